@@ -1,0 +1,10 @@
+"""gainsched: gain-scheduling compiler for a tethered quadcopter on great circles."""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("gainsched")
+except PackageNotFoundError:  # running from a source tree without install
+    __version__ = "0.0.0"
+
+__all__ = ["__version__"]

@@ -1,0 +1,394 @@
+"""Configuration: TOML in, one frozen dataclass tree out.
+
+``load_config(path)`` is the only way in. Every key is checked at this
+boundary (unknown key, wrong type, missing key, impossible value) and a bad
+one raises :class:`~gainsched.errors.InputError` naming the file and the
+dotted key. Degrees exist only here (keys ending in ``_deg``); the dataclasses
+hold SI units.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = [
+    "Config",
+    "Vehicle",
+    "Tether",
+    "Control",
+    "Grid",
+    "Feasibility",
+    "EffectSpec",
+    "load_config",
+    "config_from_text",
+    "N_STATE",
+    "N_INPUT",
+    "N_LQR",
+]
+
+N_STATE = 10  # (delta, xi, delta', xi', phi, theta, chi, wx, wy, wz)
+N_INPUT = 4  # (T1, T2, T3, T4)
+N_LQR = 11  # the above plus the integral of the delta error (paper Sec. IV.B)
+
+LINK_MODELS = ("rigid", "spring-damper")
+TERMINAL_COSTS = ("periodic", "single-period")
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """Rigid body and rotors.
+
+    Attributes
+    ----------
+    mass : float, kg
+    inertia : ndarray, shape (3, 3), kg m^2
+    layout : str, ``"x"``
+    arm_length : float, m (COG to rotor hub)
+    kappa : float, m (reaction torque per newton of thrust, paper eq. 8)
+    thrust_min, thrust_max : float, N per motor
+    """
+
+    mass: float
+    inertia: np.ndarray
+    layout: str
+    arm_length: float
+    kappa: float
+    thrust_min: float
+    thrust_max: float
+
+
+@dataclass(frozen=True)
+class Tether:
+    """Tether: length rho (m), attachment offset L_e (m) and link model.
+
+    ``stiffness`` (N/m) and ``damping`` (N s/m) are used by the spring-damper
+    link of the maximal-coordinate simulator only.
+    """
+
+    length: float
+    attachment_offset: float
+    link: str = "rigid"
+    stiffness: float = 2.0e4
+    damping: float = 50.0
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """One ``[effects.NAME]`` table: the effect kind and its parameters (SI)."""
+
+    name: str
+    params: tuple[tuple[str, float], ...]
+
+    def param_dict(self) -> dict[str, float]:
+        return dict(self.params)
+
+
+@dataclass(frozen=True)
+class Control:
+    """LQR design: control rate (Hz), weights Q (11x11), R (4x4), terminal cost."""
+
+    rate_hz: float
+    Q: np.ndarray
+    R: np.ndarray
+    integrator: bool = True
+    terminal: str = "periodic"
+
+    @property
+    def dt(self) -> float:
+        """Control period, s."""
+        return 1.0 / self.rate_hz
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Schedule grid: tangential COG speeds (m/s), tilts (rad), azimuth samples."""
+
+    speeds: np.ndarray
+    tilts: np.ndarray
+    azimuth_samples: int
+
+
+@dataclass(frozen=True)
+class Feasibility:
+    """Margins: minimum tether tension (N) and thrust margin inside the limits (N)."""
+
+    min_tension: float = 0.5
+    thrust_margin: float = 0.0
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole loaded configuration (one source of truth for every parameter)."""
+
+    name: str
+    vehicle: Vehicle
+    tether: Tether
+    effects: tuple[EffectSpec, ...]
+    g: float
+    control: Control
+    grid: Grid
+    feasibility: Feasibility
+    source: str = "<string>"
+    text: str = field(default="", repr=False)
+
+    @property
+    def sha256(self) -> str:
+        """SHA-256 of the config text (hex)."""
+        return hashlib.sha256(self.text.encode()).hexdigest()
+
+    @property
+    def radius(self) -> float:
+        """Nominal COG radius r = rho + L_e, m."""
+        return self.tether.length + self.tether.attachment_offset
+
+
+# --------------------------------------------------------------------------- checks
+
+
+class _Section:
+    """A TOML table being consumed: tracks which keys were read, to reject unknown ones."""
+
+    def __init__(self, source: str, prefix: str, data):
+        if not isinstance(data, dict):
+            raise InputError(source, prefix, "must be a table")
+        self.source, self.prefix, self.data = source, prefix, data
+        self.used: set[str] = set()
+
+    def key(self, k: str) -> str:
+        return f"{self.prefix}.{k}" if self.prefix else k
+
+    def error(self, k: str, msg: str) -> InputError:
+        return InputError(self.source, self.key(k), msg)
+
+    def get(self, k: str, default=...):
+        self.used.add(k)
+        if k not in self.data:
+            if default is ...:
+                raise self.error(k, "missing required key")
+            return default
+        return self.data[k]
+
+    def number(self, k, default=..., *, positive=False, nonneg=False) -> float:
+        v = self.get(k, default)
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise self.error(k, f"must be a number, got {type(v).__name__}")
+        v = float(v)
+        if not math.isfinite(v):
+            raise self.error(k, "must be finite")
+        if positive and v <= 0:
+            raise self.error(k, f"must be > 0, got {v:g}")
+        if nonneg and v < 0:
+            raise self.error(k, f"must be >= 0, got {v:g}")
+        return v
+
+    def string(self, k, default=..., choices=None) -> str:
+        v = self.get(k, default)
+        if not isinstance(v, str):
+            raise self.error(k, f"must be a string, got {type(v).__name__}")
+        if choices is not None and v not in choices:
+            raise self.error(k, f"must be one of {', '.join(choices)}; got {v!r}")
+        return v
+
+    def boolean(self, k, default=...) -> bool:
+        v = self.get(k, default)
+        if not isinstance(v, bool):
+            raise self.error(k, f"must be true or false, got {type(v).__name__}")
+        return v
+
+    def array(self, k, default=...) -> np.ndarray:
+        v = self.get(k, default)
+        try:
+            a = np.array(v, dtype=float)
+        except (TypeError, ValueError):
+            raise self.error(k, "must be a list of numbers (or a list of rows)") from None
+        if a.dtype == object or not isinstance(v, list) or any(isinstance(x, bool) for x in v):
+            raise self.error(k, "must be a list of numbers (or a list of rows)")
+        if not np.all(np.isfinite(a)):
+            raise self.error(k, "entries must be finite")
+        return a
+
+    def sub(self, k, default=...) -> _Section:
+        return _Section(self.source, self.key(k), self.get(k, default))
+
+    def done(self):
+        extra = sorted(set(self.data) - self.used)
+        if extra:
+            raise self.error(extra[0], "unknown key")
+
+
+def check_square_weight(sec: _Section, k: str, n: int, *, definite: bool) -> np.ndarray:
+    """Q or R: n diagonal entries or an n x n symmetric matrix; PSD (Q) or PD (R)."""
+    a = sec.array(k)
+    if a.ndim == 1:
+        if a.shape != (n,):
+            raise sec.error(k, f"must have {n} diagonal entries or be {n}x{n}, got {a.size}")
+        a = np.diag(a)
+    elif a.shape != (n, n):
+        raise sec.error(k, f"must be {n}x{n}, got {'x'.join(map(str, a.shape))}")
+    if not np.allclose(a, a.T, rtol=0, atol=1e-12 * max(1.0, np.abs(a).max())):
+        raise sec.error(k, "must be symmetric")
+    lam = np.linalg.eigvalsh(a).min()
+    tol = 1e-12 * max(1.0, np.abs(a).max())
+    if definite and lam <= tol:
+        raise sec.error(k, f"must be positive definite (smallest eigenvalue {lam:.3g})")
+    if not definite and lam < -tol:
+        raise sec.error(k, f"must be positive semidefinite (smallest eigenvalue {lam:.3g})")
+    return a
+
+
+def check_axis(sec: _Section, k: str, *, nonneg: bool, positive: bool) -> np.ndarray:
+    a = sec.array(k)
+    if a.ndim != 1 or a.size == 0:
+        raise sec.error(k, "must be a non-empty list of numbers")
+    if np.any(np.diff(a) <= 0):
+        raise sec.error(k, "must be strictly increasing")
+    if positive and a[0] <= 0:
+        raise sec.error(k, f"must be > 0, got {a[0]:g}")
+    if nonneg and a[0] < 0:
+        raise sec.error(k, f"must be >= 0 (negative values come from the symmetry), got {a[0]:g}")
+    return a
+
+
+def _vehicle(sec: _Section) -> Vehicle:
+    mass = sec.number("mass", positive=True)
+    J = sec.array("inertia")
+    if J.shape == (3,):
+        J = np.diag(J)
+    elif J.shape != (3, 3):
+        raise sec.error("inertia", "must be [Jxx, Jyy, Jzz] or a 3x3 matrix")
+    if not np.allclose(J, J.T, rtol=0, atol=1e-15):
+        raise sec.error("inertia", "must be symmetric")
+    if np.linalg.eigvalsh(J).min() <= 0:
+        raise sec.error("inertia", "must be positive definite")
+    if J[0, 1] != 0 or J[1, 2] != 0:
+        # The direction symmetry S2 (mirror about the body x-z plane) needs it.
+        raise sec.error("inertia", "Jxy and Jyz must be 0 (the vehicle is mirror-symmetric in y)")
+    layout = sec.string("layout", "x", choices=("x",))
+    arm = sec.number("arm_length", positive=True)
+    kappa = sec.number("kappa", positive=True)
+    tmin = sec.number("thrust_min", nonneg=True)
+    tmax = sec.number("thrust_max", positive=True)
+    if tmin >= tmax:
+        raise sec.error("thrust_min", f"must be < thrust_max ({tmin:g} >= {tmax:g})")
+    sec.done()
+    J.setflags(write=False)
+    return Vehicle(mass, J, layout, arm, kappa, tmin, tmax)
+
+
+def _tether(sec: _Section) -> Tether:
+    length = sec.number("length", positive=True)
+    off = sec.number("attachment_offset", nonneg=True)
+    if off >= length:
+        raise sec.error("attachment_offset", f"must be < tether length ({off:g} >= {length:g})")
+    link = sec.string("link", "rigid", choices=LINK_MODELS)
+    stiffness = sec.number("stiffness", Tether.stiffness, positive=True)
+    damping = sec.number("damping", Tether.damping, nonneg=True)
+    sec.done()
+    return Tether(length, off, link, stiffness, damping)
+
+
+def _effects(sec: _Section) -> tuple[EffectSpec, ...]:
+    from .effects import EFFECTS  # the registry; imported here to avoid a cycle
+
+    out = []
+    for name in sorted(sec.data):
+        sub = sec.sub(name)
+        if name not in EFFECTS:
+            raise sec.error(name, f"unknown effect (known: {', '.join(sorted(EFFECTS))})")
+        cls = EFFECTS[name]
+        vals = []
+        for p in cls.params:
+            v = sub.number(p.name, p.default)
+            if not (p.lower <= v <= p.upper):
+                raise sub.error(
+                    p.name, f"must be in [{p.lower:g}, {p.upper:g}] {p.unit}, got {v:g}"
+                )
+            vals.append((p.name, v))
+        sub.done()
+        out.append(EffectSpec(name, tuple(vals)))
+    return tuple(out)
+
+
+def _control(sec: _Section) -> Control:
+    rate = sec.number("rate_hz", positive=True)
+    Q = check_square_weight(sec, "Q", N_LQR, definite=False)
+    R = check_square_weight(sec, "R", N_INPUT, definite=True)
+    integ = sec.boolean("integrator", True)
+    term = sec.string("terminal", "periodic", choices=TERMINAL_COSTS)
+    sec.done()
+    Q.setflags(write=False)
+    R.setflags(write=False)
+    return Control(rate, Q, R, integ, term)
+
+
+def _grid(sec: _Section) -> Grid:
+    speeds = check_axis(sec, "speeds", nonneg=False, positive=True)
+    tilts_deg = check_axis(sec, "tilts_deg", nonneg=True, positive=False)
+    if tilts_deg[-1] >= 90:
+        raise sec.error("tilts_deg", f"must be < 90, got {tilts_deg[-1]:g}")
+    n = sec.get("azimuth_samples")
+    if isinstance(n, bool) or not isinstance(n, int):
+        raise sec.error("azimuth_samples", f"must be an integer, got {type(n).__name__}")
+    if n < 4 or n % 2:
+        raise sec.error("azimuth_samples", f"must be an even integer >= 4, got {n}")
+    sec.done()
+    tilts = np.deg2rad(tilts_deg)
+    for a in (speeds, tilts):
+        a.setflags(write=False)
+    return Grid(speeds, tilts, n)
+
+
+def _feasibility(sec: _Section) -> Feasibility:
+    f = Feasibility(
+        sec.number("min_tension", Feasibility.min_tension, nonneg=True),
+        sec.number("thrust_margin", Feasibility.thrust_margin, nonneg=True),
+    )
+    sec.done()
+    return f
+
+
+SCHEMA = "gainsched-config/1"
+
+
+def config_from_text(text: str, source: str = "<string>") -> Config:
+    """Parse and validate config TOML text. Raises InputError naming ``source`` and the key."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(source, "", f"not valid TOML ({exc})") from None
+    top = _Section(source, "", data)
+    schema = top.string("schema", SCHEMA)
+    if schema != SCHEMA:
+        raise top.error("schema", f"must be {SCHEMA!r}, got {schema!r}")
+    name = top.string("name", Path(source).stem)
+    vehicle = _vehicle(top.sub("vehicle"))
+    tether = _tether(top.sub("tether"))
+    effects = _effects(top.sub("effects", {}))
+    env = top.sub("environment")
+    g = env.number("g", positive=True)
+    env.done()
+    control = _control(top.sub("control"))
+    grid = _grid(top.sub("grid"))
+    feas = _feasibility(top.sub("feasibility", {}))
+    if feas.thrust_margin * 2 >= vehicle.thrust_max - vehicle.thrust_min:
+        raise InputError(source, "feasibility.thrust_margin", "leaves no usable thrust range")
+    top.done()
+    return Config(name, vehicle, tether, effects, g, control, grid, feas, str(source), text)
+
+
+def load_config(path) -> Config:
+    """Load and validate a config file (TOML). Raises InputError on any bad key."""
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as exc:
+        raise InputError(p, "", f"cannot read ({exc.strerror})") from None
+    return config_from_text(text, str(p))

@@ -1,0 +1,145 @@
+"""Rotation matrices, Euler angles and quaternions (DESIGN.md section 1).
+
+Conventions: ``R_AB`` maps B-coordinates to A-coordinates. Euler angles are
+Z-Y-X (``R_CB = Rz(psi) @ Ry(theta) @ Rx(phi)``, paper eq. 2). Quaternions are
+Hamilton, scalar first ``(w, x, y, z)``. Every function broadcasts over leading
+batch dimensions and is complex-step safe (no ``abs``, no ``conj``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "Rx",
+    "Ry",
+    "Rz",
+    "matrix_from_euler_zyx",
+    "euler_zyx_from_matrix",
+    "matrix_from_quaternion",
+    "quaternion_from_matrix",
+    "skew",
+    "euler_zyx_rates_from_body_rates",
+    "R_IC_from_tilt",
+]
+
+
+def _stack3x3(a00, a01, a02, a10, a11, a12, a20, a21, a22):
+    row0 = np.stack(np.broadcast_arrays(a00, a01, a02), axis=-1)
+    row1 = np.stack(np.broadcast_arrays(a10, a11, a12), axis=-1)
+    row2 = np.stack(np.broadcast_arrays(a20, a21, a22), axis=-1)
+    return np.stack([row0, row1, row2], axis=-2)
+
+
+def Rx(a):
+    """Rotation about x by angle ``a`` (rad, any shape) -> shape ``a.shape + (3, 3)``."""
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(c), np.zeros_like(c)
+    return _stack3x3(o, z, z, z, c, -s, z, s, c)
+
+
+def Ry(a):
+    """Rotation about y by angle ``a`` (rad) -> shape ``a.shape + (3, 3)``."""
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(c), np.zeros_like(c)
+    return _stack3x3(c, z, s, z, o, z, -s, z, c)
+
+
+def Rz(a):
+    """Rotation about z by angle ``a`` (rad) -> shape ``a.shape + (3, 3)``."""
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(c), np.zeros_like(c)
+    return _stack3x3(c, -s, z, s, c, z, z, z, o)
+
+
+def matrix_from_euler_zyx(phi, theta, psi):
+    """``R = Rz(psi) @ Ry(theta) @ Rx(phi)`` (paper eq. 2); angles in rad."""
+    return Rz(psi) @ Ry(theta) @ Rx(phi)
+
+
+def euler_zyx_from_matrix(R):
+    """Inverse of :func:`matrix_from_euler_zyx` for ``|theta| < pi/2``.
+
+    Returns ``(phi, theta, psi)`` in rad, each of shape ``R.shape[:-2]``.
+    """
+    phi = np.arctan2(R[..., 2, 1], R[..., 2, 2])
+    theta = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
+    psi = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    return phi, theta, psi
+
+
+def matrix_from_quaternion(q):
+    """Rotation matrix from a unit quaternion ``q = (w, x, y, z)``, shape (..., 4)."""
+    w, x, y, z = (q[..., i] for i in range(4))
+    return _stack3x3(
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    )  # fmt: skip
+
+
+def quaternion_from_matrix(R):
+    """Unit quaternion ``(w, x, y, z)`` with ``w >= 0`` from rotation matrices (..., 3, 3).
+
+    Shepperd's method: pick the largest of the four squared components to
+    avoid cancellation (numpy has no batched version of this).
+    """
+    R = np.asarray(R, dtype=float)
+    tr = R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2]
+    cand = np.stack(
+        [tr, R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]], axis=-1
+    )  # proportional to 4w^2-1, ...
+    k = np.argmax(cand, axis=-1)
+    q = np.empty(R.shape[:-2] + (4,))
+    m = k == 0
+    s = np.sqrt(1.0 + tr[m]) * 2
+    q[m] = np.stack(
+        [0.25 * s, (R[m, 2, 1] - R[m, 1, 2]) / s, (R[m, 0, 2] - R[m, 2, 0]) / s,
+         (R[m, 1, 0] - R[m, 0, 1]) / s], axis=-1)  # fmt: skip
+    m = k == 1
+    s = np.sqrt(1.0 + R[m, 0, 0] - R[m, 1, 1] - R[m, 2, 2]) * 2
+    q[m] = np.stack(
+        [(R[m, 2, 1] - R[m, 1, 2]) / s, 0.25 * s, (R[m, 0, 1] + R[m, 1, 0]) / s,
+         (R[m, 0, 2] + R[m, 2, 0]) / s], axis=-1)  # fmt: skip
+    m = k == 2
+    s = np.sqrt(1.0 + R[m, 1, 1] - R[m, 0, 0] - R[m, 2, 2]) * 2
+    q[m] = np.stack(
+        [(R[m, 0, 2] - R[m, 2, 0]) / s, (R[m, 0, 1] + R[m, 1, 0]) / s, 0.25 * s,
+         (R[m, 1, 2] + R[m, 2, 1]) / s], axis=-1)  # fmt: skip
+    m = k == 3
+    s = np.sqrt(1.0 + R[m, 2, 2] - R[m, 0, 0] - R[m, 1, 1]) * 2
+    q[m] = np.stack(
+        [(R[m, 1, 0] - R[m, 0, 1]) / s, (R[m, 0, 2] + R[m, 2, 0]) / s,
+         (R[m, 1, 2] + R[m, 2, 1]) / s, 0.25 * s], axis=-1)  # fmt: skip
+    return np.where(q[..., :1] < 0, -q, q)
+
+
+def skew(v):
+    """Cross-product matrix ``[v x]`` of vectors ``v``, shape (..., 3) -> (..., 3, 3)."""
+    z = np.zeros_like(v[..., 0])
+    return _stack3x3(z, -v[..., 2], v[..., 1], v[..., 2], z, -v[..., 0], -v[..., 1], v[..., 0], z)
+
+
+def euler_zyx_rates_from_body_rates(phi, theta, omega_B):
+    """Z-Y-X Euler angle rates ``(phi', theta', psi')`` from body rates.
+
+    Parameters
+    ----------
+    phi, theta : ndarray, rad
+    omega_B : ndarray, shape (..., 3), rad/s
+
+    Returns
+    -------
+    ndarray, shape (..., 3), rad/s
+    """
+    wx, wy, wz = omega_B[..., 0], omega_B[..., 1], omega_B[..., 2]
+    sp, cp = np.sin(phi), np.cos(phi)
+    ct, tt = np.cos(theta), np.tan(theta)
+    return np.stack(
+        [wx + (sp * wy + cp * wz) * tt, cp * wy - sp * wz, (sp * wy + cp * wz) / ct], axis=-1
+    )
+
+
+def R_IC_from_tilt(alpha_C, gamma_C=0.0):
+    """Circle-to-inertial rotation ``R_IC = Rz(gamma_C) @ Rx(alpha_C)`` (paper eq. 1), rad."""
+    return Rz(np.asarray(gamma_C, dtype=float)) @ Rx(np.asarray(alpha_C, dtype=float))
