@@ -138,6 +138,83 @@ def nominal(config, speed, tilt, samples, csv_path):
         click.echo(f"wrote {csv_path}")
 
 
+@cli.command()
+@CONFIG
+@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("tables"), show_default=True, help="Output folder.")  # fmt: skip
+@click.option("-j", "--jobs", type=int, default=-1, show_default=True,
+              help="Parallel workers (joblib; -1 = all cores).")  # fmt: skip
+@click.option("--backend", type=click.Choice(["loky", "threading", "sequential"]),
+              default="loky", show_default=True, help="joblib backend.")  # fmt: skip
+@user_errors
+def build(config, out_dir, jobs, backend):
+    """Build the gain table OUT/NAME.h5 from CONFIG: nominal, linearisation and periodic
+    LQR at every (speed m/s, tilt deg, azimuth) grid point."""
+    import time
+
+    from tqdm import tqdm
+
+    from .config import load_config
+    from .grid import build_grid
+    from .model import Model
+    from .tables import write_table
+
+    cfg = load_config(config)
+    t0 = time.perf_counter()
+    n_v = cfg.grid.speeds.size
+    with tqdm(total=n_v, unit="speed", desc=f"build {cfg.name}", disable=None) as bar:
+        grid = build_grid(cfg, n_jobs=jobs, progress=bar.update,
+                          backend=None if backend == "sequential" else backend)  # fmt: skip
+    out = out_dir / f"{cfg.name}.h5"
+    size = write_table(out, cfg, grid, Model(cfg))
+    n_pts = grid.reasons.size
+    feas = np.count_nonzero(grid.reasons == 0)
+    click.echo(
+        f"{out}: {n_pts} points ({cfg.grid.tilts.size} tilts x {n_v} speeds x "
+        f"{cfg.grid.azimuth_samples} azimuths), {100 * feas / n_pts:.1f}% feasible, "
+        f"worst closed-loop spectral radius {np.nanmax(grid.rho):.4f}, "
+        f"{time.perf_counter() - t0:.1f} s, {size / 1024:.0f} KiB"
+    )
+
+
+@cli.command()
+@click.argument("table", type=click.Path(dir_okay=False, path_type=Path))
+@user_errors
+def inspect(table):
+    """Summarise a gain table: grid, feasibility map (speed m/s x tilt deg), gain ranges,
+    worst closed-loop spectral radius."""
+    from .nominal import REASONS
+    from .tables import load_table
+
+    t = load_table(table)
+    click.echo(f"{table}: {t.attrs['schema']}, config {t.name} (sha256 {t.config_sha256[:12]}), "
+               f"tool {t.attrs['tool_version']}, terminal cost {t.attrs['terminal']}")  # fmt: skip
+    tilts = ", ".join(f"{x:g}" for x in np.rad2deg(t.tilt))
+    click.echo(f"  xi: {t.xi.size} samples over 360 deg; speeds {t.speed[0]:g}..{t.speed[-1]:g} "
+               f"m/s ({t.speed.size}); tilts {tilts} deg")  # fmt: skip
+    click.echo("  feasible azimuth fraction (rows: tilt deg, columns: speed m/s)")
+    click.echo("        " + "".join(f"{v:6g}" for v in t.speed))
+    for i, a in enumerate(np.rad2deg(t.tilt)):
+        frac = (t.reasons[i] == 0).mean(-1)
+        click.echo(f"  {a:5g} " + "".join(f"{x:6.2f}" for x in frac))
+    for bit, text in REASONS.items():
+        n = np.count_nonzero(t.reasons & bit)
+        if n:
+            click.echo(f"  {n} points: {text}")
+    K = t.K_full()
+    names = t.attrs["state_names"].split(",")
+    click.echo("  gain ranges over feasible points (min .. max per state column)")
+    for j, nm in enumerate(names):
+        col = K[..., j][np.isfinite(K[..., j])]
+        if col.size:
+            click.echo(f"    {nm:>10s}: {col.min():9.3f} .. {col.max():9.3f}")
+    rho = t.spectral_radius
+    i, j = np.unravel_index(np.nanargmax(rho), rho.shape)
+    click.echo(f"  worst closed-loop monodromy spectral radius {rho[i, j]:.5f} "
+               f"(speed {t.speed[j]:g} m/s, tilt {np.rad2deg(t.tilt[i]):g} deg); "
+               f"all < 1: {bool(np.all(rho[np.isfinite(rho)] < 1))}")  # fmt: skip
+
+
 def main():
     cli()
 

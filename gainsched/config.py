@@ -332,6 +332,11 @@ def _control(sec: _Section) -> Control:
 def _grid(sec: _Section) -> Grid:
     speeds = check_axis(sec, "speeds", nonneg=False, positive=True)
     tilts_deg = check_axis(sec, "tilts_deg", nonneg=True, positive=False)
+    if tilts_deg[0] != 0:
+        raise sec.error(
+            "tilts_deg",
+            f"must start at 0 (negative tilts come from symmetry), got {tilts_deg[0]:g}",
+        )
     if tilts_deg[-1] >= 90:
         raise sec.error("tilts_deg", f"must be < 90, got {tilts_deg[-1]:g}")
     n = sec.get("azimuth_samples")

@@ -139,6 +139,10 @@ class Effect:
         """
         raise NotImplementedError
 
+    def mirror(self):
+        """How the effect's states map under the direction mirror S2, shape (n_states, n_states)."""
+        return np.eye(self.n_states)
+
     def tangential_drag(self, v):
         """For closed-form nominals: tangential force magnitude D(v) and its first two
         derivatives when the effect is a pure function of the COG velocity directed
@@ -219,6 +223,9 @@ class MotorLag(Effect):
 
     def steady_states(self, T_actual, T_actual_dot):
         return T_actual, T_actual + self.tau * T_actual_dot
+
+    def mirror(self):
+        return np.eye(4)[[3, 2, 1, 0]]  # per-motor states swap like the motors
 
 
 EFFECTS: dict[str, type[Effect]] = {

@@ -152,7 +152,7 @@ def state_from_roll(path: Path, phi, dphi, ddphi):
     n = path.t.shape[0]
     xd, xdd = path.d[0], path.d[1]
     sp, cp = np.sin(phi), np.cos(phi)
-    s = np.zeros((n, N_STATE))
+    s = np.zeros((n, N_STATE), dtype=np.result_type(phi, dphi, ddphi, float))
     s[:, 0] = np.pi / 2
     s[:, 1] = path.xi
     s[:, 3] = xd
