@@ -153,6 +153,13 @@ class Config:
 # --------------------------------------------------------------------------- checks
 
 
+def _numeric_list(v) -> bool:
+    """A (nested) list whose leaves are all ints or floats (TOML booleans and strings are not)."""
+    return isinstance(v, list) and all(
+        (isinstance(x, int | float) and not isinstance(x, bool)) or _numeric_list(x) for x in v
+    )
+
+
 class _Section:
     """A TOML table being consumed: tracks which keys were read, to reject unknown ones."""
 
@@ -205,12 +212,12 @@ class _Section:
 
     def array(self, k, default=...) -> np.ndarray:
         v = self.get(k, default)
+        if not _numeric_list(v):
+            raise self.error(k, "must be a list of numbers (or a list of rows)")
         try:
             a = np.array(v, dtype=float)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError):  # ragged rows
             raise self.error(k, "must be a list of numbers (or a list of rows)") from None
-        if a.dtype == object or not isinstance(v, list) or any(isinstance(x, bool) for x in v):
-            raise self.error(k, "must be a list of numbers (or a list of rows)")
         if not np.all(np.isfinite(a)):
             raise self.error(k, "entries must be finite")
         return a

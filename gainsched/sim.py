@@ -1,0 +1,412 @@
+"""Closed-loop simulation: the scheduled LQR flying the nonlinear tethered vehicle.
+
+The plant is a config of its own (the "truth"): other parameters, other
+effects, another link model than the design config the tables came from.
+Fixed-step RK4 at the control rate with the input held (zero-order hold),
+motor saturation at the plant's thrust limits, and a clean stop when the
+tether goes slack. Sensing: ideal state, or motion capture at a fixed rate
+with noise and latency, fused with a model prediction in between pose updates
+(the paper's scheme, Sec. V.A: pose updates, prediction in between).
+
+Control law (paper Sec. IV): ``u = u_d - K(xi_d, xi_d', alpha) (x - x_d)``
+with the 11-entry LQR state x (xi error wrapped to [-pi, pi)), the nominal
+(x_d, u_d) of the reference path on the design model, and K from the tables.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .config import N_STATE, Config
+from .errors import InputError
+from .maximal import MaximalModel, maximal_from_reduced, reduced_from_maximal
+from .model import Model
+from .nominal import Path as XiPath
+from .nominal import maneuver_path, nominal_from_path
+from .rotations import R_IC_from_tilt, matrix_from_quaternion, quaternion_from_matrix
+
+__all__ = [
+    "Scenario",
+    "Sensing",
+    "Maneuver",
+    "SimResult",
+    "load_scenario",
+    "scenario_from_dict",
+    "profile_path",
+    "simulate",
+    "metrics",
+]
+
+
+@dataclass(frozen=True)
+class Maneuver:
+    """Speed change at ``t_start`` (s) to ``speed`` (m/s) with eq. 20 parameter ``a`` (m/s^2)."""
+
+    t_start: float
+    speed: float
+    a: float
+
+
+@dataclass(frozen=True)
+class Sensing:
+    """Motion capture: rate (Hz), noise std (m, rad), latency (s); ``ideal`` bypasses it."""
+
+    ideal: bool = True
+    rate_hz: float = 200.0
+    position_noise: float = 0.0
+    attitude_noise: float = 0.0
+    gyro_noise: float = 0.0
+    latency: float = 0.0
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A flight: tilt (rad), gamma (rad), initial speed (m/s), manoeuvres, duration (s)."""
+
+    name: str
+    tilt: float
+    speed: float
+    duration: float
+    maneuvers: tuple[Maneuver, ...] = ()
+    gamma: float = 0.0
+    sensing: Sensing = field(default_factory=Sensing)
+    initial_error: tuple[float, ...] = ()
+
+
+def _num(source, d, key, default=..., positive=False):
+    if key not in d:
+        if default is ...:
+            raise InputError(source, key, "missing required key")
+        return default
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
+        raise InputError(source, key, "must be a finite number")
+    if positive and v <= 0:
+        raise InputError(source, key, f"must be > 0, got {v}")
+    return float(v)
+
+
+def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
+    """Validate a scenario table (see ``configs/scenarios/*.toml``)."""
+    known = {"name", "tilt_deg", "gamma_deg", "speed", "duration", "maneuvers", "sensing",
+             "initial_error"}  # fmt: skip
+    for k in d:
+        if k not in known:
+            raise InputError(source, k, "unknown key")
+    name = str(d.get("name", Path(str(source)).stem))
+    tilt = np.deg2rad(_num(source, d, "tilt_deg", 0.0))
+    if not -90 < np.rad2deg(tilt) < 90:
+        raise InputError(source, "tilt_deg", "must be in (-90, 90)")
+    mans = []
+    t_prev = 0.0
+    for i, m in enumerate(d.get("maneuvers", [])):
+        key = f"maneuvers[{i}]"
+        if not isinstance(m, dict) or set(m) - {"t_start", "speed", "a"}:
+            raise InputError(source, key, "must be a table with t_start, speed, a")
+        man = Maneuver(_num(source, m, "t_start"), _num(source, m, "speed"),
+                       _num(source, m, "a", positive=True))  # fmt: skip
+        if man.t_start < t_prev:
+            raise InputError(source, f"{key}.t_start", "manoeuvres must not overlap")
+        prev_v = mans[-1].speed if mans else _num(source, d, "speed")
+        t_prev = man.t_start + abs(man.speed - prev_v) / man.a
+        mans.append(man)
+    sens = d.get("sensing", {})
+    if not isinstance(sens, dict):
+        raise InputError(source, "sensing", "must be a table")
+    sk = {"ideal", "rate_hz", "position_noise", "attitude_noise_deg", "gyro_noise", "latency",
+          "seed"}  # fmt: skip
+    for k in sens:
+        if k not in sk:
+            raise InputError(source, f"sensing.{k}", "unknown key")
+    sensing = Sensing(
+        bool(sens.get("ideal", True)),
+        _num(source, sens, "rate_hz", 200.0, positive=True),
+        _num(source, sens, "position_noise", 0.0),
+        np.deg2rad(_num(source, sens, "attitude_noise_deg", 0.0)),
+        _num(source, sens, "gyro_noise", 0.0),
+        _num(source, sens, "latency", 0.0),
+        int(sens.get("seed", 0)),
+    )
+    init = tuple(float(x) for x in d.get("initial_error", ()))
+    duration = _num(source, d, "duration", positive=True)
+    gamma = np.deg2rad(_num(source, d, "gamma_deg", 0.0))
+    speed = _num(source, d, "speed")
+    return Scenario(name, tilt, speed, duration, tuple(mans), gamma, sensing, init)
+
+
+def load_scenario(path) -> Scenario:
+    """Load a scenario TOML file; errors name the file and key."""
+    p = Path(path)
+    try:
+        d = tomllib.loads(p.read_text())
+    except OSError as exc:
+        raise InputError(p, "", f"cannot read ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(p, "", f"not valid TOML ({exc})") from None
+    return scenario_from_dict(d, p)
+
+
+def profile_path(scn: Scenario, r: float, t) -> XiPath:
+    """The reference azimuth path of a scenario: initial speed plus sequential manoeuvres."""
+    t = np.asarray(t, dtype=float)
+    v_prev = scn.speed
+    xi = scn.speed * t / r
+    d = [np.full_like(t, scn.speed / r), np.zeros_like(t), np.zeros_like(t), np.zeros_like(t)]
+    for m in scn.maneuvers:
+        p = maneuver_path(v_prev, m.speed, m.a, r, t, t_start=m.t_start)
+        xi = xi + p.xi - v_prev * t / r  # the manoeuvre's extra displacement
+        d[0] = d[0] + p.d[0] - v_prev / r
+        for j in (1, 2, 3):
+            d[j] = d[j] + p.d[j]
+        v_prev = m.speed
+    return XiPath(t, xi, tuple(d))
+
+
+@dataclass(frozen=True)
+class SimResult:
+    """Time histories at the control rate (N samples).
+
+    t (N,) s; z (N, 10) true reduced state; z_hat (N, 10) estimate; z_d (N, 10) nominal;
+    u (N, 4) applied (saturated) thrust command, N; tension (N,) N; p_I (N, 3) m COG;
+    q_IB (N, 4); saturated (N, 4) bool; status (N,) runtime status;
+    slack_time: float or None, s; scenario; alpha rad; r m.
+    """
+
+    t: np.ndarray
+    z: np.ndarray
+    z_hat: np.ndarray
+    z_d: np.ndarray
+    u: np.ndarray
+    u_d: np.ndarray
+    tension: np.ndarray
+    p_I: np.ndarray
+    q_IB: np.ndarray
+    saturated: np.ndarray
+    status: np.ndarray
+    slack_time: float | None
+    scenario: Scenario
+    r: float
+    mass: float
+    g: float
+
+
+class _Plant:
+    """Reduced model (rigid link) or maximal model (elastic links) behind one interface."""
+
+    def __init__(self, cfg: Config):
+        self.model = Model(cfg)
+        self.maximal = None if cfg.tether.link == "rigid" else MaximalModel(self.model)
+
+    def initial(self, z0):
+        if self.maximal is None:
+            x = np.zeros(self.model.n_z)
+            x[:N_STATE] = z0
+            if self.model.n_extra:  # stateful effects start in their steady state
+                x[N_STATE:] = 0.0
+            return x
+        return maximal_from_reduced(self.model, z0)
+
+    def f(self, x, u, alpha):
+        if self.maximal is None:
+            ev = self.model.evaluate(x, u, alpha)
+            return ev.z_dot, ev.tension
+        return self.maximal.f(x, u, alpha), self.maximal.tension(x, u, alpha)
+
+    def reduced(self, x, xi_ref):
+        if self.maximal is None:
+            return x[:N_STATE]
+        return reduced_from_maximal(self.model, x, xi_ref)
+
+    def pose(self, x, alpha, gamma):
+        """COG position in I (m) and R_IB."""
+        R_IC = R_IC_from_tilt(alpha, gamma)
+        if self.maximal is None:
+            R_CB = self.model.kinematics(x)[0]
+            p_C = self.model.cog_position(x)
+        else:
+            p_C = x[0:3]
+            R_CB = matrix_from_quaternion(x[6:10] / np.linalg.norm(x[6:10]))
+        return R_IC @ p_C, R_IC @ R_CB
+
+
+def _wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _rk4(f, x, u, alpha, dt):
+    k1, ten = f(x, u, alpha)
+    k2, _ = f(x + 0.5 * dt * k1, u, alpha)
+    k3, _ = f(x + 0.5 * dt * k2, u, alpha)
+    k4, _ = f(x + dt * k3, u, alpha)
+    return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), ten
+
+
+def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None = None,
+             progress=None) -> SimResult:  # fmt: skip
+    """Fly ``scenario`` with gains from ``scheduler`` on the ``plant`` (default: design).
+
+    Parameters
+    ----------
+    design : Config
+        The model the tables and the nominal come from.
+    scheduler : callable (xi, xi_dot, alpha) -> (K (4, n), status)
+        Gain lookup (Python reference interpolator or the compiled C runtime).
+    plant : Config, optional
+        The truth.
+    progress : callable(int), optional
+        Called with the number of steps done, every 100 steps.
+    """
+    plant = design if plant is None else plant
+    P = _Plant(plant)
+    dmodel = Model(design)
+    dt = design.control.dt
+    n_steps = int(round(scenario.duration / dt)) + 1
+    t = np.arange(n_steps) * dt
+    alpha = scenario.tilt
+    path = profile_path(scenario, dmodel.r, t)
+    nom = nominal_from_path(dmodel, path, alpha, periodic=False)
+    z_d, u_d = nom.z[:, :N_STATE], nom.u
+    u_min, u_max = plant.vehicle.thrust_min, plant.vehicle.thrust_max
+
+    z0 = z_d[0].copy()
+    if scenario.initial_error:
+        z0[: len(scenario.initial_error)] += np.asarray(scenario.initial_error)
+    x = P.initial(z0)
+    sens = scenario.sensing
+    rng = np.random.default_rng(sens.seed)
+    est = _Estimator(dmodel, P, sens, dt, alpha, scenario.gamma, z0, rng)
+
+    Z = np.empty((n_steps, N_STATE))
+    Zh = np.empty_like(Z)
+    U = np.empty((n_steps, 4))
+    TEN = np.empty(n_steps)
+    PI = np.empty((n_steps, 3))
+    QI = np.empty((n_steps, 4))
+    SAT = np.zeros((n_steps, 4), dtype=bool)
+    STAT = np.zeros(n_steps, dtype=np.int32)
+    integ = 0.0
+    slack_time = None
+    n_done = n_steps
+    for k in range(n_steps):
+        z_true = P.reduced(x, path.xi[k])
+        z_hat = est.estimate(k, x, z_true)
+        err = z_hat - z_d[k]
+        err[1] = _wrap(err[1])
+        K, status = scheduler(path.xi[k], path.d[0][k], alpha)
+        xerr = np.concatenate([err, [integ]])
+        n = K.shape[-1]
+        if n > xerr.size:  # design model with effect states: no estimate of them, zero error
+            xerr = np.concatenate([xerr, np.zeros(n - xerr.size)])
+        u_raw = u_d[k] - K @ xerr[:n]
+        u = np.clip(u_raw, u_min, u_max)
+        SAT[k] = u != u_raw
+        x_next, ten = _rk4(P.f, x, u, alpha, dt)
+        Z[k], Zh[k], U[k], TEN[k], STAT[k] = z_true, z_hat, u, ten, status
+        PI[k], R_IB = P.pose(x, alpha, scenario.gamma)
+        QI[k] = quaternion_from_matrix(R_IB)
+        if ten < 0:
+            slack_time = float(t[k])
+            n_done = k + 1
+            break
+        est.predict(u)
+        integ += dt * err[0]
+        x = x_next
+        if progress is not None and k % 100 == 99:
+            progress(100)
+    sl = slice(0, n_done)
+    return SimResult(t[sl], Z[sl], Zh[sl], z_d[sl], U[sl], u_d[sl], TEN[sl], PI[sl], QI[sl],
+                     SAT[sl], STAT[sl], slack_time, scenario, dmodel.r, plant.vehicle.mass,
+                     plant.g)  # fmt: skip
+
+
+class _Estimator:
+    """Ideal state, or motion-capture pose updates fused with a model prediction.
+
+    Between pose samples the estimate is propagated with the design model and
+    the applied input. A pose sample (delayed by the latency) corrects the pose
+    states and, through the innovation divided by the sample interval, the
+    rates (an alpha-beta correction on top of the model prediction); body rates
+    come from the gyro. Delayed samples are compared with the estimate of their
+    own time (ring buffer) and the correction is applied now.
+    """
+
+    def __init__(self, model, plant, sens, dt, alpha, gamma, z0, rng):
+        self.model, self.plant, self.sens, self.dt = model, plant, sens, dt
+        self.alpha, self.gamma, self.rng = alpha, gamma, rng
+        self.z = z0.copy()
+        self.every = max(1, int(round(1.0 / (sens.rate_hz * dt))))
+        self.delay = int(round(sens.latency / dt))
+        self.hist: list[np.ndarray] = []
+        self.pending: list[tuple[int, np.ndarray]] = []
+
+    def estimate(self, k, x, z_true):
+        if self.sens.ideal:
+            return z_true
+        if k % self.every == 0:  # a pose sample taken now, arriving after the latency
+            self.pending.append((k + self.delay, self._measure(x, z_true)))
+        self.hist.append(self.z.copy())
+        while self.pending and self.pending[0][0] <= k:
+            _, meas = self.pending.pop(0)
+            then = self.hist[-1 - self.delay] if len(self.hist) > self.delay else self.z
+            innov = meas - then[[0, 1, 4, 5, 6]]
+            innov[1] = _wrap(innov[1])
+            innov[4] = _wrap(innov[4])
+            T = self.every * self.dt
+            self.z[[0, 1, 4, 5, 6]] += 0.5 * innov
+            self.z[[2, 3]] += 0.5 * innov[[0, 1]] / T * 0.5
+        if len(self.hist) > self.delay + 2:
+            self.hist.pop(0)
+        z = self.z.copy()
+        z[7:10] = z_true[7:10] + self.sens.gyro_noise * self.rng.standard_normal(3)
+        return z
+
+    def _measure(self, x, z_true):
+        """Noisy pose -> (delta, xi, phi, theta, chi) through the maximal conversion."""
+        p_I, R_IB = self.plant.pose(x, self.alpha, self.gamma)
+        p_I = p_I + self.sens.position_noise * self.rng.standard_normal(3)
+        rot = self.sens.attitude_noise * self.rng.standard_normal(3)
+        from .rotations import Rx, Ry, Rz
+
+        R_IB = R_IB @ Rz(rot[2]) @ Ry(rot[1]) @ Rx(rot[0])
+        R_IC = R_IC_from_tilt(self.alpha, self.gamma)
+        xm = np.concatenate(
+            [R_IC.T @ p_I, np.zeros(3), quaternion_from_matrix(R_IC.T @ R_IB), np.zeros(3)]
+        )
+        zm = reduced_from_maximal(self.model, xm, z_true[1])
+        return zm[[0, 1, 4, 5, 6]]
+
+    def predict(self, u):
+        if self.sens.ideal:
+            return
+        self.z = self.z + self.dt * self.model.f(self.z, u, self.alpha)
+
+
+def metrics(res: SimResult) -> dict:
+    """Flight metrics: RMS out-of-plane error (m), speed tracking error (m/s), max tension (N),
+    max g-load, saturation fraction, slack events."""
+    R_IC = R_IC_from_tilt(res.scenario.tilt, res.scenario.gamma)
+    p_C = res.p_I @ R_IC  # rows: R_IC^T p
+    out_of_plane = p_C[:, 2]
+    v = res.z[:, 3] * res.r
+    v_ref = res.z_d[:, 3] * res.r
+    accel = res.tension / res.mass  # the tether carries the centripetal load
+    return {
+        "duration_s": float(res.t[-1]),
+        "rms_out_of_plane_m": float(np.sqrt(np.mean(out_of_plane**2))),
+        "max_out_of_plane_m": float(np.abs(out_of_plane).max()),
+        "rms_speed_error_mps": float(np.sqrt(np.mean((v - v_ref) ** 2))),
+        "mean_speed_error_mps": float(np.mean(v - v_ref)),
+        "max_speed_mps": float(np.abs(v).max()),
+        "max_tension_N": float(res.tension.max()),
+        "max_g_load": float(np.max(v**2 / res.r) / res.g),
+        "max_tether_accel_g": float(accel.max() / res.g),
+        "saturation_fraction": float(res.saturated.mean()),
+        "slack_events": 0 if res.slack_time is None else 1,
+        "slack_time_s": res.slack_time,
+        "max_roll_deg": float(np.rad2deg(np.abs(res.z[:, 4]).max())),
+    }

@@ -1,0 +1,287 @@
+"""Config validation: every rule rejects a bad file naming the file and the dotted key.
+
+Each bad config is the paper config with exactly one thing changed (one line
+replaced, one key removed or one key/table added), so a test can only pass
+because of the rule it is about.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gainsched.cli import cli
+from gainsched.config import config_from_text, load_config
+from gainsched.errors import InputError
+
+# --------------------------------------------------------------------------- text editing
+
+
+def _section_span(lines: list[str], section: str) -> tuple[int, int]:
+    """Line range [start, end) of the body of ``[section]`` ("" = the top level)."""
+    headers = [i for i, ln in enumerate(lines) if re.match(r"\s*\[", ln)]
+    if section == "":
+        return 0, headers[0]
+    start = next(i for i in headers if lines[i].split("#")[0].strip() == f"[{section}]") + 1
+    end = next((i for i in headers if i >= start), len(lines))
+    return start, end
+
+
+def _key_line(lines: list[str], section: str, key: str) -> int:
+    start, end = _section_span(lines, section)
+    hits = [i for i in range(start, end) if re.match(rf"\s*{re.escape(key)}\s*=", lines[i])]
+    assert len(hits) == 1, f"{section}.{key} not found exactly once"
+    return hits[0]
+
+
+def set_key(text: str, section: str, key: str, value: str) -> str:
+    """Replace the line of an existing ``key`` in ``[section]`` by ``key = value``."""
+    lines = text.splitlines()
+    lines[_key_line(lines, section, key)] = f"{key} = {value}"
+    return "\n".join(lines) + "\n"
+
+
+def drop_key(text: str, section: str, key: str) -> str:
+    """Remove the line of ``key`` from ``[section]``."""
+    lines = text.splitlines()
+    del lines[_key_line(lines, section, key)]
+    return "\n".join(lines) + "\n"
+
+
+def add_key(text: str, section: str, key: str, value: str) -> str:
+    """Insert ``key = value`` as the first line of ``[section]`` (must not exist yet)."""
+    lines = text.splitlines()
+    start, end = _section_span(lines, section)
+    assert not any(re.match(rf"\s*{re.escape(key)}\s*=", ln) for ln in lines[start:end])
+    lines.insert(start, f"{key} = {value}")
+    return "\n".join(lines) + "\n"
+
+
+def append(text: str, extra: str) -> str:
+    """Append raw TOML (e.g. a new table) at the end."""
+    return text.rstrip("\n") + "\n" + extra + "\n"
+
+
+def _q_matrix_not_psd() -> str:
+    """An 11x11 symmetric Q with eigenvalues 1 +- 2 in the (0, 1) block: one is negative."""
+    Q = np.eye(11)
+    Q[0, 1] = Q[1, 0] = 2.0
+    return "[" + ", ".join("[" + ", ".join(f"{x:g}" for x in row) + "]" for row in Q) + "]"
+
+
+NON_SYMMETRIC_J = "[[2.5e-3, 1e-5, 0], [0, 2.5e-3, 0], [0, 0, 4.5e-3]]"
+
+# (id, edit function of the paper text, dotted key the error must name)
+BAD = [
+    ("unknown-top", lambda t: add_key(t, "", "colour", '"red"'), "colour"),
+    ("unknown-section", lambda t: add_key(t, "vehicle", "wingspan", "1.0"), "vehicle.wingspan"),
+    ("unknown-effect-key", lambda t: add_key(t, "effects.drag", "mu3", "0.1"), "effects.drag.mu3"),
+    ("unknown-effect", lambda t: append(t, "[effects.magic]\nk = 1.0"), "effects.magic"),
+    ("string-mass", lambda t: set_key(t, "vehicle", "mass", '"heavy"'), "vehicle.mass"),
+    ("bool-length", lambda t: set_key(t, "tether", "length", "true"), "tether.length"),
+    ("list-kappa", lambda t: set_key(t, "vehicle", "kappa", "[0.016]"), "vehicle.kappa"),
+    ("missing-mass", lambda t: drop_key(t, "vehicle", "mass"), "vehicle.mass"),
+    ("missing-length", lambda t: drop_key(t, "tether", "length"), "tether.length"),
+    ("missing-Q", lambda t: drop_key(t, "control", "Q"), "control.Q"),
+    ("missing-speeds", lambda t: drop_key(t, "grid", "speeds"), "grid.speeds"),
+    ("zero-mass", lambda t: set_key(t, "vehicle", "mass", "0.0"), "vehicle.mass"),
+    ("negative-mass", lambda t: set_key(t, "vehicle", "mass", "-0.5"), "vehicle.mass"),
+    (
+        "inertia-not-pd",
+        lambda t: set_key(t, "vehicle", "inertia", "[1e-3, -1e-3, 1e-3]"),
+        "vehicle.inertia",
+    ),  # fmt: skip
+    (
+        "inertia-not-symmetric",
+        lambda t: set_key(t, "vehicle", "inertia", NON_SYMMETRIC_J),
+        "vehicle.inertia",
+    ),  # fmt: skip
+    (
+        "thrust-min-eq-max",
+        lambda t: set_key(t, "vehicle", "thrust_min", "3.5"),
+        "vehicle.thrust_min",
+    ),  # fmt: skip
+    (
+        "thrust-min-gt-max",
+        lambda t: set_key(t, "vehicle", "thrust_min", "4.0"),
+        "vehicle.thrust_min",
+    ),  # fmt: skip
+    (
+        "offset-ge-length",
+        lambda t: set_key(t, "tether", "attachment_offset", "1.5"),
+        "tether.attachment_offset",
+    ),  # fmt: skip
+    ("Q-size", lambda t: set_key(t, "control", "Q", "[1, 1, 1]"), "control.Q"),
+    ("Q-not-psd", lambda t: set_key(t, "control", "Q", _q_matrix_not_psd()), "control.Q"),
+    ("R-not-pd", lambda t: set_key(t, "control", "R", "[1, 0, 1, 1]"), "control.R"),
+    ("R-size", lambda t: set_key(t, "control", "R", "[1, 1, 1]"), "control.R"),
+    ("speeds-empty", lambda t: set_key(t, "grid", "speeds", "[]"), "grid.speeds"),
+    ("speeds-unsorted", lambda t: set_key(t, "grid", "speeds", "[2, 4, 3]"), "grid.speeds"),
+    ("tilts-unsorted", lambda t: set_key(t, "grid", "tilts_deg", "[0, 20, 10]"), "grid.tilts_deg"),
+    ("tilt-negative", lambda t: set_key(t, "grid", "tilts_deg", "[-10, 0, 10]"), "grid.tilts_deg"),
+    ("tilt-90", lambda t: set_key(t, "grid", "tilts_deg", "[0, 45, 90]"), "grid.tilts_deg"),
+    (
+        "azimuth-odd",
+        lambda t: set_key(t, "grid", "azimuth_samples", "35"),
+        "grid.azimuth_samples",
+    ),  # fmt: skip
+    (
+        "azimuth-float",
+        lambda t: set_key(t, "grid", "azimuth_samples", "36.0"),
+        "grid.azimuth_samples",
+    ),  # fmt: skip
+    (
+        "azimuth-string",
+        lambda t: set_key(t, "grid", "azimuth_samples", '"36"'),
+        "grid.azimuth_samples",
+    ),  # fmt: skip
+    ("drag-mu1-negative", lambda t: set_key(t, "effects.drag", "mu1", "-1"), "effects.drag.mu1"),
+]
+BAD_BY_ID = {case[0]: case for case in BAD}
+
+# representative subset also run through the CLI (one per kind of rule)
+CLI_SUBSET = [
+    "unknown-section",
+    "unknown-effect",
+    "string-mass",
+    "missing-Q",
+    "inertia-not-pd",
+    "offset-ge-length",
+    "R-not-pd",
+    "speeds-unsorted",
+    "azimuth-odd",
+    "drag-mu1-negative",
+]
+
+
+def _run_validate(path):
+    return CliRunner().invoke(cli, ["validate", str(path)])
+
+
+def _assert_one_line_error(result, *needles):
+    assert result.exit_code == 2, result.output
+    assert isinstance(result.exception, SystemExit)
+    err = result.stderr.strip().splitlines()
+    assert len(err) == 1, result.stderr
+    for needle in needles:
+        assert needle in err[0], err[0]
+    assert "Traceback" not in result.stderr + result.stdout
+
+
+# --------------------------------------------------------------------------- tests
+
+
+def test_paper_config_matches_design_section_8(paper_config):
+    c = paper_config
+    v, t = c.vehicle, c.tether
+    assert v.mass == 0.5
+    np.testing.assert_array_equal(v.inertia, np.diag([2.5e-3, 2.5e-3, 4.5e-3]))
+    assert (v.layout, v.arm_length, v.kappa) == ("x", 0.17, 0.016)
+    assert (v.thrust_min, v.thrust_max) == (0.1, 3.5)
+    assert (t.length, t.attachment_offset, t.link) == (1.5, 0.1, "rigid")
+    assert c.radius == pytest.approx(1.6, abs=1e-15)
+    drag = {e.name: e.param_dict() for e in c.effects}
+    assert drag == {"drag": {"mu1": 0.172, "mu2": 0.0025}}
+    assert c.g == 9.81
+    assert c.control.rate_hz == 1000.0 and c.control.dt == pytest.approx(1e-3, rel=1e-15)
+    # eq. 24: state order delta, xi, delta', xi', phi, theta, chi, wx, wy, wz, int(delta)
+    q_eq24 = [3, 0.2, 1, 1, 1, 2, 0.5, 1, 1, 1, 0.5]
+    np.testing.assert_array_equal(c.control.Q, np.diag(q_eq24))
+    np.testing.assert_array_equal(c.control.R, np.eye(4))
+    np.testing.assert_array_equal(c.grid.speeds, np.arange(2.0, 16.0))
+    np.testing.assert_allclose(c.grid.tilts, np.deg2rad([0, 10, 20, 30, 40]), rtol=0, atol=1e-15)
+    assert c.grid.azimuth_samples == 36
+
+
+def test_edit_helpers_change_one_line(paper_text):
+    """The helpers change exactly one line (so each bad config differs in one thing)."""
+    a = paper_text.splitlines()
+    b = set_key(paper_text, "vehicle", "mass", "0.7").splitlines()
+    assert len(a) == len(b) and sum(x != y for x, y in zip(a, b, strict=True)) == 1
+    assert "mass = 0.7" in b
+    assert len(drop_key(paper_text, "tether", "length").splitlines()) == len(a) - 1
+    # unchanged round trip: replacing a line by itself keeps a loadable config
+    config_from_text(set_key(paper_text, "vehicle", "mass", "0.5"), "good.toml")
+
+
+@pytest.mark.parametrize(("case", "edit", "key"), BAD, ids=[c[0] for c in BAD])
+def test_bad_config_names_file_and_key(paper_text, case, edit, key):
+    text = edit(paper_text)
+    assert text != paper_text
+    with pytest.raises(InputError) as info:
+        config_from_text(text, "bad.toml")
+    msg = str(info.value)
+    assert info.value.where == key, msg
+    assert msg.startswith("bad.toml: "), msg
+    assert key in msg, msg
+
+
+def test_specific_messages(paper_text):
+    """A few rules whose message should say which property is violated."""
+    cases = [
+        ("inertia-not-symmetric", "symmetric"),
+        ("inertia-not-pd", "positive definite"),
+        ("Q-not-psd", "semidefinite"),
+        ("R-not-pd", "positive definite"),
+        ("speeds-unsorted", "increasing"),
+        ("tilt-90", "< 90"),
+        ("unknown-effect", "unknown effect"),
+        ("missing-mass", "missing"),
+        ("drag-mu1-negative", "[0, 10]"),
+    ]
+    for case, words in cases:
+        _, edit, _ = BAD_BY_ID[case]
+        with pytest.raises(InputError, match=re.escape(words)):
+            config_from_text(edit(paper_text), "bad.toml")
+
+
+def test_invalid_toml_syntax(paper_text, tmp_path):
+    lines = paper_text.splitlines()
+    i = _key_line(lines, "vehicle", "mass")
+    text = set_key(paper_text, "vehicle", "mass", "= 0.5")
+    with pytest.raises(InputError) as info:
+        config_from_text(text, "bad.toml")
+    msg = str(info.value)
+    assert msg.startswith("bad.toml: ") and "not valid TOML" in msg, msg
+    assert f"line {i + 1}" in msg, msg  # the parser's position is passed through
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    _assert_one_line_error(_run_validate(path), str(path), "not valid TOML")
+
+
+def test_nonexistent_file(tmp_path):
+    path = tmp_path / "nope.toml"
+    with pytest.raises(InputError) as info:
+        load_config(path)
+    assert str(path) in str(info.value) and "cannot read" in str(info.value)
+    _assert_one_line_error(_run_validate(path), str(path), "cannot read")
+
+
+@pytest.mark.parametrize("case", CLI_SUBSET)
+def test_cli_validate_bad_config(paper_text, tmp_path, case):
+    _, edit, key = BAD_BY_ID[case]
+    path = tmp_path / "bad.toml"
+    path.write_text(edit(paper_text))
+    _assert_one_line_error(_run_validate(path), str(path), key)
+
+
+def test_cli_validate_good_config(paper_path):
+    result = _run_validate(paper_path)
+    assert result.exit_code == 0, result.output
+    assert result.stdout.startswith(f"{paper_path}: ok")
+    assert result.stderr == ""
+
+
+@pytest.mark.parametrize(
+    ("section", "key", "value"),
+    [
+        ("control", "R", '["1", "1", "1", "1"]'),
+        ("vehicle", "inertia", "[[2.5e-3, false, 0], [false, 2.5e-3, 0], [0, 0, 4.5e-3]]"),
+    ],
+)
+def test_list_entries_must_be_numbers(paper_text, section, key, value):
+    with pytest.raises(InputError, match=re.escape(f"{section}.{key}")):
+        config_from_text(set_key(paper_text, section, key, value), "bad.toml")
