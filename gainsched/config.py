@@ -328,6 +328,19 @@ def _control(sec: _Section) -> Control:
     rate = sec.number("rate_hz", positive=True)
     Q = check_square_weight(sec, "Q", N_LQR, definite=False)
     R = check_square_weight(sec, "R", N_INPUT, definite=True)
+    # The table serves reversed circles through the direction mirror S2, exact only if
+    # the weights are invariant under it (docs/symmetry.md).
+    from .symmetry import P_U, STATE_SIGNS
+
+    if not np.array_equal(Q * np.outer(STATE_SIGNS, STATE_SIGNS), Q):
+        raise sec.error(
+            "Q",
+            "must not couple states the direction mirror flips (xi, xi', "
+            "phi, chi, omega_x, omega_z) with states it keeps (docs/symmetry.md)",
+        )
+    if not np.array_equal(P_U @ R @ P_U, R):
+        raise sec.error("R", "must be invariant under the motor swap 1<->4, 2<->3 "
+                        "(R11 = R44, R22 = R33; docs/symmetry.md)")  # fmt: skip
     integ = sec.boolean("integrator", True)
     term = sec.string("terminal", "periodic", choices=TERMINAL_COSTS)
     sec.done()

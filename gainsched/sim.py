@@ -410,3 +410,109 @@ def metrics(res: SimResult) -> dict:
         "slack_time_s": res.slack_time,
         "max_roll_deg": float(np.rad2deg(np.abs(res.z[:, 4]).max())),
     }
+
+
+def table_scheduler(table):
+    """Gain lookup through the Python reference interpolator: (xi, xi_dot, alpha) -> (K, status)."""
+    from .runtime import Interpolator
+
+    interp = Interpolator(table)
+
+    def lookup(xi, xi_dot, alpha):
+        r = interp(xi, xi_dot, alpha)
+        return r.K, int(r.status)
+
+    return lookup
+
+
+def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int | None = None):
+    """The flight log a real flight would leave (``flight-log.md``): motion-capture pose at
+    the sensing rate with the scenario's noise, commanded thrusts (mean over each sample
+    interval), gyro, load-cell tension and the reference azimuth."""
+    from .logs import log_from_arrays
+    from .rotations import Rx, Ry, Rz, matrix_from_quaternion
+
+    sens = res.scenario.sensing
+    rate = sens.rate_hz if rate_hz is None else rate_hz
+    dt = res.t[1] - res.t[0]
+    every = max(1, int(round(1.0 / (rate * dt))))
+    idx = np.arange(0, res.t.size, every)
+    rng = np.random.default_rng(sens.seed + 1000 if seed is None else seed)
+    p = res.p_I[idx] + sens.position_noise * rng.standard_normal((idx.size, 3))
+    rot = sens.attitude_noise * rng.standard_normal((idx.size, 3))
+    R = matrix_from_quaternion(res.q_IB[idx]) @ Rz(rot[:, 2]) @ Ry(rot[:, 1]) @ Rx(rot[:, 0])
+    q = quaternion_from_matrix(R)
+    # thrust "held since the previous sample": the mean of the commands in the interval
+    ends = np.minimum(idx + 1, res.t.size)
+    starts = np.maximum(ends - every, 0)
+    csum = np.concatenate([np.zeros((1, 4)), np.cumsum(res.u, 0)])
+    T = (csum[ends] - csum[starts]) / (ends - starts)[:, None]
+    meta = {
+        "alpha_c_deg": f"{np.rad2deg(res.scenario.tilt):.12g}",
+        "gamma_c_deg": f"{np.rad2deg(res.scenario.gamma):.12g}",
+        "flight_id": f"sim-{res.scenario.name}",
+        "notes": "simulated by gainsched",
+    }
+    return log_from_arrays(
+        res.t[idx], p, q, T, meta, source=f"simulation {res.scenario.name}",
+        omega_B=res.z[idx, 7:10], tension=res.tension[idx],
+        xi_ref=res.z_d[idx, 1], xi_dot_ref=res.z_d[idx, 3],
+    )  # fmt: skip
+
+
+def plot_result(res: SimResult, out_dir) -> list[Path]:
+    """Speed tracking (Fig. 3 style), speed and roll (Fig. 4 style) and the 3-D path, as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    paths = []
+    v, v_ref = res.z[:, 3] * res.r, res.z_d[:, 3] * res.r
+    fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    ax[0].plot(res.t, v_ref, "r", label="desired")
+    ax[0].plot(res.t, v, "b", label="simulated")
+    ax[0].set_ylabel("speed (m/s)")
+    ax[0].legend()
+    ax[1].plot(res.t, np.rad2deg(res.z_d[:, 4]), "r", label="nominal")
+    ax[1].plot(res.t, np.rad2deg(res.z[:, 4]), "b", label="simulated")
+    ax[1].set_ylabel("roll phi (deg)")
+    ax[1].set_xlabel("time (s)")
+    ax[0].set_title(f"{res.scenario.name}: speed and roll")
+    fig.tight_layout()
+    paths.append(out_dir / "speed_roll.png")
+    fig.savefig(paths[-1], dpi=100)
+    plt.close(fig)
+    fig = plt.figure(figsize=(6, 6))
+    ax3 = fig.add_subplot(projection="3d")
+    ax3.plot(res.p_I[:, 0], res.p_I[:, 1], res.p_I[:, 2], lw=0.8)
+    ax3.set_xlabel("x (m)")
+    ax3.set_ylabel("y (m)")
+    ax3.set_zlabel("z (m)")
+    ax3.set_title(f"{res.scenario.name}: COG path (inertial frame)")
+    paths.append(out_dir / "path3d.png")
+    fig.savefig(paths[-1], dpi=100)
+    plt.close(fig)
+    return paths
+
+
+def write_run(res: SimResult, out_dir) -> dict:
+    """Write log.csv, log.h5, metrics.json and the plots into ``out_dir``; returns the metrics."""
+    import json
+
+    from .logs import write_log
+    from .tables import write_atomic
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    log = log_from_result(res)
+    write_log(out_dir / "log.csv", log)
+    write_log(out_dir / "log.h5", log)
+    m = metrics(res)
+    m["scenario"] = res.scenario.name
+    write_atomic(
+        out_dir / "metrics.json", (json.dumps(m, indent=2, sort_keys=True) + "\n").encode()
+    )
+    plot_result(res, out_dir)
+    return m

@@ -32,8 +32,13 @@ def write_atomic(path, data: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.fchmod(fd, 0o666 & ~umask)  # mkstemp makes 0600; give the file normal permissions
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -112,7 +117,9 @@ def table_bytes(config, grid, model) -> bytes:
     fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
     fapl.set_fapl_core(backing_store=False)
     fapl.set_libver_bounds(h5py.h5f.LIBVER_V18, h5py.h5f.LIBVER_V18)
-    fid = h5py.h5f.create(b"gainsched-table", h5py.h5f.ACC_TRUNC, fapl=fapl)
+    fcpl = h5py.h5p.create(h5py.h5p.FILE_CREATE)
+    fcpl.set_obj_track_times(False)  # the root group would otherwise carry its creation time
+    fid = h5py.h5f.create(b"gainsched-table", h5py.h5f.ACC_TRUNC, fapl=fapl, fcpl=fcpl)
     with h5py.File(fid) as f:
         a = f.attrs
         a["schema"] = SCHEMA
@@ -202,8 +209,10 @@ def load_table(path) -> Table:
             raise InputError(path, key, "must be finite and strictly increasing")
     if not np.allclose(xi, 2 * np.pi * np.arange(n_xi) / n_xi, rtol=0, atol=1e-12):
         raise InputError(path, "axes/xi", "must be uniform on [0, 2 pi)")
-    if tilt[0] != 0 or speed[0] <= 0:
-        raise InputError(path, "axes/tilt", "must start at 0 with positive speeds")
+    if tilt[0] != 0:
+        raise InputError(path, "axes/tilt", "must start at 0")
+    if speed[0] <= 0:
+        raise InputError(path, "axes/speed", "must be positive")
     K0, K = d["gains/K_tilt0"], d["gains/K"]
     n = K0.shape[-1]
     shapes = {
@@ -211,6 +220,7 @@ def load_table(path) -> Table:
         "nominal/u_d": (n_a, n_v, n_xi, 4), "nominal/phi_d": (n_a, n_v, n_xi),
         "nominal/tension": (n_a, n_v, n_xi), "feasibility/reasons": (n_a, n_v, n_xi),
         "closed_loop/spectral_radius": (n_a, n_v), "weights/Q": (n, n), "weights/R": (4, 4),
+        "axes/xi_dot": (n_v,), "closed_loop/dt": (n_v,),
     }  # fmt: skip
     for key, shape in shapes.items():
         if d[key].shape != shape:

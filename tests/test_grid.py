@@ -1,0 +1,142 @@
+"""The grid sweep (issue 3, DESIGN.md sections 4-5).
+
+- gains at every grid point equal a fresh single-point solve;
+- the step count / dt convention and the azimuth sampling;
+- known infeasible points are masked with the right reason bits and NaN gains.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gainsched.config import config_from_text, load_config
+from gainsched.grid import build_grid, solve_circle, steps_per_period
+from gainsched.nominal import REASONS, period
+
+PAPER = Path(__file__).parents[1] / "configs" / "paper.toml"
+
+
+def small_config_text(speeds="[6, 9]", tilts="[0, 20]", n_xi=8, name="small"):
+    text = PAPER.read_text()
+    text = re.sub(r'^name = ".*"$', f'name = "{name}"', text, flags=re.M)
+    text = re.sub(r"^speeds = .*$", f"speeds = {speeds}", text, flags=re.M)
+    text = re.sub(r"^tilts_deg = .*$", f"tilts_deg = {tilts}", text, flags=re.M)
+    return re.sub(r"^azimuth_samples = .*$", f"azimuth_samples = {n_xi}", text, flags=re.M)
+
+
+@pytest.fixture(scope="module")
+def paper_config():
+    return load_config(PAPER)
+
+
+@pytest.fixture(scope="module")
+def small():
+    cfg = config_from_text(small_config_text(), "small.toml")
+    return cfg, build_grid(cfg, n_jobs=1)
+
+
+def test_grid_shapes_and_axes(small):
+    cfg, g = small
+    n_a, n_v, n_xi = cfg.grid.tilts.size, cfg.grid.speeds.size, cfg.grid.azimuth_samples
+    assert (n_a, n_v, n_xi) == (2, 2, 8)
+    assert g.K.shape == (n_a, n_v, n_xi, 4, 11)
+    assert g.S.shape == (n_a, n_v, n_xi, 11, 11)
+    assert g.u_d.shape == (n_a, n_v, n_xi, 4)
+    for name in ("phi_d", "tension", "reasons"):
+        assert getattr(g, name).shape == (n_a, n_v, n_xi)
+    assert g.rho.shape == g.sweeps.shape == (n_a, n_v)
+    assert g.steps.shape == g.dt.shape == (n_v,)
+    assert np.all(g.reasons == 0) and np.all(np.isfinite(g.K)) and np.all(g.rho < 1)
+
+
+def test_grid_points_equal_single_point_solves(small):
+    cfg, g = small
+    for i, a in enumerate(cfg.grid.tilts):
+        for j, v in enumerate(cfg.grid.speeds):
+            s = solve_circle(cfg, float(v), [a])
+            for name, X in (("K", g.K), ("S", g.S), ("u_d", g.u_d), ("phi_d", g.phi_d),
+                            ("tension", g.tension)):  # fmt: skip
+                ref = getattr(s, name)[0]
+                err = np.abs(X[i, j] - ref).max() / np.abs(ref).max()
+                assert err <= 1e-12, (name, v, a, err)
+            np.testing.assert_array_equal(g.reasons[i, j], s.reasons[0])
+            assert g.rho[i, j] == pytest.approx(s.rho[0], rel=1e-12)
+            assert g.steps[j] == s.steps and g.dt[j] == s.dt
+
+
+def test_tilt0_slice_is_xi_independent(small):
+    _, g = small
+    K0 = g.K[0]  # (speed, xi, 4, n)
+    assert np.abs(K0 - K0[:, :1]).max() / np.abs(K0).max() <= 1e-10
+
+
+def test_step_count_and_dt_convention(paper_config):
+    """N = 2 round(T / (2 dt)) (even), dt_k = T / N within 0.15 % of the control period."""
+    cfg = paper_config
+    r, dt = cfg.radius, cfg.control.dt
+    for v in cfg.grid.speeds:
+        N = steps_per_period(v, r, dt)
+        T = period(v, r)
+        assert N % 2 == 0 and N == 2 * round(T / (2 * dt))
+        assert abs(T / N - dt) / dt < 1.5e-3
+        assert steps_per_period(-v, r, dt) == N  # reversed circles: same steps
+
+
+def test_grid_azimuths_interpolate_the_steps(paper_config):
+    """K at xi_j = 2 pi j / n_xi is the linear interpolation of the two bracketing steps."""
+    cfg = config_from_text(small_config_text(n_xi=36), "small36.toml")
+    sol, (Ad, Bd, K_steps) = solve_circle(cfg, 9.0, [np.deg2rad(20)], keep_steps=True)
+    N = sol.steps
+    assert K_steps.shape[1] == N and sol.dt == pytest.approx(period(9.0, cfg.radius) / N)
+    for j in range(36):
+        pos = j * N / 36
+        k = int(np.floor(pos))
+        w = pos - k
+        expect = (1 - w) * K_steps[0, k] + w * K_steps[0, (k + 1) % N]
+        np.testing.assert_allclose(sol.K[0, j], expect, rtol=0, atol=1e-14 * np.abs(expect).max())
+
+
+def _check_infeasible_circle(sol, bit):
+    reasons = sol.reasons[0]
+    own = reasons & ~np.uint8(16)
+    assert np.any(own & bit), f"expected bit {bit} ({REASONS[bit]}) somewhere"
+    # azimuths that are feasible by themselves carry bit 16 and nothing else
+    assert np.any(own == 0)
+    assert np.all(reasons[own == 0] == 16)
+    assert np.all(reasons[own != 0] & 16 == 0)
+    assert np.all(reasons != 0)
+    # no made-up gains
+    assert np.all(np.isnan(sol.K[0])) and np.all(np.isnan(sol.S[0])) and np.isnan(sol.rho[0])
+    # the nominal is still reported
+    assert np.all(np.isfinite(sol.u_d[0])) and np.all(np.isfinite(sol.tension[0]))
+    return own
+
+
+def test_slack_circle_masked(paper_config):
+    """2 m/s at 40 deg: the tether goes slack on part of the circle (bit 1)."""
+    sol = solve_circle(paper_config, 2.0, [np.deg2rad(40)])
+    own = _check_infeasible_circle(sol, 1)
+    slack = sol.tension[0] < paper_config.feasibility.min_tension
+    np.testing.assert_array_equal((own & 1) != 0, slack)
+
+
+def test_thrust_floor_circle_masked(paper_config):
+    """15 m/s at 40 deg: motor thrusts fall below thrust_min (bit 2)."""
+    sol = solve_circle(paper_config, 15.0, [np.deg2rad(40)])
+    own = _check_infeasible_circle(sol, 2)
+    low = np.any(sol.u_d[0] < paper_config.vehicle.thrust_min, -1)
+    np.testing.assert_array_equal((own & 2) != 0, low)
+
+
+def test_infeasible_tilt_does_not_affect_feasible_tilts(paper_config):
+    """In a batch, an infeasible tilt is skipped without changing the others' gains."""
+    tilts = np.deg2rad([0.0, 40.0])
+    both = solve_circle(paper_config, 14.0, tilts)
+    alone = solve_circle(paper_config, 14.0, tilts[:1])
+    assert np.all(both.reasons[0] == 0) and np.all(both.reasons[1] != 0)
+    np.testing.assert_allclose(both.K[0], alone.K[0], rtol=1e-12)
+    assert np.all(np.isnan(both.K[1]))
