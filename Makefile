@@ -8,7 +8,7 @@ STAMP = $(VENV)/.stamp
 
 PYTEST_ARGS ?=
 
-.PHONY: venv lint test tables bench paper clean distclean
+.PHONY: venv lint test tables bench paper clean distclean firmware-example firmware-size fuzz
 
 # (Re)create the virtualenv whenever the dependency pins change.
 $(STAMP): pyproject.toml
@@ -40,3 +40,59 @@ clean:
 
 distclean: clean
 	rm -rf $(VENV)
+
+# ---- firmware: C header + runtime (docs/runtime.md) ----------------------------
+FW_TABLE  ?= tables/paper.h5
+FW_DIR    ?= build/firmware
+FW_CFLAGS ?= -std=c99 -Wall -Wextra -Wpedantic -Werror -O2
+M4F_FLAGS  = -mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard -Os -ffunction-sections -fdata-sections
+FUZZ_RUNS    ?= 5000000
+FUZZ_SECONDS ?= 60
+SAN_FLAGS  = -g -O1 -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer
+CLANG     ?= $(firstword $(foreach c,clang clang-19 clang-18 clang-17 clang-16 clang-15 clang-14,$(shell command -v $(c) 2>/dev/null)))
+
+# The example loop: header from FW_TABLE, runtime copied beside it, strict build, run.
+firmware-example: $(STAMP)
+	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR)
+	$(CC) $(FW_CFLAGS) -I$(FW_DIR) examples/firmware/main.c $(FW_DIR)/gainsched_runtime.c \
+		-o $(FW_DIR)/firmware_example
+	$(FW_DIR)/firmware_example
+
+# Cortex-M4F section sizes of the runtime and the table (needs arm-none-eabi-gcc).
+firmware-size: $(STAMP)
+	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR) --no-code-size
+	@if command -v arm-none-eabi-gcc >/dev/null 2>&1; then \
+		set -e; \
+		arm-none-eabi-gcc $(FW_CFLAGS) $(M4F_FLAGS) -I$(FW_DIR) -c $(FW_DIR)/gainsched_runtime.c \
+			-o $(FW_DIR)/gainsched_runtime.m4f.o; \
+		arm-none-eabi-gcc $(FW_CFLAGS) $(M4F_FLAGS) -I$(FW_DIR) -c examples/firmware/size_probe.c \
+			-o $(FW_DIR)/table.m4f.o; \
+		echo "Cortex-M4F ($(M4F_FLAGS)):"; \
+		arm-none-eabi-size -A $(FW_DIR)/gainsched_runtime.m4f.o $(FW_DIR)/table.m4f.o \
+			| grep -Ev '^\.(comment|ARM\.attributes|debug)' ; \
+		arm-none-eabi-size $(FW_DIR)/gainsched_runtime.m4f.o $(FW_DIR)/table.m4f.o; \
+	else \
+		echo "firmware-size: arm-none-eabi-gcc not found (Debian: apt-get install gcc-arm-none-eabi);"; \
+		echo "host sizes instead ($(CC) -Os):"; \
+		$(CC) $(FW_CFLAGS) -Os -I$(FW_DIR) -c $(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/gainsched_runtime.host.o; \
+		$(CC) $(FW_CFLAGS) -Os -I$(FW_DIR) -c examples/firmware/size_probe.c -o $(FW_DIR)/table.host.o; \
+		size $(FW_DIR)/gainsched_runtime.host.o $(FW_DIR)/table.host.o; \
+	fi
+
+# Fuzz gs_lookup: libFuzzer when clang is there (FUZZ_SECONDS), else the bounded
+# random driver (FUZZ_RUNS queries); both under AddressSanitizer + UBSan.
+fuzz: $(STAMP)
+	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR) --no-code-size
+	@if [ -n "$(CLANG)" ] && echo 'int LLVMFuzzerTestOneInput(const char *d, long n){(void)d;(void)n;return 0;}' \
+		| $(CLANG) -x c - -fsanitize=fuzzer -o $(FW_DIR)/.fuzzprobe >/dev/null 2>&1; then \
+		set -e; mkdir -p $(FW_DIR)/fuzz-corpus; \
+		echo "fuzz: libFuzzer ($(CLANG)), $(FUZZ_SECONDS) s"; \
+		$(CLANG) $(FW_CFLAGS) $(SAN_FLAGS) -fsanitize=fuzzer -DGS_LIBFUZZER -I$(FW_DIR) \
+			examples/firmware/fuzz_lookup.c $(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/fuzz_lookup_libfuzzer; \
+		$(FW_DIR)/fuzz_lookup_libfuzzer -max_total_time=$(FUZZ_SECONDS) -max_len=12 $(FW_DIR)/fuzz-corpus; \
+	else \
+		set -e; echo "fuzz: no clang with libFuzzer; bounded random driver, $(FUZZ_RUNS) queries"; \
+		$(CC) $(FW_CFLAGS) $(SAN_FLAGS) -I$(FW_DIR) examples/firmware/fuzz_lookup.c \
+			$(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/fuzz_lookup; \
+		$(FW_DIR)/fuzz_lookup $(FUZZ_RUNS) 1; \
+	fi

@@ -138,6 +138,11 @@ def nominal(config, speed, tilt, samples, csv_path):
         click.echo(f"wrote {csv_path}")
 
 
+def _nanmax(a) -> str:
+    a = np.asarray(a)
+    return f"{np.nanmax(a):.4f}" if np.any(np.isfinite(a)) else "n/a (no feasible circle)"
+
+
 @cli.command()
 @CONFIG
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
@@ -154,6 +159,7 @@ def build(config, out_dir, jobs, backend):
 
     from tqdm import tqdm
 
+    from .codegen import write_c_outputs
     from .config import load_config
     from .grid import build_grid
     from .model import Model
@@ -167,14 +173,16 @@ def build(config, out_dir, jobs, backend):
                           backend=None if backend == "sequential" else backend)  # fmt: skip
     out = out_dir / f"{cfg.name}.h5"
     size = write_table(out, cfg, grid, Model(cfg))
+    c_files = write_c_outputs(out, out_dir)
     n_pts = grid.reasons.size
     feas = np.count_nonzero(grid.reasons == 0)
     click.echo(
         f"{out}: {n_pts} points ({cfg.grid.tilts.size} tilts x {n_v} speeds x "
         f"{cfg.grid.azimuth_samples} azimuths), {100 * feas / n_pts:.1f}% feasible, "
-        f"worst closed-loop spectral radius {np.nanmax(grid.rho):.4f}, "
+        f"worst closed-loop spectral radius {_nanmax(grid.rho)}, "
         f"{time.perf_counter() - t0:.1f} s, {size / 1024:.0f} KiB"
     )
+    click.echo("  C: " + ", ".join(str(p) for p in c_files))
 
 
 @cli.command()
@@ -183,6 +191,7 @@ def build(config, out_dir, jobs, backend):
 def inspect(table):
     """Summarise a gain table: grid, feasibility map (speed m/s x tilt deg), gain ranges,
     worst closed-loop spectral radius."""
+    from .codegen import flash_summary
     from .nominal import REASONS
     from .tables import load_table
 
@@ -208,11 +217,173 @@ def inspect(table):
         col = K[..., j][np.isfinite(K[..., j])]
         if col.size:
             click.echo(f"    {nm:>10s}: {col.min():9.3f} .. {col.max():9.3f}")
+    for line in flash_summary(t):
+        click.echo(f"  {line}")
     rho = t.spectral_radius
     i, j = np.unravel_index(np.nanargmax(rho), rho.shape)
     click.echo(f"  worst closed-loop monodromy spectral radius {rho[i, j]:.5f} "
                f"(speed {t.speed[j]:g} m/s, tilt {np.rad2deg(t.tilt[i]):g} deg); "
                f"all < 1: {bool(np.all(rho[np.isfinite(rho)] < 1))}")  # fmt: skip
+
+
+@cli.command("export-c")
+@click.argument("table", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Output folder (default: the table's folder).",
+)
+@click.option("--no-code-size", is_flag=True, help="Skip compiling the runtime to measure it.")
+@user_errors
+def export_c(table, out_dir, no_code_size):
+    """Write the C99 header NAME_gains.h for TABLE and copy the C runtime
+    (gainsched_runtime.c/.h) next to it; print the flash footprint."""
+    from .codegen import flash_summary, write_c_outputs
+    from .runtime import runtime_data
+    from .tables import load_table
+
+    paths = write_c_outputs(table, out_dir)
+    for p in paths:
+        click.echo(f"wrote {p}")
+    data = runtime_data(load_table(table))
+    click.echo(
+        f"  {data.name}: CRC-32 0x{data.crc32():08x}, config sha256 {data.config_sha256[:12]}"
+    )
+    for line in flash_summary(data, compile_code=not no_code_size):
+        click.echo(f"  {line}")
+
+
+@cli.command()
+@click.argument("table", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--speed-stride",
+    type=click.IntRange(1),
+    default=1,
+    show_default=True,
+    help="Check every N-th speed midpoint only (faster).",
+)
+@click.option(
+    "--max-error",
+    type=float,
+    default=2.0,
+    show_default=True,
+    help="Pass threshold on the max relative gain error, percent.",
+)
+@user_errors
+def check(table, speed_stride, max_error):
+    """Interpolation accuracy of TABLE: solve the periodic LQR directly at cell midpoints
+    (speed x tilt x azimuth) and compare with the interpolated gains (max and median
+    relative Frobenius error), then close the loop along each midpoint circle with the
+    interpolated gains (monodromy spectral radius). Exit code 1 if the max error is above
+    --max-error or a midpoint closed loop is not stable."""
+    import time
+
+    from tqdm import tqdm
+
+    from .runtime import midpoint_check
+    from .tables import load_table
+
+    t = load_table(table)
+    t0 = time.perf_counter()
+    n_v = len(range(0, max(t.speed.size - 1, 0), speed_stride))
+    with tqdm(total=n_v, unit="speed", desc=f"check {t.name}", disable=None) as bar:
+        res = midpoint_check(t, speed_stride=speed_stride, progress=bar.update)
+    ok_pts = int(np.count_nonzero(np.isfinite(res.rel_err)))
+    n_a = max(t.tilt.size - 1, 1)
+    click.echo(
+        f"{table}: {ok_pts} cell midpoints checked ({n_v} speeds x {n_a} tilts x "
+        f"{t.xi.size} azimuths; {res.skipped} skipped as infeasible), "
+        f"{time.perf_counter() - t0:.1f} s"
+    )
+    if ok_pts:
+        v, a, x, e = res.worst_point()
+        click.echo(
+            f"  relative gain error |K_interp - K|_F / |K|_F: max {100 * e:.2f}% "
+            f"(speed {v:g} m/s, tilt {np.rad2deg(a):g} deg, xi {np.rad2deg(x):g} deg), "
+            f"median {100 * res.median_err:.2f}%"
+        )
+        by_v, by_a = res.by_axis()
+        click.echo(
+            "  max error by speed midpoint (m/s: %): "
+            + ", ".join(f"{k:g}: {100 * e:.2f}" for k, e in by_v.items() if np.isfinite(e))
+        )
+        click.echo(
+            "  max error by tilt midpoint (deg: %): "
+            + ", ".join(
+                f"{np.rad2deg(k):g}: {100 * e:.2f}" for k, e in by_a.items() if np.isfinite(e)
+            )
+        )
+        click.echo(f"  max nominal thrust error {np.nanmax(res.u_err):.4f} N")
+    rho = [(c[2], c) for c in res.circles if np.isfinite(c[2])]
+    stable = all(r < 1 for r, _ in rho)
+    if rho:
+        r, c = max(rho)
+        click.echo(
+            f"  closed loop with interpolated gains on {len(rho)} midpoint circles: "
+            f"worst spectral radius {r:.5f} (speed {c[0]:g} m/s, tilt "
+            f"{np.rad2deg(c[1]):g} deg; direct LQR {c[3]:.5f}); all < 1: {stable}"
+        )
+    passed = ok_pts > 0 and 100 * res.max_err <= max_error and stable
+    click.echo(
+        f"  {'PASS' if passed else 'FAIL'}: max error <= {max_error:g}% and every "
+        "midpoint closed loop stable"
+    )
+    if not passed:
+        sys.exit(1)
+
+
+def _scenario_path(name: str) -> Path:
+    p = Path(name)
+    if p.suffix == ".toml" or p.exists():
+        return p
+    return Path(__file__).resolve().parents[1] / "configs" / "scenarios" / f"{name}.toml"
+
+
+@cli.command()
+@CONFIG
+@click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
+              required=True, help="Gain table (HDF5) built from CONFIG.")  # fmt: skip
+@click.option("--scenario", required=True,
+              help="Scenario file, or a name in configs/scenarios (e.g. braking).")  # fmt: skip
+@click.option("--plant", "plant_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Truth config for the plant (default: CONFIG).")  # fmt: skip
+@click.option("--speed", type=float, help="Override the scenario's initial speed, m/s.")
+@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              required=True, help="Output folder (log.csv/.h5, metrics.json, plots).")  # fmt: skip
+@user_errors
+def simulate(config, table_path, scenario, plant_path, speed, out_dir):
+    """Fly a scenario in closed loop on the nonlinear plant with gains from the table."""
+    import dataclasses
+
+    from tqdm import tqdm
+
+    from .config import load_config
+    from .sim import load_scenario, table_scheduler, write_run
+    from .sim import simulate as run
+    from .tables import load_table
+
+    cfg = load_config(config)
+    plant = load_config(plant_path) if plant_path else None
+    table = load_table(table_path)
+    if table.config_sha256 != cfg.sha256:
+        click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
+    scn = load_scenario(_scenario_path(scenario))
+    if speed is not None:
+        scn = dataclasses.replace(scn, speed=speed)
+    n = int(round(scn.duration * cfg.control.rate_hz)) + 1
+    with tqdm(total=n, unit="step", desc=f"simulate {scn.name}", disable=None) as bar:
+        res = run(cfg, table_scheduler(table), scn, plant, progress=bar.update)
+    m = write_run(res, out_dir)
+    click.echo(
+        f"{out_dir}: {scn.name} {m['duration_s']:.2f} s, "
+        f"RMS out-of-plane {m['rms_out_of_plane_m']:.4f} m, "
+        f"RMS speed error {m['rms_speed_error_mps']:.3f} m/s, "
+        f"max tension {m['max_tension_N']:.1f} N, "
+        f"saturation {100 * m['saturation_fraction']:.1f}%, slack events {m['slack_events']}"
+    )
 
 
 def main():

@@ -1,0 +1,141 @@
+"""Runtime benchmarks: C lookup time and instruction count, Python reference throughput.
+
+    python -m bench.bench_runtime [--table tables/paper.h5] [--json out.json]
+
+- C: the runtime and the table compiled for the host (``-O2`` and ``-O3``), timed
+  over pseudo-random queries through one ctypes call per pass (ns per lookup,
+  best of several passes), for two query sets: *flight* (inside the table, all
+  corners feasible: the normal case at 1 kHz) and *mixed* (every symmetry branch,
+  clamped, infeasible and invalid queries).
+- Instructions per lookup: valgrind callgrind, counting only inside ``gs_lookup``
+  (``--toggle-collect``), if valgrind is installed.
+- Python: vectorised reference lookups per second (100k-query batches).
+
+Targets (issue 4): under 1 us and under 1000 instructions per C lookup on x86.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gainsched import codegen
+from gainsched.runtime import Interpolator, runtime_data
+from gainsched.tables import load_table
+
+REPO = Path(__file__).parents[1]
+
+
+def query_sets(data, interp, m=100_000, seed=0):
+    """``{"flight": q, "mixed": q}``, float32 arrays (m, 3)."""
+    rng = np.random.default_rng(seed)
+    vmax, amax = float(data.xi_dot[-1]), float(data.tilt[-1])
+    mixed = np.stack(
+        [
+            rng.uniform(-7, 7, m),
+            rng.choice([-1, 1], m) * rng.uniform(0, 1.1 * vmax, m),
+            rng.choice([-1, 1], m) * rng.uniform(0, 1.1 * amax, m),
+        ],
+        1,
+    ).astype(np.float32)
+    mixed[rng.random(m) < 0.02, 1] = np.nan
+    cand = np.stack(
+        [
+            rng.uniform(-np.pi, np.pi, 4 * m),
+            rng.choice([-1, 1], 4 * m) * rng.uniform(float(data.xi_dot[0]), vmax, 4 * m),
+            rng.choice([-1, 1], 4 * m) * rng.uniform(0, amax, 4 * m),
+        ],
+        1,
+    ).astype(np.float32)
+    st = interp(cand[:, 0], cand[:, 1], cand[:, 2]).status
+    flight = cand[st == 0][:m]
+    return {"flight": np.ascontiguousarray(flight), "mixed": mixed}
+
+
+def time_c(lib: codegen.CRuntime, q, reps=5, passes=7) -> float:
+    """Best ns per lookup over ``passes`` of ``reps`` sweeps."""
+    lib.bench(q[:1000], 1)  # warm up
+    best = np.inf
+    for _ in range(passes):
+        t0 = time.perf_counter()
+        lib.bench(q, reps)
+        best = min(best, (time.perf_counter() - t0) / (reps * len(q)))
+    return best * 1e9
+
+
+def callgrind_instructions(exe: Path, q, workdir: Path) -> float | None:
+    """Instructions per gs_lookup call (callgrind, only inside gs_lookup)."""
+    valgrind = shutil.which("valgrind")
+    if valgrind is None:
+        return None
+    qf = workdir / "queries.bin"
+    qf.write_bytes(np.ascontiguousarray(q, dtype=np.float32).tobytes())
+    res = subprocess.run(
+        [valgrind, "--tool=callgrind", "--callgrind-out-file=/dev/null",
+         "--toggle-collect=gs_lookup", str(exe), "benchq", str(qf), "1"],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    m = re.search(r"Collected\s*:\s*(\d+)", res.stderr)
+    return int(m.group(1)) / len(q) if m else None
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--table", type=Path, default=REPO / "tables" / "paper.h5")
+    ap.add_argument("--json", type=Path, help="also write the figures as JSON")
+    ap.add_argument("--queries", type=int, default=100_000)
+    args = ap.parse_args(argv)
+    table = load_table(args.table)
+    data = runtime_data(table)
+    interp = Interpolator(data)
+    sets = query_sets(data, interp, args.queries)
+    out = {"table": str(args.table), "queries": args.queries, "c": {}, "python": {}}
+    if codegen.find_cc() is None:
+        print("no C compiler: C benchmarks skipped")
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            for opt in ("-O2", "-O3"):
+                wd = Path(tmp) / opt.strip("-")
+                lib = codegen.CRuntime(codegen.build_host(data, wd, opt=opt), data)
+                exe = codegen.build_host(data, wd, opt=opt, shared=False)
+                for name, q in sets.items():
+                    cg_q = q[:20_000]
+                    out["c"][f"{opt} {name}"] = {
+                        "ns_per_lookup": round(time_c(lib, q), 1),
+                        "instructions_per_lookup": callgrind_instructions(exe, cg_q, wd),
+                    }
+    for name, q in sets.items():
+        interp(q[:1000, 0], q[:1000, 1], q[:1000, 2])
+        best = np.inf
+        for _ in range(3):
+            t0 = time.perf_counter()
+            interp(q[:, 0], q[:, 1], q[:, 2])
+            best = min(best, time.perf_counter() - t0)
+        out["python"][name] = {"lookups_per_s": round(len(q) / best)}
+    print(f"runtime benchmarks, table {args.table} ({args.queries} queries per set)")
+    for key, r in out["c"].items():
+        ins = r["instructions_per_lookup"]
+        ins_s = f"{ins:7.0f} instructions" if ins is not None else "  (no valgrind)"
+        print(f"  C {key:10s} {r['ns_per_lookup']:7.1f} ns/lookup  {ins_s}")
+    for key, r in out["python"].items():
+        print(f"  Python {key:7s} {r['lookups_per_s'] / 1e3:8.0f} k lookups/s (vectorised)")
+    c = out["c"].get("-O2 flight")
+    if c:
+        ok = c["ns_per_lookup"] < 1000 and (c["instructions_per_lookup"] or 0) < 1000
+        print(f"  target (< 1 us and < 1000 instructions, -O2 flight): {'met' if ok else 'MISSED'}")
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,523 @@
+"""Python reference of the C runtime (``gainsched/c/gainsched_runtime.c``), vectorised.
+
+Same data, same semantics, same status bits as the firmware lookup; the tests
+hold the two together on random queries (docs/runtime.md has the contract):
+
+1. NaN/inf or out-of-limit inputs -> ``BAD_INPUT``, outputs zero.
+2. S1: ``alpha < 0`` -> ``xi += pi``, ``alpha = -alpha``.
+3. S2: ``xi_dot < 0`` -> ``xi = pi - xi``, ``xi_dot = -xi_dot``; outputs mapped
+   back with ``K -> P_u K P_x``, ``u_d -> P_u u_d``, ``phi_d -> -phi_d``.
+4. xi wrapped onto the periodic uniform axis; xi_dot and alpha clamped into the
+   table (``CLAMPED_SPEED``, ``CLAMPED_TILT``).
+5. Trilinear interpolation on the 8 corners of the cell (cell fractions within
+   ``SNAP`` = 2^-12 of 0 or 1 are snapped onto the grid plane); ``INFEASIBLE`` if
+   a corner with non-zero weight is marked infeasible, plus ``NO_GAINS`` (outputs
+   zero) if such a corner has no gains.
+
+Queries are rounded to float32 and every operation that picks the cell is
+done in float32 in the C order, so the cell and the status flags are exactly
+the C runtime's; the interpolation itself runs in float64 on the float32
+table data (the numbers the firmware holds).
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = [
+    "OK",
+    "CLAMPED_SPEED",
+    "CLAMPED_TILT",
+    "INFEASIBLE",
+    "NO_GAINS",
+    "BAD_INPUT",
+    "BAD_ARG",
+    "BAD_TABLE",
+    "UNUSABLE",
+    "MASK_NO_GAINS",
+    "STATUS_NAMES",
+    "status_text",
+    "RuntimeData",
+    "runtime_data",
+    "Lookup",
+    "Interpolator",
+    "MidpointCheck",
+    "midpoint_check",
+]
+
+# status bits (gainsched_runtime.h)
+OK = 0x00
+CLAMPED_SPEED = 0x01
+CLAMPED_TILT = 0x02
+INFEASIBLE = 0x04
+NO_GAINS = 0x08
+BAD_INPUT = 0x10
+BAD_ARG = 0x20
+BAD_TABLE = 0x40
+UNUSABLE = NO_GAINS | BAD_INPUT | BAD_ARG
+STATUS_NAMES = {
+    CLAMPED_SPEED: "CLAMPED_SPEED",
+    CLAMPED_TILT: "CLAMPED_TILT",
+    INFEASIBLE: "INFEASIBLE",
+    NO_GAINS: "NO_GAINS",
+    BAD_INPUT: "BAD_INPUT",
+    BAD_ARG: "BAD_ARG",
+    BAD_TABLE: "BAD_TABLE",
+}
+#: mask bit of a point without gains (the feasibility reasons use bits 0x01..0x10)
+MASK_NO_GAINS = 0x80
+
+F32 = np.float32
+PI_F = F32(np.pi)
+XI_LIMIT = F32(1.0e4)  # rad
+XI_DOT_LIMIT = F32(1.0e3)  # rad/s
+TILT_LIMIT = F32(np.pi / 2)  # rad
+MAX_XI = 4096  # largest azimuth axis the runtime accepts (exact float <-> int wraps)
+N_BASE_STATES = 11  # never permuted by the mirror (GS_N_BASE_STATES)
+SNAP = F32(2.0**-12)  # cell fractions this close to 0 or 1 are put on the grid plane
+
+
+def _snap(f):
+    """``gs_snap``: fractions within SNAP of 0 or 1 become exactly 0 or 1 (float32)."""
+    f = np.asarray(f, dtype=np.float32)
+    return np.where(f < SNAP, F32(0), np.where(f > F32(1) - SNAP, F32(1), f)).astype(np.float32)
+
+
+def status_text(status: int) -> str:
+    """``"OK"`` or the names of the set bits joined by ``|``."""
+    status = int(status)
+    names = [name for bit, name in STATUS_NAMES.items() if status & bit]
+    return "|".join(names) if names else "OK"
+
+
+@dataclass(frozen=True)
+class RuntimeData:
+    """A table as the runtime holds it: float32 data, infeasible gains as zeros, the mask.
+
+    Arrays (shapes as in :class:`gainsched.tables.Table`): ``xi, speed, xi_dot, tilt,
+    K_tilt0, K, u_d, phi_d, state_sign`` float32; ``state_perm, mask`` uint8 with
+    ``mask = reasons | MASK_NO_GAINS`` where a point has no finite gains or nominal.
+    ``P_x[state_perm[j], j] = state_sign[j]`` is the S2 map of the LQR state.
+    """
+
+    name: str
+    xi: np.ndarray
+    speed: np.ndarray
+    xi_dot: np.ndarray
+    tilt: np.ndarray
+    K_tilt0: np.ndarray
+    K: np.ndarray
+    u_d: np.ndarray
+    phi_d: np.ndarray
+    state_sign: np.ndarray
+    state_perm: np.ndarray
+    mask: np.ndarray
+    xi_scale: np.float32
+    state_names: tuple = ()
+    config_sha256: str = ""
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def dims(self) -> tuple[int, int, int, int]:
+        """``(n_tilt, n_speed, n_xi, n_state)``."""
+        return self.tilt.size, self.xi_dot.size, self.xi.size, self.state_sign.size
+
+    def crc_chunks(self):
+        """``(label, bytes)`` in CRC order: dims (uint32 LE), xi_scale, then the arrays."""
+        dims = np.array(self.dims, dtype="<u4")
+        yield "dims", dims.tobytes()
+        yield "xi_scale", np.array([self.xi_scale], dtype="<f4").tobytes()
+        for key in ("xi", "speed", "xi_dot", "tilt", "K_tilt0", "K", "u_d", "phi_d", "state_sign"):
+            yield key, np.ascontiguousarray(getattr(self, key), dtype="<f4").tobytes()
+        for key in ("state_perm", "mask"):
+            yield key, np.ascontiguousarray(getattr(self, key), dtype=np.uint8).tobytes()
+
+    def crc32(self) -> int:
+        """CRC-32 (zlib, IEEE) of :meth:`crc_chunks`, as ``gs_table_crc32`` computes it."""
+        crc = 0
+        for _, b in self.crc_chunks():
+            crc = zlib.crc32(b, crc)
+        return crc & 0xFFFFFFFF
+
+    def nbytes(self) -> int:
+        """Bytes of table data the firmware stores (all arrays, without padding)."""
+        return sum(len(b) for k, b in self.crc_chunks() if k not in ("dims", "xi_scale"))
+
+
+def c_identifier(name: str) -> str:
+    """A lower-case C identifier prefix from a table name (``paper-v2`` -> ``paper_v2``)."""
+    out = "".join(ch if ch.isalnum() and ch.isascii() else "_" for ch in str(name).lower())
+    out = out.strip("_") or "table"
+    return out if not out[0].isdigit() else f"t{out}"
+
+
+def _state_mirror(table) -> np.ndarray:
+    """P_x of the table's LQR state, from its config's effects."""
+    from .config import config_from_text
+    from .effects import effects_from_specs
+    from .symmetry import STATE_SIGNS, state_mirror
+
+    n = table.K_tilt0.shape[-1]
+    try:
+        cfg = config_from_text(table.config_text, f"{table.source}:config_text")
+        P = state_mirror(effects_from_specs(cfg.effects))
+    except InputError:
+        if n != STATE_SIGNS.size:
+            raise
+        P = np.diag(STATE_SIGNS)
+    if P.shape != (n, n):
+        raise InputError(table.source, "config_text", f"state map is {P.shape}, gains have n={n}")
+    return P
+
+
+def _signed_permutation(P, source="") -> tuple[np.ndarray, np.ndarray]:
+    """``(perm, sign)`` with ``P[perm[j], j] = sign[j]``; P must be a signed involution."""
+    n = P.shape[0]
+    perm = np.abs(P).argmax(0)
+    sign = P[perm, np.arange(n)]
+    Q = np.zeros_like(P)
+    Q[perm, np.arange(n)] = sign
+    ok = (
+        np.array_equal(Q, P)
+        and np.all(np.abs(sign) == 1)
+        and np.array_equal(perm[perm], np.arange(n))
+        and np.array_equal(sign[perm], sign)
+        and n >= N_BASE_STATES
+        and np.array_equal(perm[:N_BASE_STATES], np.arange(N_BASE_STATES))
+    )
+    if not ok or n > 255:
+        raise InputError(source, "state map", "S2 state map is not a signed involutive permutation")
+    return perm.astype(np.uint8), sign.astype(np.float32)
+
+
+def runtime_data(table) -> RuntimeData:
+    """Convert a loaded :class:`~gainsched.tables.Table` into the runtime's float32 form.
+
+    Raises InputError if the table cannot be represented (float32 axes collapse,
+    too many azimuths, state map not a signed permutation).
+    """
+    src = table.source or "<table>"
+    n_a, n_v, n_xi = table.reasons.shape
+    if n_xi > MAX_XI:
+        raise InputError(src, "axes/xi", f"at most {MAX_XI} azimuth samples, got {n_xi}")
+    axes = {}
+    for key in ("xi", "speed", "xi_dot", "tilt"):
+        a = np.asarray(getattr(table, key), dtype=np.float32)
+        if a.size > 1 and np.any(np.diff(a) <= 0):
+            raise InputError(src, f"axes/{key}", "not strictly increasing in float32")
+        axes[key] = a
+    if not axes["xi_dot"][0] > 0:
+        raise InputError(src, "axes/xi_dot", "must be positive")
+    if np.any(table.reasons & MASK_NO_GAINS):
+        raise InputError(src, "feasibility/reasons", f"bit {MASK_NO_GAINS:#x} is reserved")
+    perm, sign = _signed_permutation(_state_mirror(table), src)
+    K0 = np.asarray(table.K_tilt0, dtype=np.float64)
+    K = np.asarray(table.K, dtype=np.float64)
+    u_d = np.asarray(table.u_d, dtype=np.float64)
+    phi_d = np.asarray(table.phi_d, dtype=np.float64)
+    big = np.finfo(np.float32).max
+    fin0 = np.all(np.isfinite(K0) & (np.abs(K0) <= big), axis=(-2, -1))  # (n_v,)
+    finK = np.all(np.isfinite(K) & (np.abs(K) <= big), axis=(-2, -1))  # (n_a-1, n_v, n_xi)
+    good = np.empty((n_a, n_v, n_xi), dtype=bool)
+    good[0] = fin0[:, None]
+    good[1:] = finK
+    good &= np.all(np.isfinite(u_d) & (np.abs(u_d) <= big), axis=-1)
+    good &= np.isfinite(phi_d) & (np.abs(phi_d) <= big)
+    mask = np.asarray(table.reasons, dtype=np.uint8) | np.where(good, 0, MASK_NO_GAINS).astype(
+        np.uint8
+    )
+
+    def clean(x):
+        x = np.where(np.isfinite(x) & (np.abs(x) <= big), x, 0.0)
+        return np.ascontiguousarray(x, dtype=np.float32)
+
+    names = tuple(str(table.attrs.get("state_names", "")).split(",")) if table.attrs else ()
+    meta = {
+        k: table.attrs[k]
+        for k in ("tool_version", "schema", "terminal", "rate_hz", "radius_m", "config_name")
+        if k in table.attrs
+    }
+    return RuntimeData(
+        name=c_identifier(table.name if "config_name" in table.attrs else "table"),
+        xi_scale=F32(n_xi / (2 * np.pi)),
+        state_sign=sign,
+        state_perm=perm,
+        mask=np.ascontiguousarray(mask),
+        K_tilt0=clean(K0),
+        K=clean(K),
+        u_d=clean(u_d),
+        phi_d=clean(phi_d),
+        state_names=names,
+        config_sha256=str(table.config_sha256),
+        meta=meta,
+        **axes,
+    )
+
+
+@dataclass(frozen=True)
+class Lookup:
+    """Lookup results for queries of shape ``S``.
+
+    K : (*S, 4, n); u_d : (*S, 4) N; phi_d : (*S,) rad; status : (*S,) uint8 (GS_* bits)
+    """
+
+    K: np.ndarray
+    u_d: np.ndarray
+    phi_d: np.ndarray
+    status: np.ndarray
+
+
+class Interpolator:
+    """Vectorised reference lookup; ``Interpolator(table)(xi, xi_dot, alpha)`` -> :class:`Lookup`.
+
+    Parameters
+    ----------
+    table : Table or RuntimeData
+    """
+
+    def __init__(self, table):
+        d = table if isinstance(table, RuntimeData) else runtime_data(table)
+        self.data = d
+        n_a, n_v, n_xi, n = d.dims
+        self.n = n
+        Kg = np.empty((n_a, n_v, n_xi, 4 * n))
+        Kg[0] = d.K_tilt0.reshape(n_v, 1, 4 * n)
+        if n_a > 1:
+            Kg[1:] = d.K.reshape(n_a - 1, n_v, n_xi, 4 * n)
+        self._K = Kg.reshape(-1, 4 * n)
+        self._U = d.u_d.astype(np.float64).reshape(-1, 4)
+        self._P = d.phi_d.astype(np.float64).reshape(-1)
+        self._mask = d.mask.reshape(-1)
+        self._perm = d.state_perm.astype(np.intp)
+        self._sign = d.state_sign.astype(np.float64)
+
+    def cells(self, xi, xi_dot, alpha):
+        """The cell of each query, exactly as the C runtime picks it.
+
+        Returns ``(points, weights, status, mirrored)``: flat regular-grid point
+        indices (m, 8) and float32 weights (m, 8) of the corners (bit 2 tilt, bit 1
+        speed, bit 0 xi), status (m,) uint8, mirrored (m,) bool. Queries are flattened.
+        """
+        d = self.data
+        with np.errstate(over="ignore", invalid="ignore"):
+            x = np.asarray(xi, dtype=np.float32)
+            v = np.asarray(xi_dot, dtype=np.float32)
+            a = np.asarray(alpha, dtype=np.float32)
+        x, v, a = (q.reshape(-1) for q in np.broadcast_arrays(x, v, a))
+        bad = ~(np.isfinite(x) & np.isfinite(v) & np.isfinite(a))
+        bad |= (np.abs(np.where(bad, 0, x)) > XI_LIMIT) | (
+            np.abs(np.where(bad, 0, v)) > XI_DOT_LIMIT
+        )
+        bad |= np.abs(np.where(bad, 0, a)) > TILT_LIMIT
+        zero = F32(0)
+        x, v, a = (np.where(bad, zero, q).astype(np.float32) for q in (x, v, a))
+        # S1, S2 (float32, as in C)
+        neg = a < 0
+        x = np.where(neg, x + PI_F, x)
+        a = np.where(neg, -a, a)
+        mirrored = v < 0
+        x = np.where(mirrored, PI_F - x, x)
+        v = np.where(mirrored, -v, v)
+        # xi: periodic axis in cell units
+        n_a, n_v, n_xi, _ = d.dims
+        tt = x * d.xi_scale
+        fl = np.floor(tt)
+        fx = _snap(tt - fl)
+        j0 = np.mod(fl.astype(np.int64), n_xi)
+        j1 = np.where(j0 + 1 == n_xi, 0, j0 + 1)
+        status = np.zeros(x.shape, dtype=np.uint8)
+        # speed
+        V = d.xi_dot
+        cs = (v < V[0]) | (v > V[-1])
+        v = np.clip(v, V[0], V[-1])
+        status |= np.where(cs, CLAMPED_SPEED, 0).astype(np.uint8)
+        if n_v > 1:
+            k0 = np.clip(np.searchsorted(V, v, side="right") - 1, 0, n_v - 2)
+            fv = _snap((v - V[k0]) / (V[k0 + 1] - V[k0]))
+            k1 = k0 + 1
+        else:
+            k0 = k1 = np.zeros(x.shape, dtype=np.int64)
+            fv = np.zeros(x.shape, dtype=np.float32)
+        # tilt
+        T = d.tilt
+        ct = a > T[-1]
+        a = np.where(ct, T[-1], a)
+        status |= np.where(ct, CLAMPED_TILT, 0).astype(np.uint8)
+        if n_a > 1:
+            i0 = np.clip(np.searchsorted(T, a, side="right") - 1, 0, n_a - 2)
+            fa = _snap((a - T[i0]) / (T[i0 + 1] - T[i0]))
+            i1 = i0 + 1
+        else:
+            i0 = i1 = np.zeros(x.shape, dtype=np.int64)
+            fa = np.zeros(x.shape, dtype=np.float32)
+        one = F32(1)
+        ia, iv, ix = (i0, i1), (k0, k1), (j0, j1)
+        wa, wv, wx = (one - fa, fa), (one - fv, fv), (one - fx, fx)
+        pts = np.empty(x.shape + (8,), dtype=np.int64)
+        w = np.empty(x.shape + (8,), dtype=np.float32)
+        for c in range(8):
+            bt, bv, bx = (c >> 2) & 1, (c >> 1) & 1, c & 1
+            pts[:, c] = (ia[bt] * n_v + iv[bv]) * n_xi + ix[bx]
+            w[:, c] = wa[bt] * wv[bv] * wx[bx]
+        # only corners with non-zero weight count
+        m = np.bitwise_or.reduce(np.where(w != 0, self._mask[pts], 0), axis=1)
+        status |= np.where(m != 0, INFEASIBLE, 0).astype(np.uint8)
+        status |= np.where(m & MASK_NO_GAINS, NO_GAINS, 0).astype(np.uint8)
+        status = np.where(bad, BAD_INPUT, status).astype(np.uint8)
+        return pts, w, status, mirrored
+
+    def __call__(self, xi, xi_dot, alpha, *, chunk: int = 16384) -> Lookup:
+        """Look up gains for arrays of queries (broadcast together); see the module doc."""
+        shape = np.broadcast_shapes(np.shape(xi), np.shape(xi_dot), np.shape(alpha))
+        pts, w, status, mirrored = self.cells(xi, xi_dot, alpha)
+        m, n = status.size, self.n
+        K = np.empty((m, 4 * n))
+        U = np.empty((m, 4))
+        P = np.empty(m)
+        # self._K holds the gains on the regular grid (tilt-0 rows repeated over xi)
+        for s in range(0, m, chunk):
+            sl = slice(s, s + chunk)
+            p, wc = pts[sl], w[sl].astype(np.float64)
+            K[sl] = np.einsum("mc,mce->me", wc, self._K[p])
+            U[sl] = np.einsum("mc,mce->me", wc, self._U[p])
+            P[sl] = np.einsum("mc,mc->m", wc, self._P[p])
+        K = K.reshape(m, 4, n)
+        if np.any(mirrored):
+            Km = K[mirrored][:, ::-1, :][:, :, self._perm] * self._sign
+            K[mirrored] = Km
+            U[mirrored] = U[mirrored][:, ::-1]
+            P[mirrored] = -P[mirrored]
+        dead = (status & UNUSABLE) != 0
+        K[dead], U[dead], P[dead] = 0.0, 0.0, 0.0
+        return Lookup(
+            K.reshape(shape + (4, n)),
+            U.reshape(shape + (4,)),
+            P.reshape(shape),
+            status.reshape(shape),
+        )
+
+    lookup = __call__
+
+
+# --------------------------------------------------------------------------- midpoint check
+
+
+@dataclass(frozen=True)
+class MidpointCheck:
+    """Interpolation versus direct LQR solves at cell midpoints.
+
+    Attributes
+    ----------
+    speed, tilt : (m,) m/s, rad of the checked midpoints; xi : (m,) rad
+    rel_err : (m,) ``||K_interp - K_direct||_F / ||K_direct||_F`` (NaN where skipped)
+    u_err : (m,) max |u_d interp - u_d direct|, N
+    circles : list of (speed m/s, tilt rad, rho_interp, rho_direct) per midpoint circle
+    skipped : number of midpoints skipped (direct solve infeasible or an infeasible corner)
+    """
+
+    speed: np.ndarray
+    tilt: np.ndarray
+    xi: np.ndarray
+    rel_err: np.ndarray
+    u_err: np.ndarray
+    circles: list
+    skipped: int
+
+    @property
+    def max_err(self) -> float:
+        e = self.rel_err[np.isfinite(self.rel_err)]
+        return float(e.max()) if e.size else float("nan")
+
+    @property
+    def median_err(self) -> float:
+        e = self.rel_err[np.isfinite(self.rel_err)]
+        return float(np.median(e)) if e.size else float("nan")
+
+    @property
+    def worst_rho(self) -> float:
+        r = [c[2] for c in self.circles if np.isfinite(c[2])]
+        return float(max(r)) if r else float("nan")
+
+    def worst_point(self):
+        """``(speed, tilt, xi, rel_err)`` of the largest error."""
+        e = np.where(np.isfinite(self.rel_err), self.rel_err, -1)
+        i = int(np.argmax(e))
+        return self.speed[i], self.tilt[i], self.xi[i], self.rel_err[i]
+
+    def by_axis(self):
+        """Max error per speed-midpoint and per tilt-midpoint: two dicts value -> max."""
+        out = []
+        for ax in (self.speed, self.tilt):
+            d = {}
+            for v in np.unique(ax):
+                e = self.rel_err[(ax == v) & np.isfinite(self.rel_err)]
+                d[float(v)] = float(e.max()) if e.size else float("nan")
+            out.append(d)
+        return out
+
+
+def midpoint_check(table, *, speed_stride: int = 1, progress=None) -> MidpointCheck:
+    """Solve the periodic LQR directly at the cell midpoints and compare with interpolation.
+
+    Every ``speed_stride``-th speed midpoint, all tilt midpoints and all azimuth
+    midpoints are checked; one :func:`gainsched.grid.solve_circle` per speed midpoint
+    (all tilt midpoints batched, ``2 n_xi`` azimuth samples so the odd ones are the
+    azimuth midpoints). Along each midpoint circle the closed loop is rebuilt with the
+    interpolated table gains at every control step, and the monodromy spectral
+    radius reported.
+    """
+    import dataclasses
+
+    from .config import config_from_text
+    from .grid import solve_circle
+    from .lqr import monodromy, spectral_radius
+
+    interp = Interpolator(table)
+    cfg = config_from_text(table.config_text, f"{table.source}:config_text")
+    n_xi = table.xi.size
+    cfg2 = dataclasses.replace(cfg, grid=dataclasses.replace(cfg.grid, azimuth_samples=2 * n_xi))
+    r = cfg.radius
+    v_mid = 0.5 * (table.speed[1:] + table.speed[:-1])[::speed_stride]
+    a_mid = 0.5 * (table.tilt[1:] + table.tilt[:-1])
+    if a_mid.size == 0:
+        a_mid = table.tilt[:1]
+    xi_mid = (np.arange(n_xi) + 0.5) * (2 * np.pi / n_xi)
+    rows = {k: [] for k in ("speed", "tilt", "xi", "err", "uerr")}
+    circles, skipped = [], 0
+    for v in v_mid:
+        sol, steps = solve_circle(cfg2, float(v), a_mid, keep_steps=True)
+        ok = np.flatnonzero(np.isfinite(sol.rho))
+        for i, a in enumerate(a_mid):
+            Kd = sol.K[i, 1::2]
+            look = interp(xi_mid, v / r, a)
+            use = np.all(np.isfinite(Kd), axis=(-2, -1)) & (look.status == 0)
+            skipped += int(np.count_nonzero(~use))
+            err = np.linalg.norm(look.K - Kd, axis=(-2, -1)) / np.linalg.norm(Kd, axis=(-2, -1))
+            uerr = np.abs(look.u_d - sol.u_d[i, 1::2]).max(-1)
+            rows["speed"].append(np.full(n_xi, v))
+            rows["tilt"].append(np.full(n_xi, a))
+            rows["xi"].append(xi_mid)
+            rows["err"].append(np.where(use, err, np.nan))
+            rows["uerr"].append(np.where(use, uerr, np.nan))
+        if steps is not None:
+            Ad, Bd, Ks = steps
+            N = Ad.shape[-3]
+            xs = 2 * np.pi * np.arange(N) / N
+            for b, i in enumerate(ok):
+                look = interp(xs, v / r, a_mid[i])
+                if np.any(look.status != 0):
+                    circles.append((float(v), float(a_mid[i]), np.nan, float(sol.rho[i])))
+                    continue
+                rho = float(spectral_radius(monodromy(Ad[b], Bd[b], look.K)))
+                circles.append((float(v), float(a_mid[i]), rho, float(sol.rho[i])))
+        if progress is not None:
+            progress(1)
+    cat = {k: np.concatenate(x) if x else np.zeros(0) for k, x in rows.items()}
+    return MidpointCheck(
+        cat["speed"], cat["tilt"], cat["xi"], cat["err"], cat["uerr"], circles, skipped
+    )
