@@ -125,14 +125,8 @@ class MaximalModel:
         no_state = np.zeros(x.shape[:-1] + (0,))
         for eff in md.effects:
             T = eff.modify_thrust(T, kin, no_state)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1]) + (3,)
-        F = np.zeros(shape)
-        tau = np.zeros(shape)
-        for eff in md.effects:
-            wr = eff.wrench(T, kin)
-            if wr is not None:
-                F = F + wr[0]
-                tau = tau + wr[1]
+        F, tau = md.effect_wrench(T, kin)
+        shape = F.shape
         T_C = np.sum(T, axis=-1)
         F0 = R[..., :, 2] * T_C[..., None] + m * md.g_C(alpha) + F  # without the tether
         tau0 = T @ md.alloc[1:].T + tau - _cross(w, w @ J.T)

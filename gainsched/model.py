@@ -140,6 +140,18 @@ class Model:
             i += eff.n_states
         return T
 
+    def effect_wrench(self, T, kin):
+        """Sum of the effects' forces at the COG (in C, N) and torques (in B, N m)."""
+        shape = np.broadcast_shapes(T.shape[:-1], kin.v_C.shape[:-1]) + (3,)
+        F = np.zeros(shape, dtype=np.result_type(T, kin.v_C))
+        tau = np.zeros_like(F)
+        for eff in self.effects:
+            wr = eff.wrench(T, kin)
+            if wr is not None:
+                F = F + wr[0]
+                tau = tau + wr[1]
+        return F, tau
+
     # ------------------------------------------------------------------ dynamics
     def evaluate(self, z, u, alpha) -> Evaluation:
         """Full-state derivative and tether tension.
@@ -162,13 +174,7 @@ class Model:
         kin = Kinematics(R, v_q, w)
         T = self.thrust(z, u, kin)
 
-        F = np.zeros(np.broadcast_shapes(z.shape[:-1], u.shape[:-1]) + (3,), dtype=z.dtype)
-        tau = np.zeros_like(F)
-        for eff in self.effects:
-            wr = eff.wrench(T, kin)
-            if wr is not None:
-                F = F + wr[0]
-                tau = tau + wr[1]
+        F, tau = self.effect_wrench(T, kin)
 
         # p_t'' = rho (e_d delta'' + e_x xi'' + c2) with the velocity-product terms c2
         sd, cd, sx, cx = np.sin(delta), np.cos(delta), np.sin(xi), np.cos(xi)
