@@ -13,7 +13,7 @@ no gains: NaN in K, and the reason bits say why.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 from joblib import Parallel, delayed
@@ -170,11 +170,7 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
         if progress is not None:
             progress(1)
 
-    def stack(name):
-        return np.stack([getattr(s, name) for s in sols], axis=1)
-
-    return GridResult(
-        stack("K"), stack("S"), stack("u_d"), stack("phi_d"), stack("tension"),
-        stack("reasons"), stack("rho"), stack("sweeps"),
-        np.array([s.steps for s in sols]), np.array([s.dt for s in sols]),
-    )  # fmt: skip
+    per_tilt = {f.name: np.stack([getattr(s, f.name) for s in sols], axis=1)
+                for f in fields(CircleSolution) if f.name not in ("steps", "dt")}  # fmt: skip
+    return GridResult(**per_tilt, steps=np.array([s.steps for s in sols]),
+                      dt=np.array([s.dt for s in sols]))  # fmt: skip

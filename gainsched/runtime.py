@@ -88,6 +88,22 @@ def _snap(f):
     return np.where(f < SNAP, F32(0), np.where(f > F32(1) - SNAP, F32(1), f)).astype(np.float32)
 
 
+def _bracket(axis, v):
+    """Clamp ``v`` into a (non-periodic) axis and find its cell, as the C runtime does.
+
+    Returns ``(i0, i1, frac, clamped)``: corner indices, float32 fraction (snapped),
+    and where the value was clamped.
+    """
+    clamped = (v < axis[0]) | (v > axis[-1])
+    v = np.clip(v, axis[0], axis[-1])
+    n = axis.size
+    if n == 1:
+        zero = np.zeros(v.shape, dtype=np.int64)
+        return zero, zero, np.zeros(v.shape, dtype=np.float32), clamped
+    i0 = np.clip(np.searchsorted(axis, v, side="right") - 1, 0, n - 2)
+    return i0, i0 + 1, _snap((v - axis[i0]) / (axis[i0 + 1] - axis[i0])), clamped
+
+
 def status_text(status: int) -> str:
     """``"OK"`` or the names of the set bits joined by ``|``."""
     status = int(status)
@@ -331,30 +347,10 @@ class Interpolator:
         j0 = np.mod(fl.astype(np.int64), n_xi)
         j1 = np.where(j0 + 1 == n_xi, 0, j0 + 1)
         status = np.zeros(x.shape, dtype=np.uint8)
-        # speed
-        V = d.xi_dot
-        cs = (v < V[0]) | (v > V[-1])
-        v = np.clip(v, V[0], V[-1])
+        k0, k1, fv, cs = _bracket(d.xi_dot, v)
         status |= np.where(cs, CLAMPED_SPEED, 0).astype(np.uint8)
-        if n_v > 1:
-            k0 = np.clip(np.searchsorted(V, v, side="right") - 1, 0, n_v - 2)
-            fv = _snap((v - V[k0]) / (V[k0 + 1] - V[k0]))
-            k1 = k0 + 1
-        else:
-            k0 = k1 = np.zeros(x.shape, dtype=np.int64)
-            fv = np.zeros(x.shape, dtype=np.float32)
-        # tilt
-        T = d.tilt
-        ct = a > T[-1]
-        a = np.where(ct, T[-1], a)
+        i0, i1, fa, ct = _bracket(d.tilt, a)  # a >= 0 = tilt[0]: only the top can clamp
         status |= np.where(ct, CLAMPED_TILT, 0).astype(np.uint8)
-        if n_a > 1:
-            i0 = np.clip(np.searchsorted(T, a, side="right") - 1, 0, n_a - 2)
-            fa = _snap((a - T[i0]) / (T[i0 + 1] - T[i0]))
-            i1 = i0 + 1
-        else:
-            i0 = i1 = np.zeros(x.shape, dtype=np.int64)
-            fa = np.zeros(x.shape, dtype=np.float32)
         one = F32(1)
         ia, iv, ix = (i0, i1), (k0, k1), (j0, j1)
         wa, wv, wx = (one - fa, fa), (one - fv, fv), (one - fx, fx)

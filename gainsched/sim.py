@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import N_STATE, Config
+from .config import N_STATE, Config, _Section
 from .errors import InputError
 from .maximal import MaximalModel, maximal_from_reduced, reduced_from_maximal
 from .model import Model
@@ -78,65 +78,43 @@ class Scenario:
     initial_error: tuple[float, ...] = ()
 
 
-def _num(source, d, key, default=..., positive=False):
-    if key not in d:
-        if default is ...:
-            raise InputError(source, key, "missing required key")
-        return default
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
-        raise InputError(source, key, "must be a finite number")
-    if positive and v <= 0:
-        raise InputError(source, key, f"must be > 0, got {v}")
-    return float(v)
-
-
 def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
     """Validate a scenario table (see ``configs/scenarios/*.toml``)."""
-    known = {"name", "tilt_deg", "gamma_deg", "speed", "duration", "maneuvers", "sensing",
-             "initial_error"}  # fmt: skip
-    for k in d:
-        if k not in known:
-            raise InputError(source, k, "unknown key")
-    name = str(d.get("name", Path(str(source)).stem))
-    tilt = np.deg2rad(_num(source, d, "tilt_deg", 0.0))
-    if not -90 < np.rad2deg(tilt) < 90:
-        raise InputError(source, "tilt_deg", "must be in (-90, 90)")
+    top = _Section(str(source), "", d)
+    name = top.string("name", Path(str(source)).stem)
+    tilt_deg = top.number("tilt_deg", 0.0)
+    if not -90 < tilt_deg < 90:
+        raise top.error("tilt_deg", "must be in (-90, 90)")
+    speed = top.number("speed")
+    duration = top.number("duration", positive=True)
+    gamma = np.deg2rad(top.number("gamma_deg", 0.0))
+    raw = top.get("maneuvers", [])
+    if not isinstance(raw, list):
+        raise top.error("maneuvers", "must be a list of tables")
     mans = []
-    t_prev = 0.0
-    for i, m in enumerate(d.get("maneuvers", [])):
-        key = f"maneuvers[{i}]"
-        if not isinstance(m, dict) or set(m) - {"t_start", "speed", "a"}:
-            raise InputError(source, key, "must be a table with t_start, speed, a")
-        man = Maneuver(_num(source, m, "t_start"), _num(source, m, "speed"),
-                       _num(source, m, "a", positive=True))  # fmt: skip
-        if man.t_start < t_prev:
-            raise InputError(source, f"{key}.t_start", "manoeuvres must not overlap")
-        prev_v = mans[-1].speed if mans else _num(source, d, "speed")
-        t_prev = man.t_start + abs(man.speed - prev_v) / man.a
+    t_free = 0.0  # end of the previous manoeuvre
+    for i in range(len(raw)):
+        sec = _Section(str(source), f"maneuvers[{i}]", raw[i])
+        man = Maneuver(sec.number("t_start"), sec.number("speed"), sec.number("a", positive=True))
+        sec.done()
+        if man.t_start < t_free:
+            raise sec.error("t_start", "manoeuvres must not overlap")
+        t_free = man.t_start + abs(man.speed - (mans[-1].speed if mans else speed)) / man.a
         mans.append(man)
-    sens = d.get("sensing", {})
-    if not isinstance(sens, dict):
-        raise InputError(source, "sensing", "must be a table")
-    sk = {"ideal", "rate_hz", "position_noise", "attitude_noise_deg", "gyro_noise", "latency",
-          "seed"}  # fmt: skip
-    for k in sens:
-        if k not in sk:
-            raise InputError(source, f"sensing.{k}", "unknown key")
+    sens = top.sub("sensing", {})
     sensing = Sensing(
-        bool(sens.get("ideal", True)),
-        _num(source, sens, "rate_hz", 200.0, positive=True),
-        _num(source, sens, "position_noise", 0.0),
-        np.deg2rad(_num(source, sens, "attitude_noise_deg", 0.0)),
-        _num(source, sens, "gyro_noise", 0.0),
-        _num(source, sens, "latency", 0.0),
-        int(sens.get("seed", 0)),
+        sens.boolean("ideal", True),
+        sens.number("rate_hz", 200.0, positive=True),
+        sens.number("position_noise", 0.0, nonneg=True),
+        np.deg2rad(sens.number("attitude_noise_deg", 0.0, nonneg=True)),
+        sens.number("gyro_noise", 0.0, nonneg=True),
+        sens.number("latency", 0.0, nonneg=True),
+        int(sens.number("seed", 0)),
     )
-    init = tuple(float(x) for x in d.get("initial_error", ()))
-    duration = _num(source, d, "duration", positive=True)
-    gamma = np.deg2rad(_num(source, d, "gamma_deg", 0.0))
-    speed = _num(source, d, "speed")
-    return Scenario(name, tilt, speed, duration, tuple(mans), gamma, sensing, init)
+    sens.done()
+    init = tuple(top.array("initial_error", [])) if "initial_error" in d else ()
+    top.done()
+    return Scenario(name, np.deg2rad(tilt_deg), speed, duration, tuple(mans), gamma, sensing, init)
 
 
 def load_scenario(path) -> Scenario:

@@ -24,7 +24,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
-from .config import N_STATE
 from .errors import GainschedError
 from .nominal import Path, _closed_form, state_from_roll
 
@@ -173,6 +172,9 @@ def trim_path(model, path: Path, alpha: float, *, periodic: bool | None = None):
     -------
     z : ndarray (N, n_z); z_dot : ndarray (N, n_z); u : ndarray (N, 4), N; tension : ndarray (N,), N
     """
+    stateful = [e for e in model.effects if e.n_states]
+    if len(stateful) > 1 or (stateful and stateful[0].n_states != 4):
+        raise TrimError("the trim supports one stateful effect whose states are the 4 thrusts")
     xd = path.d[0]
     if periodic is None:
         periodic = bool(np.allclose(xd, xd[0]) and np.all(path.d[1] == 0))
@@ -204,12 +206,9 @@ def trim_path(model, path: Path, alpha: float, *, periodic: bool | None = None):
     u = T
     z_dot = sdot
     if model.n_extra:
-        # commanded thrust from the stateful effects' inverse; their states' derivative
-        i, us = N_STATE, T
-        for eff in model.effects:
-            if eff.n_states:
-                _, us = eff.steady_states(T, T_dot)
-                i += eff.n_states
-        u = us
+        # the free thrusts are the states of the one stateful effect (the actual thrusts);
+        # the command comes from its inverse
+        (lag,) = (e for e in model.effects if e.n_states)
+        _, u = lag.steady_states(T, T_dot)
         z_dot = np.concatenate([sdot, T_dot], -1)
     return z, z_dot, u, ev.tension
