@@ -1,32 +1,48 @@
 """Gain-compiler benchmarks on the paper config (``python -m bench``).
 
-(a) Full build of configs/paper.toml with ``build_grid`` at n_jobs = 1 and 2
-    (the n_jobs = 2 run once cold, with joblib worker start-up, and once warm).
-(b) Riccati throughput, in point-steps per second (one point-step = one step of
-    the backward recursion at one operating point), of the batched
-    ``gainsched.lqr.riccati_sweep`` against a per-point Python loop doing the
-    same recursion with numpy, on the same Ad/Bd in the same run:
-    - the 5 tilts of one speed over a whole period (what a build job batches);
-    - 64 circles (the feasible circles of the paper grid, the first ones
-      repeated to make 64), over the first N steps common to all of them.
+Every figure is measured in this run next to its baseline or peer, as a ratio:
 
-Only ratios against the baseline measured in the same run are meaningful.
+(a) Riccati kernel, in point-steps per second (one point-step = one step of the
+    backward recursion at one operating point), on the same A_k, B_k (64
+    circles of the paper grid over their first N common steps):
+    - ours: the compiled kernel (1 and 2 threads) and the batched numpy fallback;
+    - baseline: a per-point Python loop doing the same recursion with numpy;
+    - peers: Drake's discrete ``FiniteHorizonLinearQuadraticRegulator`` (extra
+      ``[peers]``; skipped with a message when absent), per step, on the
+      time-invariant tilt-0 problem; ``scipy.linalg.solve_discrete_are`` and
+      python-control ``dlqr`` per point on the tilt-0 problems against our
+      periodic recursion on the same problems (gains compared).
+(b) Linearisation + discretisation, in blocks (one step's A_d, B_d) per second:
+    ours (exact at M azimuths + trigonometric interpolation) against complex-step
+    Jacobians at every step, and our batched Taylor ``expm`` against scipy's
+    batched ``expm`` on the same blocks.
+(c) Full builds: configs/paper.toml (n_jobs 1 and 2; peak memory of a build in a
+    fresh process) and a 4x finer grid; the growth exponents of the build time in
+    grid points (1x, 2x, 4x circles) and in steps per period (control rate 0.5, 1,
+    2 kHz), fitted on log-log axes.
 """
 
 from __future__ import annotations
 
+import json
+import re
+import subprocess
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from gainsched.config import load_config
-from gainsched.grid import build_grid, solve_circle
-from gainsched.lqr import riccati_sweep
+from gainsched.config import config_from_text, load_config
+from gainsched.grid import build_grid, discrete_system, solve_circle, steps_per_period
+from gainsched.linearize import discretize, expm_batched, jacobians, lqr_system
+from gainsched.lqr import dlqr, native_available, periodic_lqr, sweep
+from gainsched.model import Model
+from gainsched.nominal import circle_nominal, period
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "configs" / "paper.toml"
-SPEED = 9.0  # m/s: all 5 tilts feasible
+SPEED = 9.0  # m/s: all tilts feasible
 
 
 def best_of(fn, repeat):
@@ -40,7 +56,7 @@ def best_of(fn, repeat):
 
 
 def loop_sweep(Ad, Bd, Q, R):
-    """The same backward recursion as riccati_sweep, one point at a time (the baseline)."""
+    """The same backward recursion, one point at a time with numpy (the baseline)."""
     P_out = np.empty(Ad.shape[:1] + Q.shape)
     for i in range(Ad.shape[0]):
         P = Q.copy()
@@ -54,93 +70,356 @@ def loop_sweep(Ad, Bd, Q, R):
     return P_out
 
 
-def riccati_case(label, Ad, Bd, Q, R, repeat=3):
-    b, N = Ad.shape[:2]
-    P_end = np.broadcast_to(Q, (b,) + Q.shape).copy()
-    t_batch, (P_batch, _, _) = best_of(lambda: riccati_sweep(Ad, Bd, Q, R, P_end), repeat)
-    t_loop, P_loop = best_of(lambda: loop_sweep(Ad, Bd, Q, R), repeat)
-    err = float(np.abs(P_batch - P_loop).max() / np.abs(P_loop).max())
-    pts = b * N
-    res = {
-        "points": int(b),
-        "steps": int(N),
-        "batched_s": t_batch,
-        "loop_s": t_loop,
-        "batched_point_steps_per_s": pts / t_batch,
-        "loop_point_steps_per_s": pts / t_loop,
-        "ratio": t_loop / t_batch,
-        "max_rel_diff": err,
-    }
-    print(
-        f"  riccati {label}: {b} points x {N} steps: batched {pts / t_batch:,.0f} point-steps/s, "
-        f"per-point loop {pts / t_loop:,.0f} point-steps/s -> {t_loop / t_batch:.1f}x "
-        f"(results agree to {err:.1e})"
-    )
-    return res
-
-
-def bench_build(cfg):
-    out = {}
-    t1, g = best_of(lambda: build_grid(cfg, n_jobs=1), 1)
-    print(f"  build paper, n_jobs=1: {t1:.2f} s ({g.reasons.size} grid points)")
-    t2_cold, _ = best_of(lambda: build_grid(cfg, n_jobs=2), 1)
-    t2_warm, _ = best_of(lambda: build_grid(cfg, n_jobs=2), 1)
-    print(f"  build paper, n_jobs=2: {t2_cold:.2f} s cold (worker start-up), {t2_warm:.2f} s warm")
-    print(f"  parallel speed-up (warm, 2 workers): {t1 / t2_warm:.2f}x")
-    out.update(
-        n_jobs_1_s=t1,
-        n_jobs_2_cold_s=t2_cold,
-        n_jobs_2_warm_s=t2_warm,
-        speedup_2_workers=t1 / t2_warm,
-        grid_points=int(g.reasons.size),
-        circles=int(g.rho.size),
-        feasible_circles=int(np.isfinite(g.rho).sum()),
-    )
-    return out
-
-
 def weights(cfg, n):
     Q = np.zeros((n, n))
     Q[:11, :11] = cfg.control.Q
     return Q, np.asarray(cfg.control.R, dtype=float)
 
 
-def bench_riccati(cfg):
-    out = {}
-    tilts = cfg.grid.tilts
-    _, (Ad, Bd, _) = solve_circle(cfg, SPEED, tilts, keep_steps=True)
-    assert Ad.shape[0] == tilts.size, "all tilts must be feasible at the benchmark speed"
-    Q, R = weights(cfg, Ad.shape[-1])
-    out["tilts_of_one_speed"] = riccati_case(f"{tilts.size} tilts at {SPEED:g} m/s", Ad, Bd, Q, R)
+def _rel(X, Y):
+    return float(np.abs(X - Y).max() / np.abs(Y).max())
 
-    # 64 circles: every feasible circle of the grid, first N_min steps, repeated to 64
-    circles_A, circles_B = [], []
+
+# ------------------------------------------------------------------ (a) Riccati
+
+
+def circles_64(cfg):
+    """A_d, B_d of 64 circles (the feasible tilted circles of the grid, repeated)."""
+    model = Model(cfg)
+    tilts = cfg.grid.tilts[1:]
+    As, Bs = [], []
     for v in cfg.grid.speeds:
-        _, steps = solve_circle(cfg, float(v), tilts, keep_steps=True)
-        if steps is not None:
-            circles_A.extend(steps[0])
-            circles_B.extend(steps[1])
-    n_feasible = len(circles_A)
-    N = min(a.shape[0] for a in circles_A)
-    idx = [i % n_feasible for i in range(64)]
-    Ad64 = np.stack([circles_A[i][:N] for i in idx])
-    Bd64 = np.stack([circles_B[i][:N] for i in idx])
-    res = riccati_case(f"64 circles ({n_feasible} feasible, repeated)", Ad64, Bd64, Q, R)
-    res["distinct_circles"] = n_feasible
-    out["points_64"] = res
+        sol = solve_circle(cfg, float(v), tilts)
+        ok = tilts[np.isfinite(sol.rho)]
+        if ok.size:
+            N = steps_per_period(v, model.r, cfg.control.dt)
+            Ad, Bd, _, _ = discrete_system(model, float(v), ok, N, period(v, model.r) / N)
+            As.extend(Ad)
+            Bs.extend(Bd)
+    N = min(a.shape[0] for a in As)
+    idx = [i % len(As) for i in range(64)]
+    return np.stack([As[i][:N] for i in idx]), np.stack([Bs[i][:N] for i in idx]), len(As)
+
+
+def bench_riccati(cfg):
+    Ad, Bd, distinct = circles_64(cfg)
+    b, N, n, _ = Bd.shape
+    Q, R = weights(cfg, n)
+    P0 = np.broadcast_to(Q, (b, n, n))
+    pts = b * N
+    out = {"points": b, "steps": N, "distinct_circles": distinct}
+    t_np, sw_np = best_of(lambda: sweep(Ad, Bd, Q, R, P0, use_native=False), 2)
+    n_loop = 8  # the baseline on 8 points (it is per point: its rate does not depend on b)
+    t_loop, P_loop = best_of(lambda: loop_sweep(Ad[:n_loop], Bd[:n_loop], Q, R), 2)
+    rate_loop = n_loop * N / t_loop
+    out["numpy_batched_point_steps_per_s"] = pts / t_np
+    out["per_point_loop_point_steps_per_s"] = rate_loop
+    agree = _rel(sw_np.P0[:n_loop], P_loop)
+    print(f"  riccati, {b} circles x {N} steps (one point-step = one recursion step at one point)")
+    print(f"    per-point Python loop       {rate_loop:12,.0f} point-steps/s "
+          f"({1e6 / rate_loop:.2f} us)  baseline")  # fmt: skip
+    print(f"    batched numpy (fallback)    {pts / t_np:12,.0f} point-steps/s "
+          f"({1e6 * t_np / pts:.2f} us)  {pts / t_np / rate_loop:5.1f}x")  # fmt: skip
+    if native_available():
+        for threads in (1, 2):
+            t_c, sw_c = best_of(lambda th=threads: sweep(Ad, Bd, Q, R, P0, threads=th), 3)
+            rate = pts / t_c
+            err = _rel(sw_c.P0, sw_np.P0)
+            print(f"    compiled kernel, {threads} thread{'s' if threads > 1 else ' '}  "
+                  f"{rate:12,.0f} point-steps/s ({1e6 / rate:.2f} us)  "
+                  f"{rate / rate_loop:5.1f}x  (P agrees with numpy to {err:.0e})")  # fmt: skip
+            out[f"compiled_{threads}t_point_steps_per_s"] = rate
+            out[f"compiled_{threads}t_us_per_point_step"] = 1e6 / rate
+            out[f"compiled_{threads}t_ratio_vs_loop"] = rate / rate_loop
+            out["compiled_vs_numpy_rel"] = err
+    else:
+        print("    compiled kernel: no C compiler, skipped")
+    out["loop_vs_batched_rel"] = agree
     return out
+
+
+def _tilt0_problems(cfg):
+    model = Model(cfg)
+    probs = []
+    for v in cfg.grid.speeds:
+        N = steps_per_period(v, model.r, cfg.control.dt)
+        dt = period(v, model.r) / N
+        nom = circle_nominal(model, float(v), 0.0, 1)
+        if nom.reasons.any():
+            continue
+        A, B = jacobians(model, nom.z[0], nom.u[0], 0.0)
+        Ad, Bd = discretize(*lqr_system(A, B), dt)
+        probs.append((float(v), Ad, Bd, N))
+    return probs
+
+
+def bench_peers(cfg):
+    """DARE / python-control dlqr per point and Drake's finite-horizon LQR per step."""
+    probs = _tilt0_problems(cfg)
+    Q, R = weights(cfg, probs[0][1].shape[-1])
+    out = {}
+    t_dare, Ks = best_of(lambda: [dlqr(Ad, Bd, Q, R)[0] for _, Ad, Bd, _ in probs], 3)
+    out["dare_s_per_point"] = t_dare / len(probs)
+    # ours on the same problems: the periodic recursion over one period of steps
+    steps = sum(N for *_, N in probs)
+
+    def ours():
+        return [periodic_lqr(np.broadcast_to(Ad, (N,) + Ad.shape)[None],
+                             np.broadcast_to(Bd, (N,) + Bd.shape)[None], Q, R,
+                             steps=[0]).K[0, 0] for _, Ad, Bd, N in probs]  # fmt: skip
+
+    t_ours, K_ours = best_of(ours, 1)
+    err = max(_rel(a, b) for a, b in zip(K_ours, Ks, strict=True))
+    out["ours_periodic_s_per_point"] = t_ours / len(probs)
+    out["ours_vs_dare_gain_rel"] = err
+    print(f"  tilt-0 problems ({len(probs)} speeds): scipy DARE {1e3 * t_dare / len(probs):.2f} "
+          f"ms/point; our periodic recursion over the period ({steps // len(probs)} steps on "
+          f"average) {1e3 * t_ours / len(probs):.2f} ms/point, gains agree to {err:.0e}; "
+          "the build uses the DARE at tilt 0")  # fmt: skip
+    try:
+        import control
+    except ImportError:
+        print("  python-control not installed (extra [peers]): dlqr peer skipped")
+    else:
+        t_ctl, Kc = best_of(lambda: [control.dlqr(Ad, Bd, Q, R)[0] for _, Ad, Bd, _ in probs], 3)
+        err_c = max(_rel(a, b) for a, b in zip(Kc, Ks, strict=True))
+        out["python_control_dlqr_s_per_point"] = t_ctl / len(probs)
+        print(f"  python-control dlqr {1e3 * t_ctl / len(probs):.2f} ms/point "
+              f"({t_ctl / t_dare:.2f}x scipy's time), gains agree to {err_c:.0e}")  # fmt: skip
+    return out
+
+
+def _drake(prob, Q, R, batched_us):
+    """Drake's discrete finite-horizon LQR per step against our kernel on one problem."""
+    try:
+        from pydrake.systems.controllers import (
+            FiniteHorizonLinearQuadraticRegulator,
+            FiniteHorizonLinearQuadraticRegulatorOptions,
+        )
+        from pydrake.systems.primitives import LinearSystem
+    except ImportError:
+        print("  drake not installed (extra [peers]): Drake peer skipped")
+        return {}
+    speed, Ad, Bd, N = prob
+    n, m = Bd.shape
+    sysd = LinearSystem(Ad, Bd, np.eye(n), np.zeros((n, m)), time_period=1.0)
+    ctx = sysd.CreateDefaultContext()
+    sysd.get_input_port().FixValue(ctx, np.zeros(m))
+    opts = FiniteHorizonLinearQuadraticRegulatorOptions()
+    opts.Qf = Q
+    t_d, res = best_of(lambda: FiniteHorizonLinearQuadraticRegulator(
+        sysd, ctx, 0.0, float(N), Q, R, opts), 1)  # fmt: skip
+    K_d = np.asarray(res.K.value(0.0))
+    sw = sweep(np.broadcast_to(Ad, (1, N, n, n)), np.broadcast_to(Bd, (1, N, n, m)), Q, R,
+               Q[None], steps=[0])  # fmt: skip
+    t_o, sw = best_of(lambda: sweep(np.broadcast_to(Ad, (1, N, n, n)),
+                                    np.broadcast_to(Bd, (1, N, n, m)), Q, R, Q[None],
+                                    steps=[0]), 3)  # fmt: skip
+    err = _rel(sw.K[0, 0], K_d)
+    us_d = 1e6 * t_d / N
+    print(f"  Drake FiniteHorizonLQR (discrete, {speed:g} m/s, {N} steps): {us_d:.1f} us/step; "
+          f"ours {1e6 * t_o / N:.2f} us/step on this one point ({us_d / (1e6 * t_o / N):.0f}x), "
+          f"{batched_us:.2f} us per point-step batched ({us_d / batched_us:.0f}x); gains agree "
+          f"to {err:.0e}")  # fmt: skip
+    return {"drake_us_per_step": us_d, "ours_single_point_us_per_step": 1e6 * t_o / N,
+            "ratio_vs_drake_single_point": us_d / (1e6 * t_o / N),
+            "ratio_vs_drake_batched": us_d / batched_us, "drake_gain_rel": err}  # fmt: skip
+
+
+# ------------------------------------------------------------------ (b) linearisation
+
+
+def bench_linearization(cfg):
+    model = Model(cfg)
+    tilts = cfg.grid.tilts[1:]
+    N = steps_per_period(SPEED, model.r, cfg.control.dt)
+    dt = period(SPEED, model.r) / N
+    blocks = tilts.size * N
+
+    def direct():
+        zs = [circle_nominal(model, SPEED, a, N) for a in tilts]
+        A, B = jacobians(model, np.stack([z.z for z in zs]), np.stack([z.u for z in zs]),
+                         tilts[:, None])  # fmt: skip
+        return discretize(*lqr_system(A, B), dt)
+
+    t_dir, (Ad_ref, _) = best_of(direct, 1)
+    t_int, (Ad, _, M, _) = best_of(lambda: discrete_system(model, SPEED, tilts, N, dt), 3)
+    err = _rel(Ad - np.eye(Ad.shape[-1]), Ad_ref - np.eye(Ad.shape[-1]))
+    print(
+        f"  linearise + discretise, {tilts.size} tilts x {N} steps: every step "
+        f"{blocks / t_dir:,.0f} blocks/s; exact at {M} azimuths + interpolation "
+        f"{blocks / t_int:,.0f} blocks/s -> {t_dir / t_int:.0f}x (agree to {err:.0e})"
+    )
+    # discretisation alone: batched Taylor vs scipy's expm on the same blocks
+    from scipy.linalg import expm
+
+    A, B = jacobians(model, circle_nominal(model, SPEED, tilts[-1], 256).z,
+                     circle_nominal(model, SPEED, tilts[-1], 256).u, tilts[-1])  # fmt: skip
+    Ax, Bx = lqr_system(A, B)
+    n, m = Bx.shape[-2:]
+    Mb = np.zeros(Ax.shape[:-2] + (n + m, n + m))
+    Mb[..., :n, :n], Mb[..., :n, n:] = Ax * dt, Bx * dt
+    t_ours, E = best_of(lambda: expm_batched(Mb), 5)
+    t_sp, E_ref = best_of(lambda: expm(Mb), 2)
+    e_err = _rel(E, E_ref)
+    print(f"  discretisation ({Mb.shape[-1]}x{Mb.shape[-1]} blocks): batched Taylor "
+          f"{len(Mb) / t_ours:,.0f} blocks/s ({1e6 * t_ours / len(Mb):.1f} us), scipy expm "
+          f"{len(Mb) / t_sp:,.0f} blocks/s ({1e6 * t_sp / len(Mb):.1f} us) -> "
+          f"{t_sp / t_ours:.1f}x (agree to {e_err:.0e})")  # fmt: skip
+    return {"blocks": blocks, "interp_samples": M, "direct_blocks_per_s": blocks / t_dir,
+            "interp_blocks_per_s": blocks / t_int, "interp_ratio": t_dir / t_int,
+            "interp_rel": err, "taylor_us_per_block": 1e6 * t_ours / len(Mb),
+            "scipy_expm_us_per_block": 1e6 * t_sp / len(Mb), "expm_ratio": t_sp / t_ours,
+            "expm_rel": e_err}  # fmt: skip
+
+
+# ------------------------------------------------------------------ (c) builds
+
+
+def _variant(text, speeds=None, tilts=None, rate=None):
+    if speeds is not None:
+        text = re.sub(r"^speeds = .*$", f"speeds = {json.dumps(speeds)}", text, flags=re.M)
+    if tilts is not None:
+        text = re.sub(r"^tilts_deg = .*$", f"tilts_deg = {json.dumps(tilts)}", text, flags=re.M)
+    if rate is not None:
+        text = re.sub(r"^rate_hz = [0-9.]+", f"rate_hz = {rate}", text, flags=re.M)
+    return text
+
+
+def _peak_rss_mib(text, n_jobs=1):
+    """Wall time and peak resident memory of a build in a fresh process."""
+    code = (  # VmHWM: this process's peak resident set (ru_maxrss may carry the parent's)
+        "import re, sys, time\n"
+        "def hwm():\n"
+        "    s = open('/proc/self/status').read()\n"
+        "    return int(re.search(r'VmHWM:\\s+(\\d+)', s).group(1)) / 1024\n"
+        "from gainsched.config import config_from_text\n"
+        "from gainsched.grid import build_grid\n"
+        "cfg = config_from_text(sys.stdin.read(), 'bench.toml')\n"
+        "base = hwm()\n"
+        f"t0 = time.perf_counter(); build_grid(cfg, n_jobs={n_jobs})\n"
+        "print(time.perf_counter() - t0, base, hwm())\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], input=text, capture_output=True,
+                         text=True, check=True)  # fmt: skip
+    t, base, peak = map(float, res.stdout.split())
+    return t, base, peak
+
+
+def _refine(x):
+    """Grid values with the midpoints added (2x - 1 values)."""
+    x = np.asarray(x, dtype=float)
+    return [round(float(v), 3) for v in np.sort(np.concatenate([x, 0.5 * (x[1:] + x[:-1])]))]
+
+
+def _exponent(x, y):
+    return float(np.polyfit(np.log(x), np.log(y), 1)[0])
+
+
+def bench_build(cfg):
+    out = {}
+    text = PAPER.read_text()
+    t1, g = best_of(lambda: build_grid(cfg, n_jobs=1), 2)
+    t2_cold, _ = best_of(lambda: build_grid(cfg, n_jobs=2), 1)
+    t2, _ = best_of(lambda: build_grid(cfg, n_jobs=2), 2)
+    print(
+        f"  build paper ({g.reasons.size} grid points, {g.rho.size} circles): n_jobs=1 "
+        f"{t1:.2f} s; n_jobs=2 {t2_cold:.2f} s cold (worker start-up), {t2:.2f} s warm"
+    )
+    _, base, peak = _peak_rss_mib(text)
+    print(
+        f"  peak memory of the paper build: {peak:.0f} MiB resident "
+        f"({peak - base:.0f} MiB above the interpreter with its imports, {base:.0f} MiB)"
+    )
+    out.update(n_jobs_1_s=t1, n_jobs_2_cold_s=t2_cold, n_jobs_2_warm_s=t2,
+               grid_points=int(g.reasons.size), circles=int(g.rho.size),
+               peak_rss_mib=peak, peak_rss_above_imports_mib=peak - base)  # fmt: skip
+
+    # 4x finer grid: the spacing of speeds and of tilts halved (midpoints added)
+    fine_v, fine_a = _refine(cfg.grid.speeds), _refine(np.rad2deg(cfg.grid.tilts))
+    variants = {
+        "1x": _variant(text),
+        "2x": _variant(text, speeds=fine_v),
+        "4x": _variant(text, speeds=fine_v, tilts=fine_a),
+    }
+    pts, times = [], []
+    for name, vt in variants.items():
+        c = config_from_text(vt, f"{name}.toml")
+        t, gg = best_of(lambda c=c: build_grid(c, n_jobs=1), 1)
+        pts.append(gg.rho.size)
+        times.append(t)
+        print(f"    grid {name}: {gg.rho.size:3d} circles, {gg.reasons.size:5d} points: {t:.2f} s")
+    e_pts = _exponent(pts, times)
+    _, _, peak4 = _peak_rss_mib(variants["4x"])
+    print(
+        f"  4x finer grid: {times[-1]:.2f} s, peak memory {peak4:.0f} MiB "
+        f"(paper: {peak:.0f} MiB); growth exponent in grid points {e_pts:.2f}"
+    )
+    steps, t_steps = [], []
+    for rate in (500.0, 1000.0, 2000.0):
+        c = config_from_text(_variant(text, rate=rate), f"rate{rate:g}.toml")
+        t, gg = best_of(lambda c=c: build_grid(c, n_jobs=1), 1)
+        steps.append(int(gg.steps.sum()))
+        t_steps.append(t)
+        print(f"    control rate {rate:g} Hz: {steps[-1]} steps per sweep of all speeds, {t:.2f} s")
+    e_steps = _exponent(steps, t_steps)
+    print(f"  growth exponent in steps per period {e_steps:.2f}")
+    out.update(fine_grid_s=times[-1], fine_grid_circles=pts[-1], fine_peak_rss_mib=peak4,
+               growth_exponent_points=e_pts, growth_exponent_steps=e_steps,
+               scaling={"circles": pts, "circle_times_s": times, "steps": steps,
+                        "step_times_s": t_steps})  # fmt: skip
+    return out
+
+
+def plot(results, out_dir):
+    """Scaling curves (PNG) next to bench/results.json."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sc = results["build"]["scaling"]
+    fig, ax = plt.subplots(1, 2, figsize=(9, 3.5))
+    for a, x, y, lab, e in ((ax[0], sc["circles"], sc["circle_times_s"], "circles",
+                             results["build"]["growth_exponent_points"]),
+                            (ax[1], sc["steps"], sc["step_times_s"], "steps per sweep",
+                             results["build"]["growth_exponent_steps"])):  # fmt: skip
+        a.loglog(x, y, "o-", label=f"build, slope {e:.2f}")
+        a.loglog(x, np.asarray(x) / x[0] * y[0], "k:", label="slope 1")
+        a.set_xlabel(lab)
+        a.set_ylabel("build time (s)")
+        a.legend()
+        a.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    path = Path(out_dir) / "build_scaling.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
 
 
 def main():
     cfg = load_config(PAPER)
-    results = {"build": bench_build(cfg), "riccati": bench_riccati(cfg)}
-    r5 = results["riccati"]["tilts_of_one_speed"]["ratio"]
-    r64 = results["riccati"]["points_64"]["ratio"]
-    print(
-        f"  batched Riccati vs per-point loop: {r5:.1f}x over 5 points, {r64:.1f}x over 64 "
-        f"points (target >= 10x: {'met' if r64 >= 10 else 'not met'} at 64, "
-        f"{'met' if r5 >= 10 else 'not met'} at 5)"
+    results = {"riccati": bench_riccati(cfg), "peers": bench_peers(cfg)}
+    r = results["riccati"]
+    best_us = (
+        min(v for k, v in r.items() if k.endswith("us_per_point_step"))
+        if any(k.endswith("us_per_point_step") for k in r)
+        else 1e6 / r["numpy_batched_point_steps_per_s"]
     )
+    probs = _tilt0_problems(cfg)
+    Q, R = weights(cfg, probs[0][1].shape[-1])
+    results["peers"].update(_drake(probs[len(probs) // 2], Q, R, best_us))
+    results.update(
+        {
+            "linearization": bench_linearization(cfg),
+            "build": bench_build(cfg),
+        }
+    )
+    if "compiled_2t_ratio_vs_loop" in r:
+        print(f"  Riccati kernel vs per-point loop: {r['compiled_1t_ratio_vs_loop']:.1f}x on 1 "
+              f"thread, {r['compiled_2t_ratio_vs_loop']:.1f}x on 2 "
+              f"({r['compiled_2t_us_per_point_step']:.2f} us per point-step)")  # fmt: skip
+    results["plot"] = str(plot(results, Path(__file__).parent))
     return results
 
 

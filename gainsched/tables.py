@@ -157,6 +157,10 @@ def table_bytes(config, grid, model) -> bytes:
         _create(cl, "spectral_radius", grid.rho, "-", "monodromy spectral radius per circle")
         _create(cl, "periods", grid.sweeps, "-", "periods in the periodic terminal cost")
         _create(cl, "steps", grid.steps, "-", "control steps per period")
+        _create(cl, "linearization_samples", grid.lin_samples, "-",
+                "azimuths of exact linearisation per circle (1: time-invariant, tilt 0)")
+        _create(cl, "linearization_error", grid.lin_error, "-",
+                "relative error check of the interpolated linearisation per circle")
         _create(cl, "dt", grid.dt, "s", "discretisation step, period / steps")
         w = _group(f, "weights")
         _create(w, "Q", Qx)

@@ -14,8 +14,10 @@ import numpy as np
 import pytest
 
 from gainsched.config import config_from_text, load_config
-from gainsched.grid import build_grid, solve_circle, steps_per_period
-from gainsched.nominal import REASONS, period
+from gainsched.grid import build_grid, discrete_system, solve_circle, steps_per_period
+from gainsched.linearize import discretize, jacobians, lqr_system
+from gainsched.model import Model
+from gainsched.nominal import REASONS, circle_nominal, period
 
 PAPER = Path(__file__).parents[1] / "configs" / "paper.toml"
 
@@ -140,3 +142,33 @@ def test_infeasible_tilt_does_not_affect_feasible_tilts(paper_config):
     assert np.all(both.reasons[0] == 0) and np.all(both.reasons[1] != 0)
     np.testing.assert_allclose(both.K[0], alone.K[0], rtol=1e-12)
     assert np.all(np.isnan(both.K[1]))
+
+
+@pytest.mark.parametrize(("speed", "tilt_deg"), [(2.5, 20), (9.0, 40), (15.0, 40)])
+def test_interpolated_linearization_equals_every_step(paper_config, speed, tilt_deg):
+    """The trigonometric interpolation of the exact samples reproduces the exact
+    (complex-step, zero-order-hold) system at every control step."""
+    model = Model(paper_config)
+    a = np.deg2rad(tilt_deg)
+    N = steps_per_period(speed, model.r, paper_config.control.dt)
+    dt = period(speed, model.r) / N
+    Ad, Bd, M, err = discrete_system(model, speed, [a], N, dt)
+    assert M < N / 4 and err <= 1e-10
+    nom = circle_nominal(model, speed, a, N)
+    A, B = jacobians(model, nom.z, nom.u, a)
+    Ad_ref, Bd_ref = discretize(*lqr_system(A, B), dt)
+    I = np.eye(Ad.shape[-1])
+    assert np.abs(Ad[0] - Ad_ref).max() / np.abs(Ad_ref - I).max() <= 1e-12
+    assert np.abs(Bd[0] - Bd_ref).max() / np.abs(Bd_ref).max() <= 1e-12
+
+
+@pytest.mark.parametrize("speed", [3.0, 15.0])
+def test_tilt0_dare_equals_periodic_recursion(paper_config, speed):
+    """Tilt-0 circles are solved by the DARE; the periodic recursion agrees."""
+    dare = solve_circle(paper_config, speed, [0.0])
+    rec = solve_circle(paper_config, speed, [0.0], dare_tilt0=False)
+    assert dare.sweeps[0] == -1 and rec.sweeps[0] > 1
+    for name in ("K", "S"):
+        X, Y = getattr(dare, name), getattr(rec, name)
+        assert np.abs(X - Y).max() / np.abs(Y).max() <= 1e-8, name
+    assert dare.rho[0] == pytest.approx(rec.rho[0], rel=1e-6)

@@ -20,11 +20,13 @@ from gainsched.grid import solve_circle
 from gainsched.lqr import (
     dlqr,
     monodromy,
+    native_available,
     period_triple,
     periodic_cost,
     periodic_lqr,
     riccati_sweep,
     spectral_radius,
+    sweep,
 )
 from gainsched.tables import load_table
 
@@ -149,6 +151,46 @@ def test_monodromy_is_the_closed_loop_product(small_problem):
         assert _rel(Phi[i], M) <= 1e-14
         assert spectral_radius(Phi[i]) == pytest.approx(np.abs(np.linalg.eigvals(M)).max())
     assert np.all(spectral_radius(Phi) < 1)
+    assert _rel(sol.Phi, Phi) <= 1e-12  # accumulated inside the final sweep
+
+
+@pytest.fixture(scope="module")
+def lqr11():
+    """A random problem of the flight size: n = 11, m = 4, N = 40 steps, 11 points (not a
+    multiple of the kernel's lane count)."""
+    rng = np.random.default_rng(2024)
+    b, N, n, m = 11, 40, 11, 4
+    Ad = np.eye(n) + rng.normal(size=(b, N, n, n)) * 0.05
+    Bd = rng.normal(size=(b, N, n, m)) * 0.05
+    return Ad, Bd, _spd(rng, n), _spd(rng, m)
+
+
+@pytest.mark.skipif(not native_available(), reason="no C compiler: numpy recursion only")
+@pytest.mark.parametrize("threads", [1, 2])
+def test_compiled_kernel_equals_numpy_recursion(lqr11, threads):
+    """c/riccati.c and the numpy fallback run the same recursion: P, K, S, Phi, G agree."""
+    Ad, Bd, Q, R = lqr11
+    P = np.zeros(Ad.shape[:1] + Q.shape)
+    steps = [39, 0, 17, 5]
+    c = sweep(Ad, Bd, Q, R, P, steps=steps, triple=True, threads=threads, use_native=True)
+    py = sweep(Ad, Bd, Q, R, P, steps=steps, triple=True, use_native=False)
+    for name in ("P0", "K", "S", "Phi", "G"):
+        assert _rel(getattr(c, name), getattr(py, name)) <= 1e-12, name
+    sol_c = periodic_lqr(Ad, Bd, Q, R, use_native=True)
+    sol_py = periodic_lqr(Ad, Bd, Q, R, use_native=False)
+    assert sol_c.sweeps == sol_py.sweeps
+    assert _rel(sol_c.K, sol_py.K) <= 1e-10
+
+
+def test_requested_steps_equal_all_steps(lqr11):
+    """Gains kept at a few steps only are those of the full sweep (memory-bounded grid)."""
+    Ad, Bd, Q, R = lqr11
+    full = periodic_lqr(Ad, Bd, Q, R, keep_S=True)
+    steps = np.array([3, 0, 21])
+    part = periodic_lqr(Ad, Bd, Q, R, keep_S=True, steps=steps)
+    np.testing.assert_array_equal(part.K, full.K[:, steps])
+    np.testing.assert_array_equal(part.S, full.S[:, steps])
+    np.testing.assert_array_equal(part.Phi, full.Phi)
 
 
 # ----------------------------------------------------------------------------- tilt 0 = DARE

@@ -29,6 +29,7 @@ from gainsched.config import load_config
 from gainsched.errors import InputError
 from gainsched.grid import build_grid
 from gainsched.linearize import STATE_NAMES
+from gainsched.lqr import native_available
 from gainsched.model import Model
 from gainsched.nominal import REASONS
 from gainsched.tables import SCHEMA, load_table, table_bytes, write_table
@@ -117,6 +118,8 @@ LAYOUT = {
     "closed_loop/spectral_radius": ((2, 2), "-"),
     "closed_loop/periods": ((2, 2), "-"),
     "closed_loop/steps": ((2,), "-"),
+    "closed_loop/linearization_samples": ((2, 2), "-"),
+    "closed_loop/linearization_error": ((2, 2), "-"),
     "closed_loop/dt": ((2,), "s"),
     "weights/Q": ((11, 11), None),
     "weights/R": ((4, 4), None),
@@ -203,21 +206,29 @@ def paper_rebuild():
 
 
 def test_committed_table_values_match_rebuild(paper_rebuild):
-    """Every dataset and attribute of tables/paper.h5 equals a fresh build (bit for bit)."""
+    """Every dataset and attribute of tables/paper.h5 equals a fresh build (bit for bit;
+    to 1e-10 relative where the numpy fallback replaces the compiled Riccati kernel the
+    committed table was built with, which rounds differently)."""
     _, _, data = paper_rebuild
+    exact = native_available()
     with h5py.File(io.BytesIO(data), "r") as new, h5py.File(PAPER_TABLE, "r") as old:
         assert dict(new.attrs) == dict(old.attrs)
         names = _datasets(new)
         assert names == _datasets(old) and len(names) == len(LAYOUT)
         for name in names:
             a, b = new[name][()], old[name][()]
-            if isinstance(a, np.ndarray) and a.dtype.kind == "f":
+            if isinstance(a, np.ndarray) and a.dtype.kind == "f" and not exact:
+                scale = max(np.nanmax(np.abs(b)), 1e-300) if b.size else 1.0
+                assert np.array_equal(np.isnan(a), np.isnan(b)), name
+                assert np.nanmax(np.abs(a - b), initial=0.0) <= 1e-10 * scale, name
+            elif isinstance(a, np.ndarray) and a.dtype.kind == "f":
                 assert np.array_equal(a, b, equal_nan=True), name
             else:
                 assert np.array_equal(a, b), name
             assert dict(new[name].attrs) == dict(old[name].attrs), name
 
 
+@pytest.mark.skipif(not native_available(), reason="numpy fallback: values checked to 1e-10")
 def test_committed_table_bytes_match_rebuild(paper_rebuild):
     """tables/paper.h5 is byte-identical to what `make tables` would write now."""
     _, _, data = paper_rebuild
