@@ -138,6 +138,28 @@ def nominal(config, speed, tilt, samples, csv_path):
         click.echo(f"wrote {csv_path}")
 
 
+def _cluster_options(fn):
+    """--jobs, --backend, --scheduler, --connect-timeout (gainsched.distributed.executor)."""
+    from .distributed import BACKENDS, DEFAULT_CONNECT_TIMEOUT
+
+    options = [
+        click.option("-j", "--jobs", type=int, default=-1, show_default=True,
+                     help="Parallel workers (joblib; -1 = all cores, or every Dask worker "
+                     "thread)."),
+        click.option("--backend", type=click.Choice(BACKENDS), default="local",
+                     show_default=True, help="Where the grid runs: local (= loky processes), "
+                     "threading, sequential, or dask (needs --scheduler; docs/distributed.md)."),
+        click.option("--scheduler", metavar="tcp://HOST:PORT",
+                     help="Dask scheduler address (with --backend dask)."),
+        click.option("--connect-timeout", type=float, default=DEFAULT_CONNECT_TIMEOUT,
+                     show_default=True, metavar="SECONDS",
+                     help="How long to wait for the Dask scheduler and a first worker."),
+    ]  # fmt: skip
+    for option in reversed(options):
+        fn = option(fn)
+    return fn
+
+
 def _nanmax(a) -> str:
     a = np.asarray(a)
     return f"{np.nanmax(a):.4f}" if np.any(np.isfinite(a)) else "n/a (no feasible circle)"
@@ -147,30 +169,32 @@ def _nanmax(a) -> str:
 @CONFIG
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               default=Path("tables"), show_default=True, help="Output folder.")  # fmt: skip
-@click.option("-j", "--jobs", type=int, default=-1, show_default=True,
-              help="Parallel workers (joblib; -1 = all cores).")  # fmt: skip
-@click.option("--backend", type=click.Choice(["loky", "threading", "sequential"]),
-              default="loky", show_default=True, help="joblib backend.")  # fmt: skip
+@_cluster_options
 @user_errors
-def build(config, out_dir, jobs, backend):
+def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     """Build the gain table OUT/NAME.h5 from CONFIG: nominal, linearisation and periodic
-    LQR at every (speed m/s, tilt deg, azimuth) grid point."""
+    LQR at every (speed m/s, tilt deg, azimuth) grid point. With --backend dask the
+    speeds run on a Dask cluster; the table is byte-identical to the local build."""
     import time
 
     from tqdm import tqdm
 
     from .codegen import write_c_outputs
     from .config import load_config
+    from .distributed import check_options, executor
     from .grid import build_grid
     from .model import Model
     from .tables import write_table
 
+    check_options(backend, scheduler)
     cfg = load_config(config)
     t0 = time.perf_counter()
     n_v = cfg.grid.speeds.size
-    with tqdm(total=n_v, unit="speed", desc=f"build {cfg.name}", disable=None) as bar:
-        grid = build_grid(cfg, n_jobs=jobs, progress=bar.update,
-                          backend=None if backend == "sequential" else backend)  # fmt: skip
+    with executor(backend, scheduler, jobs, connect_timeout=connect_timeout) as ex:
+        if backend == "dask":
+            click.echo(f"build {cfg.name} on {ex.description}", err=True)
+        with tqdm(total=n_v, unit="speed", desc=f"build {cfg.name}", disable=None) as bar:
+            grid = build_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update, backend=ex.backend)
     out = out_dir / f"{cfg.name}.h5"
     size = write_table(out, cfg, grid, Model(cfg))
     c_files = write_c_outputs(out, out_dir)
@@ -183,6 +207,55 @@ def build(config, out_dir, jobs, backend):
         f"{time.perf_counter() - t0:.1f} s, {size / 1024:.0f} KiB"
     )
     click.echo("  C: " + ", ".join(str(p) for p in c_files))
+
+
+@cli.command()
+@CONFIG
+@click.option("--vary", multiple=True, metavar="KEY=v1,v2,...",
+              help="Values of one parameter, SI (e.g. vehicle.mass=0.45,0.5,0.55); repeat "
+              "for a Cartesian product. Keys: docs/distributed.md.")  # fmt: skip
+@click.option("--monte-carlo", type=click.IntRange(0), default=0, metavar="N",
+              help="Monte Carlo samples (per --vary combination) of the --sigma keys.")
+@click.option("--seed", type=click.IntRange(0), default=0, show_default=True,
+              help="Seed of the Monte Carlo draws.")  # fmt: skip
+@click.option("--sigma", multiple=True, metavar="KEY=REL",
+              help="Relative standard deviation of a sampled parameter (e.g. "
+              "vehicle.mass=0.05): value = nominal (1 + REL z), z ~ N(0, 1).")  # fmt: skip
+@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              required=True, help="Output folder (NAME.toml, NAME.h5 per variant; "
+              "sweep.csv, sweep.json).")  # fmt: skip
+@_cluster_options
+@user_errors
+def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, scheduler,
+          connect_timeout):  # fmt: skip
+    """Build a gain table per vehicle variant (--vary) or Monte Carlo sample (--monte-carlo,
+    --sigma) of CONFIG, and a results table: feasible %, worst monodromy spectral radius,
+    max |K|, min tension margin (N) and table SHA-256 per variant."""
+    import time
+
+    from tqdm import tqdm
+
+    from .config import load_config
+    from .distributed import check_options, executor
+    from .sweep import format_rows, make_sweep, parse_sigma, parse_vary, run_sweep
+
+    check_options(backend, scheduler)
+    base = load_config(config)
+    plan = make_sweep(base, [parse_vary(v) for v in vary], monte_carlo=monte_carlo, seed=seed,
+                      sigma=[parse_sigma(s) for s in sigma])  # fmt: skip
+    t0 = time.perf_counter()
+    total = len(plan.variants) * base.grid.speeds.size
+    with executor(backend, scheduler, jobs, connect_timeout=connect_timeout) as ex:
+        if backend == "dask":
+            click.echo(f"sweep {base.name} on {ex.description}", err=True)
+        with tqdm(total=total, unit="speed", desc=f"sweep {base.name} "
+                  f"({len(plan.variants)} variants)", disable=None) as bar:  # fmt: skip
+            rows = run_sweep(plan, out_dir, n_jobs=ex.n_jobs, backend=ex.backend,
+                             progress=bar.update)  # fmt: skip
+    for line in format_rows(plan, rows):
+        click.echo(line)
+    click.echo(f"{out_dir}: {len(rows)} variants ({len(rows)} tables + configs), sweep.csv, "
+               f"sweep.json; {time.perf_counter() - t0:.1f} s")  # fmt: skip
 
 
 @cli.command()
