@@ -15,6 +15,7 @@ with the 11-entry LQR state x (xi error wrapped to [-pi, pi)), the nominal
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,7 @@ import numpy as np
 
 from .config import N_STATE, Config, _Section
 from .errors import InputError
+from .fastplant import fast_plant
 from .maximal import MaximalModel, maximal_from_reduced, reduced_from_maximal
 from .model import Model
 from .nominal import Path as XiPath
@@ -39,6 +41,8 @@ __all__ = [
     "profile_path",
     "simulate",
     "metrics",
+    "table_scheduler",
+    "c_runtime_scheduler",
 ]
 
 
@@ -174,11 +178,19 @@ class SimResult:
 
 
 class _Plant:
-    """Reduced model (rigid link) or maximal model (elastic links) behind one interface."""
+    """Reduced model (rigid link) or maximal model (elastic links) behind one interface.
+
+    The rigid link runs on the compiled plant (:mod:`gainsched.fastplant`) when it
+    supports the config and a compiler is available, else on the numpy model (the
+    reference). Other link models keep their own path: set ``self.maximal`` (an object
+    with ``f(x, u, alpha)`` and ``tension(x, u, alpha)``) and ``self.fast = None``.
+    """
 
     def __init__(self, cfg: Config):
         self.model = Model(cfg)
         self.maximal = None if cfg.tether.link == "rigid" else MaximalModel(self.model)
+        # compiled RK4 of the reduced model; None: numpy model
+        self.fast = fast_plant(cfg) if self.maximal is None else None
 
     def initial(self, z0):
         if self.maximal is None:
@@ -190,10 +202,19 @@ class _Plant:
         return maximal_from_reduced(self.model, z0)
 
     def f(self, x, u, alpha):
+        """State derivative and tether tension (N) at one state."""
         if self.maximal is None:
+            if self.fast is not None:
+                return self.fast.f(x, u, alpha)
             ev = self.model.evaluate(x, u, alpha)
             return ev.z_dot, ev.tension
         return self.maximal.f(x, u, alpha), self.maximal.tension(x, u, alpha)
+
+    def step(self, x, u, alpha, dt):
+        """One RK4 step of ``dt`` s with ``u`` held: ``(x_next, tension at x in N)``."""
+        if self.fast is not None:
+            return self.fast.rk4_step(x, u, alpha, dt)
+        return _rk4(self.f, x, u, alpha, dt)
 
     def reduced(self, x, xi_ref):
         if self.maximal is None:
@@ -201,19 +222,70 @@ class _Plant:
         return reduced_from_maximal(self.model, x, xi_ref)
 
     def pose(self, x, alpha, gamma):
-        """COG position in I (m) and R_IB."""
+        """COG position in I (m) and R_IB of one state or a batch of states (..., n_x)."""
+        if self.maximal is None and np.ndim(x) == 1:  # one state: scalar math
+            m = self.model
+            R_IC = _rot_zyx(alpha, 0.0, gamma)
+            R_CB = _rot_zyx(x[4], x[5], x[6] + x[1])
+            sd = math.sin(x[0])
+            e = np.array([sd * math.cos(x[1]), sd * math.sin(x[1]), math.cos(x[0])])
+            return R_IC @ (m.rho * e + m.L_e * R_CB[:, 0]), R_IC @ R_CB
         R_IC = R_IC_from_tilt(alpha, gamma)
         if self.maximal is None:
             R_CB = self.model.kinematics(x)[0]
             p_C = self.model.cog_position(x)
         else:
-            p_C = x[0:3]
-            R_CB = matrix_from_quaternion(x[6:10] / np.linalg.norm(x[6:10]))
-        return R_IC @ p_C, R_IC @ R_CB
+            q = x[..., 6:10]
+            p_C = x[..., 0:3]
+            R_CB = matrix_from_quaternion(q / np.linalg.norm(q, axis=-1, keepdims=True))
+        return p_C @ R_IC.T, R_IC @ R_CB
+
+    def poses(self, X, alpha, gamma):
+        """COG positions in I (N, 3), m, and quaternions q_IB (N, 4) of states X (N, n_x)."""
+        p_I, R_IB = self.pose(X, alpha, gamma)
+        return p_I, quaternion_from_matrix(R_IB)
+
+
+#: steps per block of gain lookups of a scheduler with ``batch`` (bounds the memory)
+_LOOKUP_BLOCK = 1000
 
 
 def _wrap(a):
     return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _rot_zyx(phi, theta, psi):
+    """``Rz(psi) @ Ry(theta) @ Rx(phi)`` of three scalars (rad), shape (3, 3).
+
+    The one-state form of :func:`~gainsched.rotations.matrix_from_euler_zyx` (paper
+    eq. 2) for the per-step paths: the batched version costs ~50 us per call.
+    ``_rot_zyx(alpha, 0, gamma)`` is ``R_IC`` (paper eq. 1).
+    """
+    cph, sph, cth, sth = math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta)
+    cps, sps = math.cos(psi), math.sin(psi)
+    return np.array(
+        [
+            [cps * cth, -sps * cph + cps * sth * sph, sps * sph + cps * sth * cph],
+            [sps * cth, cps * cph + sps * sth * sph, -cps * sph + sps * sth * cph],
+            [-sth, cth * sph, cth * cph],
+        ]
+    )
+
+
+def _pose_angles(model, p_C, R_CB, xi_ref):
+    """Measured ``(delta, xi, phi, theta, chi)`` (rad, shape (5,)) of one COG position
+    p_C (m, in C) and attitude R_CB: the pose part of
+    :func:`~gainsched.maximal.reduced_from_maximal` for one sample (xi on the branch
+    nearest ``xi_ref``, chi wrapped to [-pi, pi))."""
+    p_t = p_C + R_CB @ model.p_e
+    delta = math.atan2(math.hypot(p_t[0], p_t[1]), p_t[2])
+    xi = math.atan2(p_t[1], p_t[0])
+    xi = xi + 2 * math.pi * round((xi_ref - xi) / (2 * math.pi))
+    phi = math.atan2(R_CB[2, 1], R_CB[2, 2])
+    theta = math.asin(min(max(-R_CB[2, 0], -1.0), 1.0))
+    psi = math.atan2(R_CB[1, 0], R_CB[0, 0])
+    chi = (psi - xi + math.pi) % (2 * math.pi) - math.pi
+    return np.array([delta, xi, phi, theta, chi])
 
 
 def _rk4(f, x, u, alpha, dt):
@@ -233,11 +305,19 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     design : Config
         The model the tables and the nominal come from.
     scheduler : callable (xi, xi_dot, alpha) -> (K (4, n), status)
-        Gain lookup (Python reference interpolator or the compiled C runtime).
+        Gain lookup (Python reference interpolator or the compiled C runtime). It is
+        queried at the reference (xi_d, xi_d', alpha) only, so a scheduler may offer
+        ``scheduler.batch(xi, xi_dot, alpha) -> (K (m, 4, n), status (m,))`` giving the
+        same numbers for arrays of queries: the gains are then looked up in blocks of
+        steps instead of once per step (``table_scheduler`` does).
     plant : Config, optional
         The truth.
     progress : callable(int), optional
         Called with the number of steps done, every 100 steps.
+
+    The rigid-link plant runs on the compiled kernel when available (same results as
+    the numpy model to rounding, see tests/test_fastplant.py); ``GAINSCHED_NATIVE=0``
+    forces the numpy model.
     """
     plant = design if plant is None else plant
     P = _Plant(plant)
@@ -259,45 +339,63 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     rng = np.random.default_rng(sens.seed)
     est = _Estimator(dmodel, P, sens, dt, alpha, scenario.gamma, z0, rng)
 
-    Z = np.empty((n_steps, N_STATE))
-    Zh = np.empty_like(Z)
+    X = np.empty((n_steps, x.size))  # plant states; poses are computed after the loop
+    Z = X[:, :N_STATE] if P.maximal is None else np.empty((n_steps, N_STATE))
+    Zh = np.empty((n_steps, N_STATE))
     U = np.empty((n_steps, 4))
     TEN = np.empty(n_steps)
-    PI = np.empty((n_steps, 3))
-    QI = np.empty((n_steps, 4))
     SAT = np.zeros((n_steps, 4), dtype=bool)
     STAT = np.zeros(n_steps, dtype=np.int32)
+    # per-step work kept to a few small numpy calls: bound methods and arrays looked
+    # up once, the LQR error vector (11 + zero-padded effect states) reused
+    xi_ref, xi_dot_ref = path.xi, path.d[0]
+    step, reduced, estimate, predict = P.step, P.reduced, est.estimate, est.predict
+    rigid = P.maximal is None
+    batch = getattr(scheduler, "batch", None)
+    K_blk = S_blk = None
+    xerr = np.zeros(N_STATE + 1)
     integ = 0.0
     slack_time = None
     n_done = n_steps
     for k in range(n_steps):
-        z_true = P.reduced(x, path.xi[k])
-        z_hat = est.estimate(k, x, z_true)
+        X[k] = x
+        z_true = x[:N_STATE] if rigid else reduced(x, xi_ref[k])
+        z_hat = estimate(k, x, z_true)
         err = z_hat - z_d[k]
         err[1] = _wrap(err[1])
-        K, status = scheduler(path.xi[k], path.d[0][k], alpha)
-        xerr = np.concatenate([err, [integ]])
+        if batch is None:
+            K, status = scheduler(xi_ref[k], xi_dot_ref[k], alpha)
+        else:
+            j = k % _LOOKUP_BLOCK
+            if j == 0:
+                blk = slice(k, k + _LOOKUP_BLOCK)
+                K_blk, S_blk = batch(xi_ref[blk], xi_dot_ref[blk], alpha)
+                S_blk = S_blk.tolist()
+            K, status = K_blk[j], S_blk[j]
         n = K.shape[-1]
         if n > xerr.size:  # design model with effect states: no estimate of them, zero error
-            xerr = np.concatenate([xerr, np.zeros(n - xerr.size)])
+            xerr = np.zeros(n)
+        xerr[:N_STATE] = err
+        xerr[N_STATE] = integ
         u_raw = u_d[k] - K @ xerr[:n]
-        u = np.clip(u_raw, u_min, u_max)
+        u = np.minimum(np.maximum(u_raw, u_min), u_max)  # np.clip, without its overhead
         SAT[k] = u != u_raw
-        x_next, ten = _rk4(P.f, x, u, alpha, dt)
-        Z[k], Zh[k], U[k], TEN[k], STAT[k] = z_true, z_hat, u, ten, status
-        PI[k], R_IB = P.pose(x, alpha, scenario.gamma)
-        QI[k] = quaternion_from_matrix(R_IB)
+        x_next, ten = step(x, u, alpha, dt)
+        if not rigid:
+            Z[k] = z_true
+        Zh[k], U[k], TEN[k], STAT[k] = z_hat, u, ten, status
         if ten < 0:
             slack_time = float(t[k])
             n_done = k + 1
             break
-        est.predict(u)
+        predict(u)
         integ += dt * err[0]
         x = x_next
         if progress is not None and k % 100 == 99:
             progress(100)
     sl = slice(0, n_done)
-    return SimResult(t[sl], Z[sl], Zh[sl], z_d[sl], U[sl], u_d[sl], TEN[sl], PI[sl], QI[sl],
+    PI, QI = P.poses(X[sl], alpha, scenario.gamma)
+    return SimResult(t[sl], Z[sl].copy(), Zh[sl], z_d[sl], U[sl], u_d[sl], TEN[sl], PI, QI,
                      SAT[sl], STAT[sl], slack_time, scenario, dmodel.r, plant.vehicle.mass,
                      plant.g)  # fmt: skip
 
@@ -321,6 +419,12 @@ class _Estimator:
         self.delay = int(round(sens.latency / dt))
         self.hist: list[np.ndarray] = []
         self.pending: list[tuple[int, np.ndarray]] = []
+        self.R_IC = _rot_zyx(alpha, 0.0, gamma)
+        # prediction model: the compiled design model when it applies (same numbers)
+        fast = None
+        if not sens.ideal and model.n_z == N_STATE:
+            fast = fast_plant(model.config)
+        self._f = (lambda z, u, a: fast.f(z, u, a)[0]) if fast is not None else model.f
 
     def estimate(self, k, x, z_true):
         if self.sens.ideal:
@@ -344,24 +448,23 @@ class _Estimator:
         return z
 
     def _measure(self, x, z_true):
-        """Noisy pose -> (delta, xi, phi, theta, chi) through the maximal conversion."""
+        """Noisy pose -> (delta, xi, phi, theta, chi), rad, shape (5,).
+
+        True COG position and attitude in I, plus position noise (m) and a small
+        attitude perturbation ``R_IB Rz Ry Rx`` (rad), converted back to the reduced
+        pose angles as :func:`~gainsched.maximal.reduced_from_maximal` does.
+        """
         p_I, R_IB = self.plant.pose(x, self.alpha, self.gamma)
         p_I = p_I + self.sens.position_noise * self.rng.standard_normal(3)
         rot = self.sens.attitude_noise * self.rng.standard_normal(3)
-        from .rotations import Rx, Ry, Rz
-
-        R_IB = R_IB @ Rz(rot[2]) @ Ry(rot[1]) @ Rx(rot[0])
-        R_IC = R_IC_from_tilt(self.alpha, self.gamma)
-        xm = np.concatenate(
-            [R_IC.T @ p_I, np.zeros(3), quaternion_from_matrix(R_IC.T @ R_IB), np.zeros(3)]
-        )
-        zm = reduced_from_maximal(self.model, xm, z_true[1])
-        return zm[[0, 1, 4, 5, 6]]
+        R_IB = R_IB @ _rot_zyx(rot[0], rot[1], rot[2])
+        R_CI = self.R_IC.T
+        return _pose_angles(self.model, R_CI @ p_I, R_CI @ R_IB, z_true[1])
 
     def predict(self, u):
         if self.sens.ideal:
             return
-        self.z = self.z + self.dt * self.model.f(self.z, u, self.alpha)
+        self.z = self.z + self.dt * self._f(self.z, u, self.alpha)
 
 
 def metrics(res: SimResult) -> dict:
@@ -395,11 +498,68 @@ def table_scheduler(table):
     from .runtime import Interpolator
 
     interp = Interpolator(table)
+    query = interp.query  # one query per call: the scalar fast path
 
     def lookup(xi, xi_dot, alpha):
-        r = interp(xi, xi_dot, alpha)
-        return r.K, int(r.status)
+        K, _, _, status = query(xi, xi_dot, alpha)
+        return K, status
 
+    def batch(xi, xi_dot, alpha):
+        """Arrays of queries (m,) -> K (m, 4, n), status (m,) int: the same numbers."""
+        r = interp(xi, xi_dot, alpha)
+        return r.K, r.status.astype(int)
+
+    lookup.batch = batch
+    return lookup
+
+
+def c_runtime_scheduler(table, build_dir=None):
+    """Gain lookup through the compiled C runtime (the firmware code): (xi, xi_dot, alpha)
+    -> (K (4, n) float64 of the runtime's float32 gains, status int).
+
+    The table, ``gainsched_runtime.c`` and the batch shim are compiled for the host with
+    :func:`gainsched.codegen.build_host` into ``build_dir`` (default: a temporary
+    directory that lives as long as the returned function) and called through ctypes,
+    one query per call with preallocated buffers. Raises RuntimeError without a C
+    compiler.
+
+    Parameters
+    ----------
+    table : Table or RuntimeData
+    build_dir : path, optional
+    """
+    import ctypes
+    import tempfile
+
+    from .codegen import CRuntime, build_host
+    from .runtime import RuntimeData, runtime_data
+
+    data = table if isinstance(table, RuntimeData) else runtime_data(table)
+    tmp = None
+    if build_dir is None:
+        tmp = tempfile.TemporaryDirectory(prefix="gainsched-rt-")
+        build_dir = tmp.name
+    rt = CRuntime(build_host(data, Path(build_dir)), data)
+    n = data.dims[3]
+    q = np.zeros(3, dtype=np.float32)
+    Kb = np.zeros((4, n), dtype=np.float32)
+    Ub = np.zeros(4, dtype=np.float32)
+    Pb = np.zeros(1, dtype=np.float32)
+    Sb = np.zeros(1, dtype=np.int32)
+    # our own function object with raw pointers (CRuntime's ndpointer argtypes cost
+    # microseconds of checks per call); the pointers stay valid: the buffers live here
+    fn = rt.lib[f"{data.name}_lookup_batch"]
+    fn.restype = None
+    fn.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * 5
+    ptrs = [b.ctypes.data for b in (q, Kb, Ub, Pb, Sb)]
+
+    def lookup(xi, xi_dot, alpha):
+        q[0], q[1], q[2] = xi, xi_dot, alpha
+        fn(1, *ptrs)
+        return Kb.astype(np.float64), int(Sb[0])
+
+    lookup.runtime = rt  # keeps the library (and the temporary directory) alive
+    lookup.build_dir = tmp
     return lookup
 
 
