@@ -45,8 +45,42 @@ typedef double lane[W];
 typedef struct {
     lane A[NMAX * NMAX], B[NMAX * MMAX], P[NMAX * NMAX], Phi[NMAX * NMAX], G[NMAX * NMAX];
     lane BtP[MMAX * NMAX], Rb[MMAX * MMAX], K[MMAX * NMAX], Acl[NMAX * NMAX];
-    lane T[NMAX * NMAX], V[NMAX * MMAX], Y[MMAX * NMAX];
+    lane T[NMAX * NMAX], V[NMAX * MMAX], Y[MMAX * NMAX], U[NMAX * NMAX];
 } work;
+
+/* C[i nj + j] = sum_q X[i xi + q xq] Y[q yq + j yj] (q ascending), lane by lane. Four
+ * columns j at a time keep eight independent accumulator chains in flight; the sum of
+ * each entry runs in the same order as a plain triple loop, so blocking changes speed,
+ * not bits. */
+INLINE void mm(int ni, int nj, int nq, const lane *X, int xi, int xq, const lane *Y, int yq,
+               int yj, lane *C) {
+    for (int i = 0; i < ni; i++) {
+        int j = 0;
+        for (; j + 4 <= nj; j += 4) {
+            lane a0 = {0}, a1 = {0}, a2 = {0}, a3 = {0};
+            for (int q = 0; q < nq; q++) {
+                const double *x = X[i * xi + q * xq];
+                const lane *y = Y + q * yq + j * yj;
+                for (int l = 0; l < W; l++) {
+                    a0[l] += x[l] * y[0][l];
+                    a1[l] += x[l] * y[yj][l];
+                    a2[l] += x[l] * y[2 * yj][l];
+                    a3[l] += x[l] * y[3 * yj][l];
+                }
+            }
+            memcpy(C[i * nj + j], a0, sizeof(lane));
+            memcpy(C[i * nj + j + 1], a1, sizeof(lane));
+            memcpy(C[i * nj + j + 2], a2, sizeof(lane));
+            memcpy(C[i * nj + j + 3], a3, sizeof(lane));
+        }
+        for (; j < nj; j++) {
+            lane a0 = {0};
+            for (int q = 0; q < nq; q++)
+                for (int l = 0; l < W; l++) a0[l] += X[i * xi + q * xq][l] * Y[q * yq + j * yj][l];
+            memcpy(C[i * nj + j], a0, sizeof(lane));
+        }
+    }
+}
 
 /* one lane group: points p0 .. p0 + W - 1 (clamped to b - 1; extra lanes are discarded) */
 INLINE void group(int n, int m, int N, ptrdiff_t b, ptrdiff_t p0, const double *Ad,
@@ -71,29 +105,12 @@ INLINE void group(int n, int m, int N, ptrdiff_t b, ptrdiff_t p0, const double *
             for (size_t i = 0; i < nn; i++) w->A[i][l] = a[i];
             for (size_t i = 0; i < nm; i++) w->B[i][l] = bb[i];
         }
-        /* BtP = B' P (m x n) */
-        for (int i = 0; i < m; i++)
-            for (int j = 0; j < n; j++) {
-                lane acc = {0};
-                for (int q = 0; q < n; q++)
-                    for (int l = 0; l < W; l++) acc[l] += w->B[q * m + i][l] * w->P[q * n + j][l];
-                memcpy(w->BtP[i * n + j], acc, sizeof(lane));
-            }
-        /* Rb = R + BtP B (m x m), K = BtP A (m x n, right-hand side) */
-        for (int i = 0; i < m; i++)
-            for (int j = 0; j < m; j++) {
-                lane acc = {0};
-                for (int q = 0; q < n; q++)
-                    for (int l = 0; l < W; l++) acc[l] += w->BtP[i * n + q][l] * w->B[q * m + j][l];
-                for (int l = 0; l < W; l++) w->Rb[i * m + j][l] = R[i * m + j] + acc[l];
-            }
-        for (int i = 0; i < m; i++)
-            for (int j = 0; j < n; j++) {
-                lane acc = {0};
-                for (int q = 0; q < n; q++)
-                    for (int l = 0; l < W; l++) acc[l] += w->BtP[i * n + q][l] * w->A[q * n + j][l];
-                memcpy(w->K[i * n + j], acc, sizeof(lane));
-            }
+        /* BtP = B' P (m x n); Rb = R + BtP B (m x m); K = BtP A (m x n, right-hand side) */
+        mm(m, n, n, w->B, 1, m, w->P, n, 1, w->BtP);
+        mm(m, m, n, w->BtP, n, 1, w->B, m, 1, w->Rb);
+        for (int i = 0; i < m * m; i++)
+            for (int l = 0; l < W; l++) w->Rb[i][l] += R[i];
+        mm(m, n, n, w->BtP, n, 1, w->A, n, 1, w->K);
         /* Cholesky Rb = L L' in place (lower triangle) */
         for (int j = 0; j < m; j++) {
             for (int l = 0; l < W; l++) {
@@ -124,22 +141,12 @@ INLINE void group(int n, int m, int N, ptrdiff_t b, ptrdiff_t p0, const double *
                 }
         }
         /* Acl = A - B K */
-        for (int i = 0; i < n; i++)
-            for (int j = 0; j < n; j++) {
-                lane acc = {0};
-                for (int q = 0; q < m; q++)
-                    for (int l = 0; l < W; l++) acc[l] += w->B[i * m + q][l] * w->K[q * n + j][l];
-                for (int l = 0; l < W; l++) w->Acl[i * n + j][l] = w->A[i * n + j][l] - acc[l];
-            }
+        mm(n, n, m, w->B, m, 1, w->K, n, 1, w->Acl);
+        for (size_t i = 0; i < nn; i++)
+            for (int l = 0; l < W; l++) w->Acl[i][l] = w->A[i][l] - w->Acl[i][l];
         if (with_triple) {
             /* V = Phi B (n x m); Y = L^-1 V' (m x n); G += Y' Y = V Rb^-1 V' */
-            for (int i = 0; i < n; i++)
-                for (int j = 0; j < m; j++) {
-                    lane acc = {0};
-                    for (int q = 0; q < n; q++)
-                        for (int l = 0; l < W; l++) acc[l] += w->Phi[i * n + q][l] * w->B[q * m + j][l];
-                    memcpy(w->V[i * m + j], acc, sizeof(lane));
-                }
+            mm(n, m, n, w->Phi, n, 1, w->B, m, 1, w->V);
             for (int c = 0; c < n; c++)
                 for (int i = 0; i < m; i++)
                     for (int l = 0; l < W; l++) {
@@ -147,41 +154,22 @@ INLINE void group(int n, int m, int N, ptrdiff_t b, ptrdiff_t p0, const double *
                         for (int q = 0; q < i; q++) s -= w->Rb[i * m + q][l] * w->Y[q * n + c][l];
                         w->Y[i * n + c][l] = s / w->Rb[i * m + i][l];
                     }
+            mm(n, n, m, w->Y, 1, n, w->Y, n, 1, w->U);
             for (int i = 0; i < n; i++)
-                for (int j = 0; j <= i; j++) {
-                    lane acc = {0};
-                    for (int q = 0; q < m; q++)
-                        for (int l = 0; l < W; l++) acc[l] += w->Y[q * n + i][l] * w->Y[q * n + j][l];
+                for (int j = 0; j <= i; j++)
                     for (int l = 0; l < W; l++) {
-                        w->G[i * n + j][l] += acc[l];
+                        w->G[i * n + j][l] += w->U[i * n + j][l];
                         w->G[j * n + i][l] = w->G[i * n + j][l];
                     }
-                }
             /* Phi <- Phi Acl */
-            for (int i = 0; i < n; i++)
-                for (int j = 0; j < n; j++) {
-                    lane acc = {0};
-                    for (int q = 0; q < n; q++)
-                        for (int l = 0; l < W; l++) acc[l] += w->Phi[i * n + q][l] * w->Acl[q * n + j][l];
-                    memcpy(w->T[i * n + j], acc, sizeof(lane));
-                }
+            mm(n, n, n, w->Phi, n, 1, w->Acl, n, 1, w->T);
             memcpy(w->Phi, w->T, nn * sizeof(lane));
         }
         /* T = P Acl; P <- Q + A' T, symmetrised */
-        for (int i = 0; i < n; i++)
-            for (int j = 0; j < n; j++) {
-                lane acc = {0};
-                for (int q = 0; q < n; q++)
-                    for (int l = 0; l < W; l++) acc[l] += w->P[i * n + q][l] * w->Acl[q * n + j][l];
-                memcpy(w->T[i * n + j], acc, sizeof(lane));
-            }
-        for (int i = 0; i < n; i++)
-            for (int j = 0; j < n; j++) {
-                lane acc = {0};
-                for (int q = 0; q < n; q++)
-                    for (int l = 0; l < W; l++) acc[l] += w->A[q * n + i][l] * w->T[q * n + j][l];
-                for (int l = 0; l < W; l++) w->P[i * n + j][l] = Q[i * n + j] + acc[l];
-            }
+        mm(n, n, n, w->P, n, 1, w->Acl, n, 1, w->T);
+        mm(n, n, n, w->A, 1, n, w->T, n, 1, w->P);
+        for (size_t i = 0; i < nn; i++)
+            for (int l = 0; l < W; l++) w->P[i][l] = Q[i] + w->P[i][l];
         for (int i = 0; i < n; i++)
             for (int j = 0; j < i; j++)
                 for (int l = 0; l < W; l++) {
