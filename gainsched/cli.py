@@ -459,6 +459,189 @@ def simulate(config, table_path, scenario, plant_path, speed, out_dir):
     )
 
 
+_REPO = Path(__file__).resolve().parents[1]
+
+
+@cli.command()
+@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              required=True, help="Output folder (report.md, report.json, one folder per "
+              "experiment).")  # fmt: skip
+@click.option("--config", "config", type=click.Path(dir_okay=False, path_type=Path),
+              default=_REPO / "configs" / "paper.toml", show_default="configs/paper.toml",
+              help="Design config (the paper vehicle).")  # fmt: skip
+@click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=_REPO / "tables" / "paper.h5", show_default="tables/paper.h5",
+              help="Gain table built from the config.")  # fmt: skip
+@click.option("--plant", "plant_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Truth config for the plant (default: the design config).")  # fmt: skip
+@click.option("--quick", is_flag=True, help="Short smoke flights (for tests; seconds).")
+@user_errors
+def paper(out_dir, config, table_path, plant_path, quick):
+    """Fly the paper's experiments (Sec. V.B, Figs. 3-4) in simulation and write a report:
+    paper figure, paper value, simulated value."""
+    from tqdm import tqdm
+
+    from .config import load_config
+    from .paper import experiments, run_paper
+    from .sim import table_scheduler
+    from .tables import load_table
+
+    cfg = load_config(config)
+    plant = load_config(plant_path) if plant_path else None
+    table = load_table(table_path)
+    if table.config_sha256 != cfg.sha256:
+        click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
+    n = len(experiments(quick=quick))
+    meta = {"table": str(table_path), "table_config_sha256": table.config_sha256}
+    with tqdm(total=n, unit="flight", desc="paper", disable=None) as bar:
+        rep = run_paper(cfg, table_scheduler(table), out_dir, quick=quick, plant=plant,
+                        progress=bar.update, meta=meta)  # fmt: skip
+    for r in rep.rows:
+        mark = {True: "ok ", False: "NO ", None: "-  "}[r.agrees]
+        click.echo(f"{mark} {r.figure:16s} {r.quantity}: paper {r.paper}; sim {r.simulated_text}")
+    click.echo(f"wrote {out_dir / 'report.md'} and {out_dir / 'report.json'}")
+
+
+_LOGS = click.argument("logs", nargs=-1, required=True,
+                       type=click.Path(exists=True, dir_okay=False, path_type=Path))
+
+
+def _load_for_compare(config):
+    from .config import load_config
+
+    return load_config(config)
+
+
+@cli.command()
+@CONFIG
+@_LOGS
+@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Report folder: compare.json, compare.md and PNG plots.")  # fmt: skip
+@click.option("--before", "before_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="An earlier config: its residual beside CONFIG's (before/after).")  # fmt: skip
+@click.option("--no-paper", is_flag=True, help="Skip the paper's thrust/drag analyses.")
+@user_errors
+def compare(config, logs, out_dir, before_path, no_paper):
+    """Compare the model of CONFIG with flight LOGS (CSV or HDF5): residual per axis
+    (path frame m/s^2, body rad/s^2, tether stretch m), RMS, bias, fit %, whiteness,
+    input correlation, where it fails; the paper's Sec. V.C analyses."""
+    from .compare import compare as run
+    from .mvmreport import before_after_lines, compare_lines, write_before_after, write_compare
+    from .paperfits import paper_fits
+
+    cfg = _load_for_compare(config)
+    cmp = run(cfg, logs)
+    paper = None if no_paper else paper_fits(cfg, cmp.measured)
+    for line in compare_lines(cmp, paper):
+        click.echo(line)
+    before = None
+    if before_path is not None:
+        before = run(_load_for_compare(before_path), logs)
+        click.echo("")
+        for line in before_after_lines(before, cmp):
+            click.echo(line)
+    if out_dir is not None:
+        paths = write_compare(cmp, out_dir, paper)
+        if before is not None:
+            paths += write_before_after(before, cmp, out_dir)
+        click.echo(f"wrote {len(paths)} files to {out_dir} ({paths[1].name})")
+
+
+@cli.command()
+@CONFIG
+@_LOGS
+@click.option("--candidate", "candidates", multiple=True,
+              help="Only these candidates (repeatable; default: the whole library).")  # fmt: skip
+@click.option("--apply", "do_apply", is_flag=True,
+              help="Write the accepted effect and its fitted parameters to -o NEWCONFIG.")
+@click.option("-o", "--out", "new_config", type=click.Path(dir_okay=False, path_type=Path),
+              help="New config file for --apply.")  # fmt: skip
+@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Report folder: diagnose.json/.md, ranking.png, before/after.")  # fmt: skip
+@user_errors
+def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
+    """Which physical effect is missing: fit every candidate effect the model lacks to
+    the residual on LOGS, score on held-out flights (leave one flight out), rank, check
+    identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
+    from .compare import compare as run
+    from .config import config_from_text
+    from .diagnose import apply_candidate
+    from .diagnose import diagnose as run_diagnose
+    from .mvmreport import (
+        before_after_lines,
+        compare_lines,
+        diagnose_lines,
+        write_before_after,  # fmt: skip
+        write_compare,
+        write_diagnose,
+    )
+    from .tables import write_atomic
+
+    if do_apply and new_config is None:
+        raise InputError("command line", "--apply", "needs -o NEWCONFIG")
+    cfg = _load_for_compare(config)
+    base = run(cfg, logs)
+    for line in compare_lines(base):
+        click.echo(line)
+    click.echo("")
+    d = run_diagnose(cfg, logs, candidates=candidates or None, comparison=base)
+    for line in diagnose_lines(d):
+        click.echo(line)
+    after = None
+    if do_apply:
+        if d.accepted is None:
+            click.echo("nothing applied: no candidate cleared the thresholds")
+        else:
+            text = apply_candidate(cfg, d.accepted)
+            write_atomic(new_config, text.encode())
+            click.echo(f"wrote {new_config} ({d.accepted.name}); rebuild the tables with "
+                       f"`gainsched build {new_config}`")  # fmt: skip
+            after = run(config_from_text(text, str(new_config)), logs)
+            click.echo("")
+            for line in before_after_lines(base, after):
+                click.echo(line)
+    if report_dir is not None:
+        paths = write_diagnose(d, report_dir) + write_compare(base, report_dir, prefix="before")
+        if after is not None:
+            paths += write_compare(after, report_dir, prefix="after")
+            paths += write_before_after(base, after, report_dir, d)
+        click.echo(f"wrote {len(paths)} files to {report_dir}")
+
+
+@cli.command()
+@CONFIG
+@click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
+              required=True, help="Gain table (HDF5) built from CONFIG.")  # fmt: skip
+@click.option("--hidden", default="none", show_default=True,
+              help="Hidden effect of the plant (gainsched.campaign.HIDDEN).")  # fmt: skip
+@click.option("--duration", type=click.FloatRange(1.0), default=3.0, show_default=True,
+              help="Seconds per flight.")  # fmt: skip
+@click.option("--no-load-cell", is_flag=True, help="Drop the tether tension column.")
+@click.option("--format", "fmt", type=click.Choice(["csv", "h5"]), default="csv",
+              show_default=True)  # fmt: skip
+@click.option("--seed", type=int, default=1, show_default=True)
+@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              required=True, help="Output folder for the flight logs.")  # fmt: skip
+@user_errors
+def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_dir):
+    """Fly a synthetic test campaign (speeds 3-15 m/s, tilts 0/20/40 deg, a speed-up, a
+    braking; motion-capture noise) on a plant with a HIDDEN effect and write the logs."""
+    from .campaign import HIDDEN, write_campaign
+    from .campaign import campaign as fly
+    from .sim import table_scheduler
+    from .tables import load_table
+
+    if hidden not in HIDDEN:
+        known = ", ".join(HIDDEN)
+        raise InputError("command line", "--hidden",
+                         f"unknown hidden effect {hidden!r} (known: {known})")  # fmt: skip
+    cfg = _load_for_compare(config)
+    logs = fly(cfg, table_scheduler(load_table(table_path)), hidden, duration=duration,
+               load_cell=not no_load_cell, seed=seed)  # fmt: skip
+    paths = write_campaign(out_dir, logs, fmt)
+    click.echo(f"{out_dir}: {len(paths)} flights, hidden effect: {HIDDEN[hidden].doc}")
+
+
 def main():
     cli()
 

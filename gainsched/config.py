@@ -26,6 +26,7 @@ __all__ = [
     "Control",
     "Grid",
     "Feasibility",
+    "Analysis",
     "EffectSpec",
     "load_config",
     "config_from_text",
@@ -38,7 +39,7 @@ N_STATE = 10  # (delta, xi, delta', xi', phi, theta, chi, wx, wy, wz)
 N_INPUT = 4  # (T1, T2, T3, T4)
 N_LQR = 11  # the above plus the integral of the delta error (paper Sec. IV.B)
 
-LINK_MODELS = ("rigid", "spring-damper")
+LINK_MODELS = ("rigid", "spring-damper", "sls", "lumped-mass")  # seed 001 sec. 3.1
 TERMINAL_COSTS = ("periodic", "single-period")
 
 
@@ -69,8 +70,11 @@ class Vehicle:
 class Tether:
     """Tether: length rho (m), attachment offset L_e (m) and link model.
 
-    ``stiffness`` (N/m) and ``damping`` (N s/m) are used by the spring-damper
-    link of the maximal-coordinate simulator only.
+    The elastic links (:mod:`gainsched.links`) are used by the maximal-coordinate
+    simulator only: ``stiffness`` (N/m) and ``damping`` (N s/m) are the
+    spring-damper's k and c, the SLS's parallel k_p and c, and the whole chain's
+    k and c; ``series_stiffness`` (N/m) is the SLS's series k_s; ``mass`` (kg,
+    whole tether) and ``segments`` are the lumped-mass chain's.
     """
 
     length: float
@@ -78,6 +82,9 @@ class Tether:
     link: str = "rigid"
     stiffness: float = 2.0e4
     damping: float = 50.0
+    series_stiffness: float = 5.0e4
+    mass: float = 0.01
+    segments: int = 4
 
 
 @dataclass(frozen=True)
@@ -125,6 +132,26 @@ class Feasibility:
 
 
 @dataclass(frozen=True)
+class Analysis:
+    """Model versus measurement (``[analysis]``, :mod:`gainsched.compare`).
+
+    Attributes
+    ----------
+    savgol_window_s : float, s
+        Savitzky-Golay window for differentiating the pose (rounded to an odd
+        number of samples at the log's rate).
+    savgol_order : int
+        Polynomial order of the Savitzky-Golay fit (2..6; >= 2 for accelerations).
+    latency_s : float, s
+        Measurement latency: the logged pose lags the logged thrust commands by this.
+    """
+
+    savgol_window_s: float = 0.1
+    savgol_order: int = 3
+    latency_s: float = 0.0
+
+
+@dataclass(frozen=True)
 class Config:
     """The whole loaded configuration (one source of truth for every parameter)."""
 
@@ -138,6 +165,7 @@ class Config:
     feasibility: Feasibility
     source: str = "<string>"
     text: str = field(default="", repr=False)
+    analysis: Analysis = field(default_factory=Analysis)
 
     @property
     def sha256(self) -> str:
@@ -298,8 +326,21 @@ def _tether(sec: _Section) -> Tether:
     link = sec.string("link", "rigid", choices=LINK_MODELS)
     stiffness = sec.number("stiffness", Tether.stiffness, positive=True)
     damping = sec.number("damping", Tether.damping, nonneg=True)
+    own = {"series_stiffness": "sls", "mass": "lumped-mass", "segments": "lumped-mass"}
+    for k, user in own.items():
+        if k in sec.data and link != user:
+            raise sec.error(k, f'only used by link = "{user}" (link is "{link}")')
+    k_s = sec.number("series_stiffness", Tether.series_stiffness, positive=True)
+    mass = sec.number("mass", Tether.mass, nonneg=True)
+    n = sec.get("segments", Tether.segments)
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 100:
+        raise sec.error("segments", f"must be an integer in [1, 100], got {n!r}")
+    if link == "sls" and damping <= 0:
+        raise sec.error("damping", "must be > 0 for the sls link (creep time damping / stiffness)")
+    if link == "lumped-mass" and n > 1 and mass <= 0:
+        raise sec.error("mass", "must be > 0 for a chain of more than one segment")
     sec.done()
-    return Tether(length, off, link, stiffness, damping)
+    return Tether(length, off, link, stiffness, damping, k_s, mass, n)
 
 
 def _effects(sec: _Section) -> tuple[EffectSpec, ...]:
@@ -380,6 +421,22 @@ def _feasibility(sec: _Section) -> Feasibility:
     return f
 
 
+def _analysis(sec: _Section) -> Analysis:
+    window = sec.number("savgol_window_s", Analysis.savgol_window_s, positive=True)
+    if window > 10:
+        raise sec.error("savgol_window_s", f"must be <= 10 s, got {window:g}")
+    order = sec.get("savgol_order", Analysis.savgol_order)
+    if isinstance(order, bool) or not isinstance(order, int):
+        raise sec.error("savgol_order", f"must be an integer, got {type(order).__name__}")
+    if not 2 <= order <= 6:
+        raise sec.error("savgol_order", f"must be in 2..6 (accelerations need >= 2), got {order}")
+    latency = sec.number("latency_s", Analysis.latency_s, nonneg=True)
+    if latency >= 1:
+        raise sec.error("latency_s", f"must be < 1 s, got {latency:g}")
+    sec.done()
+    return Analysis(window, order, latency)
+
+
 SCHEMA = "gainsched-config/1"
 
 
@@ -403,10 +460,12 @@ def config_from_text(text: str, source: str = "<string>") -> Config:
     control = _control(top.sub("control"))
     grid = _grid(top.sub("grid"))
     feas = _feasibility(top.sub("feasibility", {}))
+    analysis = _analysis(top.sub("analysis", {}))
     if feas.thrust_margin * 2 >= vehicle.thrust_max - vehicle.thrust_min:
         raise InputError(source, "feasibility.thrust_margin", "leaves no usable thrust range")
     top.done()
-    return Config(name, vehicle, tether, effects, g, control, grid, feas, str(source), text)
+    return Config(name, vehicle, tether, effects, g, control, grid, feas, str(source), text,
+                  analysis=analysis)  # fmt: skip
 
 
 def load_config(path) -> Config:

@@ -31,6 +31,7 @@ __all__ = [
     "RotorDrag",
     "ThrustScale",
     "ThrustPolynomial",
+    "ThrustMomentum",
     "MotorLag",
     "EFFECTS",
     "effects_from_specs",
@@ -208,6 +209,102 @@ class ThrustPolynomial(Effect):
         return T * (1 + self.c1 * v + self.c2 * v * v)[..., None]
 
 
+class ThrustMomentum(Effect):
+    """Thrust change with airspeed from momentum theory (paper eq. 29, after its ref. [4]).
+
+    A rotor run at the power of its static test (thrust ``T_h`` = the commanded
+    thrust, hover induced velocity ``v_h = sqrt(T_h / (2 rho_air A))``) that moves
+    through the air with the COG velocity ``v_B`` produces
+
+        T / T_h = v_h / (v_i + v_z),   v_i^2 ((v_i + v_z)^2 + v_xy^2) = v_h^4
+
+    with ``v_z = v_B . z_B`` the airspeed along the rotor axis (the paper's
+    ``-v_inf sin(beta)``: positive when the rotor plane meets the air from above,
+    which costs thrust) and ``v_xy`` the in-plane airspeed. ``disk_area = 0``
+    switches the effect off (``T = T_h``). Momentum theory fails where the inflow
+    ``v_i + v_z`` through the disk vanishes (vortex ring, windmill: hard braking with
+    the rotor plane tilted back); there the inflow is floored smoothly at half its
+    hover value, so the thrust gain stays below 2 (< 0.05% change where ``v_i + v_z >=
+    0.8 v_h``).
+    """
+
+    kind = "thrust_momentum"
+    params = (
+        Param("disk_area", "m^2", 0.0, 0.0, 0.1, "rotor disk area per rotor (0: off)"),
+        Param("rho_air", "kg/m^3", 1.225, 0.5, 1.5, "air density"),
+    )
+
+    def ratio(self, T, v_B):
+        """``T / T_h`` per motor, shape (..., 4), for thrusts T (..., 4) N and v_B (..., 3) m/s."""
+        if self.disk_area == 0:
+            return np.ones_like(T)
+        vh2 = np.sqrt(T * T + 1e-12) / (2 * self.rho_air * self.disk_area)  # T > 0, smooth
+        vz = v_B[..., 2:3]
+        vxy2 = (v_B[..., 0:1] ** 2 + v_B[..., 1:2] ** 2)
+        vh = np.sqrt(vh2)
+        # root of g(v) = v^2 ((v + vz)^2 + vxy^2) - vh^4 in the bracket [0, vh + max(0, -vz)]
+        # (g < 0 at 0, >= 0 at the top): Newton, bisection where a step leaves the bracket
+        # (vortex-ring states)
+        v = _induced_velocity(vh, vz, vxy2)
+        lam = v + vz  # inflow through the disk
+        lam0, eps = 0.5 * vh, 0.02 * vh  # smooth max(lam, lam0), complex-step safe
+        lam = 0.5 * (lam + lam0 + np.sqrt((lam - lam0) ** 2 + eps * eps))
+        return vh / lam
+
+    def modify_thrust(self, T, kin, x):
+        return T * self.ratio(T, kin.v_B)
+
+
+def _newton_bisect(v, lo, hi, vh2, vz, vxy2):
+    """One safeguarded Newton step for g(v) = v^2 ((v + vz)^2 + vxy^2) - vh^4 (real parts
+    decide, so complex-step perturbations ride along): (v, lo, hi)."""
+    w = v + vz
+    g = v * v * (w * w + vxy2) - vh2 * vh2
+    dg = 2 * v * (w * w + vxy2) + 2 * v * v * w
+    pos = np.real(g) > 0
+    hi = np.where(pos, v, hi)
+    lo = np.where(pos, lo, v)
+    good = np.real(dg) > 0
+    newton = v - g / np.where(good, dg, 1.0)
+    nr = np.real(newton)
+    ok = good & (nr > np.real(lo)) & (nr < np.real(hi))
+    return np.where(ok, newton, 0.5 * (lo + hi)), lo, hi
+
+
+def _induced_velocity(vh, vz, vxy2, tol=1e-12, max_iter=80):
+    """Induced velocity v_i of :class:`ThrustMomentum`, broadcast shape of the inputs."""
+    vh, vz, vxy2 = np.broadcast_arrays(vh, vz, vxy2)
+    vh2 = vh * vh
+    hi = vh + 0.5 * (np.sqrt(vz * vz + 1e-12) - vz)
+    lo = np.zeros_like(hi)
+    if np.iscomplexobj(vh) or np.iscomplexobj(vz) or np.iscomplexobj(vxy2):
+        v = hi
+        active = np.ones(v.shape, dtype=bool)
+        for _ in range(max_iter):  # same per-sample stopping rule as the real branch
+            v_new, lo2, hi2 = _newton_bisect(v, lo, hi, vh2, vz, vxy2)
+            lo, hi = np.where(active, lo2, lo), np.where(active, hi2, hi)
+            moving = active & (np.abs(np.real(v_new - v)) > tol * np.real(vh))
+            v = np.where(active, v_new, v)
+            active = moving
+            if not active.any():
+                break
+        return v
+    shape = hi.shape
+    v = hi.reshape(-1).copy()
+    lo = lo.reshape(-1)
+    hi = hi.reshape(-1).copy()
+    a, b, c, h = vh2.reshape(-1), vz.reshape(-1), vxy2.reshape(-1), vh.reshape(-1)
+    idx = np.arange(v.size)
+    for _ in range(max_iter):  # iterate only the samples not converged yet
+        vn, lo[idx], hi[idx] = _newton_bisect(v[idx], lo[idx], hi[idx], a[idx], b[idx], c[idx])
+        moving = np.abs(vn - v[idx]) > tol * h[idx]
+        v[idx] = vn
+        idx = idx[moving]
+        if idx.size == 0:
+            break
+    return v.reshape(shape)
+
+
 class MotorLag(Effect):
     """First-order motor lag: ``T_actual' = (T_cmd - T_actual) / tau`` (4 states, N)."""
 
@@ -229,7 +326,8 @@ class MotorLag(Effect):
 
 
 EFFECTS: dict[str, type[Effect]] = {
-    cls.kind: cls for cls in (Drag, RotorDrag, ThrustScale, ThrustPolynomial, MotorLag)
+    cls.kind: cls
+    for cls in (Drag, RotorDrag, ThrustScale, ThrustPolynomial, ThrustMomentum, MotorLag)
 }
 
 

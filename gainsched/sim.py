@@ -25,7 +25,7 @@ import numpy as np
 from .config import N_STATE, Config, _Section
 from .errors import InputError
 from .fastplant import fast_plant
-from .maximal import MaximalModel, maximal_from_reduced, reduced_from_maximal
+from .maximal import MaximalModel, reduced_from_maximal
 from .model import Model
 from .nominal import Path as XiPath
 from .nominal import maneuver_path, nominal_from_path
@@ -192,14 +192,14 @@ class _Plant:
         # compiled RK4 of the reduced model; None: numpy model
         self.fast = fast_plant(cfg) if self.maximal is None else None
 
-    def initial(self, z0):
+    def initial(self, z0, u0):
+        """Plant state from the reduced state ``z0`` (10,) and the thrusts ``u0`` (4,), N:
+        stateful effects (motor lag) start in their steady state at ``u0``."""
         if self.maximal is None:
-            x = np.zeros(self.model.n_z)
-            x[:N_STATE] = z0
-            if self.model.n_extra:  # stateful effects start in their steady state
-                x[N_STATE:] = 0.0
-            return x
-        return maximal_from_reduced(self.model, z0)
+            extra = [e.steady_states(u0, np.zeros(4))[0] for e in self.model.effects
+                     if e.n_states]  # fmt: skip
+            return np.concatenate([z0, *extra]) if extra else np.array(z0, dtype=float)
+        return self.maximal.from_reduced(z0)  # the elastic link pre-stretched (maximal.py)
 
     def f(self, x, u, alpha):
         """State derivative and tether tension (N) at one state."""
@@ -214,6 +214,8 @@ class _Plant:
         """One RK4 step of ``dt`` s with ``u`` held: ``(x_next, tension at x in N)``."""
         if self.fast is not None:
             return self.fast.rk4_step(x, u, alpha, dt)
+        if self.maximal is not None:  # RK4 substeps for stiff links; tension < 0: slack
+            return self.maximal.step(x, u, alpha, dt)
         return _rk4(self.f, x, u, alpha, dt)
 
     def reduced(self, x, xi_ref):
@@ -334,7 +336,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     z0 = z_d[0].copy()
     if scenario.initial_error:
         z0[: len(scenario.initial_error)] += np.asarray(scenario.initial_error)
-    x = P.initial(z0)
+    x = P.initial(z0, u_d[0])
     sens = scenario.sensing
     rng = np.random.default_rng(sens.seed)
     est = _Estimator(dmodel, P, sens, dt, alpha, scenario.gamma, z0, rng)
@@ -580,9 +582,10 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
     rot = sens.attitude_noise * rng.standard_normal((idx.size, 3))
     R = matrix_from_quaternion(res.q_IB[idx]) @ Rz(rot[:, 2]) @ Ry(rot[:, 1]) @ Rx(rot[:, 0])
     q = quaternion_from_matrix(R)
-    # thrust "held since the previous sample": the mean of the commands in the interval
-    ends = np.minimum(idx + 1, res.t.size)
-    starts = np.maximum(ends - every, 0)
+    # thrust "held since the previous sample": the mean of the commands applied over
+    # [t_prev, t) (command k acts on [t_k, t_k+1)); the first row has only u[0]
+    ends = np.maximum(idx, 1)
+    starts = np.maximum(idx - every, 0)
     csum = np.concatenate([np.zeros((1, 4)), np.cumsum(res.u, 0)])
     T = (csum[ends] - csum[starts]) / (ends - starts)[:, None]
     meta = {
