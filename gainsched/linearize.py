@@ -82,9 +82,10 @@ _TAYLOR_DEGREE = 14
 def expm_batched(M):
     """Matrix exponential of a batch (..., n, n) by scaling and squaring a Taylor series.
 
-    scipy.linalg.expm accepts batches but runs its Pade kernel one matrix at a
-    time (about 0.5 ms per 15 x 15 block here), which dominated the build. One
-    scaling for the whole batch keeps everything in batched matmuls: with
+    scipy.linalg.expm accepts batches but picks a Pade degree and scaling per
+    matrix; one scaling for the whole batch keeps everything in a few batched
+    matmuls (about 2x faster than scipy's batched expm on these 15 x 15 blocks,
+    ``make bench``). With
     ``||M / 2^s||_1 <= 1/2`` the truncation error of degree 14 is below
     ``0.5^15 / 15! ~ 2e-17`` relative, i.e. rounding level (checked against
     scipy's expm in the tests).
