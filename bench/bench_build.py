@@ -153,9 +153,8 @@ def _tilt0_problems(cfg):
     return probs
 
 
-def bench_peers(cfg):
-    """DARE / python-control dlqr per point and Drake's finite-horizon LQR per step."""
-    probs = _tilt0_problems(cfg)
+def bench_peers(cfg, probs):
+    """DARE and python-control dlqr per point on the tilt-0 ``probs`` (see _tilt0_problems)."""
     Q, R = weights(cfg, probs[0][1].shape[-1])
     out = {}
     t_dare, Ks = best_of(lambda: [dlqr(Ad, Bd, Q, R)[0] for _, Ad, Bd, _ in probs], 3)
@@ -210,8 +209,6 @@ def _drake(prob, Q, R, batched_us):
     t_d, res = best_of(lambda: FiniteHorizonLinearQuadraticRegulator(
         sysd, ctx, 0.0, float(N), Q, R, opts), 1)  # fmt: skip
     K_d = np.asarray(res.K.value(0.0))
-    sw = sweep(np.broadcast_to(Ad, (1, N, n, n)), np.broadcast_to(Bd, (1, N, n, m)), Q, R,
-               Q[None], steps=[0])  # fmt: skip
     t_o, sw = best_of(lambda: sweep(np.broadcast_to(Ad, (1, N, n, n)),
                                     np.broadcast_to(Bd, (1, N, n, m)), Q, R, Q[None],
                                     steps=[0]), 3)  # fmt: skip
@@ -410,14 +407,14 @@ def plot(results, out_dir):
 
 def main():
     cfg = load_config(PAPER)
-    results = {"riccati": bench_riccati(cfg), "peers": bench_peers(cfg)}
+    probs = _tilt0_problems(cfg)
+    results = {"riccati": bench_riccati(cfg), "peers": bench_peers(cfg, probs)}
     r = results["riccati"]
     best_us = (
         min(v for k, v in r.items() if k.endswith("us_per_point_step"))
         if any(k.endswith("us_per_point_step") for k in r)
         else 1e6 / r["numpy_batched_point_steps_per_s"]
     )
-    probs = _tilt0_problems(cfg)
     Q, R = weights(cfg, probs[0][1].shape[-1])
     results["peers"].update(_drake(probs[len(probs) // 2], Q, R, best_us))
     results.update(

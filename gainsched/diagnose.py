@@ -311,17 +311,24 @@ def _candidates() -> tuple[Candidate, ...]:
 #: The candidate library, by name.
 CANDIDATES: dict[str, Candidate] = {c.name: c for c in _candidates()}
 
+_TILTED_CONSTANT_SPEED = (
+    "tilted circles at constant speed: the thrust changes around the circle while the "
+    "airspeed does not (rotor drag scales with thrust)"
+)
+_SLOW_AND_FAST_CIRCLE = (
+    "a slow (3 m/s) and a fast (12+ m/s) circle at the same tilt: a scale error does not "
+    "change with airspeed"
+)
+
 #: What separates two candidates that look alike on the flights at hand.
 _SEPARATE = {
     frozenset({"drag_linear", "drag_quadratic"}):
         "steady circles over the whole speed range (3 to 15 m/s): linear and quadratic drag "
         "part at the ends",
     frozenset({"rotor_drag", "drag_linear"}):
-        "tilted circles at constant speed: the thrust changes around the circle while the "
-        "airspeed does not (rotor drag scales with thrust)",
+        _TILTED_CONSTANT_SPEED,
     frozenset({"rotor_drag", "drag_quadratic"}):
-        "tilted circles at constant speed: the thrust changes around the circle while the "
-        "airspeed does not (rotor drag scales with thrust)",
+        _TILTED_CONSTANT_SPEED,
     frozenset({"thrust_scale", "mass"}):
         "speed-ups and braking (the mass multiplies the tangential acceleration, a thrust "
         "scale does not), or log the tether load cell",
@@ -329,11 +336,9 @@ _SEPARATE = {
         "steady circles at more speeds including 12-15 m/s and tilts, where the polynomial "
         "and the momentum-theory curves part",
     frozenset({"thrust_scale", "thrust_airspeed"}):
-        "a slow (3 m/s) and a fast (12+ m/s) circle at the same tilt: a scale error does not "
-        "change with airspeed",
+        _SLOW_AND_FAST_CIRCLE,
     frozenset({"thrust_scale", "thrust_momentum"}):
-        "a slow (3 m/s) and a fast (12+ m/s) circle at the same tilt: a scale error does not "
-        "change with airspeed",
+        _SLOW_AND_FAST_CIRCLE,
     frozenset({"motor_lag", "latency"}):
         "manoeuvres with sharp thrust changes (hard braking, speed-ups with a high jerk): a lag "
         "filters the command, a delay only shifts it",

@@ -204,8 +204,8 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=Tr
         keep, lo, hi, w = _sample_steps(N, n_xi)
         sol = periodic_lqr(Ad, Bd, Qx, config.control.R, terminal=config.control.terminal,
                            keep_S=True, steps=None if keep_steps else keep)  # fmt: skip
-        Ks, Ss = (sol.K, sol.S[:, :-1]) if keep_steps else (sol.K, sol.S)
-        if keep_steps:
+        Ks, Ss = sol.K, sol.S
+        if keep_steps:  # every step was kept: pick the grid's bracketing steps
             Ks, Ss = Ks[:, keep], Ss[:, keep]
         K[ok] = _sample(Ks, lo, hi, w)
         S[ok] = _sample(Ss, lo, hi, w)

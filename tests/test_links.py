@@ -12,19 +12,22 @@ import dataclasses
 
 import numpy as np
 import pytest
+from conftest import CIRCLE_SPEED as SPEED
+from conftest import CIRCLE_TILT as TILT
 from scipy.integrate import solve_ivp
-from scipy.interpolate import CubicSpline
 
 from gainsched.config import config_from_text
 from gainsched.errors import InputError
 from gainsched.links import LumpedMassChain, SpringDamper, StandardLinearSolid
 from gainsched.maximal import MaximalModel, reduced_from_maximal
 from gainsched.model import Model
-from gainsched.nominal import circle_path, nominal_from_path, period
 from gainsched.rotations import matrix_from_quaternion
 
-SPEED, TILT = 8.0, np.deg2rad(20.0)
 RHO = 1.5
+#: one of each elastic link, stiff enough to stay near the rigid circle
+ELASTIC_LINKS = [SpringDamper(RHO, 2e4, 50.0), StandardLinearSolid(RHO, 5e4, 2e4, 50.0),
+                 LumpedMassChain(RHO, 2e4, 50.0, 0.01, 4)]  # fmt: skip
+ELASTIC_IDS = ["spring-damper", "sls", "lumped-mass"]
 
 
 def random_taut_states(rng, n):
@@ -46,17 +49,6 @@ def perturb(mx, x, rng, scale=1e-3):
     if mx.n_link:
         x[..., 13:] += rng.normal(0, scale, x[..., 13:].shape)
     return x
-
-
-@pytest.fixture(scope="module")
-def circle(model):
-    """Nominal 8 m/s circle at 20 deg: initial state and a periodic spline of u_d(t)."""
-    T = period(SPEED, model.r)
-    t = np.linspace(0.0, T, 721)
-    nom = nominal_from_path(model, circle_path(SPEED, model.r, t), TILT)
-    assert np.all(nom.reasons == 0)
-    spline = CubicSpline(t, nom.u, bc_type="periodic")
-    return nom, (lambda s: spline(s % T))
 
 
 @pytest.fixture(scope="module")
@@ -218,12 +210,7 @@ def test_energy_balance(model_nodrag, link):
 # --------------------------------------------------------------------------- conversions
 
 
-@pytest.mark.parametrize(
-    "link",
-    [SpringDamper(RHO, 2e4, 50.0), StandardLinearSolid(RHO, 5e4, 2e4, 50.0),
-     LumpedMassChain(RHO, 2e4, 50.0, 0.01, 4)],
-    ids=["spring-damper", "sls", "lumped-mass"],
-)  # fmt: skip
+@pytest.mark.parametrize("link", ELASTIC_LINKS, ids=ELASTIC_IDS)
 def test_equilibrium_start_and_round_trip(model, link):
     """from_reduced(z, tension=f): the link pulls with f in every part, its states are at
     rest (SLS s_p' = 0, chain nodes co-moving), the stretch is f / k_static, and
@@ -258,12 +245,7 @@ def test_equilibrium_start_and_round_trip(model, link):
 # --------------------------------------------------------------------------- slack
 
 
-@pytest.mark.parametrize(
-    "link",
-    [SpringDamper(RHO, 2e4, 50.0), StandardLinearSolid(RHO, 5e4, 2e4, 50.0),
-     LumpedMassChain(RHO, 2e4, 50.0, 0.01, 4)],
-    ids=["spring-damper", "sls", "lumped-mass"],
-)  # fmt: skip
+@pytest.mark.parametrize("link", ELASTIC_LINKS, ids=ELASTIC_IDS)
 def test_slack_is_detected_and_never_pushes(model, link):
     """Inside the sphere the link is slack: zero force (free flight), the slack flag set,
     and the simulator step reports a negative signed tension."""

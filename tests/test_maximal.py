@@ -4,15 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import CIRCLE_TILT as TILT
 from scipy.integrate import solve_ivp
-from scipy.interpolate import CubicSpline
 
 from gainsched.effects import MotorLag
 from gainsched.maximal import MaximalModel, maximal_from_reduced, reduced_from_maximal
-from gainsched.nominal import circle_path, nominal_from_path, period
 from gainsched.rotations import matrix_from_quaternion
 
-SPEED, TILT = 8.0, np.deg2rad(20.0)
 K_STIFF = 1e6  # N/m
 C_STIFF = 2 * np.sqrt(K_STIFF * 0.5)  # N s/m, critical for the 0.5 kg vehicle on the spring
 
@@ -28,17 +26,6 @@ def random_states(rng, n):
     z[:, 6] = rng.uniform(-3.0, 3.0, n)
     z[:, 7:10] = rng.uniform(-5.0, 5.0, (n, 3))
     return z
-
-
-@pytest.fixture(scope="module")
-def circle(model):
-    """Nominal 8 m/s circle at 20 deg: initial state and a periodic spline of u_d(t)."""
-    T = period(SPEED, model.r)
-    t = np.linspace(0.0, T, 721)
-    nom = nominal_from_path(model, circle_path(SPEED, model.r, t), TILT)
-    assert np.all(nom.reasons == 0)
-    spline = CubicSpline(t, nom.u, bc_type="periodic")
-    return nom, (lambda s: spline(s % T))
 
 
 def prestretched(model, x, u, alpha, k):
