@@ -21,7 +21,6 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 from joblib import Parallel, delayed
-from scipy.signal import resample
 
 from .linearize import discretize, jacobians, lqr_system
 from .lqr import dlqr, periodic_lqr, spectral_radius
@@ -30,7 +29,7 @@ from .nominal import circle_nominal, period
 from .trim import TrimError
 
 __all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "steps_per_period",
-           "discrete_system", "LIN_TOL"]  # fmt: skip
+           "discrete_system", "periodic_interp", "LIN_TOL"]  # fmt: skip
 
 #: relative accuracy demanded of the interpolated linearisation (see discrete_system)
 LIN_TOL = 1e-10
@@ -106,6 +105,40 @@ def _rel_err(X, Y, offset=None):
     return np.abs(X - Y).max() / scale if scale > 0 else np.abs(X - Y).max()
 
 
+def periodic_interp(X, N):
+    """Trigonometric interpolation of M equally spaced samples of periodic functions to N.
+
+    The same interpolant as ``scipy.signal.resample(X, N, axis=1)`` (for even M < N:
+    the Nyquist term split evenly between +M/2 and -M/2), evaluated as one matrix
+    product of the N x M basis ``cos(j theta_k), sin(j theta_k)`` with the Fourier
+    coefficients. The FFT of length N that resample does costs more than the product
+    at every control rate tried and grows faster than N when N has large prime
+    factors (N is the step count per period, not a chosen length); the product is
+    linear in N. Angles are reduced exactly in integers (``j k mod N``), so the basis
+    is accurate to rounding.
+
+    Parameters
+    ----------
+    X : ndarray, shape (b, M, ...)   samples at azimuths 2 pi m / M, M even
+    N : int   number of output samples, N > M
+
+    Returns
+    -------
+    ndarray, shape (b, N, ...)   values at azimuths 2 pi k / N (a view; the steps are the
+        slowest axis in memory, the points next: each step's blocks are contiguous)
+    """
+    b, M = X.shape[:2]
+    h = M // 2
+    Y = np.moveaxis(X, 1, 0).reshape(M, -1)
+    F = np.fft.rfft(Y, axis=0) / M  # (h + 1, R)
+    coef = np.concatenate([F[:1].real, 2.0 * F[1:h].real, F[h:].real, -2.0 * F[1:h].imag])
+    r = (np.arange(N)[:, None] * np.arange(h + 1)[None, :]) % N  # j k mod N, exact
+    angle = 2.0 * np.pi / N * np.arange(N)
+    basis = np.concatenate([np.cos(angle)[r], np.sin(angle)[r[:, 1:h]]], axis=1)
+    out = (basis @ coef).reshape((N, b) + X.shape[2:])
+    return np.moveaxis(out, 0, 1)
+
+
 def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
     """``(A_d, B_d)`` of the LQR system at the N control steps of one period (batched).
 
@@ -113,7 +146,7 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
     function of the azimuth, so its Fourier series converges exponentially: the
     exact (complex-step) Jacobians and their exact discretisation are computed at
     ``M`` equally spaced azimuths and carried to the N steps by trigonometric
-    interpolation (scipy.signal.resample). M doubles from ``m0`` until the
+    interpolation (:func:`periodic_interp`). M doubles from ``m0`` until the
     interpolation from M/2 samples reproduces the M samples to ``tol`` (relative to
     ``|A_d - I|`` and ``|B_d|``); the M-sample interpolation is then used, whose error
     is smaller still. On the paper grid M = 64 gives 2e-15. With ``N <= M`` the
@@ -135,11 +168,13 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
             return Ad, Bd, N, 0.0
         Ad_2M, Bd_2M = _discrete_at(model, speed, tilts, 2 * M, dt)
         I = np.eye(Ad_M.shape[-1])
-        err = max(_rel_err(resample(Ad_M, 2 * M, axis=1), Ad_2M, I),
-                  _rel_err(resample(Bd_M, 2 * M, axis=1), Bd_2M))  # fmt: skip
+        err = max(_rel_err(periodic_interp(Ad_M, 2 * M), Ad_2M, I),
+                  _rel_err(periodic_interp(Bd_M, 2 * M), Bd_2M))  # fmt: skip
         M, Ad_M, Bd_M = 2 * M, Ad_2M, Bd_2M
         if err <= tol:
-            return resample(Ad_M, N, axis=1), resample(Bd_M, N, axis=1), M, err
+            AB = periodic_interp(np.concatenate([Ad_M, Bd_M], axis=-1), N)  # one product
+            n = Ad_M.shape[-1]
+            return AB[..., :n], AB[..., n:], M, err
 
 
 def _tilt0(model, config, speed, N, dt, Qx):

@@ -93,13 +93,18 @@ class Sweep:
 
 
 def _kernel():
-    lib = native.load("riccati")
+    return _configure(native.load("riccati"))
+
+
+def _configure(lib):
+    """Declare the C signatures of a loaded ``riccati`` library (None passes through)."""
     if lib is not None and not hasattr(lib, "_gs_ready"):
         dp = ctypes.POINTER(ctypes.c_double)
         lib.gs_riccati.restype = ctypes.c_int
+        sp = ctypes.POINTER(ctypes.c_ssize_t)
         lib.gs_riccati.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_ssize_t,
-                                   ctypes.c_ssize_t, ctypes.c_ssize_t, dp, dp, dp, dp, dp,
-                                   ctypes.POINTER(ctypes.c_int), ctypes.c_int, dp, dp,
+                                   ctypes.c_ssize_t, ctypes.c_ssize_t, dp, sp, dp, sp, dp, dp,
+                                   dp, ctypes.POINTER(ctypes.c_int), ctypes.c_int, dp, dp,
                                    ctypes.c_int, dp, dp]  # fmt: skip
         lib.gs_lanes.restype = ctypes.c_int
         lib._gs_ready = True
@@ -115,13 +120,24 @@ def _ptr(x):
     return None if x is None else x.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
 
+def _strides(X):
+    """Element strides of a float64 array, as the kernel's ``ptrdiff_t[ndim]``."""
+    return (ctypes.c_ssize_t * X.ndim)(*(s // X.itemsize for s in X.strides))
+
+
+def _aligned(X):
+    """X as float64 whose strides are whole elements (a copy only if they are not)."""
+    X = np.asarray(X, dtype=float)
+    return X if all(s % X.itemsize == 0 for s in X.strides) else np.ascontiguousarray(X)
+
+
 def _sweep_native(lib, Ad, Bd, Q, R, P, slot, n_out, K, S, triple, Phi, G, threads):
     b, N, n, m = Bd.shape
     lanes = lib.gs_lanes()
     n_groups = -(-b // lanes)
     slot_p = None if slot is None else slot.ctypes.data_as(ctypes.POINTER(ctypes.c_int))
-    args = (_ptr(Ad), _ptr(Bd), _ptr(Q), _ptr(R), _ptr(P), slot_p, n_out, _ptr(K), _ptr(S),
-            int(triple), _ptr(Phi), _ptr(G))  # fmt: skip
+    args = (_ptr(Ad), _strides(Ad), _ptr(Bd), _strides(Bd), _ptr(Q), _ptr(R), _ptr(P), slot_p,
+            n_out, _ptr(K), _ptr(S), int(triple), _ptr(Phi), _ptr(G))  # fmt: skip
 
     def run(g0, g1):  # ctypes releases the GIL: threads run in parallel
         if lib.gs_riccati(n, m, N, b, g0, g1, *args) != 0:
@@ -140,16 +156,16 @@ def _sweep_numpy(Ad, Bd, Q, R, P, slot, K, S, triple, Phi, G):
     T = lambda X: np.swapaxes(X, -1, -2)  # noqa: E731
     for k in range(Ad.shape[1] - 1, -1, -1):
         A, B = Ad[:, k], Bd[:, k]
-        BtP = T(B) @ P
-        Rb = R + BtP @ B
-        Kk = np.linalg.solve(Rb, BtP @ A)
-        Acl = A - B @ Kk
+        PA = P @ A
+        Rb = R + T(B) @ (P @ B)
+        BtPA = T(B) @ PA
+        Kk = np.linalg.solve(Rb, BtPA)
         if triple:
             V = Phi @ B
             G += V @ np.linalg.solve(Rb, T(V))
             G[:] = 0.5 * (G + T(G))
-            Phi[:] = Phi @ Acl
-        P = Q + T(A) @ (P @ Acl)
+            Phi[:] = Phi @ (A - B @ Kk)
+        P = Q + (T(A) @ PA - T(BtPA) @ Kk)  # = Q + A^T P (A - B K)
         P = 0.5 * (P + T(P))
         if slot is not None and slot[k] >= 0:
             if K is not None:
@@ -164,7 +180,8 @@ def sweep(Ad, Bd, Q, R, P, *, steps=None, keep_S=True, triple=False, threads=1,
     """One backward Riccati sweep over k = N-1 .. 0 from the terminal cost P (batched).
 
     ``P <- Q + A_k^T P (A_k - B_k K_k)`` with ``K_k = (R + B_k^T P B_k)^-1 B_k^T P A_k``
-    (paper eq. 23). With ``triple`` the sweep also accumulates the period map of the
+    (paper eq. 23), computed as ``Q + (A_k^T P A_k - (B_k^T P A_k)^T K_k)``. With
+    ``triple`` the sweep also accumulates the period map of the
     doubling algorithm (``Phi <- Phi Acl_k``, ``G <- G + Phi B_k Rb_k^-1 B_k^T Phi^T``
     from ``Phi = I, G = 0``): from ``P = 0`` that is the period triple, from the periodic
     P it is the closed-loop monodromy.
@@ -182,8 +199,9 @@ def sweep(Ad, Bd, Q, R, P, *, steps=None, keep_S=True, triple=False, threads=1,
     """
     bshape = Ad.shape[:-3]
     N, n, m = Ad.shape[-3], Ad.shape[-1], Bd.shape[-1]
-    Ad = np.ascontiguousarray(Ad, dtype=float).reshape(-1, N, n, n)
-    Bd = np.ascontiguousarray(Bd, dtype=float).reshape(-1, N, n, m)
+    # any layout (the kernel takes strides): scipy's resample output has the steps innermost
+    Ad = _aligned(Ad).reshape(-1, N, n, n)
+    Bd = _aligned(Bd).reshape(-1, N, n, m)
     b = Ad.shape[0]
     P = np.array(np.broadcast_to(P, bshape + (n, n)), dtype=float, order="C").reshape(b, n, n)
     Q = np.ascontiguousarray(Q, dtype=float)

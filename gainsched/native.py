@@ -9,11 +9,18 @@ sizes, hence hand-written C. They are compiled once per machine with the host
 fallback that computes the same thing, used when no compiler is present or
 ``GAINSCHED_NATIVE=0``.
 
+Vector width: a kernel is built for this CPU's widest vector unit it can use
+(:func:`vector_flags`: AVX-512, AVX2, else the SSE2/NEON baseline) and told the
+width in doubles (``GS_VEC_DOUBLES``); the Riccati kernel computes that many
+independent operating points per instruction. Building for one ISA (rather
+than GCC ``target_clones`` of all of them) keeps the first-use compile at a
+few seconds and lets each ISA use its own register width.
+
 Determinism: the flags keep IEEE semantics (no ``-ffast-math``, no FMA
-contraction, no ``-march=native``), so a kernel gives the same bits on any
-x86-64 machine; vector code paths (``target_clones``) only change how many
-independent points are computed per instruction, never the order of the
-operations of one point.
+contraction, no ``-march=native``) and the vector width only changes how many
+points share an instruction, never the order of the operations of one point,
+so a kernel gives the same bits on any x86-64 machine whatever its vector unit
+(checked in ``tests/test_lqr.py`` by building every variant the host can run).
 
 Cache: ``$GAINSCHED_CACHE`` or ``$XDG_CACHE_HOME/gainsched`` (default
 ``~/.cache/gainsched``); the library name carries a hash of the source, the
@@ -26,16 +33,23 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import platform
 import subprocess
 import tempfile
 from functools import cache
 from importlib import resources
 from pathlib import Path
 
-__all__ = ["CFLAGS", "load", "available", "cache_dir"]
+__all__ = ["CFLAGS", "VECTOR_ISAS", "load", "available", "build", "cache_dir", "vector_flags",
+           "vector_variants"]  # fmt: skip
 
 CFLAGS = ("-O3", "-std=c99", "-fPIC", "-shared", "-ffp-contract=off", "-fno-math-errno",
           "-fno-semantic-interposition")  # fmt: skip
+
+#: x86-64 vector ISAs the kernels are built for, widest first: (cpuinfo flag, doubles
+#: per register). Without any of them: the baseline (SSE2 on x86-64, NEON on arm64).
+VECTOR_ISAS = (("avx512f", 8), ("avx2", 4))
+BASELINE_DOUBLES = 2
 
 
 def cache_dir() -> Path:
@@ -59,8 +73,38 @@ def _cc_version(cc: str) -> str:
     return res.stdout.splitlines()[0] if res.returncode == 0 and res.stdout else ""
 
 
-@cache
-def _load(name: str) -> ctypes.CDLL | None:
+def _cpu_flags() -> frozenset[str]:
+    """The CPU feature flags the kernel reports (Linux x86-64; empty elsewhere)."""
+    if platform.machine().lower() not in ("x86_64", "amd64"):
+        return frozenset()
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("flags"):
+                    return frozenset(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return frozenset()
+
+
+def vector_variants() -> list[tuple[str, ...]]:
+    """Flags of every vector variant this CPU can run, widest first, baseline last."""
+    cpu = _cpu_flags()
+    out = [(f"-m{isa}", f"-DGS_VEC_DOUBLES={w}") for isa, w in VECTOR_ISAS if isa in cpu]
+    return out + [(f"-DGS_VEC_DOUBLES={BASELINE_DOUBLES}",)]
+
+
+def vector_flags() -> tuple[str, ...]:
+    """Flags for this CPU's widest vector unit, e.g. ``("-mavx2", "-DGS_VEC_DOUBLES=4")``."""
+    return vector_variants()[0]
+
+
+def build(name: str, flags: tuple[str, ...] = ()) -> Path | None:
+    """Compile ``gainsched/c/<name>.c`` with :data:`CFLAGS` plus ``flags`` (cached).
+
+    Returns the shared library's path, or None if there is no working compiler or the
+    compile fails (an unknown ``-m`` flag on an old compiler, say).
+    """
     from .codegen import find_cc
 
     cc = find_cc()
@@ -70,7 +114,8 @@ def _load(name: str) -> ctypes.CDLL | None:
     version = _cc_version(cc)
     if not version:
         return None
-    key = hashlib.sha256("\0".join([src, " ".join(CFLAGS), version]).encode()).hexdigest()[:16]
+    cmd = CFLAGS + tuple(flags)
+    key = hashlib.sha256("\0".join([src, " ".join(cmd), version]).encode()).hexdigest()[:16]
     out = cache_dir() / f"{name}-{key}.so"
     if not out.exists():
         try:
@@ -79,17 +124,27 @@ def _load(name: str) -> ctypes.CDLL | None:
                 c_file = Path(tmp) / f"{name}.c"
                 c_file.write_text(src)
                 tmp_so = Path(tmp) / out.name
-                res = subprocess.run([cc, *CFLAGS, str(c_file), "-o", str(tmp_so), "-lm"],
+                res = subprocess.run([cc, *cmd, str(c_file), "-o", str(tmp_so), "-lm"],
                                      capture_output=True, text=True, timeout=300)  # fmt: skip
                 if res.returncode != 0:
                     return None
                 os.replace(tmp_so, out)  # atomic: other processes see all or nothing
         except (OSError, subprocess.TimeoutExpired):
             return None
-    try:
-        return ctypes.CDLL(str(out))
-    except OSError:
-        return None
+    return out
+
+
+@cache
+def _load(name: str) -> ctypes.CDLL | None:
+    # the host's vector variant, else the baseline (a compiler without the -m flag)
+    for flags in dict.fromkeys([vector_flags(), vector_variants()[-1]]):
+        path = build(name, flags)
+        if path is not None:
+            try:
+                return ctypes.CDLL(str(path))
+            except OSError:
+                continue
+    return None
 
 
 def load(name: str) -> ctypes.CDLL | None:

@@ -10,11 +10,14 @@
 
 from __future__ import annotations
 
+import ctypes
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from gainsched import lqr, native
 from gainsched.config import load_config
 from gainsched.grid import solve_circle
 from gainsched.lqr import (
@@ -180,6 +183,60 @@ def test_compiled_kernel_equals_numpy_recursion(lqr11, threads):
     sol_py = periodic_lqr(Ad, Bd, Q, R, use_native=False)
     assert sol_c.sweeps == sol_py.sweeps
     assert _rel(sol_c.K, sol_py.K) <= 1e-10
+
+
+@pytest.mark.skipif(not native_available(), reason="no C compiler: numpy recursion only")
+def test_kernel_bits_do_not_depend_on_vector_width(lqr11, monkeypatch):
+    """Every vector variant this CPU runs (AVX-512 8 lanes, AVX2 4, baseline 2) gives the
+    same bits: committed tables do not depend on the machine that built them. Sizes
+    11 x 4 (specialised code) and 6 x 3 (generic code). (An FMA-contracted build differs:
+    this test fails on it.)"""
+    variants = native.vector_variants()
+    with ThreadPoolExecutor(2) as ex:  # a few seconds per compile
+        paths = list(ex.map(lambda f: native.build("riccati", f), variants))
+    assert all(p is not None for p in paths), variants
+    if len(paths) == 1:
+        pytest.skip("this CPU runs only the baseline variant")
+    Ad, Bd, Q, R = lqr11
+    small = (Ad[:5, :9, :6, :6], Bd[:5, :9, :6, :3], Q[:6, :6], R[:3, :3])
+    results = []
+    for path in paths:
+        lib = lqr._configure(ctypes.CDLL(str(path)))
+        monkeypatch.setattr(lqr, "_kernel", lambda lib=lib: lib)
+        out = []
+        for A, B, Qp, Rp in ((Ad, Bd, Q, R), small):
+            P = np.zeros(A.shape[:1] + Qp.shape)
+            sw = sweep(A, B, Qp, Rp, P, steps=[0, 5, 3], triple=True, threads=2, use_native=True)
+            out += [sw.P0, sw.K, sw.S, sw.Phi, sw.G]
+        results.append(out)
+    for flags, out in zip(variants[1:], results[1:], strict=True):
+        for i, (x, y) in enumerate(zip(out, results[0], strict=True)):
+            assert np.array_equal(x, y), (flags, variants[0], i)
+
+
+@pytest.mark.skipif(not native_available(), reason="no C compiler: numpy recursion only")
+def test_kernel_reads_any_layout(lqr11):
+    """The kernel reads A_k, B_k at their strides: steps innermost (scipy's resample
+    output, what the build passes) and points reversed (negative strides) give the bits
+    of C order."""
+    Ad, Bd, Q, R = lqr11
+    P = np.zeros(Ad.shape[:1] + Q.shape)
+
+    def run(A, B):
+        sw = sweep(A, B, Q, R, P, steps=[0, 7], triple=True, use_native=True)
+        return [sw.P0, sw.K, sw.S, sw.Phi, sw.G]
+
+    def steps_inner(X):
+        return np.moveaxis(np.moveaxis(X, 1, -1).copy(), -1, 1)
+
+    ref = run(Ad, Bd)
+    A_in, B_in = steps_inner(Ad), steps_inner(Bd)
+    assert A_in.strides[1] == 8 and not A_in.flags.c_contiguous
+    for x, y in zip(run(A_in, B_in), ref, strict=True):
+        np.testing.assert_array_equal(x, y)
+    rev = run(Ad[::-1].copy()[::-1], Bd[::-1].copy()[::-1])
+    for x, y in zip(rev, ref, strict=True):
+        np.testing.assert_array_equal(x, y)
 
 
 def test_requested_steps_equal_all_steps(lqr11):
