@@ -19,8 +19,9 @@ Every figure is measured in this run next to its baseline or peer, as a ratio:
     batched ``expm`` on the same blocks.
 (c) Full builds: configs/paper.toml (n_jobs 1 and 2; peak memory of a build in a
     fresh process) and a 4x finer grid; the growth exponents of the build time in
-    grid points (1x, 2x, 4x circles) and in steps per period (control rate 0.5, 1,
-    2 kHz), fitted on log-log axes.
+    grid points (1x .. 4x speeds; 1x .. 8x tilts) and in steps per period (control
+    rate 1 .. 16 kHz), fitted as plain log-log slopes (in steps also as
+    t = a + b x^p, a: the work that does not grow with the steps).
 """
 
 from __future__ import annotations
@@ -355,6 +356,18 @@ def _fixed_plus_power(x, y):
     return float(a), float(b / x[0] ** p), float(p)
 
 
+def _growth(what, variants, size, unit):
+    """Build each (name, config text) of ``variants`` (best of 2); their sizes and times."""
+    xs, ts = [], []
+    for name, vt in variants:
+        c = config_from_text(vt, "bench.toml")
+        t, g = best_of(lambda c=c: build_grid(c, n_jobs=1), 2)
+        xs.append(size(g))
+        ts.append(t)
+        print(f"    {what} {name}: {xs[-1]} {unit}, {t:.2f} s")
+    return xs, ts
+
+
 def bench_build(cfg):
     out = {}
     text = PAPER.read_text()
@@ -374,54 +387,53 @@ def bench_build(cfg):
                grid_points=int(g.reasons.size), circles=int(g.rho.size),
                peak_rss_mib=peak, peak_rss_above_imports_mib=peak - base)  # fmt: skip
 
-    # 4x finer grid: the spacing of speeds and of tilts halved (midpoints added)
-    fine_v, fine_a = _refine(cfg.grid.speeds), _refine(np.rad2deg(cfg.grid.tilts))
-    # growth in grid points: tilts refined twice at fixed speeds (every circle has the
-    # same cost profile), plus the 4x finer grid (speeds and tilts refined)
-    t2x = _refine(np.rad2deg(cfg.grid.tilts))
-    variants = {
-        "1x": _variant(text),
-        "2x tilts": _variant(text, tilts=t2x),
-        "4x tilts": _variant(text, tilts=_refine(t2x)),
-    }
-    pts, times = [], []
-    for name, vt in variants.items():
-        c = config_from_text(vt, "bench.toml")
-        t, gg = best_of(lambda c=c: build_grid(c, n_jobs=1), 1)
-        pts.append(gg.rho.size)
-        times.append(t)
-        print(f"    grid {name}: {gg.rho.size:3d} circles, {gg.reasons.size:5d} points: {t:.2f} s")
+    # growth in grid points, two ways. Speeds refined: one job per speed, each with the
+    # same cost profile, so this is the growth of the work per grid point. Tilts
+    # refined at fixed speeds: the tilts of a speed are solved as batches, which
+    # amortise the per-speed work (set-up, the tilt-0 DARE, numpy call overheads), so
+    # this grows slower than linearly.
+    # Growth in steps: the control rate raised at fixed grid. A build has work that does
+    # not grow with the steps (the linearisation at M azimuths, set by the
+    # interpolation check; the set-up), so the time is fitted as t = a + b steps^p: p is
+    # the growth exponent of the work that grows with the steps; the plain log-log
+    # slope, pulled below 1 by a, is printed too.
+    speeds = [list(map(float, cfg.grid.speeds))]
+    for _ in range(2):
+        speeds.append(_refine(speeds[-1]))
+    pts, times = _growth(
+        "grid", [(f"{2**i}x speeds", _variant(text, speeds=v)) for i, v in enumerate(speeds)],
+        lambda g: g.rho.size, "circles")  # fmt: skip
     e_pts = _exponent(pts, times)
-    fine = _variant(text, speeds=fine_v, tilts=fine_a)
+    tilts = [list(map(float, np.rad2deg(cfg.grid.tilts)))]
+    for _ in range(3):
+        tilts.append(_refine(tilts[-1]))
+    pts_t, times_t = _growth(
+        "grid", [(f"{2**i}x tilts", _variant(text, tilts=a)) for i, a in enumerate(tilts)],
+        lambda g: g.rho.size, "circles")  # fmt: skip
+    e_tilts = _exponent(pts_t, times_t)
+    print(f"  growth exponent in grid points {e_pts:.2f} (speeds refined: one job each); "
+          f"{e_tilts:.2f} with tilts refined (batched in a job, sublinear)")  # fmt: skip
+    # 4x finer grid: the spacing of speeds and of tilts halved (midpoints added)
+    fine = _variant(text, speeds=speeds[1], tilts=tilts[1])
     t_fine, g_fine = best_of(lambda: build_grid(config_from_text(fine, "fine.toml")), 1)
     _, _, peak4 = _peak_rss_mib(fine)
     print(
         f"  4x finer grid (speeds and tilts refined, {g_fine.rho.size} circles): "
-        f"{t_fine:.2f} s, peak memory {peak4:.0f} MiB (paper: {peak:.0f} MiB); "
-        f"growth exponent in grid points {e_pts:.2f}"
+        f"{t_fine:.2f} s, peak memory {peak4:.0f} MiB (paper: {peak:.0f} MiB)"
     )
-    # growth in steps: the control rate raised, so N grows at fixed grid. A build has a
-    # part that does not grow with N (the linearisation at M azimuths, set by the
-    # interpolation check, and the per-circle set-up), so the time is fitted as
-    # t = a + b steps^p: p is the growth exponent of the step-dependent work; the plain
-    # log-log slope, pulled below 1 by a, is printed too
-    steps, t_steps = [], []
-    for rate in (1000.0, 2000.0, 4000.0, 8000.0, 16000.0):
-        c = config_from_text(_variant(text, rate=rate), f"rate{rate:g}.toml")
-        t, gg = best_of(lambda c=c: build_grid(c, n_jobs=1), 1)
-        steps.append(int(gg.steps.sum()))
-        t_steps.append(t)
-        print(f"    control rate {rate:g} Hz: {steps[-1]} steps per sweep of all speeds, {t:.2f} s")
-    e_raw = _exponent(steps, t_steps)
+    rates = (1000.0, 2000.0, 4000.0, 8000.0, 16000.0)
+    steps, t_steps = _growth(
+        "control rate", [(f"{r:g} Hz", _variant(text, rate=r)) for r in rates],
+        lambda g: int(g.steps.sum()), "steps per sweep of all speeds")  # fmt: skip
     a, b, e_steps = _fixed_plus_power(steps, t_steps)
-    print(f"  growth exponent in steps per period {e_steps:.2f} (t = a + b steps^p fitted over "
-          f"1-16 kHz: a = {a:.2f} s does not grow with the steps); plain log-log slope "
-          f"{e_raw:.2f}")  # fmt: skip
+    print(f"  growth exponent in steps per period {e_steps:.2f} (t = a + b steps^p over 1-16 "
+          f"kHz, a = {a:.2f} s); plain log-log slope {_exponent(steps, t_steps):.2f}")  # fmt: skip
     out.update(fine_grid_s=t_fine, fine_grid_circles=int(g_fine.rho.size),
                fine_peak_rss_mib=peak4, growth_exponent_points=e_pts,
-               growth_exponent_steps=e_steps, growth_exponent_steps_loglog=e_raw,
-               step_fixed_part_s=a, step_fit_b=b,
-               scaling={"circles": pts, "circle_times_s": times, "steps": steps,
+               growth_exponent_points_tilts=e_tilts, growth_exponent_steps=e_steps,
+               growth_exponent_steps_loglog=_exponent(steps, t_steps), step_fit=[a, b, e_steps],
+               scaling={"circles": pts, "circle_times_s": times, "circles_tilts": pts_t,
+                        "circle_times_tilts_s": times_t, "steps": steps,
                         "step_times_s": t_steps})  # fmt: skip
     return out
 
@@ -436,18 +448,22 @@ def plot(results, out_dir):
     bd = results["build"]
     sc = bd["scaling"]
     fig, ax = plt.subplots(1, 2, figsize=(9, 3.5))
+    for key, lab in (("", "speeds refined"), ("_tilts", "tilts refined")):
+        x = np.asarray(sc["circles" + key], dtype=float)
+        y = np.asarray(sc[f"circle_times{key}_s"])
+        ax[0].loglog(x, y, "o-", label=f"{lab}, slope {_exponent(x, y):.2f}")
     xs = np.asarray(sc["steps"], dtype=float)
-    ax[1].loglog(xs, bd["step_fixed_part_s"] + bd["step_fit_b"] * xs ** bd["growth_exponent_steps"],
-                 "C1--", label=f"a + b steps^p, p = {bd['growth_exponent_steps']:.2f}")  # fmt: skip
-    for a, x, y, lab, e in ((ax[0], sc["circles"], sc["circle_times_s"], "circles",
-                             bd["growth_exponent_points"]),
-                            (ax[1], sc["steps"], sc["step_times_s"], "steps per sweep",
-                             bd["growth_exponent_steps_loglog"])):  # fmt: skip
-        a.loglog(x, y, "o-", label=f"build, log-log slope {e:.2f}")
-        a.loglog(x, np.asarray(x) / x[-1] * y[-1], "k:", label="slope 1")
+    ys = np.asarray(sc["step_times_s"])
+    fa, fb, fp = bd["step_fit"]
+    ax[1].loglog(xs, ys, "o", label=f"build, log-log slope {_exponent(xs, ys):.2f}")
+    ax[1].loglog(xs, fa + fb * xs**fp, "C1-", label=f"a + b x^p, p = {fp:.2f}, a = {fa:.2f} s")
+    for a, x, y, lab in ((ax[0], sc["circles"], sc["circle_times_s"], "circles"),
+                         (ax[1], xs, ys, "steps per sweep of all speeds")):  # fmt: skip
+        x = np.asarray(x, dtype=float)
+        a.loglog(x, x / x[0] * y[0], "k:", label="slope 1")
         a.set_xlabel(lab)
         a.set_ylabel("build time (s)")
-        a.legend()
+        a.legend(fontsize=8)
         a.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     path = Path(out_dir) / "build_scaling.png"

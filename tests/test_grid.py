@@ -14,7 +14,13 @@ import numpy as np
 import pytest
 
 from gainsched.config import config_from_text, load_config
-from gainsched.grid import build_grid, discrete_system, solve_circle, steps_per_period
+from gainsched.grid import (
+    TILT_BATCH,
+    build_grid,
+    discrete_system,
+    solve_circle,
+    steps_per_period,
+)
 from gainsched.linearize import discretize, jacobians, lqr_system
 from gainsched.model import Model
 from gainsched.nominal import REASONS, circle_nominal, period
@@ -142,6 +148,18 @@ def test_infeasible_tilt_does_not_affect_feasible_tilts(paper_config):
     assert np.all(both.reasons[0] == 0) and np.all(both.reasons[1] != 0)
     np.testing.assert_allclose(both.K[0], alone.K[0], rtol=1e-12)
     assert np.all(np.isnan(both.K[1]))
+
+
+def test_tilts_beyond_one_batch_equal_single_tilt_solves(paper_config):
+    """More tilts than one batch (TILT_BATCH) are solved batch by batch, each as if alone:
+    the working set per batch is bounded and the gains do not depend on the batching."""
+    tilts = np.deg2rad(np.linspace(4.0, 40.0, TILT_BATCH + 3))
+    sol = solve_circle(paper_config, 9.0, tilts)
+    assert np.all(sol.reasons == 0)
+    for i in (0, TILT_BATCH - 1, TILT_BATCH, tilts.size - 1):
+        alone = solve_circle(paper_config, 9.0, tilts[i : i + 1])
+        np.testing.assert_allclose(sol.K[i], alone.K[0], rtol=1e-10, atol=1e-10)
+        assert sol.rho[i] == pytest.approx(alone.rho[0], rel=1e-10)
 
 
 @pytest.mark.parametrize(("speed", "tilt_deg"), [(2.5, 20), (9.0, 40), (15.0, 40)])
