@@ -199,7 +199,7 @@ def sweep(Ad, Bd, Q, R, P, *, steps=None, keep_S=True, triple=False, threads=1,
     """
     bshape = Ad.shape[:-3]
     N, n, m = Ad.shape[-3], Ad.shape[-1], Bd.shape[-1]
-    # any layout (the kernel takes strides): scipy's resample output has the steps innermost
+    # any layout (the kernel takes strides): grid.periodic_interp returns strided views
     Ad = _aligned(Ad).reshape(-1, N, n, n)
     Bd = _aligned(Bd).reshape(-1, N, n, m)
     b = Ad.shape[0]

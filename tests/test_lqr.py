@@ -216,9 +216,8 @@ def test_kernel_bits_do_not_depend_on_vector_width(lqr11, monkeypatch):
 
 @pytest.mark.skipif(not native_available(), reason="no C compiler: numpy recursion only")
 def test_kernel_reads_any_layout(lqr11):
-    """The kernel reads A_k, B_k at their strides: steps innermost (scipy's resample
-    output, what the build passes) and points reversed (negative strides) give the bits
-    of C order."""
+    """The kernel reads A_k, B_k at their strides: steps innermost and points reversed
+    (negative strides) give the bits of C order."""
     Ad, Bd, Q, R = lqr11
     P = np.zeros(Ad.shape[:1] + Q.shape)
 

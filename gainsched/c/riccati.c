@@ -178,8 +178,9 @@ INLINE void group(int n, int m, int N, ptrdiff_t b, ptrdiff_t p0, const double *
         /* gather step k of the W points into lanes. In C order the W points' blocks lie
          * N steps apart and are walked backwards: more streams than the hardware
          * prefetcher follows, so step k - PF is requested by hand (about 2x faster on
-         * 2 threads). With the steps innermost (scipy's resample output) each cache
-         * line serves 8 consecutive steps and no prefetch is needed. */
+         * 2 threads). With the steps innermost each cache line serves 8 consecutive
+         * steps; with the points inside the steps (grid.periodic_interp) one step is
+         * one stream: no prefetch is needed in either. */
         for (int l = 0; l < W; l++) {
             const double *a = Ad + pt[l] * sA[0] + k * sA[1];
             const double *bb = Bd + pt[l] * sB[0] + k * sB[1];
@@ -265,7 +266,7 @@ static void groups(int n, int m, int N, ptrdiff_t b, ptrdiff_t g0, ptrdiff_t g1,
 /*
  * gs_riccati: sweep lane groups [g0, g1) of the b points (group g = points gW .. gW+W-1).
  * Ad (b, N, n, n) and Bd (b, N, n, m): doubles at the element strides sA[4], sB[4] (any
- * layout, e.g. C order or scipy's resample output with the steps innermost).
+ * layout: C order, steps innermost, or grid.periodic_interp's steps-outermost views).
  * Q (n, n), R (m, m): row-major. P_io (b, n, n): terminal cost in, cost-to-go at step 0
  * out. slot (N) or NULL: output slot of each step (-1: none); K_out (b, n_slots, m, n)
  * and S_out (b, n_slots, n, n) may be NULL. with_triple: also update Phi_io, G_io
