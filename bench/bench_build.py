@@ -338,6 +338,14 @@ def _refine(x):
     return [round(float(v), 3) for v in np.sort(np.concatenate([x, 0.5 * (x[1:] + x[:-1])]))]
 
 
+def _refinements(x, times):
+    """``x`` (as floats) and its ``times`` successive refinements (see _refine)."""
+    out = [[float(v) for v in x]]
+    for _ in range(times):
+        out.append(_refine(out[-1]))
+    return out
+
+
 def _exponent(x, y):
     return float(np.polyfit(np.log(x), np.log(y), 1)[0])
 
@@ -397,16 +405,12 @@ def bench_build(cfg):
     # interpolation check; the set-up), so the time is fitted as t = a + b steps^p: p is
     # the growth exponent of the work that grows with the steps; the plain log-log
     # slope, pulled below 1 by a, is printed too.
-    speeds = [list(map(float, cfg.grid.speeds))]
-    for _ in range(2):
-        speeds.append(_refine(speeds[-1]))
+    speeds = _refinements(cfg.grid.speeds, 2)
     pts, times = _growth(
         "grid", [(f"{2**i}x speeds", _variant(text, speeds=v)) for i, v in enumerate(speeds)],
         lambda g: g.rho.size, "circles")  # fmt: skip
     e_pts = _exponent(pts, times)
-    tilts = [list(map(float, np.rad2deg(cfg.grid.tilts)))]
-    for _ in range(3):
-        tilts.append(_refine(tilts[-1]))
+    tilts = _refinements(np.rad2deg(cfg.grid.tilts), 3)
     pts_t, times_t = _growth(
         "grid", [(f"{2**i}x tilts", _variant(text, tilts=a)) for i, a in enumerate(tilts)],
         lambda g: g.rho.size, "circles")  # fmt: skip
@@ -426,12 +430,13 @@ def bench_build(cfg):
         "control rate", [(f"{r:g} Hz", _variant(text, rate=r)) for r in rates],
         lambda g: int(g.steps.sum()), "steps per sweep of all speeds")  # fmt: skip
     a, b, e_steps = _fixed_plus_power(steps, t_steps)
+    e_steps_loglog = _exponent(steps, t_steps)
     print(f"  growth exponent in steps per period {e_steps:.2f} (t = a + b steps^p over 1-16 "
-          f"kHz, a = {a:.2f} s); plain log-log slope {_exponent(steps, t_steps):.2f}")  # fmt: skip
+          f"kHz, a = {a:.2f} s); plain log-log slope {e_steps_loglog:.2f}")  # fmt: skip
     out.update(fine_grid_s=t_fine, fine_grid_circles=int(g_fine.rho.size),
                fine_peak_rss_mib=peak4, growth_exponent_points=e_pts,
                growth_exponent_points_tilts=e_tilts, growth_exponent_steps=e_steps,
-               growth_exponent_steps_loglog=_exponent(steps, t_steps), step_fit=[a, b, e_steps],
+               growth_exponent_steps_loglog=e_steps_loglog, step_fit=[a, b, e_steps],
                scaling={"circles": pts, "circle_times_s": times, "circles_tilts": pts_t,
                         "circle_times_tilts_s": times_t, "steps": steps,
                         "step_times_s": t_steps})  # fmt: skip

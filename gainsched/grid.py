@@ -164,20 +164,22 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
     if N <= 2 * m0:
         Ad, Bd = _discrete_at(model, speed, tilts, N, dt)
         return Ad, Bd, N, 0.0
+    # [A_d | B_d] side by side, so that one interpolation carries both
     M = m0
-    Ad_M, Bd_M = _discrete_at(model, speed, tilts, M, dt)
+    AB_M = np.concatenate(_discrete_at(model, speed, tilts, M, dt), axis=-1)
+    n = AB_M.shape[-2]
+    I = np.eye(n)
     while True:
         if 2 * M >= N:
             Ad, Bd = _discrete_at(model, speed, tilts, N, dt)
             return Ad, Bd, N, 0.0
-        Ad_2M, Bd_2M = _discrete_at(model, speed, tilts, 2 * M, dt)
-        I = np.eye(Ad_M.shape[-1])
-        err = max(_rel_err(periodic_interp(Ad_M, 2 * M), Ad_2M, I),
-                  _rel_err(periodic_interp(Bd_M, 2 * M), Bd_2M))  # fmt: skip
-        M, Ad_M, Bd_M = 2 * M, Ad_2M, Bd_2M
+        AB_2M = np.concatenate(_discrete_at(model, speed, tilts, 2 * M, dt), axis=-1)
+        AB = periodic_interp(AB_M, 2 * M)
+        err = max(_rel_err(AB[..., :n], AB_2M[..., :n], I),
+                  _rel_err(AB[..., n:], AB_2M[..., n:]))  # fmt: skip
+        M, AB_M = 2 * M, AB_2M
         if err <= tol:
-            AB = periodic_interp(np.concatenate([Ad_M, Bd_M], axis=-1), N)  # one product
-            n = Ad_M.shape[-1]
+            AB = periodic_interp(AB_M, N)
             return AB[..., :n], AB[..., n:], M, err
 
 

@@ -137,7 +137,8 @@ def build(name: str, flags: tuple[str, ...] = ()) -> Path | None:
 @cache
 def _load(name: str) -> ctypes.CDLL | None:
     # the host's vector variant, else the baseline (a compiler without the -m flag)
-    for flags in dict.fromkeys([vector_flags(), vector_variants()[-1]]):
+    variants = vector_variants()
+    for flags in dict.fromkeys([variants[0], variants[-1]]):
         path = build(name, flags)
         if path is not None:
             try:

@@ -158,9 +158,9 @@ INLINE void ltsolve(int m, int n, const lane *L, const lane *rd, const lane *Y, 
 
 /* one lane group: points p0 .. p0 + W - 1 (clamped to b - 1; extra lanes are discarded) */
 INLINE void group(int n, int m, int N, ptrdiff_t b, ptrdiff_t p0, const double *Ad,
-                  const ptrdiff_t *sA, const double *Bd, const ptrdiff_t *sB, const double *Q, const double *R, double *P_io,
-                  const int *slot, int n_slots, double *K_out, double *S_out, int with_triple,
-                  double *Phi_io, double *G_io, work *w) {
+                  const ptrdiff_t *sA, const double *Bd, const ptrdiff_t *sB, const double *Q,
+                  const double *R, double *P_io, const int *slot, int n_slots, double *K_out,
+                  double *S_out, int with_triple, double *Phi_io, double *G_io, work *w) {
     ptrdiff_t pt[W];
     for (int l = 0; l < W; l++) pt[l] = p0 + l < b ? p0 + l : b - 1;
     const size_t nn = (size_t)n * n, nm = (size_t)n * m;
