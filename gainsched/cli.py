@@ -643,7 +643,7 @@ def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_
 
 
 def main():
-    cli()
+    cli(prog_name="gainsched")
 
 
 if __name__ == "__main__":

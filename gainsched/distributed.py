@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
 
+from . import reproducible
 from .errors import InputError
 
 __all__ = [
@@ -155,15 +156,18 @@ def environment() -> dict[str, str]:
     """What decides the bits of a build on this process: code, versions, BLAS, kernels.
 
     Runs on the client and, through ``Client.run``, on every worker; the build
-    is byte-identical to a local one only where all entries agree.
+    is byte-identical to a local one only where all entries agree and every
+    worker runs the pinned numerics (``"pinned"``, :mod:`gainsched.reproducible`).
     """
     import joblib
     import numpy
     import scipy
 
-    from . import __version__
+    from . import __version__, reproducible
 
     return {
+        "pinned": "yes" if reproducible.process_pinned() else "no",
+        "numerics": reproducible.fingerprint(),
         "gainsched": __version__,
         "gainsched source": _code_fingerprint()[:16],
         "python": ".".join(platform.python_version_tuple()[:2]),
@@ -193,9 +197,17 @@ def _check_workers(client, where: str, timeout: float) -> str:
                          f"({type(exc).__name__}: {exc}); install it there: pip install -e .[dask]"
                          ) from None  # fmt: skip
     ours = environment()
+    pin = reproducible.pin_available()
     for worker in sorted(theirs):
         env = theirs[worker]
+        if pin and env.get("pinned") != "yes":
+            start = " ".join(f"{k}='{v}'" for k, v in reproducible.PINNED_ENV.items())
+            msg = (f"worker {worker} does not run the pinned numerics ({env.get('numerics')}); "
+                   f"start workers with: env {start} dask worker {where}  (docs/distributed.md)")
+            raise InputError(_SRC, "--scheduler", msg)
         for key in ours:
+            if key == "pinned" or (pin and key == "numerics"):
+                continue  # the pin above decides; this process need not be pinned itself
             if env.get(key) != ours[key]:
                 msg = (
                     f"worker {worker} has {key} {env.get(key)}, this machine {ours[key]}; "

@@ -1,6 +1,7 @@
 """The grid sweep: nominal, linearisation, periodic LQR at every (speed, tilt) circle.
 
-One job per speed (joblib, in config order, so results are deterministic);
+One job per speed (in config order, so results are deterministic, and on
+pinned numerics, so they are the same on every machine: :mod:`.reproducible`);
 inside a job every tilt is solved at once as a batch. The step count per
 period is ``N = 2 round(T / (2 dt))`` (even, so that the symmetry maps land on
 steps) and the discretisation uses ``dt_k = T / N``, within 0.15 % of the
@@ -20,12 +21,19 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 import numpy as np
-from joblib import Parallel, delayed
+from joblib import Parallel, cpu_count, delayed
 
 from .linearize import discretize, jacobians, lqr_system
 from .lqr import dlqr, periodic_lqr, spectral_radius
 from .model import Model
 from .nominal import circle_nominal, period
+from .reproducible import (
+    blas_single_thread,
+    ensure_blas_single_thread,
+    pin_available,
+    pinned_executor,  # fmt: skip
+    process_pinned,
+)
 from .trim import TrimError
 
 __all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "steps_per_period",
@@ -279,28 +287,70 @@ class GridResult:
     dt: np.ndarray
 
 
+def _solve_speed(config, speed: float, tilts) -> CircleSolution:
+    """One job of :func:`build_grid`: all tilts of one speed, on one BLAS thread."""
+    ensure_blas_single_thread()
+    return solve_circle(config, speed, tilts)
+
+
+def _dask_active() -> bool:
+    """Whether joblib's active backend is Dask (set by ``distributed.executor``)."""
+    from joblib.parallel import get_active_backend
+
+    return type(get_active_backend()[0]).__name__.startswith("Dask")
+
+
+def _solutions(args, n_jobs, backend):
+    """Run :func:`_solve_speed` over ``args`` and yield the results in submission order.
+
+    In a process that runs the reproducible numerics (:mod:`gainsched.reproducible`)
+    and on Dask, joblib runs the jobs with the requested backend. Elsewhere (a
+    notebook, a test) the jobs run in pinned worker processes instead, even
+    for the ``sequential`` and ``threading`` backends, so that the table bits do
+    not depend on the calling process.
+    """
+    dask = backend == "dask" or (backend is None and _dask_active())
+    if dask or process_pinned() or not pin_available():
+        par = Parallel(n_jobs=n_jobs, backend=backend, return_as="generator")
+        yield from par(delayed(_solve_speed)(*a) for a in args)
+        return
+    n = n_jobs if n_jobs > 0 else max(1, cpu_count() + 1 + n_jobs)
+    n = 1 if backend == "sequential" else min(n, len(args))
+    pool = pinned_executor(n)
+    futures = [pool.submit(_solve_speed, *a) for a in args]
+    try:
+        for f in futures:
+            yield f.result()
+    finally:
+        for f in futures:
+            f.cancel()
+
+
 def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
-    """Sweep all speeds (one joblib job each) and assemble the grid.
+    """Sweep all speeds (one job each) and assemble the grid.
+
+    The result does not depend on ``n_jobs``, ``backend`` or the machine's CPU
+    family (:mod:`gainsched.reproducible`).
 
     Parameters
     ----------
     config : Config
     n_jobs : int
-        joblib workers (-1: all cores).
+        Workers (-1: all cores).
     progress : callable(int) or None
         Called with 1 after each finished speed (e.g. ``tqdm.update``).
     backend : str, optional
-        joblib backend name (``"loky"``, ``"threading"``, ``"dask"``...).
+        joblib backend name (``"loky"``, ``"threading"``, ``"sequential"``, ``"dask"``).
     """
     speeds = config.grid.speeds
     tilts = config.grid.tilts
-    jobs = (delayed(solve_circle)(config, float(v), tilts) for v in speeds)
-    par = Parallel(n_jobs=n_jobs, backend=backend, return_as="generator")
+    args = [(config, float(v), tilts) for v in speeds]
     sols = []
-    for s in par(jobs):
-        sols.append(s)
-        if progress is not None:
-            progress(1)
+    with blas_single_thread():
+        for s in _solutions(args, n_jobs, backend):
+            sols.append(s)
+            if progress is not None:
+                progress(1)
 
     per_tilt = {f.name: np.stack([getattr(s, f.name) for s in sols], axis=1)
                 for f in fields(CircleSolution) if f.name not in ("steps", "dt")}  # fmt: skip

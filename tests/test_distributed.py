@@ -18,6 +18,7 @@ import sys
 import pytest
 from click.testing import CliRunner
 
+from gainsched import reproducible
 from gainsched.cli import cli
 from gainsched.config import config_from_text
 from gainsched.errors import InputError
@@ -47,11 +48,15 @@ def small_path(small_text, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def scheduler():
-    """Address of a 2-worker, 1-thread-each LocalCluster on 127.0.0.1."""
+    """Address of a 2-worker, 1-thread-each LocalCluster on 127.0.0.1, workers started with
+    the pinned numerics (as docs/distributed.md tells users to start theirs)."""
     distributed = pytest.importorskip("dask.distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  host="127.0.0.1", dashboard_address=None) as cluster:  # fmt: skip
-        yield cluster.scheduler_address
+    with pytest.MonkeyPatch.context() as mp:  # the worker processes inherit this environment
+        for key, value in reproducible.PINNED_ENV.items():
+            mp.setenv(key, value)
+        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                      host="127.0.0.1", dashboard_address=None) as cluster:
+            yield cluster.scheduler_address
 
 
 @pytest.fixture(scope="module")
@@ -253,3 +258,19 @@ def test_mismatched_worker_is_refused(scheduler, monkeypatch):
     with pytest.raises(InputError, match=r"worker tcp://\S+ has BLAS .*, this machine other-blas"):
         with gd.executor("dask", scheduler, 2):
             pass
+
+
+@pytest.mark.skipif(not reproducible.pin_available(), reason="no pin on this CPU")
+def test_unpinned_worker_is_refused(monkeypatch):
+    """A worker started without the pinned numerics (here: Sandybridge BLAS kernels) would
+    round differently: the check names it and says how to start workers."""
+    from gainsched import distributed as gd
+
+    distributed = pytest.importorskip("dask.distributed")
+    monkeypatch.setenv("OPENBLAS_CORETYPE", "Sandybridge")  # runs on any AVX2 CPU
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address=":0") as cluster:
+        with pytest.raises(InputError, match=r"does not run the pinned numerics .*Sandybridge.*"
+                           r"OPENBLAS_CORETYPE='Haswell'"):  # fmt: skip
+            with gd.executor("dask", cluster.scheduler_address, 1):
+                pass

@@ -1,0 +1,22 @@
+"""``python -m gainsched`` and the ``gainsched`` command.
+
+The process is pinned to the reproducible numerics (:mod:`gainsched.reproducible`)
+before anything imports numpy, so every backend of ``gainsched build`` gives the
+same table bits on every x86-64-v3 machine.
+"""
+
+from __future__ import annotations
+
+
+def main() -> None:
+    """Pin the numerics of this process, then run the command line."""
+    from .reproducible import pin_environ
+
+    pin_environ()
+    from .cli import main as cli_main
+
+    cli_main()
+
+
+if __name__ == "__main__":
+    main()
