@@ -8,7 +8,8 @@ STAMP = $(VENV)/.stamp
 
 PYTEST_ARGS ?=
 
-.PHONY: venv lint test tables bench paper clean distclean firmware-example firmware-size fuzz
+.PHONY: venv lint test tables bench paper clean distclean firmware-example firmware-size fuzz \
+	interrupt-trials
 
 # (Re)create the virtualenv whenever the dependency pins change.
 $(STAMP): pyproject.toml
@@ -33,6 +34,12 @@ bench: $(STAMP)
 
 paper: $(STAMP)
 	$(BIN)/gainsched paper -o reports/paper
+
+# A real build killed by SIGINT/SIGKILL at 60 random moments (tests/test_interrupt.py).
+INTERRUPT_TRIALS ?= 60
+interrupt-trials: $(STAMP)
+	GAINSCHED_INTERRUPT_TRIALS=$(INTERRUPT_TRIALS) $(BIN)/python -m pytest -s -p no:cacheprovider \
+		tests/test_interrupt.py
 
 clean:
 	rm -rf build dist *.egg-info .pytest_cache .ruff_cache

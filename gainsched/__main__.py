@@ -7,6 +7,8 @@ same table bits on every x86-64-v3 machine.
 
 from __future__ import annotations
 
+import signal
+
 
 def main() -> None:
     """Pin the numerics of this process, then run the command line."""
@@ -15,7 +17,12 @@ def main() -> None:
     pin_environ()
     from .cli import main as cli_main
 
-    cli_main()
+    try:
+        cli_main()
+    finally:
+        # the command is done (or has reported its interruption): a Ctrl-C while the
+        # interpreter shuts down its worker pools would only print a traceback
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 if __name__ == "__main__":

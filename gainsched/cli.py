@@ -36,7 +36,63 @@ def user_errors(fn):
 CONFIG = click.argument("config", type=click.Path(dir_okay=False, path_type=Path))
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _OneLineErrors(click.Group):
+    """click's usage errors (bad option value, unknown option, missing argument) as one
+    line ``gainsched: error: command line: ...`` with exit code 2, like every other user
+    error; Ctrl-C as ``gainsched: interrupted`` with exit code 130."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True,
+             **extra):  # fmt: skip
+        try:
+            rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.UsageError as exc:
+            msg = " ".join(exc.format_message().split())
+            click.echo(f"gainsched: error: command line: {msg}", err=True)
+            return self._exit(2, standalone_mode)
+        except click.ClickException as exc:
+            click.echo(f"gainsched: error: {' '.join(exc.format_message().split())}", err=True)
+            return self._exit(exc.exit_code, standalone_mode)
+        except (click.Abort, KeyboardInterrupt):
+            click.echo("gainsched: interrupted", err=True)
+            return self._exit(130, standalone_mode)
+        return self._exit(rv if isinstance(rv, int) else 0, standalone_mode)
+
+    @staticmethod
+    def _exit(code, standalone_mode):
+        if standalone_mode:
+            sys.exit(code)
+        return code
+
+
+class FiniteFloat(click.ParamType):
+    """A finite float in ``[lo, hi]`` (``lo_open``: ``lo`` excluded); nan and inf rejected
+    (click's FloatRange lets nan through)."""
+
+    name = "number"
+
+    def __init__(self, lo=None, hi=None, *, lo_open=False, unit=""):
+        self.lo, self.hi, self.lo_open, self.unit = lo, hi, lo_open, unit
+
+    def convert(self, value, param, ctx):
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        low = self.lo is not None and (x <= self.lo if self.lo_open else x < self.lo)
+        if not np.isfinite(x) or low or (self.hi is not None and x > self.hi):
+            lo = "" if self.lo is None else f"{'(' if self.lo_open else '['}{self.lo:g}, "
+            hi = "" if self.hi is None else f"{self.hi:g}]"
+            rng = f" in {lo}{hi}" if lo and hi else f" >= {self.lo:g}" if lo else ""
+            unit = f" {self.unit}" if self.unit else ""
+            self.fail(f"{value!r}: must be a finite number{rng}{unit}", param, ctx)
+        return x
+
+
+#: the fastest circle a command accepts, m/s (the config's grid.speeds bound)
+MAX_SPEED = 100.0
+
+
+@click.group(cls=_OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="gainsched")
 def cli():
     """Gain-scheduling compiler for a tethered quadcopter flying great circles.
@@ -80,7 +136,8 @@ def validate(config):
 
 def _speed_option(fn):
     return click.option(
-        "--speed", type=float, required=True, help="Tangential COG speed, m/s (negative: reversed)."
+        "--speed", type=FiniteFloat(-MAX_SPEED, MAX_SPEED, unit="m/s"), required=True,
+        help="Tangential COG speed, m/s (negative: reversed; 0 < |speed| <= 100)."
     )(fn)
 
 
@@ -88,10 +145,11 @@ def _speed_option(fn):
 @CONFIG
 @_speed_option
 @click.option(
-    "--tilt", type=float, default=0.0, show_default=True, help="Circle tilt alpha_C, deg."
+    "--tilt", type=FiniteFloat(-90, 90, unit="deg"), default=0.0, show_default=True,
+    help="Circle tilt alpha_C, deg."
 )
-@click.option("--samples", type=click.IntRange(4, 100000), default=12, show_default=True,
-              help="Azimuth samples over one period.")  # fmt: skip
+@click.option("--samples", type=click.IntRange(4, 3600), default=12, show_default=True,
+              help="Azimuth samples over one period (4-3600).")  # fmt: skip
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write the table as CSV (SI units, xi in deg).")  # fmt: skip
 @user_errors
@@ -101,7 +159,7 @@ def nominal(config, speed, tilt, samples, csv_path):
     from .config import load_config
     from .model import Model
     from .nominal import REASONS, circle_nominal, min_taut_speed
-    from .tables import write_atomic
+    from .publish import write_atomic
 
     cfg = load_config(config)
     if speed == 0 or not np.isfinite(speed):
@@ -134,7 +192,7 @@ def nominal(config, speed, tilt, samples, csv_path):
         lines = [",".join(head)] + [
             ",".join(f"{x:.9g}" for x in row[:-1]) + f",{row[-1]}" for row in rows
         ]
-        write_atomic(csv_path, ("\n".join(lines) + "\n").encode())
+        write_atomic(csv_path, ("\n".join(lines) + "\n").encode(), where="--csv")
         click.echo(f"wrote {csv_path}")
 
 
@@ -179,15 +237,16 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
 
     from tqdm import tqdm
 
-    from .codegen import write_c_outputs
     from .config import load_config
     from .distributed import check_options, executor
     from .grid import build_grid
-    from .model import Model
-    from .tables import write_table
+    from .outputs import write_outputs
+    from .publish import check_out_dir, recover
 
     check_options(backend, scheduler)
     cfg = load_config(config)
+    check_out_dir(out_dir)  # a bad -o fails now, not after the build
+    recover(out_dir)  # finish or clean up after a killed earlier run
     t0 = time.perf_counter()
     n_v = cfg.grid.speeds.size
     with executor(backend, scheduler, jobs, connect_timeout=connect_timeout) as ex:
@@ -195,18 +254,16 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
             click.echo(f"build {cfg.name} on {ex.description}", err=True)
         with tqdm(total=n_v, unit="speed", desc=f"build {cfg.name}", disable=None) as bar:
             grid = build_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update, backend=ex.backend)
-    out = out_dir / f"{cfg.name}.h5"
-    size = write_table(out, cfg, grid, Model(cfg))
-    c_files = write_c_outputs(out, out_dir)
+    out, *c_paths = write_outputs(out_dir, cfg, grid)
     n_pts = grid.reasons.size
     feas = np.count_nonzero(grid.reasons == 0)
     click.echo(
         f"{out}: {n_pts} points ({cfg.grid.tilts.size} tilts x {n_v} speeds x "
         f"{cfg.grid.azimuth_samples} azimuths), {100 * feas / n_pts:.1f}% feasible, "
         f"worst closed-loop spectral radius {_nanmax(grid.rho)}, "
-        f"{time.perf_counter() - t0:.1f} s, {size / 1024:.0f} KiB"
+        f"{time.perf_counter() - t0:.1f} s, {out.stat().st_size / 1024:.0f} KiB"
     )
-    click.echo("  C: " + ", ".join(str(p) for p in c_files))
+    click.echo("  C: " + ", ".join(str(p) for p in c_paths))
 
 
 @cli.command()
@@ -237,10 +294,12 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
 
     from .config import load_config
     from .distributed import check_options, executor
+    from .publish import check_out_dir, staged
     from .sweep import format_rows, make_sweep, parse_sigma, parse_vary, run_sweep
 
     check_options(backend, scheduler)
     base = load_config(config)
+    check_out_dir(out_dir)
     plan = make_sweep(base, [parse_vary(v) for v in vary], monte_carlo=monte_carlo, seed=seed,
                       sigma=[parse_sigma(s) for s in sigma])  # fmt: skip
     t0 = time.perf_counter()
@@ -250,8 +309,9 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
             click.echo(f"sweep {base.name} on {ex.description}", err=True)
         with tqdm(total=total, unit="speed", desc=f"sweep {base.name} "
                   f"({len(plan.variants)} variants)", disable=None) as bar:  # fmt: skip
-            rows = run_sweep(plan, out_dir, n_jobs=ex.n_jobs, backend=ex.backend,
-                             progress=bar.update)  # fmt: skip
+            with staged(out_dir) as stage:  # every variant appears at once, or none
+                rows = run_sweep(plan, stage, n_jobs=ex.n_jobs, backend=ex.backend,
+                                 progress=bar.update)  # fmt: skip
     for line in format_rows(plan, rows):
         click.echo(line)
     click.echo(f"{out_dir}: {len(rows)} variants ({len(rows)} tables + configs), sweep.csv, "
@@ -293,6 +353,9 @@ def inspect(table):
     for line in flash_summary(t):
         click.echo(f"  {line}")
     rho = t.spectral_radius
+    if not np.any(np.isfinite(rho)):
+        click.echo("  no feasible circle: no gains, no closed loop (see the reasons above)")
+        return
     i, j = np.unravel_index(np.nanargmax(rho), rho.shape)
     click.echo(f"  worst closed-loop monodromy spectral radius {rho[i, j]:.5f} "
                f"(speed {t.speed[j]:g} m/s, tilt {np.rad2deg(t.tilt[i]):g} deg); "
@@ -340,7 +403,7 @@ def export_c(table, out_dir, no_code_size):
 )
 @click.option(
     "--max-error",
-    type=float,
+    type=FiniteFloat(0, 100, lo_open=True, unit="%"),
     default=2.0,
     show_default=True,
     help="Pass threshold on the max relative gain error, percent.",
@@ -423,7 +486,8 @@ def _scenario_path(name: str) -> Path:
               help="Scenario file, or a name in configs/scenarios (e.g. braking).")  # fmt: skip
 @click.option("--plant", "plant_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Truth config for the plant (default: CONFIG).")  # fmt: skip
-@click.option("--speed", type=float, help="Override the scenario's initial speed, m/s.")
+@click.option("--speed", type=FiniteFloat(0, MAX_SPEED, lo_open=True, unit="m/s"),
+              help="Override the scenario's initial speed, m/s (0 < speed <= 100).")
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               required=True, help="Output folder (log.csv/.h5, metrics.json, plots).")  # fmt: skip
 @user_errors
@@ -434,6 +498,7 @@ def simulate(config, table_path, scenario, plant_path, speed, out_dir):
     from tqdm import tqdm
 
     from .config import load_config
+    from .publish import check_out_dir, staged
     from .sim import load_scenario, table_scheduler, write_run
     from .sim import simulate as run
     from .tables import load_table
@@ -447,9 +512,11 @@ def simulate(config, table_path, scenario, plant_path, speed, out_dir):
     if speed is not None:
         scn = dataclasses.replace(scn, speed=speed)
     n = int(round(scn.duration * cfg.control.rate_hz)) + 1
+    check_out_dir(out_dir)
     with tqdm(total=n, unit="step", desc=f"simulate {scn.name}", disable=None) as bar:
         res = run(cfg, table_scheduler(table), scn, plant, progress=bar.update)
-    m = write_run(res, out_dir)
+    with staged(out_dir) as stage:
+        m = write_run(res, stage)
     click.echo(
         f"{out_dir}: {scn.name} {m['duration_s']:.2f} s, "
         f"RMS out-of-plane {m['rms_out_of_plane_m']:.4f} m, "
@@ -483,6 +550,7 @@ def paper(out_dir, config, table_path, plant_path, quick):
 
     from .config import load_config
     from .paper import experiments, run_paper
+    from .publish import check_out_dir, staged
     from .sim import table_scheduler
     from .tables import load_table
 
@@ -493,8 +561,10 @@ def paper(out_dir, config, table_path, plant_path, quick):
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     n = len(experiments(quick=quick))
     meta = {"table": str(table_path), "table_config_sha256": table.config_sha256}
-    with tqdm(total=n, unit="flight", desc="paper", disable=None) as bar:
-        rep = run_paper(cfg, table_scheduler(table), out_dir, quick=quick, plant=plant,
+    check_out_dir(out_dir)
+    with tqdm(total=n, unit="flight", desc="paper", disable=None) as bar, \
+            staged(out_dir) as stage:  # fmt: skip
+        rep = run_paper(cfg, table_scheduler(table), stage, quick=quick, plant=plant,
                         progress=bar.update, meta=meta)  # fmt: skip
     for r in rep.rows:
         mark = {True: "ok ", False: "NO ", None: "-  "}[r.agrees]
@@ -528,8 +598,11 @@ def compare(config, logs, out_dir, before_path, no_paper):
     from .compare import compare as run
     from .mvmreport import before_after_lines, compare_lines, write_before_after, write_compare
     from .paperfits import paper_fits
+    from .publish import check_out_dir, staged
 
     cfg = _load_for_compare(config)
+    if out_dir is not None:
+        check_out_dir(out_dir)
     cmp = run(cfg, logs)
     paper = None if no_paper else paper_fits(cfg, cmp.measured)
     for line in compare_lines(cmp, paper):
@@ -541,9 +614,10 @@ def compare(config, logs, out_dir, before_path, no_paper):
         for line in before_after_lines(before, cmp):
             click.echo(line)
     if out_dir is not None:
-        paths = write_compare(cmp, out_dir, paper)
-        if before is not None:
-            paths += write_before_after(before, cmp, out_dir)
+        with staged(out_dir) as stage:  # the report appears whole, or not at all
+            paths = write_compare(cmp, stage, paper)
+            if before is not None:
+                paths += write_before_after(before, cmp, stage)
         click.echo(f"wrote {len(paths)} files to {out_dir} ({paths[1].name})")
 
 
@@ -575,11 +649,15 @@ def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
         write_compare,
         write_diagnose,
     )
-    from .tables import write_atomic
+    from .publish import check_out_dir, staged, write_atomic
 
     if do_apply and new_config is None:
         raise InputError("command line", "--apply", "needs -o NEWCONFIG")
     cfg = _load_for_compare(config)
+    if new_config is not None:
+        check_out_dir(new_config.parent, "-o")
+    if report_dir is not None:
+        check_out_dir(report_dir, "--report")
     base = run(cfg, logs)
     for line in compare_lines(base):
         click.echo(line)
@@ -593,7 +671,7 @@ def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
             click.echo("nothing applied: no candidate cleared the thresholds")
         else:
             text = apply_candidate(cfg, d.accepted)
-            write_atomic(new_config, text.encode())
+            write_atomic(new_config, text.encode(), where="-o")
             click.echo(f"wrote {new_config} ({d.accepted.name}); rebuild the tables with "
                        f"`gainsched build {new_config}`")  # fmt: skip
             after = run(config_from_text(text, str(new_config)), logs)
@@ -601,10 +679,11 @@ def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
             for line in before_after_lines(base, after):
                 click.echo(line)
     if report_dir is not None:
-        paths = write_diagnose(d, report_dir) + write_compare(base, report_dir, prefix="before")
-        if after is not None:
-            paths += write_compare(after, report_dir, prefix="after")
-            paths += write_before_after(base, after, report_dir, d)
+        with staged(report_dir, where="--report") as stage:
+            paths = write_diagnose(d, stage) + write_compare(base, stage, prefix="before")
+            if after is not None:
+                paths += write_compare(after, stage, prefix="after")
+                paths += write_before_after(base, after, stage, d)
         click.echo(f"wrote {len(paths)} files to {report_dir}")
 
 
@@ -628,6 +707,7 @@ def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_
     braking; motion-capture noise) on a plant with a HIDDEN effect and write the logs."""
     from .campaign import HIDDEN, write_campaign
     from .campaign import campaign as fly
+    from .publish import check_out_dir, staged
     from .sim import table_scheduler
     from .tables import load_table
 
@@ -636,14 +716,16 @@ def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_
         raise InputError("command line", "--hidden",
                          f"unknown hidden effect {hidden!r} (known: {known})")  # fmt: skip
     cfg = _load_for_compare(config)
+    check_out_dir(out_dir)
     logs = fly(cfg, table_scheduler(load_table(table_path)), hidden, duration=duration,
                load_cell=not no_load_cell, seed=seed)  # fmt: skip
-    paths = write_campaign(out_dir, logs, fmt)
+    with staged(out_dir) as stage:
+        paths = write_campaign(stage, logs, fmt)
     click.echo(f"{out_dir}: {len(paths)} flights, hidden effect: {HIDDEN[hidden].doc}")
 
 
 def main():
-    cli(prog_name="gainsched")
+    cli.main(prog_name="gainsched")
 
 
 if __name__ == "__main__":

@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
+from .publish import publish, write_atomic
 from .runtime import Lookup, RuntimeData, runtime_data
-from .tables import write_atomic
 
 __all__ = [
     "RUNTIME_FILES",
@@ -38,6 +38,7 @@ __all__ = [
     "render_header",
     "write_header",
     "copy_runtime",
+    "c_files",
     "write_c_outputs",
     "flash_summary",
     "code_bytes",
@@ -174,14 +175,24 @@ def copy_runtime(out_dir) -> list[Path]:
     return out
 
 
+def c_files(table) -> dict[str, bytes]:
+    """The C outputs of a loaded table (or its :class:`RuntimeData`): file name -> bytes,
+    header first, then the runtime. Raises InputError if the table cannot be represented."""
+    data = table if isinstance(table, RuntimeData) else runtime_data(table)
+    files = {header_name(data): render_header(data).encode()}
+    files.update((f, _resource("c", f).encode()) for f in RUNTIME_FILES)
+    return files
+
+
 def write_c_outputs(table_path, out_dir=None) -> list[Path]:
     """Header and runtime for the table file ``table_path`` into ``out_dir`` (default: the
-    table's folder). Returns the written paths, header first."""
+    table's folder), published together (:func:`gainsched.publish.publish`). Returns the
+    written paths, header first."""
     from .tables import load_table
 
     table = load_table(table_path)
     out_dir = Path(table_path).parent if out_dir is None else Path(out_dir)
-    return [write_header(table, out_dir), *copy_runtime(out_dir)]
+    return publish(out_dir, c_files(table))
 
 
 # --------------------------------------------------------------------------- sizes

@@ -288,16 +288,27 @@ def _reconstruct(ch, ch1, ch2, L_e):
 def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measured:
     """Differentiate one log segment (steps 1-2 of the module docstring).
 
-    Raises :class:`InputError` naming the file when the segment is shorter than the window.
+    Raises :class:`InputError` naming the file when the segment is shorter than the window,
+    and naming the thrust columns when no sample has a positive commanded thrust (the
+    model's forces need it: without it every residual is the whole measured acceleration
+    and the thrust-efficiency analysis divides by zero).
     """
     an = config.analysis
+    rows = (f"{log.row_label}s {log.where(0).split()[-1]}-{log.where(len(log) - 1).split()[-1]}"
+            if len(log) else "no samples")  # fmt: skip
+    if not np.any(np.sum(log.T_cmd, axis=-1) > 0):
+        raise InputError(
+            log.source,
+            f"columns T1, T2, T3, T4, {rows}",
+            "the commanded thrust is zero on every sample: a log without thrust commands "
+            "cannot be compared with the model",
+        )
     dt = float(np.median(np.diff(log.t)))
     n = window_samples(an.savgol_window_s, dt, an.savgol_order, config.source)
     if len(log) < 2 * n + 1:
         raise InputError(
             log.source,
-            f"column t, {log.row_label}s {log.where(0).split()[-1]}-"
-            f"{log.where(len(log) - 1).split()[-1]}",
+            f"column t, {rows}",
             f"{len(log)} samples, fewer than twice the differentiation window "
             f"({n} samples = analysis.savgol_window_s {an.savgol_window_s:g} s) plus one",
         )

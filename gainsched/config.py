@@ -5,12 +5,21 @@ boundary (unknown key, wrong type, missing key, impossible value) and a bad
 one raises :class:`~gainsched.errors.InputError` naming the file and the
 dotted key. Degrees exist only here (keys ending in ``_deg``); the dataclasses
 hold SI units.
+
+Besides types and ranges, the checks refuse what would only fail late in a
+build: a name that is not a safe file name (:func:`check_name`), grid axes that
+collapse in the tables' float32 (:func:`check_float32_axis`), a weight Q that
+leaves the azimuth undetectable, a physically absurd vehicle, a control rate
+that undersamples the fastest circle (:func:`check_rate`), and a build that
+would need more memory or CPU time than ``[limits]`` allows
+(:func:`gainsched.budget.check_budget`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,9 +36,11 @@ __all__ = [
     "Grid",
     "Feasibility",
     "Analysis",
+    "Limits",
     "EffectSpec",
     "load_config",
     "config_from_text",
+    "check_name",
     "N_STATE",
     "N_INPUT",
     "N_LQR",
@@ -41,6 +52,21 @@ N_LQR = 11  # the above plus the integral of the delta error (paper Sec. IV.B)
 
 LINK_MODELS = ("rigid", "spring-damper", "sls", "lumped-mass")  # seed 001 sec. 3.1
 TERMINAL_COSTS = ("periodic", "single-period")
+
+#: ``name``: 1..64 characters of [A-Za-z0-9_.-], the first a letter or a digit (a file name
+#: that stays inside the output folder, is never hidden, and maps to a C identifier)
+NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}")
+NAME_RULE = "1-64 characters from A-Z a-z 0-9 _ - . starting with a letter or a digit"
+MASS_RANGE = (0.01, 1000.0)  # kg, a plausible vehicle
+INERTIA_TRIANGLE_TOL = 1e-6  # relative slack of J1 + J2 >= J3 (a flat plate is the limit)
+MAX_SPEED = 100.0  # m/s, tangential COG speed
+MAX_RATE_HZ = 1.0e5  # Hz, control rate
+MIN_STEPS_PER_PERIOD = 32  # control steps over the fastest circle of the grid
+#: largest config text, characters: a hand-written config is a few KiB, and the largest
+#: grid the default [limits] allow is far below this (parsing 20 MB of TOML takes seconds)
+MAX_CONFIG_CHARS = 2**20
+_KEY_LINE = re.compile(r"^[ \t]*([A-Za-z0-9_\-]+)[ \t]*=|^[ \t]*\[+[ \t]*([^\]\n]+?)[ \t]*\]",
+                       re.M)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -152,6 +178,22 @@ class Analysis:
 
 
 @dataclass(frozen=True)
+class Limits:
+    """Resource limits of a build (``[limits]``, checked by :func:`gainsched.budget.check_budget`).
+
+    Attributes
+    ----------
+    max_memory_gib : float, GiB
+        Largest memory one build process may need (estimated).
+    max_build_cpu_s : float, s
+        Largest estimated CPU time of the whole build (summed over workers).
+    """
+
+    max_memory_gib: float = 8.0
+    max_build_cpu_s: float = 1800.0
+
+
+@dataclass(frozen=True)
 class Config:
     """The whole loaded configuration (one source of truth for every parameter)."""
 
@@ -166,6 +208,7 @@ class Config:
     source: str = "<string>"
     text: str = field(default="", repr=False)
     analysis: Analysis = field(default_factory=Analysis)
+    limits: Limits = field(default_factory=Limits)
 
     @property
     def sha256(self) -> str:
@@ -292,8 +335,61 @@ def check_axis(sec: _Section, k: str, *, nonneg: bool, positive: bool) -> np.nda
     return a
 
 
+def check_float32_axis(sec: _Section, k: str, values: np.ndarray, what: str) -> None:
+    """The tables store axes as float32: ``values`` must stay finite and strictly increasing.
+
+    ``values`` is the axis as stored (e.g. speeds / r for ``xi_dot``, rad for tilts);
+    ``what`` names it in the message. Raises InputError naming ``k``.
+    """
+    with np.errstate(over="ignore"):
+        f = values.astype(np.float32)
+    if not np.all(np.isfinite(f)):
+        raise sec.error(k, f"{what} overflows float32 (the C tables store float32)")
+    same = np.flatnonzero(np.diff(f) <= 0)
+    if same.size:
+        i = int(same[0])
+        raise sec.error(
+            k,
+            f"entries {i + 1} and {i + 2} are equal in float32 ({what} {float(values[i])!r} "
+            f"and {float(values[i + 1])!r}; the C tables store float32): space them further "
+            "apart",
+        )
+
+
+def check_name(source, name: str, *, from_file: bool = False) -> str:
+    """``name``: the output file stem (``OUT/NAME.h5``, ``OUT/NAME_gains.h``) and the C prefix.
+
+    Rule: 1-64 characters from ``A-Z a-z 0-9 _ - .``, the first a letter or a digit (so
+    it stays inside the output folder, is never a hidden file, and
+    :func:`gainsched.runtime.c_identifier` maps it to a C identifier). With
+    ``from_file`` the name is the default taken from the config file's name, and the
+    message says to set ``name``. Raises InputError naming the key ``name``.
+    """
+    if NAME_RE.fullmatch(name):
+        return name
+    shown = name if len(name) <= 80 else name[:77] + "..."
+    if from_file:
+        fix = re.sub(r"[^A-Za-z0-9_.\-]", "_", name).lstrip("._-")[:64] or "config"
+        raise InputError(
+            source,
+            "name",
+            f"not set, and the default from the file name {shown!r} is not a valid name "
+            f"({NAME_RULE}); set name = {fix!r} in the file",
+        )
+    raise InputError(
+        source,
+        "name",
+        f"must be {NAME_RULE} (it names the output files NAME.h5, NAME_gains.h and "
+        f"the C symbols); got {shown!r}",
+    )
+
+
 def _vehicle(sec: _Section) -> Vehicle:
     mass = sec.number("mass", positive=True)
+    if not MASS_RANGE[0] <= mass <= MASS_RANGE[1]:
+        raise sec.error(
+            "mass", f"must be in [{MASS_RANGE[0]:g}, {MASS_RANGE[1]:g}] kg, got {mass:g}"
+        )
     J = sec.array("inertia")
     if J.shape == (3,):
         J = np.diag(J)
@@ -301,8 +397,16 @@ def _vehicle(sec: _Section) -> Vehicle:
         raise sec.error("inertia", "must be [Jxx, Jyy, Jzz] or a 3x3 matrix")
     if not np.allclose(J, J.T, rtol=0, atol=1e-15):
         raise sec.error("inertia", "must be symmetric")
-    if np.linalg.eigvalsh(J).min() <= 0:
+    lam = np.linalg.eigvalsh(J)  # ascending principal moments
+    if lam[0] <= 0:
         raise sec.error("inertia", "must be positive definite")
+    if lam[0] + lam[1] < lam[2] * (1 - INERTIA_TRIANGLE_TOL):
+        # every rigid body has J1 + J2 >= J3 (equality: a flat plate)
+        raise sec.error(
+            "inertia",
+            f"principal moments {lam[0]:.4g}, {lam[1]:.4g}, {lam[2]:.4g} kg m^2 violate the "
+            f"triangle inequality J1 + J2 >= J3 of every rigid body",
+        )
     if J[0, 1] != 0 or J[1, 2] != 0:
         # The direction symmetry S2 (mirror about the body x-z plane) needs it.
         raise sec.error("inertia", "Jxy and Jyz must be 0 (the vehicle is mirror-symmetric in y)")
@@ -367,7 +471,19 @@ def _effects(sec: _Section) -> tuple[EffectSpec, ...]:
 
 def _control(sec: _Section) -> Control:
     rate = sec.number("rate_hz", positive=True)
+    if rate > MAX_RATE_HZ:
+        raise sec.error("rate_hz", f"must be <= {MAX_RATE_HZ:g} Hz, got {rate:g}")
     Q = check_square_weight(sec, "Q", N_LQR, definite=False)
+    if not np.any(Q):
+        raise sec.error("Q", "must not be all zero (the LQR would have nothing to regulate)")
+    if Q[1, 1] <= 0:
+        # xi enters no dynamics (rotation about the anchor), so it is an exact integrator
+        # (eigenvalue 1 on every circle): unweighted it is undetectable and the Riccati
+        # equation has no stabilising solution
+        raise sec.error(
+            "Q", "the xi entry (index 1, azimuth) must be > 0: an unweighted azimuth is "
+            "undetectable and the LQR has no stabilising solution"
+        )  # fmt: skip
     R = check_square_weight(sec, "R", N_INPUT, definite=True)
     # The table serves reversed circles through the direction mirror S2, exact only if
     # the weights are invariant under it (docs/symmetry.md).
@@ -390,8 +506,22 @@ def _control(sec: _Section) -> Control:
     return Control(rate, Q, R, integ, term)
 
 
-def _grid(sec: _Section) -> Grid:
+def _grid(sec: _Section, radius: float) -> Grid:
+    """``[grid]``; ``radius`` (m, rho + L_e) gives the azimuth-rate axis speeds / radius."""
+    from .runtime import MAX_XI, XI_DOT_LIMIT  # the C runtime's limits (lazy: no cycle)
+
     speeds = check_axis(sec, "speeds", nonneg=False, positive=True)
+    if speeds[-1] > MAX_SPEED:
+        raise sec.error("speeds", f"must be <= {MAX_SPEED:g} m/s, got {speeds[-1]:g}")
+    xi_dot = speeds / radius
+    if xi_dot[-1] > XI_DOT_LIMIT:
+        raise sec.error(
+            "speeds",
+            f"{speeds[-1]:g} m/s on a {radius:g} m circle is an azimuth rate of "
+            f"{xi_dot[-1]:.4g} rad/s, above the runtime's limit {float(XI_DOT_LIMIT):g} rad/s",
+        )
+    check_float32_axis(sec, "speeds", speeds, "speeds (m/s)")
+    check_float32_axis(sec, "speeds", xi_dot, "azimuth rates speed / (rho + L_e) (rad/s)")
     tilts_deg = check_axis(sec, "tilts_deg", nonneg=True, positive=False)
     if tilts_deg[0] != 0:
         raise sec.error(
@@ -400,16 +530,35 @@ def _grid(sec: _Section) -> Grid:
         )
     if tilts_deg[-1] >= 90:
         raise sec.error("tilts_deg", f"must be < 90, got {tilts_deg[-1]:g}")
+    tilts = np.deg2rad(tilts_deg)
+    check_float32_axis(sec, "tilts_deg", tilts, "tilts (rad)")
     n = sec.get("azimuth_samples")
     if isinstance(n, bool) or not isinstance(n, int):
         raise sec.error("azimuth_samples", f"must be an integer, got {type(n).__name__}")
-    if n < 4 or n % 2:
-        raise sec.error("azimuth_samples", f"must be an even integer >= 4, got {n}")
+    if n < 4 or n % 2 or n > MAX_XI:
+        raise sec.error("azimuth_samples", f"must be an even integer in [4, {MAX_XI}], got {n}")
     sec.done()
-    tilts = np.deg2rad(tilts_deg)
     for a in (speeds, tilts):
         a.setflags(write=False)
     return Grid(speeds, tilts, n)
+
+
+def check_rate(source, control: Control, grid: Grid, radius: float) -> None:
+    """The control rate must resolve the fastest circle: at least ``MIN_STEPS_PER_PERIOD``
+    steps over its period T = 2 pi r / v (r = rho + L_e, m; v the largest grid speed, m/s).
+    Raises InputError naming ``control.rate_hz``."""
+    v = float(grid.speeds[-1])
+    T = 2 * math.pi * radius / v
+    steps = 2 * round(T * control.rate_hz / 2)
+    if steps < MIN_STEPS_PER_PERIOD:
+        need = MIN_STEPS_PER_PERIOD / T
+        raise InputError(
+            source,
+            "control.rate_hz",
+            f"{control.rate_hz:g} Hz gives {steps} steps over the fastest circle "
+            f"({v:g} m/s, period {T:.3g} s); needs >= {MIN_STEPS_PER_PERIOD}, i.e. "
+            f"rate_hz >= {need:.3g}",
+        )
 
 
 def _feasibility(sec: _Section) -> Feasibility:
@@ -437,11 +586,59 @@ def _analysis(sec: _Section) -> Analysis:
     return Analysis(window, order, latency)
 
 
+def _limits(sec: _Section) -> Limits:
+    mem = sec.number("max_memory_gib", Limits.max_memory_gib, positive=True)
+    cpu = sec.number("max_build_cpu_s", Limits.max_build_cpu_s, positive=True)
+    sec.done()
+    return Limits(mem, cpu)
+
+
 SCHEMA = "gainsched-config/1"
 
 
 def config_from_text(text: str, source: str = "<string>") -> Config:
-    """Parse and validate config TOML text. Raises InputError naming ``source`` and the key."""
+    """Parse and validate config TOML text. Raises InputError naming ``source`` and the key.
+
+    Without a ``name`` key the name is the stem of ``source``; for a config file name
+    (``*.toml``) that default must pass :func:`check_name` too. Other sources
+    (``"<string>"``, a table's embedded text) keep their stem unchecked: nothing is
+    written under such a name unless the config comes through :func:`load_config`.
+    """
+    return _config(text, str(source), Path(str(source)).suffix.lower() == ".toml")
+
+
+def _largest_key(text: str) -> tuple[str, int]:
+    """The dotted key whose value takes the most characters of ``text`` (a TOML file) and
+    that number: a cheap scan of the ``key =`` and ``[table]`` lines, no parsing."""
+    best, size, table, key, start = "", -1, "", "", 0
+    for m in _KEY_LINE.finditer(text):
+        if key and m.start() - start > size:
+            best, size = key, m.start() - start
+        if m.group(2) is not None:
+            table, key = m.group(2).strip(), ""
+        else:
+            key, start = (f"{table}.{m.group(1)}" if table else m.group(1)), m.start()
+    if key and len(text) - start > size:
+        best, size = key, len(text) - start
+    return best, max(size, 0)
+
+
+def _check_size(source: str, text: str) -> None:
+    if len(text) > MAX_CONFIG_CHARS:
+        key, size = _largest_key(text)
+        raise InputError(
+            source,
+            key,
+            f"the config is {len(text) / 2**20:.3g} MiB ({size / 2**20:.3g} MiB in this key); "
+            f"a config may have at most {MAX_CONFIG_CHARS // 2**20} MiB (a grid this large "
+            "could not be built anyway)",
+        )
+
+
+def _config(text: str, source: str, check_default_name: bool) -> Config:
+    from .budget import check_budget  # imported here: budget reads the Config classes
+
+    _check_size(source, text)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -450,7 +647,12 @@ def config_from_text(text: str, source: str = "<string>") -> Config:
     schema = top.string("schema", SCHEMA)
     if schema != SCHEMA:
         raise top.error("schema", f"must be {SCHEMA!r}, got {schema!r}")
-    name = top.string("name", Path(source).stem)
+    if "name" in data:
+        name = check_name(source, top.string("name"))
+    else:
+        name = top.string("name", Path(source).stem)
+        if check_default_name:
+            check_name(source, name, from_file=True)
     vehicle = _vehicle(top.sub("vehicle"))
     tether = _tether(top.sub("tether"))
     effects = _effects(top.sub("effects", {}))
@@ -458,21 +660,71 @@ def config_from_text(text: str, source: str = "<string>") -> Config:
     g = env.number("g", positive=True)
     env.done()
     control = _control(top.sub("control"))
-    grid = _grid(top.sub("grid"))
+    radius = tether.length + tether.attachment_offset
+    grid = _grid(top.sub("grid"), radius)
+    check_rate(source, control, grid, radius)
     feas = _feasibility(top.sub("feasibility", {}))
     analysis = _analysis(top.sub("analysis", {}))
+    limits = _limits(top.sub("limits", {}))
     if feas.thrust_margin * 2 >= vehicle.thrust_max - vehicle.thrust_min:
         raise InputError(source, "feasibility.thrust_margin", "leaves no usable thrust range")
     top.done()
-    return Config(name, vehicle, tether, effects, g, control, grid, feas, str(source), text,
-                  analysis=analysis)  # fmt: skip
+    cfg = Config(name, vehicle, tether, effects, g, control, grid, feas, source, text,
+                 analysis=analysis, limits=limits)  # fmt: skip
+    check_budget(cfg, source)
+    return cfg
+
+
+_UTF32_BOMS = (b"\xff\xfe\x00\x00", b"\x00\x00\xfe\xff")
+_UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
+
+
+def _decode(p: Path, data: bytes) -> str:
+    """Config bytes -> text: UTF-8 (a UTF-8 byte-order mark is dropped), newlines as ``\\n``.
+
+    Raises InputError naming the file for UTF-16/UTF-32 text (with or without a
+    byte-order mark) and for bytes that are not UTF-8 (e.g. latin-1).
+    """
+    if data.startswith(_UTF32_BOMS):
+        raise InputError(p, "", "UTF-32 text (byte-order mark); save it as UTF-8")
+    if data.startswith(_UTF16_BOMS):
+        raise InputError(p, "", "UTF-16 text (byte-order mark); save it as UTF-8")
+    if b"\x00" in data:
+        # TOML text never holds NUL; ASCII text in UTF-16 without a BOM is half NULs
+        even, odd = data[0::2].count(0), data[1::2].count(0)
+        if max(even, odd) > len(data) // 8:
+            raise InputError(p, "", "looks like UTF-16 text (NUL bytes between the "
+                             "characters); save it as UTF-8")  # fmt: skip
+        line = data[: data.index(b"\x00")].count(b"\n") + 1
+        raise InputError(p, "", f"not a text file (NUL byte on line {line})")
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        col = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise InputError(
+            p, "", f"not UTF-8 text (byte 0x{data[exc.start]:02x} at line {line}, column "
+            f"{col}: {exc.reason}); save it as UTF-8"
+        ) from None  # fmt: skip
+    # as text-mode reading did: universal newlines, so the config hash does not depend on them
+    return text.replace("\r\n", "\n").replace("\r", "\n")
 
 
 def load_config(path) -> Config:
-    """Load and validate a config file (TOML). Raises InputError on any bad key."""
+    """Load and validate a config file (TOML, UTF-8). Raises InputError on any bad key.
+
+    The file must be UTF-8 (a leading UTF-8 byte-order mark is accepted); UTF-16,
+    UTF-32 and other encodings are refused naming the file. Without a ``name`` key
+    the name is the file's stem, which must pass :func:`check_name`.
+    """
     p = Path(path)
     try:
-        text = p.read_text()
+        if p.stat().st_size > 64 * MAX_CONFIG_CHARS:  # do not even read it
+            raise InputError(p, "", f"{p.stat().st_size / 2**20:.3g} MiB is no config (a config "
+                             f"may have at most {MAX_CONFIG_CHARS // 2**20} MiB)")  # fmt: skip
+        data = p.read_bytes()
     except OSError as exc:
         raise InputError(p, "", f"cannot read ({exc.strerror})") from None
-    return config_from_text(text, str(p))
+    return _config(_decode(p, data), str(p), True)

@@ -29,6 +29,7 @@ from .model import Model
 from .nominal import circle_nominal, period
 from .reproducible import (
     blas_single_thread,
+    children_ignore_sigint,
     ensure_blas_single_thread,
     pin_available,
     pinned_executor,  # fmt: skip
@@ -303,27 +304,33 @@ def _dask_active() -> bool:
 def _solutions(args, n_jobs, backend):
     """Run :func:`_solve_speed` over ``args`` and yield the results in submission order.
 
-    In a process that runs the reproducible numerics (:mod:`gainsched.reproducible`)
-    and on Dask, joblib runs the jobs with the requested backend. Elsewhere (a
-    notebook, a test) the jobs run in pinned worker processes instead, even
-    for the ``sequential`` and ``threading`` backends, so that the table bits do
-    not depend on the calling process.
+    Worker processes on this machine (the default, ``"loky"``) come from
+    :func:`~gainsched.reproducible.pinned_executor`: started with the pinned numerics
+    and ended by the kernel when this process dies, even by SIGKILL. A process that
+    does not run the pinned numerics (a notebook, a test) sends every job there,
+    also for the ``sequential`` and ``threading`` backends, so that the table bits
+    never depend on the calling process. joblib runs the jobs on Dask, and in this
+    process for ``sequential``, ``threading`` or one job when it is pinned.
     """
     dask = backend == "dask" or (backend is None and _dask_active())
-    if dask or process_pinned() or not pin_available():
+    here = (process_pinned() or not pin_available()) and (
+        backend in ("sequential", "threading") or n_jobs == 1
+    )
+    if dask or here:
         par = Parallel(n_jobs=n_jobs, backend=backend, return_as="generator")
         yield from par(delayed(_solve_speed)(*a) for a in args)
         return
     n = n_jobs if n_jobs > 0 else max(1, cpu_count() + 1 + n_jobs)
     n = 1 if backend == "sequential" else min(n, len(args))
-    pool = pinned_executor(n)
-    futures = [pool.submit(_solve_speed, *a) for a in args]
+    with children_ignore_sigint():  # the workers (and loky's tracker) start in here
+        pool = pinned_executor(n)
+        futures = [pool.submit(_solve_speed, *a) for a in args]
     try:
         for f in futures:
             yield f.result()
-    finally:
-        for f in futures:
-            f.cancel()
+    except BaseException:  # Ctrl-C, an error, a closed generator: stop the workers now
+        pool.shutdown(wait=False, kill_workers=True)
+        raise
 
 
 def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:

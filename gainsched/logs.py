@@ -34,7 +34,24 @@ What the reader does to the data, and nothing else:
 Optional known columns may contain NaN (a missing sensor sample); required
 columns may not. Every cell of every column (unknown ones included) must be
 a number: the spec's "non-numeric cell" rule has no exception, and an empty
-cell counts as non-numeric (write ``nan`` for a missing value).
+cell counts as non-numeric (write ``nan`` for a missing value). A number is
+written in ASCII without digit separators: ``1_0`` and non-ASCII digits, which
+Python's ``float`` would accept, are refused.
+
+Values must be physically plausible (:data:`PLAUSIBLE`): ``|x|, |y|, |z| <=
+1e3 m``, ``|T1..T4| <= 1e3 N``, ``|t| <= 1e10 s``, gyro ``<= 1e3 rad/s``,
+accelerometer ``<= 1e4 m/s^2``, tension ``<= 1e4 N``, ``vbat <= 1e3 V``,
+``|xi_ref| <= 1e7 rad``, ``|xi_dot_ref| <= 1e3 rad/s``; a finite absurd value
+(``x = 1e308``) would otherwise overflow later in the analysis. Unknown columns
+are not bounded (the analysis ignores them).
+
+**Declared circle plane.** The flown circle is a great circle around the anchor,
+so its plane passes through the origin: a file whose positions span a plane
+(:func:`fitted_plane`: enough arc, small out-of-plane spread) must lie in the
+plane the metadata declare, ``R_IC = Rz(gamma_C) Rx(alpha_C)``, normal
+``R_IC (0, 0, 1)``, within ``PLANE_TOL_DEG`` (10 deg); otherwise the metadata
+``alpha_c_deg`` (or ``gamma_c_deg`` when the tilts agree) is an error. Files
+only (:func:`read_log`); :func:`log_from_arrays` (simulations) is not checked.
 """
 
 from __future__ import annotations
@@ -56,6 +73,8 @@ __all__ = [
     "OPTIONAL_COLUMNS",
     "REQUIRED_META",
     "QUAT_NORM_TOL",
+    "PLAUSIBLE",
+    "PLANE_TOL_DEG",
     "DEFAULT_MIN_SAMPLES",
     "LogWarning",
     "FlightLog",
@@ -64,6 +83,7 @@ __all__ = [
     "log_bytes",
     "log_from_arrays",
     "describe",
+    "fitted_plane",
 ]
 
 SCHEMA = "gainsched-flightlog/1"
@@ -86,6 +106,27 @@ GAP_FACTOR = 1.5
 _EXTENSIONS = {".csv": "csv", ".h5": "hdf5", ".hdf5": "hdf5"}
 _KEY_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
 _KNOWN = frozenset(REQUIRED_COLUMNS).union(*OPTIONAL_COLUMNS.values())
+#: largest plausible |value| per known column, with its unit (see the module docstring)
+PLAUSIBLE = {
+    "t": (1e10, "s"),
+    **{c: (1e3, "m") for c in "xyz"},
+    **{f"T{j}": (1e3, "N") for j in range(1, 5)},
+    **{c: (1e3, "rad/s") for c in "pqr"},
+    **{c: (1e4, "m/s^2") for c in ("ax", "ay", "az")},
+    "tension": (1e4, "N"),
+    "vbat": (1e3, "V"),
+    "xi_ref": (1e7, "rad"),
+    "xi_dot_ref": (1e3, "rad/s"),
+}
+#: largest angle between the declared circle plane and the plane of the positions, deg.
+#: Not 3: a closed-loop flight on a plant the model misses really leaves its plane (the
+#: example flights by up to 6.3 deg, simulated campaigns with a hidden effect up to 7.1 deg,
+#: braking and tilted circles), and those are the flights compare and diagnose are for.
+PLANE_TOL_DEG = 10.0
+#: a file's positions span a plane when s2 >= PLANE_SPREAD s1 (enough arc: about 1 rad)
+#: and s3 <= PLANE_FLAT s2 (s1 >= s2 >= s3: singular values of the positions)
+PLANE_SPREAD = 0.3
+PLANE_FLAT = 0.2
 
 
 class LogWarning(UserWarning):
@@ -259,14 +300,19 @@ def _read_csv(path: Path):
 
 
 def _parse_column(path, name, strs, rows, label):
-    try:
-        return np.array(list(map(float, strs)), dtype=float)
-    except ValueError:
-        pass
+    joined = "".join(strs)
+    if "_" not in joined and joined.isascii():
+        try:
+            return np.array(list(map(float, strs)), dtype=float)
+        except ValueError:
+            pass
     for k, s in enumerate(strs):
         try:
             float(s)
+            ok = "_" not in s and s.isascii()  # float() also takes 1_0 and non-ASCII digits
         except ValueError:
+            ok = False
+        if not ok:
             what = "empty cell" if not s.strip() else f"not a number: {s.strip()!r}"
             raise InputError(path, f"column {name}, {label} {rows[k]}", what) from None
     raise AssertionError("unreachable")  # pragma: no cover
@@ -356,6 +402,18 @@ def _canonical(path, cols: dict[str, np.ndarray], rows, label):
                 f"column {name}, {label} {rows[k]}",
                 f"{float(cols[name][k])!r} in a required column",
             )
+    for name, (limit, unit) in PLAUSIBLE.items():
+        if name in cols:
+            with np.errstate(invalid="ignore"):
+                bad = np.flatnonzero(np.abs(cols[name]) > limit)  # NaN (optional) passes
+            if bad.size:
+                k = bad[0]
+                raise InputError(
+                    path,
+                    f"column {name}, {label} {rows[k]}",
+                    f"{float(cols[name][k])!r} {unit} is not plausible (|{name}| <= {limit:g} "
+                    f"{unit})",
+                )
     t = cols["t"]
     dt = np.diff(t)
     bad = np.flatnonzero(dt <= 0)
@@ -402,6 +460,52 @@ def _canonical(path, cols: dict[str, np.ndarray], rows, label):
             )
     extra = {n: cols[n] for n in cols if n not in _KNOWN}
     return out, optional, extra
+
+
+def fitted_plane(p_I) -> tuple[np.ndarray, np.ndarray]:
+    """Plane through the origin (the anchor) that fits positions ``p_I`` (N, 3), m.
+
+    Returns ``(normal, s)``: the unit normal (the right singular vector of the smallest
+    singular value, oriented with ``normal[2] >= 0``) and the singular values
+    ``s1 >= s2 >= s3`` (m sqrt(samples)), which say whether the points span a plane
+    (``s2`` not small against ``s1``) and how flat it is (``s3`` against ``s2``).
+    """
+    p = np.asarray(p_I, dtype=float)
+    _, s, vt = np.linalg.svd(p, full_matrices=False)
+    n = vt[-1] if vt[-1, 2] >= 0 else -vt[-1]
+    return n, s
+
+
+def _plane_normal(alpha_deg: float, gamma_deg: float) -> np.ndarray:
+    """``R_IC (0, 0, 1)`` with ``R_IC = Rz(gamma_C) Rx(alpha_C)`` (docs/conventions.md)."""
+    a, g = math.radians(alpha_deg), math.radians(gamma_deg)
+    return np.array([math.sin(a) * math.sin(g), -math.sin(a) * math.cos(g), math.cos(a)])
+
+
+def _check_plane(path, meta: dict[str, str], p_I: np.ndarray) -> None:
+    """The positions' plane must be the declared circle plane (module docstring)."""
+    if p_I.shape[0] < 3:
+        return
+    n, s = fitted_plane(p_I)
+    if not (s[1] >= PLANE_SPREAD * s[0] and s[2] <= PLANE_FLAT * s[1]):
+        return  # not a circle-like flight: too little arc, or not in a plane
+    alpha, gamma = float(meta["alpha_c_deg"]), float(meta["gamma_c_deg"])
+    d = _plane_normal(alpha, gamma)
+    angle = math.degrees(math.acos(min(1.0, abs(float(n @ d)))))
+    if angle <= PLANE_TOL_DEG:
+        return
+    tilt = math.degrees(math.acos(min(1.0, n[2])))
+    heading = math.degrees(math.atan2(n[0], -n[1]))
+    declared_tilt = math.degrees(math.acos(min(1.0, abs(d[2]))))
+    key = "alpha_c_deg" if abs(tilt - declared_tilt) > PLANE_TOL_DEG else "gamma_c_deg"
+    plane = f"tilt {tilt:.1f} deg" + (f", gamma_c {heading:.1f} deg" if tilt > 0.5 else "")
+    raise InputError(
+        path,
+        f"metadata {key}",
+        f"declares the circle plane alpha_c_deg = {alpha:g}, gamma_c_deg = {gamma:g}, but the "
+        f"logged positions lie in the plane through the anchor with {plane} ({angle:.1f} deg "
+        f"apart, more than {PLANE_TOL_DEG:g})",
+    )
 
 
 def _make(arrays, optional, extra, meta, source, sl, **kw) -> FlightLog:
@@ -455,6 +559,7 @@ def read_log(
             f"column t, {label}s {rows[0]}-{rows[-1]}",
             f"{n} samples, fewer than the differentiation window ({min_samples})",
         )
+    _check_plane(path, meta, arrays["p_I"])
     dt = np.diff(t)
     med = float(np.median(dt)) if dt.size else 0.0
     cuts = np.flatnonzero(dt > gap_factor * med) + 1
@@ -639,7 +744,7 @@ def write_log(path, log_or_columns, meta=None) -> int:
     then unknown ones sorted. Floats are written with the shortest exact
     representation, so a round trip is lossless. ``schema`` is added if absent.
     """
-    from .tables import write_atomic  # lazy: tables pulls in the model stack
+    from .publish import write_atomic
 
     data = log_bytes(_format(path), log_or_columns, meta, name=Path(path).name)
     write_atomic(path, data)

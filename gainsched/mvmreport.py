@@ -60,7 +60,7 @@ def _clean(x):
 
 def write_json(path, data) -> Path:
     """Write ``data`` as JSON (sorted keys, nan as null) atomically."""
-    from .tables import write_atomic
+    from .publish import write_atomic
 
     write_atomic(path, (json.dumps(_clean(data), indent=2, sort_keys=True) + "\n").encode())
     return Path(path)
@@ -267,7 +267,7 @@ def compare_json(cmp: Comparison, paper: PaperFits | None = None) -> dict:
 def write_compare(cmp: Comparison, out_dir, paper: PaperFits | None = None,
                   prefix: str = "compare") -> list[Path]:  # fmt: skip
     """Write PREFIX.json, PREFIX.md and the PNG plots into ``out_dir``; returns the paths."""
-    from .tables import write_atomic
+    from .publish import write_atomic
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -342,7 +342,7 @@ def before_after_lines(before: Comparison, after: Comparison) -> list[str]:
 def write_before_after(before: Comparison, after: Comparison, out_dir,
                        diagnosis: Diagnosis | None = None) -> list[Path]:  # fmt: skip
     """before_after.{json,md,png} and the regime plot with both models."""
-    from .tables import write_atomic
+    from .publish import write_atomic
 
     plt = _plt()
     out = Path(out_dir)
@@ -436,7 +436,7 @@ def diagnose_lines(d: Diagnosis) -> list[str]:
 
 def write_diagnose(d: Diagnosis, out_dir) -> list[Path]:
     """diagnose.{json,md} and ranking.png."""
-    from .tables import write_atomic
+    from .publish import write_atomic
 
     plt = _plt()
     out = Path(out_dir)

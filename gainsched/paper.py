@@ -476,7 +476,7 @@ def _md_table(head, rows) -> list[str]:
 
 def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
     """report.md (table, per-experiment tables, plots) and report.json in ``out_dir``."""
-    from .tables import write_atomic
+    from .publish import write_atomic
 
     out_dir = Path(out_dir)
     m, res = report.meta, report.results

@@ -59,6 +59,7 @@ __all__ = [
     "status",
     "blas_single_thread",
     "pinned_executor",
+    "children_ignore_sigint",
 ]
 
 #: the OpenBLAS kernel family every pinned process uses (AVX2 + FMA)
@@ -174,15 +175,38 @@ def ensure_blas_single_thread() -> None:
 
 
 def pinned_executor(n_workers: int):
-    """A loky process pool whose workers start with :data:`PINNED_ENV` and one BLAS thread.
+    """A loky process pool whose workers start with :data:`PINNED_ENV` (where the CPU can run
+    it) and one BLAS thread.
 
     Workers are reused across calls (loky's reusable executor); they end with
     this process (see :func:`_worker_init`).
     """
     from joblib.externals.loky import get_reusable_executor
 
-    env = dict(PINNED_ENV, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    env = dict(PINNED_ENV if pin_available() else {}, OPENBLAS_NUM_THREADS="1",
+               OMP_NUM_THREADS="1")  # fmt: skip
     return get_reusable_executor(max_workers=n_workers, env=env, initializer=_worker_init)
+
+
+@contextmanager
+def children_ignore_sigint():
+    """Processes started in the block ignore SIGINT for good (Ctrl-C reaches the whole
+    foreground process group: the command handles it and ends its workers; a worker
+    would only print a traceback). This process keeps its own Ctrl-C: SIGINT is held
+    back while the block runs and delivered when it ends. Main thread only."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, handler)
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 def _worker_init() -> None:

@@ -245,6 +245,16 @@ def runtime_data(table) -> RuntimeData:
     good[1:] = finK
     good &= np.all(np.isfinite(u_d) & (np.abs(u_d) <= big), axis=-1)
     good &= np.isfinite(phi_d) & (np.abs(phi_d) <= big)
+    lost = ~good & (table.reasons == 0)
+    if np.any(lost):  # load_table checked finiteness at feasible points: a float32 overflow
+        i, j, k = (int(x) for x in np.argwhere(lost)[0])
+        fits = lambda x: bool(np.all(np.abs(x) <= big))  # noqa: E731
+        key, idx = ((("gains/K_tilt0", (j,)) if i == 0 else ("gains/K", (i - 1, j, k)))
+                    if not fits(K0[j] if i == 0 else K[i - 1, j, k]) else
+                    ("nominal/u_d", (i, j, k)) if not fits(u_d[i, j, k]) else
+                    ("nominal/phi_d", (i, j, k)))  # fmt: skip
+        raise InputError(src, f"{key}[{', '.join(map(str, idx))}]",
+                         "overflows float32 at a feasible point; the firmware cannot hold it")
     mask = np.asarray(table.reasons, dtype=np.uint8) | np.where(good, 0, MASK_NO_GAINS).astype(
         np.uint8
     )

@@ -643,7 +643,7 @@ def write_run(res: SimResult, out_dir) -> dict:
     import json
 
     from .logs import write_log
-    from .tables import write_atomic
+    from .publish import write_atomic
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

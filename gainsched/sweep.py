@@ -415,7 +415,8 @@ def run_sweep(sweep: Sweep, out_dir, *, n_jobs: int = -1,
     """
     from .grid import build_grid
     from .model import Model
-    from .tables import table_bytes, write_atomic
+    from .publish import write_atomic
+    from .tables import table_bytes
 
     out_dir = Path(out_dir)
     rows = []

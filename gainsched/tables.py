@@ -3,12 +3,19 @@
 Tables are written into an in-memory HDF5 image (no timestamps, fixed
 creation order) and then atomically renamed into place, so the same config
 gives byte-identical files and an interrupted build leaves the old file intact.
+
+Integrity: every dataset carries the SHA-256 of its dtype, shape and bytes
+(attribute ``sha256``) and the root carries ``data_sha256`` over those and the
+root attributes, so :func:`load_table` (and with it ``inspect``, ``check``,
+``export-c``, ``simulate``) refuses a file whose data changed after the build,
+naming the dataset. Gains, nominal thrusts and roll must be finite at every
+feasible point.
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
+import hashlib
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,33 +23,15 @@ import h5py
 import numpy as np
 
 from . import __version__
+from .config import N_LQR
 from .errors import InputError
 from .linearize import INPUT_NAMES, lqr_state_names
 from .nominal import REASONS
+from .publish import write_atomic
 
-__all__ = ["SCHEMA", "Table", "write_atomic", "table_bytes", "write_table", "load_table"]
+__all__ = ["SCHEMA", "Table", "table_bytes", "write_table", "load_table", "table_from_bytes"]
 
 SCHEMA = "gainsched-table/1"
-
-
-def write_atomic(path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temp file in the same folder and a rename,
-    so an interrupted run leaves the old file intact."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)  # mkstemp makes 0600; give the file normal permissions
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 @dataclass(frozen=True)
@@ -107,6 +96,36 @@ def _group(parent, name):
     return h5py.Group(gid)
 
 
+def _dataset_sha256(value) -> str:
+    """SHA-256 of a dataset's value: a header (dtype and shape), then the bytes."""
+    if isinstance(value, str | bytes):
+        head, raw = "bytes", value.encode() if isinstance(value, str) else value
+    else:
+        a = np.asarray(value)
+        a = np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<"))
+        head, raw = f"{a.dtype.str}{a.shape}", a.tobytes()
+    return hashlib.sha256(head.encode() + b"\0" + raw).hexdigest()
+
+
+def _root_sha256(attrs, digests) -> str:
+    """SHA-256 over the root attributes (but data_sha256) and every dataset's digest."""
+    h = hashlib.sha256()
+    for k in sorted(attrs):
+        if k != "data_sha256":
+            v = attrs[k]
+            h.update(f"{k}={v.decode() if isinstance(v, bytes) else v!r}\0".encode())
+    for name in sorted(digests):
+        h.update(f"{name}:{digests[name]}\0".encode())
+    return h.hexdigest()
+
+
+def _datasets(f) -> dict:
+    out = {}
+    f.visititems(lambda name, obj: out.__setitem__(name, obj) if isinstance(obj, h5py.Dataset)
+                 else None)  # fmt: skip
+    return out
+
+
 def table_bytes(config, grid, model) -> bytes:
     """Serialise a built grid (``grid.GridResult``) to HDF5 bytes, deterministically."""
     speeds, tilts = config.grid.speeds, config.grid.tilts
@@ -165,6 +184,10 @@ def table_bytes(config, grid, model) -> bytes:
         w = _group(f, "weights")
         _create(w, "Q", Qx)
         _create(w, "R", np.asarray(config.control.R))
+        digests = {}
+        for name, ds in _datasets(f).items():
+            digests[name] = ds.attrs["sha256"] = _dataset_sha256(ds[()])
+        a["data_sha256"] = _root_sha256(dict(a), digests)
         f.flush()
         return f.id.get_file_image()
 
@@ -184,28 +207,90 @@ _REQUIRED = {
 }  # fmt: skip
 
 
+#: root attributes every table carries (written by :func:`table_bytes`)
+_ATTRS = ("schema", "tool_version", "config_name", "config_sha256", "terminal", "rate_hz",
+          "radius_m", "state_names", "input_names", "data_sha256")  # fmt: skip
+
+
 def load_table(path) -> Table:
-    """Read and check a table file; any problem raises InputError naming the file and dataset."""
+    """Read and check a table file; any problem raises InputError naming the file and dataset.
+
+    Checks the schema, the data checksums (a corrupt or edited file is refused,
+    naming the dataset), shapes against the axes, and that gains, nominal thrusts
+    and roll are finite at every feasible point.
+    """
     path = Path(path)
     try:
         f = h5py.File(path, "r")
     except (OSError, ValueError) as exc:
         raise InputError(path, "", f"not a readable HDF5 table ({exc})") from None
     with f:
-        schema = f.attrs.get("schema")
-        if isinstance(schema, bytes):
-            schema = schema.decode()
-        if schema != SCHEMA:
-            raise InputError(path, "schema", f"must be {SCHEMA!r}, got {schema!r}")
-        d = {}
-        for key, ndim in _REQUIRED.items():
-            if key not in f:
-                raise InputError(path, key, "missing dataset")
-            v = f[key][()]
-            if np.ndim(v) != ndim:
-                raise InputError(path, key, f"must have {ndim} dimensions, has {np.ndim(v)}")
-            d[key] = v.decode() if isinstance(v, bytes) else v
-        attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
+        return _read_guarded(f, path)
+
+
+def _read_guarded(f, path) -> Table:
+    """:func:`_read`, with the errors HDF5 raises on a damaged file turned into InputError."""
+    try:
+        return _read(f, path)
+    except InputError:
+        raise
+    except (OSError, RuntimeError, ValueError, KeyError, TypeError, UnicodeError) as exc:
+        msg = " ".join(str(exc).split())[:160]
+        raise InputError(path, "", f"damaged HDF5 file ({type(exc).__name__}: {msg})") from None
+
+
+def table_from_bytes(data: bytes, source="<table>") -> Table:
+    """:func:`load_table` for an in-memory file image (e.g. from :func:`table_bytes`)."""
+    try:
+        f = h5py.File(io.BytesIO(data), "r")
+    except (OSError, ValueError) as exc:
+        raise InputError(source, "", f"not a readable HDF5 table ({exc})") from None
+    with f:
+        return _read_guarded(f, source)
+
+
+def _verify(f, path) -> None:
+    """Per-dataset and root checksums (see the module docstring)."""
+    if "data_sha256" not in f.attrs:
+        raise InputError(path, "data_sha256", "missing: the file carries no data checksum "
+                         "(built by gainsched < 0.2, or not by gainsched): rebuild it")  # fmt: skip
+    digests = {}
+    try:
+        for name, ds in _datasets(f).items():
+            want = ds.attrs.get("sha256")
+            got = digests[name] = _dataset_sha256(ds[()])
+            if want is None:
+                raise InputError(path, name, "missing its sha256 attribute")
+            if (want.decode() if isinstance(want, bytes) else str(want)) != got:
+                raise InputError(path, name, "checksum mismatch: the data changed after the "
+                                 "build (corrupt or edited file); rebuild the table")  # fmt: skip
+    except (OSError, ValueError, KeyError) as exc:
+        raise InputError(path, "", f"unreadable dataset ({exc})") from None
+    if _root_sha256(dict(f.attrs), digests) != _decoded(f.attrs["data_sha256"]):
+        raise InputError(path, "data_sha256", "checksum mismatch: attributes or datasets were "
+                         "added, removed or edited after the build; rebuild the table")  # fmt: skip
+
+
+def _decoded(v):
+    return v.decode() if isinstance(v, bytes) else v
+
+
+def _read(f, path) -> Table:
+    schema = _decoded(f.attrs.get("schema"))
+    if schema != SCHEMA:
+        raise InputError(path, "schema", f"must be {SCHEMA!r}, got {schema!r}")
+    for key in _ATTRS:
+        if key not in f.attrs:
+            raise InputError(path, key, "missing root attribute")
+    d = {}
+    for key, ndim in _REQUIRED.items():
+        if key not in f:
+            raise InputError(path, key, "missing dataset")
+        v = f[key][()]
+        if np.ndim(v) != ndim:
+            raise InputError(path, key, f"must have {ndim} dimensions, has {np.ndim(v)}")
+        d[key] = _decoded(v)
+    attrs = {k: _decoded(v) for k, v in f.attrs.items()}
     xi, speed, tilt = d["axes/xi"], d["axes/speed"], d["axes/tilt"]
     n_xi, n_v, n_a = xi.size, speed.size, tilt.size
     for key, arr in (("axes/xi", xi), ("axes/speed", speed), ("axes/tilt", tilt)):
@@ -229,9 +314,36 @@ def load_table(path) -> Table:
     for key, shape in shapes.items():
         if d[key].shape != shape:
             raise InputError(path, key, f"shape {d[key].shape} does not match the axes {shape}")
+    names = str(attrs["state_names"]).split(",")
+    if n < N_LQR or len(names) != n:
+        raise InputError(path, "gains/K_tilt0", f"{n} state columns; need >= {N_LQR} and one per "
+                         f"name in state_names ({len(names)})")  # fmt: skip
+    _verify(f, path)  # after the structure, so that a missing dataset is named as such
+    _check_feasible_finite(path, d, tilt, speed, xi)
     return Table(
         xi, speed, d["axes/xi_dot"], tilt, K0, K, d["nominal/u_d"], d["nominal/phi_d"],
         d["nominal/tension"], d["feasibility/reasons"].astype(np.uint8),
         d["closed_loop/spectral_radius"], d["weights/Q"], d["weights/R"], d["closed_loop/dt"],
         str(d["config_text"]), str(attrs.get("config_sha256", "")), attrs, str(path),
     )  # fmt: skip
+
+
+def _check_feasible_finite(path, d, tilt, speed, xi) -> None:
+    """Gains, nominal thrusts and roll must be finite at every feasible point (reasons 0)."""
+    ok = d["feasibility/reasons"] == 0  # (n_a, n_v, n_xi)
+    checks = (
+        ("gains/K_tilt0", d["gains/K_tilt0"], ok[0].any(-1), lambda i: (0, i[0], 0)),
+        ("gains/K", d["gains/K"], ok[1:], lambda i: (i[0] + 1, i[1], i[2])),
+        ("nominal/u_d", d["nominal/u_d"], ok, tuple),
+        ("nominal/phi_d", d["nominal/phi_d"], ok, tuple),
+    )
+    for key, x, feasible, point in checks:
+        extra = x.ndim - feasible.ndim
+        bad = feasible & ~np.all(np.isfinite(x), axis=tuple(range(-extra, 0)) if extra else ())
+        if np.any(bad):
+            idx = tuple(int(i) for i in np.argwhere(bad)[0])
+            a, v, k = point(idx)
+            raise InputError(path, f"{key}[{', '.join(map(str, idx))}]",
+                             f"non-finite value at a feasible point (tilt "
+                             f"{np.rad2deg(tilt[a]):g} deg, speed {speed[v]:g} m/s, azimuth "
+                             f"{np.rad2deg(xi[k]):g} deg); the table is corrupt")  # fmt: skip

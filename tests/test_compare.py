@@ -288,3 +288,27 @@ def test_cli_campaign_writes_logs(tmp_path):
     res = CliRunner().invoke(cli, ["campaign", str(PAPER), "--tables", table, "--hidden",
                                    "nope", "-o", str(out)])  # fmt: skip
     assert res.exit_code == 2 and "unknown hidden effect" in res.output
+
+
+def test_log_without_thrust_refused(paper, tmp_path):
+    """All-zero commanded thrust: no model prediction is possible (it gave 'RMS inf' and
+    exit 0 in the thrust-efficiency analysis); refused naming the file and the columns."""
+    log = _circle_log(T=3.0, noise=0.0005)
+    cols = log.columns()
+    for j in range(1, 5):
+        cols[f"T{j}"] = np.zeros_like(cols[f"T{j}"])
+    path = tmp_path / "nothrust.csv"
+    write_log(path, cols, log.meta)
+    with pytest.raises(InputError) as info:
+        load_segments(paper, [path])
+    assert info.value.source == str(path)
+    assert info.value.where == "columns T1, T2, T3, T4, lines 6-605", info.value.where
+    assert "thrust is zero on every sample" in info.value.message
+    res = CliRunner().invoke(cli, ["compare", str(PAPER), str(path), "-o", str(tmp_path / "r")])
+    assert res.exit_code == 2, res.output
+    err = res.stderr.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0] and "columns T1, T2, T3, T4" in err[0], err
+    cols["T2"] = cols["T2"].copy()
+    cols["T2"][:100] = 1.3  # some thrust: compared (a motor-off stretch is a valid flight)
+    write_log(path, cols, log.meta)
+    assert len(load_segments(paper, [path])[0]) == 1

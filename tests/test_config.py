@@ -139,6 +139,64 @@ BAD = [
         "grid.azimuth_samples",
     ),  # fmt: skip
     ("drag-mu1-negative", lambda t: set_key(t, "effects.drag", "mu1", "-1"), "effects.drag.mu1"),
+    # name: a file stem and a C prefix
+    ("name-escape", lambda t: set_key(t, "", "name", '"../../escape"'), "name"),
+    ("name-subdir", lambda t: set_key(t, "", "name", '"sub/dir"'), "name"),
+    ("name-empty", lambda t: set_key(t, "", "name", '""'), "name"),
+    ("name-nul", lambda t: set_key(t, "", "name", '"a\\u0000b"'), "name"),
+    ("name-hidden", lambda t: set_key(t, "", "name", '".paper"'), "name"),
+    ("name-dash-first", lambda t: set_key(t, "", "name", '"-paper"'), "name"),
+    ("name-space", lambda t: set_key(t, "", "name", '"my paper"'), "name"),
+    ("name-non-ascii", lambda t: set_key(t, "", "name", '"papér"'), "name"),
+    ("name-too-long", lambda t: set_key(t, "", "name", '"' + "a" * 65 + '"'), "name"),
+    # grid axes as the float32 tables store them, and upper bounds
+    ("speeds-f32", lambda t: set_key(t, "grid", "speeds", "[6, 6.0000001, 7, 8]"), "grid.speeds"),
+    (
+        "xi-dot-f32",
+        lambda t: set_key(t, "grid", "speeds", "[2, 7.9000004, 7.900001]"),
+        "grid.speeds",
+    ),  # fmt: skip
+    (
+        "tilts-f32",
+        lambda t: set_key(t, "grid", "tilts_deg", "[0, 10, 10.0000001]"),
+        "grid.tilts_deg",
+    ),  # fmt: skip
+    ("speeds-overflow", lambda t: set_key(t, "grid", "speeds", "[2, 1e300]"), "grid.speeds"),
+    ("speeds-above-100", lambda t: set_key(t, "grid", "speeds", "[2, 101]"), "grid.speeds"),
+    (
+        "xi-dot-above-limit",  # 15 m/s on a 1 cm tether (two lines: the offset must be < length)
+        lambda t: set_key(set_key(t, "tether", "attachment_offset", "0"), "tether", "length",
+                          "0.01"),
+        "grid.speeds",
+    ),  # fmt: skip
+    (
+        "azimuth-above-4096",
+        lambda t: set_key(t, "grid", "azimuth_samples", "4098"),
+        "grid.azimuth_samples",
+    ),  # fmt: skip
+    # weights: the azimuth must be weighted (it is an exact integrator)
+    ("Q-zero", lambda t: set_key(t, "control", "Q", "[0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]"),
+     "control.Q"),  # fmt: skip
+    ("Q-xi-zero", lambda t: set_key(t, "control", "Q", "[3, 0, 1, 1, 1, 2, 0.5, 1, 1, 1, 0.5]"),
+     "control.Q"),  # fmt: skip
+    # physically absurd values
+    ("mass-tiny", lambda t: set_key(t, "vehicle", "mass", "1e-300"), "vehicle.mass"),
+    ("mass-huge", lambda t: set_key(t, "vehicle", "mass", "2000"), "vehicle.mass"),
+    (
+        "inertia-triangle",
+        lambda t: set_key(t, "vehicle", "inertia", "[1e-3, 1e-3, 4.5e-3]"),
+        "vehicle.inertia",
+    ),  # fmt: skip
+    ("rate-too-low", lambda t: set_key(t, "control", "rate_hz", "40"), "control.rate_hz"),
+    ("rate-too-high", lambda t: set_key(t, "control", "rate_hz", "2e5"), "control.rate_hz"),
+    ("rate-1GHz", lambda t: set_key(t, "control", "rate_hz", "1e9"), "control.rate_hz"),
+    # [limits]
+    ("limits-zero", lambda t: append(t, "[limits]\nmax_memory_gib = 0"), "limits.max_memory_gib"),
+    ("limits-negative", lambda t: append(t, "[limits]\nmax_build_cpu_s = -1"),
+     "limits.max_build_cpu_s"),  # fmt: skip
+    ("limits-inf", lambda t: append(t, "[limits]\nmax_build_cpu_s = inf"),
+     "limits.max_build_cpu_s"),  # fmt: skip
+    ("limits-unknown", lambda t: append(t, "[limits]\nmax_disk_gib = 1"), "limits.max_disk_gib"),
 ]
 BAD_BY_ID = {case[0]: case for case in BAD}
 
@@ -235,6 +293,20 @@ def test_specific_messages(paper_text):
         ("unknown-effect", "unknown effect"),
         ("missing-mass", "missing"),
         ("drag-mu1-negative", "[0, 10]"),
+        ("name-escape", "1-64 characters from A-Z a-z 0-9 _ - . starting with a letter"),
+        ("name-escape", "'../../escape'"),
+        ("speeds-f32", "equal in float32"),
+        ("xi-dot-f32", "azimuth rates"),
+        ("tilts-f32", "equal in float32"),
+        ("speeds-overflow", "<= 100 m/s"),
+        ("xi-dot-above-limit", "above the runtime's limit 1000 rad/s"),
+        ("azimuth-above-4096", "[4, 4096]"),
+        ("Q-zero", "all zero"),
+        ("Q-xi-zero", "xi entry (index 1"),
+        ("mass-tiny", "[0.01, 1000] kg"),
+        ("inertia-triangle", "triangle inequality"),
+        ("rate-too-low", "26 steps over the fastest circle"),
+        ("rate-too-high", "<= 100000 Hz"),
     ]
     for case, words in cases:
         _, edit, _ = BAD_BY_ID[case]
@@ -289,3 +361,80 @@ def test_cli_validate_good_config(paper_path):
 def test_list_entries_must_be_numbers(paper_text, section, key, value):
     with pytest.raises(InputError, match=re.escape(f"{section}.{key}")):
         config_from_text(set_key(paper_text, section, key, value), "bad.toml")
+
+
+# --------------------------------------------------------------------------- encodings
+
+
+@pytest.mark.parametrize(
+    ("encode", "words"),
+    [
+        (lambda t: t.encode("utf-16"), "UTF-16 text (byte-order mark); save it as UTF-8"),
+        (lambda t: t.encode("utf-16-be"), "looks like UTF-16 text"),
+        (lambda t: t.encode("utf-16-le"), "looks like UTF-16 text"),
+        (lambda t: t.encode("utf-32"), "UTF-32 text (byte-order mark); save it as UTF-8"),
+        (lambda t: ("# caf\u00e9\n" + t).encode("latin-1"), "not UTF-8 text (byte 0xe9 at line 1"),
+        (lambda t: t.encode() + b"\x00", "not a text file (NUL byte"),
+    ],
+    ids=["utf16-bom", "utf16-be", "utf16-le", "utf32-bom", "latin1", "nul"],
+)
+def test_non_utf8_config_is_named(paper_text, tmp_path, encode, words):
+    path = tmp_path / "enc.toml"
+    path.write_bytes(encode(paper_text))
+    with pytest.raises(InputError) as info:
+        load_config(path)
+    msg = str(info.value)
+    assert msg.startswith(f"{path}: ") and words in msg and "\n" not in msg, msg
+    _assert_one_line_error(_run_validate(path), str(path), words)
+
+
+def test_utf8_bom_and_crlf_accepted(paper_text, paper_config, tmp_path):
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + paper_text.replace("\n", "\r\n").encode())
+    cfg = load_config(path)
+    assert cfg.name == "paper" and cfg.vehicle.mass == 0.5
+    assert cfg.text == paper_config.text and cfg.sha256 == paper_config.sha256
+
+
+# --------------------------------------------------------------------------- name
+
+
+@pytest.mark.parametrize("name", ["paper-v2.1", "9lives", "A_b-C.d", "a" * 64])
+def test_good_names(paper_text, name):
+    assert config_from_text(set_key(paper_text, "", "name", f'"{name}"'), "x.toml").name == name
+
+
+def test_default_name_from_file_stem(paper_text, tmp_path):
+    text = drop_key(paper_text, "", "name")
+    good = tmp_path / "vehicle-2.toml"
+    good.write_text(text)
+    assert load_config(good).name == "vehicle-2"
+    bad = tmp_path / "my vehicle.toml"
+    bad.write_text(text)
+    with pytest.raises(InputError) as info:
+        load_config(bad)
+    assert info.value.where == "name" and info.value.source == str(bad)
+    assert "default from the file name 'my vehicle'" in str(info.value)
+    assert "set name = 'my_vehicle'" in str(info.value)
+    _assert_one_line_error(_run_validate(bad), str(bad), "name", "set name")
+    # in-memory sources are no file names: their stem stays the default, unchecked
+    assert config_from_text(text).name == "<string>"
+
+
+# --------------------------------------------------------------------------- physics
+
+
+def test_plausible_edges_pass(paper_text):
+    """The bounds leave real vehicles alone: a flat plate (J1 + J2 = J3), the mass and
+    speed limits themselves, the lowest rate with 32 steps, and [limits] given."""
+    ok = [
+        set_key(paper_text, "vehicle", "inertia", "[1e-3, 3e-3, 4e-3]"),
+        set_key(paper_text, "vehicle", "mass", "0.01"),
+        set_key(paper_text, "control", "rate_hz", "48"),
+        set_key(paper_text, "grid", "speeds", "[2, 6, 6.000001, 100]"),
+        append(paper_text, "[limits]\nmax_memory_gib = 0.5\nmax_build_cpu_s = 60"),
+    ]
+    for text in ok:
+        config_from_text(text, "ok.toml")
+    cfg = config_from_text(append(paper_text, "[limits]\nmax_memory_gib = 0.5"), "ok.toml")
+    assert (cfg.limits.max_memory_gib, cfg.limits.max_build_cpu_s) == (0.5, 1800.0)

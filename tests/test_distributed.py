@@ -170,7 +170,7 @@ def test_monte_carlo_is_seeded(small_text):
 
     def plan(seed, n=4):
         return make_sweep(base, [parse_vary("vehicle.mass=0.45,0.55")], monte_carlo=n,
-                          seed=seed, sigma=[parse_sigma("vehicle.inertia.zz=0.1"),
+                          seed=seed, sigma=[parse_sigma("vehicle.inertia.zz=0.03"),
                                             parse_sigma("effects.drag.mu1=0.2")])  # fmt: skip
 
     a, b, c = plan(1), plan(1), plan(2)

@@ -535,3 +535,133 @@ def test_describe_single_segment():
     (lg,) = read_log(DATA / "example.csv")
     text = describe(lg)
     assert text == ("tilt20-v8: 0.195 s, 200.0 Hz, 40 samples, segment 1 of 1, 0 gaps, tilt 20 deg")
+
+
+# ---------------------------------------------------------------------------
+# number syntax, plausible values, the declared circle plane
+
+
+@pytest.mark.parametrize(
+    ("column", "cell"),
+    [("T2", "1_0"), ("x", "1_600.0"), ("t", "0.4_5"), ("aa_debug", "1_0"), ("y", "\u0661")],
+    ids=["underscore-thrust", "underscore-x", "underscore-t", "underscore-unknown", "arabic-1"],
+)
+def test_csv_digit_separators_and_non_ascii_refused(tmp_path, column, cell):
+    """float() accepts 1_0 (= 10) and non-ASCII digits; the log reader does not."""
+    cols = _full_columns(n=40) if column == "aa_debug" else _columns(n=40)
+    lines = _csv_text(cols)
+    header = lines[N_META].split(",")
+    cells = lines[_data_line(ROW) - 1].split(",")
+    cells[header.index(column)] = cell
+    lines[_data_line(ROW) - 1] = ",".join(cells)
+    path = _write_lines(tmp_path / "sep.csv", lines)
+    with pytest.raises(InputError) as exc:
+        read_log(path)
+    assert exc.value.source == str(path)
+    assert exc.value.where == f"column {column}, line {_data_line(ROW)}", str(exc.value)
+    assert f"not a number: {cell!r}" in exc.value.message
+
+
+@pytest.mark.parametrize(
+    ("column", "value", "words"),
+    [
+        ("x", 1e308, "m is not plausible (|x| <= 1000 m)"),
+        ("z", -2e3, "m is not plausible (|z| <= 1000 m)"),
+        ("T1", 1e308, "N is not plausible (|T1| <= 1000 N)"),
+        ("t", 1e300, "s is not plausible (|t| <= 1e+10 s)"),
+        ("tension", np.inf, "N is not plausible (|tension| <= 10000 N)"),
+        ("p", -1e5, "rad/s is not plausible (|p| <= 1000 rad/s)"),
+        ("xi_dot_ref", 5e3, "rad/s is not plausible"),
+    ],
+)
+@pytest.mark.parametrize("ext", [".csv", ".h5"])
+def test_implausible_values_refused(tmp_path, column, value, words, ext):
+    cols = {k: np.array(v) for k, v in _full_columns(n=40).items()}
+    cols[column][ROW] = value
+    path = tmp_path / f"absurd{ext}"
+    write_log(path, cols, META)
+    with pytest.raises(InputError) as exc:
+        read_log(path)
+    row = f"line {_data_line(ROW)}" if ext == ".csv" else f"sample {ROW + 1}"
+    assert exc.value.source == str(path)
+    assert exc.value.where == f"column {column}, {row}", str(exc.value)
+    assert words in exc.value.message, exc.value.message
+
+
+def test_unknown_columns_are_not_bounded(tmp_path):
+    cols = _columns(n=40)
+    cols["raw_counts"] = np.full(40, 1e300)
+    path = tmp_path / "u.csv"
+    write_log(path, cols, META)
+    (lg,) = read_log(path)
+    assert lg.extra["raw_counts"][0] == 1e300
+
+
+def _plane_columns(alpha_deg, gamma_deg=0.0, n=200, arc=3.0, noise=1e-3, seed=4):
+    """A great circle (radius 1.6 m) in the plane R_IC = Rz(gamma) Rx(alpha), ``arc`` rad."""
+    cols = _columns(n=n, seed=seed)
+    rng = np.random.default_rng(seed)
+    xi = np.linspace(0.3, 0.3 + arc, n)
+    a, g = math.radians(alpha_deg), math.radians(gamma_deg)
+    Rx = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
+    Rz = np.array([[math.cos(g), -math.sin(g), 0], [math.sin(g), math.cos(g), 0], [0, 0, 1]])
+    p = 1.6 * np.stack([np.cos(xi), np.sin(xi), 0 * xi], 1) @ (Rz @ Rx).T
+    p += rng.normal(0, noise, p.shape)
+    cols.update(zip("xyz", p.T, strict=True))
+    return cols
+
+
+@pytest.mark.parametrize("ext", [".csv", ".h5"])
+def test_declared_tilt_must_match_the_flown_plane(tmp_path, ext):
+    """A 0 deg flight declared as 40 deg (it flipped the diagnosis): refused, naming the key."""
+    path = tmp_path / f"lie{ext}"
+    write_log(path, _plane_columns(0.0), {**META, "alpha_c_deg": "40"})
+    with pytest.raises(InputError) as exc:
+        read_log(path)
+    assert exc.value.source == str(path) and exc.value.where == "metadata alpha_c_deg"
+    assert "alpha_c_deg = 40" in exc.value.message and "tilt 0.0 deg" in exc.value.message
+    assert "40.0 deg apart, more than 10" in exc.value.message
+
+
+@pytest.mark.parametrize(("alpha", "gamma"), [(0, 0), (20, 0), (40, 0), (30, 120), (10, -45)])
+def test_declared_plane_accepted(tmp_path, alpha, gamma):
+    path = tmp_path / "ok.csv"
+    write_log(path, _plane_columns(alpha, gamma), {**META, "alpha_c_deg": alpha,
+                                                   "gamma_c_deg": gamma})  # fmt: skip
+    (lg,) = read_log(path)
+    assert lg.alpha_c == pytest.approx(math.radians(alpha))
+
+
+def test_declared_heading_must_match_the_flown_plane(tmp_path):
+    """Same tilt, other heading: the plane is still wrong; gamma_c_deg is named."""
+    path = tmp_path / "heading.csv"
+    write_log(path, _plane_columns(30.0, 90.0), {**META, "alpha_c_deg": "30"})
+    with pytest.raises(InputError) as exc:
+        read_log(path)
+    assert exc.value.where == "metadata gamma_c_deg", str(exc.value)
+    assert "gamma_c 90.0 deg" in exc.value.message
+
+
+@pytest.mark.parametrize(
+    "cols",
+    [
+        pytest.param(lambda: _plane_columns(0.0, arc=0.3), id="short-arc"),
+        pytest.param(lambda: _plane_columns(0.0, noise=0.5), id="not-planar"),
+    ],
+)
+def test_plane_not_checked_without_a_circle(tmp_path, cols):
+    """Too little arc or no plane: nothing to compare the declaration with."""
+    path = tmp_path / "free.csv"
+    write_log(path, cols(), {**META, "alpha_c_deg": "40"})
+    (lg,) = read_log(path)
+    assert lg.alpha_c == pytest.approx(math.radians(40))
+
+
+def test_example_flights_still_load():
+    root = Path(__file__).parents[1] / "examples" / "flights"
+    files = sorted(root.glob("*.csv"))
+    assert len(files) == 7
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LogWarning)
+        for f in files:
+            assert read_log(f)

@@ -23,6 +23,8 @@ import pytest
 from click.testing import CliRunner
 
 import gainsched.grid
+import gainsched.outputs
+import gainsched.publish
 import gainsched.tables
 from gainsched.cli import cli
 from gainsched.config import load_config
@@ -32,6 +34,7 @@ from gainsched.linearize import STATE_NAMES
 from gainsched.lqr import native_available
 from gainsched.model import Model
 from gainsched.nominal import REASONS
+from gainsched.publish import JOURNAL, recover
 from gainsched.tables import SCHEMA, load_table, table_bytes, write_table
 
 ROOT = Path(__file__).parents[1]
@@ -151,8 +154,9 @@ def test_table_layout(small):
             assert f["feasibility/reasons"].attrs[f"bit_{bit}"] == text
         assert set(f.attrs) == {
             "schema", "tool_version", "config_name", "config_sha256", "terminal", "rate_hz",
-            "radius_m", "state_names", "input_names", "control_law",
+            "radius_m", "state_names", "input_names", "control_law", "data_sha256",
         }  # fmt: skip
+        assert all(len(f[name].attrs["sha256"]) == 64 for name in LAYOUT)
 
 
 # ------------------------------------------------------------------ determinism
@@ -309,26 +313,48 @@ class _Interrupt:
 
     @staticmethod
     def solve_circle(monkeypatch):
-        real = gainsched.grid.solve_circle
-        calls = []
+        """Ctrl-C after the first speed of the grid (in this process or a worker)."""
+        real = gainsched.grid._solutions
 
         def fake(*args, **kwargs):
-            calls.append(1)
-            if len(calls) == 2:  # the second speed
-                raise KeyboardInterrupt
-            return real(*args, **kwargs)
+            for i, sol in enumerate(real(*args, **kwargs)):
+                if i == 1:
+                    raise KeyboardInterrupt
+                yield sol
 
-        monkeypatch.setattr(gainsched.grid, "solve_circle", fake)
+        monkeypatch.setattr(gainsched.grid, "_solutions", fake)
 
     @staticmethod
     def table_bytes(monkeypatch):
         def fake(*args, **kwargs):
             raise RuntimeError("interrupted while serialising")
 
-        monkeypatch.setattr(gainsched.tables, "table_bytes", fake)
+        monkeypatch.setattr(gainsched.outputs, "table_bytes", fake)
+
+    @staticmethod
+    def header(monkeypatch):
+        """The header fails after the table bytes exist (e.g. a value float32 cannot hold)."""
+
+        def fake(*args, **kwargs):
+            raise InputError("out/small.h5", "gains/K[0, 0, 0]", "overflows float32")
+
+        monkeypatch.setattr(gainsched.outputs, "c_files", fake)
+
+    @staticmethod
+    def journal(monkeypatch):
+        """Killed just before the commit point (the journal's rename)."""
+        real = os.replace
+
+        def fake(src, dst, *args, **kwargs):
+            if str(dst).endswith(JOURNAL):
+                raise KeyboardInterrupt
+            return real(src, dst, *args, **kwargs)
+
+        monkeypatch.setattr(os, "replace", fake)
 
     @staticmethod
     def replace(monkeypatch):
+        """Killed after the commit point, while the files are renamed into place."""
         real = os.replace
 
         def fake(src, dst, *args, **kwargs):
@@ -340,43 +366,72 @@ class _Interrupt:
 
     @staticmethod
     def disk_full(monkeypatch):
-        real = os.fdopen
+        """The disk fills up while the set is staged (its second file)."""
+        real = gainsched.publish._fsync_file
+        calls = []
 
-        class Half(io.RawIOBase):
-            def __init__(self, f):
-                self.f = f
-
-            def write(self, b):
-                self.f.write(bytes(b)[: len(b) // 2])
-                self.f.flush()
+        def fake(path):
+            calls.append(path)
+            if len(calls) == 2:
                 raise OSError(28, "No space left on device")
+            return real(path)
 
-            def __enter__(self):
-                return self
-
-            def __exit__(self, *exc):
-                self.f.close()
-
-        monkeypatch.setattr(os, "fdopen", lambda fd, *a, **k: Half(real(fd, *a, **k)))
+        monkeypatch.setattr(gainsched.publish, "_fsync_file", fake)
 
 
-@pytest.mark.parametrize("fault", ["solve_circle", "table_bytes", "replace", "disk_full"])
-@pytest.mark.parametrize("existing", [True, False], ids=["old-file", "no-file"])
-def test_interrupted_build_leaves_no_partial_file(small, tmp_path, monkeypatch, fault, existing):
-    _, _, cfg_path, old_table = small
+SET = ["gainsched_runtime.c", "gainsched_runtime.h", "small.h5", "small_gains.h"]
+
+
+def _set_bytes(folder):
+    return {n: (folder / n).read_bytes() for n in SET if (folder / n).exists()}
+
+
+@pytest.fixture(scope="module")
+def old_set(tmp_path_factory):
+    """A complete older output set of a config with the same name (other azimuth grid)."""
+    d = tmp_path_factory.mktemp("old")
+    (d / "small.toml").write_text(small_config_text(n_xi="6"))
+    res = CliRunner().invoke(cli, ["build", str(d / "small.toml"), "-o", str(d / "out")])
+    assert res.exit_code == 0, res.output
+    return _set_bytes(d / "out")
+
+
+@pytest.fixture(scope="module")
+def new_set(small, tmp_path_factory):
+    _, _, cfg_path, _ = small
+    out = tmp_path_factory.mktemp("new") / "out"
+    res = CliRunner().invoke(cli, ["build", str(cfg_path), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    return _set_bytes(out)
+
+
+@pytest.mark.parametrize("fault", ["solve_circle", "table_bytes", "header", "disk_full",
+                                   "journal", "replace"])  # fmt: skip
+@pytest.mark.parametrize("existing", [True, False], ids=["old-set", "no-set"])
+def test_interrupted_build_leaves_old_or_new_set(small, old_set, new_set, tmp_path, monkeypatch,
+                                                 fault, existing):  # fmt: skip
+    """Whatever fails, the folder holds the old set or (after recover) the new one, never a
+    mix, and no temp file stays behind."""
+    _, _, cfg_path, _ = small
     out = tmp_path / "out"
     out.mkdir()
-    target = out / "small.h5"
-    old = old_table.read_bytes()
     if existing:
-        target.write_bytes(old)
+        for name, data in old_set.items():
+            (out / name).write_bytes(data)
     getattr(_Interrupt, fault)(monkeypatch)
     res = CliRunner().invoke(cli, ["build", str(cfg_path), "-o", str(out), "-j", "1"])
     monkeypatch.undo()
     assert res.exit_code != 0
-    assert sorted(p.name for p in out.iterdir()) == (["small.h5"] if existing else [])
-    if existing:
-        assert target.read_bytes() == old
+    if fault == "disk_full":
+        assert res.exit_code == 2 and "disk full" in res.stderr, res.output
+    if fault == "replace":  # past the commit point: the journal completes the new set
+        assert (out / JOURNAL).exists()
+        recover(out)
+        assert _set_bytes(out) == new_set
+    else:
+        assert _set_bytes(out) == (old_set if existing else {})
+    assert sorted(p.name for p in out.iterdir()) == (SET if existing or fault == "replace"
+                                                     else [])  # fmt: skip
 
 
 # ------------------------------------------------------------------ bad table files

@@ -1,0 +1,265 @@
+"""Writing outputs so that nothing is ever half written: one file, or a whole set at once.
+
+:func:`write_atomic` replaces one file (temp file in the same folder, fsync, rename).
+
+:func:`publish` replaces a *set* of files that belong together (a table, its C
+header and the runtime): a reader or a firmware build must never see the new
+table beside the old header. The set is staged in a hidden folder of the
+output folder, fsynced, and then committed by writing a journal
+(``.gainsched-publish.json``, itself atomic) that lists the staged files;
+after the journal the renames are carried out with SIGINT/SIGTERM/SIGHUP held
+back. A run killed before the journal leaves the old set (its stage is
+deleted by the next run); one killed after it leaves a journal that the next
+run in that folder (or :func:`recover`) rolls forward, completing the new set.
+A folder lock (``flock`` on the folder itself, no lock file) keeps two
+publishers in one folder apart. Hand-written because no library does this.
+
+Errors of the output side (read-only file system, disk full, ``-o`` under a
+regular file, no permission) raise :class:`~gainsched.errors.InputError`
+naming the folder, before the old set is touched.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import json
+import os
+import shutil
+import signal
+import tempfile
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+
+from .errors import InputError
+
+__all__ = ["write_atomic", "publish", "staged", "recover", "check_out_dir"]
+
+JOURNAL = ".gainsched-publish.json"
+_STAGE = ".gainsched-stage-"
+_HELD = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def _mode() -> int:
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+def _fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _why(exc: OSError) -> str:
+    names = {errno.ENOSPC: "disk full", errno.EROFS: "read-only file system",
+             errno.EACCES: "permission denied", errno.EPERM: "permission denied",
+             errno.ENOTDIR: "a path component is a regular file, not a folder",
+             errno.EEXIST: "a path component is a regular file, not a folder",
+             errno.EDQUOT: "disk quota exceeded"}  # fmt: skip
+    return names.get(exc.errno, exc.strerror or type(exc).__name__)
+
+
+def check_out_dir(out_dir, where: str = "-o") -> Path:
+    """Create ``out_dir`` if needed and check that files can be written into it.
+
+    Call it before long work so that a bad ``-o`` fails in a second, not after the
+    build. Raises InputError naming the folder and ``where`` (the option or key).
+    """
+    out_dir = Path(out_dir)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=out_dir, prefix=_STAGE + "probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise InputError(out_dir, where, f"cannot write there: {_why(exc)}") from None
+    return out_dir
+
+
+def write_atomic(path, data: bytes, *, where: str = "") -> None:
+    """Write ``data`` to ``path`` via a temp file in the same folder and a rename,
+    so an interrupted run leaves the old file intact.
+
+    OSError (full disk, read-only folder, ...) becomes InputError naming ``path`` and
+    ``where`` (the option or key that named it).
+    """
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise InputError(path, where, f"cannot write: {_why(exc)}") from None
+    try:
+        os.fchmod(fd, _mode())  # mkstemp makes 0600; give the file normal permissions
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        raise InputError(path, where, f"cannot write: {_why(exc)}") from None
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+@contextmanager
+def _locked(out_dir: Path) -> Iterator[None]:
+    fd = os.open(out_dir, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold back SIGINT, SIGTERM and SIGHUP (delivered when the block ends)."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _roll_forward(out_dir: Path) -> None:
+    journal = out_dir / JOURNAL
+    try:
+        entry = json.loads(journal.read_text())
+        stage, names = out_dir / entry["stage"], list(entry["files"])
+    except (OSError, ValueError, KeyError, TypeError):
+        journal.unlink(missing_ok=True)  # unreadable: it was never complete, nothing to do
+        return
+    with _signals_held():
+        for name in names:
+            src, dst = stage / name, out_dir / name
+            if src.exists():  # renamed already if a previous roll-forward was cut short
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(src, dst)
+        _fsync_dir(out_dir)
+        journal.unlink()
+        _fsync_dir(out_dir)
+    shutil.rmtree(stage, ignore_errors=True)
+
+
+def _pending_stage(out_dir: Path) -> str | None:
+    try:
+        return str(json.loads((out_dir / JOURNAL).read_text())["stage"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _clean(out_dir: Path) -> None:
+    """Remove stages and temp files of killed runs (under the folder lock); never the stage
+    of a committed set that is still due."""
+    keep = _pending_stage(out_dir)
+    for p in out_dir.glob(_STAGE + "*"):
+        if p.name == keep:
+            continue
+        if p.is_dir():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
+    for p in out_dir.glob(".*.tmp"):  # write_atomic's, of runs killed while writing
+        if p.is_file():
+            p.unlink(missing_ok=True)
+
+
+def recover(out_dir) -> None:
+    """Finish a publish that was killed after its commit point, and clean up after runs
+    killed before it. Safe to call on any folder; a no-op on a clean one."""
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        return
+    with _locked(out_dir):
+        if (out_dir / JOURNAL).exists():
+            _roll_forward(out_dir)
+        _clean(out_dir)
+
+
+@contextmanager
+def staged(out_dir, *, where: str = "-o") -> Iterator[Path]:
+    """Write a set of outputs into a stage folder, published together when the block ends.
+
+    Yields the stage folder: write files (and sub-folders) into it as if it were
+    ``out_dir``. When the block ends normally every file in it replaces its
+    counterpart in ``out_dir`` at once (commit point: the journal); files of
+    ``out_dir`` outside the set stay. If the block raises, nothing in
+    ``out_dir`` changes and the stage is deleted. An OSError (disk full,
+    read-only, ...) becomes InputError naming ``out_dir`` and ``where``.
+
+    Example
+    -------
+    >>> with staged("reports/run1") as out:               # doctest: +SKIP
+    ...     (out / "summary.json").write_text("{}")
+    ...     fig.savefig(out / "plot.png")
+    """
+    out_dir = check_out_dir(out_dir, where)
+    with _locked(out_dir):
+        if (out_dir / JOURNAL).exists():  # a killed run's committed set comes first
+            _roll_forward(out_dir)
+        _clean(out_dir)
+        try:
+            stage = Path(tempfile.mkdtemp(dir=out_dir, prefix=_STAGE))
+            yield stage
+            names = sorted(p.relative_to(stage).as_posix() for p in stage.rglob("*")
+                           if p.is_file())  # fmt: skip
+            for name in names:
+                _fsync_file(stage / name)
+            _fsync_dir(stage)
+            entry = json.dumps({"stage": stage.name, "files": names})
+            fd, tmp = tempfile.mkstemp(dir=out_dir, prefix=_STAGE + "journal-")
+            with os.fdopen(fd, "w") as f:
+                f.write(entry)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, out_dir / JOURNAL)  # the commit point
+        except BaseException as exc:
+            _clean(out_dir)  # before the commit point: the old outputs stay
+            if isinstance(exc, OSError):
+                raise InputError(out_dir, where, f"cannot write there: {_why(exc)}") from None
+            raise
+        # after the commit point the new set is due: a failure here leaves the journal,
+        # which the next run (or recover) completes
+        _roll_forward(out_dir)
+
+
+def _fsync_file(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def publish(out_dir, files: Mapping[str, bytes], *, where: str = "-o") -> list[Path]:
+    """Replace the set ``files`` (name -> bytes) in ``out_dir`` all at once (see :func:`staged`).
+
+    Parameters
+    ----------
+    out_dir : path-like
+        Output folder (created if needed).
+    files : mapping of str to bytes
+        File names (no folders) and their contents.
+    where : str
+        The option or key that named ``out_dir``, for error messages.
+
+    Returns
+    -------
+    list of Path
+        The published paths, in the order of ``files``.
+    """
+    for name in files:
+        if not name or Path(name).name != name or name.startswith("."):
+            raise ValueError(f"publish: bad file name {name!r}")
+    with staged(out_dir, where=where) as stage:
+        for name, data in files.items():
+            (stage / name).write_bytes(data)
+    return [Path(out_dir) / name for name in files]

@@ -1,0 +1,123 @@
+"""Build budget (gainsched.budget): estimates follow the grid sweep, absurd builds are refused
+at validation, quickly, naming the file and the key that drives the estimate."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import time
+
+import numpy as np
+import pytest
+
+from gainsched import grid as grid_mod
+from gainsched.budget import GIB, TILT_BATCH, check_budget, estimate_build
+from gainsched.config import Grid, Limits, config_from_text, load_config
+from gainsched.errors import InputError
+
+
+def _sub(text: str, key: str, value: str) -> str:
+    new = re.sub(rf"(?m)^{key} = .*$", f"{key} = {value}", text)
+    assert new != text
+    return new
+
+
+def _floats(a) -> str:
+    return "[" + ", ".join(repr(float(x)) for x in a) + "]"
+
+
+def test_model_follows_the_grid_sweep(paper_config):
+    """Steps per period and the tilt batch are those of gainsched.grid."""
+    cfg = paper_config
+    est = estimate_build(cfg)
+    steps = [grid_mod.steps_per_period(v, cfg.radius, cfg.control.dt) for v in cfg.grid.speeds]
+    assert est.steps_max == max(steps) == 5026
+    assert TILT_BATCH == grid_mod.TILT_BATCH
+    n = 11  # paper: drag has no state
+    assert est.worker_bytes == 2 * 8 * 6 * 5026 * (n * n + 4 * n)
+    assert est.table_bytes == 6 * 18 * 36 * (n * n + 4 * n + 8) * 8
+    assert est.peak_bytes == est.worker_bytes + 2 * est.table_bytes
+    # calibrated on the paper vehicle, every circle feasible: an upper bound of its 1.6 s
+    assert 1.5 < est.cpu_s < 10
+    assert est.peak_bytes < 0.2 * GIB
+    assert check_budget(cfg, "paper.toml") == est
+
+
+def test_effect_states_count(paper_text):
+    """Motor lag adds 4 states to the LQR state: n = 15."""
+    cfg = config_from_text(paper_text + "\n[effects.motor_lag]\ntau = 0.03\n", "lag.toml")
+    est = estimate_build(cfg)
+    assert est.worker_bytes == 2 * 8 * 6 * 5026 * (15 * 15 + 4 * 15)
+
+
+@pytest.mark.parametrize(
+    ("case", "edit", "key", "words"),
+    [
+        ("azimuth 1e6", lambda t: _sub(t, "azimuth_samples", "1000000"),
+         "grid.azimuth_samples", "[4, 4096]"),
+        ("rate 1e9", lambda t: _sub(t, "rate_hz", "1e9"), "control.rate_hz", "<= 100000 Hz"),
+        ("1e6 speeds", lambda t: _sub(t, "speeds", _floats(np.linspace(2, 15, 10**6))),
+         "grid.speeds", "at most 1 MiB"),
+        ("1e5 tilts", lambda t: _sub(t, "tilts_deg", _floats(np.linspace(0, 80, 10**5))),
+         "grid.tilts_deg", "at most 1 MiB"),
+        ("1000 x 100 grid",
+         lambda t: _sub(_sub(t, "speeds", _floats(np.linspace(2, 15, 1000))), "tilts_deg",
+                        _floats(np.linspace(0, 45, 100))),
+         "grid.speeds", "GiB per worker (the table of 100 tilts x 1000 speeds x 36 azimuth"),
+        ("1e5 Hz at 0.5 m/s", lambda t: _sub(_sub(t, "rate_hz", "1e5"), "speeds", "[0.5, 15]"),
+         "control.rate_hz",
+         "GiB per worker (control.rate_hz 100000 Hz: 2e+06 steps per period at 0.5 m/s); "
+         "limit limits.max_memory_gib = 8"),
+        ("1 mm/s", lambda t: _sub(t, "speeds", "[0.001, 15]"), "grid.speeds",
+         "GiB per worker (grid.speeds down to 0.001 m/s: 1e+07 steps per period at 1000 Hz)"),
+        ("10000 speeds", lambda t: _sub(t, "speeds", _floats(np.linspace(2, 15, 10000))),
+         "grid.speeds", "CPU-s to build (6 tilts x 10000 speeds = 60000 circles); "
+         "limit limits.max_build_cpu_s = 1800"),
+    ],
+    ids=lambda x: x if isinstance(x, str) and " " in x else None,
+)  # fmt: skip
+def test_absurd_builds_refused_quickly(paper_text, tmp_path, case, edit, key, words):
+    path = tmp_path / "big.toml"
+    path.write_text(edit(paper_text))
+    t0 = time.perf_counter()
+    with pytest.raises(InputError) as info:
+        load_config(path)
+    elapsed = time.perf_counter() - t0
+    assert info.value.source == str(path) and info.value.where == key, str(info.value)
+    assert words in info.value.message, info.value.message
+    assert elapsed < 1.0, elapsed
+
+
+def test_estimate_is_fast_for_a_million_speeds(paper_config):
+    """The estimate itself is vectorised (the 1 MiB text limit comes first in practice)."""
+    g = paper_config.grid
+    speeds = np.linspace(2, 15, 10**6)
+    cfg = dataclasses.replace(paper_config, grid=Grid(speeds, g.tilts, g.azimuth_samples))
+    t0 = time.perf_counter()
+    with pytest.raises(InputError) as info:
+        check_budget(cfg, "million.toml")
+    assert time.perf_counter() - t0 < 0.5
+    assert info.value.where == "grid.speeds" and "1000000 speeds" in info.value.message
+
+
+def test_limits_section(paper_text):
+    low_mem = paper_text + "\n[limits]\nmax_memory_gib = 0.01\n"
+    with pytest.raises(InputError) as info:
+        config_from_text(low_mem, "low.toml")
+    assert info.value.where == "grid.speeds"
+    assert info.value.message.endswith("limit limits.max_memory_gib = 0.01")
+    low_cpu = paper_text + "\n[limits]\nmax_build_cpu_s = 1\n"
+    with pytest.raises(InputError, match=r"^low.toml: grid.speeds: needs about 3.8 CPU-s"):
+        config_from_text(low_cpu, "low.toml")
+    # raising the limits admits what the defaults refuse
+    big = _sub(paper_text, "speeds", _floats(np.linspace(2, 15, 10000)))
+    with pytest.raises(InputError, match="max_build_cpu_s = 1800"):
+        config_from_text(big, "big.toml")
+    cfg = config_from_text(big + "\n[limits]\nmax_build_cpu_s = 1e4\n", "big.toml")
+    assert cfg.limits == Limits(8.0, 1e4)
+
+
+def test_config_objects_default_limits(paper_config):
+    assert paper_config.limits == Limits()
+    fields = {f.name: f for f in dataclasses.fields(paper_config)}
+    assert fields["limits"].default_factory is Limits
