@@ -36,12 +36,11 @@ import numpy as np
 
 from .config import N_INPUT, N_LQR, Config
 from .errors import InputError
+from .grid import TILT_BATCH
 
 __all__ = ["BuildEstimate", "estimate_build", "check_budget", "GIB"]
 
 GIB = 2.0**30
-#: tilts solved together in one job (:data:`gainsched.grid.TILT_BATCH`)
-TILT_BATCH = 8
 #: copies of a batch's (A_d, B_d) alive at the peak of a job (interpolation temporaries)
 JOB_COPIES = 2
 #: CPU seconds per (tilt, control step), per (tilt, speed) circle and per table point

@@ -41,7 +41,7 @@ from importlib import resources
 from pathlib import Path
 
 __all__ = ["CFLAGS", "VECTOR_ISAS", "load", "available", "build", "cache_dir", "vector_flags",
-           "vector_variants"]  # fmt: skip
+           "vector_variants", "cpu_flags"]  # fmt: skip
 
 CFLAGS = ("-O3", "-std=c99", "-fPIC", "-shared", "-ffp-contract=off", "-fno-math-errno",
           "-fno-semantic-interposition")  # fmt: skip
@@ -73,7 +73,8 @@ def _cc_version(cc: str) -> str:
     return res.stdout.splitlines()[0] if res.returncode == 0 and res.stdout else ""
 
 
-def _cpu_flags() -> frozenset[str]:
+@cache
+def cpu_flags() -> frozenset[str]:
     """The CPU feature flags the kernel reports (Linux x86-64; empty elsewhere)."""
     if platform.machine().lower() not in ("x86_64", "amd64"):
         return frozenset()
@@ -89,7 +90,7 @@ def _cpu_flags() -> frozenset[str]:
 
 def vector_variants() -> list[tuple[str, ...]]:
     """Flags of every vector variant this CPU can run, widest first, baseline last."""
-    cpu = _cpu_flags()
+    cpu = cpu_flags()
     out = [(f"-m{isa}", f"-DGS_VEC_DOUBLES={w}") for isa, w in VECTOR_ISAS if isa in cpu]
     return out + [(f"-DGS_VEC_DOUBLES={BASELINE_DOUBLES}",)]
 

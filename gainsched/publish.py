@@ -47,7 +47,8 @@ def _mode() -> int:
     return 0o666 & ~umask
 
 
-def _fsync_dir(path: Path) -> None:
+def _fsync(path: Path) -> None:
+    """fsync a file or a folder (a folder's entries: the renames into it)."""
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)
@@ -143,9 +144,9 @@ def _roll_forward(out_dir: Path) -> None:
             if src.exists():  # renamed already if a previous roll-forward was cut short
                 dst.parent.mkdir(parents=True, exist_ok=True)
                 os.replace(src, dst)
-        _fsync_dir(out_dir)
+        _fsync(out_dir)
         journal.unlink()
-        _fsync_dir(out_dir)
+        _fsync(out_dir)
     shutil.rmtree(stage, ignore_errors=True)
 
 
@@ -212,8 +213,8 @@ def staged(out_dir, *, where: str = "-o") -> Iterator[Path]:
             names = sorted(p.relative_to(stage).as_posix() for p in stage.rglob("*")
                            if p.is_file())  # fmt: skip
             for name in names:
-                _fsync_file(stage / name)
-            _fsync_dir(stage)
+                _fsync(stage / name)
+            _fsync(stage)
             entry = json.dumps({"stage": stage.name, "files": names})
             fd, tmp = tempfile.mkstemp(dir=out_dir, prefix=_STAGE + "journal-")
             with os.fdopen(fd, "w") as f:
@@ -229,14 +230,6 @@ def staged(out_dir, *, where: str = "-o") -> Iterator[Path]:
         # after the commit point the new set is due: a failure here leaves the journal,
         # which the next run (or recover) completes
         _roll_forward(out_dir)
-
-
-def _fsync_file(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 def publish(out_dir, files: Mapping[str, bytes], *, where: str = "-o") -> list[Path]:

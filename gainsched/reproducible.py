@@ -46,7 +46,8 @@ import os
 import platform
 from collections.abc import MutableMapping
 from contextlib import contextmanager
-from functools import cache
+
+from .native import cpu_flags  # no numpy: this module must load before numpy
 
 __all__ = [
     "BLAS_CORETYPE",
@@ -76,24 +77,12 @@ _OFF = "GAINSCHED_PIN"
 _NEEDS = ("avx2", "fma")
 
 
-@cache
-def _cpu_flags() -> frozenset[str]:
-    try:
-        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
-            for line in f:
-                if line.startswith("flags"):
-                    return frozenset(line.split(":", 1)[1].split())
-    except OSError:
-        pass
-    return frozenset()
-
-
 def pin_available() -> bool:
     """Whether this machine can run the pinned code (x86-64 with AVX2 and FMA) and the
     pin is not switched off (``GAINSCHED_PIN=0``)."""
     if os.environ.get(_OFF, "1") == "0":
         return False
-    return platform.machine() in ("x86_64", "AMD64") and all(f in _cpu_flags() for f in _NEEDS)
+    return platform.machine() in ("x86_64", "AMD64") and all(f in cpu_flags() for f in _NEEDS)
 
 
 def pin_environ(environ: MutableMapping[str, str] | None = None) -> bool:

@@ -196,14 +196,16 @@ def test_build_under_a_regular_file_fails_before_the_build(regular_file, monkeyp
                    "-o", "regular file")  # fmt: skip
 
 
-@pytest.mark.parametrize("command", ["export-c", "compare", "diagnose", "nominal", "simulate",
-                                     "paper", "campaign"])  # fmt: skip
+@pytest.mark.parametrize("command", ["export-c", "compare", "diagnose", "apply", "nominal",
+                                     "simulate", "paper", "campaign", "sweep"])  # fmt: skip
 def test_output_under_a_regular_file(regular_file, command):
     bad = regular_file / "sub"
     args, option = {
         "export-c": (["export-c", TABLE, "-o", bad, "--no-code-size"], "-o"),
         "compare": (["compare", PAPER, FLIGHT, "-o", bad], "-o"),
         "diagnose": (["diagnose", PAPER, FLIGHT, "--report", bad], "--report"),
+        "apply": (["diagnose", PAPER, FLIGHT, "--apply", "-o", bad / "new.toml"], "-o"),
+        "sweep": (["sweep", PAPER, "--vary", "vehicle.mass=0.5", "-o", bad], "-o"),
         "nominal": (["nominal", PAPER, "--speed", "9", "--csv", bad / "n.csv"], "--csv"),
         "simulate": (["simulate", PAPER, "--tables", TABLE, "--scenario", "horizontal",
                       "-o", bad], "-o"),
@@ -217,7 +219,7 @@ def _disk_full_after(monkeypatch, n_ok):
     """os.write / file writes in a stage fail with ENOSPC after ``n_ok`` files."""
     import gainsched.publish as pub
 
-    real = pub._fsync_file
+    real = pub._fsync
     calls = []
 
     def fake(path):
@@ -226,7 +228,7 @@ def _disk_full_after(monkeypatch, n_ok):
             raise OSError(errno.ENOSPC, "No space left on device")
         return real(path)
 
-    monkeypatch.setattr(pub, "_fsync_file", fake)
+    monkeypatch.setattr(pub, "_fsync", fake)
 
 
 def test_compare_on_a_full_disk_keeps_the_old_report(tmp_path, monkeypatch):
@@ -296,3 +298,18 @@ def test_staged_block_that_raises_changes_nothing(tmp_path):
         (stage / "sub").mkdir()
         (stage / "sub" / "p.png").write_bytes(b"png")
     assert (out / "sub" / "p.png").read_bytes() == b"png" and (out / "r.json").exists()
+
+
+@pytest.mark.parametrize("err, words", [(errno.EROFS, "read-only file system"),
+                                        (errno.EACCES, "permission denied"),
+                                        (errno.ENOSPC, "disk full")])  # fmt: skip
+def test_unwritable_folder_is_named(tmp_path, monkeypatch, err, words):
+    """Read-only, forbidden or full (simulated: the tests run as root, which ignores
+    permissions): one line naming the folder and the option, before any work."""
+    import gainsched.publish as pub
+
+    def refuse(*a, **k):
+        raise OSError(err, os.strerror(err))
+
+    monkeypatch.setattr(pub.tempfile, "mkstemp", refuse)
+    one_line_error(_run("build", PAPER, "-o", tmp_path / "out"), tmp_path / "out", "-o", words)

@@ -25,6 +25,7 @@ from gainsched import reproducible
 from gainsched.config import load_config
 from gainsched.grid import build_grid
 from gainsched.model import Model
+from gainsched.native import cpu_flags
 from gainsched.tables import table_bytes
 
 #: OpenBLAS kernel families and the CPU flags they need
@@ -53,7 +54,7 @@ pytestmark = pytest.mark.skipif(
 
 
 def _runs(family: str) -> bool:
-    return all(f in reproducible._cpu_flags() for f in FAMILIES[family])
+    return all(f in cpu_flags() for f in FAMILIES[family])
 
 
 def _env(family, threads, npy_off, **extra):
@@ -107,6 +108,7 @@ def test_same_bytes_on_every_kernel_family_thread_count_backend(det, tmp_path, f
 _LIBRARY_BUILD = """
 import hashlib, sys
 from gainsched import reproducible
+from gainsched.native import cpu_flags
 from gainsched.config import load_config
 from gainsched.grid import build_grid
 from gainsched.model import Model

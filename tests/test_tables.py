@@ -367,7 +367,7 @@ class _Interrupt:
     @staticmethod
     def disk_full(monkeypatch):
         """The disk fills up while the set is staged (its second file)."""
-        real = gainsched.publish._fsync_file
+        real = gainsched.publish._fsync
         calls = []
 
         def fake(path):
@@ -376,7 +376,7 @@ class _Interrupt:
                 raise OSError(28, "No space left on device")
             return real(path)
 
-        monkeypatch.setattr(gainsched.publish, "_fsync_file", fake)
+        monkeypatch.setattr(gainsched.publish, "_fsync", fake)
 
 
 SET = ["gainsched_runtime.c", "gainsched_runtime.h", "small.h5", "small_gains.h"]
