@@ -40,7 +40,8 @@ from gainsched.grid import build_grid, discrete_system, solve_circle, steps_per_
 from gainsched.linearize import discretize, expm_batched, jacobians, lqr_system
 from gainsched.lqr import dlqr, native_available, periodic_lqr, sweep
 from gainsched.model import Model
-from gainsched.nominal import circle_nominal, period
+from gainsched.nominal import circle_nominal
+from gainsched.path import period
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "configs" / "paper.toml"
@@ -92,7 +93,7 @@ def circles_64(cfg):
     As, Bs = [], []
     for v in cfg.grid.speeds:
         sol = solve_circle(cfg, float(v), tilts)
-        ok = tilts[np.isfinite(sol.rho)]
+        ok = tilts[np.isfinite(sol.spectral_radius)]
         if ok.size:
             N = steps_per_period(v, model.r, cfg.control.dt)
             Ad, Bd, _, _ = discrete_system(model, float(v), ok, N, period(v, model.r) / N)
@@ -101,7 +102,7 @@ def circles_64(cfg):
     N = min(a.shape[0] for a in As)
     idx = [i % len(As) for i in range(64)]
     return (np.ascontiguousarray(np.stack([As[i][:N] for i in idx])),
-            np.ascontiguousarray(np.stack([Bs[i][:N] for i in idx])), len(As))  # fmt: skip
+            np.ascontiguousarray(np.stack([Bs[i][:N] for i in idx])), len(As))
 
 
 def bench_riccati(cfg, Ad, Bd, distinct):
@@ -119,9 +120,9 @@ def bench_riccati(cfg, Ad, Bd, distinct):
     agree = _rel(sw_np.P0[:n_loop], P_loop)
     print(f"  riccati, {b} circles x {N} steps (one point-step = one recursion step at one point)")
     print(f"    per-point Python loop       {rate_loop:12,.0f} point-steps/s "
-          f"({1e6 / rate_loop:.2f} us)  baseline")  # fmt: skip
+          f"({1e6 / rate_loop:.2f} us)  baseline")
     print(f"    batched numpy (fallback)    {pts / t_np:12,.0f} point-steps/s "
-          f"({1e6 * t_np / pts:.2f} us)  {pts / t_np / rate_loop:5.1f}x")  # fmt: skip
+          f"({1e6 * t_np / pts:.2f} us)  {pts / t_np / rate_loop:5.1f}x")
     if native_available():
         for threads in (1, 2):
             t_c, sw_c = best_of(lambda th=threads: sweep(Ad, Bd, Q, R, P0, threads=th), 3)
@@ -129,7 +130,7 @@ def bench_riccati(cfg, Ad, Bd, distinct):
             err = _rel(sw_c.P0, sw_np.P0)
             print(f"    compiled kernel, {threads} thread{'s' if threads > 1 else ' '}  "
                   f"{rate:12,.0f} point-steps/s ({1e6 / rate:.2f} us)  "
-                  f"{rate / rate_loop:5.1f}x  (P agrees with numpy to {err:.0e})")  # fmt: skip
+                  f"{rate / rate_loop:5.1f}x  (P agrees with numpy to {err:.0e})")
             out[f"compiled_{threads}t_point_steps_per_s"] = rate
             out[f"compiled_{threads}t_us_per_point_step"] = 1e6 / rate
             out[f"compiled_{threads}t_ratio_vs_loop"] = rate / rate_loop
@@ -139,7 +140,7 @@ def bench_riccati(cfg, Ad, Bd, distinct):
         t_i, sw_i = best_of(lambda: sweep(*inner, Q, R, P0, threads=2), 3)
         assert np.array_equal(sw_i.P0, sw_c.P0)
         print(f"    same, steps innermost (strided, no copy), 2 threads: "
-              f"{1e6 * t_i / pts:.2f} us per point-step (same bits)")  # fmt: skip
+              f"{1e6 * t_i / pts:.2f} us per point-step (same bits)")
         out["compiled_2t_steps_inner_us"] = 1e6 * t_i / pts
     else:
         print("    compiled kernel: no C compiler, skipped")
@@ -174,7 +175,7 @@ def bench_peers(cfg, probs):
     def ours():
         return [periodic_lqr(np.broadcast_to(Ad, (N,) + Ad.shape)[None],
                              np.broadcast_to(Bd, (N,) + Bd.shape)[None], Q, R,
-                             steps=[0]).K[0, 0] for _, Ad, Bd, N in probs]  # fmt: skip
+                             steps=[0]).K[0, 0] for _, Ad, Bd, N in probs]
 
     t_ours, K_ours = best_of(ours, 1)
     err = max(_rel(a, b) for a, b in zip(K_ours, Ks, strict=True))
@@ -183,7 +184,7 @@ def bench_peers(cfg, probs):
     print(f"  tilt-0 problems ({len(probs)} speeds): scipy DARE {1e3 * t_dare / len(probs):.2f} "
           f"ms/point; our periodic recursion over the period ({steps // len(probs)} steps on "
           f"average) {1e3 * t_ours / len(probs):.2f} ms/point, gains agree to {err:.0e}; "
-          "the build uses the DARE at tilt 0")  # fmt: skip
+          "the build uses the DARE at tilt 0")
     try:
         import control
     except ImportError:
@@ -193,7 +194,7 @@ def bench_peers(cfg, probs):
         err_c = max(_rel(a, b) for a, b in zip(Kc, Ks, strict=True))
         out["python_control_dlqr_s_per_point"] = t_ctl / len(probs)
         print(f"  python-control dlqr {1e3 * t_ctl / len(probs):.2f} ms/point "
-              f"({t_ctl / t_dare:.2f}x scipy's time), gains agree to {err_c:.0e}")  # fmt: skip
+              f"({t_ctl / t_dare:.2f}x scipy's time), gains agree to {err_c:.0e}")
     return out
 
 
@@ -227,7 +228,7 @@ def _drake(Ad, Bd, Q, R, batched_us, tilt0):
     t = [float(k) for k in range(N + 1)]
     zoh = lambda X: PiecewisePolynomial.ZeroOrderHold(t, list(np.concatenate([X, X[-1:]])))  # noqa: E731
     tv = TrajectoryLinearSystem(zoh(Ad), zoh(Bd), zoh(np.broadcast_to(np.eye(n), (N, n, n))),
-                                zoh(np.zeros((N, n, m))), time_period=1.0)  # fmt: skip
+                                zoh(np.zeros((N, n, m))), time_period=1.0)
     t_d, res = best_of(lambda: solve(tv, N), 1)
     steps = [0, 1, N // 2, N - 1]
     t_o, sw = best_of(lambda: sweep(Ad[None], Bd[None], Q, R, Q[None], steps=steps), 3)
@@ -236,18 +237,18 @@ def _drake(Ad, Bd, Q, R, batched_us, tilt0):
     print(f"  Drake FiniteHorizonLQR, discrete, on one circle's time-varying A_k, B_k ({N} "
           f"steps): {us_d:.1f} us/step; ours {us_o:.2f} us/step on this one point "
           f"({us_d / us_o:.0f}x), {batched_us:.2f} us per point-step batched "
-          f"({us_d / batched_us:.0f}x); gains agree to {err:.0e}")  # fmt: skip
+          f"({us_d / batched_us:.0f}x); gains agree to {err:.0e}")
     out = {"drake_us_per_step": us_d, "ours_single_point_us_per_step": us_o,
            "ratio_vs_drake_single_point": us_d / us_o,
-           "ratio_vs_drake_batched": us_d / batched_us, "drake_gain_rel": err}  # fmt: skip
+           "ratio_vs_drake_batched": us_d / batched_us, "drake_gain_rel": err}
     speed, A0, B0, N0 = tilt0
     lti = LinearSystem(A0, B0, np.eye(n), np.zeros((n, m)), time_period=1.0)
     t_l, res_l = best_of(lambda: solve(lti, N0), 1)
     K0 = sweep(np.broadcast_to(A0, (1, N0, n, n)), np.broadcast_to(B0, (1, N0, n, m)), Q, R,
-               Q[None], steps=[0]).K[0, 0]  # fmt: skip
+               Q[None], steps=[0]).K[0, 0]
     err_l = _rel(K0, np.asarray(res_l.K.value(0.0)))
     print(f"    (time-invariant tilt-0 problem at {speed:g} m/s, LinearSystem: Drake "
-          f"{1e6 * t_l / N0:.1f} us/step, gains agree to {err_l:.0e})")  # fmt: skip
+          f"{1e6 * t_l / N0:.1f} us/step, gains agree to {err_l:.0e})")
     out.update(drake_lti_us_per_step=1e6 * t_l / N0, drake_lti_gain_rel=err_l)
     return out
 
@@ -265,7 +266,7 @@ def bench_linearization(cfg):
     def direct():
         zs = [circle_nominal(model, SPEED, a, N) for a in tilts]
         A, B = jacobians(model, np.stack([z.z for z in zs]), np.stack([z.u for z in zs]),
-                         tilts[:, None])  # fmt: skip
+                         tilts[:, None])
         return discretize(*lqr_system(A, B), dt)
 
     t_dir, (Ad_ref, _) = best_of(direct, 1)
@@ -280,7 +281,7 @@ def bench_linearization(cfg):
     from scipy.linalg import expm
 
     A, B = jacobians(model, circle_nominal(model, SPEED, tilts[-1], 256).z,
-                     circle_nominal(model, SPEED, tilts[-1], 256).u, tilts[-1])  # fmt: skip
+                     circle_nominal(model, SPEED, tilts[-1], 256).u, tilts[-1])
     Ax, Bx = lqr_system(A, B)
     n, m = Bx.shape[-2:]
     Mb = np.zeros(Ax.shape[:-2] + (n + m, n + m))
@@ -291,12 +292,12 @@ def bench_linearization(cfg):
     print(f"  discretisation ({Mb.shape[-1]}x{Mb.shape[-1]} blocks): batched Taylor "
           f"{len(Mb) / t_ours:,.0f} blocks/s ({1e6 * t_ours / len(Mb):.1f} us), scipy expm "
           f"{len(Mb) / t_sp:,.0f} blocks/s ({1e6 * t_sp / len(Mb):.1f} us) -> "
-          f"{t_sp / t_ours:.1f}x (agree to {e_err:.0e})")  # fmt: skip
+          f"{t_sp / t_ours:.1f}x (agree to {e_err:.0e})")
     return {"blocks": blocks, "interp_samples": M, "direct_blocks_per_s": blocks / t_dir,
             "interp_blocks_per_s": blocks / t_int, "interp_ratio": t_dir / t_int,
             "interp_rel": err, "taylor_us_per_block": 1e6 * t_ours / len(Mb),
             "scipy_expm_us_per_block": 1e6 * t_sp / len(Mb), "expm_ratio": t_sp / t_ours,
-            "expm_rel": e_err}  # fmt: skip
+            "expm_rel": e_err}
 
 
 # ------------------------------------------------------------------ (c) builds
@@ -327,7 +328,7 @@ def _peak_rss_mib(text, n_jobs=1):
         "print(time.perf_counter() - t0, base, hwm())\n"
     )
     res = subprocess.run([sys.executable, "-c", code], input=text, capture_output=True,
-                         text=True, check=True)  # fmt: skip
+                         text=True, check=True)
     t, base, peak = map(float, res.stdout.split())
     return t, base, peak
 
@@ -359,7 +360,7 @@ def _fixed_plus_power(x, y):
     b0 = y[-1] / x[-1] ** p0
     res = least_squares(lambda q: (q[0] + q[1] * (x / x[0]) ** q[2]) / y - 1.0,
                         [0.0, b0 * x[0] ** p0, p0],
-                        bounds=([0.0, 0.0, 0.1], [y.min(), np.inf, 3.0]))  # fmt: skip
+                        bounds=([0.0, 0.0, 0.1], [y.min(), np.inf, 3.0]))
     a, b, p = res.x
     return float(a), float(b / x[0] ** p), float(p)
 
@@ -383,7 +384,7 @@ def bench_build(cfg):
     t2_cold, _ = best_of(lambda: build_grid(cfg, n_jobs=2), 1)
     t2, _ = best_of(lambda: build_grid(cfg, n_jobs=2), 2)
     print(
-        f"  build paper ({g.reasons.size} grid points, {g.rho.size} circles): n_jobs=1 "
+        f"  build paper ({g.reasons.size} grid points, {g.spectral_radius.size} circles): n_jobs=1 "
         f"{t1:.2f} s; n_jobs=2 {t2_cold:.2f} s cold (worker start-up), {t2:.2f} s warm"
     )
     _, base, peak = _peak_rss_mib(text)
@@ -392,8 +393,8 @@ def bench_build(cfg):
         f"({peak - base:.0f} MiB above the interpreter with its imports, {base:.0f} MiB)"
     )
     out.update(n_jobs_1_s=t1, n_jobs_2_cold_s=t2_cold, n_jobs_2_warm_s=t2,
-               grid_points=int(g.reasons.size), circles=int(g.rho.size),
-               peak_rss_mib=peak, peak_rss_above_imports_mib=peak - base)  # fmt: skip
+               grid_points=int(g.reasons.size), circles=int(g.spectral_radius.size),
+               peak_rss_mib=peak, peak_rss_above_imports_mib=peak - base)
 
     # growth in grid points, two ways. Speeds refined: one job per speed, each with the
     # same cost profile, so this is the growth of the work per grid point. Tilts
@@ -408,38 +409,38 @@ def bench_build(cfg):
     speeds = _refinements(cfg.grid.speeds, 2)
     pts, times = _growth(
         "grid", [(f"{2**i}x speeds", _variant(text, speeds=v)) for i, v in enumerate(speeds)],
-        lambda g: g.rho.size, "circles")  # fmt: skip
+        lambda g: g.spectral_radius.size, "circles")
     e_pts = _exponent(pts, times)
     tilts = _refinements(np.rad2deg(cfg.grid.tilts), 3)
     pts_t, times_t = _growth(
         "grid", [(f"{2**i}x tilts", _variant(text, tilts=a)) for i, a in enumerate(tilts)],
-        lambda g: g.rho.size, "circles")  # fmt: skip
+        lambda g: g.spectral_radius.size, "circles")
     e_tilts = _exponent(pts_t, times_t)
     print(f"  growth exponent in grid points {e_pts:.2f} (speeds refined: one job each); "
-          f"{e_tilts:.2f} with tilts refined (batched in a job, sublinear)")  # fmt: skip
+          f"{e_tilts:.2f} with tilts refined (batched in a job, sublinear)")
     # 4x finer grid: the spacing of speeds and of tilts halved (midpoints added)
     fine = _variant(text, speeds=speeds[1], tilts=tilts[1])
     t_fine, g_fine = best_of(lambda: build_grid(config_from_text(fine, "fine.toml")), 1)
     _, _, peak4 = _peak_rss_mib(fine)
     print(
-        f"  4x finer grid (speeds and tilts refined, {g_fine.rho.size} circles): "
+        f"  4x finer grid (speeds and tilts refined, {g_fine.spectral_radius.size} circles): "
         f"{t_fine:.2f} s, peak memory {peak4:.0f} MiB (paper: {peak:.0f} MiB)"
     )
     rates = (1000.0, 2000.0, 4000.0, 8000.0, 16000.0)
     steps, t_steps = _growth(
         "control rate", [(f"{r:g} Hz", _variant(text, rate=r)) for r in rates],
-        lambda g: int(g.steps.sum()), "steps per sweep of all speeds")  # fmt: skip
+        lambda g: int(g.steps.sum()), "steps per sweep of all speeds")
     a, b, e_steps = _fixed_plus_power(steps, t_steps)
     e_steps_loglog = _exponent(steps, t_steps)
     print(f"  growth exponent in steps per period {e_steps:.2f} (t = a + b steps^p over 1-16 "
-          f"kHz, a = {a:.2f} s); plain log-log slope {e_steps_loglog:.2f}")  # fmt: skip
-    out.update(fine_grid_s=t_fine, fine_grid_circles=int(g_fine.rho.size),
+          f"kHz, a = {a:.2f} s); plain log-log slope {e_steps_loglog:.2f}")
+    out.update(fine_grid_s=t_fine, fine_grid_circles=int(g_fine.spectral_radius.size),
                fine_peak_rss_mib=peak4, growth_exponent_points=e_pts,
                growth_exponent_points_tilts=e_tilts, growth_exponent_steps=e_steps,
                growth_exponent_steps_loglog=e_steps_loglog, step_fit=[a, b, e_steps],
                scaling={"circles": pts, "circle_times_s": times, "circles_tilts": pts_t,
                         "circle_times_tilts_s": times_t, "steps": steps,
-                        "step_times_s": t_steps})  # fmt: skip
+                        "step_times_s": t_steps})
     return out
 
 
@@ -463,7 +464,7 @@ def plot(results, out_dir):
     ax[1].loglog(xs, ys, "o", label=f"build, log-log slope {_exponent(xs, ys):.2f}")
     ax[1].loglog(xs, fa + fb * xs**fp, "C1-", label=f"a + b x^p, p = {fp:.2f}, a = {fa:.2f} s")
     for a, x, y, lab in ((ax[0], sc["circles"], sc["circle_times_s"], "circles"),
-                         (ax[1], xs, ys, "steps per sweep of all speeds")):  # fmt: skip
+                         (ax[1], xs, ys, "steps per sweep of all speeds")):
         x = np.asarray(x, dtype=float)
         a.loglog(x, x / x[0] * y[0], "k:", label="slope 1")
         a.set_xlabel(lab)
@@ -499,7 +500,7 @@ def main():
     if "compiled_2t_ratio_vs_loop" in r:
         print(f"  Riccati kernel vs per-point loop: {r['compiled_1t_ratio_vs_loop']:.1f}x on 1 "
               f"thread, {r['compiled_2t_ratio_vs_loop']:.1f}x on 2 "
-              f"({r['compiled_2t_us_per_point_step']:.2f} us per point-step)")  # fmt: skip
+              f"({r['compiled_2t_us_per_point_step']:.2f} us per point-step)")
     results["plot"] = str(plot(results, Path(__file__).parent))
     return results
 

@@ -81,7 +81,7 @@ def main(argv=None) -> dict:
         res = run(paths)
     print(f"mvm: {res['samples']} samples in {res['flights']} flights: compare "
           f"{res['compare_s']:.1f} s, diagnose (12 candidates, leave-one-flight-out) "
-          f"{res['diagnose_s']:.1f} s; target < 30 s each")  # fmt: skip
+          f"{res['diagnose_s']:.1f} s; target < 30 s each")
     print(f"mvm: verdict: {res['verdict'][:160]}")
     if args.json:
         args.json.write_text(json.dumps(res, indent=2) + "\n")

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gainsched import codegen
+from gainsched import codegen, native
 from gainsched.runtime import Interpolator, runtime_data
 from gainsched.tables import load_table
 
@@ -83,7 +83,7 @@ def callgrind_instructions(exe: Path, q, workdir: Path) -> float | None:
         [valgrind, "--tool=callgrind", "--callgrind-out-file=/dev/null",
          "--toggle-collect=gs_lookup", str(exe), "benchq", str(qf), "1"],
         capture_output=True, text=True,
-    )  # fmt: skip
+    )
     m = re.search(r"Collected\s*:\s*(\d+)", res.stderr)
     return int(m.group(1)) / len(q) if m else None
 
@@ -99,7 +99,7 @@ def main(argv=None) -> int:
     interp = Interpolator(data)
     sets = query_sets(data, interp, args.queries)
     out = {"table": str(args.table), "queries": args.queries, "c": {}, "python": {}}
-    if codegen.find_cc() is None:
+    if native.find_cc() is None:
         print("no C compiler: C benchmarks skipped")
     else:
         with tempfile.TemporaryDirectory() as tmp:

@@ -95,7 +95,7 @@ def main():
     fast, res_fast = rtf(cfg, sched, ideal, 3)
     out["fast_rtf"] = fast
     print(f"  fast path ({DURATION:g} s, compiled plant, Python reference lookup in blocks): "
-          f"{fast:.1f}x real time")  # fmt: skip
+          f"{fast:.1f}x real time")
 
     def per_step(xi, xi_dot, alpha):  # no ``batch``: one single-query lookup per step
         return sched(xi, xi_dot, alpha)
@@ -114,7 +114,7 @@ def main():
             dev = float(np.abs(res_c.p_I - res_fast.p_I).max())
             out.update(fast_c_runtime_rtf=fast_c, c_runtime_vs_python_max_dev_m=dev)
             print(f"  fast path, C runtime lookup every step: {fast_c:.1f}x real time "
-                  f"(COG path within {dev:.1e} m of the Python-lookup flight)")  # fmt: skip
+                  f"(COG path within {dev:.1e} m of the Python-lookup flight)")
 
     short = Scenario("bench", 0.0, SPEED, BASELINE_DURATION, initial_error=INITIAL_ERROR)
     with numpy_plant():
@@ -122,22 +122,22 @@ def main():
     n = res_base.t.size
     dev = float(np.abs(res_base.p_I - res_fast.p_I[:n]).max())
     out.update(baseline_rtf=base, ratio=fast / base, baseline_vs_fast_max_dev_m=dev,
-               baseline_duration_s=BASELINE_DURATION)  # fmt: skip
+               baseline_duration_s=BASELINE_DURATION)
     print(f"  numpy baseline ({BASELINE_DURATION:g} s, numpy model, vectorised lookup per "
-          f"step): {base:.2f}x real time; same flight to {dev:.1e} m")  # fmt: skip
+          f"step): {base:.2f}x real time; same flight to {dev:.1e} m")
 
     mocap = Scenario("bench-mocap", 0.0, SPEED, DURATION, sensing=MOCAP,
-                     initial_error=INITIAL_ERROR)  # fmt: skip
+                     initial_error=INITIAL_ERROR)
     fast_mocap, _ = rtf(cfg, sched, mocap, 2)
     out["fast_mocap_rtf"] = fast_mocap
     print(f"  fast path with motion-capture sensing (200 Hz, noise, 5 ms latency): "
-          f"{fast_mocap:.1f}x real time")  # fmt: skip
+          f"{fast_mocap:.1f}x real time")
     print(f"sim: fast {fast:.1f}x real time, numpy baseline {base:.2f}x -> {fast / base:.0f}x "
           f"(target >= 10x real time: {'met' if fast >= 10 else 'not met'}); "
-          f"motion capture {fast_mocap:.1f}x")  # fmt: skip
+          f"motion capture {fast_mocap:.1f}x")
     out["load_average_1min_after"] = os.getloadavg()[0]
     print(f"  (1-min load average {out['load_average_1min_before']:.1f} before, "
-          f"{out['load_average_1min_after']:.1f} after, {os.cpu_count()} CPUs)")  # fmt: skip
+          f"{out['load_average_1min_after']:.1f} after, {os.cpu_count()} CPUs)")
     return out
 
 

@@ -31,12 +31,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .config import N_INPUT, N_LQR, Config
+from .constants import N_INPUT, N_LQR, TILT_BATCH
 from .errors import InputError
-from .grid import TILT_BATCH
+
+if TYPE_CHECKING:  # the config module calls this one: no import at run time
+    from .config import Config
 
 __all__ = ["BuildEstimate", "estimate_build", "check_budget", "GIB"]
 
@@ -139,12 +142,12 @@ def estimate_build(config: Config) -> BuildEstimate:
         mem = (step_text, step_key)
     else:
         mem = (f"the table of {shape}, {table / GIB:.3g} GiB, held twice while it is assembled",
-               _grid_key(axes))  # fmt: skip
+               _grid_key(axes))
     term = max(cpu_terms, key=lambda k: cpu_terms[k])
     two = {k: axes[k] for k in ("grid.speeds", "grid.tilts_deg")}
     if term == "steps" and rate <= REF_RATE_HZ and n_v > REF_GRID["grid.speeds"]:
         cpu_why = (f"{n_t} tilts x {steps_sum:.3g} steps over {n_v} speeds at {rate:g} Hz",
-                   _grid_key(two))  # fmt: skip
+                   _grid_key(two))
     elif term == "steps":
         cpu_why = (f"{n_t} tilts x {step_text}", step_key)
     elif term == "circles":
@@ -154,7 +157,7 @@ def estimate_build(config: Config) -> BuildEstimate:
     lim = config.limits
     worse = mem if peak / (lim.max_memory_gib * GIB) >= cpu / lim.max_build_cpu_s else cpu_why
     return BuildEstimate(peak, worker, table, cpu, steps_max, *worse, memory_term=mem,
-                         cpu_term=cpu_why)  # fmt: skip
+                         cpu_term=cpu_why)
 
 
 def _fmt(x: float) -> str:

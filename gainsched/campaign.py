@@ -135,7 +135,7 @@ HIDDEN: dict[str, HiddenEffect] = {
                        (("depth", 0.15), ("xi0_deg", 90.0), ("width_deg", 25.0))),),
                      custom=AzimuthThrustLoss),
     )
-}  # fmt: skip
+}
 
 
 def default_flights(duration: float = 3.0, seed: int = 1) -> tuple[Scenario, ...]:
@@ -147,12 +147,12 @@ def default_flights(duration: float = 3.0, seed: int = 1) -> tuple[Scenario, ...
         ("tilt20-v8", 20, 8.0, ()), ("tilt40-v7", 40, 7.0, ()),
         ("speedup", 0, 3.0, (Maneuver(0.6, 12.0, 6.25),)),
         ("braking", 0, 12.0, (Maneuver(0.6, 3.0, 8.0),)),
-    ]  # fmt: skip
+    ]
     return tuple(
         Scenario(nm, math.radians(tilt), v, duration, man,
                  sensing=dataclasses.replace(sens, seed=seed + i))
         for i, (nm, tilt, v, man) in enumerate(spec)
-    )  # fmt: skip
+    )
 
 
 def plant_config(design: Config, hidden: HiddenEffect | str) -> Config:
@@ -162,7 +162,7 @@ def plant_config(design: Config, hidden: HiddenEffect | str) -> Config:
     for section, key, value in h.sections:
         if key is None:
             text = set_section(text, section, [(k, v, None) for k, v in value],
-                               f"hidden: {h.name}")  # fmt: skip
+                               f"hidden: {h.name}")
         else:
             text = set_value(text, section, key, value, f"hidden: {h.name}")
     ctx = _registered(h.custom) if h.custom else contextlib.nullcontext()
@@ -186,12 +186,12 @@ def _trim(log: FlightLog, t0: float, load_cell: bool, hidden: str) -> FlightLog:
     meta = dict(log.meta)
     meta["notes"] = f"simulated by gainsched campaign (hidden: {hidden})"
     return log_from_arrays(log.t[keep], log.p_I[keep], log.q[keep], log.T_cmd[keep], meta,
-                           source=log.source, **opt)  # fmt: skip
+                           source=log.source, **opt)
 
 
 def fly(design: Config, scheduler, scenarios, plant: Config | None = None, *,
         latency: float = 0.0, load_cell: bool = True, trim_s: float = 0.25,
-        hidden: str = "none", custom=None) -> list[FlightLog]:  # fmt: skip
+        hidden: str = "none", custom=None) -> list[FlightLog]:
     """Fly ``scenarios`` on ``plant`` with ``scheduler`` and return the flight logs.
 
     The first ``trim_s`` s (start-up transient) are dropped; ``latency`` delays the
@@ -210,13 +210,13 @@ def fly(design: Config, scheduler, scenarios, plant: Config | None = None, *,
 
 def campaign(design: Config, scheduler, hidden: str = "none", *, scenarios=None,
              duration: float = 3.0, load_cell: bool = True,
-             seed: int = 1) -> list[FlightLog]:  # fmt: skip
+             seed: int = 1) -> list[FlightLog]:
     """Fly the default (or given) scenarios on the plant with the hidden effect ``hidden``."""
     h = HIDDEN[hidden]
     scenarios = default_flights(duration, seed) if scenarios is None else scenarios
     plant = plant_config(design, h)
     return fly(design, scheduler, scenarios, plant, latency=h.latency, load_cell=load_cell,
-               hidden=h.name, custom=h.custom)  # fmt: skip
+               hidden=h.name, custom=h.custom)
 
 
 def write_campaign(out_dir, logs, fmt: str = "csv") -> list[Path]:

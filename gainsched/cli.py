@@ -42,7 +42,7 @@ class _OneLineErrors(click.Group):
     error; Ctrl-C as ``gainsched: interrupted`` with exit code 130."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True,
-             **extra):  # fmt: skip
+             **extra):
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.UsageError as exc:
@@ -149,9 +149,9 @@ def _speed_option(fn):
     help="Circle tilt alpha_C, deg."
 )
 @click.option("--samples", type=click.IntRange(4, 3600), default=12, show_default=True,
-              help="Azimuth samples over one period (4-3600).")  # fmt: skip
+              help="Azimuth samples over one period (4-3600).")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Also write the table as CSV (SI units, xi in deg).")  # fmt: skip
+              help="Also write the table as CSV (SI units, xi in deg).")
 @user_errors
 def nominal(config, speed, tilt, samples, csv_path):
     """Nominal constant-speed circle over the azimuth: roll (deg), collective and motor
@@ -175,9 +175,9 @@ def nominal(config, speed, tilt, samples, csv_path):
         rows.append(
             (np.rad2deg(nom.z[k, 1]) % 360, np.rad2deg(nom.phi[k]), nom.collective[k],
              *nom.u[k], nom.tension[k], g_load, why)
-        )  # fmt: skip
+        )
     head = ("xi_deg", "roll_deg", "T_C_N", "T1_N", "T2_N", "T3_N", "T4_N", "tension_N", "g_load",
-            "feasibility")  # fmt: skip
+            "feasibility")
     click.echo(
         f"speed {speed:g} m/s (xi_dot {speed / model.r:.4g} rad/s), tilt {tilt:g} deg, "
         f"period {2 * np.pi * model.r / abs(speed):.3f} s, "
@@ -212,7 +212,7 @@ def _cluster_options(fn):
         click.option("--connect-timeout", type=float, default=DEFAULT_CONNECT_TIMEOUT,
                      show_default=True, metavar="SECONDS",
                      help="How long to wait for the Dask scheduler and a first worker."),
-    ]  # fmt: skip
+    ]
     for option in reversed(options):
         fn = option(fn)
     return fn
@@ -226,7 +226,7 @@ def _nanmax(a) -> str:
 @cli.command()
 @CONFIG
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
-              default=Path("tables"), show_default=True, help="Output folder.")  # fmt: skip
+              default=Path("tables"), show_default=True, help="Output folder.")
 @_cluster_options
 @user_errors
 def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
@@ -260,7 +260,7 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     click.echo(
         f"{out}: {n_pts} points ({cfg.grid.tilts.size} tilts x {n_v} speeds x "
         f"{cfg.grid.azimuth_samples} azimuths), {100 * feas / n_pts:.1f}% feasible, "
-        f"worst closed-loop spectral radius {_nanmax(grid.rho)}, "
+        f"worst closed-loop spectral radius {_nanmax(grid.spectral_radius)}, "
         f"{time.perf_counter() - t0:.1f} s, {out.stat().st_size / 1024:.0f} KiB"
     )
     click.echo("  C: " + ", ".join(str(p) for p in c_paths))
@@ -270,21 +270,21 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
 @CONFIG
 @click.option("--vary", multiple=True, metavar="KEY=v1,v2,...",
               help="Values of one parameter, SI (e.g. vehicle.mass=0.45,0.5,0.55); repeat "
-              "for a Cartesian product. Keys: docs/distributed.md.")  # fmt: skip
+              "for a Cartesian product. Keys: docs/distributed.md.")
 @click.option("--monte-carlo", type=click.IntRange(0), default=0, metavar="N",
               help="Monte Carlo samples (per --vary combination) of the --sigma keys.")
 @click.option("--seed", type=click.IntRange(0), default=0, show_default=True,
-              help="Seed of the Monte Carlo draws.")  # fmt: skip
+              help="Seed of the Monte Carlo draws.")
 @click.option("--sigma", multiple=True, metavar="KEY=REL",
               help="Relative standard deviation of a sampled parameter (e.g. "
-              "vehicle.mass=0.05): value = nominal (1 + REL z), z ~ N(0, 1).")  # fmt: skip
+              "vehicle.mass=0.05): value = nominal (1 + REL z), z ~ N(0, 1).")
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               required=True, help="Output folder (NAME.toml, NAME.h5 per variant; "
-              "sweep.csv, sweep.json).")  # fmt: skip
+              "sweep.csv, sweep.json).")
 @_cluster_options
 @user_errors
 def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, scheduler,
-          connect_timeout):  # fmt: skip
+          connect_timeout):
     """Build a gain table per vehicle variant (--vary) or Monte Carlo sample (--monte-carlo,
     --sigma) of CONFIG, and a results table: feasible %, worst monodromy spectral radius,
     max |K|, min tension margin (N) and table SHA-256 per variant."""
@@ -301,21 +301,21 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
     base = load_config(config)
     check_out_dir(out_dir)
     plan = make_sweep(base, [parse_vary(v) for v in vary], monte_carlo=monte_carlo, seed=seed,
-                      sigma=[parse_sigma(s) for s in sigma])  # fmt: skip
+                      sigma=[parse_sigma(s) for s in sigma])
     t0 = time.perf_counter()
     total = len(plan.variants) * base.grid.speeds.size
     with executor(backend, scheduler, jobs, connect_timeout=connect_timeout) as ex:
         if backend == "dask":
             click.echo(f"sweep {base.name} on {ex.description}", err=True)
         with tqdm(total=total, unit="speed", desc=f"sweep {base.name} "
-                  f"({len(plan.variants)} variants)", disable=None) as bar:  # fmt: skip
+                  f"({len(plan.variants)} variants)", disable=None) as bar:
             with staged(out_dir) as stage:  # every variant appears at once, or none
                 rows = run_sweep(plan, stage, n_jobs=ex.n_jobs, backend=ex.backend,
-                                 progress=bar.update)  # fmt: skip
+                                 progress=bar.update)
     for line in format_rows(plan, rows):
         click.echo(line)
     click.echo(f"{out_dir}: {len(rows)} variants ({len(rows)} tables + configs), sweep.csv, "
-               f"sweep.json; {time.perf_counter() - t0:.1f} s")  # fmt: skip
+               f"sweep.json; {time.perf_counter() - t0:.1f} s")
 
 
 @cli.command()
@@ -330,10 +330,10 @@ def inspect(table):
 
     t = load_table(table)
     click.echo(f"{table}: {t.attrs['schema']}, config {t.name} (sha256 {t.config_sha256[:12]}), "
-               f"tool {t.attrs['tool_version']}, terminal cost {t.attrs['terminal']}")  # fmt: skip
+               f"tool {t.attrs['tool_version']}, terminal cost {t.attrs['terminal']}")
     tilts = ", ".join(f"{x:g}" for x in np.rad2deg(t.tilt))
     click.echo(f"  xi: {t.xi.size} samples over 360 deg; speeds {t.speed[0]:g}..{t.speed[-1]:g} "
-               f"m/s ({t.speed.size}); tilts {tilts} deg")  # fmt: skip
+               f"m/s ({t.speed.size}); tilts {tilts} deg")
     click.echo("  feasible azimuth fraction (rows: tilt deg, columns: speed m/s)")
     click.echo("        " + "".join(f"{v:6g}" for v in t.speed))
     for i, a in enumerate(np.rad2deg(t.tilt)):
@@ -359,7 +359,7 @@ def inspect(table):
     i, j = np.unravel_index(np.nanargmax(rho), rho.shape)
     click.echo(f"  worst closed-loop monodromy spectral radius {rho[i, j]:.5f} "
                f"(speed {t.speed[j]:g} m/s, tilt {np.rad2deg(t.tilt[i]):g} deg); "
-               f"all < 1: {bool(np.all(rho[np.isfinite(rho)] < 1))}")  # fmt: skip
+               f"all < 1: {bool(np.all(rho[np.isfinite(rho)] < 1))}")
 
 
 @cli.command("export-c")
@@ -419,7 +419,7 @@ def check(table, speed_stride, max_error):
 
     from tqdm import tqdm
 
-    from .runtime import midpoint_check
+    from .tablecheck import midpoint_check
     from .tables import load_table
 
     t = load_table(table)
@@ -481,15 +481,15 @@ def _scenario_path(name: str) -> Path:
 @cli.command()
 @CONFIG
 @click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
-              required=True, help="Gain table (HDF5) built from CONFIG.")  # fmt: skip
+              required=True, help="Gain table (HDF5) built from CONFIG.")
 @click.option("--scenario", required=True,
-              help="Scenario file, or a name in configs/scenarios (e.g. braking).")  # fmt: skip
+              help="Scenario file, or a name in configs/scenarios (e.g. braking).")
 @click.option("--plant", "plant_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Truth config for the plant (default: CONFIG).")  # fmt: skip
+              help="Truth config for the plant (default: CONFIG).")
 @click.option("--speed", type=FiniteFloat(0, MAX_SPEED, lo_open=True, unit="m/s"),
               help="Override the scenario's initial speed, m/s (0 < speed <= 100).")
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
-              required=True, help="Output folder (log.csv/.h5, metrics.json, plots).")  # fmt: skip
+              required=True, help="Output folder (log.csv/.h5, metrics.json, plots).")
 @user_errors
 def simulate(config, table_path, scenario, plant_path, speed, out_dir):
     """Fly a scenario in closed loop on the nonlinear plant with gains from the table."""
@@ -532,15 +532,15 @@ _REPO = Path(__file__).resolve().parents[1]
 @cli.command()
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               required=True, help="Output folder (report.md, report.json, one folder per "
-              "experiment).")  # fmt: skip
+              "experiment).")
 @click.option("--config", "config", type=click.Path(dir_okay=False, path_type=Path),
               default=_REPO / "configs" / "paper.toml", show_default="configs/paper.toml",
-              help="Design config (the paper vehicle).")  # fmt: skip
+              help="Design config (the paper vehicle).")
 @click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
               default=_REPO / "tables" / "paper.h5", show_default="tables/paper.h5",
-              help="Gain table built from the config.")  # fmt: skip
+              help="Gain table built from the config.")
 @click.option("--plant", "plant_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Truth config for the plant (default: the design config).")  # fmt: skip
+              help="Truth config for the plant (default: the design config).")
 @click.option("--quick", is_flag=True, help="Short smoke flights (for tests; seconds).")
 @user_errors
 def paper(out_dir, config, table_path, plant_path, quick):
@@ -563,9 +563,9 @@ def paper(out_dir, config, table_path, plant_path, quick):
     meta = {"table": str(table_path), "table_config_sha256": table.config_sha256}
     check_out_dir(out_dir)
     with tqdm(total=n, unit="flight", desc="paper", disable=None) as bar, \
-            staged(out_dir) as stage:  # fmt: skip
+            staged(out_dir) as stage:
         rep = run_paper(cfg, table_scheduler(table), stage, quick=quick, plant=plant,
-                        progress=bar.update, meta=meta)  # fmt: skip
+                        progress=bar.update, meta=meta)
     for r in rep.rows:
         mark = {True: "ok ", False: "NO ", None: "-  "}[r.agrees]
         click.echo(f"{mark} {r.figure:16s} {r.quantity}: paper {r.paper}; sim {r.simulated_text}")
@@ -586,9 +586,9 @@ def _load_for_compare(config):
 @CONFIG
 @_LOGS
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
-              help="Report folder: compare.json, compare.md and PNG plots.")  # fmt: skip
+              help="Report folder: compare.json, compare.md and PNG plots.")
 @click.option("--before", "before_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="An earlier config: its residual beside CONFIG's (before/after).")  # fmt: skip
+              help="An earlier config: its residual beside CONFIG's (before/after).")
 @click.option("--no-paper", is_flag=True, help="Skip the paper's thrust/drag analyses.")
 @user_errors
 def compare(config, logs, out_dir, before_path, no_paper):
@@ -625,13 +625,13 @@ def compare(config, logs, out_dir, before_path, no_paper):
 @CONFIG
 @_LOGS
 @click.option("--candidate", "candidates", multiple=True,
-              help="Only these candidates (repeatable; default: the whole library).")  # fmt: skip
+              help="Only these candidates (repeatable; default: the whole library).")
 @click.option("--apply", "do_apply", is_flag=True,
               help="Write the accepted effect and its fitted parameters to -o NEWCONFIG.")
 @click.option("-o", "--out", "new_config", type=click.Path(dir_okay=False, path_type=Path),
-              help="New config file for --apply.")  # fmt: skip
+              help="New config file for --apply.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path),
-              help="Report folder: diagnose.json/.md, ranking.png, before/after.")  # fmt: skip
+              help="Report folder: diagnose.json/.md, ranking.png, before/after.")
 @user_errors
 def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
     """Which physical effect is missing: fit every candidate effect the model lacks to
@@ -645,7 +645,7 @@ def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
         before_after_lines,
         compare_lines,
         diagnose_lines,
-        write_before_after,  # fmt: skip
+        write_before_after,
         write_compare,
         write_diagnose,
     )
@@ -673,7 +673,7 @@ def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
             text = apply_candidate(cfg, d.accepted)
             write_atomic(new_config, text.encode(), where="-o")
             click.echo(f"wrote {new_config} ({d.accepted.name}); rebuild the tables with "
-                       f"`gainsched build {new_config}`")  # fmt: skip
+                       f"`gainsched build {new_config}`")
             after = run(config_from_text(text, str(new_config)), logs)
             click.echo("")
             for line in before_after_lines(base, after):
@@ -690,17 +690,17 @@ def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
 @cli.command()
 @CONFIG
 @click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
-              required=True, help="Gain table (HDF5) built from CONFIG.")  # fmt: skip
+              required=True, help="Gain table (HDF5) built from CONFIG.")
 @click.option("--hidden", default="none", show_default=True,
-              help="Hidden effect of the plant (gainsched.campaign.HIDDEN).")  # fmt: skip
+              help="Hidden effect of the plant (gainsched.campaign.HIDDEN).")
 @click.option("--duration", type=click.FloatRange(1.0), default=3.0, show_default=True,
-              help="Seconds per flight.")  # fmt: skip
+              help="Seconds per flight.")
 @click.option("--no-load-cell", is_flag=True, help="Drop the tether tension column.")
 @click.option("--format", "fmt", type=click.Choice(["csv", "h5"]), default="csv",
-              show_default=True)  # fmt: skip
+              show_default=True)
 @click.option("--seed", type=int, default=1, show_default=True)
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
-              required=True, help="Output folder for the flight logs.")  # fmt: skip
+              required=True, help="Output folder for the flight logs.")
 @user_errors
 def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_dir):
     """Fly a synthetic test campaign (speeds 3-15 m/s, tilts 0/20/40 deg, a speed-up, a
@@ -714,11 +714,11 @@ def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_
     if hidden not in HIDDEN:
         known = ", ".join(HIDDEN)
         raise InputError("command line", "--hidden",
-                         f"unknown hidden effect {hidden!r} (known: {known})")  # fmt: skip
+                         f"unknown hidden effect {hidden!r} (known: {known})")
     cfg = _load_for_compare(config)
     check_out_dir(out_dir)
     logs = fly(cfg, table_scheduler(load_table(table_path)), hidden, duration=duration,
-               load_cell=not no_load_cell, seed=seed)  # fmt: skip
+               load_cell=not no_load_cell, seed=seed)
     with staged(out_dir) as stage:
         paths = write_campaign(stage, logs, fmt)
     click.echo(f"{out_dir}: {len(paths)} flights, hidden effect: {HIDDEN[hidden].doc}")

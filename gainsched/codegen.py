@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
+from .native import find_cc
 from .publish import publish, write_atomic
 from .runtime import Lookup, RuntimeData, runtime_data
 
@@ -42,7 +43,6 @@ __all__ = [
     "write_c_outputs",
     "flash_summary",
     "code_bytes",
-    "find_cc",
     "build_host",
     "CRuntime",
 ]
@@ -103,7 +103,7 @@ def _body(arr, fmt, indent=1, per_line=6) -> str:
 
 def render_header(data: RuntimeData) -> str:
     """The text of ``<name>_gains.h`` for runtime data (see :func:`runtime.runtime_data`)."""
-    from .nominal import REASONS
+    from .constants import MASK_NO_GAINS, REASONS
 
     n_a, n_v, n_xi, n = data.dims
     K = data.K if n_a > 1 else np.zeros((1, n_v, n_xi, 4, n), dtype=np.float32)
@@ -132,7 +132,7 @@ def render_header(data: RuntimeData) -> str:
         runtime_version=RUNTIME_VERSION,
         control_law="u = u_d - K (x - x_d); xi error wrapped to [-pi, pi)",
         state_names=", ".join(data.state_names) if data.state_names else "?",
-        mask_bits=f"{bits}; {0x80:#04x} no gains stored (zeros)",
+        mask_bits=f"{bits}; {MASK_NO_GAINS:#04x} no gains stored (zeros)",
         xi=_body(data.xi, c_float),
         speed=_body(data.speed, c_float),
         xi_dot=_body(data.xi_dot, c_float),
@@ -196,16 +196,6 @@ def write_c_outputs(table_path, out_dir=None) -> list[Path]:
 
 
 # --------------------------------------------------------------------------- sizes
-
-
-def find_cc(cross: bool = False) -> str | None:
-    """The host C compiler (``$CC``, cc, gcc, clang), or arm-none-eabi-gcc with ``cross``."""
-    if cross:
-        return shutil.which("arm-none-eabi-gcc")
-    for cand in (os.environ.get("CC"), "cc", "gcc", "clang"):
-        if cand and shutil.which(cand):
-            return cand
-    return None
 
 
 def code_bytes(*, cross: bool | None = None, opt: str = "-Os") -> tuple[int, str] | None:

@@ -1,12 +1,14 @@
-"""Model versus measurement: the residual of the model on flight logs (DESIGN.md section 7).
+"""Model versus measurement: the residual of the model on flight logs.
+
+The workflow and the statistics are described in docs/model-vs-measurement.md.
 
 Pipeline, per gap-free log segment (:class:`~gainsched.logs.FlightLog`):
 
 1. **Reduced coordinates from the pose.** The attachment point
    ``p_t = p_q + R_CB p_e`` in the circle frame gives the tether distance
    ``d = |p_t|`` and the spherical angles ``(delta, xi)``; ``R_CB`` gives the
-   Z-Y-X Euler angles ``(phi, theta, psi)``, ``chi = psi - xi`` (DESIGN.md
-   section 1, the conversion of :func:`gainsched.maximal.reduced_from_maximal`).
+   Z-Y-X Euler angles ``(phi, theta, psi)``, ``chi = psi - xi`` (docs/conventions.md,
+   the conversion of :func:`gainsched.maximal.reduced_from_maximal`).
    These six channels vary slowly even at 15 m/s (xi and psi grow linearly),
    which is why they, and not the Cartesian pose, are differentiated.
 2. **Differentiation.** Savitzky-Golay (:func:`scipy.signal.savgol_filter`,
@@ -62,6 +64,7 @@ from .rotations import (
 )
 
 __all__ = [
+    "centred_commands",
     "AXES",
     "UNITS",
     "BIN_VARIABLES",
@@ -251,7 +254,7 @@ def _reconstruct(ch, ch1, ch2, L_e):
             - dpsi * dtheta * cp * st,
         ],
         -1,
-    )  # fmt: skip
+    )
     R = matrix_from_euler_zyx(phi, theta, psi)
     sd, cd, sx, cx = np.sin(delta), np.cos(delta), np.sin(xi), np.cos(xi)
     zero = np.zeros_like(sd)
@@ -266,7 +269,7 @@ def _reconstruct(ch, ch1, ch2, L_e):
     e_ddot = (
         e_d * col(ddelta2) + e_x * col(dxi2) + e_dd * col(ddelta**2)
         + 2 * e_dx * col(ddelta * dxi) + e_xx * col(dxi**2)
-    )  # fmt: skip
+    )
     p_e = np.array([-L_e, 0.0, 0.0])
     w_pe = np.cross(w, p_e)
     p_t = col(d) * e
@@ -295,7 +298,7 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
     """
     an = config.analysis
     rows = (f"{log.row_label}s {log.where(0).split()[-1]}-{log.where(len(log) - 1).split()[-1]}"
-            if len(log) else "no samples")  # fmt: skip
+            if len(log) else "no samples")
     if not np.any(np.sum(log.T_cmd, axis=-1) > 0):
         raise InputError(
             log.source,
@@ -335,7 +338,7 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
         R, w_dot, e, axes, np.asarray(log.T_cmd, float),
         None if tension is None else np.asarray(tension, float),
         dict(zip(_CHANNELS, map(float, sig), strict=True)), L_e,
-    )  # fmt: skip
+    )
 
 
 def _noisy(log: FlightLog, meas: Measured, config: Config, rng) -> Measured:
@@ -359,7 +362,7 @@ def _noisy(log: FlightLog, meas: Measured, config: Config, rng) -> Measured:
     z, acc, p, v, a, R, w_dot, e, axes = _reconstruct(ch, ch1, ch2, meas.L_e)
     return Measured(meas.name, meas.source, meas.alpha, meas.gamma, meas.t, meas.t_flight,
                     meas.window, meas.order, z, acc, ch[0], ch1[0], p, v, a, R, w_dot, e, axes,
-                    meas.T_cmd, meas.tension, meas.raw_sigma, meas.L_e)  # fmt: skip
+                    meas.T_cmd, meas.tension, meas.raw_sigma, meas.L_e)
 
 
 # --------------------------------------------------------------------------- prediction
@@ -373,7 +376,7 @@ def _delayed(t, x, latency):
     return np.stack([np.interp(tq, t, x[:, j]) for j in range(x.shape[1])], -1)
 
 
-def _centred(T):
+def centred_commands(T):
     """Command at the sample time from interval-held commands (mean of the adjacent two)."""
     out = T.copy()
     out[:-1] = 0.5 * (T[:-1] + T[1:])
@@ -468,7 +471,7 @@ def _kinematics(meas: Measured) -> Kinematics:
 
 
 def predict(model: Model, meas: Measured, *, latency: float | None = None,
-            inputs: bool = True) -> Prediction:  # fmt: skip
+            inputs: bool = True) -> Prediction:
     """The model's accelerations for the measured state and the logged commands (step 3).
 
     ``latency`` (s, default: the config's ``analysis.latency_s``) delays the commands and
@@ -477,7 +480,7 @@ def predict(model: Model, meas: Measured, *, latency: float | None = None,
     cfg = model.config
     lat = cfg.analysis.latency_s if latency is None else latency
     T_raw = _delayed(meas.t, meas.T_cmd, lat)
-    u = _centred(T_raw)
+    u = centred_commands(T_raw)
     z = meas.z
     kin = _kinematics(meas)
     if model.n_extra:
@@ -506,7 +509,7 @@ def predict(model: Model, meas: Measured, *, latency: float | None = None,
     tau = (
         np.einsum("nk,jk->nj", T, model.alloc[1:]) + tau_eff
         - f_t[:, None] * np.cross(model.p_e, e_B) - np.cross(w, np.einsum("nk,jk->nj", w, model.J))
-    )  # fmt: skip
+    )
     wd = np.einsum("nk,jk->nj", tau, np.linalg.inv(model.J))
     acc = np.einsum("nij,nj->ni", meas.axes, a_pred)
     kw = dict(window_length=meas.window, polyorder=meas.order, axis=0, mode="interp")
@@ -591,11 +594,11 @@ def _residual(model: Model, meas: Measured, pred: Prediction) -> Residual:
         inp[nm] = pred.inputs[c, j]
         inp[nm + "_rate"] = rates[c, j]
     return Residual(meas.name, meas.source, meas.t[c], measured, predicted, residual, variables,
-                    inp, pred.tension_source, meas.window)  # fmt: skip
+                    inp, pred.tension_source, meas.window)
 
 
 def residuals(config: Config, measured, *, effects=None, latency=None,
-              model: Model | None = None) -> list[Residual]:  # fmt: skip
+              model: Model | None = None) -> list[Residual]:
     """Residuals of ``config`` (optionally with other ``effects``) on measured segments."""
     model = model or Model(config, effects)
     return [_residual(model, m, predict(model, m, latency=latency)) for m in measured]
@@ -689,7 +692,7 @@ class AxisStats:
             "acf": {"lag_s": self.acf_lags.tolist(), "value": self.acf.tolist()},
             "ccf_peaks": {k: {"abs_rho": v[0], "lag_s": v[1], "band": v[2], "significant": v[3]}
                           for k, v in self.ccf.items()},
-        }  # fmt: skip
+        }
 
 
 def _num(x):
@@ -714,7 +717,7 @@ def _pooled_corr(xs, ys, max_lag):
 
 
 def axis_stats(res: list[Residual], axis: str, noise_floor: float = math.nan,
-               max_lag_s: float = 0.5) -> AxisStats:  # fmt: skip
+               max_lag_s: float = 0.5) -> AxisStats:
     """Statistics of ``axis`` pooled over segments (see :class:`AxisStats`)."""
     from scipy.stats import chi2, norm
 
@@ -754,11 +757,11 @@ def axis_stats(res: list[Residual], axis: str, noise_floor: float = math.nan,
         curves[nm] = rho
     return AxisStats(axis, UNITS[axis], n, rms, bias, float(np.std(e)), fit, float(noise_floor),
                      bool(q <= limit), q, limit, frac, np.arange(L + 1) * dt, acf, band, ccf,
-                     np.arange(-L, L + 1) * dt, curves)  # fmt: skip
+                     np.arange(-L, L + 1) * dt, curves)
 
 
 def noise_floor(config: Config, measured, segs, *, effects=None, latency=None,
-                seed: int = 0) -> dict:  # fmt: skip
+                seed: int = 0) -> dict:
     """RMS change of each residual axis when motion-capture noise of the estimated level is
     added to the raw pose channels once more: the residual the noise alone explains."""
     model = Model(config, effects)
@@ -853,7 +856,7 @@ def where_it_fails(res: list[Residual], noise: dict, n_bins: int = 8, min_count:
         out["worst"] = {"axis": worst_axis}
         out["sentence"] = (f"{worst_axis} residual is the largest ({r_all:.3g} {unit} RMS, "
                            f"{ratio[worst_axis]:.1f}x its noise floor) and uniform over the "
-                           "flown conditions")  # fmt: skip
+                           "flown conditions")
         return out
     v, spread = best
     tab = tables[v]
@@ -881,7 +884,7 @@ def where_it_fails(res: list[Residual], noise: dict, n_bins: int = 8, min_count:
     out["worst"] = {"axis": worst_axis, "variable": v, "spread": spread,
                     "bin_center": float(centers[k]), "bin": [float(edges[k]), float(edges[k + 1])],
                     "rms": float(rms[k]), "bias": float(bias[k]),
-                    "rms_elsewhere": r_low}  # fmt: skip
+                    "rms_elsewhere": r_low}
     out["sentence"] = (
         f"{worst_axis} residual {trend} (RMS {rms[k]:.3g} {unit}, bias {bias[k]:+.3g} {unit} "
         f"there vs {r_low:.3g} elsewhere; {ratio[worst_axis]:.1f}x the noise floor overall)"
@@ -933,11 +936,11 @@ class Comparison:
                                "rms_over_noise": self.where["rms_over_noise"],
                                "tables": self.where["tables"]},
             "notes": self.notes,
-        }  # fmt: skip
+        }
 
 
 def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
-            notes=None) -> Comparison:  # fmt: skip
+            notes=None) -> Comparison:
     """Load, differentiate, predict and summarise: the whole of ``gainsched compare``.
 
     ``logs``: paths or :class:`FlightLog` segments. ``measured``/``segs``/``notes`` may be

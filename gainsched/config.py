@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .constants import MAX_XI, N_INPUT, N_LQR, N_STATE, XI_DOT_LIMIT
 from .errors import InputError
 
 __all__ = [
@@ -44,13 +45,11 @@ __all__ = [
     "N_STATE",
     "N_INPUT",
     "N_LQR",
+    "Section",
 ]
 
-N_STATE = 10  # (delta, xi, delta', xi', phi, theta, chi, wx, wy, wz)
-N_INPUT = 4  # (T1, T2, T3, T4)
-N_LQR = 11  # the above plus the integral of the delta error (paper Sec. IV.B)
 
-LINK_MODELS = ("rigid", "spring-damper", "sls", "lumped-mass")  # seed 001 sec. 3.1
+LINK_MODELS = ("rigid", "spring-damper", "sls", "lumped-mass")  # gainsched.links
 TERMINAL_COSTS = ("periodic", "single-period")
 
 #: ``name``: 1..64 characters of [A-Za-z0-9_.-], the first a letter or a digit (a file name
@@ -66,7 +65,7 @@ MIN_STEPS_PER_PERIOD = 32  # control steps over the fastest circle of the grid
 #: grid the default [limits] allow is far below this (parsing 20 MB of TOML takes seconds)
 MAX_CONFIG_CHARS = 2**20
 _KEY_LINE = re.compile(r"^[ \t]*([A-Za-z0-9_\-]+)[ \t]*=|^[ \t]*\[+[ \t]*([^\]\n]+?)[ \t]*\]",
-                       re.M)  # fmt: skip
+                       re.M)
 
 
 @dataclass(frozen=True)
@@ -231,7 +230,7 @@ def _numeric_list(v) -> bool:
     )
 
 
-class _Section:
+class Section:
     """A TOML table being consumed: tracks which keys were read, to reject unknown ones."""
 
     def __init__(self, source: str, prefix: str, data):
@@ -293,8 +292,8 @@ class _Section:
             raise self.error(k, "entries must be finite")
         return a
 
-    def sub(self, k, default=...) -> _Section:
-        return _Section(self.source, self.key(k), self.get(k, default))
+    def sub(self, k, default=...) -> Section:
+        return Section(self.source, self.key(k), self.get(k, default))
 
     def done(self):
         extra = sorted(set(self.data) - self.used)
@@ -302,7 +301,7 @@ class _Section:
             raise self.error(extra[0], "unknown key")
 
 
-def check_square_weight(sec: _Section, k: str, n: int, *, definite: bool) -> np.ndarray:
+def check_square_weight(sec: Section, k: str, n: int, *, definite: bool) -> np.ndarray:
     """Q or R: n diagonal entries or an n x n symmetric matrix; PSD (Q) or PD (R)."""
     a = sec.array(k)
     if a.ndim == 1:
@@ -322,7 +321,7 @@ def check_square_weight(sec: _Section, k: str, n: int, *, definite: bool) -> np.
     return a
 
 
-def check_axis(sec: _Section, k: str, *, nonneg: bool, positive: bool) -> np.ndarray:
+def check_axis(sec: Section, k: str, *, nonneg: bool, positive: bool) -> np.ndarray:
     a = sec.array(k)
     if a.ndim != 1 or a.size == 0:
         raise sec.error(k, "must be a non-empty list of numbers")
@@ -335,7 +334,7 @@ def check_axis(sec: _Section, k: str, *, nonneg: bool, positive: bool) -> np.nda
     return a
 
 
-def check_float32_axis(sec: _Section, k: str, values: np.ndarray, what: str) -> None:
+def check_float32_axis(sec: Section, k: str, values: np.ndarray, what: str) -> None:
     """The tables store axes as float32: ``values`` must stay finite and strictly increasing.
 
     ``values`` is the axis as stored (e.g. speeds / r for ``xi_dot``, rad for tilts);
@@ -384,7 +383,7 @@ def check_name(source, name: str, *, from_file: bool = False) -> str:
     )
 
 
-def _vehicle(sec: _Section) -> Vehicle:
+def _vehicle(sec: Section) -> Vehicle:
     mass = sec.number("mass", positive=True)
     if not MASS_RANGE[0] <= mass <= MASS_RANGE[1]:
         raise sec.error(
@@ -422,7 +421,7 @@ def _vehicle(sec: _Section) -> Vehicle:
     return Vehicle(mass, J, layout, arm, kappa, tmin, tmax)
 
 
-def _tether(sec: _Section) -> Tether:
+def _tether(sec: Section) -> Tether:
     length = sec.number("length", positive=True)
     off = sec.number("attachment_offset", nonneg=True)
     if off >= length:
@@ -447,7 +446,7 @@ def _tether(sec: _Section) -> Tether:
     return Tether(length, off, link, stiffness, damping, k_s, mass, n)
 
 
-def _effects(sec: _Section) -> tuple[EffectSpec, ...]:
+def _effects(sec: Section) -> tuple[EffectSpec, ...]:
     from .effects import EFFECTS  # the registry; imported here to avoid a cycle
 
     out = []
@@ -469,7 +468,7 @@ def _effects(sec: _Section) -> tuple[EffectSpec, ...]:
     return tuple(out)
 
 
-def _control(sec: _Section) -> Control:
+def _control(sec: Section) -> Control:
     rate = sec.number("rate_hz", positive=True)
     if rate > MAX_RATE_HZ:
         raise sec.error("rate_hz", f"must be <= {MAX_RATE_HZ:g} Hz, got {rate:g}")
@@ -483,7 +482,7 @@ def _control(sec: _Section) -> Control:
         raise sec.error(
             "Q", "the xi entry (index 1, azimuth) must be > 0: an unweighted azimuth is "
             "undetectable and the LQR has no stabilising solution"
-        )  # fmt: skip
+        )
     R = check_square_weight(sec, "R", N_INPUT, definite=True)
     # The table serves reversed circles through the direction mirror S2, exact only if
     # the weights are invariant under it (docs/symmetry.md).
@@ -497,7 +496,7 @@ def _control(sec: _Section) -> Control:
         )
     if not np.array_equal(P_U @ R @ P_U, R):
         raise sec.error("R", "must be invariant under the motor swap 1<->4, 2<->3 "
-                        "(R11 = R44, R22 = R33; docs/symmetry.md)")  # fmt: skip
+                        "(R11 = R44, R22 = R33; docs/symmetry.md)")
     integ = sec.boolean("integrator", True)
     term = sec.string("terminal", "periodic", choices=TERMINAL_COSTS)
     sec.done()
@@ -506,9 +505,8 @@ def _control(sec: _Section) -> Control:
     return Control(rate, Q, R, integ, term)
 
 
-def _grid(sec: _Section, radius: float) -> Grid:
+def _grid(sec: Section, radius: float) -> Grid:
     """``[grid]``; ``radius`` (m, rho + L_e) gives the azimuth-rate axis speeds / radius."""
-    from .runtime import MAX_XI, XI_DOT_LIMIT  # the C runtime's limits (lazy: no cycle)
 
     speeds = check_axis(sec, "speeds", nonneg=False, positive=True)
     if speeds[-1] > MAX_SPEED:
@@ -561,7 +559,7 @@ def check_rate(source, control: Control, grid: Grid, radius: float) -> None:
         )
 
 
-def _feasibility(sec: _Section) -> Feasibility:
+def _feasibility(sec: Section) -> Feasibility:
     f = Feasibility(
         sec.number("min_tension", Feasibility.min_tension, nonneg=True),
         sec.number("thrust_margin", Feasibility.thrust_margin, nonneg=True),
@@ -570,7 +568,7 @@ def _feasibility(sec: _Section) -> Feasibility:
     return f
 
 
-def _analysis(sec: _Section) -> Analysis:
+def _analysis(sec: Section) -> Analysis:
     window = sec.number("savgol_window_s", Analysis.savgol_window_s, positive=True)
     if window > 10:
         raise sec.error("savgol_window_s", f"must be <= 10 s, got {window:g}")
@@ -586,7 +584,7 @@ def _analysis(sec: _Section) -> Analysis:
     return Analysis(window, order, latency)
 
 
-def _limits(sec: _Section) -> Limits:
+def _limits(sec: Section) -> Limits:
     mem = sec.number("max_memory_gib", Limits.max_memory_gib, positive=True)
     cpu = sec.number("max_build_cpu_s", Limits.max_build_cpu_s, positive=True)
     sec.done()
@@ -643,7 +641,7 @@ def _config(text: str, source: str, check_default_name: bool) -> Config:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(source, "", f"not valid TOML ({exc})") from None
-    top = _Section(source, "", data)
+    top = Section(source, "", data)
     schema = top.string("schema", SCHEMA)
     if schema != SCHEMA:
         raise top.error("schema", f"must be {SCHEMA!r}, got {schema!r}")
@@ -670,7 +668,7 @@ def _config(text: str, source: str, check_default_name: bool) -> Config:
         raise InputError(source, "feasibility.thrust_margin", "leaves no usable thrust range")
     top.done()
     cfg = Config(name, vehicle, tether, effects, g, control, grid, feas, source, text,
-                 analysis=analysis, limits=limits)  # fmt: skip
+                 analysis=analysis, limits=limits)
     check_budget(cfg, source)
     return cfg
 
@@ -694,7 +692,7 @@ def _decode(p: Path, data: bytes) -> str:
         even, odd = data[0::2].count(0), data[1::2].count(0)
         if max(even, odd) > len(data) // 8:
             raise InputError(p, "", "looks like UTF-16 text (NUL bytes between the "
-                             "characters); save it as UTF-8")  # fmt: skip
+                             "characters); save it as UTF-8")
         line = data[: data.index(b"\x00")].count(b"\n") + 1
         raise InputError(p, "", f"not a text file (NUL byte on line {line})")
     if data.startswith(b"\xef\xbb\xbf"):
@@ -707,7 +705,7 @@ def _decode(p: Path, data: bytes) -> str:
         raise InputError(
             p, "", f"not UTF-8 text (byte 0x{data[exc.start]:02x} at line {line}, column "
             f"{col}: {exc.reason}); save it as UTF-8"
-        ) from None  # fmt: skip
+        ) from None
     # as text-mode reading did: universal newlines, so the config hash does not depend on them
     return text.replace("\r\n", "\n").replace("\r", "\n")
 
@@ -723,7 +721,7 @@ def load_config(path) -> Config:
     try:
         if p.stat().st_size > 64 * MAX_CONFIG_CHARS:  # do not even read it
             raise InputError(p, "", f"{p.stat().st_size / 2**20:.3g} MiB is no config (a config "
-                             f"may have at most {MAX_CONFIG_CHARS // 2**20} MiB)")  # fmt: skip
+                             f"may have at most {MAX_CONFIG_CHARS // 2**20} MiB)")
         data = p.read_bytes()
     except OSError as exc:
         raise InputError(p, "", f"cannot read ({exc.strerror})") from None

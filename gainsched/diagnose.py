@@ -93,7 +93,7 @@ class FitParam:
 
 
 @dataclass(frozen=True)
-class Variant:
+class CandidateModel:
     """What a candidate at given parameters changes: the config, the effects, the latency."""
 
     config: Config
@@ -115,7 +115,7 @@ class Candidate:
         """Current values in the config (the model as it is)."""
         raise NotImplementedError
 
-    def variant(self, cfg: Config, theta) -> Variant:
+    def variant(self, cfg: Config, theta) -> CandidateModel:
         raise NotImplementedError
 
     def apply_text(self, text: str, cfg: Config, theta, comments: list[str], header: str) -> str:
@@ -129,7 +129,7 @@ class Candidate:
         """The values at which the candidate changes nothing (for effect sizes)."""
         st = self.start(cfg)
         return np.array([p.null if p.null is not None else s
-                         for p, s in zip(self.params, st, strict=True)])  # fmt: skip
+                         for p, s in zip(self.params, st, strict=True)])
 
     def present(self, cfg: Config) -> bool:
         return False
@@ -174,7 +174,7 @@ class EffectCandidate(Candidate):
     def variant(self, cfg, theta):
         vals = dict(zip((p.name for p in self.params), map(float, theta), strict=True))
         specs = _specs_with(cfg, self.kind, vals)
-        return Variant(cfg, effects_from_specs(specs), cfg.analysis.latency_s)
+        return CandidateModel(cfg, effects_from_specs(specs), cfg.analysis.latency_s)
 
     def apply_text(self, text, cfg, theta, comments, header):
         vals = dict(zip((p.name for p in self.params), map(float, theta), strict=True))
@@ -204,11 +204,11 @@ class ConfigCandidate(Candidate):
     def variant(self, cfg, theta):
         sec = dataclasses.replace(getattr(cfg, self.section), **{self.key: float(theta[0])})
         new = dataclasses.replace(cfg, **{self.section: sec})
-        return Variant(new, None, cfg.analysis.latency_s)
+        return CandidateModel(new, None, cfg.analysis.latency_s)
 
     def apply_text(self, text, cfg, theta, comments, header):
         return set_value(text, self.section, self.key, float(theta[0]),
-                         f"{comments[0]}; {header}")  # fmt: skip
+                         f"{comments[0]}; {header}")
 
 
 class LatencyCandidate(Candidate):
@@ -224,7 +224,7 @@ class LatencyCandidate(Candidate):
         return np.array([cfg.analysis.latency_s])
 
     def variant(self, cfg, theta):
-        return Variant(cfg, None, float(theta[0]))
+        return CandidateModel(cfg, None, float(theta[0]))
 
     def apply_text(self, text, cfg, theta, comments, header):
         return set_value(text, "analysis", "latency_s", float(theta[0]), f"{comments[0]}; {header}")
@@ -258,8 +258,8 @@ class ElasticityCandidate(Candidate):
             teth = dataclasses.replace(cfg.tether, link="rigid")
         else:
             teth = dataclasses.replace(cfg.tether, link="spring-damper", stiffness=1.0 / comp,
-                                       damping=tc / comp)  # fmt: skip
-        return Variant(dataclasses.replace(cfg, tether=teth), None, cfg.analysis.latency_s)
+                                       damping=tc / comp)
+        return CandidateModel(dataclasses.replace(cfg, tether=teth), None, cfg.analysis.latency_s)
 
     def report_values(self, theta):
         comp, tc = float(theta[0]), float(theta[1])
@@ -305,7 +305,7 @@ def _candidates() -> tuple[Candidate, ...]:
                         "attachment offset L_e error", affine=False, bounds_rel=(0.0, 3.0)),
         ConfigCandidate("tether_length", "tether", "length", P("length", "m", 0.0, 0.0),
                         "tether length error", affine=True, bounds_rel=(0.8, 1.2)),
-    )  # fmt: skip
+    )
 
 
 #: The candidate library, by name.
@@ -352,7 +352,7 @@ _SEPARATE = {
     frozenset({"mass", "drag_linear"}):
         "speed-ups and braking at several speeds: the mass acts on the acceleration, drag on "
         "the speed",
-}  # fmt: skip
+}
 
 
 def separating_flight(a: str, b: str) -> str:
@@ -394,10 +394,10 @@ class _Problem:
             )
             base = self._meas[self.config.tether.attachment_offset]
             self._meas[L_e] = [measure(s, cfg, name=m.name)
-                               for s, m in zip(self.segs, base, strict=True)]  # fmt: skip
+                               for s, m in zip(self.segs, base, strict=True)]
         return self._meas[L_e]
 
-    def vectors(self, var: Variant, only: int | None = None) -> list[dict]:
+    def vectors(self, var: CandidateModel, only: int | None = None) -> list[dict]:
         """Weighted residual per flight and axis: list over flights of {axis: (n,)}
         (only flight ``only`` when given: a one-element list)."""
         meas = self.measured(var.config.tether.attachment_offset)
@@ -408,7 +408,7 @@ class _Problem:
         for g in groups:
             per_seg = {i: residual_axes(model, meas[i], var.latency) for i in g}
             out.append({a: np.concatenate([per_seg[i][a] for i in g]) * self.weights[a]
-                        for a in self.axes})  # fmt: skip
+                        for a in self.axes})
         return out
 
 
@@ -493,11 +493,11 @@ class CandidateResult:
         out = []
         if self.rms_reduction < t["min_rms_reduction"]:
             out.append(f"held-out RMS reduction {self.rms_reduction:.1%} < "
-                       f"{t['min_rms_reduction']:.0%}")  # fmt: skip
+                       f"{t['min_rms_reduction']:.0%}")
         if not (np.isfinite(self.excess_explained)
-                and self.excess_explained >= t["min_excess_explained"]):  # fmt: skip
+                and self.excess_explained >= t["min_excess_explained"]):
             out.append(f"explains {self.excess_explained:.0%} of the residual above noise "
-                       f"(< {t['min_excess_explained']:.0%})")  # fmt: skip
+                       f"(< {t['min_excess_explained']:.0%})")
         if self.delta_bic > t["max_delta_bic"]:
             out.append(f"delta-BIC {self.delta_bic:.1f} > {t['max_delta_bic']:g}")
         if not self.plausible:
@@ -529,7 +529,7 @@ class CandidateResult:
             "passes": self.passes,
             "failed": self.failed(),
             "notes": list(self.notes),
-        }  # fmt: skip
+        }
 
 
 def _num(x):
@@ -566,7 +566,7 @@ class Diagnosis:
             "base_where_it_fails": self.base.where["sentence"],
             "model_evaluations": self.evaluations,
             "abs_cos_to_accepted": self.similarity,
-        }  # fmt: skip
+        }
 
 
 # --------------------------------------------------------------------------- fitting
@@ -593,7 +593,7 @@ def _jacobian(prob: _Problem, cand: Candidate, theta, base_vecs, cols, lo, hi):
         th[j] += sgn * h
         v = prob.vectors(cand.variant(prob.config, th))
         out.append([{a: (f1[a] - f0[a]) / (sgn * h) for a in f0}
-                    for f0, f1 in zip(base_vecs, v, strict=True)])  # fmt: skip
+                    for f0, f1 in zip(base_vecs, v, strict=True)])
     return out  # [col][flight][axis]
 
 
@@ -656,7 +656,7 @@ def _grid(prob, cand, values, lin, lo, hi, start, nf, na, k):
         for i in range(nf):
             m_ = np.arange(nf) != i
             d, val = _qp(A[m_].sum((0, 1)), b[m_].sum((0, 1)),
-                         lo[lin] - base_th[lin], hi[lin] - base_th[lin])  # fmt: skip
+                         lo[lin] - base_th[lin], hi[lin] - base_th[lin])
             sse_tr[gi, i] = c[m_].sum() + val
             held_g[gi, i] = c[i] + 2 * b[i] @ d + np.einsum("j,ajk,k->a", d, A[i], d)
             th_g[gi, i] = base_th
@@ -692,7 +692,7 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs) -> Candi
         held = np.zeros((nf, na))
         spread = 0.0
         eff = np.concatenate([np.concatenate([bv[a] - v[a] for a in bv])
-                              for bv, v in zip(base_vecs, vecs, strict=True)])  # fmt: skip
+                              for bv, v in zip(base_vecs, vecs, strict=True)])
         eff_norm = float(np.sqrt(np.sum(eff * eff)))
         for i in range(nf):
             Ai = A.sum(1)[np.arange(nf) != i].sum(0)
@@ -708,7 +708,7 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs) -> Candi
         s = cand.search
         p = cand.params[s]
         g = (np.geomspace(p.lower, p.upper, cand.grid_size) if p.scale == "log"
-             else np.linspace(p.lower, p.upper, cand.grid_size))  # fmt: skip
+             else np.linspace(p.lower, p.upper, cand.grid_size))
         sse_tr, held_g, th_g, sse_all = _grid(prob, cand, g, lin, lo, hi, start, nf, na, k)
         # all data: refine the search value between the grid neighbours of the best point
         G = g.size
@@ -780,7 +780,7 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs) -> Candi
         # how far the fold estimates move the prediction (linearised at the estimate),
         # relative to the effect itself: robust to a poorly determined second parameter
         eff = np.concatenate([np.concatenate([bv[a] - v[a] for a in bv])
-                              for bv, v in zip(base_vecs, vecs, strict=True)])  # fmt: skip
+                              for bv, v in zip(base_vecs, vecs, strict=True)])
         eff_norm = float(np.sqrt(np.sum(eff * eff)))
         moves = [math.sqrt(max(float(d @ Atot @ d), 0.0)) for d in folds - theta]
         spread = (max(moves) / eff_norm if eff_norm > 0 else math.inf) if nf > 1 else 0.0
@@ -798,14 +798,14 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs) -> Candi
     for j, q in enumerate(cand.params):
         if not ci[j] < (hi[j] - lo[j]):
             notes.append(f"{q.name} is not identified on these flights (95% CI wider than "
-                         "its range)")  # fmt: skip
+                         "its range)")
     if k > 1 and np.all(np.isfinite(corr)):
         off = np.abs(corr - np.diag(np.diag(corr))).max()
         if off >= THRESHOLDS["max_param_corr"]:
             names = [q.name for q in cand.params]
             notes.append(f"parameters {' and '.join(names)} are correlated ({off:.3f}, VIF "
                          f"{1 / max(1 - off**2, 1e-12):.0f}): only their combination is "
-                         "identified on these flights")  # fmt: skip
+                         "identified on these flights")
     # scores
     sse_base = float(base_sq.sum())
     held_base = base_sq.sum()
@@ -827,20 +827,20 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs) -> Candi
     rb = {a: float(np.sqrt(base_sq[:, j].sum() / n_ax[j])) for j, a in enumerate(axes)}
     ra = {a: float(np.sqrt(held[:, j].sum() / n_ax[j])) for j, a in enumerate(axes)}
     contrib = np.concatenate([np.concatenate([bv[a] - v[a] for a in bv])
-                              for bv, v in zip(base_vecs, vecs, strict=True)])  # fmt: skip
+                              for bv, v in zip(base_vecs, vecs, strict=True)])
     contrib = contrib.astype(np.float32)
     return CandidateResult(
         cand.name, cand.doc, cand.params, theta, ci, folds, start, cand.report_values(theta),
         float(red), float(exc), float(dbic), bool(plausible), float(spread), bool(stable), corr,
         held_fit, n_eff, rb, ra, float(1 - math.sqrt(sse_fit / sse_base)), tuple(notes), contrib,
-    )  # fmt: skip
+    )
 
 
 # --------------------------------------------------------------------------- entry points
 
 
 def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | None = None,
-             progress=None) -> Diagnosis:  # fmt: skip
+             progress=None) -> Diagnosis:
     """Fit every candidate on the logs, score on held-out flights, rank, gate, decide.
 
     ``logs``: paths or :class:`~gainsched.logs.FlightLog` segments (at least two flights
@@ -855,14 +855,14 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     prob = _Problem(config, meas, segs, base.noise)
     if len(prob.flights) < 2:
         raise InputError("command line", "LOG", "diagnose needs at least two flights (log "
-                         "files) for held-out scores")  # fmt: skip
+                         "files) for held-out scores")
     names = list(CANDIDATES) if candidates is None else list(candidates)
     for n in names:
         if n not in CANDIDATES:
             known = ", ".join(CANDIDATES)
             raise InputError("command line", "--candidate",
-                             f"unknown candidate {n!r} (known: {known})")  # fmt: skip
-    base_vecs = prob.vectors(Variant(config, None, config.analysis.latency_s))
+                             f"unknown candidate {n!r} (known: {known})")
+    base_vecs = prob.vectors(CandidateModel(config, None, config.analysis.latency_s))
     base_sq = _sq(base_vecs)
     results = []
     for n in names:
@@ -893,7 +893,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
                 twins.append((r.name, cos, separating_flight(accepted.name, r.name)))
     verdict = _verdict(base, results, accepted, twins, at_floor)
     return Diagnosis(config, base, results, accepted, twins, verdict, at_floor,
-                     prob.flight_names, int(round(prob.n_evals)), similarity)  # fmt: skip
+                     prob.flight_names, int(round(prob.n_evals)), similarity)
 
 
 def _fmt_values(r: CandidateResult) -> str:
@@ -907,23 +907,23 @@ def _verdict(base, results, accepted, twins, at_floor) -> str:
     if at_floor and accepted is None:
         grey = [a for a, st in base.stats.items() if not st.white]
         tail = (f" ({', '.join(grey)} not white at the 99% level: see the autocorrelation "
-                "plot)") if grey else ", and white"  # fmt: skip
+                "plot)") if grey else ", and white"
         return (f"no effect needed: every residual axis is within {AT_NOISE_FLOOR:g}x its "
-                f"noise floor{tail}")  # fmt: skip
+                f"noise floor{tail}")
     if accepted is None:
         best = results[0] if results else None
         tail = ""
         if best is not None:
             tail = (f" The best candidate, {best.name}, removes {best.rms_reduction:.0%} of the "
-                    f"held-out RMS but fails: {'; '.join(best.failed())}.")  # fmt: skip
+                    f"held-out RMS but fails: {'; '.join(best.failed())}.")
         return (f"no candidate explains the residual: {base.where['sentence']}.{tail}")
     s = (f"missing effect: {accepted.name} ({accepted.doc}), {_fmt_values(accepted)}; "
          f"held-out RMS -{accepted.rms_reduction:.0%}, explains "
          f"{accepted.excess_explained:.0%} of the residual above noise, "
-         f"delta-BIC {accepted.delta_bic:.0f}")  # fmt: skip
+         f"delta-BIC {accepted.delta_bic:.0f}")
     for name, cos, sep in twins:
         s += (f". It cannot be told apart from {name} on these flights (|cos| {cos:.3f}); "
-              f"to separate them: {sep}")  # fmt: skip
+              f"to separate them: {sep}")
     return s
 
 
@@ -943,7 +943,7 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
             f"{p.unit}, 95% CI [{lo:.4g}, {hi:.4g}], folds {f.min():.4g}..{f.max():.4g}"
         )
     header = (f"gainsched diagnose: {result.name}, held-out RMS -{result.rms_reduction:.0%}, "
-              f"delta-BIC {result.delta_bic:.0f}")  # fmt: skip
+              f"delta-BIC {result.delta_bic:.0f}")
     text = cand.apply_text(config.text, config, result.theta, comments, header)
     new_name = name or f"{config.name}_{result.name}"
     if get_value(text, "", "name") is not None:

@@ -115,7 +115,7 @@ def parse_scheduler(address: str) -> str:
             _SRC, "--scheduler", f"{bad} (scheme must be one of {', '.join(_SCHEMES)})"
         )
     if not parts.hostname or port is None or port == 0 or parts.path or parts.query or \
-            parts.fragment or parts.username or parts.password:  # fmt: skip
+            parts.fragment or parts.username or parts.password:
         raise InputError(_SRC, "--scheduler", bad)
     host = f"[{parts.hostname}]" if ":" in parts.hostname else parts.hostname
     return f"{parts.scheme}://{host}:{port}"
@@ -189,13 +189,13 @@ def _check_workers(client, where: str, timeout: float) -> str:
         client.wait_for_workers(1, timeout=timeout)
     except Exception:
         raise InputError(_SRC, "--scheduler", f"{where}: no worker connected within {timeout:g} s "
-                         f"(start one with: dask worker {where})") from None  # fmt: skip
+                         f"(start one with: dask worker {where})") from None
     try:
         theirs = client.run(environment)
     except Exception as exc:
         raise InputError(_SRC, "--scheduler", f"{where}: a worker cannot run gainsched "
                          f"({type(exc).__name__}: {exc}); install it there: pip install -e .[dask]"
-                         ) from None  # fmt: skip
+                         ) from None
     ours = environment()
     pin = reproducible.pin_available()
     for worker in sorted(theirs):
@@ -228,7 +228,7 @@ def _dask(scheduler: str, n_jobs: int, timeout: float) -> Iterator[Execution]:
     except ImportError:
         raise InputError(_SRC, "--backend dask", "dask is not installed; install the extra: "
                          "pip install -e .[dask]  (or pip install 'dask[distributed]')"
-                         ) from None  # fmt: skip
+                         ) from None
     address = parse_scheduler(scheduler)
     try:
         client = Client(address, timeout=timeout)
@@ -252,7 +252,7 @@ def _dask(scheduler: str, n_jobs: int, timeout: float) -> Iterator[Execution]:
 
 @contextmanager
 def executor(backend: str = "local", scheduler: str | None = None, n_jobs: int = -1, *,
-             connect_timeout: float = DEFAULT_CONNECT_TIMEOUT) -> Iterator[Execution]:  # fmt: skip
+             connect_timeout: float = DEFAULT_CONNECT_TIMEOUT) -> Iterator[Execution]:
     """Run a build locally or on a Dask cluster; yields the :class:`Execution` to use.
 
     Parameters

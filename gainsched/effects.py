@@ -1,4 +1,4 @@
-"""Effects: the one place physics is added to the plant (DESIGN.md section 2).
+"""Effects: the one place physics is added to the plant (docs/architecture.md).
 
 An effect is a small frozen object with named parameters (units, defaults,
 bounds). The same objects serve the nominal trim, the linearisation, the

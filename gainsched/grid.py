@@ -23,29 +23,27 @@ from dataclasses import dataclass, fields
 import numpy as np
 from joblib import Parallel, cpu_count, delayed
 
+from .constants import TILT_BATCH, Reason
 from .linearize import discretize, jacobians, lqr_system
 from .lqr import dlqr, periodic_lqr, spectral_radius
 from .model import Model
-from .nominal import circle_nominal, period
+from .nominal import circle_nominal
+from .path import period
 from .reproducible import (
     blas_single_thread,
     children_ignore_sigint,
     ensure_blas_single_thread,
     pin_available,
-    pinned_executor,  # fmt: skip
+    pinned_executor,
     process_pinned,
 )
 from .trim import TrimError
 
 __all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "steps_per_period",
-           "discrete_system", "periodic_interp", "LIN_TOL"]  # fmt: skip
+           "discrete_system", "periodic_interp", "LIN_TOL"]
 
 #: relative accuracy demanded of the interpolated linearisation (see discrete_system)
 LIN_TOL = 1e-10
-#: tilts solved together in one batch: bounds a job's working set (the A_k, B_k of a
-#: batch: 8 x N x 165 doubles, 20 MB at 1 kHz), so build time and memory grow linearly
-#: with the number of tilts
-TILT_BATCH = 8
 
 
 def steps_per_period(speed: float, r: float, dt: float) -> int:
@@ -63,7 +61,7 @@ class CircleSolution:
     S : (n_a, n_xi, n, n) cost-to-go at the grid azimuths
     u_d : (n_a, n_xi, 4) N; phi_d : (n_a, n_xi) rad; tension : (n_a, n_xi) N
     reasons : (n_a, n_xi) uint8
-    rho : (n_a,) closed-loop monodromy spectral radius (NaN if infeasible)
+    spectral_radius : (n_a,) closed-loop monodromy spectral radius (NaN if infeasible)
     sweeps : (n_a,) int
     lin_samples : (n_a,) int   azimuths of exact linearisation (see :func:`discrete_system`)
     lin_error : (n_a,) float   its interpolation check; steps : int; dt : float, s
@@ -75,7 +73,7 @@ class CircleSolution:
     phi_d: np.ndarray
     tension: np.ndarray
     reasons: np.ndarray
-    rho: np.ndarray
+    spectral_radius: np.ndarray
     sweeps: np.ndarray
     lin_samples: np.ndarray
     lin_error: np.ndarray
@@ -185,7 +183,7 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
         AB_2M = np.concatenate(_discrete_at(model, speed, tilts, 2 * M, dt), axis=-1)
         AB = periodic_interp(AB_M, 2 * M)
         err = max(_rel_err(AB[..., :n], AB_2M[..., :n], I),
-                  _rel_err(AB[..., n:], AB_2M[..., n:]))  # fmt: skip
+                  _rel_err(AB[..., n:], AB_2M[..., n:]))
         M, AB_M = 2 * M, AB_2M
         if err <= tol:
             AB = periodic_interp(AB_M, N)
@@ -195,7 +193,7 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
 def _tilt0(model, config, speed, N, dt, Qx):
     """Tilt 0: the circle's linearisation is the same at every azimuth (rotation
     about the vertical), so the periodic problem is time-invariant and its solution is
-    the DARE's, exactly. Returns ``K (4, n), S (n, n), rho``."""
+    the DARE's, exactly. Returns ``K (4, n), S (n, n), spectral radius``."""
     Ad, Bd = _discrete_at(model, speed, [0.0], 1, dt)
     K, S, E = dlqr(Ad[0, 0], Bd[0, 0], Qx, config.control.R)
     return K, S, float(np.abs(E).max()) ** N
@@ -220,30 +218,31 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=Tr
     n = model.n_z + 1
     K = np.full((n_a, n_xi, 4, n), np.nan)
     S = np.full((n_a, n_xi, n, n), np.nan)
-    rho = np.full(n_a, np.nan)
+    radius = np.full(n_a, np.nan)  # closed-loop spectral radius per tilt
     sweeps = np.zeros(n_a, dtype=np.int32)
     lin_samples = np.zeros(n_a, dtype=np.int32)
     lin_error = np.full(n_a, np.nan)
     u_d = np.full((n_a, n_xi, 4), np.nan)
     phi_d = np.full((n_a, n_xi), np.nan)
     tension = np.full((n_a, n_xi), np.nan)
-    reasons = np.full((n_a, n_xi), 8, dtype=np.uint8)
+    reasons = np.full((n_a, n_xi), Reason.TRIM_FAILED, dtype=np.uint8)
     for i, a in enumerate(tilts):
         try:
             # feasibility is checked on the nominal at every control step
             bad[i] = np.bitwise_or.reduce(circle_nominal(model, speed, a, N).reasons)
             g = circle_nominal(model, speed, a, n_xi)
         except TrimError:
-            bad[i] = 8
+            bad[i] = Reason.TRIM_FAILED
             continue
         u_d[i], phi_d[i], tension[i] = g.u, g.phi, g.tension
-        reasons[i] = g.reasons | np.where((g.reasons == 0) & (bad[i] != 0), 16, 0).astype(np.uint8)
+        elsewhere = (g.reasons == 0) & (bad[i] != 0)
+        reasons[i] = g.reasons | np.where(elsewhere, Reason.ELSEWHERE, 0).astype(np.uint8)
     Qx = np.zeros((n, n))
     Qx[:11, :11] = config.control.Q
     ok = np.flatnonzero(bad == 0)
     if dare_tilt0 and not keep_steps and config.control.terminal == "periodic":
         for i in ok[tilts[ok] == 0.0]:
-            Ki, Si, rho[i] = _tilt0(model, config, speed, N, dt, Qx)
+            Ki, Si, radius[i] = _tilt0(model, config, speed, N, dt, Qx)
             K[i], S[i] = Ki, Si
             lin_samples[i], lin_error[i], sweeps[i] = 1, 0.0, -1  # infinite horizon
         ok = ok[tilts[ok] != 0.0]
@@ -254,18 +253,18 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=Tr
         Ad, Bd, M, err = discrete_system(model, speed, tilts[idx], N, dt)
         lin_samples[idx], lin_error[idx] = M, err
         sol = periodic_lqr(Ad, Bd, Qx, config.control.R, terminal=config.control.terminal,
-                           keep_S=True, steps=None if keep_steps else keep)  # fmt: skip
+                           keep_S=True, steps=None if keep_steps else keep)
         Ks, Ss = sol.K, sol.S
         if keep_steps:  # every step was kept: pick the grid's bracketing steps
             Ks, Ss = Ks[:, keep], Ss[:, keep]
             kept.append((Ad, Bd, sol.K))
         K[idx] = _sample(Ks, lo, hi, w)
         S[idx] = _sample(Ss, lo, hi, w)
-        rho[idx] = spectral_radius(sol.Phi)
+        radius[idx] = spectral_radius(sol.Phi)
         sweeps[idx] = sol.sweeps
     steps = tuple(np.concatenate(x) for x in zip(*kept, strict=True)) if kept else None
-    out = CircleSolution(K, S, u_d, phi_d, tension, reasons, rho, sweeps, lin_samples,
-                         lin_error, N, dt)  # fmt: skip
+    out = CircleSolution(K, S, u_d, phi_d, tension, reasons, radius, sweeps, lin_samples,
+                         lin_error, N, dt)
     return (out, steps) if keep_steps else out
 
 
@@ -280,7 +279,7 @@ class GridResult:
     phi_d: np.ndarray
     tension: np.ndarray
     reasons: np.ndarray
-    rho: np.ndarray
+    spectral_radius: np.ndarray
     sweeps: np.ndarray
     lin_samples: np.ndarray
     lin_error: np.ndarray
@@ -360,6 +359,6 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
                 progress(1)
 
     per_tilt = {f.name: np.stack([getattr(s, f.name) for s in sols], axis=1)
-                for f in fields(CircleSolution) if f.name not in ("steps", "dt")}  # fmt: skip
+                for f in fields(CircleSolution) if f.name not in ("steps", "dt")}
     return GridResult(**per_tilt, steps=np.array([s.steps for s in sols]),
-                      dt=np.array([s.dt for s in sols]))  # fmt: skip
+                      dt=np.array([s.dt for s in sols]))

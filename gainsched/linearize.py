@@ -23,7 +23,7 @@ __all__ = [
 ]
 
 STATE_NAMES = ("delta", "xi", "delta_dot", "xi_dot", "phi", "theta", "chi",
-               "omega_x", "omega_y", "omega_z", "int_delta")  # fmt: skip
+               "omega_x", "omega_y", "omega_z", "int_delta")
 INPUT_NAMES = ("T1", "T2", "T3", "T4")
 _H = 1e-30
 

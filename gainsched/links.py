@@ -1,6 +1,9 @@
-"""Elastic tether link models for the maximal-coordinate simulator (seed 001, sec. 3.1).
+"""Elastic tether link models for the maximal-coordinate simulator.
 
-The tether is a cable-like link (seed 001, category (a)): it carries tension
+Reference ("the chapter" below): M. Tognon and A. Franchi, "Theory and
+Applications for Control of Aerial Robots in Physical Interaction Through
+Tethers", Springer, 2021, ch. 3 "Model of the Robotic Elements", sec. 3.1.
+The tether is a cable-like link (the chapter's category (a)): it carries tension
 only. When its internal force would be compressive the link is *slack*
 (``f_L = 0``) and the two ends move independently; a link model reports that
 state (``slack``) and never pushes. The anchor is the origin of the circle
@@ -9,7 +12,7 @@ frame C; the vehicle end is the attachment point ``p_t`` (m, in C) with velocity
 elongation, ``s' = n . v_t`` its rate, ``n = p_t / |p_t|``.
 
 - :class:`SpringDamper` (Kelvin-Voigt): ``f = max(0, k s + c s')``.
-- :class:`StandardLinearSolid` (SLS, Zener; seed 001 refs [5-7]): a spring
+- :class:`StandardLinearSolid` (SLS, Zener; the chapter's refs [5-7]): a spring
   ``k_s`` in series with the parallel of a spring ``k_p`` and a damper ``c``.
   With the elongation ``s_p`` (m) of the parallel element as the link state::
 
@@ -18,7 +21,7 @@ elongation, ``s' = n . v_t`` its rate, ``n = p_t / |p_t|``.
 
   Instantaneous stiffness ``k_s``, static stiffness ``k_s k_p / (k_s + k_p)``;
   as ``k_s -> inf`` it becomes the Kelvin-Voigt spring-damper ``(k_p, c)``.
-- :class:`LumpedMassChain` (finite-element approximation, seed 001 refs [7-9]):
+- :class:`LumpedMassChain` (finite-element approximation, the chapter's refs [7-9]):
   ``N`` segments of rest length ``rho / N``, each a tension-only spring-damper
   with ``N k`` and ``N c`` (so the whole chain stretched uniformly has stiffness
   ``k`` and damping ``c``), joined at ``N - 1`` point masses ``m_t / N`` under
@@ -229,9 +232,9 @@ class LumpedMassChain:
         nodes = np.asarray(s, dtype=float).reshape(np.shape(s)[:-1] + (2, nn, 3))
         zero = np.zeros(S + (1, 3))
         P = np.concatenate([zero, np.broadcast_to(nodes[..., 0, :, :], S + (nn, 3)),
-                            np.broadcast_to(p_t, S + (3,))[..., None, :]], -2)  # fmt: skip
+                            np.broadcast_to(p_t, S + (3,))[..., None, :]], -2)
         V = np.concatenate([zero, np.broadcast_to(nodes[..., 1, :, :], S + (nn, 3)),
-                            np.broadcast_to(v_t, S + (3,))[..., None, :]], -2)  # fmt: skip
+                            np.broadcast_to(v_t, S + (3,))[..., None, :]], -2)
         d = np.diff(P, axis=-2)
         length = np.sqrt(_dot(d, d))
         u = d / length[..., None]

@@ -1,9 +1,9 @@
-"""Flight logs: read and write ``gainsched-flightlog/1`` (``/work/shared/flight-log.md``).
+"""Flight logs: read and write ``gainsched-flightlog/1`` (docs/flight-log.md).
 
 A log is CSV (``# key: value`` metadata lines before the header) or HDF5 (root
 attributes as metadata, one 1-D dataset per column), chosen by the file
 extension (``.csv``, ``.h5``, ``.hdf5``). Frames and units are those of
-DESIGN.md section 1: inertial frame at the anchor, z up, SI units, Hamilton
+docs/conventions.md: inertial frame at the anchor, z up, SI units, Hamilton
 quaternions scalar first, body -> inertial.
 
 Reading enforces every bad-data rule of the spec; each violation raises

@@ -46,7 +46,7 @@ __all__ = [
     "period_triple",
     "riccati_sweep",
     "sweep",
-    "Sweep",
+    "RiccatiSweep",
     "native_available",
     "dlqr",
     "monodromy",
@@ -77,7 +77,7 @@ class PeriodicLQR:
 
 
 @dataclass(frozen=True)
-class Sweep:
+class RiccatiSweep:
     """Result of :func:`sweep` (batch shape ``b``).
 
     P0 : (*b, n, n) cost-to-go at step 0; K : (*b, n_out, m, n) and S : (*b, n_out, n, n)
@@ -105,7 +105,7 @@ def _configure(lib):
         lib.gs_riccati.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_ssize_t,
                                    ctypes.c_ssize_t, ctypes.c_ssize_t, dp, sp, dp, sp, dp, dp,
                                    dp, ctypes.POINTER(ctypes.c_int), ctypes.c_int, dp, dp,
-                                   ctypes.c_int, dp, dp]  # fmt: skip
+                                   ctypes.c_int, dp, dp]
         lib.gs_lanes.restype = ctypes.c_int
         lib._gs_ready = True
     return lib
@@ -137,7 +137,7 @@ def _sweep_native(lib, Ad, Bd, Q, R, P, slot, n_out, K, S, triple, Phi, G, threa
     n_groups = -(-b // lanes)
     slot_p = None if slot is None else slot.ctypes.data_as(ctypes.POINTER(ctypes.c_int))
     args = (_ptr(Ad), _strides(Ad), _ptr(Bd), _strides(Bd), _ptr(Q), _ptr(R), _ptr(P), slot_p,
-            n_out, _ptr(K), _ptr(S), int(triple), _ptr(Phi), _ptr(G))  # fmt: skip
+            n_out, _ptr(K), _ptr(S), int(triple), _ptr(Phi), _ptr(G))
 
     def run(g0, g1):  # ctypes releases the GIL: threads run in parallel
         if lib.gs_riccati(n, m, N, b, g0, g1, *args) != 0:
@@ -176,7 +176,7 @@ def _sweep_numpy(Ad, Bd, Q, R, P, slot, K, S, triple, Phi, G):
 
 
 def sweep(Ad, Bd, Q, R, P, *, steps=None, keep_S=True, triple=False, threads=1,
-          use_native=None) -> Sweep:  # fmt: skip
+          use_native=None) -> RiccatiSweep:
     """One backward Riccati sweep over k = N-1 .. 0 from the terminal cost P (batched).
 
     ``P <- Q + A_k^T P (A_k - B_k K_k)`` with ``K_k = (R + B_k^T P B_k)^-1 B_k^T P A_k``
@@ -228,7 +228,7 @@ def sweep(Ad, Bd, Q, R, P, *, steps=None, keep_S=True, triple=False, threads=1,
     else:
         P = _sweep_numpy(Ad, Bd, Q, R, P, slot, K, S, triple, Phi, G)
     shape = lambda X: None if X is None else X.reshape(bshape + X.shape[1:])  # noqa: E731
-    return Sweep(shape(P), shape(K), shape(S), shape(Phi), shape(G))
+    return RiccatiSweep(shape(P), shape(K), shape(S), shape(Phi), shape(G))
 
 
 def riccati_sweep(Ad, Bd, Q, R, P, *, keep=False, use_native=None):
@@ -247,7 +247,7 @@ def riccati_sweep(Ad, Bd, Q, R, P, *, keep=False, use_native=None):
 
 
 def periodic_lqr(Ad, Bd, Q, R, *, terminal="periodic", Q_e=None, tol=1e-11, max_sweeps=60,
-                 keep_S=False, steps=None, threads=1, use_native=None) -> PeriodicLQR:  # fmt: skip
+                 keep_S=False, steps=None, threads=1, use_native=None) -> PeriodicLQR:
     """Finite-horizon LQR over one period with a periodic (or fixed) terminal cost.
 
     Parameters

@@ -1,11 +1,11 @@
 """Maximal-coordinate formulation: a free rigid body plus a link force model.
 
-DESIGN.md section 2, last paragraph. The vehicle is a free 6-DOF rigid body in
-the circle frame C (inertial, only rotated); the tether is a force model acting
-at the attachment point ``p_t = p_q + R_CB p_e`` (``p_e = (-L_e, 0, 0)``) and
-anchored at the origin. This is the simulator for what the reduced model of
-:mod:`gainsched.model` cannot express (slack, stretch); where both apply they
-must agree.
+The second formulation of the plant (docs/architecture.md). The vehicle is a
+free 6-DOF rigid body in the circle frame C (inertial, only rotated); the tether
+is a force model acting at the attachment point ``p_t = p_q + R_CB p_e``
+(``p_e = (-L_e, 0, 0)``) and anchored at the origin. This is the simulator for
+what the reduced model of :mod:`gainsched.model` cannot express (slack,
+stretch); where both apply they must agree.
 
 State ``x = (p_q, v_q, q_CB, omega_B)``, shape (..., 13): COG position (m) and
 velocity (m/s) in C, the unit quaternion body->C (Hamilton, scalar first) and
@@ -22,7 +22,7 @@ with ``n = p_t / |p_t|``. Link models for the tension ``f_t`` (N):
   is the Lagrange multiplier solving ``c'' + 2 a c' + b^2 c = 0`` (Baumgarte
   stabilisation with rates ``(a, b)``, 1/s). Bilateral: may come out negative.
 - ``"spring-damper"``, ``"sls"``, ``"lumped-mass"``: the tension-only elastic
-  links of :mod:`gainsched.links` (seed 001, sec. 3.1). The link force ``F_t``
+  links of :mod:`gainsched.links` (sec. 3.1 of the book chapter cited there). The link force ``F_t``
   replaces ``-f_t n`` above (for the chain it acts along the last segment, not
   along ``n``) and the link's own states follow the rigid-body ones:
   ``x = (p_q, v_q, q_CB, omega_B, s_link)``, shape (..., 13 + n_link).
@@ -326,7 +326,7 @@ class MaximalModel:
 
 # ---------------------------------------------------------------------- conversions
 def maximal_from_reduced(model, z, stretch=0.0):
-    """Maximal state (..., 13) from the reduced state z (..., >= 10) (DESIGN.md section 1).
+    """Maximal state (..., 13) from the reduced state z (..., >= 10) (docs/conventions.md).
 
     ``R_CB = Rz(chi + xi) Ry(theta) Rx(phi)``, ``p_q = rho e(delta, xi) + L_e x_B``,
     COG velocity from :meth:`gainsched.model.Model.kinematics`; omega_B is copied.

@@ -1,4 +1,6 @@
-"""Reduced-coordinate dynamics of the tethered quadcopter (DESIGN.md section 2).
+"""Reduced-coordinate dynamics of the tethered quadcopter (paper Sec. II).
+
+Frames, angles and motor numbering: docs/conventions.md.
 
 State ``s = (delta, xi, delta', xi', phi, theta, chi, wx, wy, wz)`` (rad, rad/s)
 followed by the states of stateful effects (e.g. motor lag); input ``u = (T1..T4)``

@@ -79,7 +79,7 @@ def _header(cmp: Comparison) -> str:
     tens = sorted({r.tension_source for r in cmp.residuals})
     return (f"model {cmp.config.name} ({cmp.config.source}) on {len(flights)} flight(s), "
             f"{len(cmp.residuals)} segment(s), {n} samples; tension from "
-            f"{' / '.join(tens)}")  # fmt: skip
+            f"{' / '.join(tens)}")
 
 
 def _axis_table(cmp: Comparison):
@@ -93,9 +93,9 @@ def _axis_table(cmp: Comparison):
             cc = "none significant"
         rows.append((a, s.unit, _g(s.rms), f"{s.bias:+.3g}", f"{s.fit_percent:.1f}",
                      _g(s.noise_floor), f"{s.rms_over_noise:.2f}", "yes" if s.white else "no",
-                     cc))  # fmt: skip
+                     cc))
     return ("axis", "unit", "RMS", "bias", "fit %", "noise", "RMS/noise", "white",
-            "strongest input correlation"), rows  # fmt: skip
+            "strongest input correlation"), rows
 
 
 def _text_table(head, rows, widths) -> list[str]:
@@ -127,7 +127,7 @@ def _paper_lines(p: PaperFits) -> list[str]:
     eta = p.bins["eta"]["mean"]
     edges = p.bins["edges"]
     pairs = [f"{(edges[i] + edges[i + 1]) / 2:g} m/s: {e:.3f}"
-             for i, e in enumerate(eta) if e is not None]  # fmt: skip
+             for i, e in enumerate(eta) if e is not None]
     return [
         f"paper Sec. V.C, Fig. 6: drag fit mu1 = {p.mu1:.4g} +- {p.mu1_ci:.2g} N s/m, "
         f"mu2 = {p.mu2:.4g} +- {p.mu2_ci:.2g} N s^2/m^2 (RMS {p.drag_rms:.3g} N)",
@@ -150,7 +150,7 @@ def _plot_residuals(cmp: Comparison, path: Path):
         for k in range(len(axes)):
             ax[k].axvline(offset, color="0.7", lw=0.5)
         ax[0].text(offset, 1.02, r.name, transform=ax[0].get_xaxis_transform(), fontsize=6,
-                   rotation=30)  # fmt: skip
+                   rotation=30)
         offset += len(r)
     for k, a in enumerate(axes):
         nf = cmp.noise[a]
@@ -203,7 +203,7 @@ def _plot_where(cmp: Comparison, path: Path, other: Comparison | None = None):
                 y = np.array(t[a]["rms"], dtype=float) / src.noise[a]
                 y[cnt < 10] = np.nan
                 a_.plot(x, y, style, ms=3, lw=0.8, color=f"C{j}",
-                        label=a if src is cmp else None)  # fmt: skip
+                        label=a if src is cmp else None)
         a_.axhline(1.0, color="k", lw=0.5)
         a_.set_xlabel(f"{v} ({BIN_VARIABLES[v][0]})")
         a_.set_ylabel("bin RMS / noise floor")
@@ -224,7 +224,7 @@ def _plot_paper(p: PaperFits, out: Path) -> list[Path]:
     ax[0].plot(p.airspeed, p.eta, ".", ms=1, alpha=0.3, label="eta_f (eq. 28)")
     order = np.argsort(p.airspeed)
     ax[0].plot(p.airspeed[order], p.momentum[order], "r.", ms=1,
-               label=f"momentum theory eq. 29, A = {p.disk_area:.3g} m^2")  # fmt: skip
+               label=f"momentum theory eq. 29, A = {p.disk_area:.3g} m^2")
     ax[0].set_ylabel("T_hat / T_commanded")
     ax[0].legend(fontsize=7, markerscale=8)
     ax[0].set_title("thrust efficiency (paper Fig. 5)")
@@ -239,7 +239,7 @@ def _plot_paper(p: PaperFits, out: Path) -> list[Path]:
     ax.plot(p.airspeed, p.drag, ".", ms=1, alpha=0.3, label="estimated drag (eq. 26)")
     v = np.linspace(0, p.airspeed.max(), 100)
     ax.plot(v, p.mu1 * v + p.mu2 * v * v, "r",
-            label=f"fit (eq. 10): mu1 = {p.mu1:.4g}, mu2 = {p.mu2:.4g}")  # fmt: skip
+            label=f"fit (eq. 10): mu1 = {p.mu1:.4g}, mu2 = {p.mu2:.4g}")
     ax.set_xlabel("airspeed (m/s)")
     ax.set_ylabel("drag (N)")
     ax.set_title("drag identification (paper Fig. 6)")
@@ -265,7 +265,7 @@ def compare_json(cmp: Comparison, paper: PaperFits | None = None) -> dict:
 
 
 def write_compare(cmp: Comparison, out_dir, paper: PaperFits | None = None,
-                  prefix: str = "compare") -> list[Path]:  # fmt: skip
+                  prefix: str = "compare") -> list[Path]:
     """Write PREFIX.json, PREFIX.md and the PNG plots into ``out_dir``; returns the paths."""
     from .publish import write_atomic
 
@@ -273,7 +273,7 @@ def write_compare(cmp: Comparison, out_dir, paper: PaperFits | None = None,
     out.mkdir(parents=True, exist_ok=True)
     paths = [write_json(out / f"{prefix}.json", compare_json(cmp, paper))]
     pics = {"residuals": out / f"{prefix}_residuals.png", "corr": out / f"{prefix}_acf_ccf.png",
-            "where": out / f"{prefix}_where.png"}  # fmt: skip
+            "where": out / f"{prefix}_where.png"}
     _plot_residuals(cmp, pics["residuals"])
     _plot_acf_ccf(cmp, pics["corr"])
     _plot_where(cmp, pics["where"])
@@ -286,7 +286,7 @@ def write_compare(cmp: Comparison, out_dir, paper: PaperFits | None = None,
            f"![residual by regime]({pics['where'].name})", "",
            f"![residuals]({pics['residuals'].name})", "",
            "## Whiteness and input correlation", "",
-           f"![acf and ccf]({pics['corr'].name})", ""]  # fmt: skip
+           f"![acf and ccf]({pics['corr'].name})", ""]
     md += ["## Residual by regime (RMS / noise floor per bin)", ""]
     for v, t in cmp.where["tables"].items():
         unit = BIN_VARIABLES[v][0]
@@ -294,7 +294,7 @@ def write_compare(cmp: Comparison, out_dir, paper: PaperFits | None = None,
         rws = []
         for i in range(len(t["centers"])):
             rws.append([f"{t['edges'][i]:.3g}..{t['edges'][i + 1]:.3g}", t["count"][i],
-                        *(_g(t[a]["rms"][i] / cmp.noise[a], 3) for a in cmp.axes)])  # fmt: skip
+                        *(_g(t[a]["rms"][i] / cmp.noise[a], 3) for a in cmp.axes)])
         md += _md_table(head, rws) + [""]
     if paper is not None:
         pp = _plot_paper(paper, out)
@@ -319,7 +319,7 @@ def _ba_rows(before: Comparison, after: Comparison):
         b, f = before.stats[a], after.stats[a]
         change = 100 * (f.rms / b.rms - 1) if b.rms > 0 else 0.0
         rows.append((a, b.unit, b.rms, f.rms, change, b.noise_floor, b.rms_over_noise,
-                     f.rms_over_noise, b.white, f.white))  # fmt: skip
+                     f.rms_over_noise, b.white, f.white))
     return rows
 
 
@@ -328,11 +328,11 @@ def before_after_lines(before: Comparison, after: Comparison) -> list[str]:
     out = [f"before: {before.config.name} ({before.config.source})",
            f"after:  {after.config.name} ({after.config.source})",
            "  axis       unit     RMS before  RMS after  change   noise     "
-           "before/noise after/noise white before->after"]  # fmt: skip
+           "before/noise after/noise white before->after"]
     for a, u, rb, ra, ch, nf, qb, qa, wb, wa in _ba_rows(before, after):
         yn = {True: "yes", False: "no"}
         out.append(f"  {a:10s} {u:8s} {rb:10.4g} {ra:10.4g} {ch:+6.1f}%  {nf:9.3g} "
-                   f"{qb:12.2f} {qa:11.2f} {yn[wb]} -> {yn[wa]}")  # fmt: skip
+                   f"{qb:12.2f} {qa:11.2f} {yn[wb]} -> {yn[wa]}")
     out.append(f"  normalised RMS {before.normalized_rms():.3f} -> {after.normalized_rms():.3f}")
     out.append(f"  before: {before.where['sentence']}")
     out.append(f"  after:  {after.where['sentence']}")
@@ -340,7 +340,7 @@ def before_after_lines(before: Comparison, after: Comparison) -> list[str]:
 
 
 def write_before_after(before: Comparison, after: Comparison, out_dir,
-                       diagnosis: Diagnosis | None = None) -> list[Path]:  # fmt: skip
+                       diagnosis: Diagnosis | None = None) -> list[Path]:
     """before_after.{json,md,png} and the regime plot with both models."""
     from .publish import write_atomic
 
@@ -357,13 +357,13 @@ def write_before_after(before: Comparison, after: Comparison, out_dir,
                         "change_percent": r[4], "noise_floor": r[5],
                         "rms_over_noise_before": r[6], "rms_over_noise_after": r[7],
                         "white_before": r[8], "white_after": r[9]} for r in rows},
-    }  # fmt: skip
+    }
     if diagnosis is not None and diagnosis.accepted is not None:
         acc = diagnosis.accepted
         data["heldout"] = {"candidate": acc.name, "rms_reduction": acc.rms_reduction,
                            "excess_explained": acc.excess_explained,
                            "axis_rms_normalised_before": acc.axis_rms_before,
-                           "axis_rms_normalised_after": acc.axis_rms_after}  # fmt: skip
+                           "axis_rms_normalised_after": acc.axis_rms_after}
     paths = [write_json(out / "before_after.json", data)]
     fig, ax = plt.subplots(figsize=(8, 4))
     x = np.arange(len(rows))
@@ -382,20 +382,20 @@ def write_before_after(before: Comparison, after: Comparison, out_dir,
     _plot_where(before, pic2, other=after)
     paths += [pic, pic2]
     md = ["# Before and after", "", f"- before: `{before.config.source}`",
-          f"- after: `{after.config.source}`", ""]  # fmt: skip
+          f"- after: `{after.config.source}`", ""]
     head = ("axis", "unit", "RMS before", "RMS after", "change", "noise floor",
-            "RMS/noise before", "RMS/noise after", "white before", "white after")  # fmt: skip
+            "RMS/noise before", "RMS/noise after", "white before", "white after")
     md += _md_table(head, [(r[0], r[1], _g(r[2], 4), _g(r[3], 4), f"{r[4]:+.1f}%", _g(r[5]),
-                            f"{r[6]:.2f}", f"{r[7]:.2f}", r[8], r[9]) for r in rows])  # fmt: skip
+                            f"{r[6]:.2f}", f"{r[7]:.2f}", r[8], r[9]) for r in rows])
     md += ["", f"Normalised RMS {before.normalized_rms():.3f} -> {after.normalized_rms():.3f} "
            "(1 = measurement noise).", "", f"Before: {before.where['sentence']}.", "",
-           f"After: {after.where['sentence']}.", ""]  # fmt: skip
+           f"After: {after.where['sentence']}.", ""]
     if "heldout" in data:
         h = data["heldout"]
         md += [f"Held out (leave-one-flight-out, {h['candidate']}): normalised RMS "
                f"-{100 * h['rms_reduction']:.0f}%, "
                f"{100 * h['excess_explained']:.0f}% of the residual above noise "
-               "explained.", ""]  # fmt: skip
+               "explained.", ""]
     md += [f"![before and after]({pic.name})", "", f"![by regime]({pic2.name})", ""]
     write_atomic(out / "before_after.md", "\n".join(md).encode())
     paths.insert(1, out / "before_after.md")
@@ -409,21 +409,21 @@ def _rank_rows(d: Diagnosis):
     rows = []
     for r in d.results:
         vals = ", ".join(f"{p.name}={v:.4g}+-{c:.2g}" for p, v, c in
-                         zip(r.params, r.theta, r.ci, strict=True))  # fmt: skip
+                         zip(r.params, r.theta, r.ci, strict=True))
         rows.append((r.name, f"{100 * r.rms_reduction:.1f}%",
                      "n/a" if not np.isfinite(r.excess_explained)
                      else f"{100 * r.excess_explained:.0f}%",
                      f"{r.delta_bic:.0f}", "yes" if r.plausible else "no",
-                     _g(r.fold_spread, 2), "PASS" if r.passes else "-", vals))  # fmt: skip
+                     _g(r.fold_spread, 2), "PASS" if r.passes else "-", vals))
     return ("candidate", "held-out RMS", "excess expl.", "dBIC", "plausible", "fold spread",
-            "verdict", "parameters (95% CI)"), rows  # fmt: skip
+            "verdict", "parameters (95% CI)"), rows
 
 
 def diagnose_lines(d: Diagnosis) -> list[str]:
     """Terminal summary: ranking table, notes, verdict."""
     head, rows = _rank_rows(d)
     out = [f"diagnose {d.config.name} on {len(d.flights)} flights "
-           f"({', '.join(d.flights)}); {d.evaluations} model evaluations"]  # fmt: skip
+           f"({', '.join(d.flights)}); {d.evaluations} model evaluations"]
     w = [18, 12, 12, 8, 9, 11, 7]
     out += _text_table(head, rows, w)
     for r in d.results:
@@ -446,9 +446,9 @@ def write_diagnose(d: Diagnosis, out_dir) -> list[Path]:
     names = [r.name for r in d.results]
     y = np.arange(len(names))
     ax.barh(y - 0.2, [100 * r.rms_reduction for r in d.results], 0.4,
-            label="held-out RMS reduction")  # fmt: skip
+            label="held-out RMS reduction")
     ax.barh(y + 0.2, [100 * (r.excess_explained if np.isfinite(r.excess_explained) else 0)
-                      for r in d.results], 0.4, label="residual above noise explained")  # fmt: skip
+                      for r in d.results], 0.4, label="residual above noise explained")
     ax.set_yticks(y, names, fontsize=7)
     ax.invert_yaxis()
     ax.axvline(100 * THRESHOLDS["min_excess_explained"], color="r", lw=0.6)
@@ -462,10 +462,10 @@ def write_diagnose(d: Diagnosis, out_dir) -> list[Path]:
     paths.append(pic)
     head, rows = _rank_rows(d)
     md = [f"# Which effect is missing: {d.config.name}", "",
-          f"Flights: {', '.join(d.flights)}.", "", f"**Verdict:** {d.verdict}.", ""]  # fmt: skip
+          f"Flights: {', '.join(d.flights)}.", "", f"**Verdict:** {d.verdict}.", ""]
     md += _md_table(head, rows)
     md += ["", "Thresholds: " + ", ".join(f"{k} = {v:g}" for k, v in THRESHOLDS.items()), "",
-           f"![ranking]({pic.name})", ""]  # fmt: skip
+           f"![ranking]({pic.name})", ""]
     notes = [f"- {r.name}: {n}" for r in d.results for n in r.notes]
     if notes:
         md += ["## Notes", "", *notes, ""]

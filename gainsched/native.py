@@ -34,6 +34,7 @@ import ctypes
 import hashlib
 import os
 import platform
+import shutil
 import subprocess
 import tempfile
 from functools import cache
@@ -41,10 +42,10 @@ from importlib import resources
 from pathlib import Path
 
 __all__ = ["CFLAGS", "VECTOR_ISAS", "load", "available", "build", "cache_dir", "vector_flags",
-           "vector_variants", "cpu_flags"]  # fmt: skip
+           "vector_variants", "cpu_flags", "find_cc"]
 
 CFLAGS = ("-O3", "-std=c99", "-fPIC", "-shared", "-ffp-contract=off", "-fno-math-errno",
-          "-fno-semantic-interposition")  # fmt: skip
+          "-fno-semantic-interposition")
 
 #: x86-64 vector ISAs the kernels are built for, widest first: (cpuinfo flag, doubles
 #: per register). Without any of them: the baseline (SSE2 on x86-64, NEON on arm64).
@@ -100,14 +101,22 @@ def vector_flags() -> tuple[str, ...]:
     return vector_variants()[0]
 
 
+def find_cc(cross: bool = False) -> str | None:
+    """The host C compiler (``$CC``, cc, gcc, clang), or arm-none-eabi-gcc with ``cross``."""
+    if cross:
+        return shutil.which("arm-none-eabi-gcc")
+    for cand in (os.environ.get("CC"), "cc", "gcc", "clang"):
+        if cand and shutil.which(cand):
+            return cand
+    return None
+
+
 def build(name: str, flags: tuple[str, ...] = ()) -> Path | None:
     """Compile ``gainsched/c/<name>.c`` with :data:`CFLAGS` plus ``flags`` (cached).
 
     Returns the shared library's path, or None if there is no working compiler or the
     compile fails (an unknown ``-m`` flag on an old compiler, say).
     """
-    from .codegen import find_cc
-
     cc = find_cc()
     if cc is None:
         return None
@@ -126,7 +135,7 @@ def build(name: str, flags: tuple[str, ...] = ()) -> Path | None:
                 c_file.write_text(src)
                 tmp_so = Path(tmp) / out.name
                 res = subprocess.run([cc, *cmd, str(c_file), "-o", str(tmp_so), "-lm"],
-                                     capture_output=True, text=True, timeout=300)  # fmt: skip
+                                     capture_output=True, text=True, timeout=300)
                 if res.returncode != 0:
                     return None
                 os.replace(tmp_so, out)  # atomic: other processes see all or nothing

@@ -1,6 +1,6 @@
 """The paper's flight experiments, flown in simulation: ``gainsched paper -o DIR``.
 
-Paper Sec. V.B (DESIGN.md section 8): constant-speed horizontal circles at
+Paper Sec. V.B (the vehicle of configs/paper.toml): constant-speed horizontal circles at
 5-9 m/s with motion-capture noise (RMS z error 0.013 m), tilted circles up to
 40 deg, a speed-up with peak tangential acceleration 12.5 m/s^2 (eq. 20),
 braking from 11.3 to 1.0 m/s in under 1.5 s with peak deceleration 17.5 m/s^2
@@ -155,11 +155,11 @@ def experiments(scenario_dir=None, *, quick: bool = False) -> list[Experiment]:
             horizontal, name=f"horizontal-{v:g}", speed=v, initial_error=(),
             duration=0.3 if quick else horizontal.duration,
             sensing=dataclasses.replace(horizontal.sensing, seed=horizontal.sensing.seed + i),
-        )  # fmt: skip
+        )
         out.append(Experiment(scn.name, "horizontal", scn))
     for a in TILTS_DEG[-1:] if quick else TILTS_DEG:
         scn = dataclasses.replace(tilted, name=f"tilted-{a:g}", tilt=float(np.deg2rad(a)),
-                                  duration=0.3 if quick else tilted.duration)  # fmt: skip
+                                  duration=0.3 if quick else tilted.duration)
         out.append(Experiment(scn.name, "tilted", scn))
     if quick:
         speedup = _compact(speedup, 1, 0.1, 0.1)
@@ -171,11 +171,11 @@ def experiments(scenario_dir=None, *, quick: bool = False) -> list[Experiment]:
         (m,) = braking.maneuvers
         hard = dataclasses.replace(braking, name="braking-hard",
                                    maneuvers=(Maneuver(m.t_start, m.speed, BRAKE_PEAK_MAX / 2),))
-        out.append(Experiment("braking-hard", "braking", hard))  # fmt: skip
+        out.append(Experiment("braking-hard", "braking", hard))
     out.append(Experiment("staircase", "staircase", stairs))
     out.append(Experiment("staircase-thrust-loss", "staircase",
                           dataclasses.replace(stairs, name="staircase-thrust-loss"),
-                          plant_effect=MODEL_ERROR))  # fmt: skip
+                          plant_effect=MODEL_ERROR))
     return out
 
 
@@ -245,7 +245,7 @@ def _analyse(exp: Experiment, res: SimResult) -> dict:
                 continue
             rows.append({"speed_mps": vp, "t_start_s": t0, "t_end_s": t1, "rising": i <= top,
                          "mean_speed_error_mps": float(np.mean(v[sel] - v_d[sel])),
-                         "rms_out_of_plane_m": _rms_z(res, sel)})  # fmt: skip
+                         "rms_out_of_plane_m": _rms_z(res, sel)})
         out["plateaus"] = rows
     return out
 
@@ -297,7 +297,7 @@ def _rows(exps: list[Experiment], results: dict) -> list[Row]:
             f"{worst['rms_out_of_plane_m']:.2g} m (worst; per speed m/s: mm {each})",
             worst["rms_out_of_plane_m"] <= RMS_Z_M,
             "no model error in the simulated plant",
-        ))  # fmt: skip
+        ))
     tilted = by_kind.get("tilted", [])
     if tilted:
         top = max(tilted, key=lambda r: r["tilt_deg"])
@@ -309,14 +309,14 @@ def _rows(exps: list[Experiment], results: dict) -> list[Row]:
                       f"saturated {100 * r['saturation_fraction']:.1f}%, "
                       f"slack {r['slack_events']}" for r in tilted),
             ok and top["tilt_deg"] >= 40.0,
-        ))  # fmt: skip
+        ))
     for r in by_kind.get("speedup", []):
         rows.append(Row(
             "Sec. V.B, eq. 20", "speed-up peak tangential acceleration", "m/s^2",
             f"{SPEEDUP_PEAK} m/s^2", SPEEDUP_PEAK, r["peak_accel_mps2"],
             f"{r['peak_accel_mps2']:.3g} m/s^2 (desired {r['peak_accel_desired_mps2']:.3g})",
             abs(r["peak_accel_mps2"] / SPEEDUP_PEAK - 1) <= ACCEL_TOL,
-        ))  # fmt: skip
+        ))
     for r in by_kind.get("braking", []):
         hard = r["peak_accel_desired_mps2"] > 0.5 * (BRAKE_PEAK + BRAKE_PEAK_MAX)
         peak = BRAKE_PEAK_MAX if hard else BRAKE_PEAK
@@ -328,13 +328,13 @@ def _rows(exps: list[Experiment], results: dict) -> list[Row]:
             f"{BRAKE_V1:g} +- {SPEED_TOL:g} m/s and stay", "s", f"< {BRAKE_TIME} s", BRAKE_TIME, t,
             f"{_fmt(t, 's')} (desired {r['maneuver_time_desired_s']:.3g} s)",
             None if t is None else t < BRAKE_TIME,
-        ))  # fmt: skip
+        ))
         rows.append(Row(
             fig, "braking peak tangential deceleration", "m/s^2", f"{peak} m/s^2", peak,
             r["peak_accel_mps2"],
             f"{r['peak_accel_mps2']:.3g} m/s^2 (desired {r['peak_accel_desired_mps2']:.3g})",
             abs(r["peak_accel_mps2"] / peak - 1) <= ACCEL_TOL,
-        ))  # fmt: skip
+        ))
         if not hard and r["roll_range_deg"] is not None:
             lo, hi = r["roll_range_deg"]
             dlo, dhi = r["roll_range_desired_deg"]
@@ -343,24 +343,24 @@ def _rows(exps: list[Experiment], results: dict) -> list[Row]:
                 lo if abs(lo) > abs(hi) else hi,
                 f"{lo:.1f} .. {hi:.1f} deg (nominal {dlo:.1f} .. {dhi:.1f}; "
                 f"max error {r['max_roll_error_deg']:.2g} deg)", None,
-            ))  # fmt: skip
+            ))
     for r in by_kind.get("staircase", []):
         rising = [p for p in r["plateaus"] if p["rising"]]  # Fig. 3: speeds going up
         low = [p for p in rising if p["speed_mps"] <= GOOD_UP_TO]
         high = [p for p in rising if p["speed_mps"] > GOOD_UP_TO]
         worst = {k: max(sel, key=lambda p: abs(p["mean_speed_error_mps"])) if sel else None
-                 for k, sel in (("low", low), ("high", high))}  # fmt: skip
+                 for k, sel in (("low", low), ("high", high))}
         err = {k: None if w is None else abs(w["mean_speed_error_mps"]) for k, w in worst.items()}
         effect = r["plant_effect"]
         plant = "design plant" if effect is None else f"plant with {_effect_doc(effect)}"
         if effect is None:
             claims = (("low", "tracked well", err["low"] is not None and err["low"] <= TRACK_TOL),
-                      ("high", "tracking degrades (model error)", None))  # fmt: skip
+                      ("high", "tracking degrades (model error)", None))
         else:
             degrades = (err["high"] is not None and err["low"] is not None
-                        and err["high"] > TRACK_TOL and err["high"] > 2 * err["low"])  # fmt: skip
+                        and err["high"] > TRACK_TOL and err["high"] > 2 * err["low"])
             claims = (("low", "tracked well", err["low"] is not None and err["low"] <= TRACK_TOL),
-                      ("high", "tracking degrades (model error)", degrades))  # fmt: skip
+                      ("high", "tracking degrades (model error)", degrades))
         for k, paper, agrees in claims:
             w = worst[k]
             if w is None:
@@ -375,7 +375,7 @@ def _rows(exps: list[Experiment], results: dict) -> list[Row]:
                 agrees,
                 "the design plant has no thrust loss at airspeed"
                 if effect is None and k == "high" else "",
-            ))  # fmt: skip
+            ))
         if effect is not None or r["max_speed_desired_mps"] < TOP_SPEED - SPEED_TOL:
             continue  # (quick mode: not flown)
         rows.append(Row(
@@ -384,7 +384,7 @@ def _rows(exps: list[Experiment], results: dict) -> list[Row]:
             f"{r['max_speed_mps']:.3g} m/s, {r['max_g_load']:.1f} g, "
             f"max tension {r['max_tension_N']:.0f} N, slack {r['slack_events']}",
             r["max_speed_mps"] >= TOP_SPEED - SPEED_TOL and r["slack_events"] == 0,
-        ))  # fmt: skip
+        ))
     return rows
 
 
@@ -392,7 +392,7 @@ def _rows(exps: list[Experiment], results: dict) -> list[Row]:
 
 
 def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
-              scenario_dir=None, progress=None, meta=None) -> PaperReport:  # fmt: skip
+              scenario_dir=None, progress=None, meta=None) -> PaperReport:
     """Fly every experiment, write its folder, the plots, report.md and report.json.
 
     Parameters
@@ -427,7 +427,7 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
         if progress is not None:
             progress(1)
     _plot_out_of_plane([runs[e.name] for e in exps if e.kind == "horizontal"],
-                       out_dir / "horizontal_out_of_plane.png")  # fmt: skip
+                       out_dir / "horizontal_out_of_plane.png")
     info = {
         "config": design.name,
         "config_sha256": design.sha256,
@@ -496,12 +496,12 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
         "",
         "## Paper versus simulation",
         "",
-    ]  # fmt: skip
+    ]
     lines += _md_table(
         ["paper figure", "quantity", "paper value", "simulated value", "agrees", "note"],
         [(r.figure, r.quantity, r.paper, r.simulated_text, yes[r.agrees], r.note)
          for r in report.rows],
-    )  # fmt: skip
+    )
     kinds = {}
     for e in exps:
         kinds.setdefault(e.kind, []).append(e.name)
@@ -514,7 +514,7 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
               f"{1000 * res[n]['max_out_of_plane_m']:.3f}",
               f"{res[n]['rms_speed_error_mps']:.4f}", f"{res[n]['max_tension_N']:.1f}",
               f"{res[n]['max_roll_deg']:.1f}") for n in kinds["horizontal"]],
-        )  # fmt: skip
+        )
         lines += ["", "![out-of-plane error](horizontal_out_of_plane.png)"]
     if "tilted" in kinds:
         lines += ["", "## Tilted circles (Sec. V.B)", ""]
@@ -524,7 +524,7 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
               f"{1000 * res[n]['rms_out_of_plane_m']:.3f}",
               f"{100 * res[n]['saturation_fraction']:.1f}", res[n]["slack_events"])
              for n in kinds["tilted"]],
-        )  # fmt: skip
+        )
         lines += [""] + [f"![{n}]({n}/path3d.png)" for n in kinds["tilted"][-1:]]
     for kind, title in (("speedup", "Speed-up (eq. 20)"), ("braking", "Braking (Fig. 4)")):
         for n in kinds.get(kind, []):
@@ -537,7 +537,7 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
                       f"{r['maneuver_time_desired_s']:.3g} s); roll "
                       f"{r['roll_range_deg'][0]:.1f} .. {r['roll_range_deg'][1]:.1f} deg; "
                       f"saturated {100 * r['saturation_fraction']:.1f}%, slack "
-                      f"{r['slack_events']}.", "", f"![{n}]({n}/speed_roll.png)"]  # fmt: skip
+                      f"{r['slack_events']}.", "", f"![{n}]({n}/speed_roll.png)"]
     for n in kinds.get("staircase", []):
         eff = res[n]["plant_effect"]
         plant = "design plant" if eff is None else f"plant with {_effect_doc(eff)}"
@@ -548,10 +548,10 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
             [(f"{p['speed_mps']:g}", f"{p['t_start_s']:.2f}", f"{p['t_end_s']:.2f}",
               "yes" if p["rising"] else "no", f"{p['mean_speed_error_mps']:+.4f}",
               f"{1000 * p['rms_out_of_plane_m']:.3f}") for p in res[n]["plateaus"]],
-        )  # fmt: skip
+        )
         lines += ["", f"![{n}]({n}/speed_roll.png)"]
     lines += ["", "Every experiment folder holds log.csv / log.h5 (flight-log format), "
-              "metrics.json, speed_roll.png and path3d.png.", ""]  # fmt: skip
+              "metrics.json, speed_roll.png and path3d.png.", ""]
     write_atomic(out_dir / "report.md", "\n".join(lines).encode())
     text = json.dumps(_jsonable(report.to_json()), indent=2, sort_keys=True) + "\n"
     write_atomic(out_dir / "report.json", text.encode())

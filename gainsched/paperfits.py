@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import lsq_linear, minimize_scalar
 
-from .compare import Measured, _centred
+from .compare import Measured, centred_commands
 from .config import Config
 from .effects import ThrustMomentum
 
@@ -68,7 +68,7 @@ class PaperFits:
                                   "model": "eta_f (eq. 28) vs T/T_h of eq. 29"},
             "bins": self.bins,
             "samples": int(self.airspeed.size),
-        }  # fmt: skip
+        }
 
 
 def _estimates(m: Measured, mass: float, g: float):
@@ -83,7 +83,7 @@ def _estimates(m: Measured, mass: float, g: float):
     z_B = R[:, :, 2]
     T_hat = -mass * (g_C[2]) / z_B[:, 2]  # eq. 25: cos(phi) cos(theta) = z_B . z_C
     drag = T_hat * np.sum(z_B * e_v, -1) + mass * (e_v @ g_C) - mass * a_v  # eq. 26
-    T_cmd = np.sum(_centred(m.T_cmd)[c], -1)
+    T_cmd = np.sum(centred_commands(m.T_cmd)[c], -1)
     v_B = np.einsum("nji,nj->ni", R, v)
     return speed, T_hat, T_cmd, drag, v_B
 
@@ -139,4 +139,4 @@ def paper_fits(config: Config, measured, *, min_speed: float = 1.0) -> PaperFits
                       "std": [None if not np.isfinite(v) else float(v) for v in std]}
     return PaperFits(speed, T_hat, T_cmd, eta, drag, v_B[:, 2], mu1, mu2, float(ci[0]),
                      float(ci[1]), float(np.sqrt(np.mean(r * r))), area, mom,
-                     float(np.sqrt(cost(opt.x))), bins)  # fmt: skip
+                     float(np.sqrt(cost(opt.x))), bins)

@@ -61,7 +61,7 @@ def _why(exc: OSError) -> str:
              errno.EACCES: "permission denied", errno.EPERM: "permission denied",
              errno.ENOTDIR: "a path component is a regular file, not a folder",
              errno.EEXIST: "a path component is a regular file, not a folder",
-             errno.EDQUOT: "disk quota exceeded"}  # fmt: skip
+             errno.EDQUOT: "disk quota exceeded"}
     return names.get(exc.errno, exc.strerror or type(exc).__name__)
 
 
@@ -211,7 +211,7 @@ def staged(out_dir, *, where: str = "-o") -> Iterator[Path]:
             stage = Path(tempfile.mkdtemp(dir=out_dir, prefix=_STAGE))
             yield stage
             names = sorted(p.relative_to(stage).as_posix() for p in stage.rglob("*")
-                           if p.is_file())  # fmt: skip
+                           if p.is_file())
             for name in names:
                 _fsync(stage / name)
             _fsync(stage)

@@ -139,7 +139,7 @@ def status() -> str:
     if pin_available():
         return f"this process is not pinned ({fingerprint()}); builds run in pinned workers"
     return (f"no pin on this machine ({fingerprint()}): table bits may differ from "
-            "other machines (docs/performance.md)")  # fmt: skip
+            "other machines (docs/performance.md)")
 
 
 @contextmanager
@@ -173,7 +173,7 @@ def pinned_executor(n_workers: int):
     from joblib.externals.loky import get_reusable_executor
 
     env = dict(PINNED_ENV if pin_available() else {}, OPENBLAS_NUM_THREADS="1",
-               OMP_NUM_THREADS="1")  # fmt: skip
+               OMP_NUM_THREADS="1")
     return get_reusable_executor(max_workers=n_workers, env=env, initializer=_worker_init)
 
 

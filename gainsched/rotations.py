@@ -1,4 +1,4 @@
-"""Rotation matrices, Euler angles and quaternions (DESIGN.md section 1).
+"""Rotation matrices, Euler angles and quaternions (conventions: docs/conventions.md).
 
 Conventions: ``R_AB`` maps B-coordinates to A-coordinates. Euler angles are
 Z-Y-X (``R_CB = Rz(psi) @ Ry(theta) @ Rx(phi)``, paper eq. 2). Quaternions are
@@ -75,7 +75,7 @@ def matrix_from_quaternion(q):
         1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
         2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
         2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    )  # fmt: skip
+    )
 
 
 def quaternion_from_matrix(R):
@@ -95,22 +95,22 @@ def quaternion_from_matrix(R):
     s = np.sqrt(1.0 + tr[m]) * 2
     q[m] = np.stack(
         [0.25 * s, (R[m, 2, 1] - R[m, 1, 2]) / s, (R[m, 0, 2] - R[m, 2, 0]) / s,
-         (R[m, 1, 0] - R[m, 0, 1]) / s], axis=-1)  # fmt: skip
+         (R[m, 1, 0] - R[m, 0, 1]) / s], axis=-1)
     m = k == 1
     s = np.sqrt(1.0 + R[m, 0, 0] - R[m, 1, 1] - R[m, 2, 2]) * 2
     q[m] = np.stack(
         [(R[m, 2, 1] - R[m, 1, 2]) / s, 0.25 * s, (R[m, 0, 1] + R[m, 1, 0]) / s,
-         (R[m, 0, 2] + R[m, 2, 0]) / s], axis=-1)  # fmt: skip
+         (R[m, 0, 2] + R[m, 2, 0]) / s], axis=-1)
     m = k == 2
     s = np.sqrt(1.0 + R[m, 1, 1] - R[m, 0, 0] - R[m, 2, 2]) * 2
     q[m] = np.stack(
         [(R[m, 0, 2] - R[m, 2, 0]) / s, (R[m, 0, 1] + R[m, 1, 0]) / s, 0.25 * s,
-         (R[m, 1, 2] + R[m, 2, 1]) / s], axis=-1)  # fmt: skip
+         (R[m, 1, 2] + R[m, 2, 1]) / s], axis=-1)
     m = k == 3
     s = np.sqrt(1.0 + R[m, 2, 2] - R[m, 0, 0] - R[m, 1, 1]) * 2
     q[m] = np.stack(
         [(R[m, 1, 0] - R[m, 0, 1]) / s, (R[m, 0, 2] + R[m, 2, 0]) / s,
-         (R[m, 1, 2] + R[m, 2, 1]) / s, 0.25 * s], axis=-1)  # fmt: skip
+         (R[m, 1, 2] + R[m, 2, 1]) / s, 0.25 * s], axis=-1)
     return np.where(q[..., :1] < 0, -q, q)
 
 

@@ -22,13 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import N_STATE, Config, _Section
+from .config import N_STATE, Config, Section
 from .errors import InputError
 from .fastplant import fast_plant
 from .maximal import MaximalModel, reduced_from_maximal
 from .model import Model
-from .nominal import Path as XiPath
-from .nominal import maneuver_path, nominal_from_path
+from .nominal import nominal_from_path
+from .path import AzimuthPath, maneuver_path
 from .rotations import R_IC_from_tilt, matrix_from_quaternion, quaternion_from_matrix
 
 __all__ = [
@@ -84,7 +84,7 @@ class Scenario:
 
 def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
     """Validate a scenario table (see ``configs/scenarios/*.toml``)."""
-    top = _Section(str(source), "", d)
+    top = Section(str(source), "", d)
     name = top.string("name", Path(str(source)).stem)
     tilt_deg = top.number("tilt_deg", 0.0)
     if not -90 < tilt_deg < 90:
@@ -98,7 +98,7 @@ def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
     mans = []
     t_free = 0.0  # end of the previous manoeuvre
     for i in range(len(raw)):
-        sec = _Section(str(source), f"maneuvers[{i}]", raw[i])
+        sec = Section(str(source), f"maneuvers[{i}]", raw[i])
         man = Maneuver(sec.number("t_start"), sec.number("speed"), sec.number("a", positive=True))
         sec.done()
         if man.t_start < t_free:
@@ -133,7 +133,7 @@ def load_scenario(path) -> Scenario:
     return scenario_from_dict(d, p)
 
 
-def profile_path(scn: Scenario, r: float, t) -> XiPath:
+def profile_path(scn: Scenario, r: float, t) -> AzimuthPath:
     """The reference azimuth path of a scenario: initial speed plus sequential manoeuvres."""
     t = np.asarray(t, dtype=float)
     v_prev = scn.speed
@@ -146,7 +146,7 @@ def profile_path(scn: Scenario, r: float, t) -> XiPath:
         for j in (1, 2, 3):
             d[j] = d[j] + p.d[j]
         v_prev = m.speed
-    return XiPath(t, xi, tuple(d))
+    return AzimuthPath(t, xi, tuple(d))
 
 
 @dataclass(frozen=True)
@@ -197,7 +197,7 @@ class _Plant:
         stateful effects (motor lag) start in their steady state at ``u0``."""
         if self.maximal is None:
             extra = [e.steady_states(u0, np.zeros(4))[0] for e in self.model.effects
-                     if e.n_states]  # fmt: skip
+                     if e.n_states]
             return np.concatenate([z0, *extra]) if extra else np.array(z0, dtype=float)
         return self.maximal.from_reduced(z0)  # the elastic link pre-stretched (maximal.py)
 
@@ -299,7 +299,7 @@ def _rk4(f, x, u, alpha, dt):
 
 
 def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None = None,
-             progress=None) -> SimResult:  # fmt: skip
+             progress=None) -> SimResult:
     """Fly ``scenario`` with gains from ``scheduler`` on the ``plant`` (default: design).
 
     Parameters
@@ -399,7 +399,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     PI, QI = P.poses(X[sl], alpha, scenario.gamma)
     return SimResult(t[sl], Z[sl].copy(), Zh[sl], z_d[sl], U[sl], u_d[sl], TEN[sl], PI, QI,
                      SAT[sl], STAT[sl], slack_time, scenario, dmodel.r, plant.vehicle.mass,
-                     plant.g)  # fmt: skip
+                     plant.g)
 
 
 class _Estimator:
@@ -598,7 +598,7 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
         res.t[idx], p, q, T, meta, source=f"simulation {res.scenario.name}",
         omega_B=res.z[idx, 7:10], tension=res.tension[idx],
         xi_ref=res.z_d[idx, 1], xi_dot_ref=res.z_d[idx, 3],
-    )  # fmt: skip
+    )
 
 
 def plot_result(res: SimResult, out_dir) -> list[Path]:

@@ -69,7 +69,7 @@ __all__ = [
 SCHEMA = "gainsched-sweep/1"
 #: metric columns of the results table, after ``variant`` and the parameter columns.
 COLUMNS = ("feasible_pct", "worst_spectral_radius", "max_abs_K", "min_tension_margin_N",
-           "table_sha256", "table")  # fmt: skip
+           "table_sha256", "table")
 _SRC = "command line"
 _SECTIONS = ("vehicle", "tether", "control", "feasibility")
 _INERTIA = {"xx": 0, "yy": 1, "zz": 2}
@@ -299,7 +299,7 @@ def variant_text(base: Config, name: str, values: Sequence[tuple[str, float]]) -
     doc = {"schema": doc.pop("schema"), "name": doc.pop("name"), **doc} if "schema" in doc else doc
     changed = ", ".join(f"{k} = {float(v)!r}" for k, v in values)
     lines = [f"# gainsched sweep variant {name} of config {base.name!r} "
-             f"(sha256 {base.sha256[:12]}): {changed}"]  # fmt: skip
+             f"(sha256 {base.sha256[:12]}): {changed}"]
     _toml_table(doc, (), lines)
     return "\n".join(lines) + "\n"
 
@@ -309,7 +309,7 @@ def variant_text(base: Config, name: str, values: Sequence[tuple[str, float]]) -
 
 def make_sweep(base: Config, vary: Sequence[tuple[str, Sequence[float]]] = (), *,
                monte_carlo: int = 0, seed: int = 0,
-               sigma: Sequence[tuple[str, float]] = ()) -> Sweep:  # fmt: skip
+               sigma: Sequence[tuple[str, float]] = ()) -> Sweep:
     """Plan a sweep: every variant, validated, in a deterministic order.
 
     Parameters
@@ -391,7 +391,7 @@ def summarize(config: Config, grid) -> dict[str, float]:
     ok = grid.reasons == 0
     K = np.abs(grid.K[ok])
     K = K[np.isfinite(K)]
-    rho = grid.rho[np.isfinite(grid.rho)]
+    rho = grid.spectral_radius[np.isfinite(grid.spectral_radius)]
     margin = grid.tension[ok] - config.feasibility.min_tension
     return {
         "feasible_pct": 100.0 * float(np.count_nonzero(ok)) / ok.size,
@@ -403,7 +403,7 @@ def summarize(config: Config, grid) -> dict[str, float]:
 
 def run_sweep(sweep: Sweep, out_dir, *, n_jobs: int = -1,
               backend: str | None = None,
-              progress: Callable[[int], None] | None = None) -> list[dict]:  # fmt: skip
+              progress: Callable[[int], None] | None = None) -> list[dict]:
     """Build every variant, one after the other, each swept over its speeds in parallel.
 
     Writes ``OUT/NAME.toml`` and ``OUT/NAME.h5`` per variant (atomically; one grid
@@ -483,15 +483,15 @@ def format_rows(sweep: Sweep, rows: Sequence[dict], limit: int = 30) -> list[str
     for r in rows[:limit]:
         cells = [r["variant"], *(f(r[k], ".6g") for k in keys), f(r["feasible_pct"], ".1f"),
                  f(r["worst_spectral_radius"], ".5f"), f(r["max_abs_K"], ".4g"),
-                 f(r["min_tension_margin_N"], ".3f"), r["table_sha256"][:12]]  # fmt: skip
+                 f(r["min_tension_margin_N"], ".3f"), r["table_sha256"][:12]]
         lines.append("  ".join(c.rjust(w) for c, w in zip(cells, width, strict=True)))
     if len(rows) > limit:
         lines.append(f"  ... {len(rows) - limit} more in sweep.csv")
     for col, unit in (("feasible_pct", "%"), ("worst_spectral_radius", ""),
-                      ("max_abs_K", ""), ("min_tension_margin_N", " N")):  # fmt: skip
+                      ("max_abs_K", ""), ("min_tension_margin_N", " N")):
         v = np.array([r[col] for r in rows], dtype=float)
         v = v[np.isfinite(v)]
         if v.size:
             lines.append(f"  {col}: {v.min():.6g} .. {v.max():.6g}{unit} "
-                         f"(median {np.median(v):.6g}) over {v.size} variants")  # fmt: skip
+                         f"(median {np.median(v):.6g}) over {v.size} variants")
     return lines

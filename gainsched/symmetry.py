@@ -1,4 +1,4 @@
-"""Exact symmetries of the scheduled problem (DESIGN.md section 5; derivation in
+"""Exact symmetries of the scheduled problem (paper Sec. IV.C; derivation in
 ``docs/symmetry.md``).
 
 S1, tilt sign: ``R_IC(-a, g) = R_IC(a, g + pi) Rz(pi)``, so the circle frame of

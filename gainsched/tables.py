@@ -24,9 +24,9 @@ import numpy as np
 
 from . import __version__
 from .config import N_LQR
+from .constants import REASONS
 from .errors import InputError
 from .linearize import INPUT_NAMES, lqr_state_names
-from .nominal import REASONS
 from .publish import write_atomic
 
 __all__ = ["SCHEMA", "Table", "table_bytes", "write_table", "load_table", "table_from_bytes"]
@@ -122,7 +122,7 @@ def _root_sha256(attrs, digests) -> str:
 def _datasets(f) -> dict:
     out = {}
     f.visititems(lambda name, obj: out.__setitem__(name, obj) if isinstance(obj, h5py.Dataset)
-                 else None)  # fmt: skip
+                 else None)
     return out
 
 
@@ -173,7 +173,8 @@ def table_bytes(config, grid, model) -> bytes:
         for bit, text in REASONS.items():
             ds.attrs[f"bit_{bit}"] = text
         cl = _group(f, "closed_loop")
-        _create(cl, "spectral_radius", grid.rho, "-", "monodromy spectral radius per circle")
+        _create(cl, "spectral_radius", grid.spectral_radius, "-",
+                "monodromy spectral radius per circle")
         _create(cl, "periods", grid.sweeps, "-", "periods in the periodic terminal cost")
         _create(cl, "steps", grid.steps, "-", "control steps per period")
         _create(cl, "linearization_samples", grid.lin_samples, "-",
@@ -204,12 +205,12 @@ _REQUIRED = {
     "gains/K_tilt0": 3, "gains/K": 5, "nominal/u_d": 4, "nominal/phi_d": 3,
     "nominal/tension": 3, "feasibility/reasons": 3, "closed_loop/spectral_radius": 2,
     "closed_loop/dt": 1, "weights/Q": 2, "weights/R": 2, "config_text": 0,
-}  # fmt: skip
+}
 
 
 #: root attributes every table carries (written by :func:`table_bytes`)
 _ATTRS = ("schema", "tool_version", "config_name", "config_sha256", "terminal", "rate_hz",
-          "radius_m", "state_names", "input_names", "data_sha256")  # fmt: skip
+          "radius_m", "state_names", "input_names", "data_sha256")
 
 
 def load_table(path) -> Table:
@@ -253,7 +254,7 @@ def _verify(f, path) -> None:
     """Per-dataset and root checksums (see the module docstring)."""
     if "data_sha256" not in f.attrs:
         raise InputError(path, "data_sha256", "missing: the file carries no data checksum "
-                         "(built by gainsched < 0.2, or not by gainsched): rebuild it")  # fmt: skip
+                         "(built by gainsched < 0.2, or not by gainsched): rebuild it")
     digests = {}
     try:
         for name, ds in _datasets(f).items():
@@ -263,12 +264,12 @@ def _verify(f, path) -> None:
                 raise InputError(path, name, "missing its sha256 attribute")
             if (want.decode() if isinstance(want, bytes) else str(want)) != got:
                 raise InputError(path, name, "checksum mismatch: the data changed after the "
-                                 "build (corrupt or edited file); rebuild the table")  # fmt: skip
+                                 "build (corrupt or edited file); rebuild the table")
     except (OSError, ValueError, KeyError) as exc:
         raise InputError(path, "", f"unreadable dataset ({exc})") from None
     if _root_sha256(dict(f.attrs), digests) != _decoded(f.attrs["data_sha256"]):
         raise InputError(path, "data_sha256", "checksum mismatch: attributes or datasets were "
-                         "added, removed or edited after the build; rebuild the table")  # fmt: skip
+                         "added, removed or edited after the build; rebuild the table")
 
 
 def _decoded(v):
@@ -310,14 +311,14 @@ def _read(f, path) -> Table:
         "nominal/tension": (n_a, n_v, n_xi), "feasibility/reasons": (n_a, n_v, n_xi),
         "closed_loop/spectral_radius": (n_a, n_v), "weights/Q": (n, n), "weights/R": (4, 4),
         "axes/xi_dot": (n_v,), "closed_loop/dt": (n_v,),
-    }  # fmt: skip
+    }
     for key, shape in shapes.items():
         if d[key].shape != shape:
             raise InputError(path, key, f"shape {d[key].shape} does not match the axes {shape}")
     names = str(attrs["state_names"]).split(",")
     if n < N_LQR or len(names) != n:
         raise InputError(path, "gains/K_tilt0", f"{n} state columns; need >= {N_LQR} and one per "
-                         f"name in state_names ({len(names)})")  # fmt: skip
+                         f"name in state_names ({len(names)})")
     _verify(f, path)  # after the structure, so that a missing dataset is named as such
     _check_feasible_finite(path, d, tilt, speed, xi)
     return Table(
@@ -325,7 +326,7 @@ def _read(f, path) -> Table:
         d["nominal/tension"], d["feasibility/reasons"].astype(np.uint8),
         d["closed_loop/spectral_radius"], d["weights/Q"], d["weights/R"], d["closed_loop/dt"],
         str(d["config_text"]), str(attrs.get("config_sha256", "")), attrs, str(path),
-    )  # fmt: skip
+    )
 
 
 def _check_feasible_finite(path, d, tilt, speed, xi) -> None:
@@ -346,4 +347,4 @@ def _check_feasible_finite(path, d, tilt, speed, xi) -> None:
             raise InputError(path, f"{key}[{', '.join(map(str, idx))}]",
                              f"non-finite value at a feasible point (tilt "
                              f"{np.rad2deg(tilt[a]):g} deg, speed {speed[v]:g} m/s, azimuth "
-                             f"{np.rad2deg(xi[k]):g} deg); the table is corrupt")  # fmt: skip
+                             f"{np.rad2deg(xi[k]):g} deg); the table is corrupt")

@@ -1,4 +1,4 @@
-"""Numerical trim: the nominal of any set of effects (DESIGN.md section 3).
+"""Numerical trim: the nominal of any set of effects (paper Sec. III, for any effects).
 
 Along a prescribed azimuth path xi(t) the nominal keeps ``delta = pi/2``,
 ``theta = chi = 0`` and leaves the roll ``phi(t)`` and the four motor thrusts
@@ -24,8 +24,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
+from .closedform import closed_form, state_from_roll
 from .errors import GainschedError
-from .nominal import Path, _closed_form, state_from_roll
+from .path import AzimuthPath
 
 __all__ = ["trim_path", "TrimError"]
 
@@ -69,11 +70,11 @@ def _fourier_eval(values, T: float, t):
     return f, f1, f2
 
 
-def _sub_path(path: Path, idx) -> Path:
-    return Path(path.t[idx], path.xi[idx], tuple(d[idx] for d in path.d))
+def _sub_path(path: AzimuthPath, idx) -> AzimuthPath:
+    return AzimuthPath(path.t[idx], path.xi[idx], tuple(d[idx] for d in path.d))
 
 
-def _local(model, path: Path, alpha, phi, dphi, ddphi, T):
+def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T):
     """Residuals (n, 5) of the node equations, and the full state and its derivative."""
     s, sdot = state_from_roll(path, phi, dphi, ddphi)
     n_x = model.n_extra
@@ -140,7 +141,7 @@ def _initial_guess(model, path, alpha):
 
     drag_only = tuple(e for e in model.effects if e.tangential_drag(1.0) is not None)
     base = Model(model.config, effects=drag_only)
-    s, _, u, _ = _closed_form(base, path, alpha, base.closed_form_drag())
+    s, _, u, _ = closed_form(base, path, alpha, base.closed_form_drag())
     return s[:, 4], u
 
 
@@ -155,13 +156,13 @@ def _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, tol=1e-12, max_iter=2
     return T
 
 
-def trim_path(model, path: Path, alpha: float, *, periodic: bool | None = None):
+def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None = None):
     """Nominal ``(z, z_dot, u, tension)`` along ``path`` for the model's effects.
 
     Parameters
     ----------
     model : Model
-    path : Path
+    path : AzimuthPath
         Azimuth profile; for ``periodic=True`` the samples must cover exactly one
         period of a constant-speed circle, equally spaced (as ``circle_nominal`` makes).
     alpha : float, rad
@@ -184,7 +185,7 @@ def trim_path(model, path: Path, alpha: float, *, periodic: bool | None = None):
         tn = t[0] + np.arange(N_FOURIER) * (Tp / N_FOURIER)
         xi_n = path.xi[0] + xd[0] * (tn - t[0])
         z0 = np.zeros_like(tn)
-        nodes = Path(tn, xi_n, (np.full_like(tn, xd[0]), z0, z0, z0))
+        nodes = AzimuthPath(tn, xi_n, (np.full_like(tn, xd[0]), z0, z0, z0))
         D1, D2 = _fourier_operators(N_FOURIER, Tp)
         phi0, u0 = _initial_guess(model, nodes, alpha)
         phi_n, T_n = _newton(model, nodes, alpha, D1, D2, phi0, u0)

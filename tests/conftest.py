@@ -1,4 +1,4 @@
-"""Shared fixtures: the paper config (DESIGN.md section 8) and the reduced model built from it."""
+"""Shared fixtures: the paper config (configs/paper.toml) and the reduced model built from it."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ from scipy.interpolate import CubicSpline
 
 from gainsched.config import load_config
 from gainsched.model import Model
-from gainsched.nominal import circle_path, nominal_from_path, period
+from gainsched.nominal import nominal_from_path
+from gainsched.path import circle_path, period
 
 REPO = Path(__file__).parents[1]
 PAPER_TOML = REPO / "configs" / "paper.toml"

@@ -75,7 +75,7 @@ def test_effect_states_count(paper_text):
          "limit limits.max_build_cpu_s = 1800"),
     ],
     ids=lambda x: x if isinstance(x, str) and " " in x else None,
-)  # fmt: skip
+)
 def test_absurd_builds_refused_quickly(paper_text, tmp_path, case, edit, key, words):
     path = tmp_path / "big.toml"
     path.write_text(edit(paper_text))

@@ -22,8 +22,8 @@ import pytest
 from click.testing import CliRunner
 
 from gainsched.cli import cli
-from gainsched.codegen import find_cc
 from gainsched.config import load_config
+from gainsched.native import find_cc
 from gainsched.sim import Maneuver, Scenario, Sensing, metrics, simulate, table_scheduler
 from gainsched.tables import load_table
 
@@ -89,7 +89,7 @@ def test_grid_is_what_the_design_notes_say():
     ("tilt_deg", "speed"),
     [pytest.param(a, v, marks=() if (a, v) in SAMPLE else pytest.mark.slow,
                   id=f"tilt{a:g}-{v:g}mps") for a, v in GRID],
-)  # fmt: skip
+)
 def test_feasible_grid_speed_tracks(paper, sched, tilt_deg, speed):
     """Plant = design model, ideal sensing, 5 s from a perturbation of every state
     (``PERTURBATION``): no slack, no lookup outside the feasible table, the error stays
@@ -169,7 +169,7 @@ def _c_scheduler(table, tmp_path):
         Scenario("c-mirrored", np.deg2rad(-20.0), -8.0, 2.0, initial_error=(0.01, 0.02)),
     ],
     ids=lambda s: s.name,
-)  # fmt: skip
+)
 def test_c_runtime_and_python_interpolator_fly_the_same(paper, table, sched, scn, tmp_path):
     """The closed loop with gains from the compiled C runtime (the firmware code, float32)
     and from the Python reference interpolator: same trajectory within 1e-6 m over 2 s,
@@ -213,7 +213,7 @@ def test_paper_quick_report(tmp_path):
     assert "| paper figure | quantity | paper value | simulated value |" in md
     assert md.count("\n| ") >= len(rows) + 1
     for img in ("horizontal_out_of_plane.png", "braking/speed_roll.png",
-                "staircase/speed_roll.png", "tilted-40/path3d.png"):  # fmt: skip
+                "staircase/speed_roll.png", "tilted-40/path3d.png"):
         assert f"]({img})" in md
         assert (out / img).stat().st_size > 1000
     assert (out / "braking" / "log.csv").exists()
@@ -222,6 +222,6 @@ def test_paper_quick_report(tmp_path):
 
 def test_paper_bad_table_is_one_line(tmp_path):
     res = CliRunner().invoke(cli, ["paper", "-o", str(tmp_path), "--quick",
-                                   "--tables", str(tmp_path / "missing.h5")])  # fmt: skip
+                                   "--tables", str(tmp_path / "missing.h5")])
     assert res.exit_code == 2
     assert "missing.h5" in res.output and "Traceback" not in res.output

@@ -88,7 +88,7 @@ def test_header_contents(paper, paper_header):
     assert defined and all(s.startswith(("PAPER_", "paper_")) for s in defined), defined
     # the data round-trip exactly through the literals
     for name, arr in (("paper_K_tilt0", d.K_tilt0), ("paper_xi_dot", d.xi_dot),
-                      ("paper_u_d", d.u_d), ("paper_mask", d.mask)):  # fmt: skip
+                      ("paper_u_d", d.u_d), ("paper_mask", d.mask)):
         np.testing.assert_array_equal(_array(h, name), arr.astype(np.float64).ravel())
     K = _array(h, "paper_K")
     np.testing.assert_array_equal(K, d.K.astype(np.float64).ravel())
@@ -123,7 +123,7 @@ def test_crc_covers_documented_bytes(paper):
     d = runtime_data(paper)
     chunks = dict(d.crc_chunks())
     assert list(chunks) == ["dims", "xi_scale", "xi", "speed", "xi_dot", "tilt", "K_tilt0",
-                            "K", "u_d", "phi_d", "state_sign", "state_perm", "mask"]  # fmt: skip
+                            "K", "u_d", "phi_d", "state_sign", "state_perm", "mask"]
     assert zlib.crc32(b"".join(chunks.values())) == d.crc32()
     assert d.nbytes() == sum(len(v) for k, v in chunks.items() if k not in ("dims", "xi_scale"))
 
@@ -165,7 +165,7 @@ def test_generated_header_compiles_and_corruption_fails_verify(tmp_path):
         [CC, *codegen.STRICT_CFLAGS, "-O1", "-DGS_BATCH_MAIN", f"-I{bad_dir}",
          str(bad_dir / "synth_batch.c"), str(bad_dir / "gainsched_runtime.c"), "-o", str(out)],
         check=True,
-    )  # fmt: skip
+    )
     res = subprocess.run([str(out), "verify"], capture_output=True, text=True)
     assert res.returncode == 1 and "verify 64" in res.stdout  # GS_BAD_TABLE
 

@@ -47,7 +47,7 @@ def fly(paper):
             if names is not None:
                 scn = [s for s in default_flights(2.5) if s.name in names]
             cache[key] = campaign(paper, sched, hidden, duration=2.5, load_cell=load_cell,
-                                  scenarios=scn)  # fmt: skip
+                                  scenarios=scn)
         return cache[key]
 
     return get
@@ -204,7 +204,7 @@ def test_analysis_config_section(paper):
            ("savgol_order = 2.5", "analysis.savgol_order"),
            ("savgol_window_s = 0", "analysis.savgol_window_s"),
            ("latency_s = -0.01", "analysis.latency_s"),
-           ("window = 3", "analysis.window")]  # fmt: skip
+           ("window = 3", "analysis.window")]
     for line, key in bad:
         with pytest.raises(InputError, match=key.replace(".", r"\.")):
             config_from_text(base + f"\n[analysis]\n{line}\n", "x.toml")
@@ -241,13 +241,13 @@ def test_cli_compare_writes_report(paper, fly, tmp_path):
     paths += write_campaign(tmp_path / "logs", logs[4:], "h5")
     out = tmp_path / "rep"
     res = CliRunner().invoke(cli, ["compare", str(PAPER), *map(str, paths), "-o", str(out),
-                                   "--before", str(PAPER)])  # fmt: skip
+                                   "--before", str(PAPER)])
     assert res.exit_code == 0, res.output
     assert "where it fails: tangential residual grows with" in res.output
     assert "Fig. 6: drag fit" in res.output
     for f in ("compare.json", "compare.md", "compare_residuals.png", "compare_acf_ccf.png",
               "compare_where.png", "paper_drag.png", "paper_thrust_efficiency.png",
-              "before_after.md", "before_after.png"):  # fmt: skip
+              "before_after.md", "before_after.png"):
         assert (out / f).stat().st_size > 0, f
     data = json.loads((out / "compare.json").read_text())
     ax = data["axes"]["tangential"]
@@ -279,14 +279,14 @@ def test_cli_campaign_writes_logs(tmp_path):
     table = str(ROOT / "tables/paper.h5")
     res = CliRunner().invoke(cli, ["campaign", str(PAPER), "--tables", table, "--hidden",
                                    "thrust_scale", "--duration", "1.0", "--no-load-cell",
-                                   "-o", str(out)])  # fmt: skip
+                                   "-o", str(out)])
     assert res.exit_code == 0, res.output
     files = sorted(out.glob("*.csv"))
     assert len(files) == 7
     seg = load_segments(load_config(PAPER), files[:1])[1][0]
     assert "hidden: thrust_scale" in seg.meta["notes"] and "tension" not in seg.optional
     res = CliRunner().invoke(cli, ["campaign", str(PAPER), "--tables", table, "--hidden",
-                                   "nope", "-o", str(out)])  # fmt: skip
+                                   "nope", "-o", str(out)])
     assert res.exit_code == 2 and "unknown hidden effect" in res.output
 
 

@@ -93,27 +93,27 @@ BAD = [
         "inertia-not-pd",
         lambda t: set_key(t, "vehicle", "inertia", "[1e-3, -1e-3, 1e-3]"),
         "vehicle.inertia",
-    ),  # fmt: skip
+    ),
     (
         "inertia-not-symmetric",
         lambda t: set_key(t, "vehicle", "inertia", NON_SYMMETRIC_J),
         "vehicle.inertia",
-    ),  # fmt: skip
+    ),
     (
         "thrust-min-eq-max",
         lambda t: set_key(t, "vehicle", "thrust_min", "3.5"),
         "vehicle.thrust_min",
-    ),  # fmt: skip
+    ),
     (
         "thrust-min-gt-max",
         lambda t: set_key(t, "vehicle", "thrust_min", "4.0"),
         "vehicle.thrust_min",
-    ),  # fmt: skip
+    ),
     (
         "offset-ge-length",
         lambda t: set_key(t, "tether", "attachment_offset", "1.5"),
         "tether.attachment_offset",
-    ),  # fmt: skip
+    ),
     ("Q-size", lambda t: set_key(t, "control", "Q", "[1, 1, 1]"), "control.Q"),
     ("Q-not-psd", lambda t: set_key(t, "control", "Q", _q_matrix_not_psd()), "control.Q"),
     ("R-not-pd", lambda t: set_key(t, "control", "R", "[1, 0, 1, 1]"), "control.R"),
@@ -127,17 +127,17 @@ BAD = [
         "azimuth-odd",
         lambda t: set_key(t, "grid", "azimuth_samples", "35"),
         "grid.azimuth_samples",
-    ),  # fmt: skip
+    ),
     (
         "azimuth-float",
         lambda t: set_key(t, "grid", "azimuth_samples", "36.0"),
         "grid.azimuth_samples",
-    ),  # fmt: skip
+    ),
     (
         "azimuth-string",
         lambda t: set_key(t, "grid", "azimuth_samples", '"36"'),
         "grid.azimuth_samples",
-    ),  # fmt: skip
+    ),
     ("drag-mu1-negative", lambda t: set_key(t, "effects.drag", "mu1", "-1"), "effects.drag.mu1"),
     # name: a file stem and a C prefix
     ("name-escape", lambda t: set_key(t, "", "name", '"../../escape"'), "name"),
@@ -155,12 +155,12 @@ BAD = [
         "xi-dot-f32",
         lambda t: set_key(t, "grid", "speeds", "[2, 7.9000004, 7.900001]"),
         "grid.speeds",
-    ),  # fmt: skip
+    ),
     (
         "tilts-f32",
         lambda t: set_key(t, "grid", "tilts_deg", "[0, 10, 10.0000001]"),
         "grid.tilts_deg",
-    ),  # fmt: skip
+    ),
     ("speeds-overflow", lambda t: set_key(t, "grid", "speeds", "[2, 1e300]"), "grid.speeds"),
     ("speeds-above-100", lambda t: set_key(t, "grid", "speeds", "[2, 101]"), "grid.speeds"),
     (
@@ -168,17 +168,17 @@ BAD = [
         lambda t: set_key(set_key(t, "tether", "attachment_offset", "0"), "tether", "length",
                           "0.01"),
         "grid.speeds",
-    ),  # fmt: skip
+    ),
     (
         "azimuth-above-4096",
         lambda t: set_key(t, "grid", "azimuth_samples", "4098"),
         "grid.azimuth_samples",
-    ),  # fmt: skip
+    ),
     # weights: the azimuth must be weighted (it is an exact integrator)
     ("Q-zero", lambda t: set_key(t, "control", "Q", "[0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]"),
-     "control.Q"),  # fmt: skip
+     "control.Q"),
     ("Q-xi-zero", lambda t: set_key(t, "control", "Q", "[3, 0, 1, 1, 1, 2, 0.5, 1, 1, 1, 0.5]"),
-     "control.Q"),  # fmt: skip
+     "control.Q"),
     # physically absurd values
     ("mass-tiny", lambda t: set_key(t, "vehicle", "mass", "1e-300"), "vehicle.mass"),
     ("mass-huge", lambda t: set_key(t, "vehicle", "mass", "2000"), "vehicle.mass"),
@@ -186,16 +186,16 @@ BAD = [
         "inertia-triangle",
         lambda t: set_key(t, "vehicle", "inertia", "[1e-3, 1e-3, 4.5e-3]"),
         "vehicle.inertia",
-    ),  # fmt: skip
+    ),
     ("rate-too-low", lambda t: set_key(t, "control", "rate_hz", "40"), "control.rate_hz"),
     ("rate-too-high", lambda t: set_key(t, "control", "rate_hz", "2e5"), "control.rate_hz"),
     ("rate-1GHz", lambda t: set_key(t, "control", "rate_hz", "1e9"), "control.rate_hz"),
     # [limits]
     ("limits-zero", lambda t: append(t, "[limits]\nmax_memory_gib = 0"), "limits.max_memory_gib"),
     ("limits-negative", lambda t: append(t, "[limits]\nmax_build_cpu_s = -1"),
-     "limits.max_build_cpu_s"),  # fmt: skip
+     "limits.max_build_cpu_s"),
     ("limits-inf", lambda t: append(t, "[limits]\nmax_build_cpu_s = inf"),
-     "limits.max_build_cpu_s"),  # fmt: skip
+     "limits.max_build_cpu_s"),
     ("limits-unknown", lambda t: append(t, "[limits]\nmax_disk_gib = 1"), "limits.max_disk_gib"),
 ]
 BAD_BY_ID = {case[0]: case for case in BAD}

@@ -157,7 +157,7 @@ def test_apply_config_kinds(paper, diagnosed):
     """Config-parameter candidates edit their key; latency goes to [analysis]."""
     for hidden, section, key in (("mass", "vehicle", "mass"),
                                  ("latency", "analysis", "latency_s"),
-                                 ("tether_elasticity", "tether", "stiffness")):  # fmt: skip
+                                 ("tether_elasticity", "tether", "stiffness")):
         d = diagnosed(hidden)
         text = apply_candidate(paper, d.accepted)
         cfg = config_from_text(text)
@@ -198,7 +198,7 @@ def test_momentum_theory_thrust_loss(diagnosed):
 def test_candidate_library_covers_issue():
     need = {"drag_linear", "drag_quadratic", "rotor_drag", "thrust_airspeed", "thrust_momentum",
             "thrust_scale", "mass", "motor_lag", "latency", "tether_elasticity",
-            "attachment_offset", "tether_length"}  # fmt: skip
+            "attachment_offset", "tether_length"}
     assert need <= set(CANDIDATES)
 
 
@@ -214,7 +214,7 @@ def test_cli_diagnose_apply_and_report(paper, fly, tmp_path):
     out = tmp_path / "new.toml"
     rep = tmp_path / "rep"
     res = CliRunner().invoke(cli, ["diagnose", str(ROOT / "configs/paper.toml"), *map(str, logs),
-                                   "--apply", "-o", str(out), "--report", str(rep)])  # fmt: skip
+                                   "--apply", "-o", str(out), "--report", str(rep)])
     assert res.exit_code == 0, res.output
     assert "verdict: missing effect: thrust_scale" in res.output
     assert "normalised RMS" in res.output
@@ -222,7 +222,7 @@ def test_cli_diagnose_apply_and_report(paper, fly, tmp_path):
     k = dict(next(s for s in cfg.effects if s.name == "thrust_scale").params)["k_T"]
     assert k == pytest.approx(0.92, abs=0.01)
     for f in ("diagnose.json", "diagnose.md", "ranking.png", "before_after.md",
-              "before_after.json", "before_after.png", "after.md", "before.md"):  # fmt: skip
+              "before_after.json", "before_after.png", "after.md", "before.md"):
         assert (rep / f).stat().st_size > 0, f
     import json
 
@@ -233,7 +233,7 @@ def test_cli_diagnose_apply_and_report(paper, fly, tmp_path):
     assert ba["axes"]["normal"]["rms_after"] < 0.5 * ba["axes"]["normal"]["rms_before"]
     # --apply without -o is a usage error
     res = CliRunner().invoke(cli, ["diagnose", str(ROOT / "configs/paper.toml"),
-                                   *map(str, logs), "--apply"])  # fmt: skip
+                                   *map(str, logs), "--apply"])
     assert res.exit_code == 2 and "needs -o" in res.output
 
 

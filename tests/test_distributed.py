@@ -55,7 +55,7 @@ def scheduler():
         for key, value in reproducible.PINNED_ENV.items():
             mp.setenv(key, value)
         with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                      host="127.0.0.1", dashboard_address=None) as cluster:
+                                      host="127.0.0.1", dashboard_address=":0") as cluster:
             yield cluster.scheduler_address
 
 
@@ -90,7 +90,7 @@ def _sha(path) -> str:
 
 def test_dask_build_equals_local_build_byte_for_byte(scheduler, small_path, local_build, tmp_path):
     res = _invoke("build", small_path, "-o", tmp_path, "--backend", "dask", "--scheduler",
-                  scheduler)  # fmt: skip
+                  scheduler)
     assert res.exit_code == 0, res.output
     assert f"on dask {scheduler} (2 workers, 2 threads)" in res.stderr
     for name in ("small.h5", "small_gains.h"):
@@ -98,7 +98,7 @@ def test_dask_build_equals_local_build_byte_for_byte(scheduler, small_path, loca
 
 
 def test_result_order_does_not_follow_completion_order(scheduler, small_path, local_build,
-                                                       tmp_path, monkeypatch):  # fmt: skip
+                                                       tmp_path, monkeypatch):
     """The low speeds are made to finish last on the cluster; the table is unchanged."""
     from gainsched import grid
 
@@ -116,7 +116,7 @@ def test_result_order_does_not_follow_completion_order(scheduler, small_path, lo
     class SlowLowSpeeds(grid.Parallel):
         def __call__(self, iterable):
             jobs = [(timed, (f, 0.5 * (1 - args[1] / SPEEDS[-1]), *args), kw)
-                    for f, args, kw in iterable]  # args = (config, speed, tilts)  # fmt: skip
+                    for f, args, kw in iterable]  # args = (config, speed, tilts)
             for i, (out, t, worker) in enumerate(super().__call__(jobs)):
                 handed_back.append((t, jobs[i][1][3]))
                 workers.add(worker)
@@ -124,7 +124,7 @@ def test_result_order_does_not_follow_completion_order(scheduler, small_path, lo
 
     monkeypatch.setattr(grid, "Parallel", SlowLowSpeeds)
     res = _invoke("build", small_path, "-o", tmp_path, "--backend", "dask", "--scheduler",
-                  scheduler)  # fmt: skip
+                  scheduler)
     assert res.exit_code == 0, res.output
     assert [v for _, v in handed_back] == SPEEDS  # results come back in submission order...
     assert [v for _, v in sorted(handed_back)] != SPEEDS  # ...though they finished otherwise
@@ -139,7 +139,7 @@ def test_sweep_on_dask_rows_and_tables_equal_individual_builds(scheduler, small_
     out = tmp_path / "sweep"
     res = _invoke("sweep", small_path, "--vary", "vehicle.mass=0.45,0.55", "--vary",
                   "tether.length=1.4", "-o", out, "--backend", "dask", "--scheduler",
-                  scheduler)  # fmt: skip
+                  scheduler)
     assert res.exit_code == 0, res.output
     rows = list(csv.DictReader((out / "sweep.csv").open()))
     assert [r["variant"] for r in rows] == ["small-v000", "small-v001"]
@@ -171,7 +171,7 @@ def test_monte_carlo_is_seeded(small_text):
     def plan(seed, n=4):
         return make_sweep(base, [parse_vary("vehicle.mass=0.45,0.55")], monte_carlo=n,
                           seed=seed, sigma=[parse_sigma("vehicle.inertia.zz=0.03"),
-                                            parse_sigma("effects.drag.mu1=0.2")])  # fmt: skip
+                                            parse_sigma("effects.drag.mu1=0.2")])
 
     a, b, c = plan(1), plan(1), plan(2)
     params = [v.params for v in a.variants]
@@ -223,7 +223,7 @@ def test_unreachable_scheduler(small_path, tmp_path, command):
     addr = f"tcp://127.0.0.1:{_closed_port()}"
     extra = ["--vary", "vehicle.mass=0.5"] if command == "sweep" else []
     res = _invoke(command, small_path, "-o", tmp_path, *extra, "--backend", "dask",
-                  "--scheduler", addr, "--connect-timeout", "0.5")  # fmt: skip
+                  "--scheduler", addr, "--connect-timeout", "0.5")
     _one_line_error(res, "--scheduler", "cannot reach the Dask scheduler", addr)
 
 
@@ -246,7 +246,7 @@ def test_bad_cluster_options(small_path, tmp_path, args, needles):
 def test_dask_not_installed(small_path, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "dask.distributed", None)  # import raises ImportError
     res = _invoke("build", small_path, "-o", tmp_path, "--backend", "dask", "--scheduler",
-                  "tcp://127.0.0.1:8786")  # fmt: skip
+                  "tcp://127.0.0.1:8786")
     _one_line_error(res, "--backend dask", "dask is not installed", "pip install")
 
 
@@ -271,6 +271,6 @@ def test_unpinned_worker_is_refused(monkeypatch):
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
                                   host="127.0.0.1", dashboard_address=":0") as cluster:
         with pytest.raises(InputError, match=r"does not run the pinned numerics .*Sandybridge.*"
-                           r"OPENBLAS_CORETYPE='Haswell'"):  # fmt: skip
+                           r"OPENBLAS_CORETYPE='Haswell'"):
             with gd.executor("dask", cluster.scheduler_address, 1):
                 pass

@@ -103,7 +103,7 @@ def test_corrupt_gain_is_refused_everywhere(table_copy, tmp_path, kind, command)
         "export-c": ["export-c", table_copy, "-o", out, "--no-code-size"],
         "simulate": ["simulate", PAPER, "--tables", table_copy, "--scenario", "horizontal",
                      "-o", out],
-    }[command]  # fmt: skip
+    }[command]
     one_line_error(_run(*args), table_copy, "gains/K", "checksum mismatch")
     assert not out.exists() or not any(out.iterdir())
 
@@ -169,7 +169,7 @@ def test_inspect_all_infeasible_table(tmp_path):
     (["build"], ["CONFIG"]),
     (["no-such-command"], ["no-such-command"]),
     (["build", PAPER, "--no-such-option"], ["--no-such-option"]),
-])  # fmt: skip
+])
 def test_bad_options_give_one_line(args, needles, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     line = one_line_error(_run(*args), "command line", *needles)
@@ -193,11 +193,11 @@ def test_build_under_a_regular_file_fails_before_the_build(regular_file, monkeyp
 
     monkeypatch.setattr(gainsched.grid, "build_grid", never)
     one_line_error(_run("build", PAPER, "-o", regular_file / "sub"), regular_file / "sub",
-                   "-o", "regular file")  # fmt: skip
+                   "-o", "regular file")
 
 
 @pytest.mark.parametrize("command", ["export-c", "compare", "diagnose", "apply", "nominal",
-                                     "simulate", "paper", "campaign", "sweep"])  # fmt: skip
+                                     "simulate", "paper", "campaign", "sweep"])
 def test_output_under_a_regular_file(regular_file, command):
     bad = regular_file / "sub"
     args, option = {
@@ -211,7 +211,7 @@ def test_output_under_a_regular_file(regular_file, command):
                       "-o", bad], "-o"),
         "paper": (["paper", "--quick", "-o", bad], "-o"),
         "campaign": (["campaign", PAPER, "--tables", TABLE, "-o", bad], "-o"),
-    }[command]  # fmt: skip
+    }[command]
     one_line_error(_run(*args), option, "regular file")
 
 
@@ -302,7 +302,7 @@ def test_staged_block_that_raises_changes_nothing(tmp_path):
 
 @pytest.mark.parametrize("err, words", [(errno.EROFS, "read-only file system"),
                                         (errno.EACCES, "permission denied"),
-                                        (errno.ENOSPC, "disk full")])  # fmt: skip
+                                        (errno.ENOSPC, "disk full")])
 def test_unwritable_folder_is_named(tmp_path, monkeypatch, err, words):
     """Read-only, forbidden or full (simulated: the tests run as root, which ignores
     permissions): one line naming the folder and the option, before any work."""

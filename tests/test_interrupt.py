@@ -46,7 +46,7 @@ def _config(n_xi: int) -> str:
 def _build(cfg: Path, out: Path) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "gainsched", "build", str(cfg), "-o", str(out), "-j", "2"]
     return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            start_new_session=True)  # fmt: skip
+                            start_new_session=True)
 
 
 def _group(pgid: int) -> list[int]:

@@ -1,4 +1,4 @@
-"""Linearisation and discretisation (issue 3, DESIGN.md section 4).
+"""Linearisation and discretisation (issue 3, paper Sec. IV).
 
 - complex-step Jacobians against central differences at seeded random states,
   for the paper model and for a model with extra effects (motor-lag states,

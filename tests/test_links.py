@@ -1,4 +1,5 @@
-"""Elastic tether links (gainsched.links, seed 001 sec. 3.1) in the maximal-coordinate model.
+"""Elastic tether links (gainsched.links; the book chapter cited there, sec. 3.1) in the
+maximal-coordinate model.
 
 Stiff limits against the rigid reduced model, exact identities between the
 models (one-segment chain = spring-damper, SLS -> Kelvin-Voigt as the series
@@ -26,7 +27,7 @@ from gainsched.rotations import matrix_from_quaternion
 RHO = 1.5
 #: one of each elastic link, stiff enough to stay near the rigid circle
 ELASTIC_LINKS = [SpringDamper(RHO, 2e4, 50.0), StandardLinearSolid(RHO, 5e4, 2e4, 50.0),
-                 LumpedMassChain(RHO, 2e4, 50.0, 0.01, 4)]  # fmt: skip
+                 LumpedMassChain(RHO, 2e4, 50.0, 0.01, 4)]
 ELASTIC_IDS = ["spring-damper", "sls", "lumped-mass"]
 
 
@@ -57,7 +58,7 @@ def rigid_run(model, circle):
     nom, u_fn = circle
     ts = np.linspace(0.0, 0.5, 101)
     sol = solve_ivp(lambda t, z: model.f(z, u_fn(t), TILT), (0, ts[-1]), nom.z[0],
-                    method="DOP853", rtol=1e-11, atol=1e-11, t_eval=ts)  # fmt: skip
+                    method="DOP853", rtol=1e-11, atol=1e-11, t_eval=ts)
     assert sol.success
     return ts, model.cog_position(sol.y.T)
 
@@ -66,7 +67,7 @@ def fly(mx, z0, u_fn, ts, method, rtol):
     """Open-loop flight of a maximal model from z0 with its link in equilibrium."""
     x0 = mx.from_reduced(z0, u=u_fn(0.0), alpha=TILT)
     sol = solve_ivp(lambda t, x: mx.f(x, u_fn(t), TILT), (0, ts[-1]), x0, method=method,
-                    rtol=rtol, atol=rtol, t_eval=ts)  # fmt: skip
+                    rtol=rtol, atol=rtol, t_eval=ts)
     assert sol.success
     return sol.y.T
 
@@ -123,7 +124,7 @@ def test_one_segment_chain_is_the_spring_damper(model):
     assert 0 < a[2].slack.sum() < 40  # both cases present
     np.testing.assert_allclose(ch.link_energy(x, 0.3), sd.link_energy(x, 0.3), rtol=1e-12)
     np.testing.assert_allclose(ch.power_loss(x, 0.3), sd.power_loss(x, 0.3), rtol=1e-12,
-                               atol=1e-12)  # fmt: skip
+                               atol=1e-12)
 
 
 def test_sls_converges_to_kelvin_voigt(model, circle):
@@ -139,7 +140,7 @@ def test_sls_converges_to_kelvin_voigt(model, circle):
 
     def run(mx, x0):
         sol = solve_ivp(lambda t, x: mx.f(x, u_fn(t), TILT), (0, ts[-1]), x0, method="Radau",
-                        rtol=1e-10, atol=1e-10, t_eval=ts)  # fmt: skip
+                        rtol=1e-10, atol=1e-10, t_eval=ts)
         assert sol.success
         return sol.y.T
 
@@ -151,7 +152,7 @@ def test_sls_converges_to_kelvin_voigt(model, circle):
     for k_s in (1e6, 1e7, 1e8):
         s_p = s - (k_p * s + c * s_dot) / k_s  # the SLS pulls with the KV force at t = 0
         xs = run(MaximalModel(model, StandardLinearSolid(RHO, k_s, k_p, c)),
-                 np.concatenate([x0, [s_p]]))  # fmt: skip
+                 np.concatenate([x0, [s_p]]))
         devs.append(np.abs(xs[:, :3] - ref[:, :3]).max())
     assert devs[0] > 1e-6  # a visible difference at 1e6 N/m ...
     assert 8 < devs[0] / devs[1] < 12 and 8 < devs[1] / devs[2] < 12  # ... falling as 1/k_s
@@ -169,7 +170,7 @@ def test_sls_converges_to_kelvin_voigt(model, circle):
     x_sls = np.concatenate([x, s_p[:, None]], 1)
     u = np.ones((20, 4))
     np.testing.assert_allclose(sls.tension(x_sls, u, 0.1),
-                               np.maximum(k_p * s + c * s_dot, 0), rtol=1e-9)  # fmt: skip
+                               np.maximum(k_p * s + c * s_dot, 0), rtol=1e-9)
 
 
 @pytest.mark.parametrize(
@@ -195,7 +196,7 @@ def test_energy_balance(model_nodrag, link):
         return np.concatenate([mx.f(y[:-1], u, alpha), [mx.power_loss(y[:-1], alpha)]])
 
     sol = solve_ivp(rhs, (0.0, 0.2), np.concatenate([x0, [0.0]]), method="DOP853",
-                    rtol=1e-11, atol=1e-11, t_eval=np.linspace(0, 0.2, 41))  # fmt: skip
+                    rtol=1e-11, atol=1e-11, t_eval=np.linspace(0, 0.2, 41))
     assert sol.success
     xs, lost = sol.y[:-1].T, sol.y[-1]
     assert np.all(np.diff(lost) >= -1e-12)  # losses are losses
@@ -232,7 +233,7 @@ def test_equilibrium_start_and_round_trip(model, link):
         assert link.stretch(1.0) == pytest.approx(1 / 5e4 + 1 / 2e4)
     if isinstance(link, LumpedMassChain):
         np.testing.assert_allclose(link.tensions(p_t, v_t, x[:, 13:]), np.repeat(f[:, None], 4, 1),
-                                   rtol=1e-9)  # fmt: skip
+                                   rtol=1e-9)
         nodes = x[:, 13:].reshape(25, 2, 3, 3)
         np.testing.assert_allclose(nodes[:, 0, 1], 0.5 * p_t, atol=1e-15)  # middle node
         np.testing.assert_allclose(nodes[:, 1, 1], 0.5 * v_t, atol=1e-15)
@@ -368,7 +369,7 @@ def sched():
     [('link = "sls"', 20.0 * (1 / 5e4 + 1 / 2e4)),
      ('link = "lumped-mass"\ndamping = 2.0\nsegments = 3\nmass = 0.02', 20.0 / 2e4)],
     ids=["sls", "lumped-mass"],
-)  # fmt: skip
+)
 def test_closed_loop_on_elastic_plants(paper_config, paper_text, sched, lines, stretch):
     """The paper tables fly an elastic plant (0.5 s, 8 m/s horizontal, ideal sensing):
     taut throughout, and the COG stays within a few mm of the rigid-plant flight (the
@@ -386,7 +387,7 @@ def test_closed_loop_on_elastic_plants(paper_config, paper_text, sched, lines, s
 
 
 @pytest.mark.parametrize("lines", ['link = "spring-damper"', 'link = "sls"'],
-                         ids=["spring-damper", "sls"])  # fmt: skip
+                         ids=["spring-damper", "sls"])
 def test_simulator_stops_when_an_elastic_link_goes_slack(paper_config, paper_text, sched, lines):
     """3 m/s with the azimuth rate 1.8 rad/s short of the reference (the vehicle nearly
     stops): the link goes slack; the simulator stops and reports it like the rigid link

@@ -126,7 +126,7 @@ def test_csv_column_order_and_float_format(tmp_path):
     assert header == [
         *REQUIRED, "p", "q", "r", "ax", "ay", "az", "tension", "vbat", "xi_ref", "xi_dot_ref",
         "aa_debug", "zz_mode",
-    ]  # fmt: skip
+    ]
     assert lines[N_META + 1].split(",")[0] == repr(float(cols["t"][0]))
 
 
@@ -627,7 +627,7 @@ def test_declared_tilt_must_match_the_flown_plane(tmp_path, ext):
 def test_declared_plane_accepted(tmp_path, alpha, gamma):
     path = tmp_path / "ok.csv"
     write_log(path, _plane_columns(alpha, gamma), {**META, "alpha_c_deg": alpha,
-                                                   "gamma_c_deg": gamma})  # fmt: skip
+                                                   "gamma_c_deg": gamma})
     (lg,) = read_log(path)
     assert lg.alpha_c == pytest.approx(math.radians(alpha))
 

@@ -1,4 +1,4 @@
-"""Periodic LQR (issue 3, DESIGN.md section 4).
+"""Periodic LQR (issue 3, paper Sec. IV).
 
 - the doubling-based periodic terminal cost is the limit of plain repeated sweeps;
 - the period triple composes the per-step Riccati maps exactly;
@@ -305,7 +305,7 @@ def test_monodromy_recomputed(config, paper_table, speed, tilt_deg):
     sol, (Ad, Bd, K) = solve_circle(config, speed, [a], keep_steps=True)
     rho = spectral_radius(monodromy(Ad, Bd, K))[0]
     assert rho < 1
-    assert rho == pytest.approx(sol.rho[0], rel=1e-12)
+    assert rho == pytest.approx(sol.spectral_radius[0], rel=1e-12)
     i = int(np.flatnonzero(np.isclose(paper_table.tilt, a))[0])
     j = int(np.flatnonzero(paper_table.speed == speed)[0])
     assert rho == pytest.approx(paper_table.spectral_radius[i, j], rel=1e-9)

@@ -42,12 +42,12 @@ def simulate_both(model, mx, z0, u_fn, alpha, t_end=1.0, method="DOP853", rtol=1
     """COG positions (m) of the reduced and the maximal run on a common time grid."""
     ts = np.linspace(0.0, t_end, 201)
     red = solve_ivp(lambda t, z: model.f(z, u_fn(t), alpha), (0, t_end), z0, method="DOP853",
-                    rtol=1e-11, atol=1e-11, t_eval=ts)  # fmt: skip
+                    rtol=1e-11, atol=1e-11, t_eval=ts)
     x0 = maximal_from_reduced(model, z0)
     if mx.link == "spring-damper":
         x0 = prestretched(model, x0, u_fn(0.0), alpha, mx.k)
     mxs = solve_ivp(lambda t, x: mx.f(x, u_fn(t), alpha), (0, t_end), x0, method=method,
-                    rtol=rtol, atol=rtol, t_eval=ts)  # fmt: skip
+                    rtol=rtol, atol=rtol, t_eval=ts)
     assert red.success and mxs.success
     return ts, model.cog_position(red.y.T), mxs.y.T, red.y.T
 
@@ -77,7 +77,7 @@ def test_maximal_state_geometry(model):
     R = matrix_from_quaternion(x[:, 6:10])
     p_t = x[:, :3] + R @ model.p_e
     e = np.stack([np.sin(z[:, 0]) * np.cos(z[:, 1]), np.sin(z[:, 0]) * np.sin(z[:, 1]),
-                  np.cos(z[:, 0])], -1)  # fmt: skip
+                  np.cos(z[:, 0])], -1)
     np.testing.assert_allclose(p_t, model.rho * e, rtol=0, atol=1e-14)
     np.testing.assert_allclose(x[:, :3], model.cog_position(z), rtol=0, atol=1e-14)
     h = 1e-6
@@ -106,7 +106,7 @@ def test_rigid_link_matches_reduced_accelerations(model):
     np.testing.assert_allclose(f_t, ev.tension, rtol=0, atol=1e-9 * np.abs(ev.tension).max())
     h = 1e-6
     a_fd = (maximal_from_reduced(model, z + h * ev.z_dot)[:, 3:6]
-            - maximal_from_reduced(model, z - h * ev.z_dot)[:, 3:6]) / (2 * h)  # fmt: skip
+            - maximal_from_reduced(model, z - h * ev.z_dot)[:, 3:6]) / (2 * h)
     np.testing.assert_allclose(x_dot[:, 3:6], a_fd, rtol=0, atol=1e-7 * np.abs(a_fd).max())
     np.testing.assert_allclose(x_dot[:, 10:13], ev.z_dot[:, 7:10], rtol=0, atol=1e-9)
     np.testing.assert_allclose(x_dot[:, 0:3], x[:, 3:6], rtol=0, atol=0)
@@ -214,7 +214,7 @@ def test_rigid_energy_conserved(model_nodrag):
     z0 = np.array([np.pi / 2, 0.3, 0.1, 8.0, phi, 0.0, 0.0, 0.3, 8 * np.sin(phi), 8 * np.cos(phi)])
     x0 = maximal_from_reduced(md, z0)
     sol = solve_ivp(lambda t, x: mx.f(x, np.zeros(4), 0.3), (0.0, 1.0), x0, method="DOP853",
-                    rtol=1e-12, atol=1e-12, dense_output=True)  # fmt: skip
+                    rtol=1e-12, atol=1e-12, dense_output=True)
     xs = sol.sol(np.linspace(0.0, 1.0, 101)).T
     E = mx.energy(xs, 0.3)
     assert np.abs(E - E[0]).max() / abs(E[0]) <= 1e-6

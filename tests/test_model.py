@@ -64,7 +64,7 @@ def _second_derivative_along_flow(model, z0, u, alpha, h=1e-3):
     for sign in (-1, 1):
         t_eval = ts[ts * sign > 0] if sign > 0 else ts[ts < 0][::-1]
         sol = solve_ivp(lambda t, z: model.f(z, u, alpha), (0, sign * 2 * h), z0,
-                        method="DOP853", rtol=1e-13, atol=1e-13, t_eval=t_eval)  # fmt: skip
+                        method="DOP853", rtol=1e-13, atol=1e-13, t_eval=t_eval)
         for t, z in zip(sol.t, sol.y.T, strict=True):
             p[round(t / h)] = model.cog_position(z)
     return (-p[2] + 16 * p[1] - 30 * p[0] + 16 * p[-1] - p[-2]) / (12 * h * h)
@@ -82,7 +82,7 @@ def test_translational_and_rotational_balance(model, paper_config):
     L = motor_positions(paper_config.vehicle.arm_length)
     kappa = paper_config.vehicle.kappa
     for z0, u, alpha in zip(random_states(rng, 5), rng.uniform(0.5, 2.5, (5, 4)),
-                            rng.uniform(0.0, 0.7, 5), strict=True):  # fmt: skip
+                            rng.uniform(0.0, 0.7, 5), strict=True):
         ev = model.evaluate(z0, u, alpha)
         acc = _second_derivative_along_flow(model, z0, u, alpha)
 
@@ -98,7 +98,7 @@ def test_translational_and_rotational_balance(model, paper_config):
         speed = np.linalg.norm(v)
         gravity = -m * model.g * np.array([0.0, np.sin(alpha), np.cos(alpha)])
         forces = (R @ [0, 0, u.sum()] + gravity - ev.tension * e
-                  - (mu1 + mu2 * speed) * v)  # fmt: skip
+                  - (mu1 + mu2 * speed) * v)
         scale = np.abs(m * acc).max()
         assert scale > 1.0
         np.testing.assert_allclose(m * acc, forces, rtol=0, atol=1e-6 * scale)
@@ -127,7 +127,7 @@ def test_energy_conserved_without_thrust_and_drag(model_nodrag):
     z0 = np.array([np.pi / 2, 0.3, 0.1, 8.0, phi, 0.0, 0.0, 0.3, 8 * np.sin(phi), 8 * np.cos(phi)])
     u = np.zeros(4)
     sol = solve_ivp(lambda t, z: md.f(z, u, alpha), (0.0, 2.0), z0, method="DOP853",
-                    rtol=1e-12, atol=1e-12, dense_output=True)  # fmt: skip
+                    rtol=1e-12, atol=1e-12, dense_output=True)
     assert sol.success
     zs = sol.sol(np.linspace(0.0, 2.0, 401)).T
     E = md.energy(zs, alpha)
@@ -136,7 +136,7 @@ def test_energy_conserved_without_thrust_and_drag(model_nodrag):
     # and the test can fail: drag dissipates energy
     drag = type(md)(md.config, effects=(Drag(mu1=0.172, mu2=0.0025),))
     sol = solve_ivp(lambda t, z: drag.f(z, u, alpha), (0.0, 1.0), z0, method="DOP853",
-                    rtol=1e-8, atol=1e-8)  # fmt: skip
+                    rtol=1e-8, atol=1e-8)
     assert drag.energy(sol.y[:, -1], alpha) < 0.9 * E[0]
 
 

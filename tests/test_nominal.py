@@ -1,4 +1,4 @@
-"""Nominal trajectories (gainsched.nominal, DESIGN.md section 3, paper Sec. III)."""
+"""Nominal trajectories (gainsched.nominal, paper Sec. III)."""
 
 from __future__ import annotations
 
@@ -10,13 +10,8 @@ from click.testing import CliRunner
 from scipy.integrate import cumulative_trapezoid
 
 from gainsched.cli import cli
-from gainsched.nominal import (
-    REASONS,
-    circle_nominal,
-    maneuver_path,
-    min_taut_speed,
-    nominal_from_path,
-)
+from gainsched.nominal import REASONS, circle_nominal, min_taut_speed, nominal_from_path
+from gainsched.path import maneuver_path
 
 SLACK, THRUST_LOW = 1, 2
 assert REASONS[SLACK] == "tether slack" and REASONS[THRUST_LOW] == "thrust below minimum"
@@ -118,7 +113,7 @@ def test_maneuver_path_integrates(model, name):
         cd = (lo[2:] - lo[:-2]) / (2 * dt)
         scale = np.abs(hi).max()
         np.testing.assert_allclose(cd[inner[1:-1]], hi[1:-1][inner[1:-1]], rtol=0,
-                                   atol=1e-6 * scale)  # fmt: skip
+                                   atol=1e-6 * scale)
 
 
 # --------------------------------------------------------------------------- (3)-(5) tension
@@ -134,9 +129,13 @@ def test_tension_is_eq18(model, speed, tilt_deg):
     np.testing.assert_allclose(from_model, expected, rtol=1e-9, atol=0)
 
 
-def test_centripetal_load_at_15_m_s(model, paper_config):
-    """Paper headline: 15 m/s is more than 13 g centripetal (v^2 / r with r = rho + L_e)."""
-    assert 15.0**2 / model.r > 13 * paper_config.g
+def test_tether_carries_more_than_13_g_at_15_m_s(model, paper_config):
+    """Paper headline: at 15 m/s on the horizontal circle the tether carries more than
+    13 g (the model's tension, not the arithmetic v^2 / r)."""
+    nom = circle_nominal(model, 15.0, 0.0, 12)
+    assert np.all(nom.reasons == 0)
+    tension = model.evaluate(nom.z, nom.u, 0.0).tension
+    assert tension.min() > 13 * model.m * paper_config.g
 
 
 @pytest.mark.parametrize("tilt_deg", [0, 20, 40])
@@ -154,7 +153,7 @@ def test_min_taut_speed_is_eq19(model, paper_config, tilt_deg):
     assert not np.any(circle_nominal(model, v * (1 + 1e-6), alpha, n).reasons & SLACK)
 
 
-# --------------------------------------------------------------------------- (6) DESIGN.md numbers
+# ----------------------------------------------------------- (6) the reference vehicle's numbers
 
 
 def test_design_expectations_tilt_0(model):
@@ -181,7 +180,7 @@ def test_design_expectations_tilt_40(model):
 # --------------------------------------------------------------------------- (7) CLI
 
 CSV_HEADER = ["xi_deg", "roll_deg", "T_C_N", "T1_N", "T2_N", "T3_N", "T4_N", "tension_N",
-              "g_load", "feasibility"]  # fmt: skip
+              "g_load", "feasibility"]
 
 
 def test_cli_nominal_csv(model, paper_path, tmp_path):

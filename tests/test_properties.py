@@ -28,7 +28,7 @@ PAPER = ROOT / "configs" / "paper.toml"
 FLIGHT = ROOT / "examples" / "flights" / "v9.csv"
 SETTINGS = dict(deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                       HealthCheck.too_slow])  # fmt: skip
+                                       HealthCheck.too_slow])
 
 
 def _small_config() -> str:
@@ -57,14 +57,14 @@ LITERALS = st.one_of(
     st.text(alphabet=st.characters(codec="utf-8", exclude_categories=["Cs"]),
             max_size=12).map(lambda s: '"' + s.replace("\\", "\\\\").replace('"', '\\"')
                                         .replace("\n", "\\n") + '"'),
-)  # fmt: skip
+)
 
 
 @st.composite
 def mutated_config(draw) -> bytes:
     lines = list(LINES)
     kind = draw(st.sampled_from(["value", "value", "value", "delete", "duplicate", "unknown",
-                                 "garbage", "encoding"]))  # fmt: skip
+                                 "garbage", "encoding"]))
     i = draw(st.sampled_from(VALUE_LINES))
     key = lines[i].split("=", 1)[0]
     if kind == "value":
@@ -128,7 +128,7 @@ CELLS = st.one_of(
                      "NaN", " 1", "1,5", "abc", "0"]),
     st.floats().map(repr),
     st.text(max_size=8),
-)  # fmt: skip
+)
 
 
 @st.composite
@@ -149,7 +149,7 @@ def mutated_log(draw) -> str:
     else:
         c = draw(st.integers(0, len(lines[HEADER_AT].split(",")) - 1))
         lines[HEADER_AT:] = [",".join(x for j, x in enumerate(ln.split(",")) if j != c)
-                             for ln in lines[HEADER_AT:]]  # fmt: skip
+                             for ln in lines[HEADER_AT:]]
     return "\n".join(lines) + "\n"
 
 

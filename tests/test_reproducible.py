@@ -60,7 +60,7 @@ def _runs(family: str) -> bool:
 def _env(family, threads, npy_off, **extra):
     env = {k: v for k, v in os.environ.items() if k not in reproducible.PINNED_ENV}
     env.update(OPENBLAS_CORETYPE=family, OPENBLAS_NUM_THREADS=threads, OMP_NUM_THREADS=threads,
-               **extra)  # fmt: skip
+               **extra)
     if npy_off:
         env["NPY_DISABLE_CPU_FEATURES"] = npy_off
     return env
@@ -95,9 +95,9 @@ def test_in_process_build_equals_cli_build(det):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("family, threads, npy_off, options", MATRIX,
-                         ids=[f"{m[0]}-{m[1]}thr-{'_'.join(m[3])}" for m in MATRIX])  # fmt: skip
+                         ids=[f"{m[0]}-{m[1]}thr-{'_'.join(m[3])}" for m in MATRIX])
 def test_same_bytes_on_every_kernel_family_thread_count_backend(det, tmp_path, family, threads,
-                                                                npy_off, options):  # fmt: skip
+                                                                npy_off, options):
     if not _runs(family):
         pytest.skip(f"this CPU cannot run the {family} kernels")
     path, _, ref = det
@@ -125,7 +125,7 @@ def test_unpinned_process_builds_in_pinned_workers(det):
     path, data, _ = det
     env = _env("Sandybridge", "2", "X86_V3")
     res = subprocess.run([sys.executable, "-c", _LIBRARY_BUILD, str(path)], env=env,
-                         capture_output=True, text=True, timeout=300)  # fmt: skip
+                         capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == hashlib.sha256(data).hexdigest()
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gainsched import codegen, runtime
+from gainsched import codegen, native, runtime
 from gainsched.runtime import (
     BAD_INPUT,
     CLAMPED_SPEED,
@@ -30,13 +30,14 @@ from gainsched.runtime import (
     runtime_data,
 )
 from gainsched.symmetry import mirror_gain, state_mirror
+from gainsched.tablecheck import midpoint_check
 from gainsched.tables import Table, load_table
 
 REPO = Path(__file__).parents[1]
 PAPER_H5 = REPO / "tables" / "paper.h5"
 PAPER_TOML = REPO / "configs" / "paper.toml"
 EXAMPLES = REPO / "examples" / "firmware"
-CC = codegen.find_cc()
+CC = native.find_cc()
 needs_cc = pytest.mark.skipif(CC is None, reason="no C compiler")
 SAN_ENV = {
     **os.environ,
@@ -453,7 +454,7 @@ def test_fuzz_driver_bounded_run(tmp_path):
     exe = tmp_path / "fuzz"
     san = ["-g", "-O1", "-fsanitize=address,undefined", "-fno-sanitize-recover=all"]
     _compile([*codegen.STRICT_CFLAGS, *san, f"-I{tmp_path}", str(EXAMPLES / "fuzz_lookup.c"),
-              str(rt), "-o", str(exe)])  # fmt: skip
+              str(rt), "-o", str(exe)])
     res = subprocess.run(
         [str(exe), "300000", "3"], capture_output=True, text=True, env=SAN_ENV, timeout=120
     )
@@ -469,13 +470,13 @@ def test_fuzz_driver_bounded_run(tmp_path):
         [clang, *codegen.STRICT_CFLAGS, *san, "-fsanitize=fuzzer", "-DGS_LIBFUZZER",
          f"-I{tmp_path}", str(EXAMPLES / "fuzz_lookup.c"), str(rt), "-o", str(fz)],
         capture_output=True, text=True,
-    )  # fmt: skip
+    )
     if build.returncode:
         return  # clang without the libFuzzer runtime
     res = subprocess.run(
         [str(fz), "-max_total_time=2", "-max_len=12", "-seed=1"],
         capture_output=True, text=True, env=SAN_ENV, timeout=60,
-    )  # fmt: skip
+    )
     assert res.returncode == 0, res.stderr[-2000:]
 
 
@@ -487,11 +488,11 @@ def test_example_firmware_builds_strict_and_runs(tmp_path):
     variants = [("plain", ["-O2"])]
     if _sanitizers_work(tmp_path):
         variants.append(("san", ["-g", "-O1", "-fsanitize=address,undefined",
-                                 "-fno-sanitize-recover=all"]))  # fmt: skip
+                                 "-fno-sanitize-recover=all"]))
     for tag, flags in variants:
         exe = tmp_path / f"example_{tag}"
         _compile([*codegen.STRICT_CFLAGS, *flags, f"-I{tmp_path}", str(EXAMPLES / "main.c"),
-                  str(rt), "-o", str(exe)])  # fmt: skip
+                  str(rt), "-o", str(exe)])
         res = subprocess.run([str(exe)], capture_output=True, text=True, env=SAN_ENV, timeout=60)
         assert res.returncode == 0, res.stderr
         assert "verified" in res.stdout and "status counts: OK" in res.stdout
@@ -505,13 +506,13 @@ def test_runtime_static_properties(tmp_path):
     globals), bounded static stack, no recursion, no calls into libc but mem* helpers."""
     src = codegen.copy_runtime(tmp_path)[1]
     extra = ["-Wconversion", "-Wshadow", "-Wdouble-promotion", "-Wcast-qual", "-Wundef",
-             "-Wstrict-prototypes", "-Wmissing-prototypes", "-Wfloat-conversion"]  # fmt: skip
+             "-Wstrict-prototypes", "-Wmissing-prototypes", "-Wfloat-conversion"]
     for opt in ("-O0", "-O2", "-O3", "-Os"):
         _compile([*codegen.STRICT_CFLAGS, *extra, opt, "-c", str(src), "-o",
-                  str(tmp_path / f"rt{opt}.o")], cwd=tmp_path)  # fmt: skip
+                  str(tmp_path / f"rt{opt}.o")], cwd=tmp_path)
     obj = tmp_path / "rt_su.o"
     _compile([*codegen.STRICT_CFLAGS, "-O2", "-fstack-usage", "-fcallgraph-info", "-c", str(src),
-              "-o", str(obj)], cwd=tmp_path)  # fmt: skip
+              "-o", str(obj)], cwd=tmp_path)
     su = (tmp_path / "rt_su.su").read_text().strip().splitlines()
     assert su
     for line in su:
@@ -547,7 +548,7 @@ def test_runtime_static_properties(tmp_path):
 
 
 def test_runtime_compiles_for_cortex_m4f(tmp_path):
-    cc = codegen.find_cc(cross=True)
+    cc = native.find_cc(cross=True)
     if cc is None:
         pytest.skip("arm-none-eabi-gcc not installed")
     src = codegen.copy_runtime(tmp_path)[1]
@@ -555,7 +556,7 @@ def test_runtime_compiles_for_cortex_m4f(tmp_path):
         [cc, *codegen.STRICT_CFLAGS, *codegen.M4F_CFLAGS, "-O2", "-c", str(src), "-o",
          str(tmp_path / "rt.o")],
         capture_output=True, text=True,
-    )  # fmt: skip
+    )
     assert res.returncode == 0 and not res.stderr, res.stderr
     size = codegen.code_bytes(cross=True)
     assert size is not None and 500 < size[0] < 8000
@@ -568,7 +569,7 @@ def test_midpoint_check_sample():
     """A sample of the `gainsched check` computation on the paper table: direct LQR at
     cell midpoints versus interpolation, closed loops with the interpolated gains."""
     t = load_table(PAPER_H5)
-    res = runtime.midpoint_check(t, speed_stride=7)  # speed midpoints 2.5 and 9.5 m/s
+    res = midpoint_check(t, speed_stride=7)  # speed midpoints 2.5 and 9.5 m/s
     e = res.rel_err[np.isfinite(res.rel_err)]
     assert e.size > 100 and 0 < np.median(e) < res.max_err < 0.05
     rho = [(c[2], c[3]) for c in res.circles if np.isfinite(c[2])]
@@ -578,6 +579,6 @@ def test_midpoint_check_sample():
 
 @pytest.mark.slow
 def test_paper_grid_interpolation_error_below_2_percent():
-    res = runtime.midpoint_check(load_table(PAPER_H5))
+    res = midpoint_check(load_table(PAPER_H5))
     assert all(c[2] < 1 for c in res.circles if np.isfinite(c[2]))
     assert res.max_err < 0.02

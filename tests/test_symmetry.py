@@ -77,7 +77,7 @@ def test_S1_tilt_sign_gains(quadrants):
     K_neg = sols[1, -1].K[0]
     assert _rel(K_neg, _shift(K_pos)) <= 1e-8
     assert _rel(sols[1, -1].S[0], _shift(sols[1, 1].S[0])) <= 1e-8
-    assert sols[1, -1].rho[0] == pytest.approx(sols[1, 1].rho[0], rel=1e-10)
+    assert sols[1, -1].spectral_radius[0] == pytest.approx(sols[1, 1].spectral_radius[0], rel=1e-10)
 
 
 def test_S2_direction_gains(quadrants):
@@ -88,7 +88,7 @@ def test_S2_direction_gains(quadrants):
     assert _rel(K_rev, mirror_gain(_shift(K_fwd), P_x)) <= 1e-8
     # cost-to-go transforms as P_x S P_x
     assert _rel(sols[-1, 1].S[0], P_x @ _shift(sols[1, 1].S[0]) @ P_x) <= 1e-8
-    assert sols[-1, 1].rho[0] == pytest.approx(sols[1, 1].rho[0], rel=1e-10)
+    assert sols[-1, 1].spectral_radius[0] == pytest.approx(sols[1, 1].spectral_radius[0], rel=1e-10)
 
 
 def test_S2_nominal(quadrants):

@@ -89,7 +89,7 @@ def test_table_round_trip(small):
     assert np.abs(full[0] - g.K[0]).max() / np.abs(g.K[0]).max() <= 1e-10  # xi-independent
     for name in ("u_d", "phi_d", "tension", "reasons"):
         np.testing.assert_array_equal(getattr(t, name), getattr(g, name))
-    np.testing.assert_array_equal(t.spectral_radius, g.rho)
+    np.testing.assert_array_equal(t.spectral_radius, g.spectral_radius)
     np.testing.assert_array_equal(t.dt, g.dt)
     np.testing.assert_array_equal(t.Q, np.diag(np.asarray(cfg.control.Q).diagonal()))
     np.testing.assert_array_equal(t.R, cfg.control.R)
@@ -155,7 +155,7 @@ def test_table_layout(small):
         assert set(f.attrs) == {
             "schema", "tool_version", "config_name", "config_sha256", "terminal", "rate_hz",
             "radius_m", "state_names", "input_names", "control_law", "data_sha256",
-        }  # fmt: skip
+        }
         assert all(len(f[name].attrs["sha256"]) == 64 for name in LAYOUT)
 
 
@@ -406,10 +406,10 @@ def new_set(small, tmp_path_factory):
 
 
 @pytest.mark.parametrize("fault", ["solve_circle", "table_bytes", "header", "disk_full",
-                                   "journal", "replace"])  # fmt: skip
+                                   "journal", "replace"])
 @pytest.mark.parametrize("existing", [True, False], ids=["old-set", "no-set"])
 def test_interrupted_build_leaves_old_or_new_set(small, old_set, new_set, tmp_path, monkeypatch,
-                                                 fault, existing):  # fmt: skip
+                                                 fault, existing):
     """Whatever fails, the folder holds the old set or (after recover) the new one, never a
     mix, and no temp file stays behind."""
     _, _, cfg_path, _ = small
@@ -431,7 +431,7 @@ def test_interrupted_build_leaves_old_or_new_set(small, old_set, new_set, tmp_pa
     else:
         assert _set_bytes(out) == (old_set if existing else {})
     assert sorted(p.name for p in out.iterdir()) == (SET if existing or fault == "replace"
-                                                     else [])  # fmt: skip
+                                                     else [])
 
 
 # ------------------------------------------------------------------ bad table files
@@ -474,7 +474,7 @@ def _corrupt(kind, src, dst):
 
 
 BAD_FILES = ["not-hdf5", "truncated", "wrong-schema", "no-schema", "missing-dataset",
-             "wrong-ndim", "wrong-shape", "bad-axis"]  # fmt: skip
+             "wrong-ndim", "wrong-shape", "bad-axis"]
 
 
 @pytest.mark.parametrize("kind", BAD_FILES)

@@ -1,6 +1,6 @@
 /*
  * plant.c: the reduced-coordinate tethered-quadcopter model (rigid link) for one
- * state, and one RK4 step of it with the input held (DESIGN.md section 2).
+ * state, and one RK4 step of it with the input held (paper Sec. II).
  *
  * Why hand-written C: the closed-loop simulator evaluates the model four times
  * per control step at 1 kHz on a single state. gainsched.model.Model.evaluate

@@ -1,0 +1,88 @@
+"""The package's layers (issue 13; docs/architecture.md).
+
+The import-linter contract in pyproject.toml (run by ``make lint``) orders the
+modules in layers; these tests keep it honest: every module is in a layer, the
+import graph (lazy imports inside functions included) has no cycle, and an
+injected back-edge breaks the contract.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import grimp
+import pytest
+
+ROOT = Path(__file__).parents[1]
+CONTRACT = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]
+LINT = Path(sys.executable).with_name("lint-imports")
+
+
+def _layer_modules() -> list[str]:
+    (contract,) = CONTRACT["contracts"]
+    return [m.strip() for layer in contract["layers"] for m in layer.split("|")]
+
+
+def test_every_module_is_in_a_layer():
+    """A new module must be placed in the contract, or it would escape it."""
+    package = ROOT / "gainsched"
+    modules = {p.stem for p in package.glob("*.py") if p.stem != "__init__"}
+    listed = _layer_modules()
+    assert len(listed) == len(set(listed)), "a module is listed twice"
+    assert set(listed) == modules
+
+
+def test_no_import_cycle():
+    graph = grimp.build_graph("gainsched", exclude_type_checking_imports=True)
+    mods = sorted(m for m in graph.modules if m != "gainsched")
+    seen, stack, on_stack = {}, [], set()
+
+    def visit(m):  # depth-first search for a back edge
+        seen[m] = True
+        stack.append(m)
+        on_stack.add(m)
+        for d in sorted(graph.find_modules_directly_imported_by(m)):
+            if d == "gainsched":
+                continue
+            if d in on_stack:
+                cycle = stack[stack.index(d):] + [d]
+                raise AssertionError("import cycle: " + " -> ".join(cycle))
+            if d not in seen:
+                visit(d)
+        stack.pop()
+        on_stack.discard(m)
+
+    for m in mods:
+        if m not in seen:
+            visit(m)
+
+
+def _lint(package_parent: Path, cwd: Path) -> subprocess.CompletedProcess:
+    env = {"PYTHONPATH": str(package_parent), "PATH": str(Path(sys.executable).parent)}
+    cmd = [str(LINT), "--no-cache", "--config", str(ROOT / "pyproject.toml")]
+    return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.skipif(not LINT.exists(), reason="import-linter not installed")
+def test_contract_is_kept():
+    res = _lint(ROOT, ROOT)
+    assert res.returncode == 0, res.stdout + res.stderr
+
+
+@pytest.mark.skipif(not LINT.exists(), reason="import-linter not installed")
+@pytest.mark.parametrize("module, back_edge", [
+    ("constants.py", "from . import cli  # injected\n"),  # the base imports the top
+    ("config.py", "def _f():\n    from .grid import build_grid  # injected, lazy\n"),
+    ("tables.py", "from . import grid  # injected: a sibling of one layer\n"),
+])
+def test_contract_fails_on_an_injected_back_edge(tmp_path, module, back_edge):
+    copy = tmp_path / "gainsched"
+    shutil.copytree(ROOT / "gainsched", copy, ignore=shutil.ignore_patterns("__pycache__"))
+    with open(copy / module, "a") as f:
+        f.write("\n" + back_edge)
+    res = _lint(tmp_path, tmp_path)
+    assert res.returncode != 0 and "BROKEN" in res.stdout, res.stdout + res.stderr
