@@ -36,12 +36,12 @@ from pathlib import Path
 import numpy as np
 
 from gainsched.config import config_from_text, load_config
-from gainsched.grid import build_grid, discrete_system, solve_circle, steps_per_period
-from gainsched.linearize import discretize, expm_batched, jacobians, lqr_system
-from gainsched.lqr import dlqr, native_available, periodic_lqr, sweep
-from gainsched.model import Model
-from gainsched.nominal import circle_nominal
-from gainsched.path import period
+from gainsched.model.reduced import Model
+from gainsched.schedule.grid import build_grid, discrete_system, solve_circle, steps_per_period
+from gainsched.schedule.linearize import discretize, expm_batched, jacobians, lqr_system
+from gainsched.schedule.lqr import dlqr, native_available, periodic_lqr, sweep
+from gainsched.schedule.nominal import circle_nominal
+from gainsched.schedule.path import period
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "configs" / "paper.toml"
@@ -321,7 +321,7 @@ def _peak_rss_mib(text, n_jobs=1):
         "    s = open('/proc/self/status').read()\n"
         "    return int(re.search(r'VmHWM:\\s+(\\d+)', s).group(1)) / 1024\n"
         "from gainsched.config import config_from_text\n"
-        "from gainsched.grid import build_grid\n"
+        "from gainsched.schedule.grid import build_grid\n"
         "cfg = config_from_text(sys.stdin.read(), 'bench.toml')\n"
         "base = hwm()\n"
         f"t0 = time.perf_counter(); build_grid(cfg, n_jobs={n_jobs})\n"

@@ -27,10 +27,10 @@ REPO = Path(__file__).parents[1]
 
 
 def make_logs(out: Path, minutes: float, hidden: str) -> list[Path]:
-    from gainsched.campaign import campaign, write_campaign
     from gainsched.config import load_config
-    from gainsched.sim import table_scheduler
-    from gainsched.tables import load_table
+    from gainsched.schedule.tables import load_table
+    from gainsched.sim.campaign import campaign, write_campaign
+    from gainsched.sim.loop import table_scheduler
 
     cfg = load_config(REPO / "configs/paper.toml")
     sched = table_scheduler(load_table(REPO / "tables/paper.h5"))
@@ -40,9 +40,9 @@ def make_logs(out: Path, minutes: float, hidden: str) -> list[Path]:
 
 
 def run(paths, candidates=None) -> dict:
-    from gainsched.compare import compare
+    from gainsched.analysis.compare import compare
+    from gainsched.analysis.diagnose import diagnose
     from gainsched.config import load_config
-    from gainsched.diagnose import diagnose
 
     cfg = load_config(REPO / "configs/paper.toml")
     t0 = time.perf_counter()

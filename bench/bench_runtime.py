@@ -28,9 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from gainsched import codegen, native
-from gainsched.runtime import Interpolator, runtime_data
-from gainsched.tables import load_table
+from gainsched import native
+from gainsched.firmware import codegen
+from gainsched.firmware.runtime import Interpolator, runtime_data
+from gainsched.schedule.tables import load_table
 
 REPO = Path(__file__).parents[1]
 

@@ -1,4 +1,4 @@
-"""Closed-loop simulation speed (issue 5): real-time factor of ``gainsched.sim.simulate``.
+"""Closed-loop simulation speed (issue 5): real-time factor of ``gainsched.sim.loop.simulate``.
 
     python -m bench sim      (or: python -m bench.bench_sim)
 
@@ -8,7 +8,7 @@ tables/paper.h5. Real-time factor (RTF) = simulated seconds / wall seconds, best
 several runs (the nominal trajectory and the table set-up are inside the timed call,
 as a user sees them).
 
-(a) fast path: the compiled plant (gainsched/c/plant.c) and the Python reference
+(a) fast path: the compiled plant (gainsched/native/plant.c) and the Python reference
     interpolator (``table_scheduler``: gains of the reference path looked up in
     blocks of 1000 steps), 10 s of flight, ideal sensing; also with one lookup per
     step, through the reference's single-query path and through the compiled C
@@ -35,9 +35,9 @@ import numpy as np
 
 from gainsched import native
 from gainsched.config import load_config
-from gainsched.runtime import Interpolator
-from gainsched.sim import Scenario, Sensing, c_runtime_scheduler, simulate, table_scheduler
-from gainsched.tables import load_table
+from gainsched.firmware.runtime import Interpolator
+from gainsched.schedule.tables import load_table
+from gainsched.sim.loop import Scenario, Sensing, c_runtime_scheduler, simulate, table_scheduler
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEED = 9.0  # m/s

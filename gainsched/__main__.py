@@ -1,6 +1,6 @@
 """``python -m gainsched`` and the ``gainsched`` command.
 
-The process is pinned to the reproducible numerics (:mod:`gainsched.reproducible`)
+The process is pinned to the reproducible numerics (:mod:`gainsched.native.reproducible`)
 before anything imports numpy, so every backend of ``gainsched build`` gives the
 same table bits on every x86-64-v3 machine.
 """
@@ -12,7 +12,7 @@ import signal
 
 def main() -> None:
     """Pin the numerics of this process, then run the command line."""
-    from .reproducible import pin_environ
+    from .native.reproducible import pin_environ
 
     pin_environ()
     from .cli import main as cli_main

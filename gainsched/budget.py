@@ -5,7 +5,7 @@ control rate, a million azimuth samples). :func:`check_budget` refuses it at
 validation, in microseconds, with the key that drives the estimate, instead of
 letting the build run out of memory or time.
 
-The model follows :mod:`gainsched.grid` (one job per speed, the tilts of a job in
+The model follows :mod:`gainsched.schedule.grid` (one job per speed, the tilts of a job in
 batches of ``TILT_BATCH``):
 
 * **Steps.** A circle at speed ``v`` has ``N = 2 round(T / (2 dt))`` control steps
@@ -93,7 +93,7 @@ class BuildEstimate:
 
 
 def _lqr_states(config: Config) -> int:
-    from .effects import EFFECTS
+    from .model.effects import EFFECTS
 
     return N_LQR + sum(EFFECTS[e.name].n_states for e in config.effects if e.name in EFFECTS)
 

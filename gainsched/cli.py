@@ -107,7 +107,7 @@ def cli():
 def validate(config):
     """Check a config file (TOML) and print a summary of the vehicle and grid."""
     from .config import load_config
-    from .nominal import min_taut_speed
+    from .schedule.nominal import min_taut_speed
 
     cfg = load_config(config)
     v, t, gr = cfg.vehicle, cfg.tether, cfg.grid
@@ -157,9 +157,9 @@ def nominal(config, speed, tilt, samples, csv_path):
     """Nominal constant-speed circle over the azimuth: roll (deg), collective and motor
     thrusts (N), tether tension (N), centripetal g-load, feasibility."""
     from .config import load_config
-    from .model import Model
-    from .nominal import REASONS, circle_nominal, min_taut_speed
+    from .model.reduced import Model
     from .publish import write_atomic
+    from .schedule.nominal import REASONS, circle_nominal, min_taut_speed
 
     cfg = load_config(config)
     if speed == 0 or not np.isfinite(speed):
@@ -197,8 +197,8 @@ def nominal(config, speed, tilt, samples, csv_path):
 
 
 def _cluster_options(fn):
-    """--jobs, --backend, --scheduler, --connect-timeout (gainsched.distributed.executor)."""
-    from .distributed import BACKENDS, DEFAULT_CONNECT_TIMEOUT
+    """--jobs, --backend, --scheduler, --connect-timeout (``distributed.executor``)."""
+    from .schedule.distributed import BACKENDS, DEFAULT_CONNECT_TIMEOUT
 
     options = [
         click.option("-j", "--jobs", type=int, default=-1, show_default=True,
@@ -238,10 +238,10 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     from tqdm import tqdm
 
     from .config import load_config
-    from .distributed import check_options, executor
-    from .grid import build_grid
-    from .outputs import write_outputs
+    from .firmware.outputs import write_outputs
     from .publish import check_out_dir, recover
+    from .schedule.distributed import check_options, executor
+    from .schedule.grid import build_grid
 
     check_options(backend, scheduler)
     cfg = load_config(config)
@@ -293,9 +293,9 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
     from tqdm import tqdm
 
     from .config import load_config
-    from .distributed import check_options, executor
     from .publish import check_out_dir, staged
-    from .sweep import format_rows, make_sweep, parse_sigma, parse_vary, run_sweep
+    from .schedule.distributed import check_options, executor
+    from .schedule.sweep import format_rows, make_sweep, parse_sigma, parse_vary, run_sweep
 
     check_options(backend, scheduler)
     base = load_config(config)
@@ -324,9 +324,9 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
 def inspect(table):
     """Summarise a gain table: grid, feasibility map (speed m/s x tilt deg), gain ranges,
     worst closed-loop spectral radius."""
-    from .codegen import flash_summary
-    from .nominal import REASONS
-    from .tables import load_table
+    from .firmware.codegen import flash_summary
+    from .schedule.nominal import REASONS
+    from .schedule.tables import load_table
 
     t = load_table(table)
     click.echo(f"{table}: {t.attrs['schema']}, config {t.name} (sha256 {t.config_sha256[:12]}), "
@@ -377,9 +377,9 @@ def inspect(table):
 def export_c(table, out_dir, no_code_size):
     """Write the C99 header NAME_gains.h for TABLE and copy the C runtime
     (gainsched_runtime.c/.h) next to it; print the flash footprint."""
-    from .codegen import flash_summary, write_c_outputs
-    from .runtime import runtime_data
-    from .tables import load_table
+    from .firmware.codegen import flash_summary, write_c_outputs
+    from .firmware.runtime import runtime_data
+    from .schedule.tables import load_table
 
     paths = write_c_outputs(table, out_dir)
     for p in paths:
@@ -419,8 +419,8 @@ def check(table, speed_stride, max_error):
 
     from tqdm import tqdm
 
-    from .tablecheck import midpoint_check
-    from .tables import load_table
+    from .firmware.check import midpoint_check
+    from .schedule.tables import load_table
 
     t = load_table(table)
     t0 = time.perf_counter()
@@ -499,9 +499,9 @@ def simulate(config, table_path, scenario, plant_path, speed, out_dir):
 
     from .config import load_config
     from .publish import check_out_dir, staged
-    from .sim import load_scenario, table_scheduler, write_run
-    from .sim import simulate as run
-    from .tables import load_table
+    from .schedule.tables import load_table
+    from .sim.loop import load_scenario, table_scheduler, write_run
+    from .sim.loop import simulate as run
 
     cfg = load_config(config)
     plant = load_config(plant_path) if plant_path else None
@@ -549,10 +549,10 @@ def paper(out_dir, config, table_path, plant_path, quick):
     from tqdm import tqdm
 
     from .config import load_config
-    from .paper import experiments, run_paper
     from .publish import check_out_dir, staged
-    from .sim import table_scheduler
-    from .tables import load_table
+    from .schedule.tables import load_table
+    from .sim.loop import table_scheduler
+    from .sim.paper import experiments, run_paper
 
     cfg = load_config(config)
     plant = load_config(plant_path) if plant_path else None
@@ -595,9 +595,14 @@ def compare(config, logs, out_dir, before_path, no_paper):
     """Compare the model of CONFIG with flight LOGS (CSV or HDF5): residual per axis
     (path frame m/s^2, body rad/s^2, tether stretch m), RMS, bias, fit %, whiteness,
     input correlation, where it fails; the paper's Sec. V.C analyses."""
-    from .compare import compare as run
-    from .mvmreport import before_after_lines, compare_lines, write_before_after, write_compare
-    from .paperfits import paper_fits
+    from .analysis.compare import compare as run
+    from .analysis.paperfits import paper_fits
+    from .analysis.reports import (
+        before_after_lines,
+        compare_lines,
+        write_before_after,
+        write_compare,
+    )
     from .publish import check_out_dir, staged
 
     cfg = _load_for_compare(config)
@@ -637,11 +642,10 @@ def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
     """Which physical effect is missing: fit every candidate effect the model lacks to
     the residual on LOGS, score on held-out flights (leave one flight out), rank, check
     identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
-    from .compare import compare as run
-    from .config import config_from_text
-    from .diagnose import apply_candidate
-    from .diagnose import diagnose as run_diagnose
-    from .mvmreport import (
+    from .analysis.compare import compare as run
+    from .analysis.diagnose import apply_candidate
+    from .analysis.diagnose import diagnose as run_diagnose
+    from .analysis.reports import (
         before_after_lines,
         compare_lines,
         diagnose_lines,
@@ -649,6 +653,7 @@ def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
         write_compare,
         write_diagnose,
     )
+    from .config import config_from_text
     from .publish import check_out_dir, staged, write_atomic
 
     if do_apply and new_config is None:
@@ -692,7 +697,7 @@ def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
 @click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
               required=True, help="Gain table (HDF5) built from CONFIG.")
 @click.option("--hidden", default="none", show_default=True,
-              help="Hidden effect of the plant (gainsched.campaign.HIDDEN).")
+              help="Hidden effect of the plant (gainsched.sim.campaign.HIDDEN).")
 @click.option("--duration", type=click.FloatRange(1.0), default=3.0, show_default=True,
               help="Seconds per flight.")
 @click.option("--no-load-cell", is_flag=True, help="Drop the tether tension column.")
@@ -705,11 +710,11 @@ def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
 def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_dir):
     """Fly a synthetic test campaign (speeds 3-15 m/s, tilts 0/20/40 deg, a speed-up, a
     braking; motion-capture noise) on a plant with a HIDDEN effect and write the logs."""
-    from .campaign import HIDDEN, write_campaign
-    from .campaign import campaign as fly
     from .publish import check_out_dir, staged
-    from .sim import table_scheduler
-    from .tables import load_table
+    from .schedule.tables import load_table
+    from .sim.campaign import HIDDEN, write_campaign
+    from .sim.campaign import campaign as fly
+    from .sim.loop import table_scheduler
 
     if hidden not in HIDDEN:
         known = ", ".join(HIDDEN)

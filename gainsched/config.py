@@ -49,7 +49,7 @@ __all__ = [
 ]
 
 
-LINK_MODELS = ("rigid", "spring-damper", "sls", "lumped-mass")  # gainsched.links
+LINK_MODELS = ("rigid", "spring-damper", "sls", "lumped-mass")  # gainsched.model.links
 TERMINAL_COSTS = ("periodic", "single-period")
 
 #: ``name``: 1..64 characters of [A-Za-z0-9_.-], the first a letter or a digit (a file name
@@ -95,7 +95,7 @@ class Vehicle:
 class Tether:
     """Tether: length rho (m), attachment offset L_e (m) and link model.
 
-    The elastic links (:mod:`gainsched.links`) are used by the maximal-coordinate
+    The elastic links (:mod:`gainsched.model.links`) are used by the maximal-coordinate
     simulator only: ``stiffness`` (N/m) and ``damping`` (N s/m) are the
     spring-damper's k and c, the SLS's parallel k_p and c, and the whole chain's
     k and c; ``series_stiffness`` (N/m) is the SLS's series k_s; ``mass`` (kg,
@@ -158,7 +158,7 @@ class Feasibility:
 
 @dataclass(frozen=True)
 class Analysis:
-    """Model versus measurement (``[analysis]``, :mod:`gainsched.compare`).
+    """Model versus measurement (``[analysis]``, :mod:`gainsched.analysis.compare`).
 
     Attributes
     ----------
@@ -360,7 +360,7 @@ def check_name(source, name: str, *, from_file: bool = False) -> str:
 
     Rule: 1-64 characters from ``A-Z a-z 0-9 _ - .``, the first a letter or a digit (so
     it stays inside the output folder, is never a hidden file, and
-    :func:`gainsched.runtime.c_identifier` maps it to a C identifier). With
+    :func:`gainsched.firmware.runtime.c_identifier` maps it to a C identifier). With
     ``from_file`` the name is the default taken from the config file's name, and the
     message says to set ``name``. Raises InputError naming the key ``name``.
     """
@@ -447,7 +447,7 @@ def _tether(sec: Section) -> Tether:
 
 
 def _effects(sec: Section) -> tuple[EffectSpec, ...]:
-    from .effects import EFFECTS  # the registry; imported here to avoid a cycle
+    from .model.effects import EFFECTS  # the registry; imported here to avoid a cycle
 
     out = []
     for name in sorted(sec.data):
@@ -486,7 +486,7 @@ def _control(sec: Section) -> Control:
     R = check_square_weight(sec, "R", N_INPUT, definite=True)
     # The table serves reversed circles through the direction mirror S2, exact only if
     # the weights are invariant under it (docs/symmetry.md).
-    from .symmetry import P_U, STATE_SIGNS
+    from .model.symmetry import P_U, STATE_SIGNS
 
     if not np.array_equal(Q * np.outer(STATE_SIGNS, STATE_SIGNS), Q):
         raise sec.error(

@@ -4,7 +4,7 @@
  *
  * Every float operation that decides which cell a query falls in is spelled
  * out here in single precision, in the same order as the Python reference
- * (gainsched/runtime.py), so that both choose the same cell and return the
+ * (gainsched/firmware/runtime.py), so that both choose the same cell and return the
  * same status for every query. Change one, change the other.
  */
 #include "gainsched_runtime.h"

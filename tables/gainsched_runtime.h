@@ -10,7 +10,7 @@
  * reads outside the table arrays, execution time bounded by the table size
  * (a fixed number of passes over one 4 x n gain block per lookup).
  *
- * Query semantics (the Python reference `gainsched.runtime.Interpolator`
+ * Query semantics (the Python reference `gainsched.firmware.runtime.Interpolator`
  * implements the same, bit for bit up to the cell choice and flags):
  *  1. NaN/inf, |xi| > GS_XI_LIMIT, |xi_dot| > GS_XI_DOT_LIMIT or
  *     |alpha| > GS_TILT_LIMIT: status GS_BAD_INPUT, outputs zeroed.

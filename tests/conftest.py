@@ -9,9 +9,9 @@ import pytest
 from scipy.interpolate import CubicSpline
 
 from gainsched.config import load_config
-from gainsched.model import Model
-from gainsched.nominal import nominal_from_path
-from gainsched.path import circle_path, period
+from gainsched.model.reduced import Model
+from gainsched.schedule.nominal import nominal_from_path
+from gainsched.schedule.path import circle_path, period
 
 REPO = Path(__file__).parents[1]
 PAPER_TOML = REPO / "configs" / "paper.toml"

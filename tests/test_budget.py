@@ -10,10 +10,10 @@ import time
 import numpy as np
 import pytest
 
-from gainsched import grid as grid_mod
 from gainsched.budget import GIB, TILT_BATCH, check_budget, estimate_build
 from gainsched.config import Grid, Limits, config_from_text, load_config
 from gainsched.errors import InputError
+from gainsched.schedule import grid as grid_mod
 
 
 def _sub(text: str, key: str, value: str) -> str:
@@ -27,7 +27,7 @@ def _floats(a) -> str:
 
 
 def test_model_follows_the_grid_sweep(paper_config):
-    """Steps per period and the tilt batch are those of gainsched.grid."""
+    """Steps per period and the tilt batch are those of gainsched.schedule.grid."""
     cfg = paper_config
     est = estimate_build(cfg)
     steps = [grid_mod.steps_per_period(v, cfg.radius, cfg.control.dt) for v in cfg.grid.speeds]

@@ -24,8 +24,8 @@ from click.testing import CliRunner
 from gainsched.cli import cli
 from gainsched.config import load_config
 from gainsched.native import find_cc
-from gainsched.sim import Maneuver, Scenario, Sensing, metrics, simulate, table_scheduler
-from gainsched.tables import load_table
+from gainsched.schedule.tables import load_table
+from gainsched.sim.loop import Maneuver, Scenario, Sensing, metrics, simulate, table_scheduler
 
 ROOT = Path(__file__).resolve().parents[1]
 TABLE = ROOT / "tables" / "paper.h5"
@@ -140,12 +140,12 @@ def test_horizontal_circles_with_mocap_noise_meet_the_paper_rms(paper, sched, sp
 
 
 def _c_scheduler(table, tmp_path):
-    from gainsched import sim
+    from gainsched.sim import loop as sim
 
     if hasattr(sim, "c_runtime_scheduler"):
         return sim.c_runtime_scheduler(table, tmp_path)
-    from gainsched.codegen import CRuntime, build_host  # adapter if sim.py has none
-    from gainsched.runtime import runtime_data
+    from gainsched.firmware.codegen import CRuntime, build_host  # adapter if sim.py has none
+    from gainsched.firmware.runtime import runtime_data
 
     data = runtime_data(table)
     rt = CRuntime(build_host(data, tmp_path), data)

@@ -1,4 +1,4 @@
-"""C header generation (gainsched.codegen) and the export-c / check commands."""
+"""C header generation (gainsched.firmware.codegen) and the export-c / check commands."""
 
 from __future__ import annotations
 
@@ -13,10 +13,10 @@ import pytest
 from click.testing import CliRunner
 from test_runtime import CC, PAPER_H5, needs_cc, synthetic_table
 
-from gainsched import codegen
 from gainsched.cli import cli
-from gainsched.runtime import MASK_NO_GAINS, c_identifier, runtime_data
-from gainsched.tables import load_table
+from gainsched.firmware import codegen
+from gainsched.firmware.runtime import MASK_NO_GAINS, c_identifier, runtime_data
+from gainsched.schedule.tables import load_table
 
 
 @pytest.fixture(scope="module")

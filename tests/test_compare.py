@@ -1,6 +1,6 @@
 """Model versus measurement (issue 6): residuals, statistics, where it fails, paper analyses.
 
-Simulated campaigns (:mod:`gainsched.campaign`, 2.5 s flights at 3-15 m/s, tilts
+Simulated campaigns (:mod:`gainsched.sim.campaign`, 2.5 s flights at 3-15 m/s, tilts
 0/20/40 deg, a speed-up and a braking, motion-capture noise on) are flown once per
 module; the analysis config is configs/paper.toml.
 """
@@ -15,16 +15,16 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from gainsched.campaign import campaign, default_flights, write_campaign
+from gainsched.analysis.compare import AXES, compare, load_segments, measure, residuals
+from gainsched.analysis.logs import log_from_arrays, write_log
+from gainsched.analysis.paperfits import paper_fits
 from gainsched.cli import cli
-from gainsched.compare import AXES, compare, load_segments, measure, residuals
 from gainsched.config import config_from_text, load_config
 from gainsched.errors import InputError
-from gainsched.logs import log_from_arrays, write_log
-from gainsched.paperfits import paper_fits
-from gainsched.rotations import matrix_from_euler_zyx, quaternion_from_matrix
-from gainsched.sim import table_scheduler
-from gainsched.tables import load_table
+from gainsched.model.rotations import matrix_from_euler_zyx, quaternion_from_matrix
+from gainsched.schedule.tables import load_table
+from gainsched.sim.campaign import campaign, default_flights, write_campaign
+from gainsched.sim.loop import table_scheduler
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "configs/paper.toml"
@@ -68,7 +68,7 @@ def _circle_log(v=8.0, phi=-0.3, accel=0.0, T=10.0, rate=200.0, alpha=0.0, noise
     R_CB = matrix_from_euler_zyx(np.full_like(t, phi), np.zeros_like(t), xi)
     e = np.stack([np.cos(xi), np.sin(xi), np.zeros_like(t)], -1)
     p_C = rho * e + L_e * R_CB[:, :, 0]
-    from gainsched.rotations import R_IC_from_tilt
+    from gainsched.model.rotations import R_IC_from_tilt
 
     R_IC = R_IC_from_tilt(alpha)
     p_I = p_C @ R_IC.T

@@ -4,7 +4,7 @@ Each campaign: 7 flights of 2.5 s (3, 9, 15 m/s level; 8 m/s at 20 deg; 7 m/s at
 40 deg; a speed-up 3 -> 12 m/s; a braking 12 -> 3 m/s), motion-capture noise
 0.5 mm / 0.2 deg at 200 Hz, load cell logged. The analysis config is
 configs/paper.toml (drag only); the plant differs by the hidden effect of
-:data:`gainsched.campaign.HIDDEN`. Campaigns are flown once per module.
+:data:`gainsched.sim.campaign.HIDDEN`. Campaigns are flown once per module.
 """
 
 from __future__ import annotations
@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from gainsched.campaign import HIDDEN, campaign, default_flights, write_campaign
+from gainsched.analysis.compare import compare
+from gainsched.analysis.diagnose import CANDIDATES, THRESHOLDS, apply_candidate, diagnose
 from gainsched.cli import cli
-from gainsched.compare import compare
 from gainsched.config import config_from_text, load_config
-from gainsched.diagnose import CANDIDATES, THRESHOLDS, apply_candidate, diagnose
-from gainsched.sim import table_scheduler
-from gainsched.tables import load_table
+from gainsched.schedule.tables import load_table
+from gainsched.sim.campaign import HIDDEN, campaign, default_flights, write_campaign
+from gainsched.sim.loop import table_scheduler
 from gainsched.tomledit import get_value
 
 ROOT = Path(__file__).resolve().parents[1]

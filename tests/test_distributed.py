@@ -1,4 +1,4 @@
-"""Builds and sweeps on a Dask cluster (gainsched.distributed, gainsched.sweep).
+"""Builds and sweeps on a Dask cluster (gainsched.schedule.distributed, gainsched.schedule.sweep).
 
 A two-worker ``dask.distributed.LocalCluster`` on loopback (worker processes,
 so tasks are pickled and gainsched is imported remotely, as on a real cluster)
@@ -18,11 +18,11 @@ import sys
 import pytest
 from click.testing import CliRunner
 
-from gainsched import reproducible
 from gainsched.cli import cli
 from gainsched.config import config_from_text
 from gainsched.errors import InputError
-from gainsched.sweep import make_sweep, parse_sigma, parse_vary
+from gainsched.native import reproducible
+from gainsched.schedule.sweep import make_sweep, parse_sigma, parse_vary
 
 SPEEDS = [3, 6, 9, 12]  # m/s
 
@@ -100,7 +100,7 @@ def test_dask_build_equals_local_build_byte_for_byte(scheduler, small_path, loca
 def test_result_order_does_not_follow_completion_order(scheduler, small_path, local_build,
                                                        tmp_path, monkeypatch):
     """The low speeds are made to finish last on the cluster; the table is unchanged."""
-    from gainsched import grid
+    from gainsched.schedule import grid
 
     handed_back = []  # (finish time on the worker, speed), in the order build_grid gets them
     workers = set()
@@ -252,7 +252,7 @@ def test_dask_not_installed(small_path, tmp_path, monkeypatch):
 
 def test_mismatched_worker_is_refused(scheduler, monkeypatch):
     """A worker whose numerics differ from this machine's cannot join the build."""
-    from gainsched import distributed as gd
+    from gainsched.schedule import distributed as gd
 
     monkeypatch.setattr(gd, "_blas", lambda: "other-blas 0.0")  # this process only
     with pytest.raises(InputError, match=r"worker tcp://\S+ has BLAS .*, this machine other-blas"):
@@ -264,7 +264,7 @@ def test_mismatched_worker_is_refused(scheduler, monkeypatch):
 def test_unpinned_worker_is_refused(monkeypatch):
     """A worker started without the pinned numerics (here: Sandybridge BLAS kernels) would
     round differently: the check names it and says how to start workers."""
-    from gainsched import distributed as gd
+    from gainsched.schedule import distributed as gd
 
     distributed = pytest.importorskip("dask.distributed")
     monkeypatch.setenv("OPENBLAS_CORETYPE", "Sandybridge")  # runs on any AVX2 CPU

@@ -1,4 +1,4 @@
-"""Compiled plant (gainsched/c/plant.c) against the numpy reference model (issue 5).
+"""Compiled plant (gainsched/native/plant.c) against the numpy reference model (issue 5).
 
 - z_dot, tension and actual thrusts of ``FastPlant`` equal ``Model.evaluate`` at
   random seeded states, inputs and tilts, for every combination of the supported
@@ -26,12 +26,12 @@ import pytest
 
 from gainsched import native
 from gainsched.config import N_STATE, EffectSpec, config_from_text
-from gainsched.effects import EFFECTS
-from gainsched.fastplant import SUPPORTED_EFFECTS, FastPlant, fast_plant, fast_plant_supported
-from gainsched.model import Model
-from gainsched.runtime import Interpolator
-from gainsched.sim import Scenario, Sensing, _Plant, _rk4, simulate, table_scheduler
-from gainsched.tables import load_table
+from gainsched.firmware.runtime import Interpolator
+from gainsched.model.effects import EFFECTS
+from gainsched.model.reduced import Model
+from gainsched.schedule.tables import load_table
+from gainsched.sim.fastplant import SUPPORTED_EFFECTS, FastPlant, fast_plant, fast_plant_supported
+from gainsched.sim.loop import Scenario, Sensing, _Plant, _rk4, simulate, table_scheduler
 
 REPO = Path(__file__).resolve().parents[1]
 

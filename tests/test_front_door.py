@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import gainsched.grid
+import gainsched.schedule.grid
 from gainsched.cli import cli
 from gainsched.errors import InputError
 from gainsched.publish import JOURNAL, publish, recover, staged
-from gainsched.tables import _dataset_sha256, _datasets, _root_sha256, load_table
+from gainsched.schedule.tables import _dataset_sha256, _datasets, _root_sha256, load_table
 
 ROOT = Path(__file__).parents[1]
 PAPER = ROOT / "configs" / "paper.toml"
@@ -191,7 +191,7 @@ def test_build_under_a_regular_file_fails_before_the_build(regular_file, monkeyp
     def never(*a, **k):
         raise AssertionError("the build ran before the output folder was checked")
 
-    monkeypatch.setattr(gainsched.grid, "build_grid", never)
+    monkeypatch.setattr(gainsched.schedule.grid, "build_grid", never)
     one_line_error(_run("build", PAPER, "-o", regular_file / "sub"), regular_file / "sub",
                    "-o", "regular file")
 

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from gainsched.config import config_from_text, load_config
-from gainsched.grid import (
+from gainsched.model.reduced import Model
+from gainsched.schedule.grid import (
     TILT_BATCH,
     _solutions,
     build_grid,
@@ -22,10 +23,9 @@ from gainsched.grid import (
     solve_circle,
     steps_per_period,
 )
-from gainsched.linearize import discretize, jacobians, lqr_system
-from gainsched.model import Model
-from gainsched.nominal import REASONS, circle_nominal
-from gainsched.path import period
+from gainsched.schedule.linearize import discretize, jacobians, lqr_system
+from gainsched.schedule.nominal import REASONS, circle_nominal
+from gainsched.schedule.path import period
 
 PAPER = Path(__file__).parents[1] / "configs" / "paper.toml"
 

@@ -17,16 +17,16 @@ import scipy.linalg
 from scipy.signal import cont2discrete
 
 from gainsched.config import N_STATE, load_config
-from gainsched.effects import Drag, MotorLag, RotorDrag, ThrustScale
-from gainsched.linearize import (
+from gainsched.model.effects import Drag, MotorLag, RotorDrag, ThrustScale
+from gainsched.model.reduced import Model
+from gainsched.schedule.linearize import (
     discretize,
     expm_batched,
     jacobians,
     lqr_state_names,
     lqr_system,
 )
-from gainsched.model import Model
-from gainsched.nominal import circle_nominal
+from gainsched.schedule.nominal import circle_nominal
 
 PAPER = Path(__file__).parents[1] / "configs" / "paper.toml"
 

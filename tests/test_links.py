@@ -1,4 +1,4 @@
-"""Elastic tether links (gainsched.links; the book chapter cited there, sec. 3.1) in the
+"""Elastic tether links (gainsched.model.links; the book chapter cited there, sec. 3.1) in the
 maximal-coordinate model.
 
 Stiff limits against the rigid reduced model, exact identities between the
@@ -19,10 +19,10 @@ from scipy.integrate import solve_ivp
 
 from gainsched.config import config_from_text
 from gainsched.errors import InputError
-from gainsched.links import LumpedMassChain, SpringDamper, StandardLinearSolid
-from gainsched.maximal import MaximalModel, reduced_from_maximal
-from gainsched.model import Model
-from gainsched.rotations import matrix_from_quaternion
+from gainsched.model.links import LumpedMassChain, SpringDamper, StandardLinearSolid
+from gainsched.model.maximal import MaximalModel, reduced_from_maximal
+from gainsched.model.reduced import Model
+from gainsched.model.rotations import matrix_from_quaternion
 
 RHO = 1.5
 #: one of each elastic link, stiff enough to stay near the rigid circle
@@ -358,8 +358,8 @@ def test_one_segment_massless_chain_is_allowed(paper_text):
 def sched():
     from pathlib import Path
 
-    from gainsched.sim import table_scheduler
-    from gainsched.tables import load_table
+    from gainsched.schedule.tables import load_table
+    from gainsched.sim.loop import table_scheduler
 
     return table_scheduler(load_table(Path(__file__).resolve().parents[1] / "tables/paper.h5"))
 
@@ -374,7 +374,7 @@ def test_closed_loop_on_elastic_plants(paper_config, paper_text, sched, lines, s
     """The paper tables fly an elastic plant (0.5 s, 8 m/s horizontal, ideal sensing):
     taut throughout, and the COG stays within a few mm of the rigid-plant flight (the
     static stretch f_t / k ~ 1-1.4 mm; the 20 g chain also sags, measured 9 mm)."""
-    from gainsched.sim import Scenario, simulate
+    from gainsched.sim.loop import Scenario, simulate
 
     scn = Scenario("elastic", 0.0, 8.0, 0.5)
     rigid = simulate(paper_config, sched, scn)
@@ -392,7 +392,7 @@ def test_simulator_stops_when_an_elastic_link_goes_slack(paper_config, paper_tex
     """3 m/s with the azimuth rate 1.8 rad/s short of the reference (the vehicle nearly
     stops): the link goes slack; the simulator stops and reports it like the rigid link
     (measured 0.036 s rigid, 0.035-0.036 s elastic)."""
-    from gainsched.sim import Scenario, simulate
+    from gainsched.sim.loop import Scenario, simulate
 
     scn = Scenario("slack", 0.0, 3.0, 0.5, initial_error=(0.0, 0.0, 0.0, -1.8))
     rigid = simulate(paper_config, sched, scn)

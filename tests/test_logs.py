@@ -10,8 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
-from gainsched.errors import InputError
-from gainsched.logs import (
+from gainsched.analysis.logs import (
     SCHEMA,
     FlightLog,
     LogWarning,
@@ -21,6 +20,7 @@ from gainsched.logs import (
     read_log,
     write_log,
 )
+from gainsched.errors import InputError
 
 DATA = Path(__file__).parent / "data"
 META = {"schema": SCHEMA, "alpha_c_deg": "20", "gamma_c_deg": "0", "flight_id": "test"}

@@ -17,10 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gainsched import lqr, native
+from gainsched import native
 from gainsched.config import load_config
-from gainsched.grid import solve_circle
-from gainsched.lqr import (
+from gainsched.schedule import lqr
+from gainsched.schedule.grid import solve_circle
+from gainsched.schedule.lqr import (
     dlqr,
     monodromy,
     native_available,
@@ -31,7 +32,7 @@ from gainsched.lqr import (
     spectral_radius,
     sweep,
 )
-from gainsched.tables import load_table
+from gainsched.schedule.tables import load_table
 
 ROOT = Path(__file__).parents[1]
 PAPER = ROOT / "configs" / "paper.toml"

@@ -1,4 +1,4 @@
-"""Maximal coordinates (gainsched.maximal) agree with the reduced model where both apply."""
+"""Maximal coordinates (gainsched.model.maximal) agree with the reduced model where both apply."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import pytest
 from conftest import CIRCLE_TILT as TILT
 from scipy.integrate import solve_ivp
 
-from gainsched.effects import MotorLag
-from gainsched.maximal import MaximalModel, maximal_from_reduced, reduced_from_maximal
-from gainsched.rotations import matrix_from_quaternion
+from gainsched.model.effects import MotorLag
+from gainsched.model.maximal import MaximalModel, maximal_from_reduced, reduced_from_maximal
+from gainsched.model.rotations import matrix_from_quaternion
 
 K_STIFF = 1e6  # N/m
 C_STIFF = 2 * np.sqrt(K_STIFF * 0.5)  # N s/m, critical for the 0.5 kg vehicle on the spring
@@ -143,7 +143,7 @@ def test_spring_damper_is_tension_only(model):
 
 
 def test_stateful_effects_not_supported(paper_config):
-    from gainsched.model import Model
+    from gainsched.model.reduced import Model
 
     with pytest.raises(NotImplementedError):
         MaximalModel(Model(paper_config, effects=(MotorLag(),)))

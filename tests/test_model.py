@@ -1,4 +1,4 @@
-"""Reduced model (gainsched.model): allocation, the 6x6 solve, energy, complex-step safety."""
+"""Reduced model (gainsched.model.reduced): allocation, 6x6 solve, energy, complex steps."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from gainsched.effects import Drag
-from gainsched.model import allocation_matrix, motor_positions
-from gainsched.rotations import matrix_from_euler_zyx
+from gainsched.model.effects import Drag
+from gainsched.model.reduced import allocation_matrix, motor_positions
+from gainsched.model.rotations import matrix_from_euler_zyx
 
 
 def random_states(rng, n):

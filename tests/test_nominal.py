@@ -1,4 +1,4 @@
-"""Nominal trajectories (gainsched.nominal, paper Sec. III)."""
+"""Nominal trajectories (gainsched.schedule.nominal, paper Sec. III)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from click.testing import CliRunner
 from scipy.integrate import cumulative_trapezoid
 
 from gainsched.cli import cli
-from gainsched.nominal import REASONS, circle_nominal, min_taut_speed, nominal_from_path
-from gainsched.path import maneuver_path
+from gainsched.schedule.nominal import REASONS, circle_nominal, min_taut_speed, nominal_from_path
+from gainsched.schedule.path import maneuver_path
 
 SLACK, THRUST_LOW = 1, 2
 assert REASONS[SLACK] == "tether slack" and REASONS[THRUST_LOW] == "thrust below minimum"

@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from gainsched.cli import cli
 from gainsched.errors import InputError
-from gainsched.tables import load_table
+from gainsched.schedule.tables import load_table
 
 ROOT = Path(__file__).parents[1]
 PAPER = ROOT / "configs" / "paper.toml"

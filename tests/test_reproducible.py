@@ -1,4 +1,4 @@
-"""Byte-identical tables on every machine (issue 12; gainsched.reproducible).
+"""Byte-identical tables on every machine (issue 12; gainsched.native.reproducible).
 
 One machine stands in for many: numpy's OpenBLAS and numpy's SIMD dispatch are
 switched to other CPU families with ``OPENBLAS_CORETYPE`` and
@@ -21,12 +21,11 @@ from pathlib import Path
 import pytest
 from test_tables import small_config_text
 
-from gainsched import reproducible
 from gainsched.config import load_config
-from gainsched.grid import build_grid
-from gainsched.model import Model
-from gainsched.native import cpu_flags
-from gainsched.tables import table_bytes
+from gainsched.model.reduced import Model
+from gainsched.native import cpu_flags, reproducible
+from gainsched.schedule.grid import build_grid
+from gainsched.schedule.tables import table_bytes
 
 #: OpenBLAS kernel families and the CPU flags they need
 FAMILIES = {
@@ -107,12 +106,12 @@ def test_same_bytes_on_every_kernel_family_thread_count_backend(det, tmp_path, f
 
 _LIBRARY_BUILD = """
 import hashlib, sys
-from gainsched import reproducible
+from gainsched.native import reproducible
 from gainsched.native import cpu_flags
 from gainsched.config import load_config
-from gainsched.grid import build_grid
-from gainsched.model import Model
-from gainsched.tables import table_bytes
+from gainsched.schedule.grid import build_grid
+from gainsched.model.reduced import Model
+from gainsched.schedule.tables import table_bytes
 assert not reproducible.process_pinned(), reproducible.fingerprint()
 cfg = load_config(sys.argv[1])
 print(hashlib.sha256(table_bytes(cfg, build_grid(cfg, n_jobs=1), Model(cfg))).hexdigest())

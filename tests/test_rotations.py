@@ -1,4 +1,4 @@
-"""Rotations (gainsched.rotations) against scipy.spatial.transform.Rotation.
+"""Rotations (gainsched.model.rotations) against scipy.spatial.transform.Rotation.
 
 Conventions (docs/conventions.md): ``R_CB = Rz(psi) Ry(theta) Rx(phi)`` (intrinsic
 z-y-x), quaternions Hamilton, scalar first, rotating body vectors into I.
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from gainsched import rotations as rot
+from gainsched.model import rotations as rot
 
 RNG = np.random.default_rng(13)
 ANGLES = np.column_stack([RNG.uniform(-np.pi, np.pi, 200), RNG.uniform(-1.5, 1.5, 200),

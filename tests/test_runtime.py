@@ -1,4 +1,4 @@
-"""The C runtime against the Python reference interpolator (gainsched.runtime).
+"""The C runtime against the Python reference interpolator (gainsched.firmware.runtime).
 
 The C code is compiled with the system compiler (strict warnings, -Werror) and
 called through ctypes in one batched call; sanitizer runs use the driver
@@ -18,8 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gainsched import codegen, native, runtime
-from gainsched.runtime import (
+from gainsched import native
+from gainsched.firmware import codegen, runtime
+from gainsched.firmware.check import midpoint_check
+from gainsched.firmware.runtime import (
     BAD_INPUT,
     CLAMPED_SPEED,
     CLAMPED_TILT,
@@ -29,9 +31,8 @@ from gainsched.runtime import (
     Interpolator,
     runtime_data,
 )
-from gainsched.symmetry import mirror_gain, state_mirror
-from gainsched.tablecheck import midpoint_check
-from gainsched.tables import Table, load_table
+from gainsched.model.symmetry import mirror_gain, state_mirror
+from gainsched.schedule.tables import Table, load_table
 
 REPO = Path(__file__).parents[1]
 PAPER_H5 = REPO / "tables" / "paper.h5"
@@ -302,9 +303,9 @@ def test_reference_cell_centre_is_corner_mean():
 
 @pytest.mark.parametrize("motor_lag", [False, True])
 def test_reference_symmetries_match_symmetry_module(motor_lag):
-    """S1 and S2 applied by the interpolator agree with gainsched.symmetry's own maps."""
+    """S1 and S2 applied by the interpolator agree with gainsched.model.symmetry's own maps."""
     from gainsched.config import config_from_text
-    from gainsched.effects import effects_from_specs
+    from gainsched.model.effects import effects_from_specs
 
     t = synthetic_table(5, 7, 12, motor_lag=motor_lag, seed=4)
     P_x = state_mirror(effects_from_specs(config_from_text(t.config_text).effects))

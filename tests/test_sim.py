@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gainsched.analysis.logs import read_log
 from gainsched.config import config_from_text, load_config
-from gainsched.logs import read_log
-from gainsched.sim import (
+from gainsched.schedule.tables import load_table
+from gainsched.sim.loop import (
     Maneuver,
     Scenario,
     Sensing,
@@ -23,7 +24,6 @@ from gainsched.sim import (
     simulate,
     table_scheduler,
 )
-from gainsched.tables import load_table
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -99,7 +99,7 @@ def test_simulated_log_round_trips(paper, sched, tmp_path):
     res = simulate(paper, sched, scn)
     log = log_from_result(res)
     for ext in ("csv", "h5"):
-        from gainsched.logs import write_log
+        from gainsched.analysis.logs import write_log
 
         path = tmp_path / f"log.{ext}"
         write_log(path, log)

@@ -18,13 +18,11 @@ import numpy as np
 import pytest
 
 from gainsched.config import N_STATE, config_from_text, load_config
-from gainsched.effects import Drag, MotorLag, RotorDrag, ThrustScale
 from gainsched.errors import InputError
-from gainsched.grid import solve_circle
-from gainsched.model import Model
-from gainsched.nominal import circle_nominal
-from gainsched.rotations import R_IC_from_tilt, Rz
-from gainsched.symmetry import (
+from gainsched.model.effects import Drag, MotorLag, RotorDrag, ThrustScale
+from gainsched.model.reduced import Model
+from gainsched.model.rotations import R_IC_from_tilt, Rz
+from gainsched.model.symmetry import (
     P_U,
     STATE_SIGNS,
     fundamental_from_query,
@@ -32,6 +30,8 @@ from gainsched.symmetry import (
     mirror_state,
     state_mirror,
 )
+from gainsched.schedule.grid import solve_circle
+from gainsched.schedule.nominal import circle_nominal
 
 PAPER = Path(__file__).parents[1] / "configs" / "paper.toml"
 SPEED = 8.0  # m/s; (8 m/s, +-20 deg) is feasible all around the circle

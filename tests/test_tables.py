@@ -22,20 +22,20 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import gainsched.grid
-import gainsched.outputs
+import gainsched.firmware.outputs
 import gainsched.publish
-import gainsched.tables
+import gainsched.schedule.grid
+import gainsched.schedule.tables
 from gainsched.cli import cli
 from gainsched.config import load_config
 from gainsched.errors import InputError
-from gainsched.grid import build_grid
-from gainsched.linearize import STATE_NAMES
-from gainsched.lqr import native_available
-from gainsched.model import Model
-from gainsched.nominal import REASONS
+from gainsched.model.reduced import Model
 from gainsched.publish import JOURNAL, recover
-from gainsched.tables import SCHEMA, load_table, table_bytes, write_table
+from gainsched.schedule.grid import build_grid
+from gainsched.schedule.linearize import STATE_NAMES
+from gainsched.schedule.lqr import native_available
+from gainsched.schedule.nominal import REASONS
+from gainsched.schedule.tables import SCHEMA, load_table, table_bytes, write_table
 
 ROOT = Path(__file__).parents[1]
 PAPER = ROOT / "configs" / "paper.toml"
@@ -314,7 +314,7 @@ class _Interrupt:
     @staticmethod
     def solve_circle(monkeypatch):
         """Ctrl-C after the first speed of the grid (in this process or a worker)."""
-        real = gainsched.grid._solutions
+        real = gainsched.schedule.grid._solutions
 
         def fake(*args, **kwargs):
             for i, sol in enumerate(real(*args, **kwargs)):
@@ -322,14 +322,14 @@ class _Interrupt:
                     raise KeyboardInterrupt
                 yield sol
 
-        monkeypatch.setattr(gainsched.grid, "_solutions", fake)
+        monkeypatch.setattr(gainsched.schedule.grid, "_solutions", fake)
 
     @staticmethod
     def table_bytes(monkeypatch):
         def fake(*args, **kwargs):
             raise RuntimeError("interrupted while serialising")
 
-        monkeypatch.setattr(gainsched.outputs, "table_bytes", fake)
+        monkeypatch.setattr(gainsched.firmware.outputs, "table_bytes", fake)
 
     @staticmethod
     def header(monkeypatch):
@@ -338,7 +338,7 @@ class _Interrupt:
         def fake(*args, **kwargs):
             raise InputError("out/small.h5", "gains/K[0, 0, 0]", "overflows float32")
 
-        monkeypatch.setattr(gainsched.outputs, "c_files", fake)
+        monkeypatch.setattr(gainsched.firmware.outputs, "c_files", fake)
 
     @staticmethod
     def journal(monkeypatch):

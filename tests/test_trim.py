@@ -1,4 +1,5 @@
-"""The numerical trim (gainsched.trim) against the closed form (gainsched.closedform).
+"""The numerical trim (gainsched.schedule.trim) against the closed form
+(gainsched.schedule.closedform).
 
 On a drag-only model both apply: the closed form (paper eqs. 15-18, eq. 17 typo
 corrected) is the independent reference for the trim's Fourier collocation
@@ -10,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gainsched.closedform import closed_form
-from gainsched.path import circle_path, maneuver_path, period
-from gainsched.trim import trim_path
+from gainsched.schedule.closedform import closed_form
+from gainsched.schedule.path import circle_path, maneuver_path, period
+from gainsched.schedule.trim import trim_path
 
 
 @pytest.mark.parametrize("speed, tilt_deg", [(4.0, 0.0), (9.0, 20.0), (-12.0, 35.0)])

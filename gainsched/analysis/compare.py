@@ -1,0 +1,957 @@
+"""Model versus measurement: the residual of the model on flight logs.
+
+The workflow and the statistics are described in docs/model-vs-measurement.md.
+
+Pipeline, per gap-free log segment (:class:`~gainsched.analysis.logs.FlightLog`):
+
+1. **Reduced coordinates from the pose.** The attachment point
+   ``p_t = p_q + R_CB p_e`` in the circle frame gives the tether distance
+   ``d = |p_t|`` and the spherical angles ``(delta, xi)``; ``R_CB`` gives the
+   Z-Y-X Euler angles ``(phi, theta, psi)``, ``chi = psi - xi`` (docs/conventions.md,
+   the conversion of :func:`gainsched.model.maximal.reduced_from_maximal`).
+   These six channels vary slowly even at 15 m/s (xi and psi grow linearly),
+   which is why they, and not the Cartesian pose, are differentiated.
+2. **Differentiation.** Savitzky-Golay (:func:`scipy.signal.savgol_filter`,
+   window and order from ``[analysis]``) gives each channel and its first two
+   derivatives; the COG velocity and acceleration and the body rates and
+   their derivatives follow from exact kinematics
+   (``p_q'' = p_t'' - R (omega' x p_e + omega x (omega x p_e))``, paper eq. 9
+   corrected; Euler rates to body rates). Half a window at each segment end,
+   where the filter extrapolates, is dropped from every statistic.
+3. **Prediction.** The model's forces for the measured state and the logged
+   commands (centred on the sample time: a logged command is held over the
+   interval before its sample): thrust along z_B after the thrust modifiers,
+   gravity, effect forces and torques (paper eqs. 3, 6, 8, 10), the tether
+   tension from the load cell when logged, otherwise solved from the radial
+   equation. Stateful effects (motor lag) are run along the log. The
+   predicted accelerations are smoothed with the same filter as the
+   measurement, so the residual compares like with like.
+4. **Residual** ``measured - predicted`` on the axes of :data:`AXES`:
+   tangential (along the direction of travel), normal (to the circle plane),
+   radial (outward along the tether; only with a load cell, since the
+   radial equation is otherwise used up by the tension), the body angular
+   accelerations (roll, pitch, yaw), and the tether stretch
+   ``d - rho - predicted stretch`` (m; zero for a rigid tether).
+
+Statistics per axis (:func:`axis_stats`): RMS, bias, NRMSE fit %, the noise
+floor (the motion-capture noise pushed through the same pipeline), whiteness
+(autocorrelation beyond the filter's own support, against a Bartlett band)
+and the cross-correlation with the inputs and their rates at +-lags.
+:func:`where_it_fails` bins the residual against airspeed, tilt, azimuth,
+tension, thrust and time in flight and names the worst regime.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.signal import correlate, lfilter, savgol_coeffs, savgol_filter
+
+from ..config import Config
+from ..errors import InputError
+from ..model.effects import Effect, Kinematics, MotorLag
+from ..model.reduced import Model
+from ..model.rotations import (
+    R_IC_from_tilt,
+    euler_zyx_from_matrix,
+    matrix_from_euler_zyx,
+    matrix_from_quaternion,
+)
+from .logs import FlightLog, LogWarning, read_log
+
+__all__ = [
+    "centred_commands",
+    "AXES",
+    "UNITS",
+    "BIN_VARIABLES",
+    "Measured",
+    "Residual",
+    "AxisStats",
+    "Comparison",
+    "load_segments",
+    "measure",
+    "predict",
+    "residuals",
+    "residual_axes",
+    "axis_stats",
+    "where_it_fails",
+    "compare",
+    "window_samples",
+    "noise_floor",
+    "AT_NOISE_FLOOR",
+]
+
+#: Residual axes, in report order.
+AXES = ("tangential", "normal", "radial", "roll", "pitch", "yaw", "stretch")
+UNITS = {
+    "tangential": "m/s^2",
+    "normal": "m/s^2",
+    "radial": "m/s^2",
+    "roll": "rad/s^2",
+    "pitch": "rad/s^2",
+    "yaw": "rad/s^2",
+    "stretch": "m",
+}
+#: Variables the residual is binned against: name -> (unit, description).
+BIN_VARIABLES = {
+    "airspeed": ("m/s", "airspeed |v|"),
+    "tilt": ("deg", "circle tilt alpha_C"),
+    "azimuth": ("deg", "azimuth xi"),
+    "tension": ("N", "tether tension"),
+    "thrust": ("N", "commanded collective thrust"),
+    "time": ("s", "time in flight"),
+}
+#: RMS / noise floor below which an axis counts as explained down to the noise
+AT_NOISE_FLOOR = 1.25
+_INPUT_NAMES = ("T_C", "tau_x", "tau_y", "tau_z")
+_CHANNELS = ("d", "delta", "xi", "phi", "theta", "psi")
+
+
+def window_samples(window_s: float, dt: float, order: int, source="", where="") -> int:
+    """Savitzky-Golay window in samples: ``window_s / dt`` rounded to an odd integer > order."""
+    n = int(round(window_s / dt))
+    n += 1 - n % 2
+    if n <= order + 1:
+        raise InputError(
+            source or "config",
+            where or "analysis.savgol_window_s",
+            f"{window_s:g} s is {n} samples at {1 / dt:.4g} Hz; needs more than "
+            f"savgol_order + 1 = {order + 1}",
+        )
+    return n
+
+
+# --------------------------------------------------------------------------- measurement
+
+
+@dataclass(frozen=True, eq=False)
+class Measured:
+    """One log segment in reduced coordinates, differentiated (arrays over the whole segment).
+
+    Attributes
+    ----------
+    name : str
+        Flight id (or file name) plus the segment number when the file was split.
+    source : str
+        The log file.
+    alpha, gamma : float, rad
+        Circle plane of the flight.
+    t : (N,) s
+    t_flight : (N,) s
+        Time in flight: the log's own clock (``t``; a segment after a gap keeps its times).
+    window : int
+        Savitzky-Golay window, samples; ``core`` drops half of it at each end.
+    order : int
+    z : (N, 10)
+        Reduced state (delta, xi, delta', xi', phi, theta, chi, omega_B), rad, rad/s.
+    acc : (N, 3)
+        (delta'', xi'') rad/s^2 and d'' m/s^2.
+    d, d_dot : (N,) m, m/s
+        Distance anchor -> attachment point and its rate.
+    p, v, a : (N, 3) m, m/s, m/s^2
+        COG position, velocity and acceleration in the circle frame C.
+    R : (N, 3, 3)
+        Body -> circle rotation R_CB.
+    omega_dot : (N, 3) rad/s^2
+        Body angular acceleration.
+    e : (N, 3)
+        Tether direction (anchor -> attachment point) in C.
+    axes : (N, 3, 3)
+        Unit path-frame axes in C, rows (tangential along the travel direction,
+        normal, radial outward).
+    T_cmd : (N, 4) N
+        Logged commands (each held over the interval before its sample).
+    tension : (N,) N or None
+        Load cell.
+    raw_sigma : dict
+        Noise std of each raw channel (d m; angles rad), from the Savitzky-Golay fit residual.
+    L_e : float, m
+        Attachment offset the reduced coordinates were computed with.
+    """
+
+    name: str
+    source: str
+    alpha: float
+    gamma: float
+    t: np.ndarray
+    t_flight: np.ndarray
+    window: int
+    order: int
+    z: np.ndarray
+    acc: np.ndarray
+    d: np.ndarray
+    d_dot: np.ndarray
+    p: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    R: np.ndarray
+    omega_dot: np.ndarray
+    e: np.ndarray
+    axes: np.ndarray
+    T_cmd: np.ndarray
+    tension: np.ndarray | None
+    raw_sigma: dict = field(default_factory=dict)
+    L_e: float = 0.0
+    cache: dict = field(default_factory=dict, repr=False)  # model-independent derived arrays
+
+    def derived(self, key: str, fn):
+        """``fn()`` computed once per segment (kinematics, projections)."""
+        if key not in self.cache:
+            self.cache[key] = fn()
+        return self.cache[key]
+
+    @property
+    def dt(self) -> float:
+        """Median sample interval, s."""
+        return float(np.median(np.diff(self.t)))
+
+    @property
+    def core(self) -> slice:
+        """Samples where the filter window fits inside the segment."""
+        h = self.window // 2
+        return slice(h, len(self.t) - h)
+
+    @property
+    def n_core(self) -> int:
+        return max(0, len(self.t) - 2 * (self.window // 2))
+
+
+def _raw_channels(log: FlightLog, L_e: float, p_I=None, R_IB=None):
+    """Raw (d, delta, xi, phi, theta, psi), shape (6, N), from the logged pose (or the given
+    p_I (N, 3), R_IB (N, 3, 3)); xi and psi unwrapped, psi on the branch of xi."""
+    R_IC = R_IC_from_tilt(log.alpha_c, log.gamma_c)
+    p_C = np.einsum("nj,ji->ni", log.p_I if p_I is None else p_I, R_IC)  # rows R_IC^T p
+    R = np.einsum("ji,njk->nik", R_IC, matrix_from_quaternion(log.q) if R_IB is None else R_IB)
+    p_t = p_C - L_e * R[:, :, 0]
+    d = np.linalg.norm(p_t, axis=-1)
+    delta = np.arctan2(np.hypot(p_t[:, 0], p_t[:, 1]), p_t[:, 2])
+    xi = np.unwrap(np.arctan2(p_t[:, 1], p_t[:, 0]))
+    phi, theta, psi = euler_zyx_from_matrix(R)
+    psi = np.unwrap(psi)
+    psi += 2 * np.pi * np.round((xi[0] - psi[0]) / (2 * np.pi))  # chi = psi - xi near 0
+    return np.stack([d, delta, xi, phi, theta, psi])
+
+
+def _reconstruct(ch, ch1, ch2, L_e):
+    """Kinematics from the smoothed channels (6, N) and their derivatives (rates, accelerations)."""
+    d, delta, xi, phi, theta, psi = ch
+    dd_, ddelta, dxi, dphi, dtheta, dpsi = ch1
+    d2, ddelta2, dxi2, dphi2, dtheta2, dpsi2 = ch2
+    sp, cp, st, ct = np.sin(phi), np.cos(phi), np.sin(theta), np.cos(theta)
+    w = np.stack(
+        [dphi - dpsi * st, dtheta * cp + dpsi * sp * ct, -dtheta * sp + dpsi * cp * ct], -1
+    )
+    w_dot = np.stack(
+        [
+            dphi2 - dpsi2 * st - dpsi * dtheta * ct,
+            dtheta2 * cp - dtheta * dphi * sp + dpsi2 * sp * ct + dpsi * dphi * cp * ct
+            - dpsi * dtheta * sp * st,
+            -dtheta2 * sp - dtheta * dphi * cp + dpsi2 * cp * ct - dpsi * dphi * sp * ct
+            - dpsi * dtheta * cp * st,
+        ],
+        -1,
+    )
+    R = matrix_from_euler_zyx(phi, theta, psi)
+    sd, cd, sx, cx = np.sin(delta), np.cos(delta), np.sin(xi), np.cos(xi)
+    zero = np.zeros_like(sd)
+    e = np.stack([sd * cx, sd * sx, cd], -1)
+    e_d = np.stack([cd * cx, cd * sx, -sd], -1)
+    e_x = np.stack([-sd * sx, sd * cx, zero], -1)
+    e_dx = np.stack([-cd * sx, cd * cx, zero], -1)
+    e_xx = np.stack([-sd * cx, -sd * sx, zero], -1)
+    e_dd = -e
+    col = lambda a: a[:, None]  # noqa: E731
+    e_dot = e_d * col(ddelta) + e_x * col(dxi)
+    e_ddot = (
+        e_d * col(ddelta2) + e_x * col(dxi2) + e_dd * col(ddelta**2)
+        + 2 * e_dx * col(ddelta * dxi) + e_xx * col(dxi**2)
+    )
+    p_e = np.array([-L_e, 0.0, 0.0])
+    w_pe = np.cross(w, p_e)
+    p_t = col(d) * e
+    v_t = col(dd_) * e + col(d) * e_dot
+    a_t = col(d2) * e + 2 * col(dd_) * e_dot + col(d) * e_ddot
+    p = p_t - np.einsum("nij,j->ni", R, p_e)
+    v = v_t - np.einsum("nij,nj->ni", R, w_pe)
+    a = a_t - np.einsum("nij,nj->ni", R, np.cross(w_dot, p_e) + np.cross(w, w_pe))
+    sgn = np.where(dxi < 0, -1.0, 1.0)
+    t_hat = e_x / np.linalg.norm(e_x, axis=-1, keepdims=True) * col(sgn)
+    axes = np.stack([t_hat, -e_d, e], 1)
+    z = np.concatenate(
+        [np.stack([delta, xi, ddelta, dxi, phi, theta, psi - xi], -1), w], -1
+    )
+    acc = np.stack([ddelta2, dxi2, d2], -1)
+    return z, acc, p, v, a, R, w_dot, e, axes
+
+
+def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measured:
+    """Differentiate one log segment (steps 1-2 of the module docstring).
+
+    Raises :class:`InputError` naming the file when the segment is shorter than the window,
+    and naming the thrust columns when no sample has a positive commanded thrust (the
+    model's forces need it: without it every residual is the whole measured acceleration
+    and the thrust-efficiency analysis divides by zero).
+    """
+    an = config.analysis
+    rows = (f"{log.row_label}s {log.where(0).split()[-1]}-{log.where(len(log) - 1).split()[-1]}"
+            if len(log) else "no samples")
+    if not np.any(np.sum(log.T_cmd, axis=-1) > 0):
+        raise InputError(
+            log.source,
+            f"columns T1, T2, T3, T4, {rows}",
+            "the commanded thrust is zero on every sample: a log without thrust commands "
+            "cannot be compared with the model",
+        )
+    dt = float(np.median(np.diff(log.t)))
+    n = window_samples(an.savgol_window_s, dt, an.savgol_order, config.source)
+    if len(log) < 2 * n + 1:
+        raise InputError(
+            log.source,
+            f"column t, {rows}",
+            f"{len(log)} samples, fewer than twice the differentiation window "
+            f"({n} samples = analysis.savgol_window_s {an.savgol_window_s:g} s) plus one",
+        )
+    L_e = config.tether.attachment_offset
+    raw = _raw_channels(log, L_e)
+    kw = dict(window_length=n, polyorder=an.savgol_order, axis=-1, mode="interp")
+    ch = savgol_filter(raw, deriv=0, **kw)
+    ch1 = savgol_filter(raw, deriv=1, delta=dt, **kw)
+    ch2 = savgol_filter(raw, deriv=2, delta=dt, **kw)
+    z, acc, p, v, a, R, w_dot, e, axes = _reconstruct(ch, ch1, ch2, L_e)
+    h = n // 2
+    hc = savgol_coeffs(n, an.savgol_order)[h]
+    fit_res = (raw - ch)[:, h : len(log) - h]
+    sig = np.sqrt(np.mean(fit_res**2, axis=-1) / max(1e-12, 1 - hc))
+    tension = log.optional.get("tension")
+    if tension is not None and not np.all(np.isfinite(tension)):
+        tension = None  # a load cell with missing samples is not used (radial equation instead)
+    base = name or (log.meta.get("flight_id") or Path(log.source).stem or "log")
+    if log.n_segments > 1:
+        base = f"{base}#{log.segment + 1}"
+    return Measured(
+        base, str(log.source), log.alpha_c, log.gamma_c, np.asarray(log.t, float),
+        np.asarray(log.t, float), n, an.savgol_order, z, acc, ch[0], ch1[0], p, v, a,
+        R, w_dot, e, axes, np.asarray(log.T_cmd, float),
+        None if tension is None else np.asarray(tension, float),
+        dict(zip(_CHANNELS, map(float, sig), strict=True)), L_e,
+    )
+
+
+def _noisy(log: FlightLog, meas: Measured, config: Config, rng) -> Measured:
+    """The same segment with motion-capture noise of the estimated level added once more:
+    position noise (std from the tether-distance channel, where attitude noise does not
+    enter to first order) and attitude noise (std from the roll and pitch channels)."""
+    an = config.analysis
+    sp = meas.raw_sigma["d"]
+    sa = 0.5 * (meas.raw_sigma["phi"] + meas.raw_sigma["theta"])
+    n = len(log)
+    rot = sa * rng.standard_normal((n, 3))
+    from ..model.rotations import Rx, Ry, Rz
+
+    R_IB = matrix_from_quaternion(log.q) @ Rz(rot[:, 2]) @ Ry(rot[:, 1]) @ Rx(rot[:, 0])
+    raw = _raw_channels(log, meas.L_e, log.p_I + sp * rng.standard_normal((n, 3)), R_IB)
+    dt = meas.dt
+    kw = dict(window_length=meas.window, polyorder=an.savgol_order, axis=-1, mode="interp")
+    ch = savgol_filter(raw, deriv=0, **kw)
+    ch1 = savgol_filter(raw, deriv=1, delta=dt, **kw)
+    ch2 = savgol_filter(raw, deriv=2, delta=dt, **kw)
+    z, acc, p, v, a, R, w_dot, e, axes = _reconstruct(ch, ch1, ch2, meas.L_e)
+    return Measured(meas.name, meas.source, meas.alpha, meas.gamma, meas.t, meas.t_flight,
+                    meas.window, meas.order, z, acc, ch[0], ch1[0], p, v, a, R, w_dot, e, axes,
+                    meas.T_cmd, meas.tension, meas.raw_sigma, meas.L_e)
+
+
+# --------------------------------------------------------------------------- prediction
+
+
+def _delayed(t, x, latency):
+    """``x(t - latency)`` by linear interpolation (held at the first sample), x shape (N, k)."""
+    if latency == 0:
+        return x
+    tq = t - latency
+    return np.stack([np.interp(tq, t, x[:, j]) for j in range(x.shape[1])], -1)
+
+
+def centred_commands(T):
+    """Command at the sample time from interval-held commands (mean of the adjacent two)."""
+    out = T.copy()
+    out[:-1] = 0.5 * (T[:-1] + T[1:])
+    return out
+
+
+def effect_states(eff: Effect, t, T_cmd, kin_fn=None) -> np.ndarray:
+    """States of a stateful effect along the log, shape (N, n_states).
+
+    Motor lag is discretised exactly for commands held over each interval
+    (``x_k = a x_{k-1} + (1 - a) T_k``, ``a = exp(-dt/tau)``), started in its steady
+    state; other stateful effects are integrated with explicit Euler sub-steps.
+    """
+    dt = float(np.median(np.diff(t)))
+    if isinstance(eff, MotorLag):
+        a = math.exp(-dt / eff.tau)
+        zi = (a * T_cmd[0])[None, :]
+        return lfilter([1 - a], [1, -a], T_cmd, axis=0, zi=zi)[0]
+    x = np.zeros((len(t), eff.n_states))
+    sub = 10
+    for k in range(1, len(t)):
+        xk = x[k - 1]
+        h = (t[k] - t[k - 1]) / sub
+        kin = kin_fn(k - 1)
+        for _ in range(sub):
+            xk = xk + h * eff.state_derivative(xk, T_cmd[k], kin)
+        x[k] = xk
+    return x
+
+
+@dataclass(frozen=True, eq=False)
+class Prediction:
+    """Predicted quantities for one segment (whole segment, before the core cut).
+
+    ``acc`` (N, 3): predicted COG acceleration projected on the path axes (t, n, r),
+    smoothed; ``omega_dot`` (N, 3) rad/s^2 smoothed; ``stretch`` (N,) m; ``tension``
+    (N,) N used (load cell or radial equation); ``T`` (N, 4) N actual thrust after effects;
+    ``inputs`` (N, 4) commanded (T_C, tau_x, tau_y, tau_z) at the sample times.
+    """
+
+    acc: np.ndarray
+    omega_dot: np.ndarray
+    stretch: np.ndarray
+    tension: np.ndarray
+    T: np.ndarray
+    inputs: np.ndarray
+    tension_source: str
+
+
+def _kelvin_voigt(f, k, c, dt):
+    """Elongation of ``c s' + k s = f`` driven by the tension samples f (exact for f held)."""
+    s = f / k
+    if c == 0:
+        return s
+    a = math.exp(-dt * k / c)
+    return lfilter([1 - a], [1, -a], s, zi=[a * s[0]])[0]
+
+
+def _tether_stretch(config: Config, f_t, dt):
+    """Predicted stretch (m) of the tether for the tension f_t (N), per ``tether.link``
+    (:mod:`gainsched.model.links`): 0 for the rigid link; Kelvin-Voigt ``c s' + k s = f`` for
+    the spring-damper; ``f / k_s`` plus Kelvin-Voigt ``(k_p, c)`` for the standard linear
+    solid; the lumped-mass chain quasi-statically as its whole-chain spring-damper (node
+    dynamics and sag neglected)."""
+    teth = config.tether
+    if teth.link == "rigid":
+        return np.zeros_like(f_t)
+    f = np.maximum(f_t, 0.0)
+    s = _kelvin_voigt(f, teth.stiffness, teth.damping, dt)
+    if teth.link == "sls":
+        s = s + f / teth.series_stiffness
+    return s
+
+
+@dataclass(frozen=True)
+class _Kin(Kinematics):
+    """Kinematics with the body-frame velocity computed once per segment."""
+
+    vB: np.ndarray | None = None
+
+    @property
+    def v_B(self):
+        return self.vB
+
+
+def _kinematics(meas: Measured) -> Kinematics:
+    def make():
+        vB = np.einsum("nji,nj->ni", meas.R, meas.v)
+        return _Kin(meas.R, meas.v, meas.z[:, 7:10], vB)
+
+    return meas.derived("kin", make)
+
+
+def predict(model: Model, meas: Measured, *, latency: float | None = None,
+            inputs: bool = True) -> Prediction:
+    """The model's accelerations for the measured state and the logged commands (step 3).
+
+    ``latency`` (s, default: the config's ``analysis.latency_s``) delays the commands and
+    the load cell (both logged on board) relative to the pose (the pose lags them by it).
+    """
+    cfg = model.config
+    lat = cfg.analysis.latency_s if latency is None else latency
+    T_raw = _delayed(meas.t, meas.T_cmd, lat)
+    u = centred_commands(T_raw)
+    z = meas.z
+    kin = _kinematics(meas)
+    if model.n_extra:
+        parts = [z]
+
+        def kin_at(k):
+            return Kinematics(meas.R[k], meas.v[k], z[k, 7:10])
+
+        for eff in model.effects:
+            if eff.n_states:
+                parts.append(effect_states(eff, meas.t, T_raw, kin_at))
+        z = np.concatenate(parts, -1)
+    T = model.thrust(z, u, kin)
+    F_eff, tau_eff = model.effect_wrench(T, kin)
+    m = model.m
+    T_C = np.sum(T, -1)
+    F0 = meas.R[:, :, 2] * T_C[:, None] + m * model.g_C(meas.alpha) + F_eff
+    if meas.tension is not None:  # on board, like the commands: delayed with them
+        f_t, source = _delayed(meas.t, meas.tension[:, None], lat)[:, 0], "load cell"
+    else:
+        f_t, source = np.sum(meas.e * (F0 - m * meas.a), -1), "radial equation"
+    a_pred = (F0 - f_t[:, None] * meas.e) / m
+    e_B = meas.derived("e_B", lambda: np.einsum("nji,nj->ni", meas.R, meas.e))
+    w = z[:, 7:10]
+    # einsum, not BLAS matmul: multithreaded BLAS on tall-thin products is slow and noisy
+    tau = (
+        np.einsum("nk,jk->nj", T, model.alloc[1:]) + tau_eff
+        - f_t[:, None] * np.cross(model.p_e, e_B) - np.cross(w, np.einsum("nk,jk->nj", w, model.J))
+    )
+    wd = np.einsum("nk,jk->nj", tau, np.linalg.inv(model.J))
+    acc = np.einsum("nij,nj->ni", meas.axes, a_pred)
+    kw = dict(window_length=meas.window, polyorder=meas.order, axis=0, mode="interp")
+    sm = savgol_filter(np.concatenate([acc, wd], -1), **kw)
+    acc, wd = sm[:, :3], sm[:, 3:]
+    stretch = _tether_stretch(cfg, f_t, meas.dt)
+    inp = np.einsum("nk,jk->nj", u, model.alloc) if inputs else None
+    return Prediction(acc, wd, stretch, f_t, T, inp, source)
+
+
+# --------------------------------------------------------------------------- residuals
+
+
+@dataclass(frozen=True, eq=False)
+class Residual:
+    """Measured, predicted and residual per axis for one segment, core samples only.
+
+    ``measured``, ``predicted``, ``residual``: dict axis -> (n,) arrays, axes as in
+    :data:`AXES` (``radial`` only with a load cell); ``variables``: dict of the
+    :data:`BIN_VARIABLES` (n,) in their units; ``inputs``: dict name -> (n,) commanded
+    (T_C N, tau_x/y/z N m) and their rates (``*_rate``).
+    """
+
+    name: str
+    source: str
+    t: np.ndarray
+    measured: dict
+    predicted: dict
+    residual: dict
+    variables: dict
+    inputs: dict
+    tension_source: str
+    window: int
+
+    @property
+    def axes(self) -> tuple[str, ...]:
+        return tuple(a for a in AXES if a in self.residual)
+
+    def __len__(self):
+        return int(self.t.size)
+
+
+def residual_axes(model: Model, meas: Measured, latency: float | None = None) -> dict:
+    """Only the residual per axis (core samples) of one segment: the fast path for fits."""
+    pred = predict(model, meas, latency=latency, inputs=False)
+    c = meas.core
+    acc_m = meas.derived("acc_core", lambda: np.einsum("nij,nj->ni", meas.axes[c], meas.a[c]))
+    out = {"tangential": acc_m[:, 0] - pred.acc[c, 0], "normal": acc_m[:, 1] - pred.acc[c, 1]}
+    if pred.tension_source == "load cell":
+        out["radial"] = acc_m[:, 2] - pred.acc[c, 2]
+    for j, ax in enumerate(("roll", "pitch", "yaw")):
+        out[ax] = meas.omega_dot[c, j] - pred.omega_dot[c, j]
+    out["stretch"] = meas.d[c] - model.rho - pred.stretch[c]
+    return out
+
+
+def _residual(model: Model, meas: Measured, pred: Prediction) -> Residual:
+    c = meas.core
+    acc_m = np.einsum("nij,nj->ni", meas.axes, meas.a)
+    measured = {"tangential": acc_m[c, 0], "normal": acc_m[c, 1]}
+    predicted = {"tangential": pred.acc[c, 0], "normal": pred.acc[c, 1]}
+    if pred.tension_source == "load cell":
+        measured["radial"], predicted["radial"] = acc_m[c, 2], pred.acc[c, 2]
+    for j, ax in enumerate(("roll", "pitch", "yaw")):
+        measured[ax], predicted[ax] = meas.omega_dot[c, j], pred.omega_dot[c, j]
+    measured["stretch"] = meas.d[c] - model.rho
+    predicted["stretch"] = pred.stretch[c]
+    residual = {k: measured[k] - predicted[k] for k in measured}
+    speed = np.linalg.norm(meas.v[c], axis=-1)
+    variables = {
+        "airspeed": speed,
+        "tilt": np.full(speed.shape, np.rad2deg(meas.alpha)),
+        "azimuth": np.rad2deg(meas.z[c, 1]) % 360.0,
+        "tension": pred.tension[c],
+        "thrust": np.sum(meas.T_cmd[c], -1),
+        "time": meas.t_flight[c],
+    }
+    inp = {}
+    kw = dict(window_length=meas.window, polyorder=meas.order, axis=0, mode="interp")
+    rates = savgol_filter(pred.inputs, deriv=1, delta=meas.dt, **kw)
+    for j, nm in enumerate(_INPUT_NAMES):
+        inp[nm] = pred.inputs[c, j]
+        inp[nm + "_rate"] = rates[c, j]
+    return Residual(meas.name, meas.source, meas.t[c], measured, predicted, residual, variables,
+                    inp, pred.tension_source, meas.window)
+
+
+def residuals(config: Config, measured, *, effects=None, latency=None,
+              model: Model | None = None) -> list[Residual]:
+    """Residuals of ``config`` (optionally with other ``effects``) on measured segments."""
+    model = model or Model(config, effects)
+    return [_residual(model, m, predict(model, m, latency=latency)) for m in measured]
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def load_segments(config: Config, logs) -> tuple[list[Measured], list[FlightLog], list[str]]:
+    """Read log files (or take :class:`FlightLog` objects) and differentiate every segment.
+
+    Returns (measured segments, the log segments, warnings as text: gaps, dropped pieces).
+    """
+    segs: list[FlightLog] = []
+    notes: list[str] = []
+    for item in logs:
+        if isinstance(item, FlightLog):
+            segs.append(item)
+            continue
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", LogWarning)
+            segs.extend(read_log(item))
+        notes.extend(str(w.message) for w in caught if issubclass(w.category, LogWarning))
+    if not segs:
+        raise InputError("command line", "LOG", "no flight log given")
+    names = [s.meta.get("flight_id") or Path(s.source).stem or "log" for s in segs]
+    seen: dict[str, int] = {}
+    meas = []
+    for s, nm in zip(segs, names, strict=True):
+        if names.count(nm) > 1 and s.n_segments == 1:
+            seen[nm] = seen.get(nm, 0) + 1
+            nm = f"{nm}({seen[nm]})"
+        meas.append(measure(s, config, name=nm))
+    return meas, segs, notes
+
+
+# --------------------------------------------------------------------------- statistics
+
+
+@dataclass(frozen=True)
+class AxisStats:
+    """Statistics of one residual axis over all segments (units: :data:`UNITS`).
+
+    rms, bias (mean), std; fit_percent = 100 (1 - |y - y_hat| / |y - mean y|);
+    noise_floor: RMS residual that the measurement noise alone produces.
+
+    Whiteness: the differentiation filter correlates samples closer than its window
+    W, so the test looks at lags W, 2W, ... up to ``max_lag_s`` (roughly independent
+    estimates): ``Q = sum rho(kW)^2 / var`` with the Bartlett variance
+    ``var = (1 + 2 sum_{j<W} rho(j)^2) / n``, white when Q is below the 99% point of
+    chi-square with as many degrees of freedom as lags. ``acf_band`` is the 95%
+    band of a single lag; ``frac_outside`` the fraction of lags >= W outside it.
+
+    Cross-correlation with each input and its rate over +-``max_lag_s``: ``ccf`` maps
+    input -> (peak |rho|, lag s at the peak, band, significant); the band is the
+    Bartlett band corrected for testing every lag (Bonferroni over the ~2L/W
+    independent lags). Positive lag: the residual follows the input.
+    """
+
+    axis: str
+    unit: str
+    n: int
+    rms: float
+    bias: float
+    std: float
+    fit_percent: float
+    noise_floor: float
+    white: bool
+    whiteness_q: float
+    whiteness_limit: float
+    frac_outside: float
+    acf_lags: np.ndarray
+    acf: np.ndarray
+    acf_band: float
+    ccf: dict
+    ccf_lags: np.ndarray
+    ccf_curves: dict
+
+    @property
+    def rms_over_noise(self) -> float:
+        return self.rms / self.noise_floor if self.noise_floor > 0 else math.nan
+
+    def to_json(self) -> dict:
+        return {
+            "unit": self.unit, "n": self.n, "rms": self.rms, "bias": self.bias, "std": self.std,
+            "fit_percent": self.fit_percent, "noise_floor": self.noise_floor,
+            "rms_over_noise": _num(self.rms_over_noise),
+            "white": self.white, "whiteness_q": self.whiteness_q,
+            "whiteness_limit_99": self.whiteness_limit,
+            "acf_frac_outside_band": self.frac_outside, "acf_band_95": self.acf_band,
+            "acf": {"lag_s": self.acf_lags.tolist(), "value": self.acf.tolist()},
+            "ccf_peaks": {k: {"abs_rho": v[0], "lag_s": v[1], "band": v[2], "significant": v[3]}
+                          for k, v in self.ccf.items()},
+        }
+
+
+def _num(x):
+    """A float for JSON (None for nan/inf)."""
+    return float(x) if x is not None and np.isfinite(x) else None
+
+
+def _pooled_corr(xs, ys, max_lag):
+    """Cross-correlation of zero-mean series pooled over segments, lags -max_lag..max_lag:
+    ``sum_seg sum_t x_t y_{t-k} / sqrt(sum x^2 sum y^2)``."""
+    num = np.zeros(2 * max_lag + 1)
+    sx = sy = 0.0
+    for x, y in zip(xs, ys, strict=True):
+        n = x.size
+        full = correlate(x, y, mode="full", method="fft")
+        lo, hi = n - 1 - max_lag, n + max_lag
+        seg = full[max(lo, 0) : hi]
+        num[max(0, -lo) : max(0, -lo) + seg.size] += seg
+        sx += float(np.sum(x * x))
+        sy += float(np.sum(y * y))
+    return num / math.sqrt(sx * sy) if sx * sy > 0 else num
+
+
+def axis_stats(res: list[Residual], axis: str, noise_floor: float = math.nan,
+               max_lag_s: float = 0.5) -> AxisStats:
+    """Statistics of ``axis`` pooled over segments (see :class:`AxisStats`)."""
+    from scipy.stats import chi2, norm
+
+    y = np.concatenate([r.measured[axis] for r in res])
+    yh = np.concatenate([r.predicted[axis] for r in res])
+    e = y - yh
+    n = e.size
+    rms = float(np.sqrt(np.mean(e**2)))
+    bias = float(np.mean(e))
+    den = float(np.linalg.norm(y - y.mean()))
+    fit = float(100 * (1 - np.linalg.norm(e) / den)) if den > 0 else math.nan
+    dt = float(np.median(np.concatenate([np.diff(r.t) for r in res])))
+    W = max(r.window for r in res)
+    L = max(2 * W, int(round(max_lag_s / dt)))
+    xs = [r.residual[axis] - bias for r in res]
+    acf = _pooled_corr(xs, xs, L)[L:]
+    var1 = (1 + 2 * float(np.sum(acf[1:W] ** 2))) / n
+    band = 1.96 * math.sqrt(var1)
+    tail = acf[W:]
+    frac = float(np.mean(np.abs(tail) > band)) if tail.size else 0.0
+    lags = np.arange(W, L + 1, W)
+    q = float(np.sum(acf[lags] ** 2) / var1)
+    limit = float(chi2.ppf(0.99, lags.size))
+    n_ind = max(1.0, (2 * L + 1) / W)
+    z = float(norm.ppf(1 - 0.025 / n_ind))
+    ccf, curves = {}, {}
+    for nm in res[0].inputs:
+        us = [r.inputs[nm] - np.mean(r.inputs[nm]) for r in res]
+        rho = _pooled_corr(xs, us, L)
+        acf_u = _pooled_corr(us, us, W)[W:]
+        # Bartlett: var(rho_xu(k)) ~ (1/n) sum_j rho_x(j) rho_u(j); rho_x ~ 0 beyond W
+        var = (1 + 2 * float(np.sum(np.abs(acf[1:W] * acf_u[1:W])))) / n
+        b = z * math.sqrt(var)
+        k = int(np.argmax(np.abs(rho)))
+        peak = float(abs(rho[k]))
+        ccf[nm] = (peak, float((k - L) * dt), b, peak > b)
+        curves[nm] = rho
+    return AxisStats(axis, UNITS[axis], n, rms, bias, float(np.std(e)), fit, float(noise_floor),
+                     bool(q <= limit), q, limit, frac, np.arange(L + 1) * dt, acf, band, ccf,
+                     np.arange(-L, L + 1) * dt, curves)
+
+
+def noise_floor(config: Config, measured, segs, *, effects=None, latency=None,
+                seed: int = 0) -> dict:
+    """RMS change of each residual axis when motion-capture noise of the estimated level is
+    added to the raw pose channels once more: the residual the noise alone explains."""
+    model = Model(config, effects)
+    rng = np.random.default_rng(seed)
+    acc = {}
+    cnt = {}
+    for m, s in zip(measured, segs, strict=True):
+        r0 = _residual(model, m, predict(model, m, latency=latency))
+        mn = _noisy(s, m, config, rng)
+        r1 = _residual(model, mn, predict(model, mn, latency=latency))
+        for ax in r0.residual:
+            d = r1.residual[ax] - r0.residual[ax]
+            acc[ax] = acc.get(ax, 0.0) + float(np.sum(d * d))
+            cnt[ax] = cnt.get(ax, 0) + d.size
+    return {ax: math.sqrt(acc[ax] / cnt[ax]) for ax in acc}
+
+
+# --------------------------------------------------------------------------- where it fails
+
+
+def _bin_edges(var: str, x: np.ndarray, n_bins: int):
+    if var == "azimuth":
+        return np.linspace(0.0, 360.0, 13)
+    if var == "tilt":
+        vals = np.unique(np.round(x, 6))
+        if vals.size <= 8:
+            mids = (vals[1:] + vals[:-1]) / 2
+            return np.concatenate([[vals[0] - 1], mids, [vals[-1] + 1]])
+    lo, hi = np.percentile(x, [0.5, 99.5])
+    if not hi > lo:
+        return np.array([lo - 0.5, hi + 0.5])
+    edges = np.linspace(lo, hi, n_bins + 1)
+    edges[0], edges[-1] = min(lo, x.min()), max(hi, x.max()) + 1e-9
+    return edges
+
+
+def where_it_fails(res: list[Residual], noise: dict, n_bins: int = 8, min_count: int = 40) -> dict:
+    """Residual binned against each of :data:`BIN_VARIABLES`, per axis, and the worst regime.
+
+    Returns ``{"tables": {var: {"edges", "centers", "count", axis: {"rms", "bias"}}},
+    "worst": {...}, "sentence": str}``. Bins with fewer than ``min_count`` samples are
+    reported but not used to name the worst regime. The worst regime: the axis whose
+    RMS is largest against its noise floor; for it the variable whose bins spread most;
+    the sentence says whether the residual grows with the variable or concentrates in
+    a range of it.
+    """
+    axes = [a for a in AXES if all(a in r.residual for r in res)]
+    X = {v: np.concatenate([r.variables[v] for r in res]) for v in BIN_VARIABLES}
+    E = {a: np.concatenate([r.residual[a] for r in res]) for a in axes}
+    tables = {}
+    for v in BIN_VARIABLES:
+        edges = _bin_edges(v, X[v], n_bins)
+        idx = np.clip(np.digitize(X[v], edges) - 1, 0, len(edges) - 2)
+        count = np.bincount(idx, minlength=len(edges) - 1)
+        centers = (edges[1:] + edges[:-1]) / 2
+        if v == "tilt" and edges.size - 1 == np.unique(np.round(X[v], 6)).size:
+            centers = np.unique(np.round(X[v], 6))  # one bin per flown tilt
+        tab = {"edges": edges.tolist(), "centers": centers.tolist(), "count": count.tolist()}
+        for a in axes:
+            s2 = np.bincount(idx, E[a] ** 2, minlength=len(edges) - 1)
+            s1 = np.bincount(idx, E[a], minlength=len(edges) - 1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                tab[a] = {"rms": np.sqrt(s2 / count).tolist(), "bias": (s1 / count).tolist()}
+        tables[v] = tab
+    # the worst axis relative to its noise floor
+    ratio = {a: float(np.sqrt(np.mean(E[a] ** 2)) / noise.get(a, math.nan)) for a in axes}
+    finite = {a: r for a, r in ratio.items() if np.isfinite(r)}
+    worst_axis = max(finite, key=finite.get) if finite else axes[0]
+    best = None
+    for v in BIN_VARIABLES:
+        tab = tables[v]
+        cnt = np.array(tab["count"])
+        rms = np.array(tab[worst_axis]["rms"])
+        ok = cnt >= min_count
+        if ok.sum() < 2:
+            continue
+        spread = float(np.nanmax(rms[ok]) / max(np.nanmin(rms[ok]), 1e-300))
+        if best is None or spread > best[1]:
+            best = (v, spread)
+    out = {"tables": tables, "rms_over_noise": ratio, "worst": None, "sentence": ""}
+    unit = UNITS[worst_axis]
+    if finite and max(finite.values()) < AT_NOISE_FLOOR:
+        out["worst"] = {"axis": worst_axis, "at_noise_floor": True}
+        out["sentence"] = (
+            f"every axis is within {AT_NOISE_FLOOR:g}x its noise floor (worst: {worst_axis}, "
+            f"{ratio[worst_axis]:.2f}x): the model explains these flights down to the "
+            "measurement noise"
+        )
+        return out
+    if best is None:
+        r_all = float(np.sqrt(np.mean(E[worst_axis] ** 2)))
+        out["worst"] = {"axis": worst_axis}
+        out["sentence"] = (f"{worst_axis} residual is the largest ({r_all:.3g} {unit} RMS, "
+                           f"{ratio[worst_axis]:.1f}x its noise floor) and uniform over the "
+                           "flown conditions")
+        return out
+    v, spread = best
+    tab = tables[v]
+    cnt = np.array(tab["count"])
+    ok = cnt >= min_count
+    rms = np.array(tab[worst_axis]["rms"])
+    bias = np.array(tab[worst_axis]["bias"])
+    centers = np.array(tab["centers"])
+    edges = np.array(tab["edges"])
+    vu = BIN_VARIABLES[v][0]
+    iok = np.flatnonzero(ok)
+    k = iok[np.nanargmax(rms[iok])]
+    mid = 0.5 * (np.nanmax(rms[iok]) + np.nanmin(rms[iok]))
+    high = iok[rms[iok] > mid]
+    rank = np.corrcoef(np.arange(iok.size), rms[iok])[0, 1] if iok.size > 2 else 0.0
+    others = iok[rms[iok] <= mid]
+    r_low = float(np.sqrt(np.sum(rms[others] ** 2 * cnt[others]) / max(1, cnt[others].sum())))
+    if v != "azimuth" and k == iok[-1] and rank > 0.7:
+        trend = f"grows with {v} above {edges[high.min()]:.3g} {vu}"
+    elif v != "azimuth" and k == iok[0] and rank < -0.7:
+        trend = f"grows as {v} falls below {edges[high.max() + 1]:.3g} {vu}"
+    else:
+        lo, hi = edges[k], edges[k + 1]
+        trend = f"concentrates at {v} {lo:.3g}-{hi:.3g} {vu}"
+    out["worst"] = {"axis": worst_axis, "variable": v, "spread": spread,
+                    "bin_center": float(centers[k]), "bin": [float(edges[k]), float(edges[k + 1])],
+                    "rms": float(rms[k]), "bias": float(bias[k]),
+                    "rms_elsewhere": r_low}
+    out["sentence"] = (
+        f"{worst_axis} residual {trend} (RMS {rms[k]:.3g} {unit}, bias {bias[k]:+.3g} {unit} "
+        f"there vs {r_low:.3g} elsewhere; {ratio[worst_axis]:.1f}x the noise floor overall)"
+    )
+    return out
+
+
+# --------------------------------------------------------------------------- one call
+
+
+@dataclass(frozen=True, eq=False)
+class Comparison:
+    """Everything ``compare`` computes: residuals per segment, statistics per axis, the
+    noise floors, where it fails, and the reading notes (gaps)."""
+
+    config: Config
+    measured: list
+    residuals: list
+    stats: dict
+    noise: dict
+    where: dict
+    notes: list
+    segs: list = field(default_factory=list)
+
+    @property
+    def axes(self) -> tuple[str, ...]:
+        return tuple(self.stats)
+
+    def normalized_rms(self, axes=None) -> float:
+        """sqrt(mean over axes of (RMS / noise floor)^2): 1 for a residual of pure noise."""
+        axes = axes or self.axes
+        return float(np.sqrt(np.mean([(self.stats[a].rms / self.noise[a]) ** 2 for a in axes])))
+
+    def to_json(self) -> dict:
+        return {
+            "config": {"name": self.config.name, "source": self.config.source,
+                       "sha256": self.config.sha256,
+                       "effects": {e.name: e.param_dict() for e in self.config.effects},
+                       "analysis": {"savgol_window_s": self.config.analysis.savgol_window_s,
+                                    "savgol_order": self.config.analysis.savgol_order,
+                                    "latency_s": self.config.analysis.latency_s}},
+            "segments": [{"name": r.name, "source": r.source, "samples": len(r),
+                          "t_start": float(r.t[0]), "t_end": float(r.t[-1]),
+                          "tension": r.tension_source, "window_samples": r.window}
+                         for r in self.residuals],
+            "axes": {a: s.to_json() for a, s in self.stats.items()},
+            "normalized_rms": self.normalized_rms(),
+            "where_it_fails": {"sentence": self.where["sentence"], "worst": self.where["worst"],
+                               "rms_over_noise": self.where["rms_over_noise"],
+                               "tables": self.where["tables"]},
+            "notes": self.notes,
+        }
+
+
+def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
+            notes=None) -> Comparison:
+    """Load, differentiate, predict and summarise: the whole of ``gainsched compare``.
+
+    ``logs``: paths or :class:`FlightLog` segments. ``measured``/``segs``/``notes`` may be
+    passed from a previous :func:`load_segments` call with the same attachment offset
+    and analysis settings.
+    """
+    if measured is None:
+        measured, segs, notes = load_segments(config, logs)
+    res = residuals(config, measured, effects=effects)
+    noise = noise_floor(config, measured, segs, effects=effects)
+    axes = [a for a in AXES if all(a in r.residual for r in res)]
+    stats = {a: axis_stats(res, a, noise[a]) for a in axes}
+    where = where_it_fails(res, noise)
+    return Comparison(config, measured, res, stats, noise, where, list(notes or []), list(segs))

@@ -1,0 +1,954 @@
+"""Which physical effect is missing: fit candidates to the residual, score them on held-out flights.
+
+For each candidate of :data:`CANDIDATES` (the effects library plus config
+parameters and measurement latency) the model is refitted on the flight logs:
+the parameters minimise the residual of :mod:`gainsched.analysis.compare`, every axis
+weighted by its noise floor (so 1 per axis and sample is pure noise). Where
+the residual is affine in a parameter (drag, rotor drag, thrust scale, thrust
+polynomial, tether length, tether compliance) one linear least-squares step is
+exact; mass and attachment offset take a few Gauss-Newton steps; motor time
+constant, latency, momentum-theory disk area and the tether damping time are
+found by a bounded 1-D search (grid, then :func:`scipy.optimize.minimize_scalar`).
+
+Scores, all on **held-out flights** (leave-one-flight-out: refit without the
+flight, predict it):
+
+- ``rms_reduction``: ``1 - sqrt(SSE_fit / SSE_model)`` of the normalised residual;
+- ``excess_explained``: the share of the residual power above the noise floor
+  that the candidate removes, ``(SSE_model - SSE_fit) / (SSE_model - SSE_noise)``;
+- ``delta_bic`` (in-sample, ``n_eff = samples x axes / window``: neighbouring
+  samples share the differentiation window);
+- plausibility (the estimate inside the parameter's plausible range, not
+  pinned to its edge) and fold stability (how far the fold fits move the
+  prediction, linearised at the estimate, relative to the effect itself).
+
+A candidate is accepted when it clears every threshold of :data:`THRESHOLDS`;
+the first such in the ranking (by held-out RMS reduction) is the verdict.
+**Identifiability gate**: two candidates whose fitted contributions to the
+residual are nearly collinear (``|cos| >= 0.95``, i.e. VIF >= 10) and whose
+held-out fits explain nearly as much (within 10 points of the residual power
+above noise) cannot be told apart on these flights; the report says so and names the flight
+that would separate them. Multi-parameter candidates report their parameter correlation.
+When nothing clears the thresholds the report says that no candidate explains
+the residual and where the residual concentrates
+(:func:`gainsched.analysis.compare.where_it_fails`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from ..config import Config, EffectSpec, config_from_text
+from ..model.effects import EFFECTS, effects_from_specs
+from ..model.reduced import Model
+from ..tomledit import remove_key, set_section, set_value
+from .compare import (
+    AT_NOISE_FLOOR,
+    Comparison,
+    compare,
+    measure,
+    residual_axes,
+)
+
+__all__ = [
+    "FitParam",
+    "Candidate",
+    "CANDIDATES",
+    "THRESHOLDS",
+    "CandidateResult",
+    "Diagnosis",
+    "diagnose",
+    "apply_candidate",
+    "separating_flight",
+]
+
+#: Acceptance thresholds (held-out where it says so).
+THRESHOLDS = {
+    "min_rms_reduction": 0.05,  # held-out RMS of the normalised residual falls by >= 5%
+    "min_excess_explained": 0.5,  # and >= half of the residual power above the noise floor
+    "max_delta_bic": -10.0,
+    "max_fold_spread": 0.5,  # fold fits move the prediction by <= 50% of the effect itself
+    "twin_cos": 0.95,  # |cos| of two fitted contributions: VIF >= 10
+    "twin_excess_gap": 0.1,  # ... unless the held-out excess explained differs by > 10 points
+    "max_param_corr": 0.95,  # within a candidate
+}
+
+
+@dataclass(frozen=True)
+class FitParam:
+    """A fitted parameter: name, unit, plausible fit bounds, search scale, the value at which
+    the effect is absent (``null``; None: keep the config's value)."""
+
+    name: str
+    unit: str
+    lower: float
+    upper: float
+    scale: str = "lin"  # "lin" | "log" (search grids)
+    null: float | None = None
+
+
+@dataclass(frozen=True)
+class CandidateModel:
+    """What a candidate at given parameters changes: the config, the effects, the latency."""
+
+    config: Config
+    effects: tuple | None
+    latency: float
+
+
+class Candidate:
+    """A candidate missing effect. Subclasses define ``params``, ``search`` and the hooks."""
+
+    name: str = ""
+    doc: str = ""
+    params: tuple[FitParam, ...] = ()
+    search: int | None = None  # index of the parameter found by 1-D search
+    affine: bool = True  # residual affine in the other parameters (one LSQ step is exact)
+    grid_size: int = 13
+
+    def start(self, cfg: Config) -> np.ndarray:
+        """Current values in the config (the model as it is)."""
+        raise NotImplementedError
+
+    def variant(self, cfg: Config, theta) -> CandidateModel:
+        raise NotImplementedError
+
+    def apply_text(self, text: str, cfg: Config, theta, comments: list[str], header: str) -> str:
+        raise NotImplementedError
+
+    def report_values(self, theta) -> dict:
+        """Parameter values as written to the config (may differ from the fit parametrisation)."""
+        return {p.name: float(v) for p, v in zip(self.params, theta, strict=True)}
+
+    def null(self, cfg: Config) -> np.ndarray:
+        """The values at which the candidate changes nothing (for effect sizes)."""
+        st = self.start(cfg)
+        return np.array([p.null if p.null is not None else s
+                         for p, s in zip(self.params, st, strict=True)])
+
+    def present(self, cfg: Config) -> bool:
+        return False
+
+
+def _specs_with(cfg: Config, kind: str, values: dict) -> tuple:
+    """Effects of ``cfg`` with effect ``kind`` set to ``values`` (added when absent)."""
+    cls = EFFECTS[kind]
+    old = next((s.param_dict() for s in cfg.effects if s.name == kind), {})
+    full = {p.name: float(values.get(p.name, old.get(p.name, p.default))) for p in cls.params}
+    specs = [s for s in cfg.effects if s.name != kind]
+    specs.append(EffectSpec(kind, tuple(full.items())))
+    specs.sort(key=lambda s: s.name)
+    return tuple(specs)
+
+
+class EffectCandidate(Candidate):
+    """Refit (or add) parameters of one effect of the library."""
+
+    def __init__(self, name, kind, params, doc, search=None, affine=True, absent=None):
+        self.name, self.kind, self.params, self.doc = name, kind, tuple(params), doc
+        self.search, self.affine = search, affine
+        self.absent = absent  # values meaning "effect off" when it is not in the config
+
+    def present(self, cfg):
+        return any(s.name == self.kind for s in cfg.effects)
+
+    def start(self, cfg):
+        cur = next((s.param_dict() for s in cfg.effects if s.name == self.kind), None)
+        cls = EFFECTS[self.kind]
+        defaults = {p.name: p.default for p in cls.params}
+        out = []
+        for p in self.params:
+            if cur is not None:
+                out.append(cur[p.name])
+            elif self.absent is not None and p.name in self.absent:
+                out.append(self.absent[p.name])
+            else:
+                out.append(defaults[p.name])
+        return np.array(out, dtype=float)
+
+    def variant(self, cfg, theta):
+        vals = dict(zip((p.name for p in self.params), map(float, theta), strict=True))
+        specs = _specs_with(cfg, self.kind, vals)
+        return CandidateModel(cfg, effects_from_specs(specs), cfg.analysis.latency_s)
+
+    def apply_text(self, text, cfg, theta, comments, header):
+        vals = dict(zip((p.name for p in self.params), map(float, theta), strict=True))
+        spec = next(s for s in _specs_with(cfg, self.kind, vals) if s.name == self.kind)
+        spec = spec.param_dict()
+        cmt = dict(zip((p.name for p in self.params), comments, strict=True))
+        items = [(k, v, cmt.get(k, "kept")) for k, v in spec.items()]
+        return set_section(text, f"effects.{self.kind}", items, header)
+
+
+class ConfigCandidate(Candidate):
+    """Refit one scalar config parameter (``section.key``)."""
+
+    def __init__(self, name, section, key, param, doc, affine=True, bounds_rel=None):
+        self.name, self.section, self.key, self.doc = name, section, key, doc
+        self.params = (param,)
+        self.affine = affine
+        self.search = None
+        self.bounds_rel = bounds_rel
+
+    def _get(self, cfg):
+        return float(getattr(getattr(cfg, self.section), self.key))
+
+    def start(self, cfg):
+        return np.array([self._get(cfg)])
+
+    def variant(self, cfg, theta):
+        sec = dataclasses.replace(getattr(cfg, self.section), **{self.key: float(theta[0])})
+        new = dataclasses.replace(cfg, **{self.section: sec})
+        return CandidateModel(new, None, cfg.analysis.latency_s)
+
+    def apply_text(self, text, cfg, theta, comments, header):
+        return set_value(text, self.section, self.key, float(theta[0]),
+                         f"{comments[0]}; {header}")
+
+
+class LatencyCandidate(Candidate):
+    """Measurement latency: the pose lags the logged commands (``analysis.latency_s``)."""
+
+    name = "latency"
+    doc = "measurement latency: the motion-capture pose lags the commands and load cell"
+    params = (FitParam("latency_s", "s", 0.0, 0.06, "lin", null=0.0),)
+    search = 0
+    grid_size = 13
+
+    def start(self, cfg):
+        return np.array([cfg.analysis.latency_s])
+
+    def variant(self, cfg, theta):
+        return CandidateModel(cfg, None, float(theta[0]))
+
+    def apply_text(self, text, cfg, theta, comments, header):
+        return set_value(text, "analysis", "latency_s", float(theta[0]), f"{comments[0]}; {header}")
+
+
+class ElasticityCandidate(Candidate):
+    """Tether elasticity (Kelvin-Voigt spring-damper): fitted as compliance 1/k (affine)
+    and damping time c/k (1-D search); written as ``[tether] link = "spring-damper"``."""
+
+    name = "tether_elasticity"
+    doc = "elastic tether (spring-damper): stretch = tension / k, lagged by c / k"
+    params = (
+        FitParam("compliance", "m/N", 0.0, 1e-2, "lin", null=0.0),
+        FitParam("damping_time", "s", 0.0, 0.05, "lin", null=0.0),
+    )
+    search = 1
+    grid_size = 11
+
+    def present(self, cfg):
+        return cfg.tether.link == "spring-damper"
+
+    def start(self, cfg):
+        t = cfg.tether
+        if t.link == "rigid":
+            return np.array([0.0, 0.0])
+        return np.array([1.0 / t.stiffness, t.damping / t.stiffness])
+
+    def variant(self, cfg, theta):
+        comp, tc = float(theta[0]), float(theta[1])
+        if comp <= 1e-12:
+            teth = dataclasses.replace(cfg.tether, link="rigid")
+        else:
+            teth = dataclasses.replace(cfg.tether, link="spring-damper", stiffness=1.0 / comp,
+                                       damping=tc / comp)
+        return CandidateModel(dataclasses.replace(cfg, tether=teth), None, cfg.analysis.latency_s)
+
+    def report_values(self, theta):
+        comp, tc = float(theta[0]), float(theta[1])
+        k = 1.0 / comp if comp > 0 else math.inf
+        return {"stiffness": k, "damping": tc * k if comp > 0 else 0.0}
+
+    def apply_text(self, text, cfg, theta, comments, header):
+        v = self.report_values(theta)
+        for key in ("series_stiffness", "mass", "segments"):  # keys of the other elastic links
+            text = remove_key(text, "tether", key)
+        text = set_value(text, "tether", "link", "spring-damper", header)
+        text = set_value(text, "tether", "stiffness", v["stiffness"], f"N/m; {comments[0]}")
+        return set_value(text, "tether", "damping", v["damping"], f"N s/m; {comments[1]}")
+
+
+def _candidates() -> tuple[Candidate, ...]:
+    P = FitParam
+    return (
+        EffectCandidate("drag_linear", "drag", [P("mu1", "N s/m", 0.0, 2.0)],
+                        "linear body drag mu1 |v| (paper eq. 10)"),
+        EffectCandidate("drag_quadratic", "drag", [P("mu2", "N s^2/m^2", 0.0, 0.05)],
+                        "quadratic body drag mu2 |v|^2 (paper eq. 10)"),
+        EffectCandidate("rotor_drag", "rotor_drag", [P("k_rd", "s/m", 0.0, 0.2, null=0.0)],
+                        "rotor drag: thrust x in-plane airspeed (with its normal-axis signature)"),
+        EffectCandidate("thrust_airspeed", "thrust_airspeed",
+                        [P("c1", "s/m", -0.1, 0.1, null=0.0),
+                         P("c2", "s^2/m^2", -0.005, 0.005, null=0.0)],
+                        "thrust change with airspeed, polynomial 1 + c1 v + c2 v^2"),
+        EffectCandidate("thrust_momentum", "thrust_momentum",
+                        [P("disk_area", "m^2", 1e-5, 0.1, "log", null=0.0)],
+                        "thrust change with airspeed by momentum theory (paper eq. 29)",
+                        search=0, affine=False),
+        EffectCandidate("thrust_scale", "thrust_scale", [P("k_T", "-", 0.5, 1.5, null=1.0)],
+                        "thrust scale: the static-test map is off by a factor"),
+        ConfigCandidate("mass", "vehicle", "mass", P("mass", "kg", 0.0, 0.0),
+                        "mass error", affine=False, bounds_rel=(0.5, 1.5)),
+        EffectCandidate("motor_lag", "motor_lag", [P("tau", "s", 0.001, 0.2, "log", null=0.0)],
+                        "first-order motor lag (adds states)", search=0, affine=False),
+        LatencyCandidate(),
+        ElasticityCandidate(),
+        ConfigCandidate("attachment_offset", "tether", "attachment_offset",
+                        P("attachment_offset", "m", 0.0, 0.0),
+                        "attachment offset L_e error", affine=False, bounds_rel=(0.0, 3.0)),
+        ConfigCandidate("tether_length", "tether", "length", P("length", "m", 0.0, 0.0),
+                        "tether length error", affine=True, bounds_rel=(0.8, 1.2)),
+    )
+
+
+#: The candidate library, by name.
+CANDIDATES: dict[str, Candidate] = {c.name: c for c in _candidates()}
+
+_TILTED_CONSTANT_SPEED = (
+    "tilted circles at constant speed: the thrust changes around the circle while the "
+    "airspeed does not (rotor drag scales with thrust)"
+)
+_SLOW_AND_FAST_CIRCLE = (
+    "a slow (3 m/s) and a fast (12+ m/s) circle at the same tilt: a scale error does not "
+    "change with airspeed"
+)
+
+#: What separates two candidates that look alike on the flights at hand.
+_SEPARATE = {
+    frozenset({"drag_linear", "drag_quadratic"}):
+        "steady circles over the whole speed range (3 to 15 m/s): linear and quadratic drag "
+        "part at the ends",
+    frozenset({"rotor_drag", "drag_linear"}):
+        _TILTED_CONSTANT_SPEED,
+    frozenset({"rotor_drag", "drag_quadratic"}):
+        _TILTED_CONSTANT_SPEED,
+    frozenset({"thrust_scale", "mass"}):
+        "speed-ups and braking (the mass multiplies the tangential acceleration, a thrust "
+        "scale does not), or log the tether load cell",
+    frozenset({"thrust_airspeed", "thrust_momentum"}):
+        "steady circles at more speeds including 12-15 m/s and tilts, where the polynomial "
+        "and the momentum-theory curves part",
+    frozenset({"thrust_scale", "thrust_airspeed"}):
+        _SLOW_AND_FAST_CIRCLE,
+    frozenset({"thrust_scale", "thrust_momentum"}):
+        _SLOW_AND_FAST_CIRCLE,
+    frozenset({"motor_lag", "latency"}):
+        "manoeuvres with sharp thrust changes (hard braking, speed-ups with a high jerk): a lag "
+        "filters the command, a delay only shifts it",
+    frozenset({"tether_length", "attachment_offset"}):
+        "measure the tether length on the ground, or fly high-tension circles with pitch and "
+        "yaw excitation (the offset sets the tether's restoring torque)",
+    frozenset({"tether_elasticity", "tether_length"}):
+        "a speed staircase: an elastic tether stretches with the tension, a length error does not",
+    frozenset({"tether_elasticity", "attachment_offset"}):
+        "a speed staircase: an elastic tether stretches with the tension, an offset error does not",
+    frozenset({"mass", "drag_linear"}):
+        "speed-ups and braking at several speeds: the mass acts on the acceleration, drag on "
+        "the speed",
+}
+
+
+def separating_flight(a: str, b: str) -> str:
+    """The flight (or measurement) that tells candidates ``a`` and ``b`` apart."""
+    return _SEPARATE.get(
+        frozenset({a, b}),
+        "flights over a wider range of speed, tilt and acceleration, where the two "
+        "predictions differ",
+    )
+
+
+# --------------------------------------------------------------------------- the problem
+
+
+class _Problem:
+    """The logs, the base config, the weights; evaluates variants on every flight."""
+
+    def __init__(self, config: Config, measured, segs, noise: dict):
+        self.config = config
+        self.segs = segs
+        self._meas = {config.tether.attachment_offset: measured}
+        self.axes = tuple(a for a in noise if np.isfinite(noise[a]) and noise[a] > 0)
+        self.weights = {a: 1.0 / noise[a] for a in self.axes}
+        groups: dict[str, list[int]] = {}
+        for i, m in enumerate(measured):
+            groups.setdefault(m.source, []).append(i)
+        self.flights = list(groups.values())
+        self.flight_names = [measured[g[0]].name.split("#")[0] for g in self.flights]
+        self.window = max(m.window for m in measured)
+        self.n_evals = 0
+
+    def measured(self, L_e: float):
+        base_L = self.config.tether.attachment_offset
+        if L_e not in self._meas:
+            for key in [x for x in self._meas if x != base_L]:  # keep the base and one more
+                del self._meas[key]
+            cfg = dataclasses.replace(
+                self.config, tether=dataclasses.replace(self.config.tether, attachment_offset=L_e)
+            )
+            base = self._meas[self.config.tether.attachment_offset]
+            self._meas[L_e] = [measure(s, cfg, name=m.name)
+                               for s, m in zip(self.segs, base, strict=True)]
+        return self._meas[L_e]
+
+    def vectors(self, var: CandidateModel, only: int | None = None) -> list[dict]:
+        """Weighted residual per flight and axis: list over flights of {axis: (n,)}
+        (only flight ``only`` when given: a one-element list)."""
+        meas = self.measured(var.config.tether.attachment_offset)
+        model = Model(var.config, var.effects)
+        groups = self.flights if only is None else [self.flights[only]]
+        self.n_evals += 1 if only is None else 1 / len(self.flights)
+        out = []
+        for g in groups:
+            per_seg = {i: residual_axes(model, meas[i], var.latency) for i in g}
+            out.append({a: np.concatenate([per_seg[i][a] for i in g]) * self.weights[a]
+                        for a in self.axes})
+        return out
+
+
+def _sq(vecs) -> np.ndarray:
+    """Sum of squares per flight and axis, shape (n_flights, n_axes)."""
+    return np.array([[float(np.sum(v * v)) for v in f.values()] for f in vecs])
+
+
+def _qp(A, b, lo, hi):
+    """argmin of d^T A d + 2 b^T d over lo <= d <= hi (k <= 3 parameters; exact active sets)."""
+    k = b.size
+    best, best_val = None, math.inf
+    Ar = A + 1e-12 * np.trace(A) / max(k, 1) * np.eye(k) + 1e-300 * np.eye(k)
+    for pattern in itertools.product((0, 1, 2), repeat=k):  # free / at lo / at hi
+        d = np.where(np.array(pattern) == 1, lo, np.where(np.array(pattern) == 2, hi, 0.0))
+        free = np.array(pattern) == 0
+        if free.any():
+            rhs = -(b[free] + A[np.ix_(free, ~free)] @ d[~free])
+            try:
+                d[free] = np.linalg.solve(Ar[np.ix_(free, free)], rhs)
+            except np.linalg.LinAlgError:
+                continue
+        if np.any(d < lo - 1e-15 * (1 + abs(lo))) or np.any(d > hi + 1e-15 * (1 + abs(hi))):
+            continue
+        val = float(d @ A @ d + 2 * b @ d)
+        if val < best_val:
+            best, best_val = d, val
+    return (np.zeros(k) if best is None else best), (0.0 if best is None else best_val)
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclass(frozen=True)
+class CandidateResult:
+    """Fit and scores of one candidate (see the module docstring).
+
+    ``theta``/``ci``: fitted parameters and their 95% confidence half-widths (fit
+    parametrisation, :attr:`Candidate.params`); ``folds``: (n_flights, k) leave-one-out
+    estimates; ``values``: parameters as written to the config; ``axis_rms``: per axis
+    held-out RMS (normalised) before and after; ``corr``: parameter correlation matrix.
+    """
+
+    name: str
+    doc: str
+    params: tuple
+    theta: np.ndarray
+    ci: np.ndarray
+    folds: np.ndarray
+    start: np.ndarray
+    values: dict
+    rms_reduction: float
+    excess_explained: float
+    delta_bic: float
+    plausible: bool
+    fold_spread: float
+    stable: bool
+    corr: np.ndarray
+    heldout_sse: float
+    n_eff: float
+    axis_rms_before: dict
+    axis_rms_after: dict
+    in_sample_reduction: float
+    notes: tuple = ()
+    contribution: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def passes(self) -> bool:
+        t = THRESHOLDS
+        return bool(
+            self.rms_reduction >= t["min_rms_reduction"]
+            and np.isfinite(self.excess_explained)
+            and self.excess_explained >= t["min_excess_explained"]
+            and self.delta_bic <= t["max_delta_bic"]
+            and self.plausible
+            and self.stable
+        )
+
+    def failed(self) -> list[str]:
+        """Which thresholds the candidate misses, in words."""
+        t = THRESHOLDS
+        out = []
+        if self.rms_reduction < t["min_rms_reduction"]:
+            out.append(f"held-out RMS reduction {self.rms_reduction:.1%} < "
+                       f"{t['min_rms_reduction']:.0%}")
+        if not (np.isfinite(self.excess_explained)
+                and self.excess_explained >= t["min_excess_explained"]):
+            out.append(f"explains {self.excess_explained:.0%} of the residual above noise "
+                       f"(< {t['min_excess_explained']:.0%})")
+        if self.delta_bic > t["max_delta_bic"]:
+            out.append(f"delta-BIC {self.delta_bic:.1f} > {t['max_delta_bic']:g}")
+        if not self.plausible:
+            out.append("estimate implausible (at the edge of its range)")
+        if not self.stable:
+            out.append(f"unstable across folds (spread {self.fold_spread:.2f})")
+        return out
+
+    def to_json(self) -> dict:
+        ps = [p.name for p in self.params]
+        return {
+            "doc": self.doc,
+            "params": {n: {"estimate": float(v), "ci95": float(c), "unit": p.unit,
+                           "folds": self.folds[:, j].tolist(), "start": float(s),
+                           "bounds": [p.lower, p.upper]}
+                       for j, (n, v, c, p, s) in enumerate(
+                           zip(ps, self.theta, self.ci, self.params, self.start, strict=True))},
+            "values": self.values,
+            "heldout_rms_reduction": self.rms_reduction,
+            "heldout_excess_explained": _num(self.excess_explained),
+            "delta_bic": self.delta_bic,
+            "plausible": self.plausible,
+            "fold_spread": _num(self.fold_spread),
+            "stable": self.stable,
+            "param_corr": self.corr.tolist(),
+            "heldout_axis_rms_normalised": {"before": self.axis_rms_before,
+                                            "after": self.axis_rms_after},
+            "in_sample_rms_reduction": self.in_sample_reduction,
+            "passes": self.passes,
+            "failed": self.failed(),
+            "notes": list(self.notes),
+        }
+
+
+def _num(x):
+    return float(x) if x is not None and np.isfinite(x) else None
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    """Ranking, verdict, twins and the base comparison."""
+
+    config: Config
+    base: Comparison
+    results: list  # ranked CandidateResult
+    accepted: CandidateResult | None
+    twins: list  # (name, |cos|, separating flight)
+    verdict: str
+    at_noise_floor: bool
+    flights: list
+    evaluations: int
+    similarity: dict = field(default_factory=dict)  # |cos| of each fit to the accepted one
+
+    def to_json(self) -> dict:
+        return {
+            "config": self.config.source,
+            "flights": self.flights,
+            "verdict": self.verdict,
+            "accepted": self.accepted.name if self.accepted else None,
+            "twins": [{"candidate": n, "abs_cos": c, "separating_flight": s}
+                      for n, c, s in self.twins],
+            "at_noise_floor": self.at_noise_floor,
+            "thresholds": THRESHOLDS,
+            "ranking": [r.name for r in self.results],
+            "candidates": {r.name: r.to_json() for r in self.results},
+            "base_where_it_fails": self.base.where["sentence"],
+            "model_evaluations": self.evaluations,
+            "abs_cos_to_accepted": self.similarity,
+        }
+
+
+# --------------------------------------------------------------------------- fitting
+
+
+def _bounds(cand: Candidate, cfg: Config, start):
+    lo = np.array([p.lower for p in cand.params], float)
+    hi = np.array([p.upper for p in cand.params], float)
+    rel = getattr(cand, "bounds_rel", None)
+    if rel is not None:
+        lo, hi = np.array([rel[0] * start[0]]), np.array([rel[1] * start[0]])
+        if hi[0] <= lo[0]:  # zero start (e.g. no attachment offset)
+            lo, hi = np.array([0.0]), np.array([0.5])
+    return lo, hi
+
+
+def _jacobian(prob: _Problem, cand: Candidate, theta, base_vecs, cols, lo, hi):
+    """Forward-difference columns of the weighted residual for parameters ``cols``."""
+    out = []
+    for j in cols:
+        h = 1e-3 * (hi[j] - lo[j]) if cand.affine else 1e-4 * max(abs(theta[j]), hi[j] - lo[j])
+        sgn = 1.0 if theta[j] + h <= hi[j] else -1.0
+        th = theta.copy()
+        th[j] += sgn * h
+        v = prob.vectors(cand.variant(prob.config, th))
+        out.append([{a: (f1[a] - f0[a]) / (sgn * h) for a in f0}
+                    for f0, f1 in zip(base_vecs, v, strict=True)])
+    return out  # [col][flight][axis]
+
+
+def _stats(vecs, jac):
+    """Per flight and axis: (A (k,k), b (k,), c) of ||r + J d||^2."""
+    nf, na = len(vecs), len(vecs[0])
+    k = len(jac)
+    A = np.zeros((nf, na, k, k))
+    b = np.zeros((nf, na, k))
+    c = np.zeros((nf, na))
+    for i, f in enumerate(vecs):
+        for a_i, a in enumerate(f):
+            r = f[a]
+            c[i, a_i] = float(np.sum(r * r))
+            for j in range(k):
+                Jj = jac[j][i][a]
+                b[i, a_i, j] = float(np.sum(Jj * r))
+                for l in range(j, k):
+                    A[i, a_i, j, l] = A[i, a_i, l, j] = float(np.sum(Jj * jac[l][i][a]))
+    return A, b, c
+
+
+def _profile(prob, cand, theta_search, lin, lo, hi, start):
+    """Linear parameters solved at a fixed search value: (theta, vecs at theta, stats)."""
+    th = start.copy()
+    th[cand.search] = theta_search
+    vecs = prob.vectors(cand.variant(prob.config, th))
+    if not lin:
+        return th, vecs, None
+    jac = _jacobian(prob, cand, th, vecs, lin, lo, hi)
+    A, b, c = _stats(vecs, jac)
+    d, _ = _qp(A.sum((0, 1)), b.sum((0, 1)), lo[lin] - th[lin], hi[lin] - th[lin])
+    th2 = th.copy()
+    th2[lin] += d
+    return th2, None, (A, b, c, d, vecs, jac)
+
+
+def _grid(prob, cand, values, lin, lo, hi, start, nf, na, k):
+    """Per search value: training SSE with each flight left out (G, nf), held-out SSE per
+    axis (G, nf, na), fold parameters (G, nf, k) and the all-data SSE (G,)."""
+    G = len(values)
+    sse_tr = np.zeros((G, nf))
+    held_g = np.zeros((G, nf, na))
+    th_g = np.zeros((G, nf, k))
+    sse_all = np.zeros(G)
+    for gi, sv in enumerate(values):
+        th, vecs, st = _profile(prob, cand, float(sv), lin, lo, hi, start)
+        if st is None:
+            sq = _sq(vecs)
+            sse_all[gi] = sq.sum()
+            for i in range(nf):
+                sse_tr[gi, i] = sq.sum() - sq[i].sum()
+                held_g[gi, i] = sq[i]
+                th_g[gi, i] = th
+            continue
+        A, b, c, d_all, _, _ = st
+        sse_all[gi] = float(c.sum() + 2 * b.sum((0, 1)) @ d_all + d_all @ A.sum((0, 1)) @ d_all)
+        base_th = th.copy()
+        base_th[lin] -= d_all
+        for i in range(nf):
+            m_ = np.arange(nf) != i
+            d, val = _qp(A[m_].sum((0, 1)), b[m_].sum((0, 1)),
+                         lo[lin] - base_th[lin], hi[lin] - base_th[lin])
+            sse_tr[gi, i] = c[m_].sum() + val
+            held_g[gi, i] = c[i] + 2 * b[i] @ d + np.einsum("j,ajk,k->a", d, A[i], d)
+            th_g[gi, i] = base_th
+            th_g[gi, i, lin] += d
+    return sse_tr, held_g, th_g, sse_all
+
+
+def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs) -> CandidateResult:
+    cfg = prob.config
+    start = cand.start(cfg)
+    lo, hi = _bounds(cand, cfg, start)
+    start = np.clip(start, lo, hi)
+    k = len(cand.params)
+    nf, na = base_sq.shape
+    lin = [j for j in range(k) if j != cand.search]
+    notes = []
+    if cand.search is None:
+        theta = start.copy()
+        vecs = prob.vectors(cand.variant(cfg, theta))
+        for _ in range(1 if cand.affine else 4):
+            jac = _jacobian(prob, cand, theta, vecs, lin, lo, hi)
+            A, b, c = _stats(vecs, jac)
+            d, _ = _qp(A.sum((0, 1)), b.sum((0, 1)), lo - theta, hi - theta)
+            theta = theta + d
+            vecs = prob.vectors(cand.variant(cfg, theta))
+            if np.all(np.abs(d) <= 1e-6 * (hi - lo)):
+                break
+        if not cand.affine:
+            jac = _jacobian(prob, cand, theta, vecs, lin, lo, hi)
+        A, b, c = _stats(vecs, jac)
+        Atot = A.sum((0, 1))
+        folds = np.zeros((nf, k))
+        held = np.zeros((nf, na))
+        spread = 0.0
+        eff = np.concatenate([np.concatenate([bv[a] - v[a] for a in bv])
+                              for bv, v in zip(base_vecs, vecs, strict=True)])
+        eff_norm = float(np.sqrt(np.sum(eff * eff)))
+        for i in range(nf):
+            Ai = A.sum(1)[np.arange(nf) != i].sum(0)
+            bi = b.sum(1)[np.arange(nf) != i].sum(0)
+            d, _ = _qp(Ai, bi, lo - theta, hi - theta)
+            folds[i] = theta + d
+            held[i] = c[i] + 2 * b[i] @ d + np.einsum("j,ajk,k->a", d, A[i], d)
+            dd = math.sqrt(max(float(d @ Atot @ d), 0.0))
+            spread = max(spread, dd / eff_norm if eff_norm > 0 else math.inf)
+        J_all = jac
+        fit_sq = c
+    else:
+        s = cand.search
+        p = cand.params[s]
+        g = (np.geomspace(p.lower, p.upper, cand.grid_size) if p.scale == "log"
+             else np.linspace(p.lower, p.upper, cand.grid_size))
+        sse_tr, held_g, th_g, sse_all = _grid(prob, cand, g, lin, lo, hi, start, nf, na, k)
+        # all data: refine the search value between the grid neighbours of the best point
+        G = g.size
+        gbest = int(np.argmin(sse_all))
+        a_, b_ = g[max(gbest - 1, 0)], g[min(gbest + 1, G - 1)]
+
+        def f(sv):
+            th, vecs, st = _profile(prob, cand, sv, lin, lo, hi, start)
+            if st is None:
+                return float(_sq(vecs).sum())
+            A, b, c, d, *_ = st
+            return float(c.sum() + 2 * b.sum((0, 1)) @ d + d @ A.sum((0, 1)) @ d)
+
+        if a_ < b_:
+            tol = 1e-3 * max(g[gbest], (b_ - a_) * 0.01)
+            opt = minimize_scalar(f, bounds=(a_, b_), method="bounded", options={"xatol": tol})
+            sbest = float(opt.x) if opt.fun <= sse_all[gbest] else float(g[gbest])
+        else:
+            sbest = float(g[gbest])
+        theta, vecs, st = _profile(prob, cand, sbest, lin, lo, hi, start)
+        if st is not None:
+            vecs = prob.vectors(cand.variant(cfg, theta))
+        fit_sq = _sq(vecs)
+        # folds: each fold's search value from a parabola through its training SSE on a
+        # fine local grid around the all-data estimate (or, when its optimum lies outside,
+        # on the coarse grid), linear parameters from the nearest grid point; then the
+        # held-out flight evaluated exactly there
+        to_u = (np.log if p.scale == "log" else (lambda x: np.asarray(x, float)))
+        from_u = (np.exp if p.scale == "log" else (lambda x: x))
+        h = 0.05 if p.scale == "log" else 0.02 * (p.upper - p.lower)
+        u0 = float(to_u(sbest))
+        ul = np.clip(u0 + h * np.arange(-2, 3), to_u(p.lower), to_u(p.upper))
+        ul = np.unique(ul)
+        loc = _grid(prob, cand, from_u(ul), lin, lo, hi, start, nf, na, k) if ul.size >= 3 else None
+        u = to_u(g)
+        folds = np.zeros((nf, k))
+        held = np.zeros((nf, na))
+        for i in range(nf):
+            uo = None
+            if loc is not None:
+                y = loc[0][:, i]
+                cc = np.polyfit(ul - u0, y, 2)
+                if cc[0] > 0:
+                    cand_u = u0 - cc[1] / (2 * cc[0])
+                    if ul[0] <= cand_u <= ul[-1]:
+                        uo = float(cand_u)
+                        j = int(np.argmin(np.abs(ul - uo)))
+                        folds[i] = loc[2][j, i]
+            if uo is None:
+                j = int(np.argmin(sse_tr[:, i]))
+                jl, jr = max(j - 1, 0), min(j + 1, G - 1)
+                folds[i] = th_g[j, i]
+                uo = float(u[j])
+                if jr - jl == 2:
+                    x3, y3 = u[jl : jr + 1], sse_tr[jl : jr + 1, i]
+                    cc = np.polyfit(x3 - x3[1], y3, 2)
+                    if cc[0] > 0:
+                        uo = float(np.clip(x3[1] - cc[1] / (2 * cc[0]), x3[0], x3[2]))
+            folds[i, s] = float(from_u(uo))
+            held[i] = _sq(prob.vectors(cand.variant(cfg, folds[i]), only=i))[0]
+        J_all = None
+        spread = None  # below, from the Jacobian at the estimate
+    # confidence intervals from the Jacobian at the estimate (all parameters)
+    if J_all is None or len(J_all) != k:
+        J_all = _jacobian(prob, cand, theta, vecs, list(range(k)), lo, hi)
+    Aci, _, cci = _stats(vecs, J_all)
+    Atot = Aci.sum((0, 1))
+    if spread is None:
+        # how far the fold estimates move the prediction (linearised at the estimate),
+        # relative to the effect itself: robust to a poorly determined second parameter
+        eff = np.concatenate([np.concatenate([bv[a] - v[a] for a in bv])
+                              for bv, v in zip(base_vecs, vecs, strict=True)])
+        eff_norm = float(np.sqrt(np.sum(eff * eff)))
+        moves = [math.sqrt(max(float(d @ Atot @ d), 0.0)) for d in folds - theta]
+        spread = (max(moves) / eff_norm if eff_norm > 0 else math.inf) if nf > 1 else 0.0
+    n_total = sum(v.size for f_ in vecs for v in f_.values())
+    sse_fit = float(fit_sq.sum())
+    s2 = sse_fit / max(n_total - k, 1)
+    try:
+        cov = np.linalg.inv(Atot) * s2 * prob.window
+        ci = 1.96 * np.sqrt(np.maximum(np.diag(cov), 0.0))
+        sd = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+        corr = cov / np.outer(sd, sd)
+    except np.linalg.LinAlgError:
+        ci = np.full(k, math.inf)
+        corr = np.full((k, k), math.nan)
+    for j, q in enumerate(cand.params):
+        if not ci[j] < (hi[j] - lo[j]):
+            notes.append(f"{q.name} is not identified on these flights (95% CI wider than "
+                         "its range)")
+    if k > 1 and np.all(np.isfinite(corr)):
+        off = np.abs(corr - np.diag(np.diag(corr))).max()
+        if off >= THRESHOLDS["max_param_corr"]:
+            names = [q.name for q in cand.params]
+            notes.append(f"parameters {' and '.join(names)} are correlated ({off:.3f}, VIF "
+                         f"{1 / max(1 - off**2, 1e-12):.0f}): only their combination is "
+                         "identified on these flights")
+    # scores
+    sse_base = float(base_sq.sum())
+    held_base = base_sq.sum()
+    held_fit = float(held.sum())
+    red = 1 - math.sqrt(held_fit / held_base) if held_base > 0 else 0.0
+    excess = held_base - n_total
+    exc = (held_base - held_fit) / excess if excess > 0.02 * n_total else math.nan
+    n_eff = n_total / prob.window
+    dbic = n_eff * math.log(max(sse_fit, 1e-300) / sse_base) + k * math.log(n_eff)
+    rng = hi - lo
+    edge = np.any((theta - lo < 0.01 * rng) & (lo > 0)) or np.any(hi - theta < 0.01 * rng)
+    names_ = [q.name for q in cand.params]
+    if edge:
+        notes.append(f"{', '.join(names_)} at the edge of the plausible range")
+    plausible = not edge
+    stable = spread <= THRESHOLDS["max_fold_spread"]
+    axes = list(prob.axes)
+    n_ax = np.array([[v.size for v in f_.values()] for f_ in vecs]).sum(0)
+    rb = {a: float(np.sqrt(base_sq[:, j].sum() / n_ax[j])) for j, a in enumerate(axes)}
+    ra = {a: float(np.sqrt(held[:, j].sum() / n_ax[j])) for j, a in enumerate(axes)}
+    contrib = np.concatenate([np.concatenate([bv[a] - v[a] for a in bv])
+                              for bv, v in zip(base_vecs, vecs, strict=True)])
+    contrib = contrib.astype(np.float32)
+    return CandidateResult(
+        cand.name, cand.doc, cand.params, theta, ci, folds, start, cand.report_values(theta),
+        float(red), float(exc), float(dbic), bool(plausible), float(spread), bool(stable), corr,
+        held_fit, n_eff, rb, ra, float(1 - math.sqrt(sse_fit / sse_base)), tuple(notes), contrib,
+    )
+
+
+# --------------------------------------------------------------------------- entry points
+
+
+def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | None = None,
+             progress=None) -> Diagnosis:
+    """Fit every candidate on the logs, score on held-out flights, rank, gate, decide.
+
+    ``logs``: paths or :class:`~gainsched.analysis.logs.FlightLog` segments (at least two flights
+    for held-out scores). ``candidates``: names from :data:`CANDIDATES` (default: all).
+    ``progress``: callable(name) before each candidate.
+    """
+    from ..errors import InputError
+
+    base = comparison or compare(config, logs)
+    meas = base.measured
+    segs = base.segs
+    prob = _Problem(config, meas, segs, base.noise)
+    if len(prob.flights) < 2:
+        raise InputError("command line", "LOG", "diagnose needs at least two flights (log "
+                         "files) for held-out scores")
+    names = list(CANDIDATES) if candidates is None else list(candidates)
+    for n in names:
+        if n not in CANDIDATES:
+            known = ", ".join(CANDIDATES)
+            raise InputError("command line", "--candidate",
+                             f"unknown candidate {n!r} (known: {known})")
+    base_vecs = prob.vectors(CandidateModel(config, None, config.analysis.latency_s))
+    base_sq = _sq(base_vecs)
+    results = []
+    for n in names:
+        if progress is not None:
+            progress(n)
+        results.append(_fit_candidate(prob, CANDIDATES[n], base_sq, base_vecs))
+    results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
+    at_floor = all(s.rms_over_noise < AT_NOISE_FLOOR for s in base.stats.values())
+    accepted = next((r for r in results if r.passes), None)
+    twins = []
+    similarity = {}
+    if accepted is not None:
+        ca = accepted.contribution.astype(float)
+        na_ = float(np.sqrt(np.sum(ca * ca)))
+        for r in results:
+            if r is accepted or r.contribution is None:
+                continue
+            cb = r.contribution.astype(float)
+            nb = float(np.sqrt(np.sum(cb * cb)))
+            if na_ == 0 or nb == 0:
+                continue
+            cos = abs(float(np.sum(ca * cb)) / (na_ * nb))
+            similarity[r.name] = cos
+            # told apart anyway when the held-out fits differ clearly: the twin leaves more
+            # than a tenth of the residual above noise that the accepted one explains
+            clear = accepted.excess_explained - r.excess_explained > THRESHOLDS["twin_excess_gap"]
+            if cos >= THRESHOLDS["twin_cos"] and not clear:
+                twins.append((r.name, cos, separating_flight(accepted.name, r.name)))
+    verdict = _verdict(base, results, accepted, twins, at_floor)
+    return Diagnosis(config, base, results, accepted, twins, verdict, at_floor,
+                     prob.flight_names, int(round(prob.n_evals)), similarity)
+
+
+def _fmt_values(r: CandidateResult) -> str:
+    parts = []
+    for p, v, c in zip(r.params, r.theta, r.ci, strict=True):
+        parts.append(f"{p.name} = {v:.4g} +- {c:.2g} {p.unit}")
+    return ", ".join(parts)
+
+
+def _verdict(base, results, accepted, twins, at_floor) -> str:
+    if at_floor and accepted is None:
+        grey = [a for a, st in base.stats.items() if not st.white]
+        tail = (f" ({', '.join(grey)} not white at the 99% level: see the autocorrelation "
+                "plot)") if grey else ", and white"
+        return (f"no effect needed: every residual axis is within {AT_NOISE_FLOOR:g}x its "
+                f"noise floor{tail}")
+    if accepted is None:
+        best = results[0] if results else None
+        tail = ""
+        if best is not None:
+            tail = (f" The best candidate, {best.name}, removes {best.rms_reduction:.0%} of the "
+                    f"held-out RMS but fails: {'; '.join(best.failed())}.")
+        return (f"no candidate explains the residual: {base.where['sentence']}.{tail}")
+    s = (f"missing effect: {accepted.name} ({accepted.doc}), {_fmt_values(accepted)}; "
+         f"held-out RMS -{accepted.rms_reduction:.0%}, explains "
+         f"{accepted.excess_explained:.0%} of the residual above noise, "
+         f"delta-BIC {accepted.delta_bic:.0f}")
+    for name, cos, sep in twins:
+        s += (f". It cannot be told apart from {name} on these flights (|cos| {cos:.3f}); "
+              f"to separate them: {sep}")
+    return s
+
+
+def apply_candidate(config: Config, result: CandidateResult, *, name: str | None = None) -> str:
+    """New config text: ``config``'s text with the fitted candidate, CIs as comments.
+
+    The result is validated with :func:`~gainsched.config.config_from_text`.
+    """
+    from ..tomledit import get_value
+
+    cand = CANDIDATES[result.name]
+    comments = []
+    for j, p in enumerate(result.params):
+        lo, hi = result.theta[j] - result.ci[j], result.theta[j] + result.ci[j]
+        f = result.folds[:, j]
+        comments.append(
+            f"{p.unit}, 95% CI [{lo:.4g}, {hi:.4g}], folds {f.min():.4g}..{f.max():.4g}"
+        )
+    header = (f"gainsched diagnose: {result.name}, held-out RMS -{result.rms_reduction:.0%}, "
+              f"delta-BIC {result.delta_bic:.0f}")
+    text = cand.apply_text(config.text, config, result.theta, comments, header)
+    new_name = name or f"{config.name}_{result.name}"
+    if get_value(text, "", "name") is not None:
+        text = set_value(text, "", "name", new_name)
+    cfg = config_from_text(text, "<diagnose --apply>")  # raises if the edit is invalid
+    del cfg
+    return text

@@ -1,0 +1,414 @@
+/*
+ * gainsched runtime: gain-table lookup for flight firmware (C99).
+ * Contract and status bits: gainsched_runtime.h and docs/runtime.md.
+ *
+ * Every float operation that decides which cell a query falls in is spelled
+ * out here in single precision, in the same order as the Python reference
+ * (gainsched/firmware/runtime.py), so that both choose the same cell and return the
+ * same status for every query. Change one, change the other.
+ */
+#include "gainsched_runtime.h"
+
+#include <stddef.h> /* only freestanding headers: no libc, no libm */
+
+#define GS_PI 0x1.921fb6p+1f /* pi rounded to float */
+
+/* the bits of a float (type punning through a union is defined in C99) */
+static uint32_t gs_bits(float x)
+{
+    union {
+        float f;
+        uint32_t u;
+    } v;
+    v.f = x;
+    return v.u;
+}
+
+/* 1 if the float is NaN or +-inf (bit test: immune to -ffinite-math-only). */
+static int gs_nonfinite(float x)
+{
+    return (gs_bits(x) & 0x7f800000u) == 0x7f800000u;
+}
+
+/* Largest i in [0, n-2] with ax[i] <= v, for ax[0] <= v <= ax[n-1], n >= 2.
+ * ceil(log2(n)) iterations. */
+static uint32_t gs_bracket(const float *ax, uint32_t n, float v)
+{
+    uint32_t lo = 0u;
+    uint32_t hi = n - 1u;
+    while (hi - lo > 1u) {
+        uint32_t mid = lo + (hi - lo) / 2u;
+        if (ax[mid] <= v) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
+/* A fraction within GS_SNAP of 0 or 1 is put on the grid plane: a query that is
+ * on a grid value up to float rounding (a tilt of 20 deg converted by the caller)
+ * then uses only the corners on that plane, so an infeasible neighbour cell
+ * does not flag it. */
+static float gs_snap(float f)
+{
+    if (f < GS_SNAP) {
+        return 0.0f;
+    }
+    if (f > 1.0f - GS_SNAP) {
+        return 1.0f;
+    }
+    return f;
+}
+
+static void gs_zero(float *K, size_t nK, float *u_d, float *phi_d)
+{
+    size_t e;
+    for (e = 0; e < nK; ++e) {
+        K[e] = 0.0f;
+    }
+    for (e = 0; e < 4u; ++e) {
+        u_d[e] = 0.0f;
+    }
+    *phi_d = 0.0f;
+}
+
+/* the fields the lookup relies on (gs_verify checks the rest once, at boot) */
+static inline int gs_table_usable(const gs_table *t)
+{
+    return t->n_tilt >= 1u && t->n_speed >= 1u && t->n_xi >= 1u && t->n_state >= 1u &&
+           t->n_state <= 255u && t->xi_dot != NULL && t->tilt != NULL && t->K_tilt0 != NULL &&
+           (t->K != NULL || t->n_tilt == 1u) && t->u_d != NULL && t->phi_d != NULL &&
+           t->state_sign != NULL && t->state_perm != NULL && t->mask != NULL;
+}
+
+int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float *K, float *u_d,
+              float *phi_d)
+{
+    const gs_table *t = table;
+    size_t n, nK, e;
+    uint32_t ia[2], iv[2], ix[2];
+    float fa, fv, fx, tt;
+    int32_t fl, jx;
+    int mirrored = 0;
+    int status = GS_OK;
+    unsigned any_mask = 0u;
+    size_t P[8];
+    const float *pk[8];
+    float w[8];
+
+    if (t == NULL || K == NULL || u_d == NULL || phi_d == NULL || !gs_table_usable(t)) {
+        return GS_BAD_ARG;
+    }
+    n = t->n_state;
+    nK = 4u * n;
+
+    /* 1. refuse NaN, inf and absurd values */
+    if (gs_nonfinite(xi) || gs_nonfinite(xi_dot) || gs_nonfinite(alpha) || xi > GS_XI_LIMIT ||
+        xi < -GS_XI_LIMIT || xi_dot > GS_XI_DOT_LIMIT || xi_dot < -GS_XI_DOT_LIMIT ||
+        alpha > GS_TILT_LIMIT || alpha < -GS_TILT_LIMIT) {
+        gs_zero(K, nK, u_d, phi_d);
+        return GS_BAD_INPUT;
+    }
+
+    /* 2-3. symmetry maps into the fundamental domain */
+    if (alpha < 0.0f) { /* S1: (-alpha, xi) == (alpha, xi + pi) */
+        xi = xi + GS_PI;
+        alpha = -alpha;
+    }
+    if (xi_dot < 0.0f) { /* S2: mirror, undone on the outputs */
+        xi = GS_PI - xi;
+        xi_dot = -xi_dot;
+        mirrored = 1;
+    }
+
+    /* 4. xi: periodic uniform axis, in cell units; |tt| < 2^24 so the
+     * float <-> int conversions below are exact */
+    tt = xi * t->xi_scale;
+    fl = (int32_t)tt; /* truncation ... */
+    if ((float)fl > tt) {
+        fl -= 1; /* ... to floor */
+    }
+    fx = gs_snap(tt - (float)fl); /* in [0, 1] */
+    jx = fl % (int32_t)t->n_xi;
+    if (jx < 0) {
+        jx += (int32_t)t->n_xi;
+    }
+    ix[0] = (uint32_t)jx;
+    ix[1] = (ix[0] + 1u == t->n_xi) ? 0u : ix[0] + 1u;
+
+    /* speed axis (xi_dot): clamp, bracket */
+    if (xi_dot < t->xi_dot[0]) {
+        xi_dot = t->xi_dot[0];
+        status |= GS_CLAMPED_SPEED;
+    } else if (xi_dot > t->xi_dot[t->n_speed - 1u]) {
+        xi_dot = t->xi_dot[t->n_speed - 1u];
+        status |= GS_CLAMPED_SPEED;
+    }
+    if (t->n_speed > 1u) {
+        iv[0] = gs_bracket(t->xi_dot, t->n_speed, xi_dot);
+        iv[1] = iv[0] + 1u;
+        fv = gs_snap((xi_dot - t->xi_dot[iv[0]]) / (t->xi_dot[iv[1]] - t->xi_dot[iv[0]]));
+    } else {
+        iv[0] = iv[1] = 0u;
+        fv = 0.0f;
+    }
+
+    /* tilt axis: alpha >= 0 == tilt[0] here; clamp above, bracket */
+    if (alpha > t->tilt[t->n_tilt - 1u]) {
+        alpha = t->tilt[t->n_tilt - 1u];
+        status |= GS_CLAMPED_TILT;
+    }
+    if (t->n_tilt > 1u) {
+        ia[0] = gs_bracket(t->tilt, t->n_tilt, alpha);
+        ia[1] = ia[0] + 1u;
+        fa = gs_snap((alpha - t->tilt[ia[0]]) / (t->tilt[ia[1]] - t->tilt[ia[0]]));
+    } else {
+        ia[0] = ia[1] = 0u;
+        fa = 0.0f;
+    }
+
+    /* 5. the 8 corners c (bit 2: tilt, bit 1: speed, bit 0: xi): regular grid
+     * points P[c], weights w[c], gain blocks pk[c] */
+    {
+        const size_t nx = t->n_xi;
+        const size_t n_vx = (size_t)t->n_speed * nx;
+        const size_t a0 = ia[0] * n_vx, a1 = ia[1] * n_vx;
+        const size_t v0 = iv[0] * nx, v1 = iv[1] * nx;
+        const float wa0 = 1.0f - fa, wv0 = 1.0f - fv, wx0 = 1.0f - fx;
+        const float w00 = wa0 * wv0, w01 = wa0 * fv, w10 = fa * wv0, w11 = fa * fv;
+        P[0] = a0 + v0 + ix[0];
+        P[1] = a0 + v0 + ix[1];
+        P[2] = a0 + v1 + ix[0];
+        P[3] = a0 + v1 + ix[1];
+        P[4] = a1 + v0 + ix[0];
+        P[5] = a1 + v0 + ix[1];
+        P[6] = a1 + v1 + ix[0];
+        P[7] = a1 + v1 + ix[1];
+        w[0] = w00 * wx0;
+        w[1] = w00 * fx;
+        w[2] = w01 * wx0;
+        w[3] = w01 * fx;
+        w[4] = w10 * wx0;
+        w[5] = w10 * fx;
+        w[6] = w11 * wx0;
+        w[7] = w11 * fx;
+        if (ia[0] == 0u) { /* tilt 0: the gains do not depend on xi */
+            pk[0] = pk[1] = t->K_tilt0 + (size_t)iv[0] * nK;
+            pk[2] = pk[3] = t->K_tilt0 + (size_t)iv[1] * nK;
+        } else {
+            pk[0] = t->K + (P[0] - n_vx) * nK;
+            pk[1] = t->K + (P[1] - n_vx) * nK;
+            pk[2] = t->K + (P[2] - n_vx) * nK;
+            pk[3] = t->K + (P[3] - n_vx) * nK;
+        }
+        if (ia[1] == 0u) { /* only with a single tilt */
+            pk[4] = pk[5] = t->K_tilt0 + (size_t)iv[0] * nK;
+            pk[6] = pk[7] = t->K_tilt0 + (size_t)iv[1] * nK;
+        } else {
+            pk[4] = t->K + (P[4] - n_vx) * nK;
+            pk[5] = t->K + (P[5] - n_vx) * nK;
+            pk[6] = t->K + (P[6] - n_vx) * nK;
+            pk[7] = t->K + (P[7] - n_vx) * nK;
+        }
+    }
+    /* feasibility of the corners that contribute (all of them unless the query
+     * is on a grid plane) */
+    {
+        const uint8_t *const mk = t->mask;
+        if (fa > 0.0f && fa < 1.0f && fv > 0.0f && fv < 1.0f && fx > 0.0f && fx < 1.0f) {
+            any_mask = (unsigned)(mk[P[0]] | mk[P[1]] | mk[P[2]] | mk[P[3]] | mk[P[4]] |
+                                  mk[P[5]] | mk[P[6]] | mk[P[7]]);
+        } else {
+            unsigned c;
+            for (c = 0u; c < 8u; ++c) {
+                if (w[c] != 0.0f) {
+                    any_mask |= mk[P[c]];
+                }
+            }
+        }
+    }
+    if (any_mask != 0u) {
+        status |= GS_INFEASIBLE;
+    }
+    if ((any_mask & GS_MASK_NO_GAINS) != 0u) {
+        gs_zero(K, nK, u_d, phi_d);
+        return status | GS_NO_GAINS;
+    }
+
+    /* interpolation: four lanes at a time (nK is a multiple of 4) */
+    {
+        const float *const p0 = pk[0], *const p1 = pk[1], *const p2 = pk[2], *const p3 = pk[3];
+        const float *const p4 = pk[4], *const p5 = pk[5], *const p6 = pk[6], *const p7 = pk[7];
+        const float w0 = w[0], w1 = w[1], w2 = w[2], w3 = w[3];
+        const float w4 = w[4], w5 = w[5], w6 = w[6], w7 = w[7];
+        const float *const ud = t->u_d, *const ph = t->phi_d;
+        float o[4];
+        unsigned l;
+        for (e = 0; e < nK; e += 4u) {
+            for (l = 0u; l < 4u; ++l) {
+                const size_t i = e + l;
+                o[l] = ((w0 * p0[i] + w1 * p1[i]) + (w2 * p2[i] + w3 * p3[i])) +
+                       ((w4 * p4[i] + w5 * p5[i]) + (w6 * p6[i] + w7 * p7[i]));
+            }
+            K[e] = o[0];
+            K[e + 1u] = o[1];
+            K[e + 2u] = o[2];
+            K[e + 3u] = o[3];
+        }
+        for (l = 0u; l < 4u; ++l) {
+            o[l] = ((w0 * ud[4u * P[0] + l] + w1 * ud[4u * P[1] + l]) +
+                    (w2 * ud[4u * P[2] + l] + w3 * ud[4u * P[3] + l])) +
+                   ((w4 * ud[4u * P[4] + l] + w5 * ud[4u * P[5] + l]) +
+                    (w6 * ud[4u * P[6] + l] + w7 * ud[4u * P[7] + l]));
+        }
+        u_d[0] = o[0];
+        u_d[1] = o[1];
+        u_d[2] = o[2];
+        u_d[3] = o[3];
+        *phi_d = ((w0 * ph[P[0]] + w1 * ph[P[1]]) + (w2 * ph[P[2]] + w3 * ph[P[3]])) +
+                 ((w4 * ph[P[4]] + w5 * ph[P[5]]) + (w6 * ph[P[6]] + w7 * ph[P[7]]));
+    }
+
+    if (mirrored) {
+        /* K <- P_u K P_x: K'[r][c] = s[c] K[3-r][perm[c]]; u_d <- P_u u_d; phi_d <- -phi_d.
+         * Rows 0<->3 and 1<->2 swap with the column signs applied ... */
+        float *const r0 = K, *const r1 = K + n, *const r2 = K + 2u * n, *const r3 = K + 3u * n;
+        const float *const sg = t->state_sign;
+        const uint8_t *const pm = t->state_perm;
+        float tmp;
+        size_t col;
+        for (col = 0; col < n; ++col) {
+            const float sc = sg[col];
+            tmp = r0[col];
+            r0[col] = sc * r3[col];
+            r3[col] = sc * tmp;
+            tmp = r1[col];
+            r1[col] = sc * r2[col];
+            r2[col] = sc * tmp;
+        }
+        /* ... then the columns permute in pairs (perm is an involution and
+         * s[perm[c]] == s[c]); the base states are never permuted (gs_verify) */
+        for (col = GS_N_BASE_STATES; col < n; ++col) {
+            const size_t q = pm[col];
+            if (q > col) {
+                tmp = r0[col], r0[col] = r0[q], r0[q] = tmp;
+                tmp = r1[col], r1[col] = r1[q], r1[q] = tmp;
+                tmp = r2[col], r2[col] = r2[q], r2[q] = tmp;
+                tmp = r3[col], r3[col] = r3[q], r3[q] = tmp;
+            }
+        }
+        tmp = u_d[0];
+        u_d[0] = u_d[3];
+        u_d[3] = tmp;
+        tmp = u_d[1];
+        u_d[1] = u_d[2];
+        u_d[2] = tmp;
+        *phi_d = -*phi_d;
+    }
+    return status;
+}
+
+/* CRC-32, reflected polynomial 0xEDB88320, four bits at a time */
+static const uint32_t gs_crc_nibble[16] = {
+    0x00000000u, 0x1db71064u, 0x3b6e20c8u, 0x26d930acu, 0x76dc4190u, 0x6b6b51f4u,
+    0x4db26158u, 0x5005713cu, 0xedb88320u, 0xf00f9344u, 0xd6d6a3e8u, 0xcb61b38cu,
+    0x9b64c2b0u, 0x86d3d2d4u, 0xa00ae278u, 0xbdbdf21cu,
+};
+
+static uint32_t gs_crc_byte(uint32_t crc, uint32_t byte)
+{
+    crc ^= byte & 0xffu;
+    crc = (crc >> 4) ^ gs_crc_nibble[crc & 15u];
+    crc = (crc >> 4) ^ gs_crc_nibble[crc & 15u];
+    return crc;
+}
+
+static uint32_t gs_crc_u32(uint32_t crc, uint32_t v) /* little-endian bytes */
+{
+    crc = gs_crc_byte(crc, v);
+    crc = gs_crc_byte(crc, v >> 8);
+    crc = gs_crc_byte(crc, v >> 16);
+    return gs_crc_byte(crc, v >> 24);
+}
+
+static uint32_t gs_crc_floats(uint32_t crc, const float *p, size_t count)
+{
+    size_t i;
+    for (i = 0; i < count; ++i) {
+        crc = gs_crc_u32(crc, gs_bits(p[i]));
+    }
+    return crc;
+}
+
+static uint32_t gs_crc_bytes(uint32_t crc, const uint8_t *p, size_t count)
+{
+    size_t i;
+    for (i = 0; i < count; ++i) {
+        crc = gs_crc_byte(crc, p[i]);
+    }
+    return crc;
+}
+
+uint32_t gs_table_crc32(const gs_table *t)
+{
+    uint32_t crc = 0xffffffffu;
+    size_t n_pts, n;
+    if (t == NULL || !gs_table_usable(t) || t->xi == NULL || t->speed == NULL) {
+        return 0u;
+    }
+    n_pts = (size_t)t->n_tilt * t->n_speed * t->n_xi;
+    n = t->n_state;
+    crc = gs_crc_u32(crc, t->n_tilt);
+    crc = gs_crc_u32(crc, t->n_speed);
+    crc = gs_crc_u32(crc, t->n_xi);
+    crc = gs_crc_u32(crc, t->n_state);
+    crc = gs_crc_u32(crc, gs_bits(t->xi_scale));
+    crc = gs_crc_floats(crc, t->xi, t->n_xi);
+    crc = gs_crc_floats(crc, t->speed, t->n_speed);
+    crc = gs_crc_floats(crc, t->xi_dot, t->n_speed);
+    crc = gs_crc_floats(crc, t->tilt, t->n_tilt);
+    crc = gs_crc_floats(crc, t->K_tilt0, (size_t)t->n_speed * 4u * n);
+    if (t->n_tilt > 1u) {
+        crc = gs_crc_floats(crc, t->K, (size_t)(t->n_tilt - 1u) * t->n_speed * t->n_xi * 4u * n);
+    }
+    crc = gs_crc_floats(crc, t->u_d, n_pts * 4u);
+    crc = gs_crc_floats(crc, t->phi_d, n_pts);
+    crc = gs_crc_floats(crc, t->state_sign, n);
+    crc = gs_crc_bytes(crc, t->state_perm, n);
+    crc = gs_crc_bytes(crc, t->mask, n_pts);
+    return crc ^ 0xffffffffu;
+}
+
+int gs_verify(const gs_table *t)
+{
+    uint32_t i;
+    if (t == NULL) {
+        return GS_BAD_ARG;
+    }
+    if (!gs_table_usable(t) || t->xi == NULL || t->speed == NULL || t->n_xi > 4096u ||
+        t->n_state < GS_N_BASE_STATES ||
+        t->tilt[0] != 0.0f || !(t->xi_dot[0] > 0.0f) || !(t->xi_scale > 0.0f)) {
+        return GS_BAD_TABLE;
+    }
+    for (i = 1u; i < t->n_speed; ++i) {
+        if (!(t->xi_dot[i] > t->xi_dot[i - 1u])) {
+            return GS_BAD_TABLE;
+        }
+    }
+    for (i = 1u; i < t->n_tilt; ++i) {
+        if (!(t->tilt[i] > t->tilt[i - 1u])) {
+            return GS_BAD_TABLE;
+        }
+    }
+    for (i = 0u; i < t->n_state; ++i) { /* P_x: signed involutive permutation */
+        uint32_t p = t->state_perm[i];
+        if (p >= t->n_state || t->state_perm[p] != i || t->state_sign[p] != t->state_sign[i] ||
+            (i < GS_N_BASE_STATES && p != i) ||
+            (t->state_sign[i] != 1.0f && t->state_sign[i] != -1.0f)) {
+            return GS_BAD_TABLE;
+        }
+    }
+    return gs_table_crc32(t) == t->crc32 ? GS_OK : GS_BAD_TABLE;
+}

@@ -1,0 +1,117 @@
+/*
+ * gainsched runtime: gain-table lookup for flight firmware (C99).
+ *
+ * Hand-written, shipped with the gainsched package and copied next to each
+ * generated table header (`gainsched export-c TABLE`). One runtime serves any
+ * number of tables: a table header defines a `const gs_table` and thin
+ * `<name>_lookup` / `<name>_verify` wrappers around the functions below.
+ *
+ * Guarantees: no malloc, no recursion, no global mutable state, no libm, no
+ * reads outside the table arrays, execution time bounded by the table size
+ * (a fixed number of passes over one 4 x n gain block per lookup).
+ *
+ * Query semantics (the Python reference `gainsched.firmware.runtime.Interpolator`
+ * implements the same, bit for bit up to the cell choice and flags):
+ *  1. NaN/inf, |xi| > GS_XI_LIMIT, |xi_dot| > GS_XI_DOT_LIMIT or
+ *     |alpha| > GS_TILT_LIMIT: status GS_BAD_INPUT, outputs zeroed.
+ *  2. S1 (tilt sign): if alpha < 0: xi += pi, alpha = -alpha.
+ *  3. S2 (direction): if xi_dot < 0: xi = pi - xi, xi_dot = -xi_dot, and the
+ *     result is mirrored back at the end (K -> P_u K P_x, u_d -> P_u u_d,
+ *     phi_d -> -phi_d; P_u swaps motors 1<->4 and 2<->3).
+ *  4. xi is wrapped onto the periodic uniform axis (xi_j = 2 pi j / n_xi);
+ *     xi_dot and alpha are clamped into the table range (GS_CLAMPED_*).
+ *  5. Trilinear, element-wise interpolation over (xi, xi_dot, alpha) on the
+ *     8 corners of the cell; a cell fraction within GS_SNAP of 0 or 1 is
+ *     snapped to the grid plane. If a corner with non-zero weight is marked
+ *     infeasible the status has GS_INFEASIBLE; if such a corner has no gains at
+ *     all (its whole circle is infeasible) GS_NO_GAINS is added and the outputs
+ *     are zeroed.
+ *
+ * See docs/runtime.md for the full contract.
+ */
+#ifndef GAINSCHED_RUNTIME_H
+#define GAINSCHED_RUNTIME_H
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define GS_RUNTIME_VERSION 1
+
+/* ---- status bits returned by gs_lookup (0 = GS_OK) ---------------------- */
+#define GS_OK 0x00            /* inside the table, all corners feasible */
+#define GS_CLAMPED_SPEED 0x01 /* |xi_dot| outside the table range, clamped */
+#define GS_CLAMPED_TILT 0x02  /* |alpha| above the largest table tilt, clamped */
+#define GS_INFEASIBLE 0x04    /* a contributing corner is marked infeasible */
+#define GS_NO_GAINS 0x08      /* a contributing corner has no gains: outputs zeroed */
+#define GS_BAD_INPUT 0x10     /* NaN, inf or out-of-limit input: outputs zeroed */
+#define GS_BAD_ARG 0x20       /* NULL pointer or empty table: outputs untouched */
+#define GS_BAD_TABLE 0x40     /* gs_verify: CRC or structure mismatch */
+/* the outputs must not be used when any of these bits is set */
+#define GS_UNUSABLE (GS_NO_GAINS | GS_BAD_INPUT | GS_BAD_ARG)
+
+/* ---- per-point mask bits in the table (`<name>_mask`) ------------------- */
+/* bits 0x01..0x10 are the gainsched feasibility reasons (see the header) */
+#define GS_MASK_NO_GAINS 0x80u /* no gains stored at this point (zeros) */
+
+/* ---- input limits (beyond these a query is GS_BAD_INPUT) ---------------- */
+/* float32 resolves xi to about 1e-3 rad at 1e4 rad: wrap xi before calling */
+#define GS_XI_LIMIT 1.0e4f
+#define GS_XI_DOT_LIMIT 1.0e3f      /* rad/s */
+#define GS_TILT_LIMIT 0x1.921fb6p+0f /* pi/2 rounded to float, rad */
+
+/* the LQR state starts with 11 base states (docs/conventions.md) that the
+ * direction mirror only changes in sign; stateful effects append theirs */
+#define GS_N_BASE_STATES 11u
+
+/* cell fractions within GS_SNAP of 0 or 1 are snapped onto the grid plane */
+#define GS_SNAP 0x1p-12f
+
+/* A gain table in the fundamental domain (alpha >= 0, xi_dot > 0). All arrays
+ * are row-major; generated headers fill this in, firmware never needs to. */
+typedef struct gs_table {
+    uint32_t n_tilt;          /* >= 1, tilt[0] == 0 */
+    uint32_t n_speed;         /* >= 1 */
+    uint32_t n_xi;            /* >= 1, uniform periodic axis */
+    uint32_t n_state;         /* LQR state dimension n (>= GS_N_BASE_STATES) */
+    float xi_scale;           /* n_xi / (2 pi) rounded to float, cells per rad */
+    const float *xi;          /* [n_xi] rad (informational, in the CRC) */
+    const float *speed;       /* [n_speed] m/s (informational, in the CRC) */
+    const float *xi_dot;      /* [n_speed] rad/s, strictly increasing, > 0 */
+    const float *tilt;        /* [n_tilt] rad, strictly increasing, tilt[0] = 0 */
+    const float *K_tilt0;     /* [n_speed][4][n_state] gains at tilt 0 */
+    const float *K;           /* [n_tilt-1][n_speed][n_xi][4][n_state] */
+    const float *u_d;         /* [n_tilt][n_speed][n_xi][4] N */
+    const float *phi_d;       /* [n_tilt][n_speed][n_xi] rad */
+    const float *state_sign;  /* [n_state] +-1, the S2 state map P_x ... */
+    const uint8_t *state_perm; /* [n_state] ... P_x[state_perm[j]][j] = state_sign[j] */
+    const uint8_t *mask;      /* [n_tilt][n_speed][n_xi] 0 = feasible */
+    uint32_t crc32;           /* CRC-32 of the table data (docs/runtime.md) */
+} gs_table;
+
+/*
+ * Look up gains at azimuth xi (rad), azimuth rate xi_dot (rad/s) and circle
+ * tilt alpha (rad).
+ *
+ * Outputs: K[4 * n_state] row-major (row = motor T1..T4, column = state),
+ * u_d[4] nominal motor thrusts (N), *phi_d nominal roll (rad).
+ * Returns a bit set of GS_* status flags (GS_OK == 0). When the result has
+ * any GS_UNUSABLE bit the outputs are zeroed (GS_BAD_ARG: left untouched).
+ */
+int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float *K, float *u_d,
+              float *phi_d);
+
+/* CRC-32 (IEEE, as zlib.crc32) of the table data in the documented order. */
+uint32_t gs_table_crc32(const gs_table *table);
+
+/* GS_OK when the structure is consistent and the CRC matches, else GS_BAD_TABLE
+ * (GS_BAD_ARG for NULL). Run once at boot: it reads every byte of the table. */
+int gs_verify(const gs_table *table);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* GAINSCHED_RUNTIME_H */

@@ -1,0 +1,133 @@
+"""The interpolation check of a built table (``gainsched check``).
+
+At every cell midpoint of the (speed, tilt, azimuth) grid the periodic LQR is
+solved directly and compared with what the runtime interpolates from the table
+(:class:`~gainsched.firmware.runtime.Interpolator`); along every midpoint circle the loop
+is closed with the interpolated gains and its monodromy spectral radius
+reported. docs/runtime.md states the accuracy the default grid meets.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import config_from_text
+from ..schedule.grid import solve_circle
+from ..schedule.lqr import monodromy, spectral_radius
+from .runtime import Interpolator
+
+__all__ = ["MidpointCheck", "midpoint_check"]
+
+
+@dataclass(frozen=True)
+class MidpointCheck:
+    """Interpolation versus direct LQR solves at cell midpoints.
+
+    Attributes
+    ----------
+    speed, tilt : (m,) m/s, rad of the checked midpoints; xi : (m,) rad
+    rel_err : (m,) ``||K_interp - K_direct||_F / ||K_direct||_F`` (NaN where skipped)
+    u_err : (m,) max |u_d interp - u_d direct|, N
+    circles : list of (speed m/s, tilt rad, rho_interp, rho_direct) per midpoint circle
+    skipped : number of midpoints skipped (direct solve infeasible or an infeasible corner)
+    """
+
+    speed: np.ndarray
+    tilt: np.ndarray
+    xi: np.ndarray
+    rel_err: np.ndarray
+    u_err: np.ndarray
+    circles: list
+    skipped: int
+
+    @property
+    def max_err(self) -> float:
+        e = self.rel_err[np.isfinite(self.rel_err)]
+        return float(e.max()) if e.size else float("nan")
+
+    @property
+    def median_err(self) -> float:
+        e = self.rel_err[np.isfinite(self.rel_err)]
+        return float(np.median(e)) if e.size else float("nan")
+
+    @property
+    def worst_rho(self) -> float:
+        r = [c[2] for c in self.circles if np.isfinite(c[2])]
+        return float(max(r)) if r else float("nan")
+
+    def worst_point(self):
+        """``(speed, tilt, xi, rel_err)`` of the largest error."""
+        e = np.where(np.isfinite(self.rel_err), self.rel_err, -1)
+        i = int(np.argmax(e))
+        return self.speed[i], self.tilt[i], self.xi[i], self.rel_err[i]
+
+    def by_axis(self):
+        """Max error per speed-midpoint and per tilt-midpoint: two dicts value -> max."""
+        out = []
+        for ax in (self.speed, self.tilt):
+            d = {}
+            for v in np.unique(ax):
+                e = self.rel_err[(ax == v) & np.isfinite(self.rel_err)]
+                d[float(v)] = float(e.max()) if e.size else float("nan")
+            out.append(d)
+        return out
+
+
+def midpoint_check(table, *, speed_stride: int = 1, progress=None) -> MidpointCheck:
+    """Solve the periodic LQR directly at the cell midpoints and compare with interpolation.
+
+    Every ``speed_stride``-th speed midpoint, all tilt midpoints and all azimuth
+    midpoints are checked; one :func:`gainsched.schedule.grid.solve_circle` per speed midpoint
+    (all tilt midpoints batched, ``2 n_xi`` azimuth samples so the odd ones are the
+    azimuth midpoints). Along each midpoint circle the closed loop is rebuilt with the
+    interpolated table gains at every control step, and the monodromy spectral
+    radius reported.
+    """
+    interp = Interpolator(table)
+    cfg = config_from_text(table.config_text, f"{table.source}:config_text")
+    n_xi = table.xi.size
+    cfg2 = dataclasses.replace(cfg, grid=dataclasses.replace(cfg.grid, azimuth_samples=2 * n_xi))
+    r = cfg.radius
+    v_mid = 0.5 * (table.speed[1:] + table.speed[:-1])[::speed_stride]
+    a_mid = 0.5 * (table.tilt[1:] + table.tilt[:-1])
+    if a_mid.size == 0:
+        a_mid = table.tilt[:1]
+    xi_mid = (np.arange(n_xi) + 0.5) * (2 * np.pi / n_xi)
+    rows = {k: [] for k in ("speed", "tilt", "xi", "err", "uerr")}
+    circles, skipped = [], 0
+    for v in v_mid:
+        sol, steps = solve_circle(cfg2, float(v), a_mid, keep_steps=True)
+        ok = np.flatnonzero(np.isfinite(sol.spectral_radius))
+        for i, a in enumerate(a_mid):
+            Kd = sol.K[i, 1::2]
+            look = interp(xi_mid, v / r, a)
+            use = np.all(np.isfinite(Kd), axis=(-2, -1)) & (look.status == 0)
+            skipped += int(np.count_nonzero(~use))
+            err = np.linalg.norm(look.K - Kd, axis=(-2, -1)) / np.linalg.norm(Kd, axis=(-2, -1))
+            uerr = np.abs(look.u_d - sol.u_d[i, 1::2]).max(-1)
+            rows["speed"].append(np.full(n_xi, v))
+            rows["tilt"].append(np.full(n_xi, a))
+            rows["xi"].append(xi_mid)
+            rows["err"].append(np.where(use, err, np.nan))
+            rows["uerr"].append(np.where(use, uerr, np.nan))
+        if steps is not None:
+            Ad, Bd, Ks = steps
+            N = Ad.shape[-3]
+            xs = 2 * np.pi * np.arange(N) / N
+            for b, i in enumerate(ok):
+                look = interp(xs, v / r, a_mid[i])
+                direct = float(sol.spectral_radius[i])
+                if np.any(look.status != 0):
+                    circles.append((float(v), float(a_mid[i]), np.nan, direct))
+                    continue
+                interpolated = float(spectral_radius(monodromy(Ad[b], Bd[b], look.K)))
+                circles.append((float(v), float(a_mid[i]), interpolated, direct))
+        if progress is not None:
+            progress(1)
+    cat = {k: np.concatenate(x) if x else np.zeros(0) for k, x in rows.items()}
+    return MidpointCheck(
+        cat["speed"], cat["tilt"], cat["xi"], cat["err"], cat["uerr"], circles, skipped
+    )

@@ -1,0 +1,375 @@
+"""C outputs of a gain table: ``<name>_gains.h`` plus the hand-written runtime beside it.
+
+The header (template ``templates/gains.in.h``) holds the table as C99 ``static
+const`` data: float32 values written as hexadecimal float literals (exact, so
+every compiler reproduces the same bytes and the embedded CRC-32 holds),
+dimensions as macros, every symbol prefixed with the table name. Infeasible
+points have zero gains and a non-zero mask entry. Output is deterministic:
+the same table gives the same bytes.
+
+The runtime (``c/gainsched_runtime.[ch]``) is copied next to the header; see
+docs/runtime.md. For host-side checks (tests, benchmarks) :func:`build_host`
+compiles a table with the runtime and the batch shim (``templates/batch.in.c``)
+into a shared library or a driver program, and :class:`CRuntime` calls it
+through ctypes.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import shutil
+import string
+import subprocess
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..native import find_cc
+from ..publish import publish, write_atomic
+from .runtime import Lookup, RuntimeData, runtime_data
+
+__all__ = [
+    "RUNTIME_FILES",
+    "STRICT_CFLAGS",
+    "c_float",
+    "render",
+    "render_header",
+    "write_header",
+    "copy_runtime",
+    "c_files",
+    "write_c_outputs",
+    "flash_summary",
+    "code_bytes",
+    "build_host",
+    "CRuntime",
+]
+
+RUNTIME_FILES = ("gainsched_runtime.h", "gainsched_runtime.c")
+RUNTIME_VERSION = 1
+STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror")
+#: Cortex-M4F flags of ``make firmware-size`` and :func:`code_bytes`
+M4F_CFLAGS = ("-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard")
+
+
+def _resource(*parts) -> str:
+    return resources.files("gainsched.firmware").joinpath(*parts).read_text()
+
+
+def render(template: str, **values) -> str:
+    """Fill ``templates/<template>`` (``${key}`` placeholders; C never uses ``$``)."""
+    return string.Template(_resource("templates", template)).substitute(values)
+
+
+# --------------------------------------------------------------------------- formatting
+
+
+def c_float(x) -> str:
+    """Exact C99 float literal of a float32 value (hexadecimal, ``0x1.8p+1f``)."""
+    f = float(np.float32(x))
+    if not np.isfinite(f):
+        raise ValueError(f"non-finite value {f} cannot be emitted")
+    if f == 0:
+        return "-0.0f" if np.signbit(f) else "0.0f"
+    mant, exp = f.hex().split("p")
+    mant = mant.rstrip("0").rstrip(".")
+    return f"{mant}p{exp}f"
+
+
+def c_decimal(x) -> str:
+    """Shortest decimal C float literal of a float32 value (for macros meant to be read)."""
+    return np.format_float_positional(np.float32(x), unique=True, trim="0") + "f"
+
+
+def _c_uint(x) -> str:
+    return f"{int(x)}u"
+
+
+def _body(arr, fmt, indent=1, per_line=6) -> str:
+    """Brace-nested initializer contents of ``arr`` (without the outermost braces)."""
+    pad = "    " * indent
+    if arr.ndim == 1:
+        vals = [fmt(v) for v in arr]
+        lines = [", ".join(vals[i : i + per_line]) for i in range(0, len(vals), per_line)]
+        return ",\n".join(pad + line for line in lines)
+    parts = [f"{pad}{{\n{_body(sub, fmt, indent + 1, per_line)}\n{pad}}}" for sub in arr]
+    return ",\n".join(parts)
+
+
+# --------------------------------------------------------------------------- header
+
+
+def render_header(data: RuntimeData) -> str:
+    """The text of ``<name>_gains.h`` for runtime data (see :func:`runtime.runtime_data`)."""
+    from ..constants import MASK_NO_GAINS, REASONS
+
+    n_a, n_v, n_xi, n = data.dims
+    K = data.K if n_a > 1 else np.zeros((1, n_v, n_xi, 4, n), dtype=np.float32)
+    meta = data.meta
+    bits = "; ".join(f"{b:#04x} {t}" for b, t in REASONS.items())
+    values = dict(
+        name=data.name,
+        NAME=data.name.upper(),
+        config_name=meta.get("config_name", data.name),
+        tool_version=meta.get("tool_version", "?"),
+        config_sha256=data.config_sha256,
+        n_tilt=n_a,
+        n_speed=n_v,
+        n_xi=n_xi,
+        n_state=n,
+        n_tilt_k=max(1, n_a - 1),
+        radius=c_decimal(meta.get("radius_m", 0.0)),
+        rate_hz=c_decimal(meta.get("rate_hz", 0.0)),
+        xi_note=f"{360 / n_xi:g} deg steps",
+        speed_note=", ".join(f"{v:g}" for v in data.speed),
+        tilt_note=", ".join(f"{v:g}" for v in np.round(np.rad2deg(data.tilt.astype(float)), 6))
+        + " deg",
+        xi_scale=c_float(data.xi_scale),
+        crc32_hex=f"{data.crc32():08x}",
+        data_bytes=data.nbytes(),
+        runtime_version=RUNTIME_VERSION,
+        control_law="u = u_d - K (x - x_d); xi error wrapped to [-pi, pi)",
+        state_names=", ".join(data.state_names) if data.state_names else "?",
+        mask_bits=f"{bits}; {MASK_NO_GAINS:#04x} no gains stored (zeros)",
+        xi=_body(data.xi, c_float),
+        speed=_body(data.speed, c_float),
+        xi_dot=_body(data.xi_dot, c_float),
+        tilt=_body(data.tilt, c_float),
+        state_sign=_body(data.state_sign, c_float, per_line=11),
+        state_perm=_body(data.state_perm, _c_uint, per_line=11),
+        K_tilt0=_body(data.K_tilt0, c_float),
+        K=_body(K, c_float),
+        u_d=_body(data.u_d, c_float, per_line=4),
+        phi_d=_body(data.phi_d, c_float),
+        mask=_body(data.mask, _c_uint, per_line=18),
+    )
+    return render("gains.in.h", **values)
+
+
+def header_name(data: RuntimeData) -> str:
+    return f"{data.name}_gains.h"
+
+
+def _write(path: Path, text: str) -> Path:
+    """Atomic write, then the usual permissions (the temp file is created 0600)."""
+    write_atomic(path, text.encode())
+    umask = os.umask(0)
+    os.umask(umask)
+    path.chmod(0o644 & ~umask)
+    return path
+
+
+def write_header(table, out_dir) -> Path:
+    """Write ``OUT_DIR/<name>_gains.h`` for a loaded table (atomically); returns the path."""
+    data = table if isinstance(table, RuntimeData) else runtime_data(table)
+    return _write(Path(out_dir) / header_name(data), render_header(data))
+
+
+def copy_runtime(out_dir) -> list[Path]:
+    """Copy ``gainsched_runtime.[ch]`` into ``out_dir`` (atomically); returns the paths."""
+    out = []
+    for fname in RUNTIME_FILES:
+        out.append(_write(Path(out_dir) / fname, _resource("c", fname)))
+    return out
+
+
+def c_files(table) -> dict[str, bytes]:
+    """The C outputs of a loaded table (or its :class:`RuntimeData`): file name -> bytes,
+    header first, then the runtime. Raises InputError if the table cannot be represented."""
+    data = table if isinstance(table, RuntimeData) else runtime_data(table)
+    files = {header_name(data): render_header(data).encode()}
+    files.update((f, _resource("c", f).encode()) for f in RUNTIME_FILES)
+    return files
+
+
+def write_c_outputs(table_path, out_dir=None) -> list[Path]:
+    """Header and runtime for the table file ``table_path`` into ``out_dir`` (default: the
+    table's folder), published together (:func:`gainsched.publish.publish`). Returns the
+    written paths, header first."""
+    from ..schedule.tables import load_table
+
+    table = load_table(table_path)
+    out_dir = Path(table_path).parent if out_dir is None else Path(out_dir)
+    return publish(out_dir, c_files(table))
+
+
+# --------------------------------------------------------------------------- sizes
+
+
+def code_bytes(*, cross: bool | None = None, opt: str = "-Os") -> tuple[int, str] | None:
+    """Code bytes of the runtime (``.text*`` and ``.rodata*`` sections of its object file).
+
+    Uses arm-none-eabi-gcc for Cortex-M4F when available (or ``cross=True``), else the
+    host compiler. Returns ``(bytes, description)`` or None when no compiler works.
+    """
+    import tempfile
+
+    use_cross = bool(find_cc(cross=True)) if cross is None else cross
+    cc = find_cc(cross=use_cross)
+    if cc is None:
+        return None
+    size_tool = shutil.which("arm-none-eabi-size" if use_cross else "size")
+    flags = [*STRICT_CFLAGS, opt, "-ffunction-sections"] + (list(M4F_CFLAGS) if use_cross else [])
+    with tempfile.TemporaryDirectory() as tmp:
+        src = copy_runtime(tmp)[1]
+        obj = Path(tmp) / "rt.o"
+        res = subprocess.run([cc, *flags, "-c", str(src), "-o", str(obj)], capture_output=True)
+        if res.returncode or size_tool is None:
+            return None
+        out = subprocess.run([size_tool, "-A", str(obj)], capture_output=True, text=True).stdout
+    total = 0
+    for line in out.splitlines():
+        parts = line.split()
+        if len(parts) >= 2 and parts[0].startswith((".text", ".rodata")) and parts[1].isdigit():
+            total += int(parts[1])
+    target = "Cortex-M4F" if use_cross else "host"
+    return total, f"{target} {Path(cc).name} {opt}"
+
+
+def flash_summary(table, *, compile_code: bool = True) -> list[str]:
+    """Lines describing the flash footprint: table bytes per array and runtime code bytes."""
+    data = table if isinstance(table, RuntimeData) else runtime_data(table)
+    sizes = {k: len(b) for k, b in data.crc_chunks() if k not in ("dims", "xi_scale")}
+    big = ", ".join(f"{k} {v}" for k, v in sizes.items() if v >= 1024)
+    lines = [f"flash: table data {data.nbytes()} bytes ({data.nbytes() / 1024:.1f} KiB; {big})"]
+    if compile_code:
+        cb = code_bytes()
+        if cb is None:
+            lines.append("flash: runtime code size unknown (no working C compiler)")
+        else:
+            lines.append(f"flash: runtime code {cb[0]} bytes ({cb[1]}, .text + .rodata)")
+    return lines
+
+
+# --------------------------------------------------------------------------- host builds
+
+
+def build_host(
+    table, out_dir, *, cc=None, opt="-O2", sanitize=False, shared=True, extra=()
+) -> Path:
+    """Compile the table, the runtime and the batch shim for the host.
+
+    ``shared``: a shared library for :class:`CRuntime`; otherwise the driver program
+    (``batch``/``bench``/``verify`` modes, see ``templates/batch.in.c``). ``sanitize``
+    adds AddressSanitizer + UndefinedBehaviorSanitizer (abort on the first report).
+    Compiles with the strict warning set and -Werror. Returns the built file.
+    """
+    data = table if isinstance(table, RuntimeData) else runtime_data(table)
+    cc = cc or find_cc()
+    if cc is None:
+        raise RuntimeError("no C compiler found (set CC)")
+    out_dir = Path(out_dir)
+    header = write_header(data, out_dir)
+    runtime_c = copy_runtime(out_dir)[1]
+    shim = out_dir / f"{data.name}_batch.c"
+    _write(
+        shim,
+        render(
+            "batch.in.c",
+            name=data.name,
+            NAME=data.name.upper(),
+            tool_version=data.meta.get("tool_version", "?"),
+        ),
+    )
+    flags = [*STRICT_CFLAGS, opt, "-g", f"-I{out_dir}", *extra]
+    if sanitize:
+        flags += [
+            "-fsanitize=address,undefined",
+            "-fno-sanitize-recover=all",
+            "-fno-omit-frame-pointer",
+        ]
+    suffix = "_san" if sanitize else ""
+    if shared:
+        out = out_dir / f"lib{data.name}_batch{suffix}.so"
+        flags += ["-shared", "-fPIC"]
+    else:
+        out = out_dir / f"{data.name}_batch{suffix}"
+        flags += ["-DGS_BATCH_MAIN"]
+    cmd = [cc, *flags, "-o", str(out), str(shim), str(runtime_c)]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    if res.returncode:
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{res.stderr}")
+    assert header.exists()
+    return out
+
+
+class CRuntime:
+    """The C runtime with one table, loaded through ctypes (a :func:`build_host` library)."""
+
+    def __init__(self, lib_path, data: RuntimeData):
+        self.data = data
+        self.lib = lib = ctypes.CDLL(str(lib_path))
+        nm = data.name
+        self._batch = getattr(lib, f"{nm}_lookup_batch")
+        self._batch.restype = None
+        fp = np.ctypeslib.ndpointer(np.float32, flags="C_CONTIGUOUS")
+        ip = np.ctypeslib.ndpointer(np.int32, flags="C_CONTIGUOUS")
+        self._batch.argtypes = [ctypes.c_size_t, fp, fp, fp, fp, ip]
+        self._verify = getattr(lib, f"{nm}_verify_table")
+        self._verify.restype = ctypes.c_int
+        self._crc = getattr(lib, f"{nm}_crc32")
+        self._crc.restype = ctypes.c_uint32
+        self._flip = getattr(lib, f"{nm}_verify_flipped")
+        self._flip.argtypes = [ctypes.c_int, ctypes.c_size_t, ctypes.c_uint]
+        self._flip.restype = ctypes.c_int
+        self._bench = getattr(lib, f"{nm}_bench")
+        self._bench.argtypes = [ctypes.c_size_t, fp, ctypes.c_int]
+        self._bench.restype = ctypes.c_double
+        self._queries = getattr(lib, f"{nm}_bench_queries")
+        self._queries.argtypes = [ctypes.c_size_t, ctypes.c_uint32, fp]
+        self._queries.restype = None
+
+    def lookup(self, xi, xi_dot, alpha) -> Lookup:
+        """Batched C lookups (one ctypes call); same shapes as the Python reference."""
+        shape = np.broadcast_shapes(np.shape(xi), np.shape(xi_dot), np.shape(alpha))
+        with np.errstate(over="ignore", invalid="ignore"):
+            q = np.stack(
+                [
+                    np.broadcast_to(np.asarray(v, dtype=np.float32), shape).reshape(-1)
+                    for v in (xi, xi_dot, alpha)
+                ],
+                axis=1,
+            )
+        q = np.ascontiguousarray(q)
+        m, n = q.shape[0], self.data.dims[3]
+        K = np.full((m, 4 * n), np.float32(12345.0))  # sentinel: must be overwritten
+        U = np.full((m, 4), np.float32(12345.0))
+        P = np.full(m, np.float32(12345.0))
+        S = np.full(m, -1, dtype=np.int32)
+        self._batch(m, q, K, U, P, S)
+        return Lookup(
+            K.reshape(shape + (4, n)), U.reshape(shape + (4,)), P.reshape(shape), S.reshape(shape)
+        )
+
+    __call__ = lookup
+
+    def verify(self) -> int:
+        return int(self._verify())
+
+    def crc32(self) -> int:
+        return int(self._crc())
+
+    def verify_flipped(self, which: int, byte: int, flip: int = 0x01) -> int:
+        """``gs_verify`` on a copy with one byte of array ``which`` (CRC order) flipped."""
+        return int(self._flip(which, byte, flip))
+
+    def bench_queries(self, m: int, seed: int = 12345) -> np.ndarray:
+        q = np.zeros((m, 3), dtype=np.float32)
+        self._queries(m, seed, q)
+        return q
+
+    def bench(self, q, reps: int = 1) -> float:
+        q = np.ascontiguousarray(q, dtype=np.float32)
+        return float(self._bench(q.shape[0], q, reps))
+
+
+def check_runtime_data(table_path) -> RuntimeData:
+    """Load a table file and convert it, raising InputError for problems."""
+    from ..schedule.tables import load_table
+
+    try:
+        return runtime_data(load_table(table_path))
+    except ValueError as exc:
+        raise InputError(table_path, "", str(exc)) from None

@@ -1,0 +1,376 @@
+"""Maximal-coordinate formulation: a free rigid body plus a link force model.
+
+The second formulation of the plant (docs/architecture.md). The vehicle is a
+free 6-DOF rigid body in the circle frame C (inertial, only rotated); the tether
+is a force model acting at the attachment point ``p_t = p_q + R_CB p_e``
+(``p_e = (-L_e, 0, 0)``) and anchored at the origin. This is the simulator for
+what the reduced model of :mod:`gainsched.model.reduced` cannot express (slack,
+stretch); where both apply they must agree.
+
+State ``x = (p_q, v_q, q_CB, omega_B)``, shape (..., 13): COG position (m) and
+velocity (m/s) in C, the unit quaternion body->C (Hamilton, scalar first) and
+the body rates (rad/s) in B. Input ``u = (T1..T4)`` commanded motor thrusts, N.
+
+    m p_q''  = R (0, 0, T_C) + m g_C - f_t n + F_eff                 (paper eq. 3)
+    J omega' = sum L_i x T_i + tau_M + p_e x (R^T (-f_t n))
+               - omega x J omega + tau_eff                           (paper eqs. 6, 8)
+    p_t''    = p_q'' + R (omega' x p_e + omega x (omega x p_e))      (paper eq. 9, corrected)
+
+with ``n = p_t / |p_t|``. Link models for the tension ``f_t`` (N):
+
+- ``"rigid"``: the holonomic constraint ``c = (|p_t|^2 - rho^2) / 2 = 0``; ``f_t``
+  is the Lagrange multiplier solving ``c'' + 2 a c' + b^2 c = 0`` (Baumgarte
+  stabilisation with rates ``(a, b)``, 1/s). Bilateral: may come out negative.
+- ``"spring-damper"``, ``"sls"``, ``"lumped-mass"``: the tension-only elastic
+  links of :mod:`gainsched.model.links` (sec. 3.1 of the book chapter cited there).
+  The link force ``F_t`` replaces ``-f_t n`` above (for the chain it acts along the
+  last segment, not along ``n``) and the link's own states follow the rigid-body ones:
+  ``x = (p_q, v_q, q_CB, omega_B, s_link)``, shape (..., 13 + n_link).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..constants import N_STATE
+from .effects import Kinematics
+from .links import ELASTIC_LINKS, LinkOutput, SpringDamper, link_from_tether
+from .rotations import (
+    euler_zyx_from_matrix,
+    matrix_from_quaternion,
+    quaternion_from_matrix,
+    skew,
+)
+
+__all__ = ["MaximalModel", "maximal_from_reduced", "reduced_from_maximal", "N_MAXIMAL"]
+
+N_MAXIMAL = 13  # p (3), v (3), q (4), omega (3); elastic links append their states
+LINKS = ("rigid", *ELASTIC_LINKS)
+RK4_REACH = 2.0  # |lambda dt| per RK4 substep (stability boundary ~2.8): see MaximalModel.step
+
+
+def _mv(R, v):
+    """Batched matrix-vector product ``R @ v``, shapes (..., 3, 3), (..., 3) -> (..., 3)."""
+    return np.einsum("...ij,...j->...i", R, v)
+
+
+def _dot(a, b):
+    return np.sum(a * b, axis=-1)
+
+
+def _cross(a, b):
+    """Cross product over the last axis (faster than ``np.cross`` for small batches)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], -1)
+
+
+class MaximalModel:
+    """Free rigid body plus a tether link model, sharing parameters and effects with ``model``.
+
+    Parameters
+    ----------
+    model : gainsched.model.reduced.Model
+        Mass, inertia, geometry, allocation, gravity and effects come from it.
+    link : {"rigid", "spring-damper", "sls", "lumped-mass"} or link object, optional
+        Default: the config's ``tether.link`` with its parameters. A name takes the
+        other link parameters from the config; an object from :mod:`gainsched.model.links`
+        is used as it is.
+    stiffness : float, N/m, optional
+        Overrides ``tether.stiffness`` (spring-damper k, SLS parallel k_p, chain k).
+    damping : float, N s/m, optional
+        Overrides ``tether.damping`` (spring-damper c, SLS parallel c, chain c).
+    baumgarte : (float, float), 1/s
+        Rigid link constraint stabilisation rates (a, b): ``c'' + 2 a c' + b^2 c = 0``.
+
+    Attributes
+    ----------
+    link : str
+        The link model's name.
+    link_model : links.SpringDamper, links.StandardLinearSolid, links.LumpedMassChain or None
+        None for the rigid link.
+    n_x : int
+        State size, 13 plus the link's states.
+    """
+
+    def __init__(self, model, link=None, stiffness=None, damping=None, baumgarte=(10.0, 10.0)):
+        if model.n_extra > 0:
+            raise NotImplementedError(
+                "stateful effects (e.g. motor_lag) are not supported in maximal coordinates"
+            )
+        tether = model.config.tether
+        self.model = model
+        self.k = float(tether.stiffness if stiffness is None else stiffness)
+        self.c = float(tether.damping if damping is None else damping)
+        if link is None or isinstance(link, str):
+            name = tether.link if link is None else link
+            if name not in LINKS:
+                raise ValueError(f"link must be one of {LINKS}, got {name!r}")
+            if name == "spring-damper":  # no config fields beyond k, c
+                self.link_model = SpringDamper(model.rho, self.k, self.c)
+            else:
+                self.link_model = link_from_tether(
+                    dataclasses.replace(tether, link=name, stiffness=self.k, damping=self.c)
+                )
+        else:
+            self.link_model = link
+        self.link = "rigid" if self.link_model is None else self.link_model.kind
+        self.n_link = 0 if self.link_model is None else int(self.link_model.n_states)
+        self.n_x = N_MAXIMAL + self.n_link
+        self.baumgarte = tuple(float(b) for b in baumgarte)
+        self.J_inv = np.linalg.inv(model.J)
+        self._S = skew(model.p_e)  # [p_e x]
+
+    # ------------------------------------------------------------------ dynamics
+    def evaluate(self, x, u, alpha):
+        """State derivative and tension.
+
+        Parameters
+        ----------
+        x : ndarray, shape (..., n_x)
+            ``(p_q [m], v_q [m/s], q_CB, omega_B [rad/s], link states)``, p and v in C.
+        u : ndarray, shape (..., 4), N
+            Commanded motor thrusts.
+        alpha : float or ndarray, rad
+            Tilt of the circle plane (enters through gravity only).
+
+        Returns
+        -------
+        x_dot : ndarray, shape (..., n_x)
+        tension : ndarray, shape (...), N
+            ``f_t``; the force on the vehicle is ``-f_t p_t / |p_t|`` at the attachment point
+            (chain: ``f_t`` along the last segment). Elastic links: >= 0, see :meth:`slack`.
+        """
+        return self._evaluate(x, u, alpha)[:2]
+
+    def _evaluate(self, x, u, alpha):
+        md = self.model
+        x = np.asarray(x, dtype=float)
+        u = np.asarray(u, dtype=float)
+        m, J, p_e = md.m, md.J, md.p_e
+        p, v, q, w = x[..., 0:3], x[..., 3:6], x[..., 6:10], x[..., 10:13]
+        qn = q / np.sqrt(_dot(q, q))[..., None]
+        R = matrix_from_quaternion(qn)
+        kin = Kinematics(R, v, w)
+
+        # thrust after the (stateless) thrust modifiers, then the effect wrenches
+        T = u
+        no_state = np.zeros(x.shape[:-1] + (0,))
+        for eff in md.effects:
+            T = eff.modify_thrust(T, kin, no_state)
+        F, tau = md.effect_wrench(T, kin)
+        shape = F.shape
+        T_C = np.sum(T, axis=-1)
+        F0 = R[..., :, 2] * T_C[..., None] + m * md.g_C(alpha) + F  # without the tether
+        tau0 = T @ md.alloc[1:].T + tau - _cross(w, w @ J.T)
+
+        # attachment point: position, velocity, direction
+        w_pe = w @ self._S  # omega x p_e
+        p_t = p + _mv(R, p_e)
+        v_t = v + _mv(R, w_pe)
+        link = None
+        if self.link_model is not None:
+            link = self.link_model.evaluate(p_t, v_t, x[..., N_MAXIMAL:], md.g_C(alpha))
+            F_B = np.einsum("...ji,...j->...i", R, link.force)
+            a_q = (F0 + link.force) / m
+            w_dot = (tau0 + F_B @ self._S.T) @ self.J_inv.T  # p_e x F_B
+            f_t = link.tension
+        else:
+            a_q, w_dot, f_t = self._rigid(F0, tau0, R, w, w_pe, p_t, v_t)
+        # quaternion kinematics q' = q (x) (0, omega) / 2
+        qw, qv = q[..., :1], q[..., 1:]
+        q_dot = 0.5 * np.concatenate([-_dot(qv, w)[..., None], qw * w + _cross(qv, w)], -1)
+        parts = [np.broadcast_to(v, shape), a_q, np.broadcast_to(q_dot, shape[:-1] + (4,)), w_dot]
+        if link is not None:
+            sd = link.state_dot
+            parts.append(np.broadcast_to(sd, shape[:-1] + sd.shape[-1:]))
+        return np.concatenate(parts, -1), f_t, link
+
+    def _rigid(self, F0, tau0, R, w, w_pe, p_t, v_t):
+        """COG acceleration, omega' and multiplier f_t of the Baumgarte-stabilised constraint."""
+        md, m = self.model, self.model.m
+        dist = np.sqrt(_dot(p_t, p_t))
+        n = p_t / dist[..., None]
+        n_B = np.einsum("...ji,...j->...i", R, n)
+        lever = n_B @ self._S.T  # p_e x n_B: tether torque per newton of tension is -lever
+        # c'' = c0 - kf f with the tension-free part c0 and kf = |p_t| (1/m + l^T J^-1 l)
+        a_q0 = F0 / m
+        wd0 = tau0 @ self.J_inv.T
+        a_t0 = a_q0 + _mv(R, wd0 @ self._S + _cross(w, w_pe))
+        c0 = _dot(v_t, v_t) + _dot(p_t, a_t0)
+        kf = dist * (1.0 / m + _dot(lever, lever @ self.J_inv.T))
+        a, b = self.baumgarte
+        c = 0.5 * (dist * dist - md.rho**2)
+        c_dot = _dot(p_t, v_t)
+        f_t = (c0 + 2 * a * c_dot + b * b * c) / kf
+        a_q = (F0 - f_t[..., None] * n) / m
+        w_dot = (tau0 - f_t[..., None] * lever) @ self.J_inv.T
+        return a_q, w_dot, f_t
+
+    def f(self, x, u, alpha):
+        """State derivative, shape (..., n_x). See :meth:`evaluate`."""
+        return self.evaluate(x, u, alpha)[0]
+
+    def tension(self, x, u, alpha):
+        """Tether tension f_t, shape (...), N (0 when an elastic link is slack)."""
+        return self.evaluate(x, u, alpha)[1]
+
+    def slack(self, x, u, alpha):
+        """Whether the tether is slack, shape (...), bool.
+
+        Rigid link: the multiplier came out negative (the constraint would push).
+        Elastic links: some part of the link carries no tension (force law <= 0;
+        for the chain, any segment).
+        """
+        _, f_t, link = self._evaluate(x, u, alpha)
+        return f_t < 0 if link is None else link.slack
+
+    def link_output(self, x, alpha) -> LinkOutput:
+        """The elastic link's force, tension, slack flag and state rate at x (not for rigid)."""
+        if self.link_model is None:
+            raise ValueError("the rigid link has no link output (its force needs the input)")
+        x = np.asarray(x, dtype=float)
+        p_t, v_t = self._attachment(x)
+        return self.link_model.evaluate(p_t, v_t, x[..., N_MAXIMAL:], self.model.g_C(alpha))
+
+    def _attachment(self, x):
+        """Attachment point position (m) and velocity (m/s) in C, shapes (..., 3)."""
+        p, v, q, w = x[..., 0:3], x[..., 3:6], x[..., 6:10], x[..., 10:13]
+        R = matrix_from_quaternion(q / np.sqrt(_dot(q, q))[..., None])
+        return p + _mv(R, self.model.p_e), v + _mv(R, w @ self._S)
+
+    def energy(self, x, alpha):
+        """Mechanical energy of the vehicle (kinetic + gravitational potential), J.
+
+        Excludes the link (see :meth:`link_energy`)."""
+        md = self.model
+        p, v, w = x[..., 0:3], x[..., 3:6], x[..., 10:13]
+        kinetic = 0.5 * md.m * _dot(v, v) + 0.5 * np.einsum("...i,ij,...j", w, md.J, w)
+        return kinetic - md.m * _dot(md.g_C(alpha), p)
+
+    def link_energy(self, x, alpha):
+        """Energy held by an elastic link (springs; chain nodes' kinetic and potential), J."""
+        if self.link_model is None:
+            return np.zeros(np.shape(x)[:-1])
+        p_t, v_t = self._attachment(np.asarray(x, dtype=float))
+        return self.link_model.energy(p_t, v_t, x[..., N_MAXIMAL:], self.model.g_C(alpha))
+
+    def power_loss(self, x, alpha):
+        """Power dissipated in an elastic link (dampers, and the tension-only clip), W >= 0.
+
+        With no thrust and no effects, ``d/dt (energy + link_energy) = -power_loss``.
+        """
+        if self.link_model is None:
+            return np.zeros(np.shape(x)[:-1])
+        p_t, v_t = self._attachment(np.asarray(x, dtype=float))
+        return self.link_model.power_loss(p_t, v_t, x[..., N_MAXIMAL:], self.model.g_C(alpha))
+
+    # ------------------------------------------------------------------ simulation
+    def from_reduced(self, z, tension=None, u=None, alpha=0.0):
+        """Maximal state (..., n_x) from the reduced state z (..., >= 10), link in equilibrium.
+
+        The elastic link starts stretched to the static elongation of ``tension`` (N)
+        along ``e(delta, xi)``, its own states relaxed at that tension (SLS: ``s_p =
+        f / k_p``; chain: nodes evenly on the straight line, moving with it). Default
+        ``tension``: the rigid-link tension of the reduced model at ``(z, u, alpha)``
+        (``u`` default: hover thrust ``m g / 4`` per motor), clipped at 0. The rigid
+        link ignores ``tension`` (:func:`maximal_from_reduced`).
+        """
+        z = np.asarray(z, dtype=float)
+        if self.link_model is None:
+            return maximal_from_reduced(self.model, z)
+        if tension is None:
+            md = self.model
+            u = np.full(4, md.m * md.g / 4) if u is None else u
+            tension = np.maximum(md.evaluate(z[..., :N_STATE], u, alpha).tension, 0.0)
+        x = maximal_from_reduced(self.model, z, stretch=self.link_model.stretch(tension))
+        p_t, v_t = self._attachment(x)
+        return np.concatenate([x, self.link_model.initial(p_t, v_t, tension)], -1)
+
+    def to_reduced(self, x, xi_ref=None):
+        """Reduced state (..., 10) of x; see :func:`reduced_from_maximal`."""
+        return reduced_from_maximal(self.model, x, xi_ref)
+
+    def substeps(self, dt: float) -> int:
+        """RK4 substeps per step of ``dt`` s that keep the link's fastest mode stable
+        (``|lambda| dt / n <= RK4_REACH``); 1 for the rigid link."""
+        if self.link_model is None:
+            return 1
+        rate = self.link_model.max_rate(self.model.m)
+        return max(1, int(np.ceil(dt * rate / RK4_REACH)))
+
+    def step(self, x, u, alpha, dt):
+        """Advance x by ``dt`` s with the input u held: RK4 with :meth:`substeps` substeps.
+
+        Returns ``(x_next (..., n_x), signed tension at x (...) N)``, like the
+        simulator's RK4: negative means slack. Rigid link: the multiplier. Elastic
+        links: the tension, or when slack the link's ``margin`` (<= 0, the push it
+        would need; :class:`gainsched.model.links.LinkOutput`).
+        """
+        x = np.asarray(x, dtype=float)
+        n = self.substeps(dt)
+        h = dt / n
+        ten = None
+        for _ in range(n):
+            k1, t1, link = self._evaluate(x, u, alpha)
+            if ten is None:
+                ten = t1 if link is None else np.where(link.slack, link.margin, t1)
+            k2 = self.f(x + 0.5 * h * k1, u, alpha)
+            k3 = self.f(x + 0.5 * h * k2, u, alpha)
+            k4 = self.f(x + h * k3, u, alpha)
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return x, ten
+
+
+# ---------------------------------------------------------------------- conversions
+def maximal_from_reduced(model, z, stretch=0.0):
+    """Maximal state (..., 13) from the reduced state z (..., >= 10) (docs/conventions.md).
+
+    ``R_CB = Rz(chi + xi) Ry(theta) Rx(phi)``, ``p_q = rho e(delta, xi) + L_e x_B``,
+    COG velocity from :meth:`gainsched.model.reduced.Model.kinematics`; omega_B is copied.
+    ``stretch`` (m, broadcastable to z.shape[:-1]): the attachment point at
+    ``(rho + stretch) e`` instead, moving with the same angular rates (an elastic
+    link's elongation; z is recovered exactly by :func:`reduced_from_maximal`).
+    """
+    z = np.asarray(z, dtype=float)
+    R, e, _, _, v_q, w_x_pe = model.kinematics(z)
+    p_q = model.rho * e - _mv(R, model.p_e)
+    if np.any(stretch):
+        scale = (1.0 + np.asarray(stretch, dtype=float) / model.rho)[..., None]
+        Rw = _mv(R, w_x_pe)
+        p_q = scale * (model.rho * e) - _mv(R, model.p_e)
+        v_q = scale * (v_q + Rw) - Rw  # v_t scales with the radius; v_q = v_t - R (w x p_e)
+    return np.concatenate([p_q, v_q, quaternion_from_matrix(R), z[..., 7:10]], -1)
+
+
+def reduced_from_maximal(model, x, xi_ref=None):
+    """Reduced state (..., 10) from the maximal state x (..., >= 13; link states ignored).
+
+    ``delta, xi`` are the spherical angles of the attachment point, ``delta', xi'``
+    its angular rates (the radial rate, non-zero only for an elastic link, is
+    dropped); ``phi, theta, psi`` the Z-Y-X Euler angles of ``R_CB`` and
+    ``chi = psi - xi`` wrapped to [-pi, pi). ``xi`` is in (-pi, pi], or unwrapped
+    to the branch nearest ``xi_ref`` (rad, broadcastable) when given.
+    """
+    x = np.asarray(x, dtype=float)
+    p, v, q, w = x[..., 0:3], x[..., 3:6], x[..., 6:10], x[..., 10:13]
+    R = matrix_from_quaternion(q / np.sqrt(_dot(q, q))[..., None])
+    p_t = p + _mv(R, model.p_e)
+    v_t = v + _mv(R, _cross(w, np.broadcast_to(model.p_e, w.shape)))
+    rxy = np.hypot(p_t[..., 0], p_t[..., 1])
+    dist = np.sqrt(_dot(p_t, p_t))
+    delta = np.arctan2(rxy, p_t[..., 2])
+    xi = np.arctan2(p_t[..., 1], p_t[..., 0])
+    if xi_ref is not None:
+        xi = xi + 2 * np.pi * np.round((np.asarray(xi_ref) - xi) / (2 * np.pi))
+    sd, cd, sx, cx = np.sin(delta), np.cos(delta), np.sin(xi), np.cos(xi)
+    e_d = np.stack([cd * cx, cd * sx, -sd], -1)  # de/ddelta
+    e_x = np.stack([-sx, cx, np.zeros_like(sx)], -1)  # (de/dxi) / sin(delta)
+    delta_dot = _dot(e_d, v_t) / dist
+    xi_dot = _dot(e_x, v_t) / (dist * sd)
+    phi, theta, psi = euler_zyx_from_matrix(R)
+    chi = (psi - xi + np.pi) % (2 * np.pi) - np.pi
+    z = np.stack([delta, xi, delta_dot, xi_dot, phi, theta, chi], -1)
+    return np.concatenate([z, w], -1)[..., :N_STATE]

@@ -1,0 +1,260 @@
+"""Reduced-coordinate dynamics of the tethered quadcopter (paper Sec. II).
+
+Frames, angles and motor numbering: docs/conventions.md.
+
+State ``s = (delta, xi, delta', xi', phi, theta, chi, wx, wy, wz)`` (rad, rad/s)
+followed by the states of stateful effects (e.g. motor lag); input ``u = (T1..T4)``
+commanded motor thrusts (N). With ``p_q = p_t - R p_e`` and
+
+    m p_q''  = R (0,0,T_C) + m g_C - f_t e + F_eff                  (paper eq. 3)
+    J omega' = sum L_i x T_i + tau_M + p_e x (R^T (-f_t e))
+               - omega x J omega + tau_eff                           (paper eq. 6, 8)
+    p_q''    = p_t'' - R (omega' x p_e + omega x (omega x p_e))      (eq. 9, corrected)
+
+the unknowns ``(delta'', xi'', omega', f_t)`` enter linearly: six equations, one
+6x6 solve per state. Everything is batched over leading dimensions and is
+complex-step safe, so :mod:`gainsched.schedule.linearize` can take exact Jacobians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..constants import N_STATE
+from .effects import Effect, Kinematics, effects_from_specs
+from .rotations import euler_zyx_rates_from_body_rates, matrix_from_euler_zyx, skew
+
+if TYPE_CHECKING:  # the config imports the effects of this package
+    from ..config import Config
+
+__all__ = ["Model", "Evaluation", "allocation_matrix", "motor_positions"]
+
+
+def motor_positions(arm_length: float) -> np.ndarray:
+    """Rotor hub positions L_i in B for the X layout, shape (4, 3), m.
+
+    Motor i sits at angle 45 deg + (i-1) 90 deg: 1 (+,+), 2 (-,+), 3 (-,-), 4 (+,-).
+    """
+    b = np.deg2rad(45.0 + 90.0 * np.arange(4))
+    return arm_length * np.stack([np.cos(b), np.sin(b), np.zeros(4)], axis=-1)
+
+
+def allocation_matrix(arm_length: float, kappa: float) -> np.ndarray:
+    """Map from motor thrusts (N) to (T_C, tau_x, tau_y, tau_z) (N, N m), shape (4, 4).
+
+    ``tau = sum L_i x (0, 0, T_i) + (0, 0, kappa (T1 - T2 + T3 - T4))`` (paper eqs. 6, 8).
+    """
+    L = motor_positions(arm_length)
+    return np.stack([np.ones(4), L[:, 1], -L[:, 0], kappa * np.array([1.0, -1.0, 1.0, -1.0])])
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Result of one model evaluation (batched).
+
+    Attributes
+    ----------
+    z_dot : ndarray, shape (..., n_z)
+        Time derivative of the full state.
+    tension : ndarray, shape (...), N
+        Tether tension f_t (negative means the model needs a pushing tether: slack).
+    T : ndarray, shape (..., 4), N
+        Actual motor thrusts after the effects.
+    """
+
+    z_dot: np.ndarray
+    tension: np.ndarray
+    T: np.ndarray
+
+
+class Model:
+    """The reduced model built from a :class:`~gainsched.config.Config`.
+
+    Parameters
+    ----------
+    config : Config
+    effects : sequence of Effect, optional
+        Overrides the config's effects (used by fits and by the simulator's plant).
+    """
+
+    def __init__(self, config: Config, effects: tuple[Effect, ...] | None = None):
+        v, t = config.vehicle, config.tether
+        self.config = config
+        self.m = v.mass
+        self.J = np.array(v.inertia, dtype=float)
+        self.rho = t.length
+        self.L_e = t.attachment_offset
+        self.r = t.length + t.attachment_offset
+        self.g = config.g
+        self.p_e = np.array([-self.L_e, 0.0, 0.0])
+        self.L = motor_positions(v.arm_length)
+        self.alloc = allocation_matrix(v.arm_length, v.kappa)
+        self.alloc_inv = np.linalg.inv(self.alloc)
+        self.effects = tuple(effects_from_specs(config.effects) if effects is None else effects)
+        self.n_extra = sum(e.n_states for e in self.effects)
+        self.n_z = N_STATE + self.n_extra
+        self._skew_pe = skew(self.p_e)
+
+    # ------------------------------------------------------------------ helpers
+    def g_C(self, alpha):
+        """Gravity in the circle frame, ``-g (0, sin a, cos a)``, shape alpha.shape + (3,)."""
+        a = np.asarray(alpha)
+        return -self.g * np.stack([np.zeros_like(a, dtype=float), np.sin(a), np.cos(a)], axis=-1)
+
+    def closed_form_drag(self):
+        """The tangential-drag functions of all effects if the closed-form nominal applies
+        (every effect a pure velocity drag, no thrust modifiers, no states), else None."""
+        parts = [e.tangential_drag for e in self.effects]
+        if any(e.tangential_drag(1.0) is None for e in self.effects):
+            return None
+
+        def D(v):
+            out = [np.zeros_like(v), np.zeros_like(v), np.zeros_like(v)]
+            for f in parts:
+                for i, x in enumerate(f(v)):
+                    out[i] = out[i] + x
+            return out
+
+        return D
+
+    def kinematics(self, s):
+        """Rotation, attachment-point geometry and COG velocity from states (..., >=10)."""
+        delta, xi, dd, dx = s[..., 0], s[..., 1], s[..., 2], s[..., 3]
+        phi, theta, chi, w = s[..., 4], s[..., 5], s[..., 6], s[..., 7:10]
+        R = matrix_from_euler_zyx(phi, theta, chi + xi)
+        sd, cd, sx, cx = np.sin(delta), np.cos(delta), np.sin(xi), np.cos(xi)
+        z = np.zeros_like(sd)
+        e = np.stack([sd * cx, sd * sx, cd], -1)
+        e_d = np.stack([cd * cx, cd * sx, -sd], -1)  # de/ddelta
+        e_x = np.stack([-sd * sx, sd * cx, z], -1)  # de/dxi
+        w_x_pe = np.cross(w, self.p_e)
+        v_q = self.rho * (e_d * dd[..., None] + e_x * dx[..., None]) - np.einsum(
+            "...ij,...j->...i", R, w_x_pe
+        )
+        return R, e, e_d, e_x, v_q, w_x_pe
+
+    def thrust(self, z, u, kin):
+        """Actual motor thrusts (N) after stateful effects and thrust modifiers."""
+        T = u
+        i = N_STATE
+        for eff in self.effects:
+            x = z[..., i : i + eff.n_states]
+            T = eff.modify_thrust(T, kin, x)
+            i += eff.n_states
+        return T
+
+    def effect_wrench(self, T, kin):
+        """Sum of the effects' forces at the COG (in C, N) and torques (in B, N m)."""
+        shape = np.broadcast_shapes(T.shape[:-1], kin.v_C.shape[:-1]) + (3,)
+        F = np.zeros(shape, dtype=np.result_type(T, kin.v_C))
+        tau = np.zeros_like(F)
+        for eff in self.effects:
+            wr = eff.wrench(T, kin)
+            if wr is not None:
+                F = F + wr[0]
+                tau = tau + wr[1]
+        return F, tau
+
+    # ------------------------------------------------------------------ dynamics
+    def evaluate(self, z, u, alpha) -> Evaluation:
+        """Full-state derivative and tether tension.
+
+        Parameters
+        ----------
+        z : ndarray, shape (..., n_z)
+            State (see module docstring), rad, rad/s, plus effect states.
+        u : ndarray, shape (..., 4), N
+            Commanded motor thrusts.
+        alpha : float or ndarray broadcastable to z.shape[:-1], rad
+            Tilt of the circle plane.
+        """
+        z = np.asarray(z)
+        u = np.asarray(u)
+        m, J = self.m, self.J
+        delta, xi, dd, dx = z[..., 0], z[..., 1], z[..., 2], z[..., 3]
+        phi, theta, w = z[..., 4], z[..., 5], z[..., 7:10]
+        R, e, e_d, e_x, v_q, w_x_pe = self.kinematics(z)
+        kin = Kinematics(R, v_q, w)
+        T = self.thrust(z, u, kin)
+
+        F, tau = self.effect_wrench(T, kin)
+
+        # p_t'' = rho (e_d delta'' + e_x xi'' + c2) with the velocity-product terms c2
+        sd, cd, sx, cx = np.sin(delta), np.cos(delta), np.sin(xi), np.cos(xi)
+        zero = np.zeros_like(sd)
+        e_dx = np.stack([-cd * sx, cd * cx, zero], -1)
+        e_xx = np.stack([-sd * cx, -sd * sx, zero], -1)
+        c2 = (
+            -e * (dd * dd)[..., None]
+            + 2 * e_dx * (dd * dx)[..., None]
+            + e_xx * (dx * dx)[..., None]
+        )
+
+        T_C = np.sum(T, axis=-1)
+        thrust_C = R[..., :, 2] * T_C[..., None]
+        w_w_pe = np.cross(w, w_x_pe)
+        rhs_F = (
+            thrust_C
+            + m * self.g_C(alpha)
+            + F
+            - m * self.rho * c2
+            + m * np.einsum("...ij,...j->...i", R, w_w_pe)
+        )
+        tau_M = T @ self.alloc[1:].T
+        rhs_tau = tau_M - np.cross(w, w @ J.T) + tau
+
+        RT_e = np.einsum("...ji,...j->...i", R, e)
+        A = np.zeros(rhs_F.shape[:-1] + (6, 6), dtype=rhs_F.dtype)
+        A[..., :3, 0] = m * self.rho * e_d
+        A[..., :3, 1] = m * self.rho * e_x
+        A[..., :3, 2:5] = m * R @ self._skew_pe
+        A[..., :3, 5] = e
+        A[..., 3:, 2:5] = J
+        A[..., 3:, 5] = RT_e @ self._skew_pe.T
+        sol = np.linalg.solve(A, np.concatenate([rhs_F, rhs_tau], -1)[..., None])[..., 0]
+
+        euler_dot = euler_zyx_rates_from_body_rates(phi, theta, w)
+        parts = [
+            dd[..., None],
+            dx[..., None],
+            sol[..., 0:2],
+            euler_dot[..., 0:2],
+            (euler_dot[..., 2] - dx)[..., None],
+            sol[..., 2:5],
+        ]
+        i = N_STATE
+        for eff in self.effects:
+            if eff.n_states:
+                parts.append(eff.state_derivative(z[..., i : i + eff.n_states], u, kin))
+                i += eff.n_states
+        shape = np.broadcast_shapes(*(p.shape[:-1] for p in parts))
+        z_dot = np.concatenate([np.broadcast_to(p, shape + p.shape[-1:]) for p in parts], -1)
+        return Evaluation(z_dot, sol[..., 5], T)
+
+    def f(self, z, u, alpha):
+        """State derivative only, shape (..., n_z). See :meth:`evaluate`."""
+        return self.evaluate(z, u, alpha).z_dot
+
+    # ------------------------------------------------------------------ outputs
+    def cog_position(self, z, alpha=0.0, gamma=0.0, frame="C"):
+        """COG position ``p_q = rho e + L_e x_B`` in C (or I with ``frame="I"``), m."""
+        R, e, *_ = self.kinematics(z)
+        p = self.rho * e + self.L_e * R[..., :, 0]
+        if frame == "I":
+            from .rotations import R_IC_from_tilt
+
+            p = np.einsum("ij,...j->...i", R_IC_from_tilt(alpha, gamma), p)
+        return p
+
+    def energy(self, z, alpha):
+        """Mechanical energy (kinetic + potential), J; conserved with zero thrust, no drag."""
+        R, e, e_d, e_x, v_q, _ = self.kinematics(z)
+        w = z[..., 7:10]
+        p = self.cog_position(z)
+        kinetic = 0.5 * self.m * np.sum(v_q * v_q, -1) + 0.5 * np.einsum(
+            "...i,ij,...j", w, self.J, w
+        )
+        return kinetic - self.m * np.sum(self.g_C(alpha) * p, -1)

@@ -1,0 +1,359 @@
+/*
+ * plant.c: the reduced-coordinate tethered-quadcopter model (rigid link) for one
+ * state, and one RK4 step of it with the input held (paper Sec. II).
+ *
+ * Why hand-written C: the closed-loop simulator evaluates the model four times
+ * per control step at 1 kHz on a single state. gainsched.model.reduced.Model.evaluate
+ * is batched numpy (~0.4 ms per call on one state, almost all of it per-call
+ * overhead of ~100 small numpy operations), which caps the simulator at
+ * ~0.3x real time. The physics here is a line-by-line transcription of
+ * Model.evaluate and of the state-only effects of gainsched/model/effects.py; the
+ * numpy model stays the reference (tests/test_fastplant.py holds the two
+ * together to 1e-12) and the fallback (gainsched/sim/fastplant.py).
+ *
+ * State z = (delta, xi, delta', xi', phi, theta, chi, wx, wy, wz, effect states)
+ * (rad, rad/s, N), input u = commanded motor thrusts (N), alpha = circle tilt (rad).
+ * With p_q = p_t - R p_e and the corrected paper equations
+ *
+ *   m p_q''  = R (0,0,T_C) + m g_C - f_t e + F_eff                  (eq. 3)
+ *   J omega' = sum L_i x T_i + tau_M + p_e x (R^T (-f_t e))
+ *              - omega x J omega + tau_eff                          (eqs. 6, 8)
+ *   p_q''    = p_t'' - R (omega' x p_e + omega x (omega x p_e))     (eq. 9, corrected)
+ *
+ * the unknowns (delta'', xi'', omega', f_t) solve one 6x6 linear system.
+ *
+ * Parameters: one read-only double array built by gainsched/sim/fastplant.py
+ * (layout below, GS_PLANT_LAYOUT); no globals, no allocation, C99.
+ */
+#include <math.h>
+#include <stddef.h>
+
+#define GS_PLANT_LAYOUT 1
+#define N_BASE 10
+#define MAX_Z 64 /* largest state the RK4 scratch holds (10 + effect states) */
+#define EPS2 1e-24 /* effects.norm: keeps sqrt differentiable at zero speed */
+
+/* parameter array layout (doubles) */
+enum {
+    P_LAYOUT = 0, /* GS_PLANT_LAYOUT */
+    P_NZ,         /* state size n_z */
+    P_M,          /* mass, kg */
+    P_RHO,        /* tether length, m */
+    P_LE,         /* attachment offset L_e, m (p_e = (-L_e, 0, 0) in B) */
+    P_G,          /* gravity, m/s^2 */
+    P_J,          /* inertia J, 3x3 row-major, kg m^2 (9 entries) */
+    P_ALLOC = P_J + 9, /* rows 1..3 of the allocation matrix, 3x4 row-major (12) */
+    P_NEFF = P_ALLOC + 12, /* number of effects */
+    P_EFF,        /* effects in model order, EFF_STRIDE doubles each */
+};
+#define EFF_STRIDE 4 /* kind, param a, param b, first state index */
+
+/* effect kinds (gainsched.model.effects) */
+enum {
+    FX_DRAG = 1,         /* Drag: a = mu1, b = mu2 (eq. 10) */
+    FX_ROTOR_DRAG = 2,   /* RotorDrag: a = k_rd */
+    FX_THRUST_SCALE = 3, /* ThrustScale: a = k_T */
+    FX_THRUST_POLY = 4,  /* ThrustPolynomial: a = c1, b = c2 */
+    FX_MOTOR_LAG = 5     /* MotorLag: a = tau, 4 states */
+};
+
+/* exported (ctypes, gainsched/sim/fastplant.py) */
+int gs_plant_layout(void);
+int gs_plant_max_states(void);
+int gs_plant_eval(const double *p, const double *z, const double *u, double alpha,
+                  double *z_dot, double *tension, double *T_out);
+int gs_plant_rk4(const double *p, const double *x, const double *u, double alpha, double dt,
+                 double *x_next, double *tension);
+
+int gs_plant_layout(void) { return GS_PLANT_LAYOUT; }
+
+int gs_plant_max_states(void) { return MAX_Z; }
+
+static void cross(const double a[3], const double b[3], double out[3])
+{
+    out[0] = a[1] * b[2] - a[2] * b[1];
+    out[1] = a[2] * b[0] - a[0] * b[2];
+    out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/* Solve A x = b (6x6, row-major, overwritten) by Gaussian elimination with partial
+ * pivoting (as LAPACK dgesv). Returns 0, or 1 if A is singular. */
+static int solve6(double A[6][6], double b[6], double x[6])
+{
+    int i, j, k;
+    for (k = 0; k < 6; ++k) {
+        int piv = k;
+        double best = fabs(A[k][k]);
+        for (i = k + 1; i < 6; ++i) {
+            if (fabs(A[i][k]) > best) {
+                best = fabs(A[i][k]);
+                piv = i;
+            }
+        }
+        if (!(best > 0.0)) {
+            return 1;
+        }
+        if (piv != k) {
+            double t;
+            for (j = 0; j < 6; ++j) {
+                t = A[k][j];
+                A[k][j] = A[piv][j];
+                A[piv][j] = t;
+            }
+            t = b[k];
+            b[k] = b[piv];
+            b[piv] = t;
+        }
+        for (i = k + 1; i < 6; ++i) {
+            double l = A[i][k] / A[k][k];
+            for (j = k + 1; j < 6; ++j) {
+                A[i][j] -= l * A[k][j];
+            }
+            b[i] -= l * b[k];
+        }
+    }
+    for (i = 5; i >= 0; --i) {
+        double s = b[i];
+        for (j = i + 1; j < 6; ++j) {
+            s -= A[i][j] * x[j];
+        }
+        x[i] = s / A[i][i];
+    }
+    return 0;
+}
+
+/*
+ * State derivative z_dot (n_z) and tether tension f_t (N, negative = slack) of the
+ * reduced model at state z (n_z) and commanded thrust u (4, N); T_out (4, N, may be
+ * NULL) receives the actual motor thrusts after the effects. Returns 0, or 1 if the
+ * 6x6 system is singular (outputs undefined). Model.evaluate, one state.
+ */
+int gs_plant_eval(const double *p, const double *z, const double *u, double alpha,
+                  double *z_dot, double *tension, double *T_out)
+{
+    const double m = p[P_M], rho = p[P_RHO], L_e = p[P_LE], g = p[P_G];
+    const double *J = p + P_J, *Al = p + P_ALLOC;
+    const int n_eff = (int)p[P_NEFF];
+    const double delta = z[0], xi = z[1], dd = z[2], dx = z[3];
+    const double phi = z[4], theta = z[5], chi = z[6];
+    const double w[3] = {z[7], z[8], z[9]};
+    const double p_e[3] = {-L_e, 0.0, 0.0};
+    double R[3][3], e[3], e_d[3], e_x[3], e_dx[3], e_xx[3], c2[3];
+    double w_x_pe[3], w_w_pe[3], R_wxpe[3], R_wwpe[3], v[3], T[4], F[3] = {0, 0, 0};
+    /* effect torque in B: none of the supported effects has one (kept for the form) */
+    double tau[3] = {0, 0, 0}, Jw[3], wJw[3], rhs[6], A[6][6], sol[6], RT_e[3], pe_RTe[3];
+    double speed = -1.0; /* |v| (effects.norm), computed once when an effect needs it */
+    int i, j, k;
+
+    /* kinematics: R_CB = Rz(chi + xi) Ry(theta) Rx(phi) (paper eq. 2) */
+    {
+        const double psi = chi + xi;
+        const double cps = cos(psi), sps = sin(psi), cth = cos(theta), sth = sin(theta);
+        const double cph = cos(phi), sph = sin(phi);
+        R[0][0] = cps * cth;
+        R[0][1] = -sps * cph + cps * sth * sph;
+        R[0][2] = sps * sph + cps * sth * cph;
+        R[1][0] = sps * cth;
+        R[1][1] = cps * cph + sps * sth * sph;
+        R[1][2] = -cps * sph + sps * sth * cph;
+        R[2][0] = -sth;
+        R[2][1] = cth * sph;
+        R[2][2] = cth * cph;
+    }
+    {
+        const double sd = sin(delta), cd = cos(delta), sx = sin(xi), cx = cos(xi);
+        e[0] = sd * cx;    e[1] = sd * sx;    e[2] = cd;
+        e_d[0] = cd * cx;  e_d[1] = cd * sx;  e_d[2] = -sd; /* de/ddelta */
+        e_x[0] = -sd * sx; e_x[1] = sd * cx;  e_x[2] = 0.0; /* de/dxi */
+        e_dx[0] = -cd * sx; e_dx[1] = cd * cx; e_dx[2] = 0.0;
+        e_xx[0] = -sd * cx; e_xx[1] = -sd * sx; e_xx[2] = 0.0;
+    }
+    cross(w, p_e, w_x_pe);
+    for (i = 0; i < 3; ++i) {
+        R_wxpe[i] = R[i][0] * w_x_pe[0] + R[i][1] * w_x_pe[1] + R[i][2] * w_x_pe[2];
+    }
+    /* COG velocity in C (= airspeed, no wind) */
+    for (i = 0; i < 3; ++i) {
+        v[i] = rho * (e_d[i] * dd + e_x[i] * dx) - R_wxpe[i];
+    }
+
+    /* thrust: command -> effects in model order (stateful first, then config order) */
+    for (j = 0; j < 4; ++j) {
+        T[j] = u[j];
+    }
+    for (k = 0; k < n_eff; ++k) {
+        const double *ef = p + P_EFF + EFF_STRIDE * k;
+        const int kind = (int)ef[0];
+        if (kind == FX_MOTOR_LAG) {
+            const int s0 = (int)ef[3];
+            for (j = 0; j < 4; ++j) {
+                T[j] = z[s0 + j];
+            }
+        } else if (kind == FX_THRUST_SCALE) {
+            for (j = 0; j < 4; ++j) {
+                T[j] = ef[1] * T[j];
+            }
+        } else if (kind == FX_THRUST_POLY) {
+            double f;
+            if (speed < 0.0) {
+                speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] + EPS2);
+            }
+            f = 1.0 + ef[1] * speed + ef[2] * speed * speed;
+            for (j = 0; j < 4; ++j) {
+                T[j] = T[j] * f;
+            }
+        }
+    }
+    const double T_C = T[0] + T[1] + T[2] + T[3];
+
+    /* wrench effects (see the final thrust): force at the COG in C, torque in B */
+    for (k = 0; k < n_eff; ++k) {
+        const double *ef = p + P_EFF + EFF_STRIDE * k;
+        const int kind = (int)ef[0];
+        if (kind == FX_DRAG) { /* F = -(mu1 + mu2 |v|) v (paper eq. 10) */
+            double c;
+            if (speed < 0.0) {
+                speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] + EPS2);
+            }
+            c = ef[1] + ef[2] * speed;
+            for (i = 0; i < 3; ++i) {
+                F[i] = F[i] + (-c) * v[i];
+            }
+        } else if (kind == FX_ROTOR_DRAG) { /* F_B = -k_rd T_C (v_Bx, v_By, 0) */
+            double v_B[2], F_B[2];
+            for (j = 0; j < 2; ++j) {
+                v_B[j] = R[0][j] * v[0] + R[1][j] * v[1] + R[2][j] * v[2];
+                F_B[j] = -ef[1] * T_C * v_B[j];
+            }
+            for (i = 0; i < 3; ++i) {
+                F[i] = F[i] + (R[i][0] * F_B[0] + R[i][1] * F_B[1]);
+            }
+        }
+    }
+
+    /* p_t'' = rho (e_d delta'' + e_x xi'' + c2) */
+    for (i = 0; i < 3; ++i) {
+        c2[i] = -e[i] * (dd * dd) + 2.0 * e_dx[i] * (dd * dx) + e_xx[i] * (dx * dx);
+    }
+    cross(w, w_x_pe, w_w_pe);
+    for (i = 0; i < 3; ++i) {
+        R_wwpe[i] = R[i][0] * w_w_pe[0] + R[i][1] * w_w_pe[1] + R[i][2] * w_w_pe[2];
+    }
+    {
+        const double g_C[3] = {0.0, -g * sin(alpha), -g * cos(alpha)};
+        for (i = 0; i < 3; ++i) {
+            rhs[i] = R[i][2] * T_C + m * g_C[i] + F[i] - m * rho * c2[i] + m * R_wwpe[i];
+        }
+    }
+    for (i = 0; i < 3; ++i) {
+        Jw[i] = J[3 * i] * w[0] + J[3 * i + 1] * w[1] + J[3 * i + 2] * w[2];
+    }
+    cross(w, Jw, wJw);
+    for (i = 0; i < 3; ++i) { /* tau_M = Alloc[1:] T (paper eqs. 6, 8) */
+        const double *a = Al + 4 * i;
+        const double tau_M = a[0] * T[0] + a[1] * T[1] + a[2] * T[2] + a[3] * T[3];
+        rhs[3 + i] = tau_M - wJw[i] + tau[i];
+    }
+
+    /* A (delta'', xi'', omega', f_t) = rhs */
+    for (i = 0; i < 3; ++i) {
+        RT_e[i] = R[0][i] * e[0] + R[1][i] * e[1] + R[2][i] * e[2];
+    }
+    cross(p_e, RT_e, pe_RTe); /* = RT_e @ skew(p_e)^T */
+    {
+        /* skew(p_e), [p_e x], for the (m R) [p_e x] block of eq. 9 */
+        const double S[3][3] = {{0.0, -p_e[2], p_e[1]}, {p_e[2], 0.0, -p_e[0]},
+                                {-p_e[1], p_e[0], 0.0}};
+        for (i = 0; i < 3; ++i) {
+            const double mR[3] = {m * R[i][0], m * R[i][1], m * R[i][2]};
+            A[i][0] = m * rho * e_d[i];
+            A[i][1] = m * rho * e_x[i];
+            for (j = 0; j < 3; ++j) {
+                A[i][2 + j] = mR[0] * S[0][j] + mR[1] * S[1][j] + mR[2] * S[2][j];
+                A[3 + i][2 + j] = J[3 * i + j];
+            }
+            A[i][5] = e[i];
+            A[3 + i][0] = 0.0;
+            A[3 + i][1] = 0.0;
+            A[3 + i][5] = pe_RTe[i];
+        }
+    }
+    if (solve6(A, rhs, sol)) {
+        return 1;
+    }
+
+    /* Euler-angle rates from body rates (Z-Y-X) */
+    {
+        const double sp = sin(phi), cp = cos(phi), ct = cos(theta), tt = tan(theta);
+        const double a = sp * w[1] + cp * w[2];
+        z_dot[0] = dd;
+        z_dot[1] = dx;
+        z_dot[2] = sol[0];
+        z_dot[3] = sol[1];
+        z_dot[4] = w[0] + a * tt;
+        z_dot[5] = cp * w[1] - sp * w[2];
+        z_dot[6] = a / ct - dx;
+        z_dot[7] = sol[2];
+        z_dot[8] = sol[3];
+        z_dot[9] = sol[4];
+    }
+    for (k = 0; k < n_eff; ++k) {
+        const double *ef = p + P_EFF + EFF_STRIDE * k;
+        if ((int)ef[0] == FX_MOTOR_LAG) { /* T_actual' = (T_cmd - T_actual) / tau */
+            const int s0 = (int)ef[3];
+            for (j = 0; j < 4; ++j) {
+                z_dot[s0 + j] = (u[j] - z[s0 + j]) / ef[1];
+            }
+        }
+    }
+    *tension = sol[5];
+    if (T_out != NULL) {
+        for (j = 0; j < 4; ++j) {
+            T_out[j] = T[j];
+        }
+    }
+    return 0;
+}
+
+/*
+ * One classical RK4 step of length dt (s) with the input u held (zero-order hold):
+ * x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), in the operation order of
+ * gainsched.sim.loop._rk4. *tension receives f_t at the start of the step (x). Returns 0,
+ * 1 if a model evaluation was singular, 2 if n_z exceeds MAX_Z.
+ */
+int gs_plant_rk4(const double *p, const double *x, const double *u, double alpha, double dt,
+                 double *x_next, double *tension)
+{
+    const int n = (int)p[P_NZ];
+    double k1[MAX_Z], k2[MAX_Z], k3[MAX_Z], k4[MAX_Z], xs[MAX_Z], ten;
+    const double h2 = 0.5 * dt, h6 = dt / 6.0;
+    int i;
+    if (n > MAX_Z || n < N_BASE) {
+        return 2;
+    }
+    if (gs_plant_eval(p, x, u, alpha, k1, tension, NULL)) {
+        return 1;
+    }
+    for (i = 0; i < n; ++i) {
+        xs[i] = x[i] + h2 * k1[i];
+    }
+    if (gs_plant_eval(p, xs, u, alpha, k2, &ten, NULL)) {
+        return 1;
+    }
+    for (i = 0; i < n; ++i) {
+        xs[i] = x[i] + h2 * k2[i];
+    }
+    if (gs_plant_eval(p, xs, u, alpha, k3, &ten, NULL)) {
+        return 1;
+    }
+    for (i = 0; i < n; ++i) {
+        xs[i] = x[i] + dt * k3[i];
+    }
+    if (gs_plant_eval(p, xs, u, alpha, k4, &ten, NULL)) {
+        return 1;
+    }
+    for (i = 0; i < n; ++i) {
+        x_next[i] = x[i] + h6 * (((k1[i] + 2.0 * k2[i]) + 2.0 * k3[i]) + k4[i]);
+    }
+    return 0;
+}

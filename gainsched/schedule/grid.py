@@ -1,0 +1,364 @@
+"""The grid sweep: nominal, linearisation, periodic LQR at every (speed, tilt) circle.
+
+One job per speed (in config order, so results are deterministic, and on
+pinned numerics, so they are the same on every machine: :mod:`.reproducible`);
+inside a job every tilt is solved at once as a batch. The step count per
+period is ``N = 2 round(T / (2 dt))`` (even, so that the symmetry maps land on
+steps) and the discretisation uses ``dt_k = T / N``, within 0.15 % of the
+control period on the paper grid. The linearisation is exact at 64-128
+azimuths and carried to every step by trigonometric interpolation, checked
+to 1e-10 (:func:`discrete_system`); tilt-0 circles, time-invariant, are solved
+by the DARE. Gains at the azimuth grid are interpolated linearly between the
+two steps that bracket each grid azimuth; only those steps' gains are kept,
+so memory does not grow with the number of steps.
+
+A circle with any infeasible sample (slack, thrust limits, trim failure) has
+no gains: NaN in K, and the reason bits say why.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+from joblib import Parallel, cpu_count, delayed
+
+from ..constants import TILT_BATCH, Reason
+from ..model.reduced import Model
+from ..native.reproducible import (
+    blas_single_thread,
+    children_ignore_sigint,
+    ensure_blas_single_thread,
+    pin_available,
+    pinned_executor,
+    process_pinned,
+)
+from .linearize import discretize, jacobians, lqr_system
+from .lqr import dlqr, periodic_lqr, spectral_radius
+from .nominal import circle_nominal
+from .path import period
+from .trim import TrimError
+
+__all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "steps_per_period",
+           "discrete_system", "periodic_interp", "LIN_TOL"]
+
+#: relative accuracy demanded of the interpolated linearisation (see discrete_system)
+LIN_TOL = 1e-10
+
+
+def steps_per_period(speed: float, r: float, dt: float) -> int:
+    """Even number of control steps closest to one period."""
+    return max(2, 2 * int(round(period(speed, r) / (2 * dt))))
+
+
+@dataclass(frozen=True)
+class CircleSolution:
+    """Everything the table needs for one speed, all tilts (leading axis: tilt).
+
+    Attributes
+    ----------
+    K : (n_a, n_xi, 4, n) gains at the grid azimuths (NaN if infeasible)
+    S : (n_a, n_xi, n, n) cost-to-go at the grid azimuths
+    u_d : (n_a, n_xi, 4) N; phi_d : (n_a, n_xi) rad; tension : (n_a, n_xi) N
+    reasons : (n_a, n_xi) uint8
+    spectral_radius : (n_a,) closed-loop monodromy spectral radius (NaN if infeasible)
+    sweeps : (n_a,) int
+    lin_samples : (n_a,) int   azimuths of exact linearisation (see :func:`discrete_system`)
+    lin_error : (n_a,) float   its interpolation check; steps : int; dt : float, s
+    """
+
+    K: np.ndarray
+    S: np.ndarray
+    u_d: np.ndarray
+    phi_d: np.ndarray
+    tension: np.ndarray
+    reasons: np.ndarray
+    spectral_radius: np.ndarray
+    sweeps: np.ndarray
+    lin_samples: np.ndarray
+    lin_error: np.ndarray
+    steps: int
+    dt: float
+
+
+def _sample_steps(N, n_xi):
+    """Steps bracketing the grid azimuths 2 pi j / n_xi and the linear weights.
+
+    Returns ``(steps, lo, hi, w)``: the distinct steps to keep, and for every grid
+    azimuth the indices into ``steps`` of its two bracketing steps and the weight of
+    the upper one.
+    """
+    pos = np.arange(n_xi) * (N / n_xi)
+    k = np.floor(pos).astype(int)
+    steps, inv = np.unique(np.concatenate([k, (k + 1) % N]), return_inverse=True)
+    return steps, inv[:n_xi], inv[n_xi:], pos - k
+
+
+def _sample(X, lo, hi, w):
+    """Linear interpolation along axis 1 between the kept steps (see :func:`_sample_steps`)."""
+    w = w.reshape((1, w.size) + (1,) * (X.ndim - 2))
+    return (1 - w) * X[:, lo] + w * X[:, hi]
+
+
+def _discrete_at(model, speed, tilts, n, dt):
+    """Zero-order-hold LQR system at ``n`` equally spaced steps of the circle, all tilts."""
+    zs, us = [], []
+    for a in tilts:
+        nom = circle_nominal(model, speed, a, n)
+        zs.append(nom.z)
+        us.append(nom.u)
+    A, B = jacobians(model, np.stack(zs), np.stack(us), np.asarray(tilts)[:, None])
+    return discretize(*lqr_system(A, B), dt)
+
+
+def _rel_err(X, Y, offset=None):
+    scale = np.abs(Y if offset is None else Y - offset).max()
+    return np.abs(X - Y).max() / scale if scale > 0 else np.abs(X - Y).max()
+
+
+def periodic_interp(X, N):
+    """Trigonometric interpolation of M equally spaced samples of periodic functions to N.
+
+    The same interpolant as ``scipy.signal.resample(X, N, axis=1)`` (for even M < N:
+    the Nyquist term split evenly between +M/2 and -M/2), evaluated as one matrix
+    product of the N x M basis ``cos(j theta_k), sin(j theta_k)`` with the Fourier
+    coefficients. The FFT of length N that resample does costs more than the product
+    at every control rate tried and grows faster than N when N has large prime
+    factors (N is the step count per period, not a chosen length); the product is
+    linear in N. Angles are reduced exactly in integers (``j k mod N``), so the basis
+    is accurate to rounding.
+
+    Parameters
+    ----------
+    X : ndarray, shape (b, M, ...)   samples at azimuths 2 pi m / M, M even
+    N : int   number of output samples, N > M
+
+    Returns
+    -------
+    ndarray, shape (b, N, ...)   values at azimuths 2 pi k / N (a view; the steps are the
+        slowest axis in memory, the points next: each step's blocks are contiguous)
+    """
+    b, M = X.shape[:2]
+    h = M // 2
+    Y = np.moveaxis(X, 1, 0).reshape(M, -1)
+    F = np.fft.rfft(Y, axis=0) / M  # (h + 1, R)
+    coef = np.concatenate([F[:1].real, 2.0 * F[1:h].real, F[h:].real, -2.0 * F[1:h].imag])
+    r = (np.arange(N)[:, None] * np.arange(h + 1)[None, :]) % N  # j k mod N, exact
+    angle = 2.0 * np.pi / N * np.arange(N)
+    basis = np.concatenate([np.cos(angle)[r], np.sin(angle)[r[:, 1:h]]], axis=1)
+    out = (basis @ coef).reshape((N, b) + X.shape[2:])
+    return np.moveaxis(out, 0, 1)
+
+
+def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
+    """``(A_d, B_d)`` of the LQR system at the N control steps of one period (batched).
+
+    The nominal, and hence every entry of A_k and B_k, is an analytic periodic
+    function of the azimuth, so its Fourier series converges exponentially: the
+    exact (complex-step) Jacobians and their exact discretisation are computed at
+    ``M`` equally spaced azimuths and carried to the N steps by trigonometric
+    interpolation (:func:`periodic_interp`). M doubles from ``m0`` until the
+    interpolation from M/2 samples reproduces the M samples to ``tol`` (relative to
+    ``|A_d - I|`` and ``|B_d|``); the M-sample interpolation is then used, whose error
+    is smaller still. On the paper grid M = 64 gives 2e-15. With ``N <= M`` the
+    steps are computed directly.
+
+    Returns
+    -------
+    A_d : ndarray (n_a, N, n, n); B_d : ndarray (n_a, N, n, 4); M : int (N if direct);
+    err : float   the last interpolation check (0 if direct)
+    """
+    if N <= 2 * m0:
+        Ad, Bd = _discrete_at(model, speed, tilts, N, dt)
+        return Ad, Bd, N, 0.0
+    # [A_d | B_d] side by side, so that one interpolation carries both
+    M = m0
+    AB_M = np.concatenate(_discrete_at(model, speed, tilts, M, dt), axis=-1)
+    n = AB_M.shape[-2]
+    I = np.eye(n)
+    while True:
+        if 2 * M >= N:
+            Ad, Bd = _discrete_at(model, speed, tilts, N, dt)
+            return Ad, Bd, N, 0.0
+        AB_2M = np.concatenate(_discrete_at(model, speed, tilts, 2 * M, dt), axis=-1)
+        AB = periodic_interp(AB_M, 2 * M)
+        err = max(_rel_err(AB[..., :n], AB_2M[..., :n], I),
+                  _rel_err(AB[..., n:], AB_2M[..., n:]))
+        M, AB_M = 2 * M, AB_2M
+        if err <= tol:
+            AB = periodic_interp(AB_M, N)
+            return AB[..., :n], AB[..., n:], M, err
+
+
+def _tilt0(model, config, speed, N, dt, Qx):
+    """Tilt 0: the circle's linearisation is the same at every azimuth (rotation
+    about the vertical), so the periodic problem is time-invariant and its solution is
+    the DARE's, exactly. Returns ``K (4, n), S (n, n), spectral radius``."""
+    Ad, Bd = _discrete_at(model, speed, [0.0], 1, dt)
+    K, S, E = dlqr(Ad[0, 0], Bd[0, 0], Qx, config.control.R)
+    return K, S, float(np.abs(E).max()) ** N
+
+
+def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=True):
+    """Periodic LQR for one speed at all ``tilts`` (rad, batched).
+
+    Returns a :class:`CircleSolution` (and, with ``keep_steps``, the per-step
+    ``(Ad, Bd, K)`` of the tilts solved by the periodic recursion, for checks).
+    ``dare_tilt0`` solves tilt-0 circles by the DARE (see :func:`_tilt0`); with
+    ``keep_steps`` every tilt goes through the periodic recursion.
+    """
+    model = Model(config)
+    tilts = np.asarray(tilts, dtype=float)
+    n_xi = config.grid.azimuth_samples
+    N = steps_per_period(speed, model.r, config.control.dt)
+    dt = period(speed, model.r) / N
+    n_a = tilts.size
+
+    bad = np.zeros(n_a, dtype=np.uint8)
+    n = model.n_z + 1
+    K = np.full((n_a, n_xi, 4, n), np.nan)
+    S = np.full((n_a, n_xi, n, n), np.nan)
+    radius = np.full(n_a, np.nan)  # closed-loop spectral radius per tilt
+    sweeps = np.zeros(n_a, dtype=np.int32)
+    lin_samples = np.zeros(n_a, dtype=np.int32)
+    lin_error = np.full(n_a, np.nan)
+    u_d = np.full((n_a, n_xi, 4), np.nan)
+    phi_d = np.full((n_a, n_xi), np.nan)
+    tension = np.full((n_a, n_xi), np.nan)
+    reasons = np.full((n_a, n_xi), Reason.TRIM_FAILED, dtype=np.uint8)
+    for i, a in enumerate(tilts):
+        try:
+            # feasibility is checked on the nominal at every control step
+            bad[i] = np.bitwise_or.reduce(circle_nominal(model, speed, a, N).reasons)
+            g = circle_nominal(model, speed, a, n_xi)
+        except TrimError:
+            bad[i] = Reason.TRIM_FAILED
+            continue
+        u_d[i], phi_d[i], tension[i] = g.u, g.phi, g.tension
+        elsewhere = (g.reasons == 0) & (bad[i] != 0)
+        reasons[i] = g.reasons | np.where(elsewhere, Reason.ELSEWHERE, 0).astype(np.uint8)
+    Qx = np.zeros((n, n))
+    Qx[:11, :11] = config.control.Q
+    ok = np.flatnonzero(bad == 0)
+    if dare_tilt0 and not keep_steps and config.control.terminal == "periodic":
+        for i in ok[tilts[ok] == 0.0]:
+            Ki, Si, radius[i] = _tilt0(model, config, speed, N, dt, Qx)
+            K[i], S[i] = Ki, Si
+            lin_samples[i], lin_error[i], sweeps[i] = 1, 0.0, -1  # infinite horizon
+        ok = ok[tilts[ok] != 0.0]
+    keep, lo, hi, w = _sample_steps(N, n_xi)
+    kept = []
+    for c in range(0, ok.size, TILT_BATCH):
+        idx = ok[c : c + TILT_BATCH]
+        Ad, Bd, M, err = discrete_system(model, speed, tilts[idx], N, dt)
+        lin_samples[idx], lin_error[idx] = M, err
+        sol = periodic_lqr(Ad, Bd, Qx, config.control.R, terminal=config.control.terminal,
+                           keep_S=True, steps=None if keep_steps else keep)
+        Ks, Ss = sol.K, sol.S
+        if keep_steps:  # every step was kept: pick the grid's bracketing steps
+            Ks, Ss = Ks[:, keep], Ss[:, keep]
+            kept.append((Ad, Bd, sol.K))
+        K[idx] = _sample(Ks, lo, hi, w)
+        S[idx] = _sample(Ss, lo, hi, w)
+        radius[idx] = spectral_radius(sol.Phi)
+        sweeps[idx] = sol.sweeps
+    steps = tuple(np.concatenate(x) for x in zip(*kept, strict=True)) if kept else None
+    out = CircleSolution(K, S, u_d, phi_d, tension, reasons, radius, sweeps, lin_samples,
+                         lin_error, N, dt)
+    return (out, steps) if keep_steps else out
+
+
+@dataclass(frozen=True)
+class GridResult:
+    """The whole grid, axes (tilt, speed, xi). Arrays as in CircleSolution with a speed axis
+    after the tilt axis; ``steps`` and ``dt`` per speed."""
+
+    K: np.ndarray
+    S: np.ndarray
+    u_d: np.ndarray
+    phi_d: np.ndarray
+    tension: np.ndarray
+    reasons: np.ndarray
+    spectral_radius: np.ndarray
+    sweeps: np.ndarray
+    lin_samples: np.ndarray
+    lin_error: np.ndarray
+    steps: np.ndarray
+    dt: np.ndarray
+
+
+def _solve_speed(config, speed: float, tilts) -> CircleSolution:
+    """One job of :func:`build_grid`: all tilts of one speed, on one BLAS thread."""
+    ensure_blas_single_thread()
+    return solve_circle(config, speed, tilts)
+
+
+def _dask_active() -> bool:
+    """Whether joblib's active backend is Dask (set by ``distributed.executor``)."""
+    from joblib.parallel import get_active_backend
+
+    return type(get_active_backend()[0]).__name__.startswith("Dask")
+
+
+def _solutions(args, n_jobs, backend):
+    """Run :func:`_solve_speed` over ``args`` and yield the results in submission order.
+
+    Worker processes on this machine (the default, ``"loky"``) come from
+    :func:`~gainsched.native.reproducible.pinned_executor`: started with the pinned numerics
+    and ended by the kernel when this process dies, even by SIGKILL. A process that
+    does not run the pinned numerics (a notebook, a test) sends every job there,
+    also for the ``sequential`` and ``threading`` backends, so that the table bits
+    never depend on the calling process. joblib runs the jobs on Dask, and in this
+    process for ``sequential``, ``threading`` or one job when it is pinned.
+    """
+    dask = backend == "dask" or (backend is None and _dask_active())
+    here = (process_pinned() or not pin_available()) and (
+        backend in ("sequential", "threading") or n_jobs == 1
+    )
+    if dask or here:
+        par = Parallel(n_jobs=n_jobs, backend=backend, return_as="generator")
+        yield from par(delayed(_solve_speed)(*a) for a in args)
+        return
+    n = n_jobs if n_jobs > 0 else max(1, cpu_count() + 1 + n_jobs)
+    n = 1 if backend == "sequential" else min(n, len(args))
+    with children_ignore_sigint():  # the workers (and loky's tracker) start in here
+        pool = pinned_executor(n)
+        futures = [pool.submit(_solve_speed, *a) for a in args]
+    try:
+        for f in futures:
+            yield f.result()
+    except BaseException:  # Ctrl-C, an error, a closed generator: stop the workers now
+        pool.shutdown(wait=False, kill_workers=True)
+        raise
+
+
+def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
+    """Sweep all speeds (one job each) and assemble the grid.
+
+    The result does not depend on ``n_jobs``, ``backend`` or the machine's CPU
+    family (:mod:`gainsched.native.reproducible`).
+
+    Parameters
+    ----------
+    config : Config
+    n_jobs : int
+        Workers (-1: all cores).
+    progress : callable(int) or None
+        Called with 1 after each finished speed (e.g. ``tqdm.update``).
+    backend : str, optional
+        joblib backend name (``"loky"``, ``"threading"``, ``"sequential"``, ``"dask"``).
+    """
+    speeds = config.grid.speeds
+    tilts = config.grid.tilts
+    args = [(config, float(v), tilts) for v in speeds]
+    sols = []
+    with blas_single_thread():
+        for s in _solutions(args, n_jobs, backend):
+            sols.append(s)
+            if progress is not None:
+                progress(1)
+
+    per_tilt = {f.name: np.stack([getattr(s, f.name) for s in sols], axis=1)
+                for f in fields(CircleSolution) if f.name not in ("steps", "dt")}
+    return GridResult(**per_tilt, steps=np.array([s.steps for s in sols]),
+                      dt=np.array([s.dt for s in sols]))

@@ -1,0 +1,115 @@
+"""Linearisation along the nominal and zero-order-hold discretisation (paper Sec. IV.B).
+
+Jacobians are exact: complex-step differentiation of the batched model
+(``f(z + i h e_j)`` has imaginary part ``h df/dz_j`` to rounding, no
+subtractive cancellation). The LQR state appends the integral of the delta
+error after the ten reduced states (paper Sec. IV.B); effect states follow.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import N_STATE
+
+__all__ = [
+    "jacobians",
+    "lqr_system",
+    "discretize",
+    "expm_batched",
+    "lqr_state_names",
+    "STATE_NAMES",
+    "INPUT_NAMES",
+]
+
+STATE_NAMES = ("delta", "xi", "delta_dot", "xi_dot", "phi", "theta", "chi",
+               "omega_x", "omega_y", "omega_z", "int_delta")
+INPUT_NAMES = ("T1", "T2", "T3", "T4")
+_H = 1e-30
+
+
+def jacobians(model, z, u, alpha):
+    """Exact ``A = df/dz`` and ``B = df/du`` by complex steps.
+
+    Parameters
+    ----------
+    z : ndarray, shape (..., n_z); u : ndarray, shape (..., 4), N; alpha : float or ndarray, rad
+
+    Returns
+    -------
+    A : ndarray, shape (..., n_z, n_z); B : ndarray, shape (..., n_z, 4)
+    """
+    z = np.asarray(z, dtype=float)
+    u = np.asarray(u, dtype=float)
+    n_z, shape = z.shape[-1], np.broadcast_shapes(z.shape[:-1], u.shape[:-1])
+    # one batched evaluation for all perturbation directions: axis -2 enumerates them
+    dz = np.concatenate([np.eye(n_z), np.zeros((4, n_z))]) * (1j * _H)
+    du = np.concatenate([np.zeros((n_z, 4)), np.eye(4)]) * (1j * _H)
+    zc = np.broadcast_to(z[..., None, :], shape + (n_z + 4, n_z)) + dz
+    uc = np.broadcast_to(u[..., None, :], shape + (n_z + 4, 4)) + du
+    a = np.asarray(alpha)[..., None] if np.ndim(alpha) else alpha
+    J = np.imag(model.f(zc, uc, a)) / _H  # (..., n_z + 4, n_z): row j = d f / d x_j
+    J = np.swapaxes(J, -1, -2)
+    return J[..., :n_z], J[..., n_z:]
+
+
+def lqr_system(A, B):
+    """Augment with the delta integrator: LQR state ``(s[0:10], int delta, effect states)``.
+
+    Returns ``(A_x, B_x)`` of shapes (..., n, n) and (..., n, 4), n = n_z + 1.
+    """
+    n_z = A.shape[-1]
+    n = n_z + 1
+    perm = list(range(N_STATE)) + list(range(N_STATE, n_z))  # z index -> x index (skip 10)
+    idx = [i if i < N_STATE else i + 1 for i in perm]
+    Ax = np.zeros(A.shape[:-2] + (n, n))
+    Bx = np.zeros(B.shape[:-2] + (n, B.shape[-1]))
+    Ax[..., np.ix_(idx, idx)[0], np.ix_(idx, idx)[1]] = A
+    Bx[..., idx, :] = B
+    Ax[..., N_STATE, 0] = 1.0  # d/dt int(delta - delta_d) = delta error
+    return Ax, Bx
+
+
+def lqr_state_names(model):
+    """Names of the LQR state entries (11 plus effect states)."""
+    extra = [f"{e.kind}_{i}" for e in model.effects for i in range(e.n_states)]
+    return STATE_NAMES + tuple(extra)
+
+
+_TAYLOR_DEGREE = 14
+
+
+def expm_batched(M):
+    """Matrix exponential of a batch (..., n, n) by scaling and squaring a Taylor series.
+
+    scipy.linalg.expm accepts batches but picks a Pade degree and scaling per
+    matrix; one scaling for the whole batch keeps everything in a few batched
+    matmuls (about 2x faster than scipy's batched expm on these 15 x 15 blocks,
+    ``make bench``). With
+    ``||M / 2^s||_1 <= 1/2`` the truncation error of degree 14 is below
+    ``0.5^15 / 15! ~ 2e-17`` relative, i.e. rounding level (checked against
+    scipy's expm in the tests).
+    """
+    norm = np.abs(M).sum(-2).max() if M.size else 0.0
+    s = max(0, int(np.ceil(np.log2(norm / 0.5)))) if norm > 0.5 else 0
+    X = M / 2.0**s
+    n = M.shape[-1]
+    E = np.broadcast_to(np.eye(n), M.shape).copy()
+    for k in range(_TAYLOR_DEGREE, 0, -1):  # Horner: I + X/1 (I + X/2 (I + ...))
+        E = np.eye(n) + (X @ E) / k
+    for _ in range(s):
+        E = E @ E
+    return E
+
+
+def discretize(A, B, dt):
+    """Zero-order hold: ``expm([[A, B], [0, 0]] dt)`` (batched, see :func:`expm_batched`).
+
+    Returns ``(A_d, B_d)`` with the shapes of ``A`` and ``B``.
+    """
+    n, m = A.shape[-1], B.shape[-1]
+    M = np.zeros(A.shape[:-2] + (n + m, n + m))
+    M[..., :n, :n] = A * dt
+    M[..., :n, n:] = B * dt
+    E = expm_batched(M)
+    return E[..., :n, :n], E[..., :n, n:]

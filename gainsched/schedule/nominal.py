@@ -1,0 +1,120 @@
+"""Nominal trajectories on great circles (paper Sec. III).
+
+An :class:`~gainsched.schedule.path.AzimuthPath` is the azimuth profile xi(t) with four
+derivatives. From it,
+:func:`nominal_from_path` builds the nominal state and input ``(s_d, u_d)``:
+
+- closed form (:mod:`gainsched.schedule.closedform`) when every effect is a pure COG
+  velocity drag;
+- otherwise :mod:`gainsched.schedule.trim` solves the same model numerically.
+
+The nominal keeps ``delta = pi/2``, ``theta = chi = 0``, ``psi = xi``; the roll
+phi carries the tangential force balance and the tether carries the radial one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import REASONS, Reason
+from .closedform import closed_form
+from .path import AzimuthPath, circle_path, period
+from .trim import trim_path
+
+__all__ = [
+    "Nominal",
+    "nominal_from_path",
+    "circle_nominal",
+    "feasibility_reasons",
+    "REASONS",
+    "min_taut_speed",
+]
+
+
+
+@dataclass(frozen=True)
+class Nominal:
+    """A nominal trajectory.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,), s
+    z : ndarray, shape (N, n_z)
+        Nominal full state (reduced state plus effect states).
+    z_dot : ndarray, shape (N, n_z)
+        Its time derivative (from the path, independent of the model's solve).
+    u : ndarray, shape (N, 4), N
+        Nominal commanded motor thrusts.
+    tension : ndarray, shape (N,), N
+    alpha : float, rad
+    reasons : ndarray of uint8, shape (N,)
+        Feasibility reason bits (0 = feasible), see :data:`REASONS`.
+    """
+
+    t: np.ndarray
+    z: np.ndarray
+    z_dot: np.ndarray
+    u: np.ndarray
+    tension: np.ndarray
+    alpha: float
+    reasons: np.ndarray
+
+    @property
+    def phi(self):
+        """Nominal roll, rad."""
+        return self.z[:, 4]
+
+    @property
+    def collective(self):
+        """Nominal collective thrust (commanded), N."""
+        return self.u.sum(-1)
+
+    @property
+    def feasible(self):
+        return self.reasons == 0
+
+
+def feasibility_reasons(config, u, tension) -> np.ndarray:
+    """Reason bits per sample: tension margin and per-motor thrust limits (with margin)."""
+    f, v = config.feasibility, config.vehicle
+    bits = np.zeros(np.shape(tension), dtype=np.uint8)
+    bits |= np.where(tension < f.min_tension, Reason.SLACK, 0).astype(np.uint8)
+    low, high = v.thrust_min + f.thrust_margin, v.thrust_max - f.thrust_margin
+    bits |= np.where(np.any(u < low, -1), Reason.THRUST_LOW, 0).astype(np.uint8)
+    bits |= np.where(np.any(u > high, -1), Reason.THRUST_HIGH, 0).astype(np.uint8)
+    return bits
+
+
+def nominal_from_path(model, path: AzimuthPath, alpha: float, *,
+                      periodic: bool | None = None) -> Nominal:
+    """Nominal (state, input, tension, feasibility) along ``path`` at tilt ``alpha`` (rad).
+
+    Uses the closed form when the model's effects allow it, otherwise the
+    numerical trim of :mod:`gainsched.schedule.trim` (``periodic`` selects the Fourier
+    collocation for whole constant-speed circles; default: inferred).
+    """
+    D = model.closed_form_drag()
+    if D is not None:
+        z, zdot, u, tension = closed_form(model, path, alpha, D)
+    else:
+        z, zdot, u, tension = trim_path(model, path, alpha, periodic=periodic)
+    reasons = feasibility_reasons(model.config, u, tension)
+    return Nominal(path.t, z, zdot, u, tension, float(alpha), reasons)
+
+
+def circle_nominal(model, speed: float, alpha: float, n: int, xi0: float = 0.0) -> Nominal:
+    """Nominal over one period of a constant-speed circle, sampled at ``n`` equal steps.
+
+    Sample k is at ``t = k T / n`` and ``xi = xi0 + sign(speed) 2 pi k / n``.
+    """
+    T = period(speed, model.r)
+    t = np.arange(n) * (T / n)
+    return nominal_from_path(model, circle_path(speed, model.r, t, xi0), alpha, periodic=True)
+
+
+def min_taut_speed(config, alpha: float) -> float:
+    """Lowest constant speed (m/s) keeping tension >= min_tension at every azimuth (eq. 19)."""
+    r, m = config.radius, config.vehicle.mass
+    return float(np.sqrt(r * (config.feasibility.min_tension / m + config.g * np.sin(abs(alpha)))))

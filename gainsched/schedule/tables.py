@@ -1,0 +1,350 @@
+"""Gain tables on disk (HDF5): layout in ``docs/table-format.md``.
+
+Tables are written into an in-memory HDF5 image (no timestamps, fixed
+creation order) and then atomically renamed into place, so the same config
+gives byte-identical files and an interrupted build leaves the old file intact.
+
+Integrity: every dataset carries the SHA-256 of its dtype, shape and bytes
+(attribute ``sha256``) and the root carries ``data_sha256`` over those and the
+root attributes, so :func:`load_table` (and with it ``inspect``, ``check``,
+``export-c``, ``simulate``) refuses a file whose data changed after the build,
+naming the dataset. Gains, nominal thrusts and roll must be finite at every
+feasible point.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from .. import __version__
+from ..config import N_LQR
+from ..constants import REASONS
+from ..errors import InputError
+from ..publish import write_atomic
+from .linearize import INPUT_NAMES, lqr_state_names
+
+__all__ = ["SCHEMA", "Table", "table_bytes", "write_table", "load_table", "table_from_bytes"]
+
+SCHEMA = "gainsched-table/1"
+
+
+@dataclass(frozen=True)
+class Table:
+    """A loaded gain table (fundamental domain: tilt >= 0, xi_dot > 0).
+
+    Attributes
+    ----------
+    xi : (n_xi,) rad, uniform on [0, 2 pi); speed : (n_v,) m/s; xi_dot : (n_v,) rad/s
+    tilt : (n_a,) rad, tilt[0] == 0
+    K_tilt0 : (n_v, 4, n) gains at tilt 0 (independent of xi)
+    K : (n_a - 1, n_v, n_xi, 4, n) gains at tilt[1:]
+    u_d : (n_a, n_v, n_xi, 4) N; phi_d : (n_a, n_v, n_xi) rad; tension : (n_a, n_v, n_xi) N
+    reasons : (n_a, n_v, n_xi) uint8 (0 = feasible)
+    spectral_radius : (n_a, n_v); Q : (n, n); R : (4, 4); dt : (n_v,) s
+    config_text : str; config_sha256 : str; attrs : dict
+    """
+
+    xi: np.ndarray
+    speed: np.ndarray
+    xi_dot: np.ndarray
+    tilt: np.ndarray
+    K_tilt0: np.ndarray
+    K: np.ndarray
+    u_d: np.ndarray
+    phi_d: np.ndarray
+    tension: np.ndarray
+    reasons: np.ndarray
+    spectral_radius: np.ndarray
+    Q: np.ndarray
+    R: np.ndarray
+    dt: np.ndarray
+    config_text: str
+    config_sha256: str
+    attrs: dict
+    source: str = ""
+
+    @property
+    def name(self) -> str:
+        return str(self.attrs["config_name"])
+
+    def K_full(self) -> np.ndarray:
+        """Gains on the regular grid (n_a, n_v, n_xi, 4, n), tilt-0 slice broadcast over xi."""
+        k0 = np.broadcast_to(self.K_tilt0[:, None], (1, *self.K.shape[1:]))
+        return np.concatenate([k0, self.K], axis=0)
+
+
+def _create(group, name, data, units=None, doc=None):
+    ds = group.create_dataset(name, data=data, track_times=False)
+    if units is not None:
+        ds.attrs["units"] = units
+    if doc is not None:
+        ds.attrs["description"] = doc
+    return ds
+
+
+def _group(parent, name):
+    """A group without modification times (h5py's create_group always tracks them)."""
+    gcpl = h5py.h5p.create(h5py.h5p.GROUP_CREATE)
+    gcpl.set_obj_track_times(False)
+    gid = h5py.h5g.create(parent.id, name.encode(), gcpl=gcpl)
+    return h5py.Group(gid)
+
+
+def _dataset_sha256(value) -> str:
+    """SHA-256 of a dataset's value: a header (dtype and shape), then the bytes."""
+    if isinstance(value, str | bytes):
+        head, raw = "bytes", value.encode() if isinstance(value, str) else value
+    else:
+        a = np.asarray(value)
+        a = np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<"))
+        head, raw = f"{a.dtype.str}{a.shape}", a.tobytes()
+    return hashlib.sha256(head.encode() + b"\0" + raw).hexdigest()
+
+
+def _root_sha256(attrs, digests) -> str:
+    """SHA-256 over the root attributes (but data_sha256) and every dataset's digest."""
+    h = hashlib.sha256()
+    for k in sorted(attrs):
+        if k != "data_sha256":
+            v = attrs[k]
+            h.update(f"{k}={v.decode() if isinstance(v, bytes) else v!r}\0".encode())
+    for name in sorted(digests):
+        h.update(f"{name}:{digests[name]}\0".encode())
+    return h.hexdigest()
+
+
+def _datasets(f) -> dict:
+    out = {}
+    f.visititems(lambda name, obj: out.__setitem__(name, obj) if isinstance(obj, h5py.Dataset)
+                 else None)
+    return out
+
+
+def table_bytes(config, grid, model) -> bytes:
+    """Serialise a built grid (``grid.GridResult``) to HDF5 bytes, deterministically."""
+    speeds, tilts = config.grid.speeds, config.grid.tilts
+    n_xi = config.grid.azimuth_samples
+    n = grid.K.shape[-1]
+    Qx = np.zeros((n, n))
+    Qx[:11, :11] = config.control.Q
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    fapl.set_fapl_core(backing_store=False)
+    fapl.set_libver_bounds(h5py.h5f.LIBVER_V18, h5py.h5f.LIBVER_V18)
+    fcpl = h5py.h5p.create(h5py.h5p.FILE_CREATE)
+    fcpl.set_obj_track_times(False)  # the root group would otherwise carry its creation time
+    fid = h5py.h5f.create(b"gainsched-table", h5py.h5f.ACC_TRUNC, fapl=fapl, fcpl=fcpl)
+    with h5py.File(fid) as f:
+        a = f.attrs
+        a["schema"] = SCHEMA
+        a["tool_version"] = __version__
+        a["config_name"] = config.name
+        a["config_sha256"] = config.sha256
+        a["terminal"] = config.control.terminal
+        a["rate_hz"] = config.control.rate_hz
+        a["radius_m"] = config.radius
+        a["state_names"] = ",".join(lqr_state_names(model))
+        a["input_names"] = ",".join(INPUT_NAMES)
+        a["control_law"] = "u = u_d - K (x - x_d); xi error wrapped to [-pi, pi)"
+        _create(f, "config_text", config.text)
+        ax = _group(f, "axes")
+        _create(ax, "xi", 2 * np.pi * np.arange(n_xi) / n_xi, "rad", "azimuth, uniform, periodic")
+        _create(ax, "speed", speeds, "m/s", "tangential COG speed")
+        _create(ax, "xi_dot", speeds / config.radius, "rad/s", "azimuth rate = speed / (rho + L_e)")
+        _create(ax, "tilt", tilts, "rad", "circle tilt alpha_C; tilt[0] = 0")
+        g = _group(f, "gains")
+        _create(
+            g, "K_tilt0", grid.K[0, :, 0], "SI", "gains at tilt 0 (xi-independent), (speed, 4, n)"
+        )
+        _create(g, "K", grid.K[1:], "SI", "gains at tilt[1:], (tilt-1, speed, xi, 4, n)")
+        _create(g, "S_tilt0", grid.S[0, :, 0], "SI", "Riccati cost-to-go at tilt 0")
+        _create(g, "S", grid.S[1:], "SI", "Riccati cost-to-go at tilt[1:]")
+        nm = _group(f, "nominal")
+        _create(nm, "u_d", grid.u_d, "N", "nominal motor thrusts (tilt, speed, xi, 4)")
+        _create(nm, "phi_d", grid.phi_d, "rad", "nominal roll")
+        _create(nm, "tension", grid.tension, "N", "nominal tether tension")
+        fe = _group(f, "feasibility")
+        ds = _create(fe, "reasons", grid.reasons, None, "bit mask, 0 = feasible")
+        for bit, text in REASONS.items():
+            ds.attrs[f"bit_{bit}"] = text
+        cl = _group(f, "closed_loop")
+        _create(cl, "spectral_radius", grid.spectral_radius, "-",
+                "monodromy spectral radius per circle")
+        _create(cl, "periods", grid.sweeps, "-", "periods in the periodic terminal cost")
+        _create(cl, "steps", grid.steps, "-", "control steps per period")
+        _create(cl, "linearization_samples", grid.lin_samples, "-",
+                "azimuths of exact linearisation per circle (1: time-invariant, tilt 0)")
+        _create(cl, "linearization_error", grid.lin_error, "-",
+                "relative error check of the interpolated linearisation per circle")
+        _create(cl, "dt", grid.dt, "s", "discretisation step, period / steps")
+        w = _group(f, "weights")
+        _create(w, "Q", Qx)
+        _create(w, "R", np.asarray(config.control.R))
+        digests = {}
+        for name, ds in _datasets(f).items():
+            digests[name] = ds.attrs["sha256"] = _dataset_sha256(ds[()])
+        a["data_sha256"] = _root_sha256(dict(a), digests)
+        f.flush()
+        return f.id.get_file_image()
+
+
+def write_table(path, config, grid, model) -> int:
+    """Write the HDF5 table atomically; returns the file size in bytes."""
+    data = table_bytes(config, grid, model)
+    write_atomic(path, data)
+    return len(data)
+
+
+_REQUIRED = {
+    "axes/xi": 1, "axes/speed": 1, "axes/xi_dot": 1, "axes/tilt": 1,
+    "gains/K_tilt0": 3, "gains/K": 5, "nominal/u_d": 4, "nominal/phi_d": 3,
+    "nominal/tension": 3, "feasibility/reasons": 3, "closed_loop/spectral_radius": 2,
+    "closed_loop/dt": 1, "weights/Q": 2, "weights/R": 2, "config_text": 0,
+}
+
+
+#: root attributes every table carries (written by :func:`table_bytes`)
+_ATTRS = ("schema", "tool_version", "config_name", "config_sha256", "terminal", "rate_hz",
+          "radius_m", "state_names", "input_names", "data_sha256")
+
+
+def load_table(path) -> Table:
+    """Read and check a table file; any problem raises InputError naming the file and dataset.
+
+    Checks the schema, the data checksums (a corrupt or edited file is refused,
+    naming the dataset), shapes against the axes, and that gains, nominal thrusts
+    and roll are finite at every feasible point.
+    """
+    path = Path(path)
+    try:
+        f = h5py.File(path, "r")
+    except (OSError, ValueError) as exc:
+        raise InputError(path, "", f"not a readable HDF5 table ({exc})") from None
+    with f:
+        return _read_guarded(f, path)
+
+
+def _read_guarded(f, path) -> Table:
+    """:func:`_read`, with the errors HDF5 raises on a damaged file turned into InputError."""
+    try:
+        return _read(f, path)
+    except InputError:
+        raise
+    except (OSError, RuntimeError, ValueError, KeyError, TypeError, UnicodeError) as exc:
+        msg = " ".join(str(exc).split())[:160]
+        raise InputError(path, "", f"damaged HDF5 file ({type(exc).__name__}: {msg})") from None
+
+
+def table_from_bytes(data: bytes, source="<table>") -> Table:
+    """:func:`load_table` for an in-memory file image (e.g. from :func:`table_bytes`)."""
+    try:
+        f = h5py.File(io.BytesIO(data), "r")
+    except (OSError, ValueError) as exc:
+        raise InputError(source, "", f"not a readable HDF5 table ({exc})") from None
+    with f:
+        return _read_guarded(f, source)
+
+
+def _verify(f, path) -> None:
+    """Per-dataset and root checksums (see the module docstring)."""
+    if "data_sha256" not in f.attrs:
+        raise InputError(path, "data_sha256", "missing: the file carries no data checksum "
+                         "(built by gainsched < 0.2, or not by gainsched): rebuild it")
+    digests = {}
+    try:
+        for name, ds in _datasets(f).items():
+            want = ds.attrs.get("sha256")
+            got = digests[name] = _dataset_sha256(ds[()])
+            if want is None:
+                raise InputError(path, name, "missing its sha256 attribute")
+            if (want.decode() if isinstance(want, bytes) else str(want)) != got:
+                raise InputError(path, name, "checksum mismatch: the data changed after the "
+                                 "build (corrupt or edited file); rebuild the table")
+    except (OSError, ValueError, KeyError) as exc:
+        raise InputError(path, "", f"unreadable dataset ({exc})") from None
+    if _root_sha256(dict(f.attrs), digests) != _decoded(f.attrs["data_sha256"]):
+        raise InputError(path, "data_sha256", "checksum mismatch: attributes or datasets were "
+                         "added, removed or edited after the build; rebuild the table")
+
+
+def _decoded(v):
+    return v.decode() if isinstance(v, bytes) else v
+
+
+def _read(f, path) -> Table:
+    schema = _decoded(f.attrs.get("schema"))
+    if schema != SCHEMA:
+        raise InputError(path, "schema", f"must be {SCHEMA!r}, got {schema!r}")
+    for key in _ATTRS:
+        if key not in f.attrs:
+            raise InputError(path, key, "missing root attribute")
+    d = {}
+    for key, ndim in _REQUIRED.items():
+        if key not in f:
+            raise InputError(path, key, "missing dataset")
+        v = f[key][()]
+        if np.ndim(v) != ndim:
+            raise InputError(path, key, f"must have {ndim} dimensions, has {np.ndim(v)}")
+        d[key] = _decoded(v)
+    attrs = {k: _decoded(v) for k, v in f.attrs.items()}
+    xi, speed, tilt = d["axes/xi"], d["axes/speed"], d["axes/tilt"]
+    n_xi, n_v, n_a = xi.size, speed.size, tilt.size
+    for key, arr in (("axes/xi", xi), ("axes/speed", speed), ("axes/tilt", tilt)):
+        if arr.size == 0 or not np.all(np.isfinite(arr)) or np.any(np.diff(arr) <= 0):
+            raise InputError(path, key, "must be finite and strictly increasing")
+    if not np.allclose(xi, 2 * np.pi * np.arange(n_xi) / n_xi, rtol=0, atol=1e-12):
+        raise InputError(path, "axes/xi", "must be uniform on [0, 2 pi)")
+    if tilt[0] != 0:
+        raise InputError(path, "axes/tilt", "must start at 0")
+    if speed[0] <= 0:
+        raise InputError(path, "axes/speed", "must be positive")
+    K0, K = d["gains/K_tilt0"], d["gains/K"]
+    n = K0.shape[-1]
+    shapes = {
+        "gains/K_tilt0": (n_v, 4, n), "gains/K": (n_a - 1, n_v, n_xi, 4, n),
+        "nominal/u_d": (n_a, n_v, n_xi, 4), "nominal/phi_d": (n_a, n_v, n_xi),
+        "nominal/tension": (n_a, n_v, n_xi), "feasibility/reasons": (n_a, n_v, n_xi),
+        "closed_loop/spectral_radius": (n_a, n_v), "weights/Q": (n, n), "weights/R": (4, 4),
+        "axes/xi_dot": (n_v,), "closed_loop/dt": (n_v,),
+    }
+    for key, shape in shapes.items():
+        if d[key].shape != shape:
+            raise InputError(path, key, f"shape {d[key].shape} does not match the axes {shape}")
+    names = str(attrs["state_names"]).split(",")
+    if n < N_LQR or len(names) != n:
+        raise InputError(path, "gains/K_tilt0", f"{n} state columns; need >= {N_LQR} and one per "
+                         f"name in state_names ({len(names)})")
+    _verify(f, path)  # after the structure, so that a missing dataset is named as such
+    _check_feasible_finite(path, d, tilt, speed, xi)
+    return Table(
+        xi, speed, d["axes/xi_dot"], tilt, K0, K, d["nominal/u_d"], d["nominal/phi_d"],
+        d["nominal/tension"], d["feasibility/reasons"].astype(np.uint8),
+        d["closed_loop/spectral_radius"], d["weights/Q"], d["weights/R"], d["closed_loop/dt"],
+        str(d["config_text"]), str(attrs.get("config_sha256", "")), attrs, str(path),
+    )
+
+
+def _check_feasible_finite(path, d, tilt, speed, xi) -> None:
+    """Gains, nominal thrusts and roll must be finite at every feasible point (reasons 0)."""
+    ok = d["feasibility/reasons"] == 0  # (n_a, n_v, n_xi)
+    checks = (
+        ("gains/K_tilt0", d["gains/K_tilt0"], ok[0].any(-1), lambda i: (0, i[0], 0)),
+        ("gains/K", d["gains/K"], ok[1:], lambda i: (i[0] + 1, i[1], i[2])),
+        ("nominal/u_d", d["nominal/u_d"], ok, tuple),
+        ("nominal/phi_d", d["nominal/phi_d"], ok, tuple),
+    )
+    for key, x, feasible, point in checks:
+        extra = x.ndim - feasible.ndim
+        bad = feasible & ~np.all(np.isfinite(x), axis=tuple(range(-extra, 0)) if extra else ())
+        if np.any(bad):
+            idx = tuple(int(i) for i in np.argwhere(bad)[0])
+            a, v, k = point(idx)
+            raise InputError(path, f"{key}[{', '.join(map(str, idx))}]",
+                             f"non-finite value at a feasible point (tilt "
+                             f"{np.rad2deg(tilt[a]):g} deg, speed {speed[v]:g} m/s, azimuth "
+                             f"{np.rad2deg(xi[k]):g} deg); the table is corrupt")

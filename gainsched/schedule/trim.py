@@ -1,0 +1,215 @@
+"""Numerical trim: the nominal of any set of effects (paper Sec. III, for any effects).
+
+Along a prescribed azimuth path xi(t) the nominal keeps ``delta = pi/2``,
+``theta = chi = 0`` and leaves the roll ``phi(t)`` and the four motor thrusts
+free. At every node the model must give ``delta'' = 0``, the path's ``xi''`` and
+the ``omega'`` that eq. 16 derives from ``phi, phi', phi''``: five equations in
+five unknowns per node, coupled through ``phi'`` and ``phi''``.
+
+``phi`` is represented by its node values with a linear differentiation
+operator: a Fourier (spectral) one for whole periodic circles, a quintic
+interpolating spline for manoeuvres. Newton's method on all nodes at once; the
+local partial derivatives come from complex steps (exact to rounding), and
+the chain rule through the differentiation operators assembles the Jacobian.
+With stateful effects (motor lag) the free thrusts are the effect states (the
+actual thrusts) and the command follows from the effect's inverse.
+
+Dense linear algebra is fine: 128 periodic nodes (a few hundred spline nodes)
+give a 640 x 640 (a few thousand) system; no library offers this particular
+collocation, hence the hand-written solver.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.interpolate import make_interp_spline
+
+from ..errors import GainschedError
+from .closedform import closed_form, state_from_roll
+from .path import AzimuthPath
+
+__all__ = ["trim_path", "TrimError"]
+
+N_FOURIER = 128
+N_SPLINE_MAX = 600
+
+
+class TrimError(GainschedError):
+    """The trim did not converge."""
+
+
+def _fourier_operators(n: int, T: float):
+    """Spectral first and second derivative matrices on n equispaced nodes of period T."""
+    k = np.fft.fftfreq(n, d=T / n) * 2 * np.pi
+    if n % 2 == 0:
+        k1 = k.copy()
+        k1[n // 2] = 0.0  # the Nyquist mode has no well-defined odd derivative
+    else:
+        k1 = k
+    eye = np.eye(n)
+    F = np.fft.fft(eye, axis=0)
+    D1 = np.real(np.fft.ifft(1j * k1[:, None] * F, axis=0))
+    D2 = np.real(np.fft.ifft(-(k**2)[:, None] * F, axis=0))
+    return D1, D2
+
+
+def _fourier_eval(values, T: float, t):
+    """Evaluate the trigonometric interpolant of node values (..., n) and two derivatives at t."""
+    n = values.shape[-1]
+    c = np.fft.fft(values, axis=-1) / n
+    k = np.fft.fftfreq(n, d=1.0 / n)
+    if n % 2 == 0:  # split the Nyquist coefficient symmetrically so the interpolant is real
+        c = np.concatenate([c, c[..., n // 2 : n // 2 + 1] / 2], -1)
+        c[..., n // 2] /= 2
+        k = np.concatenate([k, [n / 2]])
+    w = 2 * np.pi * k / T
+    E = np.exp(1j * np.outer(t, w))  # (len t, n)
+    f = np.real(E @ c.T)
+    f1 = np.real(E @ (1j * w * c).T)
+    f2 = np.real(E @ (-(w**2) * c).T)
+    return f, f1, f2
+
+
+def _sub_path(path: AzimuthPath, idx) -> AzimuthPath:
+    return AzimuthPath(path.t[idx], path.xi[idx], tuple(d[idx] for d in path.d))
+
+
+def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T):
+    """Residuals (n, 5) of the node equations, and the full state and its derivative."""
+    s, sdot = state_from_roll(path, phi, dphi, ddphi)
+    n_x = model.n_extra
+    if n_x:  # stateful effects: the free thrusts are the actual thrusts (effect states)
+        z = np.concatenate([s.astype(T.dtype), T], -1)
+    else:
+        z = s.astype(np.result_type(s, T))
+    ev = model.evaluate(z, T, alpha)
+    res = np.stack(
+        [
+            ev.z_dot[:, 2],
+            ev.z_dot[:, 3] - sdot[:, 3],
+            ev.z_dot[:, 7] - sdot[:, 7],
+            ev.z_dot[:, 8] - sdot[:, 8],
+            ev.z_dot[:, 9] - sdot[:, 9],
+        ],
+        -1,
+    )
+    return res, z, sdot, ev
+
+
+def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T):
+    """d res / d(phi, phi', phi'', T1..T4) per node by complex steps, shape (n, 5, 7)."""
+    h = 1e-30
+    cols = []
+    args = [phi, dphi, ddphi]
+    for j in range(3):
+        a = [x.astype(complex) for x in args]
+        a[j] = a[j] + 1j * h
+        cols.append(np.imag(_local(model, path, alpha, *a, T.astype(complex))[0]) / h)
+    for j in range(4):
+        Tc = T.astype(complex)
+        Tc[:, j] += 1j * h
+        cols.append(
+            np.imag(_local(model, path, alpha, *[x.astype(complex) for x in args], Tc)[0]) / h
+        )
+    return np.stack(cols, -1)
+
+
+def _newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40):
+    n = phi.size
+    scale = max(1.0, float(np.abs(path.d[0]).max()) ** 2)
+    for _ in range(max_iter):
+        dphi, ddphi = D1 @ phi, D2 @ phi
+        res = _local(model, path, alpha, phi, dphi, ddphi, T)[0]
+        if np.abs(res).max() < tol * scale:
+            return phi, T
+        Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T)
+        J = np.zeros((5 * n, 5 * n))
+        for i in range(5):
+            rows = slice(i * n, (i + 1) * n)
+            J[rows, :n] = np.diag(Jl[:, i, 0]) + Jl[:, i, 1, None] * D1 + Jl[:, i, 2, None] * D2
+            for j in range(4):
+                J[rows, n * (1 + j) : n * (2 + j)] = np.diag(Jl[:, i, 3 + j])
+        step = np.linalg.solve(J, res.T.reshape(-1))
+        phi = phi - step[:n]
+        T = T - step[n:].reshape(4, n).T
+    raise TrimError(f"trim did not converge (residual {np.abs(res).max():.3g})")
+
+
+def _initial_guess(model, path, alpha):
+    """Closed-form nominal of the drag-like effects alone."""
+    from ..model.reduced import Model
+
+    drag_only = tuple(e for e in model.effects if e.tangential_drag(1.0) is not None)
+    base = Model(model.config, effects=drag_only)
+    s, _, u, _ = closed_form(base, path, alpha, base.closed_form_drag())
+    return s[:, 4], u
+
+
+def _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, tol=1e-12, max_iter=20):
+    """Per-point Newton on the four thrusts for the xi'' and omega' equations (phi fixed)."""
+    for _ in range(max_iter):
+        res = _local(model, path, alpha, phi, dphi, ddphi, T)[0][:, 1:]
+        if np.abs(res).max() < tol * max(1.0, np.abs(T).max()):
+            break
+        Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T)[:, 1:, 3:]
+        T = T - np.linalg.solve(Jl, res[..., None])[..., 0]
+    return T
+
+
+def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None = None):
+    """Nominal ``(z, z_dot, u, tension)`` along ``path`` for the model's effects.
+
+    Parameters
+    ----------
+    model : Model
+    path : AzimuthPath
+        Azimuth profile; for ``periodic=True`` the samples must cover exactly one
+        period of a constant-speed circle, equally spaced (as ``circle_nominal`` makes).
+    alpha : float, rad
+    periodic : bool, optional
+        Fourier collocation (default when the path has constant xi').
+
+    Returns
+    -------
+    z : ndarray (N, n_z); z_dot : ndarray (N, n_z); u : ndarray (N, 4), N; tension : ndarray (N,), N
+    """
+    stateful = [e for e in model.effects if e.n_states]
+    if len(stateful) > 1 or (stateful and stateful[0].n_states != 4):
+        raise TrimError("the trim supports one stateful effect whose states are the 4 thrusts")
+    xd = path.d[0]
+    if periodic is None:
+        periodic = bool(np.allclose(xd, xd[0]) and np.all(path.d[1] == 0))
+    t = path.t
+    if periodic:
+        Tp = 2 * np.pi / abs(xd[0])
+        tn = t[0] + np.arange(N_FOURIER) * (Tp / N_FOURIER)
+        xi_n = path.xi[0] + xd[0] * (tn - t[0])
+        z0 = np.zeros_like(tn)
+        nodes = AzimuthPath(tn, xi_n, (np.full_like(tn, xd[0]), z0, z0, z0))
+        D1, D2 = _fourier_operators(N_FOURIER, Tp)
+        phi0, u0 = _initial_guess(model, nodes, alpha)
+        phi_n, T_n = _newton(model, nodes, alpha, D1, D2, phi0, u0)
+        phi, dphi, ddphi = _fourier_eval(phi_n, Tp, t - t[0])
+        T_guess = _fourier_eval(T_n.T, Tp, t - t[0])[0]
+        T_dot = _fourier_eval(T_n.T, Tp, t - t[0])[1]
+    else:
+        idx = np.unique(np.linspace(0, t.size - 1, min(t.size, N_SPLINE_MAX)).round().astype(int))
+        nodes = _sub_path(path, idx)
+        spl = make_interp_spline(nodes.t, np.eye(idx.size), k=5)
+        D1, D2 = spl(nodes.t, nu=1), spl(nodes.t, nu=2)
+        phi0, u0 = _initial_guess(model, nodes, alpha)
+        phi_n, T_n = _newton(model, nodes, alpha, D1, D2, phi0, u0)
+        phi, dphi, ddphi = (spl(t, nu=k) @ phi_n for k in range(3))
+        T_guess = spl(t) @ T_n
+        T_dot = spl(t, nu=1) @ T_n
+    T = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T_guess)
+    res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T)
+    u = T
+    z_dot = sdot
+    if model.n_extra:
+        # the free thrusts are the states of the one stateful effect (the actual thrusts);
+        # the command comes from its inverse
+        (lag,) = (e for e in model.effects if e.n_states)
+        _, u = lag.steady_states(T, T_dot)
+        z_dot = np.concatenate([sdot, T_dot], -1)
+    return z, z_dot, u, ev.tension

@@ -1,0 +1,232 @@
+"""Synthetic flight campaigns with a hidden effect (test data for compare / diagnose).
+
+A campaign flies a set of scenarios (several speeds and tilts, a speed-up, a
+braking) in closed loop with the design config's gain table, on a *plant*
+that differs from the design by one hidden effect, and returns the flight
+logs a real campaign would leave (motion-capture noise on, commanded thrusts,
+optionally the load cell). :data:`HIDDEN` lists the hidden effects the tests
+and the example data set use; each says how the plant (or the logging) differs
+from the design and the true parameter value diagnose should recover.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..analysis.logs import FlightLog, log_from_arrays, write_log
+from ..config import Config, config_from_text
+from ..model.effects import EFFECTS, Effect, Param
+from ..tomledit import set_section, set_value
+from .loop import Maneuver, Scenario, Sensing, log_from_result, simulate
+
+__all__ = [
+    "HiddenEffect",
+    "HIDDEN",
+    "AzimuthThrustLoss",
+    "default_flights",
+    "plant_config",
+    "fly",
+    "campaign",
+    "write_campaign",
+]
+
+
+class AzimuthThrustLoss(Effect):
+    """A thrust loss localised in azimuth (an effect *outside* the library, for tests).
+
+    ``T *= 1 - depth exp(-(xi - xi0)^2 / (2 width^2))`` with xi the azimuth of the
+    direction of travel (``atan2(-v_x, v_y)`` in C for positive circulation).
+    """
+
+    kind = "azimuth_thrust_loss"
+    params = (
+        Param("depth", "-", 0.0, 0.0, 0.9, "peak fractional thrust loss"),
+        Param("xi0_deg", "deg", 90.0, -360.0, 360.0, "azimuth of the loss"),
+        Param("width_deg", "deg", 20.0, 1.0, 180.0, "Gaussian width"),
+    )
+
+    def modify_thrust(self, T, kin, x):
+        v = kin.v_C
+        xi = np.arctan2(-v[..., 0], v[..., 1])
+        d = (xi - math.radians(self.xi0_deg) + np.pi) % (2 * np.pi) - np.pi
+        return T * (1 - self.depth * np.exp(-0.5 * (d / math.radians(self.width_deg)) ** 2))[
+            ..., None
+        ]
+
+
+@contextlib.contextmanager
+def _registered(cls):
+    """Temporarily add an effect class to the registry (configs can then name it)."""
+    had = cls.kind in EFFECTS
+    EFFECTS[cls.kind] = cls
+    try:
+        yield
+    finally:
+        if not had:
+            EFFECTS.pop(cls.kind, None)
+
+
+@dataclass(frozen=True)
+class HiddenEffect:
+    """How the truth differs from the design config.
+
+    ``sections``: TOML edits, (section, key, value) or (section, None, items) for a whole
+    table; ``latency``: pose delay in the logs, s; ``truth``: the parameter diagnose should
+    recover, (candidate name, parameter, value); ``custom``: an effect class outside the
+    registry that the plant uses.
+    """
+
+    name: str
+    doc: str
+    sections: tuple = ()
+    latency: float = 0.0
+    truth: tuple | None = None
+    custom: type | None = None
+
+
+HIDDEN: dict[str, HiddenEffect] = {
+    h.name: h
+    for h in (
+        HiddenEffect("none", "no hidden effect (negative control)"),
+        HiddenEffect("drag_quadratic", "quadratic drag mis-set: mu2 = 0.0075 instead of 0.0025",
+                     (("effects.drag", "mu2", 0.0075),), truth=("drag_quadratic", "mu2", 0.0075)),
+        HiddenEffect("thrust_airspeed", "thrust loss with airspeed, T *= 1 - 0.01 v",
+                     (("effects.thrust_airspeed", None, (("c1", -0.01), ("c2", 0.0))),),
+                     truth=("thrust_airspeed", "c1", -0.01)),
+        HiddenEffect("thrust_momentum", "thrust change with airspeed by momentum theory "
+                     "(eq. 29), disk area 0.006 m^2",
+                     (("effects.thrust_momentum", None, (("disk_area", 0.006),)),),
+                     truth=("thrust_momentum", "disk_area", 0.006)),
+        HiddenEffect("rotor_drag", "rotor drag k_rd = 0.015 s/m",
+                     (("effects.rotor_drag", None, (("k_rd", 0.015),)),),
+                     truth=("rotor_drag", "k_rd", 0.015)),
+        HiddenEffect("motor_lag", "first-order motor lag tau = 35 ms",
+                     (("effects.motor_lag", None, (("tau", 0.035),)),),
+                     truth=("motor_lag", "tau", 0.035)),
+        HiddenEffect("latency", "motion-capture latency 15 ms", latency=0.015,
+                     truth=("latency", "latency_s", 0.015)),
+        HiddenEffect("tether_elasticity", "elastic tether, k = 3000 N/m, c = 5 N s/m",
+                     (("tether", "link", "spring-damper"), ("tether", "stiffness", 3000.0),
+                      ("tether", "damping", 5.0)),
+                     truth=("tether_elasticity", "stiffness", 3000.0)),
+        HiddenEffect("thrust_scale", "thrust scale k_T = 0.92 (static test 8% optimistic)",
+                     (("effects.thrust_scale", None, (("k_T", 0.92),)),),
+                     truth=("thrust_scale", "k_T", 0.92)),
+        HiddenEffect("mass", "mass 0.55 kg instead of 0.5 kg", (("vehicle", "mass", 0.55),),
+                     truth=("mass", "mass", 0.55)),
+        HiddenEffect("attachment_offset", "attachment offset L_e = 0.12 m instead of 0.10 m",
+                     (("tether", "attachment_offset", 0.12),),
+                     truth=("attachment_offset", "attachment_offset", 0.12)),
+        HiddenEffect("example", "the example data set (docs/model-vs-measurement.md): "
+                     "thrust change with airspeed by momentum theory (disk area 0.006 m^2) "
+                     "and a 30 ms motor lag",
+                     (("effects.thrust_momentum", None, (("disk_area", 0.006),)),
+                      ("effects.motor_lag", None, (("tau", 0.03),))),
+                     truth=("thrust_momentum", "disk_area", 0.006)),
+        HiddenEffect("azimuth_thrust_loss", "thrust loss of 15% localised at azimuth 90 deg "
+                     "(outside the candidate library)",
+                     (("effects.azimuth_thrust_loss", None,
+                       (("depth", 0.15), ("xi0_deg", 90.0), ("width_deg", 25.0))),),
+                     custom=AzimuthThrustLoss),
+    )
+}
+
+
+def default_flights(duration: float = 3.0, seed: int = 1) -> tuple[Scenario, ...]:
+    """Speeds 3-15 m/s at tilt 0, 8 m/s at 20 deg, 7 m/s at 40 deg, a speed-up 3 -> 12 m/s
+    and a braking 12 -> 3 m/s; motion-capture noise 0.5 mm / 0.2 deg at 200 Hz."""
+    sens = Sensing(False, 200.0, 0.0005, math.radians(0.2), 0.0, 0.0, seed)
+    spec = [
+        ("v3", 0, 3.0, ()), ("v9", 0, 9.0, ()), ("v15", 0, 15.0, ()),
+        ("tilt20-v8", 20, 8.0, ()), ("tilt40-v7", 40, 7.0, ()),
+        ("speedup", 0, 3.0, (Maneuver(0.6, 12.0, 6.25),)),
+        ("braking", 0, 12.0, (Maneuver(0.6, 3.0, 8.0),)),
+    ]
+    return tuple(
+        Scenario(nm, math.radians(tilt), v, duration, man,
+                 sensing=dataclasses.replace(sens, seed=seed + i))
+        for i, (nm, tilt, v, man) in enumerate(spec)
+    )
+
+
+def plant_config(design: Config, hidden: HiddenEffect | str) -> Config:
+    """The truth: the design config's text with the hidden effect's edits."""
+    h = HIDDEN[hidden] if isinstance(hidden, str) else hidden
+    text = design.text
+    for section, key, value in h.sections:
+        if key is None:
+            text = set_section(text, section, [(k, v, None) for k, v in value],
+                               f"hidden: {h.name}")
+        else:
+            text = set_value(text, section, key, value, f"hidden: {h.name}")
+    ctx = _registered(h.custom) if h.custom else contextlib.nullcontext()
+    with ctx:
+        return config_from_text(text, f"<plant {h.name}>")
+
+
+def _delayed_result(res, latency: float):
+    """The simulation result with the pose delayed by ``latency`` s (held at the start)."""
+    dt = float(res.t[1] - res.t[0])
+    s = int(round(latency / dt))
+    if s == 0:
+        return res
+    idx = np.maximum(np.arange(res.t.size) - s, 0)
+    return dataclasses.replace(res, p_I=res.p_I[idx], q_IB=res.q_IB[idx])
+
+
+def _trim(log: FlightLog, t0: float, load_cell: bool, hidden: str) -> FlightLog:
+    keep = log.t >= log.t[0] + t0
+    opt = {k: v[keep] for k, v in log.optional.items() if load_cell or k != "tension"}
+    meta = dict(log.meta)
+    meta["notes"] = f"simulated by gainsched campaign (hidden: {hidden})"
+    return log_from_arrays(log.t[keep], log.p_I[keep], log.q[keep], log.T_cmd[keep], meta,
+                           source=log.source, **opt)
+
+
+def fly(design: Config, scheduler, scenarios, plant: Config | None = None, *,
+        latency: float = 0.0, load_cell: bool = True, trim_s: float = 0.25,
+        hidden: str = "none", custom=None) -> list[FlightLog]:
+    """Fly ``scenarios`` on ``plant`` with ``scheduler`` and return the flight logs.
+
+    The first ``trim_s`` s (start-up transient) are dropped; ``latency`` delays the
+    logged pose; ``load_cell=False`` drops the tension column. Flights that go slack are
+    kept up to the slack instant.
+    """
+    ctx = _registered(custom) if custom else contextlib.nullcontext()
+    logs = []
+    with ctx:
+        for scn in scenarios:
+            res = simulate(design, scheduler, scn, plant)
+            log = log_from_result(_delayed_result(res, latency))
+            logs.append(_trim(log, trim_s, load_cell, hidden))
+    return logs
+
+
+def campaign(design: Config, scheduler, hidden: str = "none", *, scenarios=None,
+             duration: float = 3.0, load_cell: bool = True,
+             seed: int = 1) -> list[FlightLog]:
+    """Fly the default (or given) scenarios on the plant with the hidden effect ``hidden``."""
+    h = HIDDEN[hidden]
+    scenarios = default_flights(duration, seed) if scenarios is None else scenarios
+    plant = plant_config(design, h)
+    return fly(design, scheduler, scenarios, plant, latency=h.latency, load_cell=load_cell,
+               hidden=h.name, custom=h.custom)
+
+
+def write_campaign(out_dir, logs, fmt: str = "csv") -> list[Path]:
+    """Write each log as ``OUT/<flight_id>.<fmt>``; returns the paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for log in logs:
+        name = (log.meta.get("flight_id") or "flight").replace("sim-", "")
+        p = out / f"{name}.{fmt}"
+        write_log(p, log)
+        paths.append(p)
+    return paths

@@ -1,0 +1,170 @@
+"""Compiled reduced-coordinate plant for the closed-loop simulator (``gainsched/native/plant.c``).
+
+The simulator needs the model on *one* state four times per control step;
+:meth:`gainsched.model.reduced.Model.evaluate` is batched numpy and spends ~0.4 ms per
+single-state call in per-operation overhead. ``plant.c`` is the same physics
+(paper eqs. 3, 6, 8, corrected eq. 9; the 6x6 solve for ``(delta'', xi'', omega',
+f_t)``) for one state in C, plus one RK4 step with the input held. This module
+packs a :class:`~gainsched.model.reduced.Model` into the C parameter array and calls the
+kernel through ctypes with preallocated buffers.
+
+Supported: the rigid link with the state-only effects ``drag`` (eq. 10),
+``rotor_drag``, ``thrust_scale``, ``thrust_airspeed`` and ``motor_lag`` (4 extra
+states). Anything else (other effects, elastic links) uses the numpy model:
+:func:`fast_plant` returns None and the caller falls back, as it does when no C
+compiler is available or ``GAINSCHED_NATIVE=0`` (:func:`gainsched.native.load`).
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from ..config import N_STATE, Config
+from ..model.effects import Drag, MotorLag, RotorDrag, ThrustPolynomial, ThrustScale
+from ..model.reduced import Model
+from ..native import load
+
+__all__ = ["FastPlant", "fast_plant", "fast_plant_supported", "SUPPORTED_EFFECTS"]
+
+_LAYOUT = 1  # GS_PLANT_LAYOUT in plant.c
+_EFF_STRIDE = 4  # kind, param a, param b, first state index
+#: effect class -> (kind code in plant.c, names of the parameters a, b)
+_CODES = {
+    Drag: (1, ("mu1", "mu2")),
+    RotorDrag: (2, ("k_rd",)),
+    ThrustScale: (3, ("k_T",)),
+    ThrustPolynomial: (4, ("c1", "c2")),
+    MotorLag: (5, ("tau",)),
+}
+#: config effect names the compiled plant implements
+SUPPORTED_EFFECTS = frozenset(cls.kind for cls in _CODES)
+
+
+def fast_plant_supported(config: Config) -> bool:
+    """Whether the compiled plant implements ``config``: rigid link, supported effects only.
+
+    Says nothing about whether a compiler is available (see :func:`fast_plant`).
+    """
+    return config.tether.link == "rigid" and all(
+        s.name in SUPPORTED_EFFECTS for s in config.effects
+    )
+
+
+def _params(model: Model) -> np.ndarray:
+    """The ``plant.c`` parameter array of a model (layout in plant.c), float64."""
+    alloc = np.asarray(model.alloc, dtype=float)
+    head = [_LAYOUT, model.n_z, model.m, model.rho, model.L_e, model.g]
+    eff = []
+    i = N_STATE
+    for e in model.effects:
+        code, names = _CODES[type(e)]
+        vals = [float(e.values[n]) for n in names] + [0.0] * (2 - len(names))
+        eff.append([code, *vals, i])
+        i += e.n_states
+    p = np.concatenate(
+        [
+            np.asarray(head, dtype=float),
+            np.asarray(model.J, dtype=float).reshape(9),
+            alloc[1:].reshape(12),
+            [len(eff)],
+            np.asarray(eff, dtype=float).reshape(-1),
+        ]
+    )
+    return np.ascontiguousarray(p)
+
+
+class FastPlant:
+    """The reduced model of ``config`` (rigid link) evaluated by ``plant.c``.
+
+    Same interface as the simulator's plant: :meth:`f` and :meth:`rk4_step`. Not
+    thread-safe (the instance owns its scratch buffers); make one per thread.
+
+    Parameters
+    ----------
+    config : Config
+        Must satisfy :func:`fast_plant_supported`.
+    lib : ctypes.CDLL
+        The loaded ``plant`` kernel (``gainsched.native.load("plant")``).
+    """
+
+    def __init__(self, config: Config, lib: ctypes.CDLL):
+        if not fast_plant_supported(config):
+            raise ValueError(f"{config.source}: not supported by the compiled plant")
+        model = Model(config)
+        if int(lib.gs_plant_layout()) != _LAYOUT:
+            raise RuntimeError("plant.c parameter layout does not match fastplant.py")
+        if model.n_z > int(lib.gs_plant_max_states()):
+            raise ValueError(f"{model.n_z} states: more than plant.c holds")
+        self.model = model
+        self.n_z = model.n_z
+        self._p = _params(model)
+        # Preallocated buffers, their addresses taken once and passed as c_void_p ints:
+        # measured per RK4 call (paper config, one core), c_void_p ints ~5.7 us,
+        # POINTER(c_double) from ``ndarray.ctypes.data_as`` ~7.5 us, ndpointer argtypes
+        # with fresh output arrays ~31 us (its per-call array checks dominate).
+        self._x = np.zeros(self.n_z)
+        self._u = np.zeros(4)
+        self._out = np.zeros(self.n_z)
+        self._ten = np.zeros(1)
+        self._T = np.zeros(4)
+        bufs = (self._p, self._x, self._u, self._out, self._ten, self._T)
+        self._pp, self._px, self._pu, self._pout, self._pten, self._pT = (
+            a.ctypes.data for a in bufs
+        )
+        # private function objects: the argtypes are ours, not shared with other users
+        vp, dbl = ctypes.c_void_p, ctypes.c_double
+        self._eval = lib["gs_plant_eval"]
+        self._eval.argtypes = [vp, vp, vp, dbl, vp, vp, vp]
+        self._eval.restype = ctypes.c_int
+        self._rk4 = lib["gs_plant_rk4"]
+        self._rk4.argtypes = [vp, vp, vp, dbl, dbl, vp, vp]
+        self._rk4.restype = ctypes.c_int
+        self._lib = lib
+
+    def evaluate(self, z, u, alpha):
+        """``(z_dot (n_z,), tension N, T (4,) N)`` at one state, as ``Model.evaluate``."""
+        self._x[:] = z
+        self._u[:] = u
+        if self._eval(self._pp, self._px, self._pu, alpha, self._pout, self._pten, self._pT):
+            raise np.linalg.LinAlgError("singular model matrix")
+        return self._out.copy(), float(self._ten[0]), self._T.copy()
+
+    def f(self, x, u, alpha):
+        """State derivative (n_z,) and tether tension (float, N) at one state.
+
+        Parameters
+        ----------
+        x : array (n_z,) reduced state (rad, rad/s) and effect states
+        u : array (4,) commanded motor thrusts, N
+        alpha : float, rad, tilt of the circle plane
+        """
+        self._x[:] = x
+        self._u[:] = u
+        if self._eval(self._pp, self._px, self._pu, alpha, self._pout, self._pten, None):
+            raise np.linalg.LinAlgError("singular model matrix")
+        return self._out.copy(), float(self._ten[0])
+
+    def rk4_step(self, x, u, alpha, dt):
+        """One RK4 step of ``dt`` s with ``u`` held: ``(x_next (n_z,), tension at x, N)``.
+
+        Same operations as ``gainsched.sim.loop._rk4`` with the numpy model.
+        """
+        self._x[:] = x
+        self._u[:] = u
+        rc = self._rk4(self._pp, self._px, self._pu, alpha, dt, self._pout, self._pten)
+        if rc:
+            raise np.linalg.LinAlgError("singular model matrix")
+        return self._out.copy(), float(self._ten[0])
+
+
+def fast_plant(config: Config) -> FastPlant | None:
+    """The compiled plant for ``config``, or None: unsupported config, no compiler, or
+    ``GAINSCHED_NATIVE=0`` (the caller then uses the numpy model)."""
+    if not fast_plant_supported(config):
+        return None
+    lib = load("plant")
+    if lib is None:
+        return None
+    return FastPlant(config, lib)

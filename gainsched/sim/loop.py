@@ -1,0 +1,659 @@
+"""Closed-loop simulation: the scheduled LQR flying the nonlinear tethered vehicle.
+
+The plant is a config of its own (the "truth"): other parameters, other
+effects, another link model than the design config the tables came from.
+Fixed-step RK4 at the control rate with the input held (zero-order hold),
+motor saturation at the plant's thrust limits, and a clean stop when the
+tether goes slack. Sensing: ideal state, or motion capture at a fixed rate
+with noise and latency, fused with a model prediction in between pose updates
+(the paper's scheme, Sec. V.A: pose updates, prediction in between).
+
+Control law (paper Sec. IV): ``u = u_d - K(xi_d, xi_d', alpha) (x - x_d)``
+with the 11-entry LQR state x (xi error wrapped to [-pi, pi)), the nominal
+(x_d, u_d) of the reference path on the design model, and K from the tables.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..config import N_STATE, Config, Section
+from ..errors import InputError
+from ..model.maximal import MaximalModel, reduced_from_maximal
+from ..model.reduced import Model
+from ..model.rotations import R_IC_from_tilt, matrix_from_quaternion, quaternion_from_matrix
+from ..schedule.nominal import nominal_from_path
+from ..schedule.path import AzimuthPath, maneuver_path
+from .fastplant import fast_plant
+
+__all__ = [
+    "Scenario",
+    "Sensing",
+    "Maneuver",
+    "SimResult",
+    "load_scenario",
+    "scenario_from_dict",
+    "profile_path",
+    "simulate",
+    "metrics",
+    "table_scheduler",
+    "c_runtime_scheduler",
+]
+
+
+@dataclass(frozen=True)
+class Maneuver:
+    """Speed change at ``t_start`` (s) to ``speed`` (m/s) with eq. 20 parameter ``a`` (m/s^2)."""
+
+    t_start: float
+    speed: float
+    a: float
+
+
+@dataclass(frozen=True)
+class Sensing:
+    """Motion capture: rate (Hz), noise std (m, rad), latency (s); ``ideal`` bypasses it."""
+
+    ideal: bool = True
+    rate_hz: float = 200.0
+    position_noise: float = 0.0
+    attitude_noise: float = 0.0
+    gyro_noise: float = 0.0
+    latency: float = 0.0
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A flight: tilt (rad), gamma (rad), initial speed (m/s), manoeuvres, duration (s)."""
+
+    name: str
+    tilt: float
+    speed: float
+    duration: float
+    maneuvers: tuple[Maneuver, ...] = ()
+    gamma: float = 0.0
+    sensing: Sensing = field(default_factory=Sensing)
+    initial_error: tuple[float, ...] = ()
+
+
+def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
+    """Validate a scenario table (see ``configs/scenarios/*.toml``)."""
+    top = Section(str(source), "", d)
+    name = top.string("name", Path(str(source)).stem)
+    tilt_deg = top.number("tilt_deg", 0.0)
+    if not -90 < tilt_deg < 90:
+        raise top.error("tilt_deg", "must be in (-90, 90)")
+    speed = top.number("speed")
+    duration = top.number("duration", positive=True)
+    gamma = np.deg2rad(top.number("gamma_deg", 0.0))
+    raw = top.get("maneuvers", [])
+    if not isinstance(raw, list):
+        raise top.error("maneuvers", "must be a list of tables")
+    mans = []
+    t_free = 0.0  # end of the previous manoeuvre
+    for i in range(len(raw)):
+        sec = Section(str(source), f"maneuvers[{i}]", raw[i])
+        man = Maneuver(sec.number("t_start"), sec.number("speed"), sec.number("a", positive=True))
+        sec.done()
+        if man.t_start < t_free:
+            raise sec.error("t_start", "manoeuvres must not overlap")
+        t_free = man.t_start + abs(man.speed - (mans[-1].speed if mans else speed)) / man.a
+        mans.append(man)
+    sens = top.sub("sensing", {})
+    sensing = Sensing(
+        sens.boolean("ideal", True),
+        sens.number("rate_hz", 200.0, positive=True),
+        sens.number("position_noise", 0.0, nonneg=True),
+        np.deg2rad(sens.number("attitude_noise_deg", 0.0, nonneg=True)),
+        sens.number("gyro_noise", 0.0, nonneg=True),
+        sens.number("latency", 0.0, nonneg=True),
+        int(sens.number("seed", 0)),
+    )
+    sens.done()
+    init = tuple(top.array("initial_error", [])) if "initial_error" in d else ()
+    top.done()
+    return Scenario(name, np.deg2rad(tilt_deg), speed, duration, tuple(mans), gamma, sensing, init)
+
+
+def load_scenario(path) -> Scenario:
+    """Load a scenario TOML file; errors name the file and key."""
+    p = Path(path)
+    try:
+        d = tomllib.loads(p.read_text())
+    except OSError as exc:
+        raise InputError(p, "", f"cannot read ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(p, "", f"not valid TOML ({exc})") from None
+    return scenario_from_dict(d, p)
+
+
+def profile_path(scn: Scenario, r: float, t) -> AzimuthPath:
+    """The reference azimuth path of a scenario: initial speed plus sequential manoeuvres."""
+    t = np.asarray(t, dtype=float)
+    v_prev = scn.speed
+    xi = scn.speed * t / r
+    d = [np.full_like(t, scn.speed / r), np.zeros_like(t), np.zeros_like(t), np.zeros_like(t)]
+    for m in scn.maneuvers:
+        p = maneuver_path(v_prev, m.speed, m.a, r, t, t_start=m.t_start)
+        xi = xi + p.xi - v_prev * t / r  # the manoeuvre's extra displacement
+        d[0] = d[0] + p.d[0] - v_prev / r
+        for j in (1, 2, 3):
+            d[j] = d[j] + p.d[j]
+        v_prev = m.speed
+    return AzimuthPath(t, xi, tuple(d))
+
+
+@dataclass(frozen=True)
+class SimResult:
+    """Time histories at the control rate (N samples).
+
+    t (N,) s; z (N, 10) true reduced state; z_hat (N, 10) estimate; z_d (N, 10) nominal;
+    u (N, 4) applied (saturated) thrust command, N; tension (N,) N; p_I (N, 3) m COG;
+    q_IB (N, 4); saturated (N, 4) bool; status (N,) runtime status;
+    slack_time: float or None, s; scenario; alpha rad; r m.
+    """
+
+    t: np.ndarray
+    z: np.ndarray
+    z_hat: np.ndarray
+    z_d: np.ndarray
+    u: np.ndarray
+    u_d: np.ndarray
+    tension: np.ndarray
+    p_I: np.ndarray
+    q_IB: np.ndarray
+    saturated: np.ndarray
+    status: np.ndarray
+    slack_time: float | None
+    scenario: Scenario
+    r: float
+    mass: float
+    g: float
+
+
+class _Plant:
+    """Reduced model (rigid link) or maximal model (elastic links) behind one interface.
+
+    The rigid link runs on the compiled plant (:mod:`gainsched.sim.fastplant`) when it
+    supports the config and a compiler is available, else on the numpy model (the
+    reference). Other link models keep their own path: set ``self.maximal`` (an object
+    with ``f(x, u, alpha)`` and ``tension(x, u, alpha)``) and ``self.fast = None``.
+    """
+
+    def __init__(self, cfg: Config):
+        self.model = Model(cfg)
+        self.maximal = None if cfg.tether.link == "rigid" else MaximalModel(self.model)
+        # compiled RK4 of the reduced model; None: numpy model
+        self.fast = fast_plant(cfg) if self.maximal is None else None
+
+    def initial(self, z0, u0):
+        """Plant state from the reduced state ``z0`` (10,) and the thrusts ``u0`` (4,), N:
+        stateful effects (motor lag) start in their steady state at ``u0``."""
+        if self.maximal is None:
+            extra = [e.steady_states(u0, np.zeros(4))[0] for e in self.model.effects
+                     if e.n_states]
+            return np.concatenate([z0, *extra]) if extra else np.array(z0, dtype=float)
+        return self.maximal.from_reduced(z0)  # the elastic link pre-stretched (maximal.py)
+
+    def f(self, x, u, alpha):
+        """State derivative and tether tension (N) at one state."""
+        if self.maximal is None:
+            if self.fast is not None:
+                return self.fast.f(x, u, alpha)
+            ev = self.model.evaluate(x, u, alpha)
+            return ev.z_dot, ev.tension
+        return self.maximal.f(x, u, alpha), self.maximal.tension(x, u, alpha)
+
+    def step(self, x, u, alpha, dt):
+        """One RK4 step of ``dt`` s with ``u`` held: ``(x_next, tension at x in N)``."""
+        if self.fast is not None:
+            return self.fast.rk4_step(x, u, alpha, dt)
+        if self.maximal is not None:  # RK4 substeps for stiff links; tension < 0: slack
+            return self.maximal.step(x, u, alpha, dt)
+        return _rk4(self.f, x, u, alpha, dt)
+
+    def reduced(self, x, xi_ref):
+        if self.maximal is None:
+            return x[:N_STATE]
+        return reduced_from_maximal(self.model, x, xi_ref)
+
+    def pose(self, x, alpha, gamma):
+        """COG position in I (m) and R_IB of one state or a batch of states (..., n_x)."""
+        if self.maximal is None and np.ndim(x) == 1:  # one state: scalar math
+            m = self.model
+            R_IC = _rot_zyx(alpha, 0.0, gamma)
+            R_CB = _rot_zyx(x[4], x[5], x[6] + x[1])
+            sd = math.sin(x[0])
+            e = np.array([sd * math.cos(x[1]), sd * math.sin(x[1]), math.cos(x[0])])
+            return R_IC @ (m.rho * e + m.L_e * R_CB[:, 0]), R_IC @ R_CB
+        R_IC = R_IC_from_tilt(alpha, gamma)
+        if self.maximal is None:
+            R_CB = self.model.kinematics(x)[0]
+            p_C = self.model.cog_position(x)
+        else:
+            q = x[..., 6:10]
+            p_C = x[..., 0:3]
+            R_CB = matrix_from_quaternion(q / np.linalg.norm(q, axis=-1, keepdims=True))
+        return p_C @ R_IC.T, R_IC @ R_CB
+
+    def poses(self, X, alpha, gamma):
+        """COG positions in I (N, 3), m, and quaternions q_IB (N, 4) of states X (N, n_x)."""
+        p_I, R_IB = self.pose(X, alpha, gamma)
+        return p_I, quaternion_from_matrix(R_IB)
+
+
+#: steps per block of gain lookups of a scheduler with ``batch`` (bounds the memory)
+_LOOKUP_BLOCK = 1000
+
+
+def _wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _rot_zyx(phi, theta, psi):
+    """``Rz(psi) @ Ry(theta) @ Rx(phi)`` of three scalars (rad), shape (3, 3).
+
+    The one-state form of :func:`~gainsched.model.rotations.matrix_from_euler_zyx` (paper
+    eq. 2) for the per-step paths: the batched version costs ~50 us per call.
+    ``_rot_zyx(alpha, 0, gamma)`` is ``R_IC`` (paper eq. 1).
+    """
+    cph, sph, cth, sth = math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta)
+    cps, sps = math.cos(psi), math.sin(psi)
+    return np.array(
+        [
+            [cps * cth, -sps * cph + cps * sth * sph, sps * sph + cps * sth * cph],
+            [sps * cth, cps * cph + sps * sth * sph, -cps * sph + sps * sth * cph],
+            [-sth, cth * sph, cth * cph],
+        ]
+    )
+
+
+def _pose_angles(model, p_C, R_CB, xi_ref):
+    """Measured ``(delta, xi, phi, theta, chi)`` (rad, shape (5,)) of one COG position
+    p_C (m, in C) and attitude R_CB: the pose part of
+    :func:`~gainsched.model.maximal.reduced_from_maximal` for one sample (xi on the branch
+    nearest ``xi_ref``, chi wrapped to [-pi, pi))."""
+    p_t = p_C + R_CB @ model.p_e
+    delta = math.atan2(math.hypot(p_t[0], p_t[1]), p_t[2])
+    xi = math.atan2(p_t[1], p_t[0])
+    xi = xi + 2 * math.pi * round((xi_ref - xi) / (2 * math.pi))
+    phi = math.atan2(R_CB[2, 1], R_CB[2, 2])
+    theta = math.asin(min(max(-R_CB[2, 0], -1.0), 1.0))
+    psi = math.atan2(R_CB[1, 0], R_CB[0, 0])
+    chi = (psi - xi + math.pi) % (2 * math.pi) - math.pi
+    return np.array([delta, xi, phi, theta, chi])
+
+
+def _rk4(f, x, u, alpha, dt):
+    k1, ten = f(x, u, alpha)
+    k2, _ = f(x + 0.5 * dt * k1, u, alpha)
+    k3, _ = f(x + 0.5 * dt * k2, u, alpha)
+    k4, _ = f(x + dt * k3, u, alpha)
+    return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), ten
+
+
+def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None = None,
+             progress=None) -> SimResult:
+    """Fly ``scenario`` with gains from ``scheduler`` on the ``plant`` (default: design).
+
+    Parameters
+    ----------
+    design : Config
+        The model the tables and the nominal come from.
+    scheduler : callable (xi, xi_dot, alpha) -> (K (4, n), status)
+        Gain lookup (Python reference interpolator or the compiled C runtime). It is
+        queried at the reference (xi_d, xi_d', alpha) only, so a scheduler may offer
+        ``scheduler.batch(xi, xi_dot, alpha) -> (K (m, 4, n), status (m,))`` giving the
+        same numbers for arrays of queries: the gains are then looked up in blocks of
+        steps instead of once per step (``table_scheduler`` does).
+    plant : Config, optional
+        The truth.
+    progress : callable(int), optional
+        Called with the number of steps done, every 100 steps.
+
+    The rigid-link plant runs on the compiled kernel when available (same results as
+    the numpy model to rounding, see tests/test_fastplant.py); ``GAINSCHED_NATIVE=0``
+    forces the numpy model.
+    """
+    plant = design if plant is None else plant
+    P = _Plant(plant)
+    dmodel = Model(design)
+    dt = design.control.dt
+    n_steps = int(round(scenario.duration / dt)) + 1
+    t = np.arange(n_steps) * dt
+    alpha = scenario.tilt
+    path = profile_path(scenario, dmodel.r, t)
+    nom = nominal_from_path(dmodel, path, alpha, periodic=False)
+    z_d, u_d = nom.z[:, :N_STATE], nom.u
+    u_min, u_max = plant.vehicle.thrust_min, plant.vehicle.thrust_max
+
+    z0 = z_d[0].copy()
+    if scenario.initial_error:
+        z0[: len(scenario.initial_error)] += np.asarray(scenario.initial_error)
+    x = P.initial(z0, u_d[0])
+    sens = scenario.sensing
+    rng = np.random.default_rng(sens.seed)
+    est = _Estimator(dmodel, P, sens, dt, alpha, scenario.gamma, z0, rng)
+
+    X = np.empty((n_steps, x.size))  # plant states; poses are computed after the loop
+    Z = X[:, :N_STATE] if P.maximal is None else np.empty((n_steps, N_STATE))
+    Zh = np.empty((n_steps, N_STATE))
+    U = np.empty((n_steps, 4))
+    TEN = np.empty(n_steps)
+    SAT = np.zeros((n_steps, 4), dtype=bool)
+    STAT = np.zeros(n_steps, dtype=np.int32)
+    # per-step work kept to a few small numpy calls: bound methods and arrays looked
+    # up once, the LQR error vector (11 + zero-padded effect states) reused
+    xi_ref, xi_dot_ref = path.xi, path.d[0]
+    step, reduced, estimate, predict = P.step, P.reduced, est.estimate, est.predict
+    rigid = P.maximal is None
+    batch = getattr(scheduler, "batch", None)
+    K_blk = S_blk = None
+    xerr = np.zeros(N_STATE + 1)
+    integ = 0.0
+    slack_time = None
+    n_done = n_steps
+    for k in range(n_steps):
+        X[k] = x
+        z_true = x[:N_STATE] if rigid else reduced(x, xi_ref[k])
+        z_hat = estimate(k, x, z_true)
+        err = z_hat - z_d[k]
+        err[1] = _wrap(err[1])
+        if batch is None:
+            K, status = scheduler(xi_ref[k], xi_dot_ref[k], alpha)
+        else:
+            j = k % _LOOKUP_BLOCK
+            if j == 0:
+                blk = slice(k, k + _LOOKUP_BLOCK)
+                K_blk, S_blk = batch(xi_ref[blk], xi_dot_ref[blk], alpha)
+                S_blk = S_blk.tolist()
+            K, status = K_blk[j], S_blk[j]
+        n = K.shape[-1]
+        if n > xerr.size:  # design model with effect states: no estimate of them, zero error
+            xerr = np.zeros(n)
+        xerr[:N_STATE] = err
+        xerr[N_STATE] = integ
+        u_raw = u_d[k] - K @ xerr[:n]
+        u = np.minimum(np.maximum(u_raw, u_min), u_max)  # np.clip, without its overhead
+        SAT[k] = u != u_raw
+        x_next, ten = step(x, u, alpha, dt)
+        if not rigid:
+            Z[k] = z_true
+        Zh[k], U[k], TEN[k], STAT[k] = z_hat, u, ten, status
+        if ten < 0:
+            slack_time = float(t[k])
+            n_done = k + 1
+            break
+        predict(u)
+        integ += dt * err[0]
+        x = x_next
+        if progress is not None and k % 100 == 99:
+            progress(100)
+    sl = slice(0, n_done)
+    PI, QI = P.poses(X[sl], alpha, scenario.gamma)
+    return SimResult(t[sl], Z[sl].copy(), Zh[sl], z_d[sl], U[sl], u_d[sl], TEN[sl], PI, QI,
+                     SAT[sl], STAT[sl], slack_time, scenario, dmodel.r, plant.vehicle.mass,
+                     plant.g)
+
+
+class _Estimator:
+    """Ideal state, or motion-capture pose updates fused with a model prediction.
+
+    Between pose samples the estimate is propagated with the design model and
+    the applied input. A pose sample (delayed by the latency) corrects the pose
+    states and, through the innovation divided by the sample interval, the
+    rates (an alpha-beta correction on top of the model prediction); body rates
+    come from the gyro. Delayed samples are compared with the estimate of their
+    own time (ring buffer) and the correction is applied now.
+    """
+
+    def __init__(self, model, plant, sens, dt, alpha, gamma, z0, rng):
+        self.model, self.plant, self.sens, self.dt = model, plant, sens, dt
+        self.alpha, self.gamma, self.rng = alpha, gamma, rng
+        self.z = z0.copy()
+        self.every = max(1, int(round(1.0 / (sens.rate_hz * dt))))
+        self.delay = int(round(sens.latency / dt))
+        self.hist: list[np.ndarray] = []
+        self.pending: list[tuple[int, np.ndarray]] = []
+        self.R_IC = _rot_zyx(alpha, 0.0, gamma)
+        # prediction model: the compiled design model when it applies (same numbers)
+        fast = None
+        if not sens.ideal and model.n_z == N_STATE:
+            fast = fast_plant(model.config)
+        self._f = (lambda z, u, a: fast.f(z, u, a)[0]) if fast is not None else model.f
+
+    def estimate(self, k, x, z_true):
+        if self.sens.ideal:
+            return z_true
+        if k % self.every == 0:  # a pose sample taken now, arriving after the latency
+            self.pending.append((k + self.delay, self._measure(x, z_true)))
+        self.hist.append(self.z.copy())
+        while self.pending and self.pending[0][0] <= k:
+            _, meas = self.pending.pop(0)
+            then = self.hist[-1 - self.delay] if len(self.hist) > self.delay else self.z
+            innov = meas - then[[0, 1, 4, 5, 6]]
+            innov[1] = _wrap(innov[1])
+            innov[4] = _wrap(innov[4])
+            T = self.every * self.dt
+            self.z[[0, 1, 4, 5, 6]] += 0.5 * innov
+            self.z[[2, 3]] += 0.5 * innov[[0, 1]] / T * 0.5
+        if len(self.hist) > self.delay + 2:
+            self.hist.pop(0)
+        z = self.z.copy()
+        z[7:10] = z_true[7:10] + self.sens.gyro_noise * self.rng.standard_normal(3)
+        return z
+
+    def _measure(self, x, z_true):
+        """Noisy pose -> (delta, xi, phi, theta, chi), rad, shape (5,).
+
+        True COG position and attitude in I, plus position noise (m) and a small
+        attitude perturbation ``R_IB Rz Ry Rx`` (rad), converted back to the reduced
+        pose angles as :func:`~gainsched.model.maximal.reduced_from_maximal` does.
+        """
+        p_I, R_IB = self.plant.pose(x, self.alpha, self.gamma)
+        p_I = p_I + self.sens.position_noise * self.rng.standard_normal(3)
+        rot = self.sens.attitude_noise * self.rng.standard_normal(3)
+        R_IB = R_IB @ _rot_zyx(rot[0], rot[1], rot[2])
+        R_CI = self.R_IC.T
+        return _pose_angles(self.model, R_CI @ p_I, R_CI @ R_IB, z_true[1])
+
+    def predict(self, u):
+        if self.sens.ideal:
+            return
+        self.z = self.z + self.dt * self._f(self.z, u, self.alpha)
+
+
+def metrics(res: SimResult) -> dict:
+    """Flight metrics: RMS out-of-plane error (m), speed tracking error (m/s), max tension (N),
+    max g-load, saturation fraction, slack events."""
+    R_IC = R_IC_from_tilt(res.scenario.tilt, res.scenario.gamma)
+    p_C = res.p_I @ R_IC  # rows: R_IC^T p
+    out_of_plane = p_C[:, 2]
+    v = res.z[:, 3] * res.r
+    v_ref = res.z_d[:, 3] * res.r
+    accel = res.tension / res.mass  # the tether carries the centripetal load
+    return {
+        "duration_s": float(res.t[-1]),
+        "rms_out_of_plane_m": float(np.sqrt(np.mean(out_of_plane**2))),
+        "max_out_of_plane_m": float(np.abs(out_of_plane).max()),
+        "rms_speed_error_mps": float(np.sqrt(np.mean((v - v_ref) ** 2))),
+        "mean_speed_error_mps": float(np.mean(v - v_ref)),
+        "max_speed_mps": float(np.abs(v).max()),
+        "max_tension_N": float(res.tension.max()),
+        "max_g_load": float(np.max(v**2 / res.r) / res.g),
+        "max_tether_accel_g": float(accel.max() / res.g),
+        "saturation_fraction": float(res.saturated.mean()),
+        "slack_events": 0 if res.slack_time is None else 1,
+        "slack_time_s": res.slack_time,
+        "max_roll_deg": float(np.rad2deg(np.abs(res.z[:, 4]).max())),
+    }
+
+
+def table_scheduler(table):
+    """Gain lookup through the Python reference interpolator: (xi, xi_dot, alpha) -> (K, status)."""
+    from ..firmware.runtime import Interpolator
+
+    interp = Interpolator(table)
+    query = interp.query  # one query per call: the scalar fast path
+
+    def lookup(xi, xi_dot, alpha):
+        K, _, _, status = query(xi, xi_dot, alpha)
+        return K, status
+
+    def batch(xi, xi_dot, alpha):
+        """Arrays of queries (m,) -> K (m, 4, n), status (m,) int: the same numbers."""
+        r = interp(xi, xi_dot, alpha)
+        return r.K, r.status.astype(int)
+
+    lookup.batch = batch
+    return lookup
+
+
+def c_runtime_scheduler(table, build_dir=None):
+    """Gain lookup through the compiled C runtime (the firmware code): (xi, xi_dot, alpha)
+    -> (K (4, n) float64 of the runtime's float32 gains, status int).
+
+    The table, ``gainsched_runtime.c`` and the batch shim are compiled for the host with
+    :func:`gainsched.firmware.codegen.build_host` into ``build_dir`` (default: a temporary
+    directory that lives as long as the returned function) and called through ctypes,
+    one query per call with preallocated buffers. Raises RuntimeError without a C
+    compiler.
+
+    Parameters
+    ----------
+    table : Table or RuntimeData
+    build_dir : path, optional
+    """
+    import ctypes
+    import tempfile
+
+    from ..firmware.codegen import CRuntime, build_host
+    from ..firmware.runtime import RuntimeData, runtime_data
+
+    data = table if isinstance(table, RuntimeData) else runtime_data(table)
+    tmp = None
+    if build_dir is None:
+        tmp = tempfile.TemporaryDirectory(prefix="gainsched-rt-")
+        build_dir = tmp.name
+    rt = CRuntime(build_host(data, Path(build_dir)), data)
+    n = data.dims[3]
+    q = np.zeros(3, dtype=np.float32)
+    Kb = np.zeros((4, n), dtype=np.float32)
+    Ub = np.zeros(4, dtype=np.float32)
+    Pb = np.zeros(1, dtype=np.float32)
+    Sb = np.zeros(1, dtype=np.int32)
+    # our own function object with raw pointers (CRuntime's ndpointer argtypes cost
+    # microseconds of checks per call); the pointers stay valid: the buffers live here
+    fn = rt.lib[f"{data.name}_lookup_batch"]
+    fn.restype = None
+    fn.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * 5
+    ptrs = [b.ctypes.data for b in (q, Kb, Ub, Pb, Sb)]
+
+    def lookup(xi, xi_dot, alpha):
+        q[0], q[1], q[2] = xi, xi_dot, alpha
+        fn(1, *ptrs)
+        return Kb.astype(np.float64), int(Sb[0])
+
+    lookup.runtime = rt  # keeps the library (and the temporary directory) alive
+    lookup.build_dir = tmp
+    return lookup
+
+
+def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int | None = None):
+    """The flight log a real flight would leave (``flight-log.md``): motion-capture pose at
+    the sensing rate with the scenario's noise, commanded thrusts (mean over each sample
+    interval), gyro, load-cell tension and the reference azimuth."""
+    from ..analysis.logs import log_from_arrays
+    from ..model.rotations import Rx, Ry, Rz, matrix_from_quaternion
+
+    sens = res.scenario.sensing
+    rate = sens.rate_hz if rate_hz is None else rate_hz
+    dt = res.t[1] - res.t[0]
+    every = max(1, int(round(1.0 / (rate * dt))))
+    idx = np.arange(0, res.t.size, every)
+    rng = np.random.default_rng(sens.seed + 1000 if seed is None else seed)
+    p = res.p_I[idx] + sens.position_noise * rng.standard_normal((idx.size, 3))
+    rot = sens.attitude_noise * rng.standard_normal((idx.size, 3))
+    R = matrix_from_quaternion(res.q_IB[idx]) @ Rz(rot[:, 2]) @ Ry(rot[:, 1]) @ Rx(rot[:, 0])
+    q = quaternion_from_matrix(R)
+    # thrust "held since the previous sample": the mean of the commands applied over
+    # [t_prev, t) (command k acts on [t_k, t_k+1)); the first row has only u[0]
+    ends = np.maximum(idx, 1)
+    starts = np.maximum(idx - every, 0)
+    csum = np.concatenate([np.zeros((1, 4)), np.cumsum(res.u, 0)])
+    T = (csum[ends] - csum[starts]) / (ends - starts)[:, None]
+    meta = {
+        "alpha_c_deg": f"{np.rad2deg(res.scenario.tilt):.12g}",
+        "gamma_c_deg": f"{np.rad2deg(res.scenario.gamma):.12g}",
+        "flight_id": f"sim-{res.scenario.name}",
+        "notes": "simulated by gainsched",
+    }
+    return log_from_arrays(
+        res.t[idx], p, q, T, meta, source=f"simulation {res.scenario.name}",
+        omega_B=res.z[idx, 7:10], tension=res.tension[idx],
+        xi_ref=res.z_d[idx, 1], xi_dot_ref=res.z_d[idx, 3],
+    )
+
+
+def plot_result(res: SimResult, out_dir) -> list[Path]:
+    """Speed tracking (Fig. 3 style), speed and roll (Fig. 4 style) and the 3-D path, as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    paths = []
+    v, v_ref = res.z[:, 3] * res.r, res.z_d[:, 3] * res.r
+    fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    ax[0].plot(res.t, v_ref, "r", label="desired")
+    ax[0].plot(res.t, v, "b", label="simulated")
+    ax[0].set_ylabel("speed (m/s)")
+    ax[0].legend()
+    ax[1].plot(res.t, np.rad2deg(res.z_d[:, 4]), "r", label="nominal")
+    ax[1].plot(res.t, np.rad2deg(res.z[:, 4]), "b", label="simulated")
+    ax[1].set_ylabel("roll phi (deg)")
+    ax[1].set_xlabel("time (s)")
+    ax[0].set_title(f"{res.scenario.name}: speed and roll")
+    fig.tight_layout()
+    paths.append(out_dir / "speed_roll.png")
+    fig.savefig(paths[-1], dpi=100)
+    plt.close(fig)
+    fig = plt.figure(figsize=(6, 6))
+    ax3 = fig.add_subplot(projection="3d")
+    ax3.plot(res.p_I[:, 0], res.p_I[:, 1], res.p_I[:, 2], lw=0.8)
+    ax3.set_xlabel("x (m)")
+    ax3.set_ylabel("y (m)")
+    ax3.set_zlabel("z (m)")
+    ax3.set_title(f"{res.scenario.name}: COG path (inertial frame)")
+    paths.append(out_dir / "path3d.png")
+    fig.savefig(paths[-1], dpi=100)
+    plt.close(fig)
+    return paths
+
+
+def write_run(res: SimResult, out_dir) -> dict:
+    """Write log.csv, log.h5, metrics.json and the plots into ``out_dir``; returns the metrics."""
+    import json
+
+    from ..analysis.logs import write_log
+    from ..publish import write_atomic
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    log = log_from_result(res)
+    write_log(out_dir / "log.csv", log)
+    write_log(out_dir / "log.h5", log)
+    m = metrics(res)
+    m["scenario"] = res.scenario.name
+    write_atomic(
+        out_dir / "metrics.json", (json.dumps(m, indent=2, sort_keys=True) + "\n").encode()
+    )
+    plot_result(res, out_dir)
+    return m
