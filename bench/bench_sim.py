@@ -43,7 +43,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SPEED = 9.0  # m/s
 DURATION = 10.0  # s, fast path
 BASELINE_DURATION = 1.0  # s, numpy baseline
-INITIAL_ERROR = (0.01, 0.02)  # delta, xi (rad), as configs/scenarios/horizontal.toml
+INITIAL_ERROR = (0.01, 0.02)  # delta, xi (rad), as the shipped horizontal scenario
 MOCAP = Sensing(False, 200.0, 0.0005, np.deg2rad(0.2), 0.01, 0.005, 1)
 
 

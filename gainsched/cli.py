@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import functools
 import sys
+import warnings
 from pathlib import Path
 
 import click
 import numpy as np
 
 from . import __version__
-from .errors import InputError
+from .errors import GainschedWarning, InputError
 
 __all__ = ["main", "cli"]
 
@@ -36,6 +37,14 @@ def user_errors(fn):
 CONFIG = click.argument("config", type=click.Path(dir_okay=False, path_type=Path))
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    """gainsched's own warnings as one line on stderr; others as Python shows them."""
+    if issubclass(category, GainschedWarning):
+        click.echo(f"gainsched: warning: {' '.join(str(message).split())}", err=True)
+    else:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
 class _OneLineErrors(click.Group):
     """click's usage errors (bad option value, unknown option, missing argument) as one
     line ``gainsched: error: command line: ...`` with exit code 2, like every other user
@@ -44,7 +53,10 @@ class _OneLineErrors(click.Group):
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True,
              **extra):
         try:
-            rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            with warnings.catch_warnings():
+                warnings.showwarning = _one_line_warning
+                rv = super().main(args, prog_name, complete_var, standalone_mode=False,
+                                  **extra)
         except click.UsageError as exc:
             msg = " ".join(exc.format_message().split())
             click.echo(f"gainsched: error: command line: {msg}", err=True)
@@ -475,7 +487,9 @@ def _scenario_path(name: str) -> Path:
     p = Path(name)
     if p.suffix == ".toml" or p.exists():
         return p
-    return Path(__file__).resolve().parents[1] / "configs" / "scenarios" / f"{name}.toml"
+    from .sim.paper import SCENARIO_DIR
+
+    return SCENARIO_DIR / f"{name}.toml"
 
 
 @cli.command()
@@ -483,7 +497,8 @@ def _scenario_path(name: str) -> Path:
 @click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
               required=True, help="Gain table (HDF5) built from CONFIG.")
 @click.option("--scenario", required=True,
-              help="Scenario file, or a name in configs/scenarios (e.g. braking).")
+              help="Scenario file, or the name of a shipped scenario (horizontal, tilted40, "
+              "speedup, braking, staircase).")
 @click.option("--plant", "plant_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Truth config for the plant (default: CONFIG).")
 @click.option("--speed", type=FiniteFloat(0, MAX_SPEED, lo_open=True, unit="m/s"),

@@ -7,7 +7,7 @@ stderr and exit code 2, with no traceback.
 
 from __future__ import annotations
 
-__all__ = ["InputError", "GainschedError"]
+__all__ = ["InputError", "GainschedError", "GainschedWarning"]
 
 
 class GainschedError(Exception):
@@ -35,3 +35,8 @@ class InputError(GainschedError):
         self.message = message
         text = f"{self.source}: {where}: {message}" if where else f"{self.source}: {message}"
         super().__init__(text)
+
+
+class GainschedWarning(UserWarning):
+    """Something the user should know that does not stop the command (the CLI prints it
+    as one line ``gainsched: warning: ...``)."""

@@ -24,8 +24,10 @@ from gainsched.sim.loop import (
     simulate,
     table_scheduler,
 )
+from gainsched.sim.paper import SCENARIO_DIR
 
 ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = SCENARIO_DIR  # the shipped scenarios (package data)
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +41,7 @@ def sched():
 
 
 def test_profile_path_composes_manoeuvres():
-    scn = load_scenario(ROOT / "configs/scenarios/staircase.toml")
+    scn = load_scenario(SCENARIOS / "staircase.toml")
     t = np.linspace(0, scn.duration, 44001)
     p = profile_path(scn, 1.6, t)
     v = p.d[0] * 1.6
@@ -124,5 +126,5 @@ def test_bad_scenario_names_key(tmp_path):
     p.write_text("speed = 5.0\nduration = -1.0\n")
     with pytest.raises(InputError, match="duration"):
         load_scenario(p)
-    braking = load_scenario(ROOT / "configs/scenarios/braking.toml")  # the good file loads
+    braking = load_scenario(SCENARIOS / "braking.toml")  # the good file loads
     assert (braking.name, braking.speed, braking.duration) == ("braking", 11.3, 3.0)

@@ -53,7 +53,7 @@ from scipy.signal import correlate, lfilter, savgol_coeffs, savgol_filter
 
 from ..config import Config
 from ..errors import InputError
-from ..model.effects import Effect, Kinematics, MotorLag
+from ..model.effects import Effect, Kinematics
 from ..model.reduced import Model
 from ..model.rotations import (
     R_IC_from_tilt,
@@ -390,11 +390,9 @@ def effect_states(eff: Effect, t, T_cmd, kin_fn=None) -> np.ndarray:
     (``x_k = a x_{k-1} + (1 - a) T_k``, ``a = exp(-dt/tau)``), started in its steady
     state; other stateful effects are integrated with explicit Euler sub-steps.
     """
-    dt = float(np.median(np.diff(t)))
-    if isinstance(eff, MotorLag):
-        a = math.exp(-dt / eff.tau)
-        zi = (a * T_cmd[0])[None, :]
-        return lfilter([1 - a], [1, -a], T_cmd, axis=0, zi=zi)[0]
+    exact = eff.states_from_held_commands(t, T_cmd)
+    if exact is not None:
+        return exact
     x = np.zeros((len(t), eff.n_states))
     sub = 10
     for k in range(1, len(t)):

@@ -65,7 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import GainschedWarning, InputError
 
 __all__ = [
     "SCHEMA",
@@ -129,7 +129,7 @@ PLANE_SPREAD = 0.3
 PLANE_FLAT = 0.2
 
 
-class LogWarning(UserWarning):
+class LogWarning(GainschedWarning):
     """A log problem that is reported but not fatal (a gap, a dropped short segment)."""
 
 

@@ -18,6 +18,8 @@ All hooks broadcast over leading batch dimensions and are complex-step safe.
 
 from __future__ import annotations
 
+import contextlib
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -34,6 +36,7 @@ __all__ = [
     "ThrustMomentum",
     "MotorLag",
     "EFFECTS",
+    "registered_effect",
     "effects_from_specs",
     "norm",
 ]
@@ -139,6 +142,13 @@ class Effect:
         Returns ``(x, u_cmd)``, shapes (..., n_states) and (..., 4).
         """
         raise NotImplementedError
+
+    def states_from_held_commands(self, t, T_cmd):
+        """The effect's states along a log whose commands ``T_cmd`` (N, 4), N, are held
+        over each sample interval ``t`` (N,), s, started in steady state: shape
+        (N, n_states), or None when the effect has no exact form (the caller then
+        integrates :meth:`state_derivative`)."""
+        return None
 
     def mirror(self):
         """How the effect's states map under the direction mirror S2, shape (n_states, n_states)."""
@@ -324,11 +334,43 @@ class MotorLag(Effect):
     def mirror(self):
         return np.eye(4)[[3, 2, 1, 0]]  # per-motor states swap like the motors
 
+    def states_from_held_commands(self, t, T_cmd):
+        # exact zero-order hold: x_k = a x_{k-1} + (1 - a) T_k, a = exp(-dt / tau)
+        from scipy.signal import lfilter
+
+        a = math.exp(-float(np.median(np.diff(t))) / self.tau)
+        return lfilter([1 - a], [1, -a], T_cmd, axis=0, zi=(a * T_cmd[0])[None, :])[0]
+
 
 EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
     for cls in (Drag, RotorDrag, ThrustScale, ThrustPolynomial, ThrustMomentum, MotorLag)
 }
+
+
+@contextlib.contextmanager
+def registered_effect(cls: type[Effect]):
+    """Make a user-defined effect class nameable in configs (``[effects.<kind>]``) for the
+    block: the config checks, the model, the simulator and the analysis then use it
+    like a built-in one.
+
+    Example
+    -------
+    >>> class Wake(Effect):                            # doctest: +SKIP
+    ...     kind = "wake"
+    ...     params = (Param("depth", "-", 0.0, 0.0, 0.5, "relative thrust loss"),)
+    >>> with registered_effect(Wake):                  # doctest: +SKIP
+    ...     cfg = load_config("vehicle_with_wake.toml")
+    """
+    if cls.kind in EFFECTS and EFFECTS[cls.kind] is not cls:
+        raise ValueError(f"an effect named {cls.kind!r} exists already")
+    had = cls.kind in EFFECTS
+    EFFECTS[cls.kind] = cls
+    try:
+        yield cls
+    finally:
+        if not had:
+            EFFECTS.pop(cls.kind, None)
 
 
 def effects_from_specs(specs) -> tuple[Effect, ...]:

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..analysis.logs import FlightLog, log_from_arrays, write_log
 from ..config import Config, config_from_text
-from ..model.effects import EFFECTS, Effect, Param
+from ..model.effects import Effect, Param, registered_effect
 from ..tomledit import set_section, set_value
 from .loop import Maneuver, Scenario, Sensing, log_from_result, simulate
 
@@ -58,18 +58,6 @@ class AzimuthThrustLoss(Effect):
         return T * (1 - self.depth * np.exp(-0.5 * (d / math.radians(self.width_deg)) ** 2))[
             ..., None
         ]
-
-
-@contextlib.contextmanager
-def _registered(cls):
-    """Temporarily add an effect class to the registry (configs can then name it)."""
-    had = cls.kind in EFFECTS
-    EFFECTS[cls.kind] = cls
-    try:
-        yield
-    finally:
-        if not had:
-            EFFECTS.pop(cls.kind, None)
 
 
 @dataclass(frozen=True)
@@ -165,7 +153,7 @@ def plant_config(design: Config, hidden: HiddenEffect | str) -> Config:
                                f"hidden: {h.name}")
         else:
             text = set_value(text, section, key, value, f"hidden: {h.name}")
-    ctx = _registered(h.custom) if h.custom else contextlib.nullcontext()
+    ctx = registered_effect(h.custom) if h.custom else contextlib.nullcontext()
     with ctx:
         return config_from_text(text, f"<plant {h.name}>")
 
@@ -198,7 +186,7 @@ def fly(design: Config, scheduler, scenarios, plant: Config | None = None, *,
     logged pose; ``load_cell=False`` drops the tension column. Flights that go slack are
     kept up to the slack instant.
     """
-    ctx = _registered(custom) if custom else contextlib.nullcontext()
+    ctx = registered_effect(custom) if custom else contextlib.nullcontext()
     logs = []
     with ctx:
         for scn in scenarios:

@@ -17,19 +17,20 @@ from __future__ import annotations
 
 import math
 import tomllib
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..config import N_STATE, Config, Section
-from ..errors import InputError
+from ..errors import GainschedWarning, InputError
 from ..model.maximal import MaximalModel, reduced_from_maximal
 from ..model.reduced import Model
 from ..model.rotations import R_IC_from_tilt, matrix_from_quaternion, quaternion_from_matrix
 from ..schedule.nominal import nominal_from_path
 from ..schedule.path import AzimuthPath, maneuver_path
-from .fastplant import fast_plant
+from .fastplant import SUPPORTED_EFFECTS, fast_plant
 
 __all__ = [
     "Scenario",
@@ -83,7 +84,7 @@ class Scenario:
 
 
 def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
-    """Validate a scenario table (see ``configs/scenarios/*.toml``)."""
+    """Validate a scenario table (see ``gainsched/sim/scenarios/*.toml``)."""
     top = Section(str(source), "", d)
     name = top.string("name", Path(str(source)).stem)
     tilt_deg = top.number("tilt_deg", 0.0)
@@ -177,6 +178,23 @@ class SimResult:
     g: float
 
 
+_FALLBACKS_SEEN: set[str] = set()
+
+
+def _warn_numpy_plant(cfg: Config) -> None:
+    """Say once per reason that the rigid-link plant runs on the numpy model (slower)."""
+    missing = sorted(s.name for s in cfg.effects if s.name not in SUPPORTED_EFFECTS)
+    why = (f"the compiled plant does not implement the effect(s) {', '.join(missing)}"
+           if missing else "the compiled plant is not available (no C compiler, or "
+           "GAINSCHED_NATIVE=0)")
+    if why in _FALLBACKS_SEEN:
+        return
+    _FALLBACKS_SEEN.add(why)
+    warnings.warn(f"{why}: the simulation runs on the numpy model, about 0.3x real time "
+                  f"instead of 80x (gainsched/sim/fastplant.py)", GainschedWarning,
+                  stacklevel=3)
+
+
 class _Plant:
     """Reduced model (rigid link) or maximal model (elastic links) behind one interface.
 
@@ -191,6 +209,8 @@ class _Plant:
         self.maximal = None if cfg.tether.link == "rigid" else MaximalModel(self.model)
         # compiled RK4 of the reduced model; None: numpy model
         self.fast = fast_plant(cfg) if self.maximal is None else None
+        if self.maximal is None and self.fast is None:
+            _warn_numpy_plant(cfg)
 
     def initial(self, z0, u0):
         """Plant state from the reduced state ``z0`` (10,) and the thrusts ``u0`` (4,), N:

@@ -6,7 +6,7 @@ Paper Sec. V.B (the vehicle of configs/paper.toml): constant-speed horizontal ci
 braking from 11.3 to 1.0 m/s in under 1.5 s with peak deceleration 17.5 m/s^2
 (Fig. 4; decelerations up to 19.75 m/s^2 were flown), and the speed staircase
 of Fig. 3 (tracked well up to about 9 m/s). Each experiment is a scenario in
-``configs/scenarios`` (one source of truth with ``gainsched simulate``), flown
+``gainsched/sim/scenarios`` (one source of truth with ``gainsched simulate``), flown
 with the committed tables through :func:`gainsched.sim.loop.simulate` on the design
 config as the plant (no model error), motion capture at 200 Hz with 0.5 mm /
 0.2 deg noise. The staircase is flown a second time on a plant with the model
@@ -49,7 +49,7 @@ __all__ = [
 ]
 
 SCHEMA = "gainsched-paper-report/1"
-SCENARIO_DIR = Path(__file__).resolve().parents[2] / "configs" / "scenarios"
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"  # package data
 
 # the paper's numbers (Sec. V.B, Figs. 3 and 4)
 RMS_Z_M = 0.013  # RMS z error on horizontal circles, m
