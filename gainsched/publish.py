@@ -134,9 +134,12 @@ def _roll_forward(out_dir: Path) -> None:
     journal = out_dir / JOURNAL
     try:
         entry = json.loads(journal.read_text())
-        stage, names = out_dir / entry["stage"], list(entry["files"])
+        stage, names = out_dir / entry["stage"], [str(n) for n in entry["files"]]
     except (OSError, ValueError, KeyError, TypeError):
         journal.unlink(missing_ok=True)  # unreadable: it was never complete, nothing to do
+        return
+    if not _safe_journal(entry["stage"], names):  # not ours: never rename by its word
+        journal.unlink(missing_ok=True)
         return
     with _signals_held():
         for name in names:
@@ -148,6 +151,13 @@ def _roll_forward(out_dir: Path) -> None:
         journal.unlink()
         _fsync(out_dir)
     shutil.rmtree(stage, ignore_errors=True)
+
+
+def _safe_journal(stage, names) -> bool:
+    """A journal names a stage of this folder and relative paths that stay inside it."""
+    plain = isinstance(stage, str) and stage.startswith(_STAGE) and Path(stage).name == stage
+    inside = all(n and not Path(n).is_absolute() and ".." not in Path(n).parts for n in names)
+    return plain and inside
 
 
 def _pending_stage(out_dir: Path) -> str | None:

@@ -313,3 +313,15 @@ def test_unwritable_folder_is_named(tmp_path, monkeypatch, err, words):
 
     monkeypatch.setattr(pub.tempfile, "mkstemp", refuse)
     one_line_error(_run("build", PAPER, "-o", tmp_path / "out"), tmp_path / "out", "-o", words)
+
+
+def test_a_forged_journal_moves_nothing_outside_the_folder(tmp_path):
+    """The journal is read from the output folder: names that leave it are ignored."""
+    out = tmp_path / "out"
+    publish(out, {"t.h5": b"old"})
+    victim = tmp_path / "victim.txt"
+    victim.write_bytes(b"keep")
+    (out / JOURNAL).write_text('{"stage": "..", "files": ["victim.txt"]}')  # take a file
+    recover(out)
+    assert victim.read_bytes() == b"keep" and (out / "t.h5").read_bytes() == b"old"
+    assert sorted(os.listdir(out)) == ["t.h5"]
