@@ -79,7 +79,7 @@ def test_contract_is_kept():
 @pytest.mark.parametrize("module, back_edge", [
     ("constants.py", "from . import cli  # injected\n"),  # the base imports the top
     ("config.py", "def _f():\n    from .schedule.grid import build_grid  # injected, lazy\n"),
-    ("publish.py", "from . import tomledit  # injected: a sibling of one layer\n"),
+    ("publish.py", "from . import configedit  # injected: a sibling of one layer\n"),
     ("model/reduced.py", "from ..schedule import grid  # injected: model above schedule\n"),
 ])
 def test_contract_fails_on_an_injected_back_edge(tmp_path, module, back_edge):

@@ -20,10 +20,10 @@ from gainsched.analysis.compare import compare
 from gainsched.analysis.diagnose import CANDIDATES, THRESHOLDS, apply_candidate, diagnose
 from gainsched.cli import cli
 from gainsched.config import config_from_text, load_config
+from gainsched.configedit import get_value
 from gainsched.schedule.tables import load_table
 from gainsched.sim.campaign import HIDDEN, campaign, default_flights, write_campaign
 from gainsched.sim.loop import table_scheduler
-from gainsched.tomledit import get_value
 
 ROOT = Path(__file__).resolve().parents[1]
 DURATION = 2.5

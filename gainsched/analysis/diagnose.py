@@ -45,9 +45,9 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..config import Config, EffectSpec, config_from_text
+from ..configedit import remove_key, set_section, set_value
 from ..model.effects import EFFECTS, effects_from_specs
 from ..model.reduced import Model
-from ..tomledit import remove_key, set_section, set_value
 from .compare import (
     AT_NOISE_FLOOR,
     Comparison,
@@ -933,7 +933,7 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
 
     The result is validated with :func:`~gainsched.config.config_from_text`.
     """
-    from ..tomledit import get_value
+    from ..configedit import get_value
 
     cand = CANDIDATES[result.name]
     comments = []

@@ -31,15 +31,12 @@ the SHA-256 of the variant's HDF5 table.
 
 from __future__ import annotations
 
-import copy
 import csv
 import hashlib
 import io
 import itertools
 import json
 import math
-import re
-import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -47,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Config, config_from_text
+from ..configedit import set_values
 from ..errors import InputError
 
 __all__ = [
@@ -238,70 +236,17 @@ def parse_sigma(spec: str) -> tuple[str, float]:
     return key, rel
 
 
-# --------------------------------------------------------------------------- TOML out
-
-_BARE = re.compile(r"^[A-Za-z0-9_-]+$")
-
-
-def _toml_key(k: str) -> str:
-    return k if _BARE.match(k) else json.dumps(k)
-
-
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        return repr(v) if math.isfinite(v) else ("nan" if v != v else ("inf" if v > 0 else "-inf"))
-    if isinstance(v, str):
-        return json.dumps(v)  # JSON string escapes are valid TOML basic-string escapes
-    if isinstance(v, list):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + "}"
-    raise TypeError(f"cannot write {type(v).__name__} as TOML")
-
-
-def _toml_table(d: dict, prefix: tuple[str, ...], lines: list[str]) -> None:
-    scalars = [(k, v) for k, v in d.items() if not isinstance(v, dict)]
-    tables = [(k, v) for k, v in d.items() if isinstance(v, dict)]
-    if prefix and (scalars or not tables):
-        lines.append("")
-        lines.append("[" + ".".join(_toml_key(p) for p in prefix) + "]")
-    for k, v in scalars:
-        lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
-    for k, v in tables:
-        _toml_table(v, (*prefix, k), lines)
-
-
-def _set(doc: dict, path: tuple, value: float) -> None:
-    *tables, last = path
-    if isinstance(last, int):  # inertia diagonal: [Jxx, Jyy, Jzz] or a 3x3 matrix
-        J = doc[tables[0]][tables[1]]
-        if isinstance(J[0], list):
-            J[last][last] = value
-        else:
-            J[last] = value
-        return
-    for t in tables:
-        doc = doc.setdefault(t, {})
-    doc[last] = value
-
-
 def variant_text(base: Config, name: str, values: Sequence[tuple[str, float]]) -> str:
-    """The TOML text of ``base`` with ``values`` (canonical keys) applied and ``name`` set."""
-    doc = copy.deepcopy(tomllib.loads(base.text))
+    """The TOML text of ``base`` with ``values`` (canonical keys) applied and ``name`` set:
+    the base text edited as a document (:mod:`gainsched.configedit`), comments kept,
+    values in full precision."""
     paths = scalar_parameters(base)
-    for key, v in values:
-        _set(doc, paths[key], float(v))
-    doc["name"] = name
-    doc = {"schema": doc.pop("schema"), "name": doc.pop("name"), **doc} if "schema" in doc else doc
+    edits = {".".join(map(str, paths[key])): float(v) for key, v in values}
+    edits["name"] = name
     changed = ", ".join(f"{k} = {float(v)!r}" for k, v in values)
-    lines = [f"# gainsched sweep variant {name} of config {base.name!r} "
-             f"(sha256 {base.sha256[:12]}): {changed}"]
-    _toml_table(doc, (), lines)
-    return "\n".join(lines) + "\n"
+    head = (f"# gainsched sweep variant {name} of config {base.name!r} "
+            f"(sha256 {base.sha256[:12]}): {changed}\n")
+    return head + set_values(base.text, edits)
 
 
 # --------------------------------------------------------------------------- variants
