@@ -724,7 +724,9 @@ def log_bytes(fmt: str, log_or_columns, meta=None, *, name: str = "flightlog") -
     fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
     fapl.set_fapl_core(backing_store=False)
     fapl.set_libver_bounds(h5py.h5f.LIBVER_V18, h5py.h5f.LIBVER_V18)
-    fid = h5py.h5f.create(name.encode(), h5py.h5f.ACC_TRUNC, fapl=fapl)
+    fcpl = h5py.h5p.create(h5py.h5p.FILE_CREATE)
+    fcpl.set_obj_track_times(False)  # the root group would carry the wall-clock second
+    fid = h5py.h5f.create(name.encode(), h5py.h5f.ACC_TRUNC, fapl=fapl, fcpl=fcpl)
     with h5py.File(fid) as f:
         for k, v in meta.items():
             f.attrs[k] = v
