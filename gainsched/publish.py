@@ -130,17 +130,26 @@ def _signals_held() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
+def _read_journal(out_dir: Path) -> tuple[str, list[str]] | None:
+    """The pending journal's ``(stage, files)``, or None when there is none or it is not a
+    journal this module wrote (unreadable, or naming paths outside the folder)."""
+    try:
+        entry = json.loads((out_dir / JOURNAL).read_text())
+        stage, names = entry["stage"], [str(n) for n in entry["files"]]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    plain = isinstance(stage, str) and stage.startswith(_STAGE) and Path(stage).name == stage
+    inside = all(n and not Path(n).is_absolute() and ".." not in Path(n).parts for n in names)
+    return (stage, names) if plain and inside else None
+
+
 def _roll_forward(out_dir: Path) -> None:
     journal = out_dir / JOURNAL
-    try:
-        entry = json.loads(journal.read_text())
-        stage, names = out_dir / entry["stage"], [str(n) for n in entry["files"]]
-    except (OSError, ValueError, KeyError, TypeError):
-        journal.unlink(missing_ok=True)  # unreadable: it was never complete, nothing to do
-        return
-    if not _safe_journal(entry["stage"], names):  # not ours: never rename by its word
+    pending = _read_journal(out_dir)
+    if pending is None:  # never complete, or not ours: never rename by its word
         journal.unlink(missing_ok=True)
         return
+    stage, names = out_dir / pending[0], pending[1]
     with _signals_held():
         for name in names:
             src, dst = stage / name, out_dir / name
@@ -153,24 +162,19 @@ def _roll_forward(out_dir: Path) -> None:
     shutil.rmtree(stage, ignore_errors=True)
 
 
-def _safe_journal(stage, names) -> bool:
-    """A journal names a stage of this folder and relative paths that stay inside it."""
-    plain = isinstance(stage, str) and stage.startswith(_STAGE) and Path(stage).name == stage
-    inside = all(n and not Path(n).is_absolute() and ".." not in Path(n).parts for n in names)
-    return plain and inside
-
-
-def _pending_stage(out_dir: Path) -> str | None:
-    try:
-        return str(json.loads((out_dir / JOURNAL).read_text())["stage"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
+def _settle(out_dir: Path) -> None:
+    """Complete a committed set a killed run left, then remove what killed runs left
+    before their commit point (under the folder lock)."""
+    if (out_dir / JOURNAL).exists():
+        _roll_forward(out_dir)
+    _clean(out_dir)
 
 
 def _clean(out_dir: Path) -> None:
     """Remove stages and temp files of killed runs (under the folder lock); never the stage
     of a committed set that is still due."""
-    keep = _pending_stage(out_dir)
+    pending = _read_journal(out_dir)
+    keep = pending[0] if pending else None
     for p in out_dir.glob(_STAGE + "*"):
         if p.name == keep:
             continue
@@ -190,9 +194,7 @@ def recover(out_dir) -> None:
     if not out_dir.is_dir():
         return
     with _locked(out_dir):
-        if (out_dir / JOURNAL).exists():
-            _roll_forward(out_dir)
-        _clean(out_dir)
+        _settle(out_dir)
 
 
 @contextmanager
@@ -214,9 +216,7 @@ def staged(out_dir, *, where: str = "-o") -> Iterator[Path]:
     """
     out_dir = check_out_dir(out_dir, where)
     with _locked(out_dir):
-        if (out_dir / JOURNAL).exists():  # a killed run's committed set comes first
-            _roll_forward(out_dir)
-        _clean(out_dir)
+        _settle(out_dir)  # a killed run's committed set comes first
         try:
             stage = Path(tempfile.mkdtemp(dir=out_dir, prefix=_STAGE))
             yield stage
