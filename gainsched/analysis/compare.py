@@ -54,6 +54,12 @@ from scipy.signal import correlate, lfilter, savgol_coeffs, savgol_filter
 from ..config import Config
 from ..errors import InputError
 from ..model.effects import Effect, Kinematics
+from ..model.geometry import (
+    attachment_from_cog,
+    cog_from_attachment,
+    spherical_from_point,
+    tether_direction,
+)
 from ..model.reduced import Model
 from ..model.rotations import (
     R_IC_from_tilt,
@@ -226,10 +232,8 @@ def _raw_channels(log: FlightLog, L_e: float, p_I=None, R_IB=None):
     R_IC = R_IC_from_tilt(log.alpha_c, log.gamma_c)
     p_C = np.einsum("nj,ji->ni", log.p_I if p_I is None else p_I, R_IC)  # rows R_IC^T p
     R = np.einsum("ji,njk->nik", R_IC, matrix_from_quaternion(log.q) if R_IB is None else R_IB)
-    p_t = p_C - L_e * R[:, :, 0]
-    d = np.linalg.norm(p_t, axis=-1)
-    delta = np.arctan2(np.hypot(p_t[:, 0], p_t[:, 1]), p_t[:, 2])
-    xi = np.unwrap(np.arctan2(p_t[:, 1], p_t[:, 0]))
+    d, delta, xi = spherical_from_point(attachment_from_cog(p_C, R, np.array([-L_e, 0.0, 0.0])))
+    xi = np.unwrap(xi)
     phi, theta, psi = euler_zyx_from_matrix(R)
     psi = np.unwrap(psi)
     psi += 2 * np.pi * np.round((xi[0] - psi[0]) / (2 * np.pi))  # chi = psi - xi near 0
@@ -256,26 +260,17 @@ def _reconstruct(ch, ch1, ch2, L_e):
         -1,
     )
     R = matrix_from_euler_zyx(phi, theta, psi)
-    sd, cd, sx, cx = np.sin(delta), np.cos(delta), np.sin(xi), np.cos(xi)
-    zero = np.zeros_like(sd)
-    e = np.stack([sd * cx, sd * sx, cd], -1)
-    e_d = np.stack([cd * cx, cd * sx, -sd], -1)
-    e_x = np.stack([-sd * sx, sd * cx, zero], -1)
-    e_dx = np.stack([-cd * sx, cd * cx, zero], -1)
-    e_xx = np.stack([-sd * cx, -sd * sx, zero], -1)
-    e_dd = -e
+    direction = tether_direction(delta, xi)
+    e, e_d, e_x = direction.e, direction.e_delta, direction.e_xi
     col = lambda a: a[:, None]  # noqa: E731
-    e_dot = e_d * col(ddelta) + e_x * col(dxi)
-    e_ddot = (
-        e_d * col(ddelta2) + e_x * col(dxi2) + e_dd * col(ddelta**2)
-        + 2 * e_dx * col(ddelta * dxi) + e_xx * col(dxi**2)
-    )
+    e_dot = direction.rate(ddelta, dxi)
+    e_ddot = direction.acceleration(ddelta, dxi, ddelta2, dxi2)
     p_e = np.array([-L_e, 0.0, 0.0])
     w_pe = np.cross(w, p_e)
     p_t = col(d) * e
     v_t = col(dd_) * e + col(d) * e_dot
     a_t = col(d2) * e + 2 * col(dd_) * e_dot + col(d) * e_ddot
-    p = p_t - np.einsum("nij,j->ni", R, p_e)
+    p = cog_from_attachment(p_t, R, p_e)
     v = v_t - np.einsum("nij,nj->ni", R, w_pe)
     a = a_t - np.einsum("nij,nj->ni", R, np.cross(w_dot, p_e) + np.cross(w, w_pe))
     sgn = np.where(dxi < 0, -1.0, 1.0)
@@ -463,7 +458,7 @@ class _Kin(Kinematics):
 def _kinematics(meas: Measured) -> Kinematics:
     def make():
         vB = np.einsum("nji,nj->ni", meas.R, meas.v)
-        return _Kin(meas.R, meas.v, meas.z[:, 7:10], vB)
+        return _Kin(meas.R, meas.v, meas.z[:, 7:10], meas.p, meas.alpha, vB)
 
     return meas.derived("kin", make)
 
@@ -485,29 +480,22 @@ def predict(model: Model, meas: Measured, *, latency: float | None = None,
         parts = [z]
 
         def kin_at(k):
-            return Kinematics(meas.R[k], meas.v[k], z[k, 7:10])
+            return Kinematics(meas.R[k], meas.v[k], z[k, 7:10], meas.p[k], meas.alpha)
 
         for eff in model.effects:
             if eff.n_states:
                 parts.append(effect_states(eff, meas.t, T_raw, kin_at))
         z = np.concatenate(parts, -1)
     T = model.thrust(z, u, kin)
-    F_eff, tau_eff = model.effect_wrench(T, kin)
+    F0, tau0 = model.body_wrench(T, kin, meas.alpha)
     m = model.m
-    T_C = np.sum(T, -1)
-    F0 = meas.R[:, :, 2] * T_C[:, None] + m * model.g_C(meas.alpha) + F_eff
     if meas.tension is not None:  # on board, like the commands: delayed with them
         f_t, source = _delayed(meas.t, meas.tension[:, None], lat)[:, 0], "load cell"
     else:
         f_t, source = np.sum(meas.e * (F0 - m * meas.a), -1), "radial equation"
     a_pred = (F0 - f_t[:, None] * meas.e) / m
     e_B = meas.derived("e_B", lambda: np.einsum("nji,nj->ni", meas.R, meas.e))
-    w = z[:, 7:10]
-    # einsum, not BLAS matmul: multithreaded BLAS on tall-thin products is slow and noisy
-    tau = (
-        np.einsum("nk,jk->nj", T, model.alloc[1:]) + tau_eff
-        - f_t[:, None] * np.cross(model.p_e, e_B) - np.cross(w, np.einsum("nk,jk->nj", w, model.J))
-    )
+    tau = tau0 - f_t[:, None] * model.tether_lever(e_B)
     wd = np.einsum("nk,jk->nj", tau, np.linalg.inv(model.J))
     acc = np.einsum("nij,nj->ni", meas.axes, a_pred)
     kw = dict(window_length=meas.window, polyorder=meas.order, axis=0, mode="interp")

@@ -72,16 +72,36 @@ class Kinematics:
     v_C : ndarray, shape (..., 3), m/s
         COG velocity in C (equal to the airspeed: no wind).
     omega_B : ndarray, shape (..., 3), rad/s
+        Body rates.
+    p_C : ndarray, shape (..., 3), m
+        COG position in C (the tether anchor at the origin).
+    alpha : float or ndarray, shape (...), rad
+        Tilt of the circle plane: C is turned by ``alpha`` about the inertial x axis
+        (paper eq. 1; the heading ``gamma`` of the plane does not enter the physics).
     """
 
     R_CB: np.ndarray
     v_C: np.ndarray
     omega_B: np.ndarray
+    p_C: np.ndarray
+    alpha: float | np.ndarray
 
     @property
     def v_B(self):
         """COG velocity in B, shape (..., 3), m/s."""
         return np.einsum("...ji,...j->...i", self.R_CB, self.v_C)
+
+    @property
+    def up_C(self):
+        """The inertial up direction ``R_IC^T (0, 0, 1) = (0, sin alpha, cos alpha)`` in C,
+        shape (..., 3) (broadcast against the batch of ``alpha``)."""
+        a = np.asarray(self.alpha)
+        return np.stack([np.zeros_like(a, dtype=float), np.sin(a), np.cos(a)], -1)
+
+    @property
+    def height(self):
+        """COG height above the anchor, ``(R_IC p_C)_z``, shape (...), m."""
+        return np.sum(self.p_C * self.up_C, axis=-1)
 
 
 class Effect:

@@ -36,13 +36,14 @@ import numpy as np
 
 from ..constants import N_STATE
 from .effects import Kinematics
-from .links import ELASTIC_LINKS, LinkOutput, SpringDamper, link_from_tether
-from .rotations import (
-    euler_zyx_from_matrix,
-    matrix_from_quaternion,
-    quaternion_from_matrix,
-    skew,
+from .geometry import (
+    attachment_from_cog,
+    cog_from_attachment,
+    pose_angles_from_pose,
+    tether_direction,
 )
+from .links import ELASTIC_LINKS, LinkOutput, SpringDamper, link_from_tether
+from .rotations import matrix_from_quaternion, quaternion_from_matrix, skew
 
 __all__ = ["MaximalModel", "maximal_from_reduced", "reduced_from_maximal", "N_MAXIMAL"]
 
@@ -149,26 +150,19 @@ class MaximalModel:
         md = self.model
         x = np.asarray(x, dtype=float)
         u = np.asarray(u, dtype=float)
-        m, J, p_e = md.m, md.J, md.p_e
+        m, p_e = md.m, md.p_e
         p, v, q, w = x[..., 0:3], x[..., 3:6], x[..., 6:10], x[..., 10:13]
         qn = q / np.sqrt(_dot(q, q))[..., None]
         R = matrix_from_quaternion(qn)
-        kin = Kinematics(R, v, w)
-
-        # thrust after the (stateless) thrust modifiers, then the effect wrenches
-        T = u
-        no_state = np.zeros(x.shape[:-1] + (0,))
-        for eff in md.effects:
-            T = eff.modify_thrust(T, kin, no_state)
-        F, tau = md.effect_wrench(T, kin)
-        shape = F.shape
-        T_C = np.sum(T, axis=-1)
-        F0 = R[..., :, 2] * T_C[..., None] + m * md.g_C(alpha) + F  # without the tether
-        tau0 = T @ md.alloc[1:].T + tau - _cross(w, w @ J.T)
+        kin = Kinematics(R, v, w, p, alpha)
+        # thrust after the (stateless) thrust modifiers; everything but the tether
+        T = md.thrust(np.zeros(x.shape[:-1] + (N_STATE,)), u, kin)
+        F0, tau0 = md.body_wrench(T, kin, alpha)
+        shape = F0.shape
 
         # attachment point: position, velocity, direction
         w_pe = w @ self._S  # omega x p_e
-        p_t = p + _mv(R, p_e)
+        p_t = attachment_from_cog(p, R, p_e)
         v_t = v + _mv(R, w_pe)
         link = None
         if self.link_model is not None:
@@ -193,8 +187,7 @@ class MaximalModel:
         md, m = self.model, self.model.m
         dist = np.sqrt(_dot(p_t, p_t))
         n = p_t / dist[..., None]
-        n_B = np.einsum("...ji,...j->...i", R, n)
-        lever = n_B @ self._S.T  # p_e x n_B: tether torque per newton of tension is -lever
+        lever = md.tether_lever(np.einsum("...ji,...j->...i", R, n))
         # c'' = c0 - kf f with the tension-free part c0 and kf = |p_t| (1/m + l^T J^-1 l)
         a_q0 = F0 / m
         wd0 = tau0 @ self.J_inv.T
@@ -239,7 +232,7 @@ class MaximalModel:
         """Attachment point position (m) and velocity (m/s) in C, shapes (..., 3)."""
         p, v, q, w = x[..., 0:3], x[..., 3:6], x[..., 6:10], x[..., 10:13]
         R = matrix_from_quaternion(q / np.sqrt(_dot(q, q))[..., None])
-        return p + _mv(R, self.model.p_e), v + _mv(R, w @ self._S)
+        return attachment_from_cog(p, R, self.model.p_e), v + _mv(R, w @ self._S)
 
     def energy(self, x, alpha):
         """Mechanical energy of the vehicle (kinetic + gravitational potential), J.
@@ -335,13 +328,14 @@ def maximal_from_reduced(model, z, stretch=0.0):
     link's elongation; z is recovered exactly by :func:`reduced_from_maximal`).
     """
     z = np.asarray(z, dtype=float)
-    R, e, _, _, v_q, w_x_pe = model.kinematics(z)
-    p_q = model.rho * e - _mv(R, model.p_e)
+    R, d, v_q, w_x_pe = model.kinematics(z)
+    p_t = model.rho * d.e
     if np.any(stretch):
         scale = (1.0 + np.asarray(stretch, dtype=float) / model.rho)[..., None]
         Rw = _mv(R, w_x_pe)
-        p_q = scale * (model.rho * e) - _mv(R, model.p_e)
+        p_t = scale * p_t
         v_q = scale * (v_q + Rw) - Rw  # v_t scales with the radius; v_q = v_t - R (w x p_e)
+    p_q = cog_from_attachment(p_t, R, model.p_e)
     return np.concatenate([p_q, v_q, quaternion_from_matrix(R), z[..., 7:10]], -1)
 
 
@@ -357,20 +351,11 @@ def reduced_from_maximal(model, x, xi_ref=None):
     x = np.asarray(x, dtype=float)
     p, v, q, w = x[..., 0:3], x[..., 3:6], x[..., 6:10], x[..., 10:13]
     R = matrix_from_quaternion(q / np.sqrt(_dot(q, q))[..., None])
-    p_t = p + _mv(R, model.p_e)
+    dist, pose = pose_angles_from_pose(p, R, model.p_e, xi_ref)
+    delta, xi = pose[..., 0], pose[..., 1]
     v_t = v + _mv(R, _cross(w, np.broadcast_to(model.p_e, w.shape)))
-    rxy = np.hypot(p_t[..., 0], p_t[..., 1])
-    dist = np.sqrt(_dot(p_t, p_t))
-    delta = np.arctan2(rxy, p_t[..., 2])
-    xi = np.arctan2(p_t[..., 1], p_t[..., 0])
-    if xi_ref is not None:
-        xi = xi + 2 * np.pi * np.round((np.asarray(xi_ref) - xi) / (2 * np.pi))
-    sd, cd, sx, cx = np.sin(delta), np.cos(delta), np.sin(xi), np.cos(xi)
-    e_d = np.stack([cd * cx, cd * sx, -sd], -1)  # de/ddelta
-    e_x = np.stack([-sx, cx, np.zeros_like(sx)], -1)  # (de/dxi) / sin(delta)
-    delta_dot = _dot(e_d, v_t) / dist
-    xi_dot = _dot(e_x, v_t) / (dist * sd)
-    phi, theta, psi = euler_zyx_from_matrix(R)
-    chi = (psi - xi + np.pi) % (2 * np.pi) - np.pi
-    z = np.stack([delta, xi, delta_dot, xi_dot, phi, theta, chi], -1)
+    d = tether_direction(delta, xi)
+    delta_dot = _dot(d.e_delta, v_t) / dist
+    xi_dot = _dot(d.e_xi, v_t) / (dist * np.sin(delta) ** 2)  # |e_xi| = sin(delta)
+    z = np.concatenate([pose[..., :2], np.stack([delta_dot, xi_dot], -1), pose[..., 2:]], -1)
     return np.concatenate([z, w], -1)[..., :N_STATE]

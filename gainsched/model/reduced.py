@@ -25,6 +25,7 @@ import numpy as np
 
 from ..constants import N_STATE
 from .effects import Effect, Kinematics, effects_from_specs
+from .geometry import cog_from_attachment, pose_from_reduced, tether_direction
 from .rotations import euler_zyx_rates_from_body_rates, matrix_from_euler_zyx, skew
 
 if TYPE_CHECKING:  # the config imports the effects of this package
@@ -121,20 +122,34 @@ class Model:
         return D
 
     def kinematics(self, s):
-        """Rotation, attachment-point geometry and COG velocity from states (..., >=10)."""
-        delta, xi, dd, dx = s[..., 0], s[..., 1], s[..., 2], s[..., 3]
+        """Body rotation, tether direction and COG velocity of states ``s`` (..., >= 10).
+
+        Returns
+        -------
+        R_CB : ndarray, shape (..., 3, 3)
+            ``Rz(chi + xi) Ry(theta) Rx(phi)`` (paper eq. 2).
+        direction : :class:`~gainsched.model.geometry.TetherDirection`
+        v_q : ndarray, shape (..., 3), m/s
+            COG velocity in C, ``rho e' - R_CB (omega x p_e)``.
+        w_x_pe : ndarray, shape (..., 3), m/s
+            ``omega x p_e`` in B.
+        """
+        xi, dd, dx = s[..., 1], s[..., 2], s[..., 3]
         phi, theta, chi, w = s[..., 4], s[..., 5], s[..., 6], s[..., 7:10]
         R = matrix_from_euler_zyx(phi, theta, chi + xi)
-        sd, cd, sx, cx = np.sin(delta), np.cos(delta), np.sin(xi), np.cos(xi)
-        z = np.zeros_like(sd)
-        e = np.stack([sd * cx, sd * sx, cd], -1)
-        e_d = np.stack([cd * cx, cd * sx, -sd], -1)  # de/ddelta
-        e_x = np.stack([-sd * sx, sd * cx, z], -1)  # de/dxi
+        d = tether_direction(s[..., 0], xi)
         w_x_pe = np.cross(w, self.p_e)
-        v_q = self.rho * (e_d * dd[..., None] + e_x * dx[..., None]) - np.einsum(
-            "...ij,...j->...i", R, w_x_pe
-        )
-        return R, e, e_d, e_x, v_q, w_x_pe
+        v_q = self.rho * d.rate(dd, dx) - np.einsum("...ij,...j->...i", R, w_x_pe)
+        return R, d, v_q, w_x_pe
+
+    def effect_kinematics(self, s, alpha):
+        """The :class:`~gainsched.model.effects.Kinematics` effects see at states ``s``
+        (..., >= 10) on a circle of tilt ``alpha`` (rad)."""
+        R, d, v_q, _ = self.kinematics(s)
+        return self._effect_kinematics(R, d, v_q, s[..., 7:10], alpha)
+
+    def _effect_kinematics(self, R, d, v_q, w, alpha):
+        return Kinematics(R, v_q, w, cog_from_attachment(self.rho * d.e, R, self.p_e), alpha)
 
     def thrust(self, z, u, kin):
         """Actual motor thrusts (N) after stateful effects and thrust modifiers."""
@@ -158,6 +173,45 @@ class Model:
                 tau = tau + wr[1]
         return F, tau
 
+    def body_wrench(self, T, kin, alpha):
+        """Everything acting on the vehicle except the tether: the one body wrench that
+        the reduced model, the maximal model and the model-versus-measurement
+        comparison use.
+
+        ``F = R_CB (0, 0, T_C) + m g_C + F_eff`` (paper eq. 3 without ``-f_t e``) and
+        ``tau = sum L_i x T_i + tau_M - omega x J omega + tau_eff`` (paper eqs. 6, 8
+        without the tether torque).
+
+        Parameters
+        ----------
+        T : ndarray, shape (..., 4), N
+            Actual motor thrusts (after :meth:`thrust`).
+        kin : Kinematics
+            Where the vehicle is (:meth:`effect_kinematics`).
+        alpha : float or ndarray, rad
+            Tilt of the circle plane.
+
+        Returns
+        -------
+        F_C : ndarray, shape (..., 3), N
+            Force at the COG in C.
+        tau_B : ndarray, shape (..., 3), N m
+            Torque about the COG in B.
+        """
+        F, tau = self.effect_wrench(T, kin)
+        w = kin.omega_B
+        T_C = np.sum(T, axis=-1)
+        F_C = kin.R_CB[..., :, 2] * T_C[..., None] + self.m * self.g_C(alpha) + F
+        tau_B = T @ self.alloc[1:].T - np.cross(w, w @ self.J.T) + tau
+        return F_C, tau_B
+
+    def tether_lever(self, n_B):
+        """``p_e x n_B``, shape (..., 3), m: the tether's torque about the COG is
+        ``-f_t p_e x n_B`` for a tension ``f_t`` (N) pulling the attachment point along
+        ``-n`` (paper eq. 6); ``n_B`` (..., 3) is the unit vector from the anchor to the
+        attachment point, in B."""
+        return n_B @ self._skew_pe.T
+
     # ------------------------------------------------------------------ dynamics
     def evaluate(self, z, u, alpha) -> Evaluation:
         """Full-state derivative and tether tension.
@@ -174,46 +228,27 @@ class Model:
         z = np.asarray(z)
         u = np.asarray(u)
         m, J = self.m, self.J
-        delta, xi, dd, dx = z[..., 0], z[..., 1], z[..., 2], z[..., 3]
+        dd, dx = z[..., 2], z[..., 3]
         phi, theta, w = z[..., 4], z[..., 5], z[..., 7:10]
-        R, e, e_d, e_x, v_q, w_x_pe = self.kinematics(z)
-        kin = Kinematics(R, v_q, w)
+        R, d, v_q, w_x_pe = self.kinematics(z)
+        e = d.e
+        kin = self._effect_kinematics(R, d, v_q, w, alpha)
         T = self.thrust(z, u, kin)
+        F0, rhs_tau = self.body_wrench(T, kin, alpha)
 
-        F, tau = self.effect_wrench(T, kin)
-
-        # p_t'' = rho (e_d delta'' + e_x xi'' + c2) with the velocity-product terms c2
-        sd, cd, sx, cx = np.sin(delta), np.cos(delta), np.sin(xi), np.cos(xi)
-        zero = np.zeros_like(sd)
-        e_dx = np.stack([-cd * sx, cd * cx, zero], -1)
-        e_xx = np.stack([-sd * cx, -sd * sx, zero], -1)
-        c2 = (
-            -e * (dd * dd)[..., None]
-            + 2 * e_dx * (dd * dx)[..., None]
-            + e_xx * (dx * dx)[..., None]
-        )
-
-        T_C = np.sum(T, axis=-1)
-        thrust_C = R[..., :, 2] * T_C[..., None]
+        # p_t'' = rho (e_delta delta'' + e_xi xi'' + c2), c2 the velocity-product terms
+        c2 = d.velocity_products(dd, dx)
         w_w_pe = np.cross(w, w_x_pe)
-        rhs_F = (
-            thrust_C
-            + m * self.g_C(alpha)
-            + F
-            - m * self.rho * c2
-            + m * np.einsum("...ij,...j->...i", R, w_w_pe)
-        )
-        tau_M = T @ self.alloc[1:].T
-        rhs_tau = tau_M - np.cross(w, w @ J.T) + tau
+        rhs_F = F0 - m * self.rho * c2 + m * np.einsum("...ij,...j->...i", R, w_w_pe)
 
-        RT_e = np.einsum("...ji,...j->...i", R, e)
+        e_B = np.einsum("...ji,...j->...i", R, e)
         A = np.zeros(rhs_F.shape[:-1] + (6, 6), dtype=rhs_F.dtype)
-        A[..., :3, 0] = m * self.rho * e_d
-        A[..., :3, 1] = m * self.rho * e_x
+        A[..., :3, 0] = m * self.rho * d.e_delta
+        A[..., :3, 1] = m * self.rho * d.e_xi
         A[..., :3, 2:5] = m * R @ self._skew_pe
         A[..., :3, 5] = e
         A[..., 3:, 2:5] = J
-        A[..., 3:, 5] = RT_e @ self._skew_pe.T
+        A[..., 3:, 5] = self.tether_lever(e_B)
         sol = np.linalg.solve(A, np.concatenate([rhs_F, rhs_tau], -1)[..., None])[..., 0]
 
         euler_dot = euler_zyx_rates_from_body_rates(phi, theta, w)
@@ -241,8 +276,7 @@ class Model:
     # ------------------------------------------------------------------ outputs
     def cog_position(self, z, alpha=0.0, gamma=0.0, frame="C"):
         """COG position ``p_q = rho e + L_e x_B`` in C (or I with ``frame="I"``), m."""
-        R, e, *_ = self.kinematics(z)
-        p = self.rho * e + self.L_e * R[..., :, 0]
+        p = pose_from_reduced(z, self.rho, self.p_e)[0]
         if frame == "I":
             from .rotations import R_IC_from_tilt
 
@@ -251,7 +285,7 @@ class Model:
 
     def energy(self, z, alpha):
         """Mechanical energy (kinetic + potential), J; conserved with zero thrust, no drag."""
-        R, e, e_d, e_x, v_q, _ = self.kinematics(z)
+        _, _, v_q, _ = self.kinematics(z)
         w = z[..., 7:10]
         p = self.cog_position(z)
         kinetic = 0.5 * self.m * np.sum(v_q * v_q, -1) + 0.5 * np.einsum(

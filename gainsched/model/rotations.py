@@ -8,6 +8,8 @@ batch dimensions and is complex-step safe (no ``abs``, no ``conj``).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = [
@@ -15,6 +17,7 @@ __all__ = [
     "Ry",
     "Rz",
     "matrix_from_euler_zyx",
+    "matrix_from_euler_zyx_scalar",
     "euler_zyx_from_matrix",
     "matrix_from_quaternion",
     "quaternion_from_matrix",
@@ -55,6 +58,24 @@ def Rz(a):
 def matrix_from_euler_zyx(phi, theta, psi):
     """``R = Rz(psi) @ Ry(theta) @ Rx(phi)`` (paper eq. 2); angles in rad."""
     return Rz(psi) @ Ry(theta) @ Rx(phi)
+
+
+def matrix_from_euler_zyx_scalar(phi: float, theta: float, psi: float) -> np.ndarray:
+    """:func:`matrix_from_euler_zyx` of three real scalars (rad), shape (3, 3).
+
+    The one-sample form for per-step code (the simulator's sensors): scalar math
+    costs ~2 us where the batched form spends ~50 us in numpy's per-call overhead.
+    ``matrix_from_euler_zyx_scalar(alpha, 0, gamma)`` is ``R_IC`` (paper eq. 1).
+    """
+    cph, sph, cth, sth = math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta)
+    cps, sps = math.cos(psi), math.sin(psi)
+    return np.array(
+        [
+            [cps * cth, -sps * cph + cps * sth * sph, sps * sph + cps * sth * cph],
+            [sps * cth, cps * cph + sps * sth * sph, -cps * sph + sps * sth * cph],
+            [-sth, cth * sph, cth * cph],
+        ]
+    )
 
 
 def euler_zyx_from_matrix(R):

@@ -15,7 +15,6 @@ with the 11-entry LQR state x (xi error wrapped to [-pi, pi)), the nominal
 
 from __future__ import annotations
 
-import math
 import tomllib
 import warnings
 from dataclasses import dataclass, field
@@ -25,9 +24,15 @@ import numpy as np
 
 from ..config import N_STATE, Config, Section
 from ..errors import GainschedWarning, InputError
+from ..model.geometry import pose_angles_from_pose, pose_from_reduced, wrap_angle
 from ..model.maximal import MaximalModel, reduced_from_maximal
 from ..model.reduced import Model
-from ..model.rotations import R_IC_from_tilt, matrix_from_quaternion, quaternion_from_matrix
+from ..model.rotations import (
+    R_IC_from_tilt,
+    matrix_from_euler_zyx_scalar,
+    matrix_from_quaternion,
+    quaternion_from_matrix,
+)
 from ..schedule.nominal import nominal_from_path
 from ..schedule.path import AzimuthPath, maneuver_path
 from .fastplant import SUPPORTED_EFFECTS, fast_plant
@@ -245,21 +250,16 @@ class _Plant:
 
     def pose(self, x, alpha, gamma):
         """COG position in I (m) and R_IB of one state or a batch of states (..., n_x)."""
-        if self.maximal is None and np.ndim(x) == 1:  # one state: scalar math
-            m = self.model
-            R_IC = _rot_zyx(alpha, 0.0, gamma)
-            R_CB = _rot_zyx(x[4], x[5], x[6] + x[1])
-            sd = math.sin(x[0])
-            e = np.array([sd * math.cos(x[1]), sd * math.sin(x[1]), math.cos(x[0])])
-            return R_IC @ (m.rho * e + m.L_e * R_CB[:, 0]), R_IC @ R_CB
-        R_IC = R_IC_from_tilt(alpha, gamma)
         if self.maximal is None:
-            R_CB = self.model.kinematics(x)[0]
-            p_C = self.model.cog_position(x)
+            p_C, R_CB = pose_from_reduced(x, self.model.rho, self.model.p_e)
         else:
             q = x[..., 6:10]
             p_C = x[..., 0:3]
             R_CB = matrix_from_quaternion(q / np.linalg.norm(q, axis=-1, keepdims=True))
+        if np.ndim(x) == 1:  # one state (the pose sensor): scalar math
+            R_IC = matrix_from_euler_zyx_scalar(alpha, 0.0, gamma)
+        else:
+            R_IC = R_IC_from_tilt(alpha, gamma)
         return p_C @ R_IC.T, R_IC @ R_CB
 
     def poses(self, X, alpha, gamma):
@@ -270,44 +270,6 @@ class _Plant:
 
 #: steps per block of gain lookups of a scheduler with ``batch`` (bounds the memory)
 _LOOKUP_BLOCK = 1000
-
-
-def _wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
-def _rot_zyx(phi, theta, psi):
-    """``Rz(psi) @ Ry(theta) @ Rx(phi)`` of three scalars (rad), shape (3, 3).
-
-    The one-state form of :func:`~gainsched.model.rotations.matrix_from_euler_zyx` (paper
-    eq. 2) for the per-step paths: the batched version costs ~50 us per call.
-    ``_rot_zyx(alpha, 0, gamma)`` is ``R_IC`` (paper eq. 1).
-    """
-    cph, sph, cth, sth = math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta)
-    cps, sps = math.cos(psi), math.sin(psi)
-    return np.array(
-        [
-            [cps * cth, -sps * cph + cps * sth * sph, sps * sph + cps * sth * cph],
-            [sps * cth, cps * cph + sps * sth * sph, -cps * sph + sps * sth * cph],
-            [-sth, cth * sph, cth * cph],
-        ]
-    )
-
-
-def _pose_angles(model, p_C, R_CB, xi_ref):
-    """Measured ``(delta, xi, phi, theta, chi)`` (rad, shape (5,)) of one COG position
-    p_C (m, in C) and attitude R_CB: the pose part of
-    :func:`~gainsched.model.maximal.reduced_from_maximal` for one sample (xi on the branch
-    nearest ``xi_ref``, chi wrapped to [-pi, pi))."""
-    p_t = p_C + R_CB @ model.p_e
-    delta = math.atan2(math.hypot(p_t[0], p_t[1]), p_t[2])
-    xi = math.atan2(p_t[1], p_t[0])
-    xi = xi + 2 * math.pi * round((xi_ref - xi) / (2 * math.pi))
-    phi = math.atan2(R_CB[2, 1], R_CB[2, 2])
-    theta = math.asin(min(max(-R_CB[2, 0], -1.0), 1.0))
-    psi = math.atan2(R_CB[1, 0], R_CB[0, 0])
-    chi = (psi - xi + math.pi) % (2 * math.pi) - math.pi
-    return np.array([delta, xi, phi, theta, chi])
 
 
 def _rk4(f, x, u, alpha, dt):
@@ -384,7 +346,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         z_true = x[:N_STATE] if rigid else reduced(x, xi_ref[k])
         z_hat = estimate(k, x, z_true)
         err = z_hat - z_d[k]
-        err[1] = _wrap(err[1])
+        err[1] = wrap_angle(err[1])
         if batch is None:
             K, status = scheduler(xi_ref[k], xi_dot_ref[k], alpha)
         else:
@@ -441,7 +403,7 @@ class _Estimator:
         self.delay = int(round(sens.latency / dt))
         self.hist: list[np.ndarray] = []
         self.pending: list[tuple[int, np.ndarray]] = []
-        self.R_IC = _rot_zyx(alpha, 0.0, gamma)
+        self.R_IC = matrix_from_euler_zyx_scalar(alpha, 0.0, gamma)
         # prediction model: the compiled design model when it applies (same numbers)
         fast = None
         if not sens.ideal and model.n_z == N_STATE:
@@ -458,8 +420,8 @@ class _Estimator:
             _, meas = self.pending.pop(0)
             then = self.hist[-1 - self.delay] if len(self.hist) > self.delay else self.z
             innov = meas - then[[0, 1, 4, 5, 6]]
-            innov[1] = _wrap(innov[1])
-            innov[4] = _wrap(innov[4])
+            innov[1] = wrap_angle(innov[1])
+            innov[4] = wrap_angle(innov[4])
             T = self.every * self.dt
             self.z[[0, 1, 4, 5, 6]] += 0.5 * innov
             self.z[[2, 3]] += 0.5 * innov[[0, 1]] / T * 0.5
@@ -474,14 +436,14 @@ class _Estimator:
 
         True COG position and attitude in I, plus position noise (m) and a small
         attitude perturbation ``R_IB Rz Ry Rx`` (rad), converted back to the reduced
-        pose angles as :func:`~gainsched.model.maximal.reduced_from_maximal` does.
+        pose angles (:func:`~gainsched.model.geometry.pose_angles_from_pose`).
         """
         p_I, R_IB = self.plant.pose(x, self.alpha, self.gamma)
         p_I = p_I + self.sens.position_noise * self.rng.standard_normal(3)
         rot = self.sens.attitude_noise * self.rng.standard_normal(3)
-        R_IB = R_IB @ _rot_zyx(rot[0], rot[1], rot[2])
+        R_IB = R_IB @ matrix_from_euler_zyx_scalar(rot[0], rot[1], rot[2])
         R_CI = self.R_IC.T
-        return _pose_angles(self.model, R_CI @ p_I, R_CI @ R_IB, z_true[1])
+        return pose_angles_from_pose(R_CI @ p_I, R_CI @ R_IB, self.model.p_e, z_true[1])[1]
 
     def predict(self, u):
         if self.sens.ideal:
