@@ -219,6 +219,29 @@ class Config:
         """Nominal COG radius r = rho + L_e, m."""
         return self.tether.length + self.tether.attachment_offset
 
+    def with_values(self, values: dict, source: str | None = None) -> Config:
+        """A variant with some keys changed: the config text edited as a TOML document
+        (comments kept, floats in full precision; :func:`gainsched.configedit.set_values`)
+        and validated again, so ``text`` and ``sha256`` describe the variant.
+
+        Parameters
+        ----------
+        values : dict
+            Dotted key -> value, e.g. ``{"vehicle.mass": 0.55, "grid.azimuth_samples": 72}``.
+        source : str, optional
+            Where errors point (default: this config's source).
+
+        Example
+        -------
+        >>> cfg = load_config("configs/paper.toml")              # doctest: +SKIP
+        >>> cfg.with_values({"vehicle.mass": 0.55}).vehicle.mass  # doctest: +SKIP
+        0.55
+        """
+        from .configedit import set_values
+
+        return config_from_text(set_values(self.text, values),
+                                self.source if source is None else source)
+
 
 # --------------------------------------------------------------------------- checks
 

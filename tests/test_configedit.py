@@ -71,3 +71,22 @@ def test_set_values_for_sweeps():
     matrix = 'x = 1\n\n[vehicle]\ninertia = [[1.0, 0, 0], [0, 2.0, 0], [0, 0, 3.0]]\n'
     d = tomllib.loads(set_values(matrix, {"vehicle.inertia.1": 2.5}))
     assert d["vehicle"]["inertia"] == [[1.0, 0, 0], [0, 2.5, 0], [0, 0, 3.0]]
+
+
+def test_config_variant_carries_its_own_text_and_hash():
+    """Config.with_values: the one variant path for code (check's doubled azimuth grid,
+    diagnose's config candidates): text, hash and values agree, comments survive, and a
+    bad value is refused naming the key."""
+    import hashlib
+
+    from gainsched.config import load_config
+    from gainsched.errors import InputError
+
+    cfg = load_config(PAPER)
+    var = cfg.with_values({"vehicle.mass": 0.5123456789012345, "grid.azimuth_samples": 72})
+    assert var.vehicle.mass == 0.5123456789012345 and var.grid.azimuth_samples == 72
+    assert var.sha256 == hashlib.sha256(var.text.encode()).hexdigest() != cfg.sha256
+    assert "# kg" in var.text and var.source == cfg.source
+    assert var.tether == cfg.tether and var.effects == cfg.effects
+    with pytest.raises(InputError, match=r"paper.toml: vehicle.mass: "):
+        cfg.with_values({"vehicle.mass": -1.0})

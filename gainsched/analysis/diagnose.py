@@ -36,7 +36,6 @@ the residual and where the residual concentrates
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import math
 from dataclasses import dataclass, field
@@ -46,7 +45,7 @@ from scipy.optimize import minimize_scalar
 
 from ..config import Config, EffectSpec, config_from_text
 from ..configedit import remove_key, set_section, set_value
-from ..model.effects import EFFECTS, effects_from_specs
+from ..model.effects import EFFECTS, Param, Refit, effects_from_specs
 from ..model.reduced import Model
 from .compare import (
     AT_NOISE_FLOOR,
@@ -60,6 +59,7 @@ __all__ = [
     "FitParam",
     "Candidate",
     "CANDIDATES",
+    "candidates",
     "THRESHOLDS",
     "CandidateResult",
     "Diagnosis",
@@ -82,15 +82,18 @@ THRESHOLDS = {
 
 @dataclass(frozen=True)
 class FitParam:
-    """A fitted parameter: name, unit, plausible fit bounds, search scale, the value at which
-    the effect is absent (``null``; None: keep the config's value)."""
+    """A fitted parameter: name, unit, plausible fit bounds and search scale."""
 
     name: str
     unit: str
     lower: float
     upper: float
     scale: str = "lin"  # "lin" | "log" (search grids)
-    null: float | None = None
+
+    @classmethod
+    def from_param(cls, p: Param) -> FitParam:
+        """The fit of an effect's :class:`~gainsched.model.effects.Param` (its fit range)."""
+        return cls(p.name, p.unit, *p.fit_range, p.scale)
 
 
 @dataclass(frozen=True)
@@ -126,12 +129,6 @@ class Candidate:
         """Parameter values as written to the config (may differ from the fit parametrisation)."""
         return {p.name: float(v) for p, v in zip(self.params, theta, strict=True)}
 
-    def null(self, cfg: Config) -> np.ndarray:
-        """The values at which the candidate changes nothing (for effect sizes)."""
-        st = self.start(cfg)
-        return np.array([p.null if p.null is not None else s
-                         for p, s in zip(self.params, st, strict=True)])
-
     def present(self, cfg: Config) -> bool:
         return False
 
@@ -148,29 +145,25 @@ def _specs_with(cfg: Config, kind: str, values: dict) -> tuple:
 
 
 class EffectCandidate(Candidate):
-    """Refit (or add) parameters of one effect of the library."""
+    """Refit (or add) parameters of one effect of the library, as its
+    :class:`~gainsched.model.effects.Refit` says."""
 
-    def __init__(self, name, kind, params, doc, search=None, affine=True, absent=None):
-        self.name, self.kind, self.params, self.doc = name, kind, tuple(params), doc
-        self.search, self.affine = search, affine
-        self.absent = absent  # values meaning "effect off" when it is not in the config
+    def __init__(self, kind: str, refit: Refit):
+        cls = EFFECTS[kind]
+        by_name = {p.name: p for p in cls.params}
+        self.name, self.kind, self.doc = refit.name, kind, refit.doc
+        self.params = tuple(FitParam.from_param(by_name[n]) for n in refit.params)
+        self.search = None if refit.search is None else refit.params.index(refit.search)
+        self.affine = refit.affine
 
     def present(self, cfg):
         return any(s.name == self.kind for s in cfg.effects)
 
     def start(self, cfg):
         cur = next((s.param_dict() for s in cfg.effects if s.name == self.kind), None)
-        cls = EFFECTS[self.kind]
-        defaults = {p.name: p.default for p in cls.params}
-        out = []
-        for p in self.params:
-            if cur is not None:
-                out.append(cur[p.name])
-            elif self.absent is not None and p.name in self.absent:
-                out.append(self.absent[p.name])
-            else:
-                out.append(defaults[p.name])
-        return np.array(out, dtype=float)
+        defaults = {p.name: p.default for p in EFFECTS[self.kind].params}
+        return np.array([(defaults if cur is None else cur)[p.name] for p in self.params],
+                        dtype=float)
 
     def variant(self, cfg, theta):
         vals = dict(zip((p.name for p in self.params), map(float, theta), strict=True))
@@ -203,8 +196,7 @@ class ConfigCandidate(Candidate):
         return np.array([self._get(cfg)])
 
     def variant(self, cfg, theta):
-        sec = dataclasses.replace(getattr(cfg, self.section), **{self.key: float(theta[0])})
-        new = dataclasses.replace(cfg, **{self.section: sec})
+        new = cfg.with_values({f"{self.section}.{self.key}": float(theta[0])})
         return CandidateModel(new, None, cfg.analysis.latency_s)
 
     def apply_text(self, text, cfg, theta, comments, header):
@@ -217,7 +209,7 @@ class LatencyCandidate(Candidate):
 
     name = "latency"
     doc = "measurement latency: the motion-capture pose lags the commands and load cell"
-    params = (FitParam("latency_s", "s", 0.0, 0.06, "lin", null=0.0),)
+    params = (FitParam("latency_s", "s", 0.0, 0.06, "lin"),)
     search = 0
     grid_size = 13
 
@@ -231,6 +223,10 @@ class LatencyCandidate(Candidate):
         return set_value(text, "analysis", "latency_s", float(theta[0]), f"{comments[0]}; {header}")
 
 
+#: tether keys of the other elastic links (the SLS's and the chain's), refused elsewhere
+_ELASTIC_LINK_KEYS = ("series_stiffness", "mass", "segments")
+
+
 class ElasticityCandidate(Candidate):
     """Tether elasticity (Kelvin-Voigt spring-damper): fitted as compliance 1/k (affine)
     and damping time c/k (1-D search); written as ``[tether] link = "spring-damper"``."""
@@ -238,8 +234,8 @@ class ElasticityCandidate(Candidate):
     name = "tether_elasticity"
     doc = "elastic tether (spring-damper): stretch = tension / k, lagged by c / k"
     params = (
-        FitParam("compliance", "m/N", 0.0, 1e-2, "lin", null=0.0),
-        FitParam("damping_time", "s", 0.0, 0.05, "lin", null=0.0),
+        FitParam("compliance", "m/N", 0.0, 1e-2, "lin"),
+        FitParam("damping_time", "s", 0.0, 0.05, "lin"),
     )
     search = 1
     grid_size = 11
@@ -254,13 +250,14 @@ class ElasticityCandidate(Candidate):
         return np.array([1.0 / t.stiffness, t.damping / t.stiffness])
 
     def variant(self, cfg, theta):
-        comp, tc = float(theta[0]), float(theta[1])
-        if comp <= 1e-12:
-            teth = dataclasses.replace(cfg.tether, link="rigid")
+        if float(theta[0]) <= 1e-12:
+            text = cfg.text
+            for key in _ELASTIC_LINK_KEYS:
+                text = remove_key(text, "tether", key)
+            text = set_value(text, "tether", "link", "rigid")
         else:
-            teth = dataclasses.replace(cfg.tether, link="spring-damper", stiffness=1.0 / comp,
-                                       damping=tc / comp)
-        return CandidateModel(dataclasses.replace(cfg, tether=teth), None, cfg.analysis.latency_s)
+            text = self.apply_text(cfg.text, cfg, theta, ["", ""], "")
+        return CandidateModel(config_from_text(text, cfg.source), None, cfg.analysis.latency_s)
 
     def report_values(self, theta):
         comp, tc = float(theta[0]), float(theta[1])
@@ -269,36 +266,24 @@ class ElasticityCandidate(Candidate):
 
     def apply_text(self, text, cfg, theta, comments, header):
         v = self.report_values(theta)
-        for key in ("series_stiffness", "mass", "segments"):  # keys of the other elastic links
+        for key in _ELASTIC_LINK_KEYS:
             text = remove_key(text, "tether", key)
         text = set_value(text, "tether", "link", "spring-damper", header)
         text = set_value(text, "tether", "stiffness", v["stiffness"], f"N/m; {comments[0]}")
         return set_value(text, "tether", "damping", v["damping"], f"N s/m; {comments[1]}")
 
 
-def _candidates() -> tuple[Candidate, ...]:
+def candidates() -> dict[str, Candidate]:
+    """The candidate library, by name: every :meth:`~gainsched.model.effects.Effect.refits`
+    of every effect nameable in configs (built-in or registered with
+    :func:`~gainsched.model.effects.registered_effect`), then config parameters, the
+    measurement latency and the tether elasticity."""
     P = FitParam
-    return (
-        EffectCandidate("drag_linear", "drag", [P("mu1", "N s/m", 0.0, 2.0)],
-                        "linear body drag mu1 |v| (paper eq. 10)"),
-        EffectCandidate("drag_quadratic", "drag", [P("mu2", "N s^2/m^2", 0.0, 0.05)],
-                        "quadratic body drag mu2 |v|^2 (paper eq. 10)"),
-        EffectCandidate("rotor_drag", "rotor_drag", [P("k_rd", "s/m", 0.0, 0.2, null=0.0)],
-                        "rotor drag: thrust x in-plane airspeed (with its normal-axis signature)"),
-        EffectCandidate("thrust_airspeed", "thrust_airspeed",
-                        [P("c1", "s/m", -0.1, 0.1, null=0.0),
-                         P("c2", "s^2/m^2", -0.005, 0.005, null=0.0)],
-                        "thrust change with airspeed, polynomial 1 + c1 v + c2 v^2"),
-        EffectCandidate("thrust_momentum", "thrust_momentum",
-                        [P("disk_area", "m^2", 1e-5, 0.1, "log", null=0.0)],
-                        "thrust change with airspeed by momentum theory (paper eq. 29)",
-                        search=0, affine=False),
-        EffectCandidate("thrust_scale", "thrust_scale", [P("k_T", "-", 0.5, 1.5, null=1.0)],
-                        "thrust scale: the static-test map is off by a factor"),
+    out: list[Candidate] = [EffectCandidate(kind, r)
+                            for kind, cls in EFFECTS.items() for r in cls.refits()]
+    out += [
         ConfigCandidate("mass", "vehicle", "mass", P("mass", "kg", 0.0, 0.0),
                         "mass error", affine=False, bounds_rel=(0.5, 1.5)),
-        EffectCandidate("motor_lag", "motor_lag", [P("tau", "s", 0.001, 0.2, "log", null=0.0)],
-                        "first-order motor lag (adds states)", search=0, affine=False),
         LatencyCandidate(),
         ElasticityCandidate(),
         ConfigCandidate("attachment_offset", "tether", "attachment_offset",
@@ -306,11 +291,17 @@ def _candidates() -> tuple[Candidate, ...]:
                         "attachment offset L_e error", affine=False, bounds_rel=(0.0, 3.0)),
         ConfigCandidate("tether_length", "tether", "length", P("length", "m", 0.0, 0.0),
                         "tether length error", affine=True, bounds_rel=(0.8, 1.2)),
-    )
+    ]
+    by_name: dict[str, Candidate] = {}
+    for c in out:
+        if c.name in by_name:
+            raise ValueError(f"two diagnose candidates are named {c.name!r}")
+        by_name[c.name] = c
+    return by_name
 
 
-#: The candidate library, by name.
-CANDIDATES: dict[str, Candidate] = {c.name: c for c in _candidates()}
+#: The candidate library of the built-in effects, by name (:func:`candidates`).
+CANDIDATES: dict[str, Candidate] = candidates()
 
 _TILTED_CONSTANT_SPEED = (
     "tilted circles at constant speed: the thrust changes around the circle while the "
@@ -390,9 +381,7 @@ class _Problem:
         if L_e not in self._meas:
             for key in [x for x in self._meas if x != base_L]:  # keep the base and one more
                 del self._meas[key]
-            cfg = dataclasses.replace(
-                self.config, tether=dataclasses.replace(self.config.tether, attachment_offset=L_e)
-            )
+            cfg = self.config.with_values({"tether.attachment_offset": L_e})
             base = self._meas[self.config.tether.attachment_offset]
             self._meas[L_e] = [measure(s, cfg, name=m.name)
                                for s, m in zip(self.segs, base, strict=True)]
@@ -857,10 +846,11 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     if len(prob.flights) < 2:
         raise InputError("command line", "LOG", "diagnose needs at least two flights (log "
                          "files) for held-out scores")
-    names = list(CANDIDATES) if candidates is None else list(candidates)
+    library = globals()["candidates"]()  # the parameter shadows the function
+    names = list(library) if candidates is None else list(candidates)
     for n in names:
-        if n not in CANDIDATES:
-            known = ", ".join(CANDIDATES)
+        if n not in library:
+            known = ", ".join(library)
             raise InputError("command line", "--candidate",
                              f"unknown candidate {n!r} (known: {known})")
     base_vecs = prob.vectors(CandidateModel(config, None, config.analysis.latency_s))
@@ -869,7 +859,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     for n in names:
         if progress is not None:
             progress(n)
-        results.append(_fit_candidate(prob, CANDIDATES[n], base_sq, base_vecs))
+        results.append(_fit_candidate(prob, library[n], base_sq, base_vecs))
     results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
     at_floor = all(s.rms_over_noise < AT_NOISE_FLOOR for s in base.stats.values())
     accepted = next((r for r in results if r.passes), None)
@@ -935,7 +925,7 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
     """
     from ..configedit import get_value
 
-    cand = CANDIDATES[result.name]
+    cand = candidates()[result.name]
     comments = []
     for j, p in enumerate(result.params):
         lo, hi = result.theta[j] - result.ci[j], result.theta[j] + result.ci[j]

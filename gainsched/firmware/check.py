@@ -9,7 +9,6 @@ reported. docs/runtime.md states the accuracy the default grid meets.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,7 +88,7 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None) -> MidpointCh
     interp = Interpolator(table)
     cfg = config_from_text(table.config_text, f"{table.source}:config_text")
     n_xi = table.xi.size
-    cfg2 = dataclasses.replace(cfg, grid=dataclasses.replace(cfg.grid, azimuth_samples=2 * n_xi))
+    cfg2 = cfg.with_values({"grid.azimuth_samples": 2 * n_xi})
     r = cfg.radius
     v_mid = 0.5 * (table.speed[1:] + table.speed[:-1])[::speed_stride]
     a_mid = 0.5 * (table.tilt[1:] + table.tilt[:-1])

@@ -27,6 +27,7 @@ import numpy as np
 
 __all__ = [
     "Param",
+    "Refit",
     "Kinematics",
     "Effect",
     "Drag",
@@ -51,7 +52,23 @@ def norm(v):
 
 @dataclass(frozen=True)
 class Param:
-    """A physical parameter of an effect: name, unit, default and plausible bounds."""
+    """A physical parameter of an effect.
+
+    Attributes
+    ----------
+    name, unit : str
+    default : float
+        Value when a config leaves it out.
+    lower, upper : float
+        The range a config may set (checked when it is loaded).
+    doc : str
+    fit : (float, float) or None
+        The plausible range ``gainsched diagnose`` searches when it fits the parameter
+        to flight logs (an estimate pinned to its edge is implausible); None: the
+        config range.
+    scale : {"lin", "log"}
+        How a 1-D search samples the fit range.
+    """
 
     name: str
     unit: str
@@ -59,6 +76,40 @@ class Param:
     lower: float
     upper: float
     doc: str = ""
+    fit: tuple[float, float] | None = None
+    scale: str = "lin"
+
+    @property
+    def fit_range(self) -> tuple[float, float]:
+        """``fit`` or the config range."""
+        return self.fit if self.fit is not None else (self.lower, self.upper)
+
+
+@dataclass(frozen=True)
+class Refit:
+    """One way ``gainsched diagnose`` may fit an effect to flight logs (one candidate).
+
+    Attributes
+    ----------
+    name : str
+        Candidate name (unique over all effects).
+    params : tuple of str
+        The effect's parameters the candidate fits; the others keep their values.
+    doc : str
+        One line for the report.
+    search : str or None
+        The parameter found by a bounded 1-D search (nonlinear, e.g. a time constant);
+        the others by least squares at each search value.
+    affine : bool
+        Whether the residual is affine in the least-squares parameters (one step is
+        exact); False: a few Gauss-Newton steps.
+    """
+
+    name: str
+    params: tuple[str, ...]
+    doc: str
+    search: str | None = None
+    affine: bool = True
 
 
 @dataclass(frozen=True)
@@ -111,6 +162,20 @@ class Effect:
     params: ClassVar[tuple[Param, ...]] = ()
     n_states: ClassVar[int] = 0
     doc: ClassVar[str] = ""
+    #: how ``gainsched diagnose`` fits the effect; empty: see :meth:`refits`
+    fits: ClassVar[tuple[Refit, ...]] = ()
+
+    @classmethod
+    def refits(cls) -> tuple[Refit, ...]:
+        """The diagnose candidates of this effect: ``fits``, or one candidate named after
+        the effect that fits every parameter with no affine assumption (a bounded 1-D
+        search when there is one parameter, Gauss-Newton steps otherwise)."""
+        if cls.fits:
+            return cls.fits
+        line = (cls.__doc__ or cls.kind).strip().splitlines()[0]
+        names = tuple(p.name for p in cls.params)
+        return (Refit(cls.kind, names, line, search=names[0] if len(names) == 1 else None,
+                      affine=False),)
 
     def __init__(self, **values: float):
         names = {p.name for p in self.params}
@@ -186,8 +251,12 @@ class Drag(Effect):
 
     kind = "drag"
     params = (
-        Param("mu1", "N s/m", 0.0, 0.0, 10.0, "linear drag coefficient"),
-        Param("mu2", "N s^2/m^2", 0.0, 0.0, 1.0, "quadratic drag coefficient"),
+        Param("mu1", "N s/m", 0.0, 0.0, 10.0, "linear drag coefficient", fit=(0.0, 2.0)),
+        Param("mu2", "N s^2/m^2", 0.0, 0.0, 1.0, "quadratic drag coefficient", fit=(0.0, 0.05)),
+    )
+    fits = (
+        Refit("drag_linear", ("mu1",), "linear body drag mu1 |v| (paper eq. 10)"),
+        Refit("drag_quadratic", ("mu2",), "quadratic body drag mu2 |v|^2 (paper eq. 10)"),
     )
 
     def wrench(self, T, kin):
@@ -206,6 +275,8 @@ class RotorDrag(Effect):
 
     kind = "rotor_drag"
     params = (Param("k_rd", "s/m", 0.0, 0.0, 0.2, "rotor drag per newton of thrust per m/s"),)
+    fits = (Refit("rotor_drag", ("k_rd",),
+                  "rotor drag: thrust x in-plane airspeed (with its normal-axis signature)"),)
 
     def wrench(self, T, kin):
         T_C = np.sum(T, axis=-1)
@@ -220,6 +291,8 @@ class ThrustScale(Effect):
 
     kind = "thrust_scale"
     params = (Param("k_T", "-", 1.0, 0.5, 1.5, "real / commanded thrust"),)
+    fits = (Refit("thrust_scale", ("k_T",),
+                  "thrust scale: the static-test map is off by a factor"),)
 
     def modify_thrust(self, T, kin, x):
         return self.k_T * T
@@ -230,9 +303,11 @@ class ThrustPolynomial(Effect):
 
     kind = "thrust_airspeed"
     params = (
-        Param("c1", "s/m", 0.0, -0.2, 0.2, "linear coefficient"),
-        Param("c2", "s^2/m^2", 0.0, -0.01, 0.01, "quadratic coefficient"),
+        Param("c1", "s/m", 0.0, -0.2, 0.2, "linear coefficient", fit=(-0.1, 0.1)),
+        Param("c2", "s^2/m^2", 0.0, -0.01, 0.01, "quadratic coefficient", fit=(-0.005, 0.005)),
     )
+    fits = (Refit("thrust_airspeed", ("c1", "c2"),
+                  "thrust change with airspeed, polynomial 1 + c1 v + c2 v^2"),)
 
     def modify_thrust(self, T, kin, x):
         v = norm(kin.v_C)
@@ -260,9 +335,13 @@ class ThrustMomentum(Effect):
 
     kind = "thrust_momentum"
     params = (
-        Param("disk_area", "m^2", 0.0, 0.0, 0.1, "rotor disk area per rotor (0: off)"),
+        Param("disk_area", "m^2", 0.0, 0.0, 0.1, "rotor disk area per rotor (0: off)",
+              fit=(1e-5, 0.1), scale="log"),
         Param("rho_air", "kg/m^3", 1.225, 0.5, 1.5, "air density"),
     )
+    fits = (Refit("thrust_momentum", ("disk_area",),
+                  "thrust change with airspeed by momentum theory (paper eq. 29)",
+                  search="disk_area", affine=False),)
 
     def ratio(self, T, v_B):
         """``T / T_h`` per motor, shape (..., 4), for thrusts T (..., 4) N and v_B (..., 3) m/s."""
@@ -339,8 +418,11 @@ class MotorLag(Effect):
     """First-order motor lag: ``T_actual' = (T_cmd - T_actual) / tau`` (4 states, N)."""
 
     kind = "motor_lag"
-    params = (Param("tau", "s", 0.03, 1e-4, 0.5, "motor time constant"),)
+    params = (Param("tau", "s", 0.03, 1e-4, 0.5, "motor time constant", fit=(0.001, 0.2),
+                    scale="log"),)
     n_states = 4
+    fits = (Refit("motor_lag", ("tau",), "first-order motor lag (adds states)", search="tau",
+                  affine=False),)
 
     def modify_thrust(self, T, kin, x):
         return x

@@ -21,6 +21,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import block_diag
 
+from .effects import Kinematics
+from .rotations import matrix_from_euler_zyx
+
 __all__ = [
     "P_U",
     "STATE_SIGNS",
@@ -28,6 +31,7 @@ __all__ = [
     "mirror_gain",
     "mirror_state",
     "fundamental_from_query",
+    "effect_symmetry_errors",
 ]
 
 P_U = np.eye(4)[[3, 2, 1, 0]]
@@ -77,3 +81,65 @@ def fundamental_from_query(xi, xi_dot, alpha):
     mirrored = xi_dot < 0
     xi = np.where(mirrored, np.pi - xi, xi)  # S2
     return np.mod(xi, 2 * np.pi), np.abs(xi_dot), alpha, mirrored
+
+
+def _relative(a, b) -> float:
+    scale = max(float(np.max(np.abs(a))), float(np.max(np.abs(b))), 1e-300)
+    return float(np.max(np.abs(a - b))) / scale
+
+
+def effect_symmetry_errors(effect, n: int = 64, seed: int = 0) -> dict[str, float]:
+    """How far an effect's hooks are from respecting S1 and S2 (0: exactly).
+
+    The table stores ``alpha >= 0, xi' > 0`` only and maps every other query there
+    (:func:`fundamental_from_query`), which is exact only when every effect is
+    equivariant: under S1 (``R_CB -> Z R_CB``, ``v_C -> Z v_C``, ``p_C -> Z p_C``,
+    ``alpha -> -alpha``, ``Z = Rz(pi)``) thrusts and torques stay, forces turn with
+    Z; under S2 (``R_CB -> M R_CB N``, ``v_C -> M v_C``, ``p_C -> M p_C``,
+    ``omega_B -> -N omega_B``, motors ``P_U``, states :meth:`Effect.mirror`) thrusts
+    permute, forces mirror with M and torques map like ``omega_B``. An effect of
+    speed, thrust, body rates or height keeps both; one tied to a heading or an
+    azimuth in the inertial frame does not.
+
+    Parameters
+    ----------
+    effect : Effect
+    n : int
+        Random kinematic samples (speeds to 20 m/s, positions to 3 m, tilts to 0.8 rad).
+    seed : int
+
+    Returns
+    -------
+    dict
+        ``{"S1": error, "S2": error}``: the largest relative difference between the
+        hook's output at the mapped kinematics and the mapped output.
+    """
+    rng = np.random.default_rng(seed)
+    R = matrix_from_euler_zyx(*rng.uniform(-1.2, 1.2, (2, n)), rng.uniform(-np.pi, np.pi, n))
+    kin = Kinematics(R, rng.normal(0, 8, (n, 3)), rng.normal(0, 2, (n, 3)),
+                     rng.normal(0, 2, (n, 3)), rng.uniform(-0.8, 0.8, n))
+    T = rng.uniform(1.0, 8.0, (n, 4))
+    x = rng.uniform(1.0, 8.0, (n, effect.n_states))
+    Z = np.diag([-1.0, -1.0, 1.0])
+    M, N = np.diag([-1.0, 1.0, 1.0]), np.diag([1.0, -1.0, 1.0])
+    P_x = effect.mirror() if effect.n_states else np.eye(0)
+    maps = {
+        # kinematics, thrust, state maps, then the output maps (thrust, force, torque, state)
+        "S1": (Kinematics(Z @ kin.R_CB, kin.v_C @ Z, kin.omega_B, kin.p_C @ Z, -kin.alpha),
+               np.eye(4), np.eye(effect.n_states), Z, np.eye(3)),
+        "S2": (Kinematics(M @ kin.R_CB @ N, kin.v_C @ M, -kin.omega_B @ N, kin.p_C @ M,
+                          kin.alpha), P_U, P_x, M, -N),
+    }
+    out = {}
+    for name, (kin2, P_T, P_s, F_map, tau_map) in maps.items():
+        T2, x2 = T @ P_T.T, x @ P_s.T
+        errs = [_relative(effect.modify_thrust(T2, kin2, x2),
+                          effect.modify_thrust(T, kin, x) @ P_T.T)]
+        w1, w2 = effect.wrench(T, kin), effect.wrench(T2, kin2)
+        if w1 is not None:
+            errs += [_relative(w2[0], w1[0] @ F_map.T), _relative(w2[1], w1[1] @ tau_map.T)]
+        if effect.n_states:
+            errs.append(_relative(effect.state_derivative(x2, T2, kin2),
+                                  effect.state_derivative(x, T, kin) @ P_s.T))
+        out[name] = max(errs)
+    return out

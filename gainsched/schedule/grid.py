@@ -24,7 +24,9 @@ import numpy as np
 from joblib import Parallel, cpu_count, delayed
 
 from ..constants import TILT_BATCH, Reason
+from ..errors import InputError
 from ..model.reduced import Model
+from ..model.symmetry import effect_symmetry_errors
 from ..native.reproducible import (
     blas_single_thread,
     children_ignore_sigint,
@@ -40,10 +42,33 @@ from .path import period
 from .trim import TrimError
 
 __all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "steps_per_period",
-           "discrete_system", "periodic_interp", "LIN_TOL"]
+           "discrete_system", "periodic_interp", "check_effect_symmetries", "LIN_TOL",
+           "SYMMETRY_TOL"]
 
 #: relative accuracy demanded of the interpolated linearisation (see discrete_system)
 LIN_TOL = 1e-10
+#: largest relative S1/S2 violation of an effect the table's symmetry maps accept
+SYMMETRY_TOL = 1e-9
+
+
+def check_effect_symmetries(config) -> None:
+    """Refuse effects that break the symmetries the table relies on.
+
+    The table stores ``alpha >= 0, xi' > 0`` and the runtime maps every other query
+    there (S1, S2; docs/symmetry.md); an effect tied to an inertial heading or azimuth
+    would make those maps wrong without a sign. Raises :class:`InputError` naming the
+    config file and ``effects.<kind>``
+    (:func:`~gainsched.model.symmetry.effect_symmetry_errors`).
+    """
+    for eff in Model(config).effects:
+        for name, err in effect_symmetry_errors(eff).items():
+            if not err <= SYMMETRY_TOL:
+                what = "tilt-sign" if name == "S1" else "direction"
+                raise InputError(config.source, f"effects.{eff.kind}",
+                                 f"breaks the {what} symmetry {name} that the table's "
+                                 f"query maps rely on (relative error {err:.1e} > "
+                                 f"{SYMMETRY_TOL:g}; docs/symmetry.md): simulate and diagnose "
+                                 "with it, build tables without it")
 
 
 def steps_per_period(speed: float, r: float, dt: float) -> int:
@@ -348,6 +373,7 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
     backend : str, optional
         joblib backend name (``"loky"``, ``"threading"``, ``"sequential"``, ``"dask"``).
     """
+    check_effect_symmetries(config)
     speeds = config.grid.speeds
     tilts = config.grid.tilts
     args = [(config, float(v), tilts) for v in speeds]
