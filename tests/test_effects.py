@@ -99,8 +99,11 @@ def test_simulator_says_once_when_the_compiled_plant_cannot_run_it(tmp_path):
         "[environment]", "[effects.thrust_momentum]\ndisk_area = 0.02\n\n[environment]", 1)
     plant = tmp_path / "plant.toml"
     plant.write_text(text)
+    scenario = tmp_path / "short.toml"  # the numpy plant is slow: a 0.5 s flight
+    scenario.write_text((ROOT / "gainsched/sim/scenarios/horizontal.toml").read_text()
+                        .replace("duration = 5.0", "duration = 0.5"))
     args = ["simulate", str(PAPER), "--tables", str(ROOT / "tables" / "paper.h5"), "--scenario",
-            "horizontal", "--plant", str(plant), "-o", str(tmp_path / "out")]
+            str(scenario), "--plant", str(plant), "-o", str(tmp_path / "out")]
     res = CliRunner().invoke(cli, args)
     assert res.exit_code == 0, res.output
     lines = [ln for ln in res.stderr.splitlines() if ln.startswith("gainsched: warning:")]
