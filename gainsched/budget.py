@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .constants import N_INPUT, N_LQR, TILT_BATCH
+from .constants import N_INPUT, TILT_BATCH
 from .errors import InputError
 
 if TYPE_CHECKING:  # the config module calls this one: no import at run time
@@ -95,7 +95,8 @@ class BuildEstimate:
 def _lqr_states(config: Config) -> int:
     from .model.effects import EFFECTS
 
-    return N_LQR + sum(EFFECTS[e.name].n_states for e in config.effects if e.name in EFFECTS)
+    return config.control.n_lqr + sum(EFFECTS[e.name].n_states for e in config.effects
+                                      if e.name in EFFECTS)
 
 
 def _grid_key(counts: dict[str, int]) -> str:

@@ -535,6 +535,7 @@ def simulate(config, table_path, scenario, plant_path, speed, out_dir):
     click.echo(
         f"{out_dir}: {scn.name} {m['duration_s']:.2f} s, "
         f"RMS out-of-plane {m['rms_out_of_plane_m']:.4f} m, "
+        f"RMS along-track {m['rms_along_track_m']:.3f} m (lap slips {m['lap_slips']}), "
         f"RMS speed error {m['rms_speed_error_mps']:.3f} m/s, "
         f"max tension {m['max_tension_N']:.1f} N, "
         f"saturation {100 * m['saturation_fraction']:.1f}%, slack events {m['slack_events']}"

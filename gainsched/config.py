@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .constants import MAX_XI, N_INPUT, N_LQR, N_STATE, XI_DOT_LIMIT
+from .constants import INTEGRATORS, MAX_XI, N_INPUT, N_STATE, REDUCED_NAMES, XI_DOT_LIMIT
 from .errors import InputError
 
 __all__ = [
@@ -44,7 +44,6 @@ __all__ = [
     "check_name",
     "N_STATE",
     "N_INPUT",
-    "N_LQR",
     "Section",
 ]
 
@@ -123,15 +122,32 @@ class EffectSpec:
         return dict(self.params)
 
 
+def _integrators(delta: bool, azimuth: bool) -> tuple[str, ...]:
+    on = {"int_delta": delta, "int_xi": azimuth}
+    return tuple(n for n in INTEGRATORS if on[n])
+
+
 @dataclass(frozen=True)
 class Control:
-    """LQR design: control rate (Hz), weights Q (11x11), R (4x4), terminal cost."""
+    """LQR design: control rate (Hz), weights Q (n x n, n = 10 + integrals), R (4x4),
+    the integral states, terminal cost."""
 
     rate_hz: float
     Q: np.ndarray
     R: np.ndarray
     integrator: bool = True
     terminal: str = "periodic"
+    azimuth_integral: bool = False
+
+    @property
+    def integrators(self) -> tuple[str, ...]:
+        """The LQR's integral states in their order (:data:`~gainsched.constants.INTEGRATORS`)."""
+        return _integrators(self.integrator, self.azimuth_integral)
+
+    @property
+    def n_lqr(self) -> int:
+        """LQR state dimension without effect states: 10 plus the integrals."""
+        return N_STATE + len(self.integrators)
 
     @property
     def dt(self) -> float:
@@ -324,12 +340,16 @@ class Section:
             raise self.error(extra[0], "unknown key")
 
 
-def check_square_weight(sec: Section, k: str, n: int, *, definite: bool) -> np.ndarray:
-    """Q or R: n diagonal entries or an n x n symmetric matrix; PSD (Q) or PD (R)."""
+def check_square_weight(sec: Section, k: str, n: int, *, definite: bool,
+                        names: tuple[str, ...] = ()) -> np.ndarray:
+    """Q or R: n diagonal entries or an n x n symmetric matrix; PSD (Q) or PD (R).
+    ``names`` (n entries) are quoted when the size is wrong."""
     a = sec.array(k)
+    order = f" ({', '.join(names)})" if names else ""
     if a.ndim == 1:
         if a.shape != (n,):
-            raise sec.error(k, f"must have {n} diagonal entries or be {n}x{n}, got {a.size}")
+            raise sec.error(k, f"must have {n} diagonal entries{order} or be {n}x{n}, "
+                            f"got {a.size}")
         a = np.diag(a)
     elif a.shape != (n, n):
         raise sec.error(k, f"must be {n}x{n}, got {'x'.join(map(str, a.shape))}")
@@ -495,7 +515,11 @@ def _control(sec: Section) -> Control:
     rate = sec.number("rate_hz", positive=True)
     if rate > MAX_RATE_HZ:
         raise sec.error("rate_hz", f"must be <= {MAX_RATE_HZ:g} Hz, got {rate:g}")
-    Q = check_square_weight(sec, "Q", N_LQR, definite=False)
+    integ = sec.boolean("integrator", True)
+    az_integ = sec.boolean("azimuth_integral", False)
+    integrators = _integrators(integ, az_integ)
+    Q = check_square_weight(sec, "Q", N_STATE + len(integrators), definite=False,
+                            names=REDUCED_NAMES + integrators)
     if not np.any(Q):
         raise sec.error("Q", "must not be all zero (the LQR would have nothing to regulate)")
     if Q[1, 1] <= 0:
@@ -509,23 +533,23 @@ def _control(sec: Section) -> Control:
     R = check_square_weight(sec, "R", N_INPUT, definite=True)
     # The table serves reversed circles through the direction mirror S2, exact only if
     # the weights are invariant under it (docs/symmetry.md).
-    from .model.symmetry import P_U, STATE_SIGNS
+    from .model.symmetry import P_U, lqr_state_signs
 
-    if not np.array_equal(Q * np.outer(STATE_SIGNS, STATE_SIGNS), Q):
+    signs = lqr_state_signs(integrators)
+    if not np.array_equal(Q * np.outer(signs, signs), Q):
         raise sec.error(
             "Q",
             "must not couple states the direction mirror flips (xi, xi', "
-            "phi, chi, omega_x, omega_z) with states it keeps (docs/symmetry.md)",
+            "phi, chi, omega_x, omega_z, int_xi) with states it keeps (docs/symmetry.md)",
         )
     if not np.array_equal(P_U @ R @ P_U, R):
         raise sec.error("R", "must be invariant under the motor swap 1<->4, 2<->3 "
                         "(R11 = R44, R22 = R33; docs/symmetry.md)")
-    integ = sec.boolean("integrator", True)
     term = sec.string("terminal", "periodic", choices=TERMINAL_COSTS)
     sec.done()
     Q.setflags(write=False)
     R.setflags(write=False)
-    return Control(rate, Q, R, integ, term)
+    return Control(rate, Q, R, integ, term, az_integ)
 
 
 def _grid(sec: Section, radius: float) -> Grid:

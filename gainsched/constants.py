@@ -11,7 +11,9 @@ from enum import IntFlag
 __all__ = [
     "N_STATE",
     "N_INPUT",
-    "N_LQR",
+    "INTEGRATORS",
+    "REDUCED_NAMES",
+    "CONTROL_LAW",
     "Reason",
     "REASONS",
     "MASK_NO_GAINS",
@@ -24,10 +26,19 @@ __all__ = [
 
 #: reduced state (delta, xi, delta', xi', phi, theta, chi, omega_x, omega_y, omega_z)
 N_STATE = 10
+#: names of the reduced state entries (LQR state columns 0-9)
+REDUCED_NAMES = ("delta", "xi", "delta_dot", "xi_dot", "phi", "theta", "chi",
+                 "omega_x", "omega_y", "omega_z")
+#: the control law the gains are for (stored in the tables and the C headers)
+CONTROL_LAW = ("u = u_d - K (x - x_d); the azimuth error from continuous (unwrapped) "
+               "azimuths, never wrapped at +-pi; integral states integrate their errors")
 #: inputs: the four motor thrusts (T1, T2, T3, T4), N
 N_INPUT = 4
-#: LQR state: the reduced state plus the integral of the delta error (paper Sec. IV.B)
-N_LQR = 11
+#: the LQR's optional integral states, in their order after the reduced state (before
+#: the effect states): name -> index of the reduced state whose error each integrates.
+#: ``int_delta`` is the paper's (Sec. IV.B, ``[control] integrator``); ``int_xi``, the
+#: along-track integral, holds the place on the circle (``[control] azimuth_integral``)
+INTEGRATORS = {"int_delta": 0, "int_xi": 1}
 
 
 class Reason(IntFlag):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import shutil
 import stat
@@ -14,8 +15,11 @@ from click.testing import CliRunner
 from test_runtime import CC, PAPER_H5, needs_cc, synthetic_table
 
 from gainsched.cli import cli
+from gainsched.config import config_from_text
 from gainsched.firmware import codegen
 from gainsched.firmware.runtime import MASK_NO_GAINS, c_identifier, runtime_data
+from gainsched.model.reduced import Model
+from gainsched.schedule.linearize import lqr_state_names
 from gainsched.schedule.tables import load_table
 
 
@@ -214,3 +218,19 @@ def test_cli_check_sample():
         cli, ["check", str(PAPER_H5), "--speed-stride", "7", "--max-error", "0.01"]
     )
     assert strict.exit_code == 1 and "FAIL" in strict.output
+
+
+def test_header_names_the_state_columns_and_integrals(paper_header):
+    """Macros say where each state sits in K and x and which integral states exist."""
+    assert "#define PAPER_X_XI 1u" in paper_header
+    assert "#define PAPER_X_INT_DELTA 10u" in paper_header
+    assert "#define PAPER_HAS_INT_DELTA 1" in paper_header
+    assert "#define PAPER_HAS_INT_XI 0" in paper_header
+    t = synthetic_table(3, 4, 8, motor_lag=True, azimuth_integral=True, seed=4, name="hold")
+    t = dataclasses.replace(t, attrs={**t.attrs, "state_names": ",".join(
+        lqr_state_names(Model(config_from_text(t.config_text))))})
+    h = codegen.render_header(runtime_data(t))
+    assert "#define HOLD_X_INT_DELTA 10u" in h and "#define HOLD_X_INT_XI 11u" in h
+    assert "#define HOLD_HAS_INT_XI 1" in h and "#define HOLD_X_MOTOR_LAG_0 12u" in h
+    sign = _array(h, "hold_state_sign")
+    np.testing.assert_array_equal(sign[10:12], [1, -1])  # int_xi flips like xi

@@ -438,3 +438,24 @@ def test_plausible_edges_pass(paper_text):
         config_from_text(text, "ok.toml")
     cfg = config_from_text(append(paper_text, "[limits]\nmax_memory_gib = 0.5"), "ok.toml")
     assert (cfg.limits.max_memory_gib, cfg.limits.max_build_cpu_s) == (0.5, 1800.0)
+
+
+def test_integral_states_set_the_size_of_Q():
+    """``integrator`` (int_delta) and ``azimuth_integral`` (int_xi) each add one LQR state
+    after the reduced state; Q must have one entry per state, and a wrong size is refused
+    naming the order."""
+    base = load_config("configs/paper.toml")
+    assert base.control.integrators == ("int_delta",) and base.control.n_lqr == 11
+    both = base.with_values({"control.azimuth_integral": True,
+                             "control.Q": [3, 0.2, 1, 1, 1, 2, 0.5, 1, 1, 1, 0.5, 2.0]})
+    assert both.control.integrators == ("int_delta", "int_xi") and both.control.n_lqr == 12
+    none = base.with_values({"control.integrator": False,
+                             "control.Q": [3, 0.2, 1, 1, 1, 2, 0.5, 1, 1, 1]})
+    assert none.control.integrators == () and none.control.n_lqr == 10
+    with pytest.raises(InputError, match=r"control\.Q: must have 12 diagonal entries \(delta, "
+                                         r"xi, .*, int_delta, int_xi\) or be 12x12, got 11"):
+        base.with_values({"control.azimuth_integral": True})
+    Q = np.diag([3, 0.2, 1, 1, 1, 2, 0.5, 1, 1, 1, 0.5, 2.0])
+    Q[0, 11] = Q[11, 0] = 0.1  # int_xi flips under the direction mirror, delta does not
+    with pytest.raises(InputError, match=r"control\.Q: must not couple .*int_xi"):
+        base.with_values({"control.azimuth_integral": True, "control.Q": Q.tolist()})

@@ -179,3 +179,34 @@ def test_discretize_matches_cont2discrete(config):
     Ad_b, Bd_b = discretize(Ax, Bx, dt)
     np.testing.assert_allclose(Ad_b[5], Ad, rtol=0, atol=1e-14 * np.abs(Ad).max())
     np.testing.assert_allclose(Bd_b[5], Bd, rtol=0, atol=1e-14 * np.abs(Bd).max())
+
+
+@pytest.mark.parametrize("integrators", [(), ("int_delta",), ("int_xi",),
+                                         ("int_delta", "int_xi")])
+def test_lqr_system_integrals_by_simulation(model, integrators):
+    """A second formulation: integrate the augmented continuous system and compare each
+    integral state with the quadrature of the reduced state it integrates."""
+    from scipy.integrate import solve_ivp
+
+    rng = np.random.default_rng(5)
+    n_z = model.n_z
+    A = rng.normal(scale=0.3, size=(n_z, n_z))
+    B = rng.normal(size=(n_z, 4))
+    Ax, Bx = lqr_system(A, B, integrators)
+    n_i = len(integrators)
+    assert Ax.shape == (n_z + n_i,) * 2
+    x0 = np.concatenate([rng.normal(size=N_STATE), np.zeros(n_i), rng.normal(size=n_z - N_STATE)])
+    u = rng.normal(size=4)
+    t = np.linspace(0, 1, 201)
+    sol = solve_ivp(lambda _, x: Ax @ x + Bx @ u, (0, 1), x0, t_eval=t, rtol=1e-11, atol=1e-12)
+    z = np.delete(sol.y, np.s_[N_STATE:N_STATE + n_i], axis=0)  # the model's own states
+    ref = solve_ivp(lambda _, x: A @ x + B @ u, (0, 1), np.delete(x0, np.s_[N_STATE:N_STATE + n_i]),
+                    t_eval=t, rtol=1e-11, atol=1e-12).y
+    np.testing.assert_allclose(z, ref, atol=1e-8)
+    from scipy.integrate import trapezoid
+
+    for j, name in enumerate(integrators):
+        src = {"int_delta": 0, "int_xi": 1}[name]
+        assert sol.y[N_STATE + j, -1] == pytest.approx(trapezoid(ref[src], t), abs=1e-4)
+    names = lqr_state_names(model, integrators)
+    assert names[N_STATE:N_STATE + n_i] == integrators and len(names) == n_z + n_i

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from gainsched import native
+from gainsched.configedit import set_values
 from gainsched.firmware import codegen, runtime
 from gainsched.firmware.check import midpoint_check
 from gainsched.firmware.runtime import (
@@ -50,14 +51,18 @@ SAN_ENV = {
 # --------------------------------------------------------------------------- tables
 
 
-def synthetic_table(n_a=4, n_v=5, n_xi=8, *, motor_lag=False, seed=0, name="synth") -> Table:
+def synthetic_table(n_a=4, n_v=5, n_xi=8, *, motor_lag=False, azimuth_integral=False, seed=0,
+                    name="synth") -> Table:
     """Random gains on a small nonuniform grid, with every kind of infeasible point:
     whole circles without gains (tilt > 0 and tilt 0) and flagged points that keep them."""
     rng = np.random.default_rng(seed)
     text = PAPER_TOML.read_text().replace('name = "paper"', f'name = "{name}"')
     if motor_lag:
         text += "\n[effects.motor_lag]\ntau = 0.03\n"
-    n = 11 + (4 if motor_lag else 0)
+    if azimuth_integral:  # int_xi after int_delta: 12 LQR states
+        text = set_values(text, {"control.azimuth_integral": True,
+                                 "control.Q": [3, 0.2, 1, 1, 1, 2, 0.5, 1, 1, 1, 0.5, 1]})
+    n = 11 + int(azimuth_integral) + (4 if motor_lag else 0)
     r = 1.6
     speed = np.array([2.0, 3.5, 4.0, 7.0, 11.0, 12.5, 15.0][:n_v])
     tilt = np.deg2rad([0.0, 12.0, 25.0, 40.0, 55.0][:n_a])
@@ -107,6 +112,8 @@ TABLES = {
     "paper": lambda: load_table(PAPER_H5),
     "synth": lambda: synthetic_table(),
     "synth_lag": lambda: synthetic_table(5, 7, 12, motor_lag=True, seed=1, name="synth_lag"),
+    "synth_int": lambda: synthetic_table(3, 4, 8, motor_lag=True, azimuth_integral=True,
+                                         seed=4, name="synth_int"),
     "tiny": lambda: synthetic_table(1, 1, 4, seed=2, name="tiny"),
     "tiny2": lambda: synthetic_table(2, 2, 4, seed=3, name="tiny2"),
 }
@@ -301,14 +308,16 @@ def test_reference_cell_centre_is_corner_mean():
         np.testing.assert_allclose(r.K, corners.mean((0, 1, 2)), atol=2e-6)
 
 
-@pytest.mark.parametrize("motor_lag", [False, True])
-def test_reference_symmetries_match_symmetry_module(motor_lag):
+@pytest.mark.parametrize(("motor_lag", "azimuth_integral"),
+                         [(False, False), (True, False), (True, True)])
+def test_reference_symmetries_match_symmetry_module(motor_lag, azimuth_integral):
     """S1 and S2 applied by the interpolator agree with gainsched.model.symmetry's own maps."""
     from gainsched.config import config_from_text
     from gainsched.model.effects import effects_from_specs
 
-    t = synthetic_table(5, 7, 12, motor_lag=motor_lag, seed=4)
-    P_x = state_mirror(effects_from_specs(config_from_text(t.config_text).effects))
+    t = synthetic_table(5, 7, 12, motor_lag=motor_lag, azimuth_integral=azimuth_integral, seed=4)
+    cfg = config_from_text(t.config_text)
+    P_x = state_mirror(effects_from_specs(cfg.effects), cfg.control.integrators)
     ref = Interpolator(t)
     rng = np.random.default_rng(5)
     m = 3000

@@ -43,21 +43,26 @@ def _rel(X, Y):
     return np.abs(X - Y).max() / np.abs(Y).max()
 
 
-def _config(extra_effects=""):
+def _config(extra_effects="", azimuth_integral=False):
     text = PAPER.read_text()
     text = re.sub(r"^azimuth_samples = .*$", f"azimuth_samples = {N_XI}", text, flags=re.M)
     if extra_effects:
         text = text.replace("[environment]", extra_effects + "\n[environment]")
-    return config_from_text(text, "symmetry.toml")
+    cfg = config_from_text(text, "symmetry.toml")
+    if azimuth_integral:  # the along-track integral, mirrored like xi
+        cfg = cfg.with_values({"control.azimuth_integral": True,
+                               "control.Q": [3, 0.2, 1, 1, 1, 2, 0.5, 1, 1, 1, 0.5, 2.0]})
+    return cfg
 
 
 EXTRA = "[effects.rotor_drag]\nk_rd = 0.02\n\n[effects.motor_lag]\ntau = 0.03\n"
 
 
-@pytest.fixture(scope="module", params=["paper", "with-effects"])
+@pytest.fixture(scope="module", params=["paper", "with-effects", "azimuth-integral"])
 def quadrants(request):
     """Direct solves in all four quadrants (+-speed, +-tilt) at N_XI azimuths."""
-    cfg = _config() if request.param == "paper" else _config(EXTRA)
+    cfg = {"paper": lambda: _config(), "with-effects": lambda: _config(EXTRA),
+           "azimuth-integral": lambda: _config(EXTRA, azimuth_integral=True)}[request.param]()
     sols = {
         (sv, sa): solve_circle(cfg, sv * SPEED, [sa * TILT]) for sv in (1, -1) for sa in (1, -1)
     }
@@ -82,7 +87,7 @@ def test_S1_tilt_sign_gains(quadrants):
 
 def test_S2_direction_gains(quadrants):
     cfg, sols = quadrants
-    P_x = state_mirror(Model(cfg).effects)
+    P_x = state_mirror(Model(cfg).effects, cfg.control.integrators)
     K_fwd = sols[1, 1].K[0]
     K_rev = sols[-1, 1].K[0]  # sample j at xi = -2 pi j / n_xi
     assert _rel(K_rev, mirror_gain(_shift(K_fwd), P_x)) <= 1e-8
@@ -113,7 +118,7 @@ def test_fundamental_from_query_reproduces_direct_solves(quadrants):
     """Each quadrant's direct gains are the stored (+speed, +tilt) gains looked up through
     fundamental_from_query and mapped back with P_u K P_x when mirrored."""
     cfg, sols = quadrants
-    P_x = state_mirror(Model(cfg).effects)
+    P_x = state_mirror(Model(cfg).effects, cfg.control.integrators)
     r = cfg.radius
     K_stored = sols[1, 1].K[0]
     u_stored = sols[1, 1].u_d[0]

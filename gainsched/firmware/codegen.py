@@ -29,7 +29,7 @@ import numpy as np
 from ..errors import InputError
 from ..native import find_cc
 from ..publish import publish, write_atomic
-from .runtime import Lookup, RuntimeData, runtime_data
+from .runtime import Lookup, RuntimeData, c_identifier, runtime_data
 
 __all__ = [
     "RUNTIME_FILES",
@@ -130,7 +130,7 @@ def render_header(data: RuntimeData) -> str:
         crc32_hex=f"{data.crc32():08x}",
         data_bytes=data.nbytes(),
         runtime_version=RUNTIME_VERSION,
-        control_law="u = u_d - K (x - x_d); xi error wrapped to [-pi, pi)",
+        control_law=str(data.meta.get("control_law", "u = u_d - K (x - x_d)")),
         state_names=", ".join(data.state_names) if data.state_names else "?",
         mask_bits=f"{bits}; {MASK_NO_GAINS:#04x} no gains stored (zeros)",
         xi=_body(data.xi, c_float),
@@ -145,7 +145,21 @@ def render_header(data: RuntimeData) -> str:
         phi_d=_body(data.phi_d, c_float),
         mask=_body(data.mask, _c_uint, per_line=18),
     )
+    values["state_macros"] = _state_macros(data)
     return render("gains.in.h", **values)
+
+
+def _state_macros(data: RuntimeData) -> str:
+    """``#define <NAME>_X_<STATE> <column>u`` for every LQR state, and whether each
+    integral state of :data:`gainsched.constants.INTEGRATORS` is present."""
+    from ..constants import INTEGRATORS
+
+    NAME = data.name.upper()
+    lines = [f"#define {NAME}_X_{c_identifier(x).upper()} {j}u"
+             for j, x in enumerate(data.state_names)]
+    lines += [f"#define {NAME}_HAS_{c_identifier(x).upper()} {int(x in data.state_names)}"
+              for x in INTEGRATORS]
+    return "\n".join(lines)
 
 
 def header_name(data: RuntimeData) -> str:

@@ -171,19 +171,25 @@ def c_identifier(name: str) -> str:
 
 
 def _state_mirror(table) -> np.ndarray:
-    """P_x of the table's LQR state, from its config's effects."""
+    """P_x of the table's LQR state, from its config's integrals and effects (or, for a
+    config this process cannot load, e.g. one naming an effect registered elsewhere,
+    from the integral states in ``state_names`` when there are no effect states)."""
     from ..config import config_from_text
+    from ..constants import INTEGRATORS, REDUCED_NAMES
     from ..model.effects import effects_from_specs
-    from ..model.symmetry import STATE_SIGNS, state_mirror
+    from ..model.symmetry import state_mirror
 
     n = table.K_tilt0.shape[-1]
     try:
         cfg = config_from_text(table.config_text, f"{table.source}:config_text")
-        P = state_mirror(effects_from_specs(cfg.effects))
+        P = state_mirror(effects_from_specs(cfg.effects), cfg.control.integrators)
     except InputError:
-        if n != STATE_SIGNS.size:
+        names = str(table.attrs.get("state_names", "")).split(",")
+        integrators = tuple(x for x in names if x in INTEGRATORS)
+        if names[:len(REDUCED_NAMES)] != list(REDUCED_NAMES) or len(names) != len(
+                REDUCED_NAMES) + len(integrators):
             raise
-        P = np.diag(STATE_SIGNS)
+        P = state_mirror((), integrators)
     if P.shape != (n, n):
         raise InputError(table.source, "config_text", f"state map is {P.shape}, gains have n={n}")
     return P
@@ -263,7 +269,8 @@ def runtime_data(table) -> RuntimeData:
     names = tuple(str(table.attrs.get("state_names", "")).split(",")) if table.attrs else ()
     meta = {
         k: table.attrs[k]
-        for k in ("tool_version", "schema", "terminal", "rate_hz", "radius_m", "config_name")
+        for k in ("tool_version", "schema", "terminal", "rate_hz", "radius_m", "config_name",
+                  "control_law")
         if k in table.attrs
     }
     return RuntimeData(

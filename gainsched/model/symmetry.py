@@ -21,12 +21,15 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import block_diag
 
+from ..constants import INTEGRATORS
 from .effects import Kinematics
 from .rotations import matrix_from_euler_zyx
 
 __all__ = [
     "P_U",
     "STATE_SIGNS",
+    "REDUCED_SIGNS",
+    "lqr_state_signs",
     "state_mirror",
     "mirror_gain",
     "mirror_state",
@@ -35,14 +38,25 @@ __all__ = [
 ]
 
 P_U = np.eye(4)[[3, 2, 1, 0]]
-#: signs of the 11 LQR state errors under S2
-#: (delta, xi, delta', xi', phi, theta, chi, wx, wy, wz, int delta)
-STATE_SIGNS = np.array([1, -1, 1, -1, -1, 1, -1, -1, 1, -1, 1], dtype=float)
+#: signs of the 10 reduced-state errors under S2
+#: (delta, xi, delta', xi', phi, theta, chi, wx, wy, wz)
+REDUCED_SIGNS = np.array([1, -1, 1, -1, -1, 1, -1, -1, 1, -1], dtype=float)
+#: signs of the paper's 11 LQR state errors under S2 (reduced state, int delta)
+STATE_SIGNS = np.append(REDUCED_SIGNS, 1.0)
 
 
-def state_mirror(effects=()) -> np.ndarray:
-    """``P_x``: the S2 map of the LQR state (11 entries plus effect states), shape (n, n)."""
-    blocks = [np.diag(STATE_SIGNS)] + [e.mirror() for e in effects if e.n_states]
+def lqr_state_signs(integrators=("int_delta",)) -> np.ndarray:
+    """Signs of the LQR state errors under S2: the reduced state, then each integral
+    with the sign of the state it integrates (:data:`gainsched.constants.INTEGRATORS`),
+    shape (10 + len(integrators),)."""
+    return np.concatenate([REDUCED_SIGNS, [REDUCED_SIGNS[INTEGRATORS[n]] for n in integrators]])
+
+
+def state_mirror(effects=(), integrators=("int_delta",)) -> np.ndarray:
+    """``P_x``: the S2 map of the LQR state (reduced state, integrals, effect states),
+    shape (n, n)."""
+    blocks = [np.diag(lqr_state_signs(integrators))]
+    blocks += [e.mirror() for e in effects if e.n_states]
     return block_diag(*blocks)
 
 
@@ -54,7 +68,7 @@ def mirror_gain(K, P_x=None):
 
 def mirror_state(z):
     """S2 applied to absolute reduced states (..., 10): xi -> pi - xi, signs as STATE_SIGNS."""
-    out = z * STATE_SIGNS[:10]
+    out = z * REDUCED_SIGNS
     out[..., 1] = np.pi - z[..., 1]
     return out
 

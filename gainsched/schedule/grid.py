@@ -23,7 +23,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from joblib import Parallel, cpu_count, delayed
 
-from ..constants import TILT_BATCH, Reason
+from ..constants import N_STATE, TILT_BATCH, Reason
 from ..errors import InputError
 from ..model.reduced import Model
 from ..model.symmetry import effect_symmetry_errors
@@ -133,7 +133,7 @@ def _discrete_at(model, speed, tilts, n, dt):
         zs.append(nom.z)
         us.append(nom.u)
     A, B = jacobians(model, np.stack(zs), np.stack(us), np.asarray(tilts)[:, None])
-    return discretize(*lqr_system(A, B), dt)
+    return discretize(*lqr_system(A, B, model.config.control.integrators), dt)
 
 
 def _rel_err(X, Y, offset=None):
@@ -240,7 +240,8 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=Tr
     n_a = tilts.size
 
     bad = np.zeros(n_a, dtype=np.uint8)
-    n = model.n_z + 1
+    n_lqr = config.control.n_lqr  # reduced state and integrals; effect states follow
+    n = model.n_z - N_STATE + n_lqr
     K = np.full((n_a, n_xi, 4, n), np.nan)
     S = np.full((n_a, n_xi, n, n), np.nan)
     radius = np.full(n_a, np.nan)  # closed-loop spectral radius per tilt
@@ -263,7 +264,7 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=Tr
         elsewhere = (g.reasons == 0) & (bad[i] != 0)
         reasons[i] = g.reasons | np.where(elsewhere, Reason.ELSEWHERE, 0).astype(np.uint8)
     Qx = np.zeros((n, n))
-    Qx[:11, :11] = config.control.Q
+    Qx[:n_lqr, :n_lqr] = config.control.Q
     ok = np.flatnonzero(bad == 0)
     if dare_tilt0 and not keep_steps and config.control.terminal == "periodic":
         for i in ok[tilts[ok] == 0.0]:

@@ -2,8 +2,9 @@
 
 Jacobians are exact: complex-step differentiation of the batched model
 (``f(z + i h e_j)`` has imaginary part ``h df/dz_j`` to rounding, no
-subtractive cancellation). The LQR state appends the integral of the delta
-error after the ten reduced states (paper Sec. IV.B); effect states follow.
+subtractive cancellation). The LQR state appends the integral states after the
+ten reduced states: the delta error's (paper Sec. IV.B) and, optionally, the
+azimuth error's (the along-track integral); effect states follow.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import N_STATE
+from ..constants import INTEGRATORS, REDUCED_NAMES
 
 __all__ = [
     "jacobians",
@@ -19,11 +21,12 @@ __all__ = [
     "expm_batched",
     "lqr_state_names",
     "STATE_NAMES",
+    "REDUCED_NAMES",
     "INPUT_NAMES",
 ]
 
-STATE_NAMES = ("delta", "xi", "delta_dot", "xi_dot", "phi", "theta", "chi",
-               "omega_x", "omega_y", "omega_z", "int_delta")
+#: the paper's LQR state (reduced state and the delta integral)
+STATE_NAMES = REDUCED_NAMES + ("int_delta",)
 INPUT_NAMES = ("T1", "T2", "T3", "T4")
 _H = 1e-30
 
@@ -53,27 +56,38 @@ def jacobians(model, z, u, alpha):
     return J[..., :n_z], J[..., n_z:]
 
 
-def lqr_system(A, B):
-    """Augment with the delta integrator: LQR state ``(s[0:10], int delta, effect states)``.
+def lqr_system(A, B, integrators=("int_delta",)):
+    """Augment with the integral states: LQR state ``(s[0:10], integrals, effect states)``.
 
-    Returns ``(A_x, B_x)`` of shapes (..., n, n) and (..., n, 4), n = n_z + 1.
+    Parameters
+    ----------
+    A : ndarray, shape (..., n_z, n_z); B : ndarray, shape (..., n_z, 4)
+        Continuous-time Jacobians of the full state (reduced state, effect states).
+    integrators : sequence of str
+        Names from :data:`gainsched.constants.INTEGRATORS`, in that order: each adds a
+        state whose rate is the error of the reduced state it integrates.
+
+    Returns ``(A_x, B_x)`` of shapes (..., n, n) and (..., n, 4), n = n_z + len(integrators).
     """
-    n_z = A.shape[-1]
-    n = n_z + 1
-    perm = list(range(N_STATE)) + list(range(N_STATE, n_z))  # z index -> x index (skip 10)
-    idx = [i if i < N_STATE else i + 1 for i in perm]
+    n_z, n_i = A.shape[-1], len(integrators)
+    n = n_z + n_i
+    idx = [i if i < N_STATE else i + n_i for i in range(n_z)]  # z index -> x index
     Ax = np.zeros(A.shape[:-2] + (n, n))
     Bx = np.zeros(B.shape[:-2] + (n, B.shape[-1]))
     Ax[..., np.ix_(idx, idx)[0], np.ix_(idx, idx)[1]] = A
     Bx[..., idx, :] = B
-    Ax[..., N_STATE, 0] = 1.0  # d/dt int(delta - delta_d) = delta error
+    for j, name in enumerate(integrators):  # d/dt int(s_i - s_i,d) = s_i error
+        Ax[..., N_STATE + j, INTEGRATORS[name]] = 1.0
     return Ax, Bx
 
 
-def lqr_state_names(model):
-    """Names of the LQR state entries (11 plus effect states)."""
+def lqr_state_names(model, integrators=None):
+    """Names of the LQR state entries: the reduced state, the integrals (default: the
+    model's config's), the effect states."""
+    if integrators is None:
+        integrators = model.config.control.integrators
     extra = [f"{e.kind}_{i}" for e in model.effects for i in range(e.n_states)]
-    return STATE_NAMES + tuple(extra)
+    return REDUCED_NAMES + tuple(integrators) + tuple(extra)
 
 
 _TAYLOR_DEGREE = 14

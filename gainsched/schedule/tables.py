@@ -23,8 +23,8 @@ import h5py
 import numpy as np
 
 from .. import __version__
-from ..config import N_LQR
-from ..constants import REASONS
+from ..config import N_STATE
+from ..constants import CONTROL_LAW, REASONS
 from ..errors import InputError
 from ..publish import write_atomic
 from .linearize import INPUT_NAMES, lqr_state_names
@@ -132,7 +132,8 @@ def table_bytes(config, grid, model) -> bytes:
     n_xi = config.grid.azimuth_samples
     n = grid.K.shape[-1]
     Qx = np.zeros((n, n))
-    Qx[:11, :11] = config.control.Q
+    n_lqr = config.control.n_lqr
+    Qx[:n_lqr, :n_lqr] = config.control.Q
     fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
     fapl.set_fapl_core(backing_store=False)
     fapl.set_libver_bounds(h5py.h5f.LIBVER_V18, h5py.h5f.LIBVER_V18)
@@ -150,7 +151,7 @@ def table_bytes(config, grid, model) -> bytes:
         a["radius_m"] = config.radius
         a["state_names"] = ",".join(lqr_state_names(model))
         a["input_names"] = ",".join(INPUT_NAMES)
-        a["control_law"] = "u = u_d - K (x - x_d); xi error wrapped to [-pi, pi)"
+        a["control_law"] = CONTROL_LAW
         _create(f, "config_text", config.text)
         ax = _group(f, "axes")
         _create(ax, "xi", 2 * np.pi * np.arange(n_xi) / n_xi, "rad", "azimuth, uniform, periodic")
@@ -316,8 +317,8 @@ def _read(f, path) -> Table:
         if d[key].shape != shape:
             raise InputError(path, key, f"shape {d[key].shape} does not match the axes {shape}")
     names = str(attrs["state_names"]).split(",")
-    if n < N_LQR or len(names) != n:
-        raise InputError(path, "gains/K_tilt0", f"{n} state columns; need >= {N_LQR} and one per "
+    if n < N_STATE or len(names) != n:
+        raise InputError(path, "gains/K_tilt0", f"{n} state columns; need >= {N_STATE} and one per "
                          f"name in state_names ({len(names)})")
     _verify(f, path)  # after the structure, so that a missing dataset is named as such
     _check_feasible_finite(path, d, tilt, speed, xi)

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import N_STATE, Config, Section
+from ..constants import INTEGRATORS
 from ..errors import GainschedWarning, InputError
 from ..model.geometry import pose_angles_from_pose, pose_from_reduced, wrap_angle
 from ..model.maximal import MaximalModel, reduced_from_maximal
@@ -337,16 +338,22 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     rigid = P.maximal is None
     batch = getattr(scheduler, "batch", None)
     K_blk = S_blk = None
-    xerr = np.zeros(N_STATE + 1)
-    integ = 0.0
+    # integral states of the design (int_delta, int_xi): the errors they integrate
+    int_idx = [INTEGRATORS[name] for name in design.control.integrators]
+    n_lqr = N_STATE + len(int_idx)
+    xerr = np.zeros(n_lqr)
+    integ = np.zeros(len(int_idx))
+    xi_true = z0[1]  # the plant's azimuth, tracked continuously (elastic links)
     slack_time = None
     n_done = n_steps
     for k in range(n_steps):
         X[k] = x
-        z_true = x[:N_STATE] if rigid else reduced(x, xi_ref[k])
+        z_true = x[:N_STATE] if rigid else reduced(x, xi_true)
+        xi_true = z_true[1]
         z_hat = estimate(k, x, z_true)
+        # no wrap: the estimate and the reference are continuous azimuths, so the error
+        # stays right past half a lap (a lag of 4 rad is a lag, not a lead of 2.3 rad)
         err = z_hat - z_d[k]
-        err[1] = wrap_angle(err[1])
         if batch is None:
             K, status = scheduler(xi_ref[k], xi_dot_ref[k], alpha)
         else:
@@ -360,7 +367,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         if n > xerr.size:  # design model with effect states: no estimate of them, zero error
             xerr = np.zeros(n)
         xerr[:N_STATE] = err
-        xerr[N_STATE] = integ
+        xerr[N_STATE:n_lqr] = integ
         u_raw = u_d[k] - K @ xerr[:n]
         u = np.minimum(np.maximum(u_raw, u_min), u_max)  # np.clip, without its overhead
         SAT[k] = u != u_raw
@@ -373,7 +380,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
             n_done = k + 1
             break
         predict(u)
-        integ += dt * err[0]
+        integ += dt * err[int_idx]
         x = x_next
         if progress is not None and k % 100 == 99:
             progress(100)
@@ -414,7 +421,7 @@ class _Estimator:
         if self.sens.ideal:
             return z_true
         if k % self.every == 0:  # a pose sample taken now, arriving after the latency
-            self.pending.append((k + self.delay, self._measure(x, z_true)))
+            self.pending.append((k + self.delay, self._measure(x, self.z[1])))
         self.hist.append(self.z.copy())
         while self.pending and self.pending[0][0] <= k:
             _, meas = self.pending.pop(0)
@@ -431,19 +438,21 @@ class _Estimator:
         z[7:10] = z_true[7:10] + self.sens.gyro_noise * self.rng.standard_normal(3)
         return z
 
-    def _measure(self, x, z_true):
+    def _measure(self, x, xi_near):
         """Noisy pose -> (delta, xi, phi, theta, chi), rad, shape (5,).
 
         True COG position and attitude in I, plus position noise (m) and a small
         attitude perturbation ``R_IB Rz Ry Rx`` (rad), converted back to the reduced
-        pose angles (:func:`~gainsched.model.geometry.pose_angles_from_pose`).
+        pose angles (:func:`~gainsched.model.geometry.pose_angles_from_pose`) with xi on
+        the branch nearest ``xi_near`` (the estimate: the azimuth is tracked continuously,
+        as a firmware must, from what it knows).
         """
         p_I, R_IB = self.plant.pose(x, self.alpha, self.gamma)
         p_I = p_I + self.sens.position_noise * self.rng.standard_normal(3)
         rot = self.sens.attitude_noise * self.rng.standard_normal(3)
         R_IB = R_IB @ matrix_from_euler_zyx_scalar(rot[0], rot[1], rot[2])
         R_CI = self.R_IC.T
-        return pose_angles_from_pose(R_CI @ p_I, R_CI @ R_IB, self.model.p_e, z_true[1])[1]
+        return pose_angles_from_pose(R_CI @ p_I, R_CI @ R_IB, self.model.p_e, xi_near)[1]
 
     def predict(self, u):
         if self.sens.ideal:
@@ -452,18 +461,26 @@ class _Estimator:
 
 
 def metrics(res: SimResult) -> dict:
-    """Flight metrics: RMS out-of-plane error (m), speed tracking error (m/s), max tension (N),
-    max g-load, saturation fraction, slack events."""
+    """Flight metrics: out-of-plane error (m), along-track error (azimuth error, rad, and
+    its arc at the COG radius, m) with lap slips, speed tracking error (m/s), max tension
+    (N), max g-load, saturation fraction, slack events."""
     R_IC = R_IC_from_tilt(res.scenario.tilt, res.scenario.gamma)
     p_C = res.p_I @ R_IC  # rows: R_IC^T p
     out_of_plane = p_C[:, 2]
     v = res.z[:, 3] * res.r
     v_ref = res.z_d[:, 3] * res.r
     accel = res.tension / res.mass  # the tether carries the centripetal load
+    xi_err = res.z[:, 1] - res.z_d[:, 1]  # both continuous: a lap behind is -2 pi
     return {
         "duration_s": float(res.t[-1]),
         "rms_out_of_plane_m": float(np.sqrt(np.mean(out_of_plane**2))),
         "max_out_of_plane_m": float(np.abs(out_of_plane).max()),
+        "rms_along_track_m": float(res.r * np.sqrt(np.mean(xi_err**2))),
+        "max_along_track_m": float(res.r * np.abs(xi_err).max()),
+        "mean_azimuth_error_rad": float(np.mean(xi_err)),
+        "final_azimuth_error_rad": float(xi_err[-1]),
+        "max_azimuth_error_rad": float(np.abs(xi_err).max()),
+        "lap_slips": int(np.abs(xi_err).max() // (2 * np.pi)),
         "rms_speed_error_mps": float(np.sqrt(np.mean((v - v_ref) ** 2))),
         "mean_speed_error_mps": float(np.mean(v - v_ref)),
         "max_speed_mps": float(np.abs(v).max()),

@@ -32,6 +32,8 @@
 #define ${NAME}_N_SPEED ${n_speed}u /* speed / azimuth-rate axis */
 #define ${NAME}_N_XI ${n_xi}u /* azimuth axis, periodic */
 #define ${NAME}_N_STATE ${n_state}u /* LQR state dimension: columns of K */
+/* the column of each state in K and x (order above); which integral states exist */
+${state_macros}
 #define ${NAME}_N_INPUT 4u /* motors: rows of K */
 #define ${NAME}_N_TILT_K ${n_tilt_k}u /* first dimension of ${name}_K: max(1, N_TILT - 1) */
 #define ${NAME}_RADIUS_M ${radius} /* COG radius rho + L_e, m: xi_dot = speed / radius */
