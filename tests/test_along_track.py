@@ -92,3 +92,63 @@ def test_along_track_metrics_are_the_azimuth_error_at_the_radius(paper):
     assert m["rms_along_track_m"] == pytest.approx(res.r * np.sqrt(np.mean(xi_err**2)))
     assert m["max_along_track_m"] == pytest.approx(res.r * np.abs(xi_err).max())
     assert m["max_along_track_m"] < 0.05  # design model as plant: tracks
+
+
+@pytest.fixture(scope="module")
+def hold_table():
+    cfg = load_config(ROOT / "configs/paper_hold.toml")
+    return cfg, _table(cfg)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("plant_effect", [("effects.thrust_scale", [("k_T", 0.93)]),
+                                          ("effects.thrust_airspeed", [("c1", 0.0),
+                                                                       ("c2", -0.0008)])],
+                         ids=["thrust-scale-0.93", "thrust-loss-0.0008v2"])
+def test_recommended_config_holds_the_azimuth_at_every_grid_speed(paper, hold_table,
+                                                                   plant_effect):
+    """configs/paper_hold.toml (the paper's weights plus int_xi) on plants with a
+    tangential thrust error, level circles at every grid speed, 10 s: the azimuth lag
+    settles below 0.02 rad (the paper's weights leave up to 0.55 and 1.6 rad), with
+    the out-of-plane RMS within 10 % of the paper table's."""
+    plant = _plant(paper, plant_effect)
+    hold, t_hold = hold_table
+    t_paper = load_table(ROOT / "tables/paper.h5")
+    worst_paper = 0.0
+    for v in paper.grid.speeds:
+        mp = metrics(_fly(paper, t_paper, plant, float(v), 10.0))
+        mh = metrics(_fly(hold, t_hold, plant, float(v), 10.0))
+        worst_paper = max(worst_paper, abs(mp["final_azimuth_error_rad"]))
+        assert abs(mh["final_azimuth_error_rad"]) <= 0.02, v
+        assert mh["rms_out_of_plane_m"] <= 1.1 * mp["rms_out_of_plane_m"] + 1e-4, v
+        assert mh["slack_events"] == 0 and mh["lap_slips"] == 0, v
+    assert worst_paper > 0.5  # the error the integral removes is there
+
+
+def test_status_policy_holds_the_last_good_gains_and_refuses_to_start(paper):
+    """A lookup without usable gains (NO_GAINS) is flown with the last good gains, never
+    with K = 0; a flight that starts where the table has none is refused (one line)."""
+    from gainsched.errors import InputError
+    from gainsched.sim.loop import Maneuver
+
+    table = load_table(ROOT / "tables/paper.h5")
+    scn = load_scenario(SCENARIO_DIR / "tilted40.toml")
+    with pytest.raises(InputError, match=r"no usable gains where the flight starts \(.*NO_GAINS"):
+        simulate(paper, table_scheduler(table), dataclasses.replace(scn, speed=15.0), paper)
+    # 8 -> 12 m/s at 40 deg: the circles above 11 m/s are infeasible (no gains)
+    up = dataclasses.replace(scn, speed=8.0, duration=3.0,
+                             maneuvers=(Maneuver(0.5, 12.0, 4.0),))
+    res = simulate(paper, table_scheduler(table), up, paper)
+    m = metrics(res)
+    assert m["held_gains_s"] > 0.1
+    assert np.all(res.held == ((res.status & 0x08) != 0))
+
+
+def test_braking_below_the_grid_and_the_tension_margin_is_reported(paper):
+    """The paper's braking ends at 1 m/s: below the table's 2 m/s (CLAMPED_SPEED) and
+    below the 0.5 N tension margin of the config (nominal 0.31 N): both are reported."""
+    res = simulate(paper, table_scheduler(load_table(ROOT / "tables/paper.h5")),
+                   load_scenario(SCENARIO_DIR / "braking.toml"), paper)
+    m = metrics(res)
+    assert m["clamped_speed_s"] > 0.5 and m["below_tension_margin_s"] > 0.5
+    assert m["min_nominal_tension_N"] == pytest.approx(0.5 * 1.0**2 / res.r, rel=0.02)

@@ -15,6 +15,7 @@ with the 11-entry LQR state x (xi error wrapped to [-pi, pi)), the nominal
 
 from __future__ import annotations
 
+import math
 import tomllib
 import warnings
 from dataclasses import dataclass, field
@@ -25,6 +26,7 @@ import numpy as np
 from ..config import N_STATE, Config, Section
 from ..constants import INTEGRATORS
 from ..errors import GainschedWarning, InputError
+from ..firmware.runtime import CLAMPED_SPEED, UNUSABLE, status_text
 from ..model.geometry import pose_angles_from_pose, pose_from_reduced, wrap_angle
 from ..model.maximal import MaximalModel, reduced_from_maximal
 from ..model.reduced import Model
@@ -162,7 +164,9 @@ class SimResult:
 
     t (N,) s; z (N, 10) true reduced state; z_hat (N, 10) estimate; z_d (N, 10) nominal;
     u (N, 4) applied (saturated) thrust command, N; tension (N,) N; p_I (N, 3) m COG;
-    q_IB (N, 4); saturated (N, 4) bool; status (N,) runtime status;
+    q_IB (N, 4); saturated (N, 4) bool; status (N,) runtime status of the lookup;
+    held (N,) bool: the lookup was unusable and the last good gains were flown;
+    tension_d (N,) N: the nominal's tension; min_tension N: the config's margin;
     slack_time: float or None, s; scenario; alpha rad; r m.
     """
 
@@ -182,6 +186,9 @@ class SimResult:
     r: float
     mass: float
     g: float
+    held: np.ndarray | None = None
+    tension_d: np.ndarray | None = None
+    min_tension: float = 0.0
 
 
 _FALLBACKS_SEEN: set[str] = set()
@@ -344,6 +351,8 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     xerr = np.zeros(n_lqr)
     integ = np.zeros(len(int_idx))
     xi_true = z0[1]  # the plant's azimuth, tracked continuously (elastic links)
+    K_good = None  # the last usable gains (held through NO_GAINS / bad lookups)
+    HELD = np.zeros(n_steps, dtype=bool)
     slack_time = None
     n_done = n_steps
     for k in range(n_steps):
@@ -363,6 +372,16 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
                 K_blk, S_blk = batch(xi_ref[blk], xi_dot_ref[blk], alpha)
                 S_blk = S_blk.tolist()
             K, status = K_blk[j], S_blk[j]
+        if status & UNUSABLE:  # the firmware policy: hold the last good gains
+            if K_good is None:
+                raise InputError(
+                    f"scenario {scenario.name}", "speed",
+                    f"the table has no usable gains where the flight starts ({status_text(status)}"
+                    f" at speed {xi_dot_ref[k] * dmodel.r:.3g} m/s, tilt "
+                    f"{math.degrees(alpha):.3g} deg): a firmware would refuse to engage")
+            K, HELD[k] = K_good, True
+        else:
+            K_good = K
         n = K.shape[-1]
         if n > xerr.size:  # design model with effect states: no estimate of them, zero error
             xerr = np.zeros(n)
@@ -388,7 +407,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     PI, QI = P.poses(X[sl], alpha, scenario.gamma)
     return SimResult(t[sl], Z[sl].copy(), Zh[sl], z_d[sl], U[sl], u_d[sl], TEN[sl], PI, QI,
                      SAT[sl], STAT[sl], slack_time, scenario, dmodel.r, plant.vehicle.mass,
-                     plant.g)
+                     plant.g, HELD[sl], nom.tension[sl], design.feasibility.min_tension)
 
 
 class _Estimator:
@@ -471,6 +490,7 @@ def metrics(res: SimResult) -> dict:
     v_ref = res.z_d[:, 3] * res.r
     accel = res.tension / res.mass  # the tether carries the centripetal load
     xi_err = res.z[:, 1] - res.z_d[:, 1]  # both continuous: a lap behind is -2 pi
+    dt = float(res.t[1] - res.t[0]) if res.t.size > 1 else 0.0
     return {
         "duration_s": float(res.t[-1]),
         "rms_out_of_plane_m": float(np.sqrt(np.mean(out_of_plane**2))),
@@ -488,6 +508,12 @@ def metrics(res: SimResult) -> dict:
         "max_g_load": float(np.max(v**2 / res.r) / res.g),
         "max_tether_accel_g": float(accel.max() / res.g),
         "saturation_fraction": float(res.saturated.mean()),
+        "held_gains_s": float(np.count_nonzero(res.held) * dt) if res.held is not None else 0.0,
+        "clamped_speed_s": float(np.count_nonzero(res.status & CLAMPED_SPEED) * dt),
+        "min_nominal_tension_N": (float(res.tension_d.min()) if res.tension_d is not None
+                                  else math.nan),
+        "below_tension_margin_s": (float(np.count_nonzero(res.tension_d < res.min_tension) * dt)
+                                   if res.tension_d is not None else 0.0),
         "slack_events": 0 if res.slack_time is None else 1,
         "slack_time_s": res.slack_time,
         "max_roll_deg": float(np.rad2deg(np.abs(res.z[:, 4]).max())),

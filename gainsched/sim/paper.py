@@ -550,6 +550,19 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
               f"{1000 * p['rms_out_of_plane_m']:.3f}") for p in res[n]["plateaus"]],
         )
         lines += ["", f"![{n}]({n}/speed_roll.png)"]
+    lines += ["", "## Along the circle (every flight)", "",
+              "Azimuth error between continuous azimuths (a lap behind is -2 pi); along-track "
+              "error = azimuth error x COG radius. Held: the lookup had no usable gains and "
+              "the last good ones were flown. Below margin: the nominal tension under the "
+              "config's `min_tension`.", ""]
+    lines += _md_table(
+        ["flight", "RMS along-track (mm)", "max along-track (mm)", "final azimuth error (mrad)",
+         "lap slips", "held gains (s)", "below tension margin (s)"],
+        [(n, f"{1000 * r['rms_along_track_m']:.2f}", f"{1000 * r['max_along_track_m']:.2f}",
+          f"{1000 * r['final_azimuth_error_rad']:+.2f}", r["lap_slips"],
+          f"{r['held_gains_s']:.2f}", f"{r['below_tension_margin_s']:.2f}")
+         for n, r in ((e.name, res[e.name]) for e in exps)],
+    )
     lines += ["", "Every experiment folder holds log.csv / log.h5 (flight-log format), "
               "metrics.json, speed_roll.png and path3d.png.", ""]
     write_atomic(out_dir / "report.md", "\n".join(lines).encode())
