@@ -503,10 +503,15 @@ def _scenario_path(name: str) -> Path:
               help="Truth config for the plant (default: CONFIG).")
 @click.option("--speed", type=FiniteFloat(0, MAX_SPEED, lo_open=True, unit="m/s"),
               help="Override the scenario's initial speed, m/s (0 < speed <= 100).")
+@click.option("--controller", type=click.Choice(["path", "firmware"]), default="path",
+              show_default=True,
+              help="Nominal source: 'path' computes it from the design model along the "
+              "reference; 'firmware' uses only the table's lookup plus the drag-only closed "
+              "form (what a firmware has; docs/runtime.md).")
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               required=True, help="Output folder (log.csv/.h5, metrics.json, plots).")
 @user_errors
-def simulate(config, table_path, scenario, plant_path, speed, out_dir):
+def simulate(config, table_path, scenario, plant_path, speed, controller, out_dir):
     """Fly a scenario in closed loop on the nonlinear plant with gains from the table."""
     import dataclasses
 
@@ -529,7 +534,8 @@ def simulate(config, table_path, scenario, plant_path, speed, out_dir):
     n = int(round(scn.duration * cfg.control.rate_hz)) + 1
     check_out_dir(out_dir)
     with tqdm(total=n, unit="step", desc=f"simulate {scn.name}", disable=None) as bar:
-        res = run(cfg, table_scheduler(table), scn, plant, progress=bar.update)
+        res = run(cfg, table_scheduler(table), scn, plant, progress=bar.update,
+                  controller=controller)
     with staged(out_dir) as stage:
         m = write_run(res, stage)
     click.echo(

@@ -26,6 +26,7 @@ import numpy as np
 from ..config import N_STATE, Config, Section
 from ..constants import INTEGRATORS
 from ..errors import GainschedWarning, InputError
+from ..firmware.feedforward import feedforward
 from ..firmware.runtime import CLAMPED_SPEED, UNUSABLE, status_text
 from ..model.geometry import pose_angles_from_pose, pose_from_reduced, wrap_angle
 from ..model.maximal import MaximalModel, reduced_from_maximal
@@ -289,7 +290,7 @@ def _rk4(f, x, u, alpha, dt):
 
 
 def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None = None,
-             progress=None) -> SimResult:
+             progress=None, controller: str = "path") -> SimResult:
     """Fly ``scenario`` with gains from ``scheduler`` on the ``plant`` (default: design).
 
     Parameters
@@ -306,6 +307,12 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         The truth.
     progress : callable(int), optional
         Called with the number of steps done, every 100 steps.
+    controller : {"path", "firmware"}
+        Where the nominal ``(x_d, u_d)`` comes from. ``"path"``: the design model along
+        the reference, computed here (closed form or trim). ``"firmware"``: only what a
+        firmware has, the table's lookup plus the drag-only closed form with the
+        table's correction (:func:`gainsched.firmware.feedforward.feedforward`); the
+        scheduler must carry the table's interpolator (``table_scheduler`` does).
 
     The rigid-link plant runs on the compiled kernel when available (same results as
     the numpy model to rounding, see tests/test_fastplant.py); ``GAINSCHED_NATIVE=0``
@@ -321,6 +328,15 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     path = profile_path(scenario, dmodel.r, t)
     nom = nominal_from_path(dmodel, path, alpha, periodic=False)
     z_d, u_d = nom.z[:, :N_STATE], nom.u
+    if controller == "firmware":
+        interp = getattr(scheduler, "interp", None)
+        if interp is None:
+            raise ValueError("controller='firmware' needs a scheduler with the table's "
+                             "interpolator (table_scheduler)")
+        ff = feedforward(interp, design, path, alpha)
+        z_d, u_d = ff.x_d, ff.u_d
+    elif controller != "path":
+        raise ValueError(f"controller must be 'path' or 'firmware', got {controller!r}")
     u_min, u_max = plant.vehicle.thrust_min, plant.vehicle.thrust_max
 
     z0 = z_d[0].copy()
@@ -537,6 +553,7 @@ def table_scheduler(table):
         return r.K, r.status.astype(int)
 
     lookup.batch = batch
+    lookup.interp = interp  # for the firmware feed-forward (simulate(controller="firmware"))
     return lookup
 
 
