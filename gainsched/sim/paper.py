@@ -401,6 +401,8 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
         The config the tables were built from (the paper config).
     scheduler : callable
         Gain lookup (:func:`gainsched.sim.loop.table_scheduler` of the committed table).
+        With the table's interpolator (``table_scheduler``) the flights use the firmware's
+        feed-forward (``simulate(controller="firmware")``), else the design model's.
     out_dir : path
     quick : bool
         Short smoke version (see :func:`experiments`).
@@ -420,7 +422,10 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
             from .campaign import plant_config
 
             truth = plant_config(plant or design, exp.plant_effect)
-        res = simulate(design, scheduler, exp.scenario, truth)
+        # the firmware's nominal (lookup + closed form) when the scheduler offers the
+        # table's interpolator: the flights a firmware would fly from the generated files
+        mode = "firmware" if getattr(scheduler, "interp", None) is not None else "path"
+        res = simulate(design, scheduler, exp.scenario, truth, controller=mode)
         write_run(res, out_dir / exp.name)
         results[exp.name] = _analyse(exp, res)
         runs[exp.name] = res
@@ -434,6 +439,9 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
         "plant": (plant or design).name,
         "quick": bool(quick),
         "experiments_run": [e.name for e in exps],
+        "nominal": ("firmware feed-forward: table lookup plus the drag-only closed form"
+                    if getattr(scheduler, "interp", None) is not None
+                    else "design model along the reference"),
         **(meta or {}),
     }
     report = PaperReport(tuple(_rows(exps, results)), results, info)
@@ -488,6 +496,9 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
         + (f", tables `{m['table']}`" if "table" in m else "")
         + (" — **quick mode** (short smoke flights; numbers not meaningful)" if m["quick"]
            else "") + ".",
+        "",
+        f"Nominal flown: {m.get('nominal', 'design model along the reference')} "
+        "(docs/runtime.md, \"Manoeuvres: the feed-forward\").",
         "",
         "The plant is the design model (no model error); motion capture at 200 Hz with "
         "0.5 mm / 0.2 deg noise, fused with a model prediction at 1 kHz. Paper values that "
