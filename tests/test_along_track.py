@@ -152,3 +152,23 @@ def test_braking_below_the_grid_and_the_tension_margin_is_reported(paper):
     m = metrics(res)
     assert m["clamped_speed_s"] > 0.5 and m["below_tension_margin_s"] > 0.5
     assert m["min_nominal_tension_N"] == pytest.approx(0.5 * 1.0**2 / res.r, rel=0.02)
+
+
+def test_compare_reports_along_track_tracking_from_the_logged_reference(paper, tmp_path):
+    """compare's tracking summary: a log with xi_ref (the simulator writes it) gives the
+    same along-track error as the simulator's own metrics (a second formulation: pose ->
+    reduced coordinates vs the plant's state), within the motion-capture noise."""
+    from gainsched.analysis.compare import compare, tracking_summary
+    from gainsched.sim.loop import log_from_result
+
+    plant = _plant(paper, ("effects.thrust_scale", [("k_T", 0.93)]))
+    res = _fly(paper, load_table(ROOT / "tables/paper.h5"), plant, 12.0, 4.0)
+    m = metrics(res)
+    log = log_from_result(res)
+    (tr,) = tracking_summary(paper, [log])
+    assert tr["final_azimuth_error_rad"] == pytest.approx(m["final_azimuth_error_rad"], abs=2e-3)
+    assert tr["max_along_track_m"] == pytest.approx(m["max_along_track_m"], rel=0.02)
+    assert tr["lap_slips"] == 0
+    cmp = compare(paper, [log, log_from_result(_fly(paper, load_table(ROOT / "tables/paper.h5"),
+                                                      paper, 8.0, 2.0))])
+    assert len(cmp.tracking) == 2 and cmp.to_json()["tracking"] == cmp.tracking

@@ -86,6 +86,7 @@ __all__ = [
     "axis_stats",
     "where_it_fails",
     "compare",
+    "tracking_summary",
     "window_samples",
     "noise_floor",
     "AT_NOISE_FLOOR",
@@ -894,6 +895,7 @@ class Comparison:
     where: dict
     notes: list
     segs: list = field(default_factory=list)
+    tracking: list = field(default_factory=list)
 
     @property
     def axes(self) -> tuple[str, ...]:
@@ -922,6 +924,7 @@ class Comparison:
                                "rms_over_noise": self.where["rms_over_noise"],
                                "tables": self.where["tables"]},
             "notes": self.notes,
+            "tracking": self.tracking,
         }
 
 
@@ -940,4 +943,33 @@ def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
     axes = [a for a in AXES if all(a in r.residual for r in res)]
     stats = {a: axis_stats(res, a, noise[a]) for a in axes}
     where = where_it_fails(res, noise)
-    return Comparison(config, measured, res, stats, noise, where, list(notes or []), list(segs))
+    return Comparison(config, measured, res, stats, noise, where, list(notes or []), list(segs),
+                      tracking_summary(config, segs or [], [m.name for m in measured]))
+
+
+def tracking_summary(config: Config, segs, names=None) -> list[dict]:
+    """Along-track tracking of every log segment that carries the reference azimuth
+    (``xi_ref``): the measured azimuth of the attachment point minus the reference, both
+    continuous (the reference put on the 2 pi branch of the first sample; a lap behind
+    is -2 pi), and that error times the COG radius (m).
+
+    Returns a list of dicts: ``segment`` (``names[i]``, default the file), ``rms_along_track_m``,
+    ``max_along_track_m``, ``final_azimuth_error_rad``, ``lap_slips``.
+    """
+    out = []
+    names = names or [str(log.source) for log in segs]
+    for log, name in zip(segs, names, strict=True):
+        ref = log.optional.get("xi_ref")
+        if ref is None or len(log) < 2:
+            continue
+        xi = _raw_channels(log, config.tether.attachment_offset)[2]
+        ref = np.unwrap(np.asarray(ref, dtype=float))
+        ref = ref + 2 * np.pi * np.round((xi[0] - ref[0]) / (2 * np.pi))
+        err = xi - ref
+        r = config.radius
+        out.append({"segment": name,
+                    "rms_along_track_m": float(r * np.sqrt(np.mean(err**2))),
+                    "max_along_track_m": float(r * np.abs(err).max()),
+                    "final_azimuth_error_rad": float(err[-1]),
+                    "lap_slips": int(np.abs(err).max() // (2 * np.pi))})
+    return out

@@ -116,6 +116,10 @@ def compare_lines(cmp: Comparison, paper: PaperFits | None = None) -> list[str]:
     out += _text_table(head, rows, w)
     out.append(f"  normalised RMS (1 = noise): {cmp.normalized_rms():.3f}")
     out.append(f"where it fails: {cmp.where['sentence']}")
+    for tr in cmp.tracking:
+        out.append(f"tracking {tr['segment']}: RMS along-track {tr['rms_along_track_m']:.4f} m, "
+                   f"max {tr['max_along_track_m']:.4f} m, final azimuth error "
+                   f"{tr['final_azimuth_error_rad']:+.4f} rad, lap slips {tr['lap_slips']}")
     for note in cmp.notes:
         out.append(f"note: {note}")
     if paper is not None:
