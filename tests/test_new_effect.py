@@ -90,7 +90,9 @@ def test_new_effect_keeps_the_symmetries_and_builds_tables():
             "grid.azimuth_samples": 12}
     with registered_effect(GroundEffect):
         cfg = _config(0.12, anchor_height=2.0, grid=grid)
-        table = table_from_bytes(table_bytes(cfg, build_grid(cfg), Model(cfg)))
+        # two jobs: worker processes build it, which know the class only because it
+        # travels with the job (their registry has the built-in effects only)
+        table = table_from_bytes(table_bytes(cfg, build_grid(cfg, n_jobs=2), Model(cfg)))
         cfg0 = _config(0.0, anchor_height=2.0, grid=grid)  # rotor_radius 0: effect off
         table0 = table_from_bytes(table_bytes(cfg0, build_grid(cfg0), Model(cfg0)))
     assert not table.reasons.any() and not table0.reasons.any()

@@ -38,6 +38,9 @@ __all__ = [
     "MotorLag",
     "EFFECTS",
     "registered_effect",
+    "registered_effects",
+    "registered_effects_context",
+    "BUILTIN_KINDS",
     "effects_from_specs",
     "norm",
 ]
@@ -448,6 +451,27 @@ EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
     for cls in (Drag, RotorDrag, ThrustScale, ThrustPolynomial, ThrustMomentum, MotorLag)
 }
+
+
+#: the kinds that ship with the package (the rest of EFFECTS came from registered_effect)
+BUILTIN_KINDS = frozenset(EFFECTS)
+
+
+def registered_effects(kinds=None) -> tuple[type[Effect], ...]:
+    """The effect classes registered in this process with :func:`registered_effect` (not
+    built in), optionally only those of ``kinds``: what a worker process needs to be
+    told to build the same model (its own registry has the built-in ones only)."""
+    return tuple(cls for kind, cls in EFFECTS.items()
+                 if kind not in BUILTIN_KINDS and (kinds is None or kind in kinds))
+
+
+@contextlib.contextmanager
+def registered_effects_context(classes):
+    """Register every class of ``classes`` for the block (see :func:`registered_effect`)."""
+    with contextlib.ExitStack() as stack:
+        for cls in classes:
+            stack.enter_context(registered_effect(cls))
+        yield
 
 
 @contextlib.contextmanager

@@ -25,6 +25,7 @@ from joblib import Parallel, cpu_count, delayed
 
 from ..constants import N_STATE, TILT_BATCH, Reason
 from ..errors import InputError
+from ..model.effects import registered_effects, registered_effects_context
 from ..model.reduced import Model
 from ..model.symmetry import effect_symmetry_errors
 from ..native.reproducible import (
@@ -313,10 +314,13 @@ class GridResult:
     dt: np.ndarray
 
 
-def _solve_speed(config, speed: float, tilts) -> CircleSolution:
-    """One job of :func:`build_grid`: all tilts of one speed, on one BLAS thread."""
+def _solve_speed(config, speed: float, tilts, effects=()) -> CircleSolution:
+    """One job of :func:`build_grid`: all tilts of one speed, on one BLAS thread.
+    ``effects``: the registered (not built-in) effect classes the config names, which a
+    worker process does not know otherwise (they travel with the job, by value)."""
     ensure_blas_single_thread()
-    return solve_circle(config, speed, tilts)
+    with registered_effects_context(effects):
+        return solve_circle(config, speed, tilts)
 
 
 def _dask_active() -> bool:
@@ -377,7 +381,8 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
     check_effect_symmetries(config)
     speeds = config.grid.speeds
     tilts = config.grid.tilts
-    args = [(config, float(v), tilts) for v in speeds]
+    extra = registered_effects({s.name for s in config.effects})
+    args = [(config, float(v), tilts, extra) for v in speeds]
     sols = []
     with blas_single_thread():
         for s in _solutions(args, n_jobs, backend):
