@@ -158,14 +158,15 @@ def test_compare_reports_along_track_tracking_from_the_logged_reference(paper, t
     """compare's tracking summary: a log with xi_ref (the simulator writes it) gives the
     same along-track error as the simulator's own metrics (a second formulation: pose ->
     reduced coordinates vs the plant's state), within the motion-capture noise."""
-    from gainsched.analysis.compare import compare, tracking_summary
+    from gainsched.analysis.compare import compare, load_segments, tracking_summary
     from gainsched.sim.loop import log_from_result
 
     plant = _plant(paper, ("effects.thrust_scale", [("k_T", 0.93)]))
     res = _fly(paper, load_table(ROOT / "tables/paper.h5"), plant, 12.0, 4.0)
     m = metrics(res)
     log = log_from_result(res)
-    (tr,) = tracking_summary(paper, [log])
+    measured, segs, _ = load_segments(paper, [log])
+    (tr,) = tracking_summary(paper, measured, segs)
     assert tr["final_azimuth_error_rad"] == pytest.approx(m["final_azimuth_error_rad"], abs=2e-3)
     assert tr["max_along_track_m"] == pytest.approx(m["max_along_track_m"], rel=0.02)
     assert tr["lap_slips"] == 0

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gainsched.analysis.diagnose import candidates, diagnose
+from gainsched.analysis.diagnose import candidate_library, diagnose
 from gainsched.config import config_from_text
 from gainsched.configedit import set_section, set_values
 from gainsched.errors import InputError
@@ -120,7 +120,7 @@ def test_new_effect_is_flown_compared_and_diagnosed():
             warnings.simplefilter("always")
             logs = fly(design, sched, scns, plant, custom=GroundEffect)
         assert sum("ground_effect" in str(w.message) for w in caught) == 1
-        lib = candidates()
+        lib = candidate_library()
         assert lib["ground_effect"].params[0].upper == 0.2  # the Param's fit range
         dg = diagnose(design, logs, candidates=["ground_effect", "thrust_scale"])
     res = {r.name: r for r in dg.results}
@@ -131,7 +131,7 @@ def test_new_effect_is_flown_compared_and_diagnosed():
     # a second formulation: at constant height (level flights) the ground effect is a
     # thrust scale 1 / (1 - (R / 4h)^2), h = anchor height 0.3 m
     assert res["thrust_scale"].theta[0] == pytest.approx(1 / (1 - (0.18 / 1.2) ** 2), rel=5e-3)
-    assert "ground_effect" not in candidates()  # the library follows the registry
+    assert "ground_effect" not in candidate_library()  # the library follows the registry
 
 
 def test_build_refuses_an_effect_that_breaks_the_symmetries():

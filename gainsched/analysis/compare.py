@@ -944,30 +944,31 @@ def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
     stats = {a: axis_stats(res, a, noise[a]) for a in axes}
     where = where_it_fails(res, noise)
     return Comparison(config, measured, res, stats, noise, where, list(notes or []), list(segs),
-                      tracking_summary(config, segs or [], [m.name for m in measured]))
+                      tracking_summary(config, measured, segs or []))
 
 
-def tracking_summary(config: Config, segs, names=None) -> list[dict]:
+def tracking_summary(config: Config, measured, segs) -> list[dict]:
     """Along-track tracking of every log segment that carries the reference azimuth
-    (``xi_ref``): the measured azimuth of the attachment point minus the reference, both
-    continuous (the reference put on the 2 pi branch of the first sample; a lap behind
-    is -2 pi), and that error times the COG radius (m).
+    (``xi_ref``): the measured azimuth of the attachment point (``Measured.z``, already
+    reconstructed from the pose) minus the reference, both continuous (the reference put
+    on the 2 pi branch of the first sample; a lap behind is -2 pi), and that error times
+    the COG radius (m).
 
-    Returns a list of dicts: ``segment`` (``names[i]``, default the file), ``rms_along_track_m``,
-    ``max_along_track_m``, ``final_azimuth_error_rad``, ``lap_slips``.
+    Returns a list of dicts: ``segment`` (the measured segment's name),
+    ``rms_along_track_m``, ``max_along_track_m``, ``final_azimuth_error_rad``,
+    ``lap_slips``.
     """
     out = []
-    names = names or [str(log.source) for log in segs]
-    for log, name in zip(segs, names, strict=True):
+    for meas, log in zip(measured, segs, strict=True):
         ref = log.optional.get("xi_ref")
         if ref is None or len(log) < 2:
             continue
-        xi = _raw_channels(log, config.tether.attachment_offset)[2]
+        xi = meas.z[:, 1]
         ref = np.unwrap(np.asarray(ref, dtype=float))
         ref = ref + 2 * np.pi * np.round((xi[0] - ref[0]) / (2 * np.pi))
         err = xi - ref
         r = config.radius
-        out.append({"segment": name,
+        out.append({"segment": meas.name,
                     "rms_along_track_m": float(r * np.sqrt(np.mean(err**2))),
                     "max_along_track_m": float(r * np.abs(err).max()),
                     "final_azimuth_error_rad": float(err[-1]),

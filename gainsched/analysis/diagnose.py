@@ -59,7 +59,7 @@ __all__ = [
     "FitParam",
     "Candidate",
     "CANDIDATES",
-    "candidates",
+    "candidate_library",
     "THRESHOLDS",
     "CandidateResult",
     "Diagnosis",
@@ -273,7 +273,7 @@ class ElasticityCandidate(Candidate):
         return set_value(text, "tether", "damping", v["damping"], f"N s/m; {comments[1]}")
 
 
-def candidates() -> dict[str, Candidate]:
+def candidate_library() -> dict[str, Candidate]:
     """The candidate library, by name: every :meth:`~gainsched.model.effects.Effect.refits`
     of every effect nameable in configs (built-in or registered with
     :func:`~gainsched.model.effects.registered_effect`), then config parameters, the
@@ -300,8 +300,8 @@ def candidates() -> dict[str, Candidate]:
     return by_name
 
 
-#: The candidate library of the built-in effects, by name (:func:`candidates`).
-CANDIDATES: dict[str, Candidate] = candidates()
+#: The candidate library of the built-in effects, by name (:func:`candidate_library`).
+CANDIDATES: dict[str, Candidate] = candidate_library()
 
 _TILTED_CONSTANT_SPEED = (
     "tilted circles at constant speed: the thrust changes around the circle while the "
@@ -846,7 +846,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     if len(prob.flights) < 2:
         raise InputError("command line", "LOG", "diagnose needs at least two flights (log "
                          "files) for held-out scores")
-    library = globals()["candidates"]()  # the parameter shadows the function
+    library = candidate_library()
     names = list(library) if candidates is None else list(candidates)
     for n in names:
         if n not in library:
@@ -925,7 +925,7 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
     """
     from ..configedit import get_value
 
-    cand = candidates()[result.name]
+    cand = candidate_library()[result.name]
     comments = []
     for j, p in enumerate(result.params):
         lo, hi = result.theta[j] - result.ci[j], result.theta[j] + result.ci[j]

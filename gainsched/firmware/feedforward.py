@@ -48,6 +48,9 @@ class FeedForward:
         ``theta = chi = 0``, ``omega_d = (phi_d', xi' sin phi_d, xi' cos phi_d)``.
     u_d : ndarray, shape (N, 4), N
         Nominal motor thrust commands.
+    tension : ndarray, shape (N,), N
+        Nominal tether tension of the closed form (paper eq. 18 with the acceleration
+        terms; the drag-only model's, the firmware's estimate).
     status : ndarray, shape (N,), int
         The lookup's status bits (:mod:`gainsched.firmware.runtime`); where unusable the
         correction is left out (closed form only).
@@ -55,6 +58,7 @@ class FeedForward:
 
     x_d: np.ndarray
     u_d: np.ndarray
+    tension: np.ndarray
     status: np.ndarray
 
 
@@ -90,7 +94,7 @@ def feedforward(lookup: Interpolator, config, path: AzimuthPath, alpha: float) -
     """
     model = drag_only_model(config)
     D = model.closed_form_drag()
-    s, _, u_cf, _ = closed_form(model, path, alpha, D)
+    s, _, u_cf, tension = closed_form(model, path, alpha, D)
     # the correction is taken where the lookup is: at the clamped speed and tilt when the
     # reference leaves the grid (below the lowest speed the table holds, say)
     d = lookup.data
@@ -112,4 +116,4 @@ def feedforward(lookup: Interpolator, config, path: AzimuthPath, alpha: float) -
     x_d[:, 4] = phi
     x_d[:, 8] = xd * np.sin(phi)
     x_d[:, 9] = xd * np.cos(phi)
-    return FeedForward(x_d, u_cf * ratio, lk.status.astype(int))
+    return FeedForward(x_d, u_cf * ratio, tension, lk.status.astype(int))

@@ -25,6 +25,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from .rotations import up_C_from_tilt
+
 __all__ = [
     "Param",
     "Refit",
@@ -149,8 +151,7 @@ class Kinematics:
     def up_C(self):
         """The inertial up direction ``R_IC^T (0, 0, 1) = (0, sin alpha, cos alpha)`` in C,
         shape (..., 3) (broadcast against the batch of ``alpha``)."""
-        a = np.asarray(self.alpha)
-        return np.stack([np.zeros_like(a, dtype=float), np.sin(a), np.cos(a)], -1)
+        return up_C_from_tilt(self.alpha)
 
     @property
     def height(self):

@@ -243,5 +243,4 @@ def _pose_angles_one(p_q, R_CB, p_e, xi_ref):
     phi = math.atan2(R_CB[2, 1], R_CB[2, 2])
     theta = math.asin(min(max(-R_CB[2, 0], -1.0), 1.0))
     psi = math.atan2(R_CB[1, 0], R_CB[0, 0])
-    chi = (psi - xi + math.pi) % (2 * math.pi) - math.pi
-    return dist, np.array([delta, xi, phi, theta, chi])
+    return dist, np.array([delta, xi, phi, theta, wrap_angle(psi - xi)])

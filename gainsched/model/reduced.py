@@ -26,7 +26,12 @@ import numpy as np
 from ..constants import N_STATE
 from .effects import Effect, Kinematics, effects_from_specs
 from .geometry import cog_from_attachment, pose_from_reduced, tether_direction
-from .rotations import euler_zyx_rates_from_body_rates, matrix_from_euler_zyx, skew
+from .rotations import (
+    euler_zyx_rates_from_body_rates,
+    matrix_from_euler_zyx,
+    skew,
+    up_C_from_tilt,
+)
 
 if TYPE_CHECKING:  # the config imports the effects of this package
     from ..config import Config
@@ -102,8 +107,7 @@ class Model:
     # ------------------------------------------------------------------ helpers
     def g_C(self, alpha):
         """Gravity in the circle frame, ``-g (0, sin a, cos a)``, shape alpha.shape + (3,)."""
-        a = np.asarray(alpha)
-        return -self.g * np.stack([np.zeros_like(a, dtype=float), np.sin(a), np.cos(a)], axis=-1)
+        return -self.g * up_C_from_tilt(alpha)
 
     def closed_form_drag(self):
         """The tangential-drag functions of all effects if the closed-form nominal applies

@@ -24,6 +24,7 @@ __all__ = [
     "skew",
     "euler_zyx_rates_from_body_rates",
     "R_IC_from_tilt",
+    "up_C_from_tilt",
 ]
 
 
@@ -159,6 +160,13 @@ def euler_zyx_rates_from_body_rates(phi, theta, omega_B):
     return np.stack(
         [wx + (sp * wy + cp * wz) * tt, cp * wy - sp * wz, (sp * wy + cp * wz) / ct], axis=-1
     )
+
+
+def up_C_from_tilt(alpha_C):
+    """The inertial up direction in the circle frame, ``R_IC^T (0, 0, 1) = (0, sin a,
+    cos a)`` (independent of the heading gamma), shape alpha_C.shape + (3,)."""
+    a = np.asarray(alpha_C)
+    return np.stack([np.zeros_like(a, dtype=float), np.sin(a), np.cos(a)], axis=-1)
 
 
 def R_IC_from_tilt(alpha_C, gamma_C=0.0):

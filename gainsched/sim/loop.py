@@ -326,16 +326,17 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     t = np.arange(n_steps) * dt
     alpha = scenario.tilt
     path = profile_path(scenario, dmodel.r, t)
-    nom = nominal_from_path(dmodel, path, alpha, periodic=False)
-    z_d, u_d = nom.z[:, :N_STATE], nom.u
-    if controller == "firmware":
+    if controller == "path":
+        nom = nominal_from_path(dmodel, path, alpha, periodic=False)
+        z_d, u_d, tension_d = nom.z[:, :N_STATE], nom.u, nom.tension
+    elif controller == "firmware":  # no trim of the design model: only what a firmware has
         interp = getattr(scheduler, "interp", None)
         if interp is None:
             raise ValueError("controller='firmware' needs a scheduler with the table's "
                              "interpolator (table_scheduler)")
         ff = feedforward(interp, design, path, alpha)
-        z_d, u_d = ff.x_d, ff.u_d
-    elif controller != "path":
+        z_d, u_d, tension_d = ff.x_d, ff.u_d, ff.tension
+    else:
         raise ValueError(f"controller must be 'path' or 'firmware', got {controller!r}")
     u_min, u_max = plant.vehicle.thrust_min, plant.vehicle.thrust_max
 
@@ -423,7 +424,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     PI, QI = P.poses(X[sl], alpha, scenario.gamma)
     return SimResult(t[sl], Z[sl].copy(), Zh[sl], z_d[sl], U[sl], u_d[sl], TEN[sl], PI, QI,
                      SAT[sl], STAT[sl], slack_time, scenario, dmodel.r, plant.vehicle.mass,
-                     plant.g, HELD[sl], nom.tension[sl], design.feasibility.min_tension)
+                     plant.g, HELD[sl], tension_d[sl], design.feasibility.min_tension)
 
 
 class _Estimator:
