@@ -9,6 +9,10 @@
   clamped, infeasible and invalid queries).
 - Instructions per lookup: valgrind callgrind, counting only inside ``gs_lookup``
   (``--toggle-collect``), if valgrind is installed.
+- The manoeuvre feed-forward (``gs_lookup_nominal``: the lookup plus the drag-only
+  closed form at an accelerating reference, corrected by the table) on the same
+  queries, ns and instructions, printed as a ratio to the plain lookup measured in
+  the same run.
 - Python: vectorised reference lookups per second (100k-query batches).
 
 Targets (issue 4): under 1 us and under 1000 instructions per C lookup on x86.
@@ -62,19 +66,20 @@ def query_sets(data, interp, m=100_000, seed=0):
     return {"flight": np.ascontiguousarray(flight), "mixed": mixed}
 
 
-def time_c(lib: codegen.CRuntime, q, reps=5, passes=7) -> float:
-    """Best ns per lookup over ``passes`` of ``reps`` sweeps."""
-    lib.bench(q[:1000], 1)  # warm up
+def time_c(lib: codegen.CRuntime, q, reps=5, passes=7, nominal=False) -> float:
+    """Best ns per lookup over ``passes`` of ``reps`` sweeps (``nominal``: with the
+    manoeuvre feed-forward, ``gs_lookup_nominal``)."""
+    lib.bench(q[:1000], 1, nominal=nominal)  # warm up
     best = np.inf
     for _ in range(passes):
         t0 = time.perf_counter()
-        lib.bench(q, reps)
+        lib.bench(q, reps, nominal=nominal)
         best = min(best, (time.perf_counter() - t0) / (reps * len(q)))
     return best * 1e9
 
 
-def callgrind_instructions(exe: Path, q, workdir: Path) -> float | None:
-    """Instructions per gs_lookup call (callgrind, only inside gs_lookup)."""
+def callgrind_instructions(exe: Path, q, workdir: Path, nominal=False) -> float | None:
+    """Instructions per call (callgrind, only inside gs_lookup, or gs_lookup_nominal)."""
     valgrind = shutil.which("valgrind")
     if valgrind is None:
         return None
@@ -82,7 +87,8 @@ def callgrind_instructions(exe: Path, q, workdir: Path) -> float | None:
     qf.write_bytes(np.ascontiguousarray(q, dtype=np.float32).tobytes())
     res = subprocess.run(
         [valgrind, "--tool=callgrind", "--callgrind-out-file=/dev/null",
-         "--toggle-collect=gs_lookup", str(exe), "benchq", str(qf), "1"],
+         f"--toggle-collect={'gs_lookup_nominal' if nominal else 'gs_lookup'}", str(exe),
+         "benchn" if nominal else "benchq", str(qf), "1"],
         capture_output=True, text=True,
     )
     m = re.search(r"Collected\s*:\s*(\d+)", res.stderr)
@@ -114,6 +120,11 @@ def main(argv=None) -> int:
                         "ns_per_lookup": round(time_c(lib, q), 1),
                         "instructions_per_lookup": callgrind_instructions(exe, cg_q, wd),
                     }
+                    out["c"][f"{opt} {name} +nominal"] = {
+                        "ns_per_lookup": round(time_c(lib, q, nominal=True), 1),
+                        "instructions_per_lookup": callgrind_instructions(exe, cg_q, wd,
+                                                                          nominal=True),
+                    }
     for name, q in sets.items():
         interp(q[:1000, 0], q[:1000, 1], q[:1000, 2])
         best = np.inf
@@ -126,7 +137,19 @@ def main(argv=None) -> int:
     for key, r in out["c"].items():
         ins = r["instructions_per_lookup"]
         ins_s = f"{ins:7.0f} instructions" if ins is not None else "  (no valgrind)"
-        print(f"  C {key:10s} {r['ns_per_lookup']:7.1f} ns/lookup  {ins_s}")
+        print(f"  C {key:19s} {r['ns_per_lookup']:7.1f} ns/lookup  {ins_s}")
+    out["nominal_ratio"] = {}
+    for key, r in out["c"].items():
+        if key.endswith(" +nominal"):
+            base = out["c"][key.removesuffix(" +nominal")]
+            ratio = {"ns": r["ns_per_lookup"] / base["ns_per_lookup"]}
+            if r["instructions_per_lookup"] and base["instructions_per_lookup"]:
+                ratio["instructions"] = (r["instructions_per_lookup"]
+                                         / base["instructions_per_lookup"])
+            out["nominal_ratio"][key.removesuffix(" +nominal")] = ratio
+            ins = f", instructions x{ratio['instructions']:.2f}" if "instructions" in ratio else ""
+            print(f"  feed-forward / lookup {key.removesuffix(' +nominal'):10s} "
+                  f"ns x{ratio['ns']:.2f}{ins}")
     for key, r in out["python"].items():
         print(f"  Python {key:7s} {r['lookups_per_s'] / 1e3:8.0f} k lookups/s (vectorised)")
     c = out["c"].get("-O2 flight")

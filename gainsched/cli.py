@@ -483,6 +483,12 @@ def check(table, speed_stride, max_error):
         sys.exit(1)
 
 
+_RUNTIME = click.option(
+    "--runtime", type=click.Choice(["auto", "c", "python"]), default="auto", show_default=True,
+    help="Where the flight's gains and firmware feed-forward come from: the compiled C "
+    "runtime (c), its Python reference (python), or C when a C compiler is found (auto).")
+
+
 def _scenario_path(name: str) -> Path:
     p = Path(name)
     if p.suffix == ".toml" or p.exists():
@@ -503,6 +509,7 @@ def _scenario_path(name: str) -> Path:
               help="Truth config for the plant (default: CONFIG).")
 @click.option("--speed", type=FiniteFloat(0, MAX_SPEED, lo_open=True, unit="m/s"),
               help="Override the scenario's initial speed, m/s (0 < speed <= 100).")
+@_RUNTIME
 @click.option("--controller", type=click.Choice(["path", "firmware"]), default="path",
               show_default=True,
               help="Nominal source: 'path' computes it from the design model along the "
@@ -511,7 +518,7 @@ def _scenario_path(name: str) -> Path:
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               required=True, help="Output folder (log.csv/.h5, metrics.json, plots).")
 @user_errors
-def simulate(config, table_path, scenario, plant_path, speed, controller, out_dir):
+def simulate(config, table_path, scenario, plant_path, speed, runtime, controller, out_dir):
     """Fly a scenario in closed loop on the nonlinear plant with gains from the table."""
     import dataclasses
 
@@ -520,7 +527,7 @@ def simulate(config, table_path, scenario, plant_path, speed, controller, out_di
     from .config import load_config
     from .publish import check_out_dir, staged
     from .schedule.tables import load_table
-    from .sim.loop import load_scenario, table_scheduler, write_run
+    from .sim.loop import load_scenario, runtime_scheduler, write_run
     from .sim.loop import simulate as run
 
     cfg = load_config(config)
@@ -534,7 +541,7 @@ def simulate(config, table_path, scenario, plant_path, speed, controller, out_di
     n = int(round(scn.duration * cfg.control.rate_hz)) + 1
     check_out_dir(out_dir)
     with tqdm(total=n, unit="step", desc=f"simulate {scn.name}", disable=None) as bar:
-        res = run(cfg, table_scheduler(table), scn, plant, progress=bar.update,
+        res = run(cfg, runtime_scheduler(table, runtime), scn, plant, progress=bar.update,
                   controller=controller)
     with staged(out_dir) as stage:
         m = write_run(res, stage)
@@ -564,8 +571,9 @@ _REPO = Path(__file__).resolve().parents[1]
 @click.option("--plant", "plant_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Truth config for the plant (default: the design config).")
 @click.option("--quick", is_flag=True, help="Short smoke flights (for tests; seconds).")
+@_RUNTIME
 @user_errors
-def paper(out_dir, config, table_path, plant_path, quick):
+def paper(out_dir, config, table_path, plant_path, quick, runtime):
     """Fly the paper's experiments (Sec. V.B, Figs. 3-4) in simulation and write a report:
     paper figure, paper value, simulated value."""
     from tqdm import tqdm
@@ -573,7 +581,7 @@ def paper(out_dir, config, table_path, plant_path, quick):
     from .config import load_config
     from .publish import check_out_dir, staged
     from .schedule.tables import load_table
-    from .sim.loop import table_scheduler
+    from .sim.loop import runtime_scheduler
     from .sim.paper import experiments, run_paper
 
     cfg = load_config(config)
@@ -586,7 +594,7 @@ def paper(out_dir, config, table_path, plant_path, quick):
     check_out_dir(out_dir)
     with tqdm(total=n, unit="flight", desc="paper", disable=None) as bar, \
             staged(out_dir) as stage:
-        rep = run_paper(cfg, table_scheduler(table), stage, quick=quick, plant=plant,
+        rep = run_paper(cfg, runtime_scheduler(table, runtime), stage, quick=quick, plant=plant,
                         progress=bar.update, meta=meta)
     for r in rep.rows:
         mark = {True: "ok ", False: "NO ", None: "-  "}[r.agrees]

@@ -310,6 +310,250 @@ int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float 
     return status;
 }
 
+/* ---- single-precision trigonometry --------------------------------------
+ * Hand-written because the runtime links no libm (freestanding firmware, and
+ * host and target must compute the same bits); bounds in gainsched_runtime.h.
+ * Minimax polynomials of Cephes (S. L. Moshier, "Methods and Programs for
+ * Mathematical Functions", Prentice Hall, 1989: sinf/cosf on [-pi/4, pi/4],
+ * atanf on [0, tan(pi/8)]). */
+
+/* pi/2 in three parts (8 + 11 + 24 bits): k * part is exact for k < 2^13 */
+#define GS_PIO2_1 0x1.92p+0f
+#define GS_PIO2_2 0x1.fb4p-12f
+#define GS_PIO2_3 0x1.4442d2p-24f
+#define GS_2_OVER_PI 0x1.45f306p-1f
+#define GS_PIO2 0x1.921fb6p+0f
+#define GS_PIO4 0x1.921fb6p-1f
+#define GS_TAN_PI_8 0x1.a8279ap-2f
+
+void gs_sincosf(float x, float *s, float *c)
+{
+    const float ax = x < 0.0f ? -x : x;
+    /* x = k pi/2 + r, |r| <= pi/4 (+ rounding); |x| <= 1e4 keeps k below 2^13 */
+    const int32_t k = (int32_t)(ax * GS_2_OVER_PI + 0.5f);
+    const float kf = (float)k;
+    const float r = ((ax - kf * GS_PIO2_1) - kf * GS_PIO2_2) - kf * GS_PIO2_3;
+    const float z = r * r;
+    const float sr = r + r * z * (-0x1.555546p-3f + z * (0x1.11073cp-7f + z * -0x1.9943f2p-13f));
+    const float cr =
+        (1.0f - 0.5f * z) + z * z * (0x1.55554ap-5f + z * (-0x1.6c0c34p-10f + z * 0x1.99eb9cp-16f));
+    float sv, cv;
+    switch ((uint32_t)k & 3u) {
+    case 0u: sv = sr, cv = cr; break;
+    case 1u: sv = cr, cv = -sr; break;
+    case 2u: sv = -sr, cv = -cr; break;
+    default: sv = -cr, cv = sr; break;
+    }
+    *s = x < 0.0f ? -sv : sv;
+    *c = cv;
+}
+
+float gs_atan2f(float y, float x)
+{
+    const float ay = y < 0.0f ? -y : y;
+    const float ax = x < 0.0f ? -x : x;
+    const int swap = ay > ax;
+    float t, base = 0.0f, z, a;
+    if (ax == 0.0f && ay == 0.0f) {
+        return 0.0f;
+    }
+    t = swap ? ax / ay : ay / ax; /* in [0, 1] */
+    if (t > GS_TAN_PI_8) {        /* atan(t) = pi/4 + atan((t - 1) / (t + 1)) */
+        t = (t - 1.0f) / (t + 1.0f);
+        base = GS_PIO4;
+    }
+    z = t * t;
+    a = base + (t + t * z * (-0x1.555454p-2f +
+                             z * (0x1.9924bep-3f + z * (-0x1.1c370ap-3f + z * 0x1.49e1a2p-4f))));
+    if (swap) {
+        a = GS_PIO2 - a;
+    }
+    if (x < 0.0f) {
+        a = GS_PI - a;
+    }
+    return y < 0.0f ? -a : a;
+}
+
+/* 1 / sqrt(x) for normal x > 0: bit-level first guess (within 3.5 %), then three
+ * Newton steps, each taking the relative error e to about 1.5 e^2 (no division) */
+static float gs_rsqrtf(float x)
+{
+    union {
+        float f;
+        uint32_t u;
+    } v;
+    float y;
+    v.f = x;
+    v.u = 0x5f3759dfu - (v.u >> 1);
+    y = v.f;
+    y = y * (1.5f - (0.5f * x) * (y * y));
+    y = y * (1.5f - (0.5f * x) * (y * y));
+    y = y * (1.5f - (0.5f * x) * (y * y));
+    return y;
+}
+
+float gs_sqrtf(float x)
+{
+    if (!(x > 0.0f)) {
+        return 0.0f;
+    }
+    if (gs_nonfinite(x)) {
+        return x;
+    }
+    return x * gs_rsqrtf(x);
+}
+
+/* ---- manoeuvre feed-forward ----------------------------------------------- */
+
+/* The drag-only closed form (paper eqs. 15-18, eq. 17 corrected) at the reference
+ * d = (xi', xi'', xi''', xi'''') with sx, cx = sin, cos xi and sa, ca = sin, cos
+ * alpha: motor thrusts u[4], sin and cos of the roll phi = atan2(-N, Dn) in sc[2],
+ * roll rate *dphi, tension *tension. The equations of
+ * gainsched/schedule/closedform.py, written without division (1/m and 1/sqrt(H)
+ * are all it needs; a Cortex-M4F divides in 14 cycles). */
+static void gs_closed_form(const gs_vehicle *vh, float inv_m, const float d[4], float sx,
+                           float cx, float sa, float ca, float u[4], float sc[2], float *dphi,
+                           float *tension)
+{
+    const float m = vh->mass, g = vh->g, r = vh->radius;
+    const float xd = d[0], xdd = d[1], xddd = d[2], xdddd = d[3];
+    const float v = r * xd, vd = r * xdd, vdd = r * xddd;
+    const float av = v < 0.0f ? -v : v;
+    const float sgn = v > 0.0f ? 1.0f : (v < 0.0f ? -1.0f : 0.0f);
+    const float Dv = (vh->drag_mu1 + vh->drag_mu2 * av) * v;
+    const float D1 = vh->drag_mu1 + 2.0f * vh->drag_mu2 * av;
+    const float D2 = 2.0f * vh->drag_mu2 * sgn;
+    /* tangential force per mass N and its derivatives; normal Dn (eq. 17) */
+    const float N = r * xdd + g * sa * cx + Dv * inv_m;
+    const float N1 = r * xddd - g * sa * sx * xd + D1 * vd * inv_m;
+    const float N2 =
+        r * xdddd - g * sa * (cx * xd * xd + sx * xdd) + (D2 * vd * vd + D1 * vdd) * inv_m;
+    const float Dn = g * ca;
+    const float H = Dn * Dn + N * N;
+    const float y = gs_rsqrtf(H); /* H >= (g cos alpha)^2 > 0 for |alpha| < pi/2 */
+    const float iH = y * y;
+    const float sp = -N * y, cp = Dn * y; /* sin, cos of phi */
+    const float p1 = -Dn * N1 * iH;
+    const float p2 = -Dn * (N2 - 2.0f * N * N1 * N1 * iH) * iH;
+    /* body rates and their derivative (eqs. 15-16) */
+    const float w0 = p1, w1 = xd * sp, w2 = xd * cp;
+    const float a0 = p2, a1 = xd * p1 * cp + xdd * sp, a2 = xdd * cp - xd * p1 * sp;
+    const float *const J = vh->J;
+    const float *const A = vh->alloc_inv;
+    /* J w, then (T_C, tau_B = J w' + w x J w): the tether torque is zero on the
+     * nominal (x_B along the tether) */
+    const float h0 = (J[0] * w0 + J[1] * w1) + J[2] * w2;
+    const float h1 = (J[3] * w0 + J[4] * w1) + J[5] * w2;
+    const float h2 = (J[6] * w0 + J[7] * w1) + J[8] * w2;
+    const float T_C = m * (H * y);
+    const float t0 = ((J[0] * a0 + J[1] * a1) + J[2] * a2) + (w1 * h2 - w2 * h1);
+    const float t1 = ((J[3] * a0 + J[4] * a1) + J[5] * a2) + (w2 * h0 - w0 * h2);
+    const float t2 = ((J[6] * a0 + J[7] * a1) + J[8] * a2) + (w0 * h1 - w1 * h0);
+    u[0] = (A[0] * T_C + A[1] * t0) + (A[2] * t1 + A[3] * t2);
+    u[1] = (A[4] * T_C + A[5] * t0) + (A[6] * t1 + A[7] * t2);
+    u[2] = (A[8] * T_C + A[9] * t0) + (A[10] * t1 + A[11] * t2);
+    u[3] = (A[12] * T_C + A[13] * t0) + (A[14] * t1 + A[15] * t2);
+    sc[0] = sp;
+    sc[1] = cp;
+    *dphi = p1;
+    *tension = m * r * xd * xd - m * g * sa * sx; /* eq. 18 */
+}
+
+static void gs_zero_nominal(gs_nominal *nom)
+{
+    unsigned i;
+    for (i = 0u; i < 4u; ++i) {
+        nom->u_d[i] = 0.0f;
+    }
+    for (i = 0u; i < 10u; ++i) {
+        nom->x_d[i] = 0.0f;
+    }
+    nom->tension = 0.0f;
+}
+
+int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, float *K,
+                      gs_nominal *nom)
+{
+    const gs_table *t = table;
+    const gs_vehicle *vh;
+    float ud_tab[4], phi_tab, u_cf[4], sc[2], dphi, ten, inv_m;
+    float sx, cx, sa, ca, phi, sphi, cphi;
+    int status;
+    unsigned i;
+
+    if (t == NULL || ref == NULL || K == NULL || nom == NULL || !gs_table_usable(t) ||
+        t->vehicle == NULL) {
+        return GS_BAD_ARG;
+    }
+    vh = t->vehicle;
+    for (i = 2u; i < 5u; ++i) {
+        if (gs_nonfinite(ref[i]) || ref[i] > GS_XI_DERIV_LIMIT || ref[i] < -GS_XI_DERIV_LIMIT) {
+            gs_zero(K, 4u * (size_t)t->n_state, ud_tab, &phi_tab);
+            gs_zero_nominal(nom);
+            return GS_BAD_INPUT;
+        }
+    }
+    status = gs_lookup(t, ref[0], ref[1], alpha, K, ud_tab, &phi_tab);
+    if ((status & (GS_BAD_INPUT | GS_BAD_ARG)) != 0) {
+        gs_zero_nominal(nom);
+        return status;
+    }
+
+    /* the closed form at the reference ... */
+    inv_m = 1.0f / vh->mass;
+    gs_sincosf(ref[0], &sx, &cx);
+    gs_sincosf(alpha, &sa, &ca);
+    gs_closed_form(vh, inv_m, ref + 1, sx, cx, sa, ca, u_cf, sc, &dphi, &ten);
+
+    if ((status & GS_UNUSABLE) == 0) {
+        /* ... corrected by the table's nominal over the closed form's on the steady
+         * circle at the point the lookup used (xi_dot and alpha clamped into the
+         * table): thrust ratio per motor, roll offset */
+        const float lo = t->xi_dot[0], hi = t->xi_dot[t->n_speed - 1u];
+        const float amax = t->tilt[t->n_tilt - 1u];
+        const float vq = ref[1] < 0.0f ? -ref[1] : ref[1];
+        const float aq = alpha < 0.0f ? -alpha : alpha;
+        float d_st[4], u_st[4], sc_st[2], dphi_st, ten_st, sas = sa, cas = ca, xd_g, a_g;
+        xd_g = vq < lo ? lo : (vq > hi ? hi : vq);
+        xd_g = ref[1] < 0.0f ? -xd_g : xd_g;
+        a_g = aq > amax ? amax : aq;
+        a_g = alpha < 0.0f ? -a_g : a_g;
+        if (a_g != alpha) {
+            gs_sincosf(a_g, &sas, &cas);
+        }
+        d_st[0] = xd_g, d_st[1] = 0.0f, d_st[2] = 0.0f, d_st[3] = 0.0f;
+        gs_closed_form(vh, inv_m, d_st, sx, cx, sas, cas, u_st, sc_st, &dphi_st, &ten_st);
+        for (i = 0u; i < 4u; ++i) {
+            if (u_st[i] > GS_FF_MIN_THRUST) {
+                u_cf[i] = u_cf[i] * (ud_tab[i] / u_st[i]);
+            }
+        }
+        /* phi = phi_tab + (phi_cf - phi_st): one atan2 of the difference */
+        phi = phi_tab + gs_atan2f(sc[0] * sc_st[1] - sc[1] * sc_st[0],
+                                  sc[1] * sc_st[1] + sc[0] * sc_st[0]);
+        gs_sincosf(phi, &sphi, &cphi);
+    } else { /* the closed form alone */
+        phi = gs_atan2f(sc[0], sc[1]);
+        sphi = sc[0];
+        cphi = sc[1];
+    }
+    for (i = 0u; i < 4u; ++i) {
+        nom->u_d[i] = u_cf[i];
+    }
+    nom->x_d[0] = GS_PIO2; /* delta */
+    nom->x_d[1] = ref[0];
+    nom->x_d[2] = 0.0f;
+    nom->x_d[3] = ref[1];
+    nom->x_d[4] = phi;
+    nom->x_d[5] = 0.0f; /* theta */
+    nom->x_d[6] = 0.0f; /* chi */
+    nom->x_d[7] = dphi; /* omega_B (eq. 15) */
+    nom->x_d[8] = ref[1] * sphi;
+    nom->x_d[9] = ref[1] * cphi;
+    nom->tension = ten;
+    return status;
+}
+
 /* CRC-32, reflected polynomial 0xEDB88320, four bits at a time */
 static const uint32_t gs_crc_nibble[16] = {
     0x00000000u, 0x1db71064u, 0x3b6e20c8u, 0x26d930acu, 0x76dc4190u, 0x6b6b51f4u,
@@ -378,6 +622,16 @@ uint32_t gs_table_crc32(const gs_table *t)
     crc = gs_crc_floats(crc, t->state_sign, n);
     crc = gs_crc_bytes(crc, t->state_perm, n);
     crc = gs_crc_bytes(crc, t->mask, n_pts);
+    if (t->vehicle != NULL) { /* the fields in declaration order */
+        const gs_vehicle *vh = t->vehicle;
+        crc = gs_crc_u32(crc, gs_bits(vh->mass));
+        crc = gs_crc_u32(crc, gs_bits(vh->g));
+        crc = gs_crc_u32(crc, gs_bits(vh->radius));
+        crc = gs_crc_u32(crc, gs_bits(vh->drag_mu1));
+        crc = gs_crc_u32(crc, gs_bits(vh->drag_mu2));
+        crc = gs_crc_floats(crc, vh->J, 9u);
+        crc = gs_crc_floats(crc, vh->alloc_inv, 16u);
+    }
     return crc ^ 0xffffffffu;
 }
 
@@ -399,6 +653,21 @@ int gs_verify(const gs_table *t)
     }
     for (i = 1u; i < t->n_tilt; ++i) {
         if (!(t->tilt[i] > t->tilt[i - 1u])) {
+            return GS_BAD_TABLE;
+        }
+    }
+    if (t->vehicle != NULL) {
+        const gs_vehicle *vh = t->vehicle;
+        int bad = gs_nonfinite(vh->drag_mu1) || gs_nonfinite(vh->drag_mu2) ||
+                  !(vh->mass > 0.0f) || !(vh->radius > 0.0f) || !(vh->g > 0.0f) ||
+                  gs_nonfinite(vh->mass) || gs_nonfinite(vh->radius) || gs_nonfinite(vh->g);
+        for (i = 0u; i < 9u; ++i) {
+            bad |= gs_nonfinite(vh->J[i]);
+        }
+        for (i = 0u; i < 16u; ++i) {
+            bad |= gs_nonfinite(vh->alloc_inv[i]);
+        }
+        if (bad) {
             return GS_BAD_TABLE;
         }
     }

@@ -4,7 +4,7 @@
  *
  * config sha256: 5a0ec5a41000cf2903b59f12b52b4a2de87a51a3ce91def1772464d4ce608247
  * grid: 6 tilts x 18 speeds x 36 azimuths, n = 11 states
- * table data: 655423 bytes, CRC-32 0xa52985b0 (docs/runtime.md)
+ * table data: 655543 bytes, CRC-32 0x11392f9a (docs/runtime.md)
  *
  * Usage (C99; compile gainsched_runtime.c alongside):
  *     #include "paper_gains.h"
@@ -12,6 +12,11 @@
  *     float K[4][PAPER_N_STATE], u_d[4], phi_d;
  *     int status = paper_lookup(xi, xi_dot, alpha, K, u_d, &phi_d);
  *     if (status & GS_UNUSABLE) { do not use K, u_d, phi_d }
+ * With the manoeuvre feed-forward (reference xi and four derivatives):
+ *     float ref[5] = {xi, xi_dot, xi_ddot, xi_dddot, xi_ddddot};
+ *     gs_nominal nom;
+ *     status = paper_lookup_nominal(ref, alpha, K, &nom);
+ *     u = nom.u_d - K (x - nom.x_d)   (x: the LQR state, integrals appended)
  * Control law: u = u_d - K (x - x_d); the azimuth error from continuous (unwrapped) azimuths, never wrapped at +-pi; integral states integrate their errors
  * Units: xi rad, xi_dot rad/s, alpha rad, K SI (N per state unit), u_d N, phi_d rad.
  * State order (K columns): delta, xi, delta_dot, xi_dot, phi, theta, chi, omega_x, omega_y, omega_z, int_delta
@@ -52,12 +57,18 @@
 #define PAPER_RATE_HZ 1000.0f /* control rate the gains are designed for */
 #define PAPER_XI_SCALE 0x1.6eb168p+2f /* N_XI / (2 pi) in float, cells per rad */
 #define PAPER_CONFIG_SHA256 "5a0ec5a41000cf2903b59f12b52b4a2de87a51a3ce91def1772464d4ce608247"
-#define PAPER_CRC32 0xa52985b0u /* CRC-32 of the table data (docs/runtime.md) */
-#define PAPER_DATA_BYTES 655423u /* bytes of table data (flash) */
-#define PAPER_RUNTIME_VERSION 1
+#define PAPER_CRC32 0x11392f9au /* CRC-32 of the table data (docs/runtime.md) */
+#define PAPER_DATA_BYTES 655543u /* bytes of table data (flash) */
+#define PAPER_RUNTIME_VERSION 2
 
+/* the manoeuvre feed-forward's closed form (gs_lookup_nominal): 1 if available */
+#define PAPER_HAS_NOMINAL 1
+#define PAPER_MASS_KG 0.5f /* vehicle mass */
+#define PAPER_G_MPS2 9.81f /* gravity */
+#define PAPER_DRAG_MU1 0.172f /* body drag (mu1 + mu2 |v|) v, N s/m */
+#define PAPER_DRAG_MU2 0.0025f /* N s^2/m^2 */
 #if GS_RUNTIME_VERSION != PAPER_RUNTIME_VERSION
-#error "paper_gains.h needs gainsched runtime version 1"
+#error "paper_gains.h needs gainsched runtime version 2"
 #endif
 
 /* azimuth axis, rad, uniform and periodic: xi_j = 2 pi j / N_XI (10 deg steps) */
@@ -72163,6 +72174,26 @@ static const uint8_t paper_mask[PAPER_N_TILT][PAPER_N_SPEED][PAPER_N_XI] = {
     }
 };
 
+/* closed-form constants of the feed-forward: mass, g, radius, mu1, mu2, J, alloc_inv */
+static const gs_vehicle paper_vehicle = {
+    0x1p-1f,
+    0x1.39eb86p+3f,
+    0x1.99999ap+0f,
+    0x1.60418ap-3f,
+    0x1.47ae14p-9f,
+    {
+        0x1.47ae14p-9f, 0.0f, 0.0f,
+        0.0f, 0x1.47ae14p-9f, 0.0f,
+        0.0f, 0.0f, 0x1.26e978p-8f
+    },
+    {
+        0x1p-2f, 0x1.0a3474p+1f, -0x1.0a3474p+1f, 0x1.f4p+3f,
+        0x1p-2f, 0x1.0a3474p+1f, 0x1.0a3474p+1f, -0x1.f4p+3f,
+        0x1p-2f, -0x1.0a3474p+1f, 0x1.0a3474p+1f, 0x1.f4p+3f,
+        0x1p-2f, -0x1.0a3474p+1f, -0x1.0a3474p+1f, -0x1.f4p+3f
+    },
+};
+
 static const gs_table paper_table = {
     PAPER_N_TILT,
     PAPER_N_SPEED,
@@ -72180,6 +72211,7 @@ static const gs_table paper_table = {
     paper_state_sign,
     paper_state_perm,
     &paper_mask[0][0][0],
+    &paper_vehicle,
     PAPER_CRC32,
 };
 
@@ -72188,6 +72220,15 @@ static inline int paper_lookup(
     float xi, float xi_dot, float alpha, float K[4][PAPER_N_STATE], float u_d[4], float *phi_d)
 {
     return gs_lookup(&paper_table, xi, xi_dot, alpha, (float *)K, u_d, phi_d);
+}
+
+/* Gains and the nominal of an accelerating reference ref = {xi rad, xi' rad/s,
+ * xi'' rad/s^2, xi''' rad/s^3, xi'''' rad/s^4} at tilt alpha rad: GS_* status bits
+ * (GS_BAD_ARG when PAPER_HAS_NOMINAL is 0). */
+static inline int paper_lookup_nominal(
+    const float ref[5], float alpha, float K[4][PAPER_N_STATE], gs_nominal *nom)
+{
+    return gs_lookup_nominal(&paper_table, ref, alpha, (float *)K, nom);
 }
 
 /* GS_OK if the table data match the embedded CRC-32 (reads the whole table). */

@@ -38,7 +38,7 @@ def test_drag_only_feedforward_is_the_design_nominal(paper, name):
     design model's closed form to the table's interpolation error (1.3 mN, 7e-5 rad)."""
     cfg, interp = paper
     path = maneuver_path(*MANOEUVRES[name], cfg.radius, T, 0.5)
-    ff = feedforward(interp, cfg, path, 0.0)
+    ff = feedforward(interp, path, 0.0)
     nom = nominal_from_path(Model(cfg), path, 0.0, periodic=False)
     np.testing.assert_allclose(ff.u_d, nom.u, rtol=0, atol=3e-3)
     np.testing.assert_allclose(ff.x_d[:, 4], nom.z[:, 4], rtol=0, atol=2e-4)
@@ -53,7 +53,7 @@ def test_constant_speed_feedforward_is_the_lookup(paper):
     cfg, interp = paper
     path = circle_path(8.0, cfg.radius, T[:500])
     for alpha in (0.0, np.deg2rad(27.0)):
-        ff = feedforward(interp, cfg, path, alpha)
+        ff = feedforward(interp, path, alpha)
         lk = interp(path.xi, path.d[0], np.full(500, alpha))
         np.testing.assert_allclose(ff.u_d, lk.u_d, rtol=1e-12)
         np.testing.assert_allclose(ff.x_d[:, 4], lk.phi_d, rtol=0, atol=1e-12)
@@ -69,7 +69,7 @@ def test_thrust_scale_is_carried_through_the_manoeuvre():
                            "scaled.toml").with_values({"grid.tilts_deg": [0.0]})
     interp = Interpolator(table_from_bytes(table_bytes(cfg, build_grid(cfg), Model(cfg))))
     path = maneuver_path(*MANOEUVRES["braking"], cfg.radius, T, 0.5)
-    ff = feedforward(interp, cfg, path, 0.0)
+    ff = feedforward(interp, path, 0.0)
     exact = nominal_from_path(Model(base), path, 0.0, periodic=False).u / 0.93
     np.testing.assert_allclose(ff.u_d, exact, rtol=0, atol=3e-3)
 

@@ -269,6 +269,7 @@ def test_crc_is_zlib_of_documented_bytes(paper_data):
     for key in ("xi", "speed", "xi_dot", "tilt", "K_tilt0", "K", "u_d", "phi_d", "state_sign"):
         blob += np.ascontiguousarray(getattr(d, key), dtype="<f4").tobytes()
     blob += d.state_perm.tobytes() + d.mask.tobytes()
+    blob += np.ascontiguousarray(d.vehicle, dtype="<f4").tobytes()  # gs_vehicle, in order
     assert zlib.crc32(blob) == d.crc32()
 
 

@@ -48,7 +48,7 @@ __all__ = [
 ]
 
 RUNTIME_FILES = ("gainsched_runtime.h", "gainsched_runtime.c")
-RUNTIME_VERSION = 1
+RUNTIME_VERSION = 2
 STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror")
 #: Cortex-M4F flags of ``make firmware-size`` and :func:`code_bytes`
 M4F_CFLAGS = ("-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard")
@@ -146,6 +146,7 @@ def render_header(data: RuntimeData) -> str:
         mask=_body(data.mask, _c_uint, per_line=18),
     )
     values["state_macros"] = _state_macros(data)
+    values.update(_vehicle_values(data))
     return render("gains.in.h", **values)
 
 
@@ -160,6 +161,27 @@ def _state_macros(data: RuntimeData) -> str:
     lines += [f"#define {NAME}_HAS_{c_identifier(x).upper()} {int(x in data.state_names)}"
               for x in INTEGRATORS]
     return "\n".join(lines)
+
+
+def _vehicle_values(data: RuntimeData) -> dict:
+    """Template values of the feed-forward's ``gs_vehicle`` (or its absence)."""
+    name, NAME = data.name, data.name.upper()
+    if data.vehicle is None:
+        return dict(has_vehicle=0, vehicle_macros="", vehicle_data="", vehicle_ref="NULL")
+    v = np.asarray(data.vehicle, dtype=np.float32)
+    macros = "\n".join([
+        f"#define {NAME}_MASS_KG {c_decimal(v[0])} /* vehicle mass */",
+        f"#define {NAME}_G_MPS2 {c_decimal(v[1])} /* gravity */",
+        f"#define {NAME}_DRAG_MU1 {c_decimal(v[3])} /* body drag (mu1 + mu2 |v|) v, N s/m */",
+        f"#define {NAME}_DRAG_MU2 {c_decimal(v[4])} /* N s^2/m^2 */",
+    ])
+    body = (f"/* closed-form constants of the feed-forward: mass, g, radius, mu1, mu2, J, "
+            f"alloc_inv */\nstatic const gs_vehicle {name}_vehicle = {{\n"
+            + ",\n".join(f"    {c_float(x)}" for x in v[:5])
+            + f",\n    {{\n{_body(v[5:14], c_float, 2, 3)}\n    }},"
+            + f"\n    {{\n{_body(v[14:30], c_float, 2, 4)}\n    }},\n}};\n")
+    return dict(has_vehicle=1, vehicle_macros=macros, vehicle_data=body,
+                vehicle_ref=f"&{name}_vehicle")
 
 
 def header_name(data: RuntimeData) -> str:
@@ -331,6 +353,15 @@ class CRuntime:
         self._bench = getattr(lib, f"{nm}_bench")
         self._bench.argtypes = [ctypes.c_size_t, fp, ctypes.c_int]
         self._bench.restype = ctypes.c_double
+        self._nominal = getattr(lib, f"{nm}_nominal_batch")
+        self._nominal.restype = None
+        self._nominal.argtypes = [ctypes.c_size_t, fp, fp, fp, fp, fp, ip]
+        self._trig = getattr(lib, f"{nm}_trig_batch")
+        self._trig.restype = None
+        self._trig.argtypes = [ctypes.c_size_t] + [fp] * 6
+        self._bench_nominal = getattr(lib, f"{nm}_bench_nominal")
+        self._bench_nominal.argtypes = [ctypes.c_size_t, fp, ctypes.c_int]
+        self._bench_nominal.restype = ctypes.c_double
         self._queries = getattr(lib, f"{nm}_bench_queries")
         self._queries.argtypes = [ctypes.c_size_t, ctypes.c_uint32, fp]
         self._queries.restype = None
@@ -359,6 +390,35 @@ class CRuntime:
 
     __call__ = lookup
 
+    def nominal(self, ref, alpha):
+        """Batched ``gs_lookup_nominal``: references ``ref`` (m, 5) (xi rad, xi' rad/s,
+        xi'' rad/s^2, xi''' rad/s^3, xi'''' rad/s^4) at tilts ``alpha`` (m,) or scalar, rad.
+
+        Returns ``(K (m, 4, n), u_d (m, 4) N, x_d (m, 10), tension (m,) N, status (m,))``,
+        float32 outputs of the runtime.
+        """
+        ref = np.asarray(ref, dtype=np.float64).reshape(-1, 5)
+        m, n = ref.shape[0], self.data.dims[3]
+        with np.errstate(over="ignore", invalid="ignore"):
+            q = np.empty((m, 6), dtype=np.float32)
+            q[:, :5] = ref
+            q[:, 5] = np.broadcast_to(np.asarray(alpha, dtype=np.float64), (m,))
+        K = np.full((m, 4 * n), np.float32(12345.0))  # sentinel: must be overwritten
+        U = np.full((m, 4), np.float32(12345.0))
+        X = np.full((m, 10), np.float32(12345.0))
+        T = np.full(m, np.float32(12345.0))
+        S = np.full(m, -1, dtype=np.int32)
+        self._nominal(m, q, K, U, X, T, S)
+        return K.reshape(m, 4, n), U, X, T, S
+
+    def trig(self, x, y):
+        """The runtime's ``gs_sincosf(x)``, ``gs_atan2f(y, x)``, ``gs_sqrtf(x)`` on float32
+        arrays of one shape (m,): ``(sin, cos, atan2, sqrt)``."""
+        x = np.ascontiguousarray(x, dtype=np.float32).reshape(-1)
+        y = np.ascontiguousarray(y, dtype=np.float32).reshape(-1)
+        out = [np.empty_like(x) for _ in range(4)]
+        self._trig(x.size, x, y, *out)
+        return tuple(out)
     def verify(self) -> int:
         return int(self._verify())
 
@@ -374,9 +434,12 @@ class CRuntime:
         self._queries(m, seed, q)
         return q
 
-    def bench(self, q, reps: int = 1) -> float:
+    def bench(self, q, reps: int = 1, *, nominal: bool = False) -> float:
+        """``reps`` passes of lookups over queries ``q`` (m, 3); ``nominal``: with
+        ``gs_lookup_nominal`` (derivatives of ``<name>_bench_reference``). Checksum."""
         q = np.ascontiguousarray(q, dtype=np.float32)
-        return float(self._bench(q.shape[0], q, reps))
+        fn = self._bench_nominal if nominal else self._bench
+        return float(fn(q.shape[0], q, reps))
 
 
 def check_runtime_data(table_path) -> RuntimeData:

@@ -5,21 +5,26 @@ An accelerating reference (a speed-up, a braking) needs more: the tangential
 force of ``r xi''`` changes the roll, the collective and, through ``phi'`` and
 ``phi''``, the body rates and torques (paper eqs. 15-18). The firmware gets it as
 
-    nominal(xi, xi', xi'', xi''', xi'''', alpha) =
-        closed form of the drag-only model at the accelerating reference
-      + [table nominal at (xi, xi', alpha) - closed form at the same constant speed]
+    u_d   = u_cf(ref) * [u_d,table(xi, xi', alpha) / u_cf(steady)]    (per motor)
+    phi_d = phi_cf(ref) + [phi_d,table(xi, xi', alpha) - phi_cf(steady)]
 
-The closed form (paper eqs. 15-18, eq. 17 corrected) covers the rigid body, the
-tether, gravity and the drag effects exactly; the bracket is the tabulated
-correction for every other effect of the config (the trim's nominal, any
-effects). For a drag-only config the bracket is the table's interpolation error
-only; on a constant-speed circle the sum is exactly today's lookup. What the
-correction does not carry is how another effect changes *with* the acceleration
-(a thrust scale scales the extra thrust a braking needs): the closed form's part
-of it is right, the effect's share of the change is missing.
+``cf`` is the closed form of the drag-only model (paper eqs. 15-18, eq. 17
+corrected) at the accelerating reference ``ref`` and at the constant-speed circle
+``steady`` the lookup used (speed and tilt clamped into the table). It covers the
+rigid body, the tether, gravity and the drag effects exactly; the brackets are the
+tabulated correction for every other effect of the config (the trim's nominal, any
+effects). For a drag-only config they carry the table's interpolation error only;
+on a constant-speed circle inside the table the result is exactly the lookup's.
+The thrust correction is a ratio, so an effect that scales the thrust (a thrust
+scale, a loss with airspeed) scales the extra thrust of a manoeuvre too. What it
+does not carry is a force effect's change *with* the acceleration (rotor drag
+grows with the collective a braking needs).
 
-This module is the Python reference of that computation (``feedforward``); the
-firmware's C form and its tests follow it.
+This module is the Python reference of that computation (``feedforward``), in double
+precision on the table's own float32 constants (``RuntimeData.vehicle``, the
+``gs_vehicle`` of the header); ``gs_lookup_nominal`` in
+``gainsched/firmware/c/gainsched_runtime.c`` is its C form, with the same clamps and
+guards, and tests/test_feedforward_c.py holds the two together.
 """
 
 from __future__ import annotations
@@ -29,12 +34,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import N_STATE
-from ..model.reduced import Model
+from ..errors import InputError
 from ..schedule.closedform import closed_form
 from ..schedule.path import AzimuthPath
-from .runtime import UNUSABLE, Interpolator
+from .runtime import UNUSABLE, Interpolator, VehicleConstants
 
-__all__ = ["FeedForward", "drag_only_model", "feedforward"]
+__all__ = ["FF_MIN_THRUST", "FeedForward", "feedforward"]
+
+#: the table's thrust ratio is applied only where the steady closed form's motor thrust
+#: exceeds this, N (``GS_FF_MIN_THRUST``)
+FF_MIN_THRUST = 1e-3
 
 
 @dataclass(frozen=True)
@@ -54,33 +63,26 @@ class FeedForward:
     status : ndarray, shape (N,), int
         The lookup's status bits (:mod:`gainsched.firmware.runtime`); where unusable the
         correction is left out (closed form only).
+    K : ndarray, shape (N, 4, n), optional
+        The lookup's gains at the reference when the source returns them with the
+        nominal (the C runtime's ``gs_lookup_nominal``), else None.
     """
 
     x_d: np.ndarray
     u_d: np.ndarray
     tension: np.ndarray
     status: np.ndarray
+    K: np.ndarray | None = None
 
 
-def drag_only_model(config) -> Model:
-    """The part of ``config``'s model the closed form covers: the rigid body, the tether,
-    gravity and the effects that are pure COG-velocity drags (no states, no thrust
-    change)."""
-    full = Model(config)
-    drags = tuple(e for e in full.effects
-                  if e.n_states == 0 and e.tangential_drag(1.0) is not None)
-    return Model(config, effects=drags)
-
-
-def feedforward(lookup: Interpolator, config, path: AzimuthPath, alpha: float) -> FeedForward:
+def feedforward(lookup: Interpolator, path: AzimuthPath, alpha: float) -> FeedForward:
     """The nominal a firmware flies along ``path`` (see the module docstring).
 
     Parameters
     ----------
     lookup : Interpolator
-        The table's lookup (the Python reference of the C runtime).
-    config : Config
-        The config the table was built from (its vehicle, tether and drag).
+        The table's lookup (the Python reference of the C runtime); its data carry the
+        closed form's vehicle constants.
     path : AzimuthPath
         The reference ``xi(t)`` with four derivatives (rad, rad/s, ... rad/s^4).
     alpha : float, rad
@@ -90,26 +92,32 @@ def feedforward(lookup: Interpolator, config, path: AzimuthPath, alpha: float) -
     -------
     >>> from gainsched.schedule.path import maneuver_path           # doctest: +SKIP
     >>> path = maneuver_path(11.3, 1.0, 8.75, cfg.radius, t, 0.5)   # doctest: +SKIP
-    >>> ff = feedforward(Interpolator(table), cfg, path, 0.0)       # doctest: +SKIP
+    >>> ff = feedforward(Interpolator(table), path, 0.0)            # doctest: +SKIP
     """
-    model = drag_only_model(config)
-    D = model.closed_form_drag()
-    s, _, u_cf, tension = closed_form(model, path, alpha, D)
-    # the correction is taken where the lookup is: at the clamped speed and tilt when the
-    # reference leaves the grid (below the lowest speed the table holds, say)
     d = lookup.data
+    if d.vehicle is None:
+        raise InputError(d.name, "vehicle", "the table carries no closed-form constants "
+                         "(its config cannot be loaded here): no manoeuvre feed-forward")
+    vehicle = VehicleConstants.from_array(d.vehicle)
+    D = vehicle.closed_form_drag()
+    s, _, u_cf, tension = closed_form(vehicle, path, alpha, D)
+    # the correction is taken where the lookup is: at the clamped speed and tilt when the
+    # reference leaves the grid (below the lowest speed the table holds, say); the
+    # runtime's sign conventions: xi' = 0 is a positive rate, alpha = 0 a positive tilt
     xd = path.d[0]
-    xd_grid = np.sign(xd) * np.clip(np.abs(xd), float(d.xi_dot[0]), float(d.xi_dot[-1]))
-    a_grid = float(np.sign(alpha) * min(abs(alpha), float(d.tilt[-1])))
+    lo, hi, top = float(d.xi_dot[0]), float(d.xi_dot[-1]), float(d.tilt[-1])
+    xd_grid = np.where(xd < 0, -1.0, 1.0) * np.clip(np.abs(xd), lo, hi)
+    a_grid = (-1.0 if alpha < 0 else 1.0) * min(abs(alpha), top)
     zero = np.zeros_like(path.t)
     steady = AzimuthPath(path.t, path.xi, (xd_grid, zero, zero, zero))
-    s0, _, u0, _ = closed_form(model, steady, a_grid, D)
+    s0, _, u0, _ = closed_form(vehicle, steady, a_grid, D)
     lk = lookup(path.xi, xd, np.full_like(path.t, alpha))
     usable = (lk.status & UNUSABLE) == 0
     # per motor, the table's thrust over the steady closed form's: a thrust scale or a
     # thrust change with airspeed multiplies the command, so a ratio carries them
     # through the manoeuvre exactly (an offset would not)
-    ratio = np.where(usable[:, None], lk.u_d / u0, 1.0)
+    use = usable[:, None] & (u0 > FF_MIN_THRUST)
+    ratio = np.where(use, lk.u_d / np.where(use, u0, 1.0), 1.0)
     dphi = np.where(usable, lk.phi_d - s0[:, 4], 0.0)
     x_d = np.array(s[:, :N_STATE], dtype=float)
     phi = x_d[:, 4] + dphi

@@ -47,6 +47,9 @@ __all__ = [
     "status_text",
     "RuntimeData",
     "runtime_data",
+    "VEHICLE_FIELDS",
+    "VehicleConstants",
+    "vehicle_constants",
     "Lookup",
     "Interpolator",
 ]
@@ -78,6 +81,68 @@ XI_DOT_LIMIT = F32(constants.XI_DOT_LIMIT)  # rad/s
 TILT_LIMIT = F32(constants.TILT_LIMIT)  # rad
 N_BASE_STATES = 11  # never permuted by the mirror (GS_N_BASE_STATES)
 SNAP = F32(2.0**-12)  # cell fractions this close to 0 or 1 are put on the grid plane
+
+
+#: the closed-form constants a table carries for the firmware's feed-forward (``gs_vehicle``
+#: in gainsched_runtime.h, same order): name -> number of float32 values
+VEHICLE_FIELDS = {"mass": 1, "g": 1, "radius": 1, "drag_mu1": 1, "drag_mu2": 1, "J": 9,
+                  "alloc_inv": 16}
+
+
+@dataclass(frozen=True)
+class VehicleConstants:
+    """What the compiled closed form knows of the vehicle (paper eqs. 15-18).
+
+    Attribute names follow :class:`gainsched.model.reduced.Model`, so that
+    :func:`gainsched.schedule.closedform.closed_form` takes it as its model.
+
+    Attributes
+    ----------
+    m : float, kg
+    g : float, m/s^2
+    r : float, m
+        COG radius ``rho + L_e``.
+    mu1, mu2 : float, N s/m and N s^2/m^2
+        Body drag ``(mu1 + mu2 |v|) v`` of the config's pure-drag effects, summed.
+    J : ndarray, shape (3, 3), kg m^2
+    alloc_inv : ndarray, shape (4, 4)
+        ``(T_C N, tau_B N m) -> motor thrusts N``.
+    """
+
+    m: float
+    g: float
+    r: float
+    mu1: float
+    mu2: float
+    J: np.ndarray
+    alloc_inv: np.ndarray
+
+    @classmethod
+    def from_array(cls, a) -> VehicleConstants:
+        """From the ``gs_vehicle`` float32 layout (:data:`VEHICLE_FIELDS`), in float64."""
+        ends = np.cumsum(list(VEHICLE_FIELDS.values()))
+        f = dict(zip(VEHICLE_FIELDS, np.split(np.asarray(a, dtype=np.float64), ends[:-1]),
+                     strict=True))
+        return cls(float(f["mass"][0]), float(f["g"][0]), float(f["radius"][0]),
+                   float(f["drag_mu1"][0]), float(f["drag_mu2"][0]), f["J"].reshape(3, 3),
+                   f["alloc_inv"].reshape(4, 4))
+
+    def closed_form_drag(self):
+        from ..model.effects import polynomial_drag
+
+        return polynomial_drag(self.mu1, self.mu2)
+
+
+def vehicle_constants(config) -> np.ndarray:
+    """The ``gs_vehicle`` values of a config, float32 shape (30,) (:data:`VEHICLE_FIELDS`):
+    the drag-only part of its model (:meth:`gainsched.model.reduced.Model.drag_part`)."""
+    from ..model.reduced import Model
+
+    model = Model(config).drag_part()
+    mu1, mu2 = model.drag_coefficients()
+    values = {"mass": model.m, "g": model.g, "radius": model.r, "drag_mu1": mu1,
+              "drag_mu2": mu2, "J": model.J, "alloc_inv": model.alloc_inv}
+    return np.concatenate([np.ravel(values[k]) for k in VEHICLE_FIELDS]).astype(np.float32)
 
 
 def _snap(f):
@@ -117,6 +182,9 @@ class RuntimeData:
     K_tilt0, K, u_d, phi_d, state_sign`` float32; ``state_perm, mask`` uint8 with
     ``mask = reasons | MASK_NO_GAINS`` where a point has no finite gains or nominal.
     ``P_x[state_perm[j], j] = state_sign[j]`` is the S2 map of the LQR state.
+    ``vehicle``: the closed-form constants of the feed-forward (:data:`VEHICLE_FIELDS`),
+    float32 (30,), or None when the table's config cannot be loaded here (an effect
+    registered in another process): the table then has no feed-forward.
     """
 
     name: str
@@ -135,6 +203,7 @@ class RuntimeData:
     state_names: tuple = ()
     config_sha256: str = ""
     meta: dict = field(default_factory=dict)
+    vehicle: np.ndarray | None = None
 
     @property
     def dims(self) -> tuple[int, int, int, int]:
@@ -150,6 +219,8 @@ class RuntimeData:
             yield key, np.ascontiguousarray(getattr(self, key), dtype="<f4").tobytes()
         for key in ("state_perm", "mask"):
             yield key, np.ascontiguousarray(getattr(self, key), dtype=np.uint8).tobytes()
+        if self.vehicle is not None:
+            yield "vehicle", np.ascontiguousarray(self.vehicle, dtype="<f4").tobytes()
 
     def crc32(self) -> int:
         """CRC-32 (zlib, IEEE) of :meth:`crc_chunks`, as ``gs_table_crc32`` computes it."""
@@ -267,6 +338,13 @@ def runtime_data(table) -> RuntimeData:
         return np.ascontiguousarray(x, dtype=np.float32)
 
     names = tuple(str(table.attrs.get("state_names", "")).split(",")) if table.attrs else ()
+    from ..config import config_from_text
+
+    try:
+        vehicle = vehicle_constants(config_from_text(table.config_text,
+                                                     f"{src}:config_text"))
+    except InputError:  # a config naming an effect registered elsewhere: no feed-forward
+        vehicle = None
     meta = {
         k: table.attrs[k]
         for k in ("tool_version", "schema", "terminal", "rate_hz", "radius_m", "config_name",
@@ -286,6 +364,7 @@ def runtime_data(table) -> RuntimeData:
         state_names=names,
         config_sha256=str(table.config_sha256),
         meta=meta,
+        vehicle=vehicle,
         **axes,
     )
 

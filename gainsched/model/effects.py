@@ -33,6 +33,7 @@ __all__ = [
     "Kinematics",
     "Effect",
     "Drag",
+    "polynomial_drag",
     "RotorDrag",
     "ThrustScale",
     "ThrustPolynomial",
@@ -243,11 +244,30 @@ class Effect:
         """How the effect's states map under the direction mirror S2, shape (n_states, n_states)."""
         return np.eye(self.n_states)
 
-    def tangential_drag(self, v):
-        """For closed-form nominals: tangential force magnitude D(v) and its first two
-        derivatives when the effect is a pure function of the COG velocity directed
-        against it; None otherwise (the nominal then comes from the numerical trim)."""
+    def drag_coefficients(self):
+        """``(mu1, mu2)`` when the effect is a pure COG-velocity drag
+        ``F = -(mu1 + mu2 |v|) v`` (N s/m, N s^2/m^2), else None.
+
+        The closed-form nominal (paper eqs. 15-18) and the firmware's compiled
+        feed-forward cover such effects exactly; for any other effect the nominal comes
+        from the numerical trim and reaches the firmware through the table.
+        """
         return None
+
+
+def polynomial_drag(mu1: float, mu2: float):
+    """The tangential drag of ``F = -(mu1 + mu2 |v|) v`` (paper eq. 10) for the closed form.
+
+    Returns ``D(v) -> (D, dD/dv, d2D/dv2)``, N, N s/m, N s^2/m^2, for the signed speed
+    ``v`` (m/s, any shape).
+    """
+
+    def D(v):
+        a = np.abs(v)
+        return (mu1 + mu2 * a) * v, mu1 + 2 * mu2 * a, 2 * mu2 * np.sign(v)
+
+    return D
+
 
 
 class Drag(Effect):
@@ -268,9 +288,8 @@ class Drag(Effect):
         F = -(self.mu1 + self.mu2 * speed)[..., None] * kin.v_C
         return F, np.zeros_like(F)
 
-    def tangential_drag(self, v):
-        a = np.abs(v)
-        return (self.mu1 + self.mu2 * a) * v, self.mu1 + 2 * self.mu2 * a, 2 * self.mu2 * np.sign(v)
+    def drag_coefficients(self):
+        return float(self.mu1), float(self.mu2)
 
 
 class RotorDrag(Effect):

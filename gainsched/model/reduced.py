@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..constants import N_STATE
-from .effects import Effect, Kinematics, effects_from_specs
+from .effects import Effect, Kinematics, effects_from_specs, polynomial_drag
 from .geometry import cog_from_attachment, pose_from_reduced, tether_direction
 from .rotations import (
     euler_zyx_rates_from_body_rates,
@@ -109,21 +109,25 @@ class Model:
         """Gravity in the circle frame, ``-g (0, sin a, cos a)``, shape alpha.shape + (3,)."""
         return -self.g * up_C_from_tilt(alpha)
 
-    def closed_form_drag(self):
-        """The tangential-drag functions of all effects if the closed-form nominal applies
-        (every effect a pure velocity drag, no thrust modifiers, no states), else None."""
-        parts = [e.tangential_drag for e in self.effects]
-        if any(e.tangential_drag(1.0) is None for e in self.effects):
+    def drag_coefficients(self):
+        """``(mu1, mu2)`` summed over the effects when every effect is a pure COG-velocity
+        drag (:meth:`Effect.drag_coefficients`), else None."""
+        parts = [e.drag_coefficients() for e in self.effects]
+        if any(c is None for c in parts):
             return None
+        return sum(c[0] for c in parts), sum(c[1] for c in parts)
 
-        def D(v):
-            out = [np.zeros_like(v), np.zeros_like(v), np.zeros_like(v)]
-            for f in parts:
-                for i, x in enumerate(f(v)):
-                    out[i] = out[i] + x
-            return out
+    def drag_part(self) -> Model:
+        """The same vehicle with only the effects that are pure COG-velocity drags: the part
+        of the model the closed form (and the firmware's compiled feed-forward) covers."""
+        return Model(self.config, effects=tuple(
+            e for e in self.effects if e.drag_coefficients() is not None))
 
-        return D
+    def closed_form_drag(self):
+        """The tangential drag ``D(v) -> (D, D', D'')`` of the closed-form nominal if it
+        applies (every effect a pure velocity drag), else None."""
+        c = self.drag_coefficients()
+        return None if c is None else polynomial_drag(*c)
 
     def kinematics(self, s):
         """Body rotation, tether direction and COG velocity of states ``s`` (..., >= 10).

@@ -137,10 +137,7 @@ def _newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40):
 
 def _initial_guess(model, path, alpha):
     """Closed-form nominal of the drag-like effects alone."""
-    from ..model.reduced import Model
-
-    drag_only = tuple(e for e in model.effects if e.tangential_drag(1.0) is not None)
-    base = Model(model.config, effects=drag_only)
+    base = model.drag_part()
     s, _, u, _ = closed_form(base, path, alpha, base.closed_form_drag())
     return s[:, 4], u
 

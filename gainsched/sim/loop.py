@@ -26,8 +26,8 @@ import numpy as np
 from ..config import N_STATE, Config, Section
 from ..constants import INTEGRATORS
 from ..errors import GainschedWarning, InputError
-from ..firmware.feedforward import feedforward
-from ..firmware.runtime import CLAMPED_SPEED, UNUSABLE, status_text
+from ..firmware.feedforward import FeedForward, feedforward
+from ..firmware.runtime import BAD_ARG, CLAMPED_SPEED, UNUSABLE, status_text
 from ..model.geometry import pose_angles_from_pose, pose_from_reduced, wrap_angle
 from ..model.maximal import MaximalModel, reduced_from_maximal
 from ..model.reduced import Model
@@ -53,6 +53,8 @@ __all__ = [
     "metrics",
     "table_scheduler",
     "c_runtime_scheduler",
+    "RUNTIMES",
+    "runtime_scheduler",
 ]
 
 
@@ -311,8 +313,10 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         Where the nominal ``(x_d, u_d)`` comes from. ``"path"``: the design model along
         the reference, computed here (closed form or trim). ``"firmware"``: only what a
         firmware has, the table's lookup plus the drag-only closed form with the
-        table's correction (:func:`gainsched.firmware.feedforward.feedforward`); the
-        scheduler must carry the table's interpolator (``table_scheduler`` does).
+        table's correction (:mod:`gainsched.firmware.feedforward`), from
+        ``scheduler.feedforward(path, alpha)``: the compiled C runtime's
+        ``gs_lookup_nominal`` (``c_runtime_scheduler``, gains and nominal both from C)
+        or its Python reference (``table_scheduler``).
 
     The rigid-link plant runs on the compiled kernel when available (same results as
     the numpy model to rounding, see tests/test_fastplant.py); ``GAINSCHED_NATIVE=0``
@@ -330,11 +334,11 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         nom = nominal_from_path(dmodel, path, alpha, periodic=False)
         z_d, u_d, tension_d = nom.z[:, :N_STATE], nom.u, nom.tension
     elif controller == "firmware":  # no trim of the design model: only what a firmware has
-        interp = getattr(scheduler, "interp", None)
-        if interp is None:
+        source = getattr(scheduler, "feedforward", None)
+        if source is None:
             raise ValueError("controller='firmware' needs a scheduler with the table's "
-                             "interpolator (table_scheduler)")
-        ff = feedforward(interp, design, path, alpha)
+                             "feed-forward (table_scheduler or c_runtime_scheduler)")
+        ff = source(path, alpha)
         z_d, u_d, tension_d = ff.x_d, ff.u_d, ff.tension
     else:
         raise ValueError(f"controller must be 'path' or 'firmware', got {controller!r}")
@@ -362,6 +366,10 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     rigid = P.maximal is None
     batch = getattr(scheduler, "batch", None)
     K_blk = S_blk = None
+    # the C runtime returns the gains with the nominal: the firmware's one call per step
+    K_all = S_all = None
+    if controller == "firmware" and ff.K is not None:
+        K_all, S_all = ff.K.astype(np.float64), ff.status.tolist()
     # integral states of the design (int_delta, int_xi): the errors they integrate
     int_idx = [INTEGRATORS[name] for name in design.control.integrators]
     n_lqr = N_STATE + len(int_idx)
@@ -380,7 +388,9 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         # no wrap: the estimate and the reference are continuous azimuths, so the error
         # stays right past half a lap (a lag of 4 rad is a lag, not a lead of 2.3 rad)
         err = z_hat - z_d[k]
-        if batch is None:
+        if K_all is not None:
+            K, status = K_all[k], S_all[k]
+        elif batch is None:
             K, status = scheduler(xi_ref[k], xi_dot_ref[k], alpha)
         else:
             j = k % _LOOKUP_BLOCK
@@ -554,7 +564,9 @@ def table_scheduler(table):
         return r.K, r.status.astype(int)
 
     lookup.batch = batch
-    lookup.interp = interp  # for the firmware feed-forward (simulate(controller="firmware"))
+    lookup.interp = interp
+    # the firmware's nominal along a reference (simulate(controller="firmware"))
+    lookup.feedforward = lambda path, alpha: feedforward(interp, path, alpha)
     return lookup
 
 
@@ -603,9 +615,50 @@ def c_runtime_scheduler(table, build_dir=None):
         fn(1, *ptrs)
         return Kb.astype(np.float64), int(Sb[0])
 
+    def nominal(path, alpha):
+        """``gs_lookup_nominal`` along a reference: the gains and the firmware's nominal
+        (:class:`~gainsched.firmware.feedforward.FeedForward` with ``K``), all from C."""
+        ref = np.stack([path.xi, *path.d], axis=1)
+        K, U, X, T, S = rt.nominal(ref, alpha)
+        if np.any(S & BAD_ARG):
+            raise InputError(str(data.name), "vehicle", "the table carries no closed-form "
+                             "constants: no manoeuvre feed-forward")
+        return FeedForward(X.astype(np.float64), U.astype(np.float64), T.astype(np.float64),
+                           S.astype(int), K)
+
+    lookup.feedforward = nominal
+
     lookup.runtime = rt  # keeps the library (and the temporary directory) alive
     lookup.build_dir = tmp
     return lookup
+
+
+#: where the simulator's firmware takes its lookups and feed-forward from
+RUNTIMES = ("auto", "c", "python")
+
+
+def runtime_scheduler(table, runtime: str = "auto"):
+    """The gain source of a flight: ``"c"`` the compiled C runtime
+    (:func:`c_runtime_scheduler`: gains and the firmware's nominal from
+    ``gs_lookup_nominal``), ``"python"`` its Python reference (:func:`table_scheduler`),
+    ``"auto"`` the C runtime when a C compiler is found, else the reference. The returned
+    scheduler's ``source`` says which.
+
+    Raises InputError for ``"c"`` without a C compiler.
+    """
+    from ..native import find_cc
+
+    if runtime not in RUNTIMES:
+        raise InputError("--runtime", runtime, f"must be one of {', '.join(RUNTIMES)}")
+    if runtime == "c" or (runtime == "auto" and find_cc() is not None):
+        if find_cc() is None:
+            raise InputError("--runtime", "c", "no C compiler found (set CC)")
+        sched = c_runtime_scheduler(table)
+        sched.source = "C runtime (gs_lookup_nominal)"
+    else:
+        sched = table_scheduler(table)
+        sched.source = "Python reference of the C runtime"
+    return sched
 
 
 def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int | None = None):

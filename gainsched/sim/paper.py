@@ -400,9 +400,10 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
     design : Config
         The config the tables were built from (the paper config).
     scheduler : callable
-        Gain lookup (:func:`gainsched.sim.loop.table_scheduler` of the committed table).
-        With the table's interpolator (``table_scheduler``) the flights use the firmware's
-        feed-forward (``simulate(controller="firmware")``), else the design model's.
+        Gain lookup of the committed table (:func:`gainsched.sim.loop.runtime_scheduler`).
+        When it offers the table's feed-forward (the C runtime or its Python reference)
+        the flights are the firmware's (``simulate(controller="firmware")``), else they
+        fly the design model's nominal.
     out_dir : path
     quick : bool
         Short smoke version (see :func:`experiments`).
@@ -422,9 +423,9 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
             from .campaign import plant_config
 
             truth = plant_config(plant or design, exp.plant_effect)
-        # the firmware's nominal (lookup + closed form) when the scheduler offers the
-        # table's interpolator: the flights a firmware would fly from the generated files
-        mode = "firmware" if getattr(scheduler, "interp", None) is not None else "path"
+        # the firmware's nominal (lookup + closed form) when the scheduler offers it: the
+        # flights a firmware would fly from the generated files
+        mode = "firmware" if getattr(scheduler, "feedforward", None) is not None else "path"
         res = simulate(design, scheduler, exp.scenario, truth, controller=mode)
         write_run(res, out_dir / exp.name)
         results[exp.name] = _analyse(exp, res)
@@ -439,8 +440,9 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
         "plant": (plant or design).name,
         "quick": bool(quick),
         "experiments_run": [e.name for e in exps],
-        "nominal": ("firmware feed-forward: table lookup plus the drag-only closed form"
-                    if getattr(scheduler, "interp", None) is not None
+        "nominal": (f"firmware feed-forward: table lookup plus the drag-only closed form "
+                    f"({getattr(scheduler, 'source', 'table')})"
+                    if getattr(scheduler, "feedforward", None) is not None
                     else "design model along the reference"),
         **(meta or {}),
     }

@@ -27,6 +27,15 @@
  *     all (its whole circle is infeasible) GS_NO_GAINS is added and the outputs
  *     are zeroed.
  *
+ * Manoeuvre feed-forward (gs_lookup_nominal): the lookup plus the nominal of an
+ * accelerating reference xi(t) with four derivatives. The drag-only model's closed
+ * form (paper eqs. 15-18, eq. 17 corrected) at the reference, times the table's
+ * correction for every other effect of the config:
+ *     u_d   = u_cf(ref) * [u_d,table / u_cf(steady)]   (per motor)
+ *     phi_d = phi_cf(ref) + [phi_d,table - phi_cf(steady)]
+ * "steady" is the constant-speed circle at the clamped (xi_dot, alpha) the lookup
+ * used. On a constant-speed circle inside the table this is gs_lookup's u_d, phi_d.
+ *
  * See docs/runtime.md for the full contract.
  */
 #ifndef GAINSCHED_RUNTIME_H
@@ -38,7 +47,7 @@
 extern "C" {
 #endif
 
-#define GS_RUNTIME_VERSION 1
+#define GS_RUNTIME_VERSION 2
 
 /* ---- status bits returned by gs_lookup (0 = GS_OK) ---------------------- */
 #define GS_OK 0x00            /* inside the table, all corners feasible */
@@ -61,6 +70,11 @@ extern "C" {
 #define GS_XI_LIMIT 1.0e4f
 #define GS_XI_DOT_LIMIT 1.0e3f      /* rad/s */
 #define GS_TILT_LIMIT 0x1.921fb6p+0f /* pi/2 rounded to float, rad */
+/* gs_lookup_nominal: |xi''|, |xi'''|, |xi''''| above this are GS_BAD_INPUT */
+#define GS_XI_DERIV_LIMIT 1.0e6f /* rad/s^2, rad/s^3, rad/s^4 */
+/* gs_lookup_nominal applies the table's thrust ratio only where the steady closed
+ * form's motor thrust exceeds this (N); elsewhere the closed form alone */
+#define GS_FF_MIN_THRUST 1.0e-3f
 
 /* the LQR state starts with 11 base states (docs/conventions.md) that the
  * direction mirror only changes in sign; stateful effects append theirs */
@@ -68,6 +82,19 @@ extern "C" {
 
 /* cell fractions within GS_SNAP of 0 or 1 are snapped onto the grid plane */
 #define GS_SNAP 0x1p-12f
+
+/* The vehicle as the closed-form feed-forward knows it (paper eqs. 15-18): the
+ * rigid body, the tether radius, gravity and the body drag of the config's
+ * pure-drag effects. Generated headers fill this in. */
+typedef struct gs_vehicle {
+    float mass;          /* kg */
+    float g;             /* m/s^2 */
+    float radius;        /* COG radius rho + L_e, m */
+    float drag_mu1;      /* N s/m: drag force (mu1 + mu2 |v|) v against the COG velocity */
+    float drag_mu2;      /* N s^2/m^2 */
+    float J[9];          /* inertia in B, kg m^2, row-major */
+    float alloc_inv[16]; /* (T_C N, tau_B N m) -> motor thrusts T1..T4 N, row-major */
+} gs_vehicle;
 
 /* A gain table in the fundamental domain (alpha >= 0, xi_dot > 0). All arrays
  * are row-major; generated headers fill this in, firmware never needs to. */
@@ -88,6 +115,7 @@ typedef struct gs_table {
     const float *state_sign;  /* [n_state] +-1, the S2 state map P_x ... */
     const uint8_t *state_perm; /* [n_state] ... P_x[state_perm[j]][j] = state_sign[j] */
     const uint8_t *mask;      /* [n_tilt][n_speed][n_xi] 0 = feasible */
+    const gs_vehicle *vehicle; /* closed-form constants; NULL: no gs_lookup_nominal */
     uint32_t crc32;           /* CRC-32 of the table data (docs/runtime.md) */
 } gs_table;
 
@@ -102,6 +130,42 @@ typedef struct gs_table {
  */
 int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float *K, float *u_d,
               float *phi_d);
+
+/* The nominal of gs_lookup_nominal. */
+typedef struct gs_nominal {
+    float u_d[4];  /* nominal motor thrusts T1..T4, N */
+    float x_d[10]; /* nominal reduced state: delta, xi, delta', xi', phi, theta, chi,
+                    * omega_B (3) (docs/conventions.md); delta = pi/2, theta = chi = 0 */
+    float tension; /* nominal tether tension of the closed form (paper eq. 18), N */
+} gs_nominal;
+
+/*
+ * Gains and the manoeuvre nominal at the reference ref = {xi rad, xi' rad/s,
+ * xi'' rad/s^2, xi''' rad/s^3, xi'''' rad/s^4} and tilt alpha (rad).
+ *
+ * K as gs_lookup at (ref[0], ref[1], alpha); *nom the nominal of the accelerating
+ * reference (see the top of this file). Returns gs_lookup's status bits, plus
+ * GS_BAD_INPUT for a non-finite or out-of-limit derivative (K and *nom zeroed) and
+ * GS_BAD_ARG for a NULL pointer or a table without vehicle (outputs untouched).
+ * With GS_NO_GAINS, K is zero and *nom is the drag-only closed form alone (a
+ * firmware that holds its last good gains may still fly it); with GS_BAD_INPUT
+ * everything is zero.
+ */
+int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, float *K,
+                      gs_nominal *nom);
+
+/*
+ * The runtime's own single-precision trigonometry (no libm, so that host and
+ * target compute the same bits). Error bounds against double precision of the
+ * same float input (held by tests/test_feedforward_c.py):
+ *   gs_sincosf  |error| <= 1.5e-7 for |x| <= GS_XI_LIMIT (1e4 rad)
+ *   gs_atan2f   |error| <= 3e-7 rad, all quadrants; gs_atan2f(0, 0) = 0 and
+ *               gs_atan2f(-0, x < 0) = +pi
+ *   gs_sqrtf    relative error <= 2.5e-7 for normal x > 0; 0 for x <= 0 or NaN
+ */
+void gs_sincosf(float x, float *s, float *c);
+float gs_atan2f(float y, float x);
+float gs_sqrtf(float x);
 
 /* CRC-32 (IEEE, as zlib.crc32) of the table data in the documented order. */
 uint32_t gs_table_crc32(const gs_table *table);

@@ -8,6 +8,7 @@
  *   ./a.out batch IN OUT   queries float32 (m, 3) -> K (m, 4n), u_d (m, 4), phi_d (m), status int32 (m)
  *   ./a.out bench M REPS   M pseudo-random queries REPS times, prints a checksum
  *   ./a.out benchq IN REPS the queries of file IN (float32 (m, 3)) REPS times
+ *   ./a.out benchn IN REPS the same with gs_lookup_nominal (bench_reference derivatives)
  */
 #include <stddef.h>
 #include <stdint.h>
@@ -27,6 +28,41 @@ void ${name}_lookup_batch(size_t m, const float *q, float *K, float *u_d, float 
     for (i = 0; i < m; ++i) {
         status[i] = (int32_t)gs_lookup(&${name}_table, q[3 * i], q[3 * i + 1], q[3 * i + 2],
                                        K + i * NK, u_d + 4 * i, phi_d + i);
+    }
+}
+
+/* m references (xi, xi', xi'', xi''', xi'''', alpha) row-major in q; outputs row-major */
+void ${name}_nominal_batch(size_t m, const float *q, float *K, float *u_d, float *x_d,
+                           float *tension, int32_t *status)
+{
+    size_t i;
+    unsigned j;
+    gs_nominal nom;
+    for (i = 0; i < m; ++i) {
+        status[i] = (int32_t)gs_lookup_nominal(&${name}_table, q + 6 * i, q[6 * i + 5],
+                                               K + i * NK, &nom);
+        if (status[i] & GS_BAD_ARG) {
+            continue; /* outputs untouched */
+        }
+        for (j = 0u; j < 4u; ++j) {
+            u_d[4 * i + j] = nom.u_d[j];
+        }
+        for (j = 0u; j < 10u; ++j) {
+            x_d[10 * i + j] = nom.x_d[j];
+        }
+        tension[i] = nom.tension;
+    }
+}
+
+/* the runtime's trigonometry on m inputs: sincos(x), atan2(y, x), sqrt(x) */
+void ${name}_trig_batch(size_t m, const float *x, const float *y, float *s, float *c, float *at,
+                        float *sq)
+{
+    size_t i;
+    for (i = 0; i < m; ++i) {
+        gs_sincosf(x[i], s + i, c + i);
+        at[i] = gs_atan2f(y[i], x[i]);
+        sq[i] = gs_sqrtf(x[i]);
     }
 }
 
@@ -53,12 +89,12 @@ uint32_t ${name}_dims(int which)
 
 /* gs_verify on a copy of the table whose array `which` (CRC order: 0 xi, 1 speed,
  * 2 xi_dot, 3 tilt, 4 K_tilt0, 5 K, 6 u_d, 7 phi_d, 8 state_sign, 9 state_perm,
- * 10 mask) has byte `byte` XOR-ed with `flip`. -1 if out of range. */
+ * 10 mask, 11 vehicle) has byte `byte` XOR-ed with `flip`. -1 if out of range. */
 int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
 {
     gs_table t = ${name}_table;
-    const void *src[11];
-    size_t size[11];
+    const void *src[12];
+    size_t size[12];
     size_t n_pts = (size_t)t.n_tilt * t.n_speed * t.n_xi;
     unsigned char *copy;
     int r;
@@ -73,7 +109,8 @@ int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
     src[8] = t.state_sign; size[8] = t.n_state * sizeof(float);
     src[9] = t.state_perm; size[9] = t.n_state;
     src[10] = t.mask; size[10] = n_pts;
-    if (which < 0 || which > 10 || byte >= size[which]) {
+    src[11] = t.vehicle; size[11] = t.vehicle != NULL ? sizeof(gs_vehicle) : 0u;
+    if (which < 0 || which > 11 || byte >= size[which]) {
         return -1;
     }
     copy = (unsigned char *)malloc(size[which]);
@@ -93,7 +130,8 @@ int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
     case 7: t.phi_d = (const float *)(void *)copy; break;
     case 8: t.state_sign = (const float *)(void *)copy; break;
     case 9: t.state_perm = copy; break;
-    default: t.mask = copy; break;
+    case 10: t.mask = copy; break;
+    default: t.vehicle = (const gs_vehicle *)(void *)copy; break;
     }
     r = gs_verify(&t);
     free(copy);
@@ -141,6 +179,35 @@ double ${name}_bench(size_t m, const float *q, int reps)
             int st = gs_lookup(&${name}_table, q[3 * i], q[3 * i + 1], q[3 * i + 2], K, u_d,
                                &phi_d);
             sum += (double)K[(i * 7u) % NK] + (double)u_d[i & 3u] + (double)phi_d + st;
+        }
+    }
+    return sum;
+}
+
+/* the derivatives the nominal benchmark adds to a query (xi, xi_dot, alpha) */
+static void ${name}_bench_reference(const float *q, float ref[5])
+{
+    ref[0] = q[0];
+    ref[1] = q[1];
+    ref[2] = 0.1f * q[0];
+    ref[3] = 0.05f * q[1];
+    ref[4] = 0.01f * q[2];
+}
+
+/* as ${name}_bench, with gs_lookup_nominal */
+double ${name}_bench_nominal(size_t m, const float *q, int reps)
+{
+    float K[NK], ref[5];
+    gs_nominal nom;
+    double sum = 0.0;
+    int r;
+    size_t i;
+    for (r = 0; r < reps; ++r) {
+        for (i = 0; i < m; ++i) {
+            int st;
+            ${name}_bench_reference(q + 3 * i, ref);
+            st = gs_lookup_nominal(&${name}_table, ref, q[3 * i + 2], K, &nom);
+            sum += (double)K[(i * 7u) % NK] + (double)nom.u_d[i & 3u] + (double)nom.x_d[4] + st;
         }
     }
     return sum;
@@ -220,14 +287,16 @@ int main(int argc, char **argv)
         free(q);
         return 0;
     }
-    if (argc == 4 && strcmp(argv[1], "benchq") == 0) {
+    if (argc == 4 && (strcmp(argv[1], "benchq") == 0 || strcmp(argv[1], "benchn") == 0)) {
         size_t m = 0;
         float *q = gs_read_queries(argv[2], &m);
+        int reps = atoi(argv[3]);
         if (q == NULL) {
             fprintf(stderr, "cannot read %s\n", argv[2]);
             return 2;
         }
-        printf("checksum %.6g\n", ${name}_bench(m, q, atoi(argv[3])));
+        printf("checksum %.6g\n", argv[1][5] == 'n' ? ${name}_bench_nominal(m, q, reps)
+                                                     : ${name}_bench(m, q, reps));
         free(q);
         return 0;
     }
@@ -236,7 +305,7 @@ int main(int argc, char **argv)
         printf("verify %d crc 0x%08lx\n", r, (unsigned long)gs_table_crc32(&${name}_table));
         return r == GS_OK ? 0 : 1;
     }
-    fprintf(stderr, "usage: %s batch IN OUT | bench M REPS | benchq IN REPS | verify\n", argv[0]);
+    fprintf(stderr, "usage: %s batch IN OUT | bench M REPS | benchq IN REPS | benchn IN REPS | verify\n", argv[0]);
     return 2;
 }
 #endif

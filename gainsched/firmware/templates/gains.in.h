@@ -12,6 +12,11 @@
  *     float K[4][${NAME}_N_STATE], u_d[4], phi_d;
  *     int status = ${name}_lookup(xi, xi_dot, alpha, K, u_d, &phi_d);
  *     if (status & GS_UNUSABLE) { do not use K, u_d, phi_d }
+ * With the manoeuvre feed-forward (reference xi and four derivatives):
+ *     float ref[5] = {xi, xi_dot, xi_ddot, xi_dddot, xi_ddddot};
+ *     gs_nominal nom;
+ *     status = ${name}_lookup_nominal(ref, alpha, K, &nom);
+ *     u = nom.u_d - K (x - nom.x_d)   (x: the LQR state, integrals appended)
  * Control law: ${control_law}
  * Units: xi rad, xi_dot rad/s, alpha rad, K SI (N per state unit), u_d N, phi_d rad.
  * State order (K columns): ${state_names}
@@ -44,6 +49,9 @@ ${state_macros}
 #define ${NAME}_DATA_BYTES ${data_bytes}u /* bytes of table data (flash) */
 #define ${NAME}_RUNTIME_VERSION ${runtime_version}
 
+/* the manoeuvre feed-forward's closed form (gs_lookup_nominal): 1 if available */
+#define ${NAME}_HAS_NOMINAL ${has_vehicle}
+${vehicle_macros}
 #if GS_RUNTIME_VERSION != ${NAME}_RUNTIME_VERSION
 #error "${name}_gains.h needs gainsched runtime version ${runtime_version}"
 #endif
@@ -101,6 +109,7 @@ static const uint8_t ${name}_mask[${NAME}_N_TILT][${NAME}_N_SPEED][${NAME}_N_XI]
 ${mask}
 };
 
+${vehicle_data}
 static const gs_table ${name}_table = {
     ${NAME}_N_TILT,
     ${NAME}_N_SPEED,
@@ -118,6 +127,7 @@ static const gs_table ${name}_table = {
     ${name}_state_sign,
     ${name}_state_perm,
     &${name}_mask[0][0][0],
+    ${vehicle_ref},
     ${NAME}_CRC32,
 };
 
@@ -126,6 +136,15 @@ static inline int ${name}_lookup(
     float xi, float xi_dot, float alpha, float K[4][${NAME}_N_STATE], float u_d[4], float *phi_d)
 {
     return gs_lookup(&${name}_table, xi, xi_dot, alpha, (float *)K, u_d, phi_d);
+}
+
+/* Gains and the nominal of an accelerating reference ref = {xi rad, xi' rad/s,
+ * xi'' rad/s^2, xi''' rad/s^3, xi'''' rad/s^4} at tilt alpha rad: GS_* status bits
+ * (GS_BAD_ARG when ${NAME}_HAS_NOMINAL is 0). */
+static inline int ${name}_lookup_nominal(
+    const float ref[5], float alpha, float K[4][${NAME}_N_STATE], gs_nominal *nom)
+{
+    return gs_lookup_nominal(&${name}_table, ref, alpha, (float *)K, nom);
 }
 
 /* GS_OK if the table data match the embedded CRC-32 (reads the whole table). */
