@@ -145,7 +145,7 @@ def test_status_policy_holds_the_last_good_gains_and_refuses_to_start(paper):
 
 
 def test_braking_below_the_grid_and_the_tension_margin_is_reported(paper):
-    """The paper's braking ends at 1 m/s: below the table's 2 m/s (CLAMPED_SPEED) and
+    """The paper's braking ends at 1 m/s: below the table's 1.3 m/s (CLAMPED_SPEED) and
     below the 0.5 N tension margin of the config (nominal 0.31 N): both are reported."""
     res = simulate(paper, table_scheduler(load_table(ROOT / "tables/paper.h5")),
                    load_scenario(SCENARIO_DIR / "braking.toml"), paper)

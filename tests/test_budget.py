@@ -31,11 +31,11 @@ def test_model_follows_the_grid_sweep(paper_config):
     cfg = paper_config
     est = estimate_build(cfg)
     steps = [grid_mod.steps_per_period(v, cfg.radius, cfg.control.dt) for v in cfg.grid.speeds]
-    assert est.steps_max == max(steps) == 5026
+    assert est.steps_max == max(steps) == 7734  # 1.3 m/s
     assert TILT_BATCH == grid_mod.TILT_BATCH
     n = 11  # paper: drag has no state
-    assert est.worker_bytes == 2 * 8 * 6 * 5026 * (n * n + 4 * n)
-    assert est.table_bytes == 6 * 18 * 36 * (n * n + 4 * n + 8) * 8
+    assert est.worker_bytes == 2 * 8 * 6 * 7734 * (n * n + 4 * n)
+    assert est.table_bytes == 6 * 19 * 36 * (n * n + 4 * n + 8) * 8
     assert est.peak_bytes == est.worker_bytes + 2 * est.table_bytes
     # calibrated on the paper vehicle, every circle feasible: an upper bound of its 1.6 s
     assert 1.5 < est.cpu_s < 10
@@ -47,7 +47,7 @@ def test_effect_states_count(paper_text):
     """Motor lag adds 4 states to the LQR state: n = 15."""
     cfg = config_from_text(paper_text + "\n[effects.motor_lag]\ntau = 0.03\n", "lag.toml")
     est = estimate_build(cfg)
-    assert est.worker_bytes == 2 * 8 * 6 * 5026 * (15 * 15 + 4 * 15)
+    assert est.worker_bytes == 2 * 8 * 6 * 7734 * (15 * 15 + 4 * 15)
 
 
 @pytest.mark.parametrize(
@@ -107,7 +107,7 @@ def test_limits_section(paper_text):
     assert info.value.where == "grid.speeds"
     assert info.value.message.endswith("limit limits.max_memory_gib = 0.01")
     low_cpu = paper_text + "\n[limits]\nmax_build_cpu_s = 1\n"
-    with pytest.raises(InputError, match=r"^low.toml: grid.speeds: needs about 3.8 CPU-s"):
+    with pytest.raises(InputError, match=r"^low.toml: grid.speeds: needs about 4.3 CPU-s"):
         config_from_text(low_cpu, "low.toml")
     # raising the limits admits what the defaults refuse
     big = _sub(paper_text, "speeds", _floats(np.linspace(2, 15, 10000)))

@@ -29,7 +29,14 @@ import numpy as np
 from ..errors import InputError
 from ..native import find_cc
 from ..publish import publish, write_atomic
-from .runtime import Lookup, RuntimeData, c_identifier, runtime_data
+from .runtime import (
+    VEHICLE_FIELDS,
+    Lookup,
+    RuntimeData,
+    c_identifier,
+    runtime_data,
+    vehicle_fields,
+)
 
 __all__ = [
     "RUNTIME_FILES",
@@ -168,18 +175,22 @@ def _vehicle_values(data: RuntimeData) -> dict:
     name, NAME = data.name, data.name.upper()
     if data.vehicle is None:
         return dict(has_vehicle=0, vehicle_macros="", vehicle_data="", vehicle_ref="NULL")
-    v = np.asarray(data.vehicle, dtype=np.float32)
+    f = vehicle_fields(np.asarray(data.vehicle, dtype=np.float32))
     macros = "\n".join([
-        f"#define {NAME}_MASS_KG {c_decimal(v[0])} /* vehicle mass */",
-        f"#define {NAME}_G_MPS2 {c_decimal(v[1])} /* gravity */",
-        f"#define {NAME}_DRAG_MU1 {c_decimal(v[3])} /* body drag (mu1 + mu2 |v|) v, N s/m */",
-        f"#define {NAME}_DRAG_MU2 {c_decimal(v[4])} /* N s^2/m^2 */",
+        f"#define {NAME}_MASS_KG {c_decimal(f['mass'][0])} /* vehicle mass */",
+        f"#define {NAME}_G_MPS2 {c_decimal(f['g'][0])} /* gravity */",
+        f"#define {NAME}_MIN_TENSION_N {c_decimal(f['min_tension'][0])} /* taut margin: "
+        "GS_LOW_TENSION below */",
+        f"#define {NAME}_DRAG_MU1 {c_decimal(f['drag_mu1'][0])} /* body drag "
+        "(mu1 + mu2 |v|) v, N s/m */",
+        f"#define {NAME}_DRAG_MU2 {c_decimal(f['drag_mu2'][0])} /* N s^2/m^2 */",
     ])
-    body = (f"/* closed-form constants of the feed-forward: mass, g, radius, mu1, mu2, J, "
-            f"alloc_inv */\nstatic const gs_vehicle {name}_vehicle = {{\n"
-            + ",\n".join(f"    {c_float(x)}" for x in v[:5])
-            + f",\n    {{\n{_body(v[5:14], c_float, 2, 3)}\n    }},"
-            + f"\n    {{\n{_body(v[14:30], c_float, 2, 4)}\n    }},\n}};\n")
+    # one initializer per field, in gs_vehicle order: scalars, then the 3x3 and 4x4 blocks
+    inits = [f"    {c_float(x[0])}" if x.size == 1 else
+             f"    {{\n{_body(x, c_float, 2, int(np.sqrt(x.size)))}\n    }}" for x in f.values()]
+    body = (f"/* closed-form constants of the feed-forward, in gs_vehicle order:\n"
+            f" * {', '.join(VEHICLE_FIELDS)} */\n"
+            f"static const gs_vehicle {name}_vehicle = {{\n" + ",\n".join(inits) + ",\n};\n")
     return dict(has_vehicle=1, vehicle_macros=macros, vehicle_data=body,
                 vehicle_ref=f"&{name}_vehicle")
 

@@ -37,7 +37,7 @@ from ..constants import N_STATE
 from ..errors import InputError
 from ..schedule.closedform import closed_form
 from ..schedule.path import AzimuthPath
-from .runtime import UNUSABLE, Interpolator, VehicleConstants
+from .runtime import LOW_TENSION, UNUSABLE, Interpolator, VehicleConstants
 
 __all__ = ["FF_MIN_THRUST", "FeedForward", "feedforward"]
 
@@ -62,7 +62,8 @@ class FeedForward:
         terms; the drag-only model's, the firmware's estimate).
     status : ndarray, shape (N,), int
         The lookup's status bits (:mod:`gainsched.firmware.runtime`); where unusable the
-        correction is left out (closed form only).
+        correction is left out (closed form only). Plus ``LOW_TENSION`` where the
+        nominal tension is below the config's ``min_tension``.
     K : ndarray, shape (N, 4, n), optional
         The lookup's gains at the reference when the source returns them with the
         nominal (the C runtime's ``gs_lookup_nominal``), else None.
@@ -124,4 +125,5 @@ def feedforward(lookup: Interpolator, path: AzimuthPath, alpha: float) -> FeedFo
     x_d[:, 4] = phi
     x_d[:, 8] = xd * np.sin(phi)
     x_d[:, 9] = xd * np.cos(phi)
-    return FeedForward(x_d, u_cf * ratio, tension, lk.status.astype(int))
+    status = lk.status.astype(int) | np.where(tension < vehicle.min_tension, LOW_TENSION, 0)
+    return FeedForward(x_d, u_cf * ratio, tension, status)

@@ -41,6 +41,7 @@ __all__ = [
     "BAD_INPUT",
     "BAD_ARG",
     "BAD_TABLE",
+    "LOW_TENSION",
     "UNUSABLE",
     "MASK_NO_GAINS",
     "STATUS_NAMES",
@@ -50,6 +51,7 @@ __all__ = [
     "VEHICLE_FIELDS",
     "VehicleConstants",
     "vehicle_constants",
+    "vehicle_fields",
     "Lookup",
     "Interpolator",
 ]
@@ -63,6 +65,7 @@ NO_GAINS = 0x08
 BAD_INPUT = 0x10
 BAD_ARG = 0x20
 BAD_TABLE = 0x40
+LOW_TENSION = 0x80  # the feed-forward's nominal tension is below the table's margin
 UNUSABLE = NO_GAINS | BAD_INPUT | BAD_ARG
 STATUS_NAMES = {
     CLAMPED_SPEED: "CLAMPED_SPEED",
@@ -72,6 +75,7 @@ STATUS_NAMES = {
     BAD_INPUT: "BAD_INPUT",
     BAD_ARG: "BAD_ARG",
     BAD_TABLE: "BAD_TABLE",
+    LOW_TENSION: "LOW_TENSION",
 }
 
 F32 = np.float32
@@ -85,8 +89,8 @@ SNAP = F32(2.0**-12)  # cell fractions this close to 0 or 1 are put on the grid 
 
 #: the closed-form constants a table carries for the firmware's feed-forward (``gs_vehicle``
 #: in gainsched_runtime.h, same order): name -> number of float32 values
-VEHICLE_FIELDS = {"mass": 1, "g": 1, "radius": 1, "drag_mu1": 1, "drag_mu2": 1, "J": 9,
-                  "alloc_inv": 16}
+VEHICLE_FIELDS = {"mass": 1, "g": 1, "radius": 1, "min_tension": 1, "drag_mu1": 1,
+                  "drag_mu2": 1, "J": 9, "alloc_inv": 16}
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,8 @@ class VehicleConstants:
     g : float, m/s^2
     r : float, m
         COG radius ``rho + L_e``.
+    min_tension : float, N
+        The config's taut margin: below it the feed-forward sets ``LOW_TENSION``.
     mu1, mu2 : float, N s/m and N s^2/m^2
         Body drag ``(mu1 + mu2 |v|) v`` of the config's pure-drag effects, summed.
     J : ndarray, shape (3, 3), kg m^2
@@ -112,6 +118,7 @@ class VehicleConstants:
     m: float
     g: float
     r: float
+    min_tension: float
     mu1: float
     mu2: float
     J: np.ndarray
@@ -120,17 +127,22 @@ class VehicleConstants:
     @classmethod
     def from_array(cls, a) -> VehicleConstants:
         """From the ``gs_vehicle`` float32 layout (:data:`VEHICLE_FIELDS`), in float64."""
-        ends = np.cumsum(list(VEHICLE_FIELDS.values()))
-        f = dict(zip(VEHICLE_FIELDS, np.split(np.asarray(a, dtype=np.float64), ends[:-1]),
-                     strict=True))
-        return cls(float(f["mass"][0]), float(f["g"][0]), float(f["radius"][0]),
-                   float(f["drag_mu1"][0]), float(f["drag_mu2"][0]), f["J"].reshape(3, 3),
+        f = vehicle_fields(np.asarray(a, dtype=np.float64))
+        scalar = {k: float(x[0]) for k, x in f.items() if x.size == 1}
+        return cls(scalar["mass"], scalar["g"], scalar["radius"], scalar["min_tension"],
+                   scalar["drag_mu1"], scalar["drag_mu2"], f["J"].reshape(3, 3),
                    f["alloc_inv"].reshape(4, 4))
 
     def closed_form_drag(self):
         from ..model.effects import polynomial_drag
 
         return polynomial_drag(self.mu1, self.mu2)
+
+
+def vehicle_fields(a) -> dict[str, np.ndarray]:
+    """A ``gs_vehicle`` array (:data:`VEHICLE_FIELDS` order) split into its fields."""
+    ends = np.cumsum(list(VEHICLE_FIELDS.values()))
+    return dict(zip(VEHICLE_FIELDS, np.split(np.asarray(a), ends[:-1]), strict=True))
 
 
 def vehicle_constants(config) -> np.ndarray:
@@ -140,7 +152,8 @@ def vehicle_constants(config) -> np.ndarray:
 
     model = Model(config).drag_part()
     mu1, mu2 = model.drag_coefficients()
-    values = {"mass": model.m, "g": model.g, "radius": model.r, "drag_mu1": mu1,
+    values = {"mass": model.m, "g": model.g, "radius": model.r,
+              "min_tension": config.feasibility.min_tension, "drag_mu1": mu1,
               "drag_mu2": mu2, "J": model.J, "alloc_inv": model.alloc_inv}
     return np.concatenate([np.ravel(values[k]) for k in VEHICLE_FIELDS]).astype(np.float32)
 

@@ -551,6 +551,9 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
     nom->x_d[8] = ref[1] * sphi;
     nom->x_d[9] = ref[1] * cphi;
     nom->tension = ten;
+    if (ten < vh->min_tension) {
+        status |= GS_LOW_TENSION;
+    }
     return status;
 }
 
@@ -627,6 +630,7 @@ uint32_t gs_table_crc32(const gs_table *t)
         crc = gs_crc_u32(crc, gs_bits(vh->mass));
         crc = gs_crc_u32(crc, gs_bits(vh->g));
         crc = gs_crc_u32(crc, gs_bits(vh->radius));
+        crc = gs_crc_u32(crc, gs_bits(vh->min_tension));
         crc = gs_crc_u32(crc, gs_bits(vh->drag_mu1));
         crc = gs_crc_u32(crc, gs_bits(vh->drag_mu2));
         crc = gs_crc_floats(crc, vh->J, 9u);
@@ -659,6 +663,7 @@ int gs_verify(const gs_table *t)
     if (t->vehicle != NULL) {
         const gs_vehicle *vh = t->vehicle;
         int bad = gs_nonfinite(vh->drag_mu1) || gs_nonfinite(vh->drag_mu2) ||
+                  gs_nonfinite(vh->min_tension) ||
                   !(vh->mass > 0.0f) || !(vh->radius > 0.0f) || !(vh->g > 0.0f) ||
                   gs_nonfinite(vh->mass) || gs_nonfinite(vh->radius) || gs_nonfinite(vh->g);
         for (i = 0u; i < 9u; ++i) {

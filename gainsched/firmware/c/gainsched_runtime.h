@@ -58,6 +58,7 @@ extern "C" {
 #define GS_BAD_INPUT 0x10     /* NaN, inf or out-of-limit input: outputs zeroed */
 #define GS_BAD_ARG 0x20       /* NULL pointer or empty table: outputs untouched */
 #define GS_BAD_TABLE 0x40     /* gs_verify: CRC or structure mismatch */
+#define GS_LOW_TENSION 0x80   /* gs_lookup_nominal: nominal tension below the table's margin */
 /* the outputs must not be used when any of these bits is set */
 #define GS_UNUSABLE (GS_NO_GAINS | GS_BAD_INPUT | GS_BAD_ARG)
 
@@ -90,6 +91,7 @@ typedef struct gs_vehicle {
     float mass;          /* kg */
     float g;             /* m/s^2 */
     float radius;        /* COG radius rho + L_e, m */
+    float min_tension;   /* N: the config's taut margin (GS_LOW_TENSION below it) */
     float drag_mu1;      /* N s/m: drag force (mu1 + mu2 |v|) v against the COG velocity */
     float drag_mu2;      /* N s^2/m^2 */
     float J[9];          /* inertia in B, kg m^2, row-major */
@@ -146,7 +148,9 @@ typedef struct gs_nominal {
  * K as gs_lookup at (ref[0], ref[1], alpha); *nom the nominal of the accelerating
  * reference (see the top of this file). Returns gs_lookup's status bits, plus
  * GS_BAD_INPUT for a non-finite or out-of-limit derivative (K and *nom zeroed) and
- * GS_BAD_ARG for a NULL pointer or a table without vehicle (outputs untouched).
+ * GS_BAD_ARG for a NULL pointer or a table without vehicle (outputs untouched),
+ * and GS_LOW_TENSION (informational: outputs valid) when the nominal tension is
+ * below vehicle->min_tension, a reference slower than the tether margin allows.
  * With GS_NO_GAINS, K is zero and *nom is the drag-only closed form alone (a
  * firmware that holds its last good gains may still fly it); with GS_BAD_INPUT
  * everything is zero.
