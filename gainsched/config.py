@@ -166,10 +166,28 @@ class Grid:
 
 @dataclass(frozen=True)
 class Feasibility:
-    """Margins: minimum tether tension (N) and thrust margin inside the limits (N)."""
+    """Margins and the nominal's freedom.
+
+    Attributes
+    ----------
+    min_tension : float, N
+        The tether must stay at least this taut.
+    thrust_margin : float, N
+        Distance every nominal motor thrust keeps inside ``[thrust_min, thrust_max]``.
+    attitude_offsets : {"zero", "free"}
+        ``"zero"``: the nominal keeps ``theta = chi = 0`` (paper eqs. 15-18). ``"free"``:
+        where that nominal needs a motor outside its range, pitch and yaw offsets of least
+        mean square let the tether carry part of the torque
+        (:mod:`gainsched.schedule.offsets`); elsewhere the nominal is the same.
+    max_attitude_offset : float, rad
+        Largest ``|theta|``, ``|chi|`` a free-offset nominal may use
+        (``max_attitude_offset_deg`` in the file).
+    """
 
     min_tension: float = 0.5
     thrust_margin: float = 0.0
+    attitude_offsets: str = "zero"
+    max_attitude_offset: float = float(np.deg2rad(10.0))
 
 
 @dataclass(frozen=True)
@@ -607,9 +625,15 @@ def check_rate(source, control: Control, grid: Grid, radius: float) -> None:
 
 
 def _feasibility(sec: Section) -> Feasibility:
+    bound_deg = sec.number("max_attitude_offset_deg",
+                           float(np.rad2deg(Feasibility.max_attitude_offset)), positive=True)
+    if bound_deg > 45:
+        raise sec.error("max_attitude_offset_deg", f"must be <= 45 deg, got {bound_deg:g}")
     f = Feasibility(
         sec.number("min_tension", Feasibility.min_tension, nonneg=True),
         sec.number("thrust_margin", Feasibility.thrust_margin, nonneg=True),
+        sec.string("attitude_offsets", Feasibility.attitude_offsets, ("zero", "free")),
+        float(np.deg2rad(bound_deg)),
     )
     sec.done()
     return f

@@ -10,16 +10,21 @@ derivatives. From it,
 
 The nominal keeps ``delta = pi/2``, ``theta = chi = 0``, ``psi = xi``; the roll
 phi carries the tangential force balance and the tether carries the radial one.
+With ``[feasibility] attitude_offsets = "free"`` a constant-speed circle whose
+motors that nominal drives out of range gets pitch and yaw offsets instead
+(:mod:`gainsched.schedule.offsets`, :func:`circle_offsets`).
 """
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..constants import REASONS, Reason
 from .closedform import closed_form
+from .offsets import CHECK_SAMPLES, AttitudeOffsets, solve_offsets
 from .path import AzimuthPath, circle_path, period
 from .trim import trim_path
 
@@ -27,6 +32,7 @@ __all__ = [
     "Nominal",
     "nominal_from_path",
     "circle_nominal",
+    "circle_offsets",
     "feasibility_reasons",
     "REASONS",
     "min_taut_speed",
@@ -111,7 +117,43 @@ def circle_nominal(model, speed: float, alpha: float, n: int, xi0: float = 0.0) 
     """
     T = period(speed, model.r)
     t = np.arange(n) * (T / n)
-    return nominal_from_path(model, circle_path(speed, model.r, t, xi0), alpha, periodic=True)
+    path = circle_path(speed, model.r, t, xi0)
+    offsets = circle_offsets(model, speed, alpha)
+    if offsets is None:
+        return nominal_from_path(model, path, alpha, periodic=True)
+    z, z_dot, u, tension = trim_path(model, path, alpha, periodic=True, offsets=offsets)
+    return Nominal(t, z, z_dot, u, tension, float(alpha),
+                   feasibility_reasons(model.config, u, tension))
+
+
+# offsets per model and circle: a circle's nominal is asked for at several sample counts
+_OFFSETS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def circle_offsets(model, speed: float, alpha: float) -> AttitudeOffsets | None:
+    """The attitude offsets of a constant-speed circle's nominal, or None for none.
+
+    None unless the config asks for free offsets (``[feasibility] attitude_offsets =
+    "free"``) and the zero-offset nominal, checked at ``CHECK_SAMPLES`` azimuths, needs a
+    motor outside ``[thrust_min + margin, thrust_max - margin]`` with the tether taut
+    (offsets do not change the tension much, so a slack circle stays slack); then the
+    least-mean-square offsets of :func:`gainsched.schedule.offsets.solve_offsets`, or None
+    when none within ``max_attitude_offset`` exist. Cached per model and circle.
+    """
+    f = model.config.feasibility
+    if f.attitude_offsets != "free":
+        return None
+    cache = _OFFSETS.setdefault(model, {})
+    key = (float(speed), float(alpha))
+    if key not in cache:
+        T = period(speed, model.r)
+        t = np.arange(CHECK_SAMPLES) * (T / CHECK_SAMPLES)
+        zero = nominal_from_path(model, circle_path(speed, model.r, t), alpha, periodic=True)
+        bits = int(np.bitwise_or.reduce(zero.reasons))
+        thrust = bits & (Reason.THRUST_LOW | Reason.THRUST_HIGH)
+        cache[key] = (solve_offsets(model, speed, alpha, bound=f.max_attitude_offset)
+                      if thrust and not bits & Reason.SLACK else None)
+    return cache[key]
 
 
 def min_taut_speed(config, alpha: float) -> float:

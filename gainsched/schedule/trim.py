@@ -1,10 +1,12 @@
 """Numerical trim: the nominal of any set of effects (paper Sec. III, for any effects).
 
-Along a prescribed azimuth path xi(t) the nominal keeps ``delta = pi/2``,
-``theta = chi = 0`` and leaves the roll ``phi(t)`` and the four motor thrusts
-free. At every node the model must give ``delta'' = 0``, the path's ``xi''`` and
-the ``omega'`` that eq. 16 derives from ``phi, phi', phi''``: five equations in
-five unknowns per node, coupled through ``phi'`` and ``phi''``.
+Along a prescribed azimuth path xi(t) the nominal keeps ``delta = pi/2`` and
+given pitch and yaw offsets ``theta, chi`` (zero unless
+:mod:`gainsched.schedule.offsets` chose them) and leaves the roll ``phi(t)`` and
+the four motor thrusts free. At every node the model must give ``delta'' = 0``,
+the path's ``xi''`` and the ``omega'`` the attitude kinematics derive from the
+angles (eq. 16 without offsets): five equations in five unknowns per node,
+coupled through ``phi'`` and ``phi''``.
 
 ``phi`` is represented by its node values with a linear differentiation
 operator: a Fourier (spectral) one for whole periodic circles, a quintic
@@ -25,7 +27,7 @@ import numpy as np
 from scipy.interpolate import make_interp_spline
 
 from ..errors import GainschedError
-from .closedform import closed_form, state_from_roll
+from .closedform import closed_form, state_from_attitude
 from .path import AzimuthPath
 
 __all__ = ["trim_path", "TrimError"]
@@ -74,9 +76,13 @@ def _sub_path(path: AzimuthPath, idx) -> AzimuthPath:
     return AzimuthPath(path.t[idx], path.xi[idx], tuple(d[idx] for d in path.d))
 
 
-def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T):
-    """Residuals (n, 5) of the node equations, and the full state and its derivative."""
-    s, sdot = state_from_roll(path, phi, dphi, ddphi)
+def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T, offsets=None):
+    """Residuals (n, 5) of the node equations, and the full state and its derivative.
+
+    ``offsets``: ``(pitch, yaw)``, each ``(value, rate, acceleration)`` at the nodes, or None.
+    """
+    pitch, yaw = (None, None) if offsets is None else offsets
+    s, sdot = state_from_attitude(path, (phi, dphi, ddphi), pitch, yaw)
     n_x = model.n_extra
     if n_x:  # stateful effects: the free thrusts are the actual thrusts (effect states)
         z = np.concatenate([s.astype(T.dtype), T], -1)
@@ -96,40 +102,60 @@ def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T):
     return res, z, sdot, ev
 
 
-def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T):
-    """d res / d(phi, phi', phi'', T1..T4) per node by complex steps, shape (n, 5, 7)."""
+def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets=None, *,
+                     wrt_offsets=False):
+    """d res / d(phi, phi', phi'', T1..T4) per node by complex steps, shape (n, 5, 7); with
+    ``wrt_offsets`` six more columns, d res / d(theta, theta', theta'', chi, chi', chi'')."""
     h = 1e-30
+    roll = [np.asarray(x, dtype=complex) for x in (phi, dphi, ddphi)]
+    off = [np.zeros_like(roll[0]) for _ in range(6)] if offsets is None else [
+        np.asarray(x, dtype=complex) * np.ones_like(roll[0]) for tri in offsets for x in tri]
+    Tc0 = T.astype(complex)
+
+    def column(roll_, off_, T_):
+        o = (tuple(off_[:3]), tuple(off_[3:]))
+        return np.imag(_local(model, path, alpha, *roll_, T_, o)[0]) / h
+
     cols = []
-    args = [phi, dphi, ddphi]
     for j in range(3):
-        a = [x.astype(complex) for x in args]
+        a = list(roll)
         a[j] = a[j] + 1j * h
-        cols.append(np.imag(_local(model, path, alpha, *a, T.astype(complex))[0]) / h)
+        cols.append(column(a, off, Tc0))
     for j in range(4):
-        Tc = T.astype(complex)
+        Tc = Tc0.copy()
         Tc[:, j] += 1j * h
-        cols.append(
-            np.imag(_local(model, path, alpha, *[x.astype(complex) for x in args], Tc)[0]) / h
-        )
+        cols.append(column(roll, off, Tc))
+    if wrt_offsets:
+        for j in range(6):
+            o = list(off)
+            o[j] = o[j] + 1j * h
+            cols.append(column(roll, o, Tc0))
     return np.stack(cols, -1)
 
 
-def _newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40):
+def _collocation_jacobian(Jl, D1, D2):
+    """The (5n, 5n) Jacobian of all node residuals in (phi nodes, T1 nodes, ..., T4 nodes)
+    from the local partials ``Jl`` (n, 5, >= 7) and the differentiation operators."""
+    n = Jl.shape[0]
+    J = np.zeros((5 * n, 5 * n))
+    for i in range(5):
+        rows = slice(i * n, (i + 1) * n)
+        J[rows, :n] = np.diag(Jl[:, i, 0]) + Jl[:, i, 1, None] * D1 + Jl[:, i, 2, None] * D2
+        for j in range(4):
+            J[rows, n * (1 + j) : n * (2 + j)] = np.diag(Jl[:, i, 3 + j])
+    return J
+
+
+def _newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40, offsets=None):
     n = phi.size
     scale = max(1.0, float(np.abs(path.d[0]).max()) ** 2)
     for _ in range(max_iter):
         dphi, ddphi = D1 @ phi, D2 @ phi
-        res = _local(model, path, alpha, phi, dphi, ddphi, T)[0]
+        res = _local(model, path, alpha, phi, dphi, ddphi, T, offsets)[0]
         if np.abs(res).max() < tol * scale:
             return phi, T
-        Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T)
-        J = np.zeros((5 * n, 5 * n))
-        for i in range(5):
-            rows = slice(i * n, (i + 1) * n)
-            J[rows, :n] = np.diag(Jl[:, i, 0]) + Jl[:, i, 1, None] * D1 + Jl[:, i, 2, None] * D2
-            for j in range(4):
-                J[rows, n * (1 + j) : n * (2 + j)] = np.diag(Jl[:, i, 3 + j])
-        step = np.linalg.solve(J, res.T.reshape(-1))
+        Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets)
+        step = np.linalg.solve(_collocation_jacobian(Jl, D1, D2), res.T.reshape(-1))
         phi = phi - step[:n]
         T = T - step[n:].reshape(4, n).T
     raise TrimError(f"trim did not converge (residual {np.abs(res).max():.3g})")
@@ -142,18 +168,20 @@ def _initial_guess(model, path, alpha):
     return s[:, 4], u
 
 
-def _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, tol=1e-12, max_iter=20):
+def _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, tol=1e-12, max_iter=20,
+                  offsets=None):
     """Per-point Newton on the four thrusts for the xi'' and omega' equations (phi fixed)."""
     for _ in range(max_iter):
-        res = _local(model, path, alpha, phi, dphi, ddphi, T)[0][:, 1:]
+        res = _local(model, path, alpha, phi, dphi, ddphi, T, offsets)[0][:, 1:]
         if np.abs(res).max() < tol * max(1.0, np.abs(T).max()):
             break
-        Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T)[:, 1:, 3:]
+        Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets)[:, 1:, 3:7]
         T = T - np.linalg.solve(Jl, res[..., None])[..., 0]
     return T
 
 
-def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None = None):
+def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None = None,
+              offsets=None):
     """Nominal ``(z, z_dot, u, tension)`` along ``path`` for the model's effects.
 
     Parameters
@@ -165,6 +193,9 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
     alpha : float, rad
     periodic : bool, optional
         Fourier collocation (default when the path has constant xi').
+    offsets : AttitudeOffsets, optional
+        Pitch and yaw offsets ``theta(xi), chi(xi)`` (:mod:`gainsched.schedule.offsets`);
+        default zero.
 
     Returns
     -------
@@ -185,7 +216,8 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
         nodes = AzimuthPath(tn, xi_n, (np.full_like(tn, xd[0]), z0, z0, z0))
         D1, D2 = _fourier_operators(N_FOURIER, Tp)
         phi0, u0 = _initial_guess(model, nodes, alpha)
-        phi_n, T_n = _newton(model, nodes, alpha, D1, D2, phi0, u0)
+        off_n = None if offsets is None else offsets.along(nodes)
+        phi_n, T_n = _newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
         phi, dphi, ddphi = _fourier_eval(phi_n, Tp, t - t[0])
         T_guess = _fourier_eval(T_n.T, Tp, t - t[0])[0]
         T_dot = _fourier_eval(T_n.T, Tp, t - t[0])[1]
@@ -195,12 +227,14 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
         spl = make_interp_spline(nodes.t, np.eye(idx.size), k=5)
         D1, D2 = spl(nodes.t, nu=1), spl(nodes.t, nu=2)
         phi0, u0 = _initial_guess(model, nodes, alpha)
-        phi_n, T_n = _newton(model, nodes, alpha, D1, D2, phi0, u0)
+        off_n = None if offsets is None else offsets.along(nodes)
+        phi_n, T_n = _newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
         phi, dphi, ddphi = (spl(t, nu=k) @ phi_n for k in range(3))
         T_guess = spl(t) @ T_n
         T_dot = spl(t, nu=1) @ T_n
-    T = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T_guess)
-    res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T)
+    off = None if offsets is None else offsets.along(path)
+    T = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T_guess, offsets=off)
+    res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
     u = T
     z_dot = sdot
     if model.n_extra:

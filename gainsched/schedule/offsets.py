@@ -1,0 +1,225 @@
+"""Attitude offsets of the nominal: a trim that lets the tether carry the yaw torque.
+
+On a great circle the closed-form nominal (paper eqs. 15-18) keeps ``theta = chi =
+0`` and leaves the motors to make every torque. At high speed and tilt the roll
+and yaw torques it asks for need motor thrusts below the minimum (down to -0.85 N
+at 40 deg and 15 m/s on the paper vehicle). The tether is attached ``L_e`` behind
+the COG, so a small yaw or pitch offset turns the tension (tens of newtons there)
+into a torque: about 0.1 N m per degree at 15 m/s, more than the motors' yaw
+authority.
+
+:func:`solve_offsets` chooses smooth periodic offsets ``theta(xi)``, ``chi(xi)``,
+Fourier series in the azimuth up to :data:`HARMONICS`, of least mean square over
+the circle, such that the trim of the full model (any effects,
+:mod:`gainsched.schedule.trim`) keeps every motor inside ``[thrust_min + margin,
+thrust_max - margin]`` and both offsets within the configured bound. Where the
+zero-offset nominal is feasible the least-squares optimum is zero offsets, so the
+nominal is exactly today's. The problem is an SLSQP over the ``2 (2 H + 1)``
+coefficients; each evaluation is the collocation trim of the roll and thrusts for
+those offsets, and the constraint gradients come from the implicit function
+theorem on that trim's Newton Jacobian (one extra linear solve), not from finite
+differences. scipy's SLSQP is the optimizer; the collocation and its sensitivities
+are ours because no library offers this trim (see :mod:`gainsched.schedule.trim`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize
+
+from .path import AzimuthPath, circle_path, period
+from .trim import (
+    TrimError,
+    _collocation_jacobian,
+    _fourier_operators,
+    _initial_guess,
+    _local_jacobians,
+    _newton,
+)
+
+__all__ = ["HARMONICS", "AttitudeOffsets", "solve_offsets"]
+
+#: highest harmonic of the azimuth in the offset series
+HARMONICS = 3
+#: collocation nodes of the optimisation (the nominal itself is then trimmed with the
+#: trim's own resolution)
+N_NODES = 64
+#: the thrust bounds are imposed at the nodes this much inside the config's (N), so that
+#: the nominal between the nodes keeps them too; doubled (up to 4 times) while a check
+#: on CHECK_SAMPLES samples of the circle finds a motor outside
+NODE_SAFETY_N = 2e-3
+CHECK_SAMPLES = 1024
+#: the optimisation variables are the coefficients in degrees (objective of order 1)
+_DEG = np.pi / 180
+
+
+def _basis(xi, harmonics: int):
+    """Fourier basis in the azimuth and its first two derivatives, each (n, 2 H + 1):
+    columns ``1, cos(k xi), sin(k xi)`` for k = 1..H."""
+    k = np.arange(1, harmonics + 1)
+    c, s = np.cos(np.outer(xi, k)), np.sin(np.outer(xi, k))
+    one, zero = np.ones((np.size(xi), 1)), np.zeros((np.size(xi), 1))
+    return (np.concatenate([one, c, s], 1), np.concatenate([zero, -k * s, k * c], 1),
+            np.concatenate([zero, -(k**2) * c, -(k**2) * s], 1))
+
+
+@dataclass(frozen=True)
+class AttitudeOffsets:
+    """Pitch and yaw offsets of a nominal as Fourier series in the azimuth.
+
+    ``theta(xi) = pitch[0] + sum_k pitch[k] cos(k xi) + pitch[H + k] sin(k xi)``, the same
+    for ``chi(xi)`` with ``yaw``; k = 1..H.
+
+    Attributes
+    ----------
+    pitch, yaw : ndarray, shape (2 H + 1,), rad
+    """
+
+    pitch: np.ndarray
+    yaw: np.ndarray
+
+    @property
+    def harmonics(self) -> int:
+        return (self.pitch.size - 1) // 2
+
+    def along(self, path: AzimuthPath):
+        """``(pitch, yaw)`` along ``path``, each ``(value rad, rate rad/s, acceleration
+        rad/s^2)`` with the time derivatives through ``xi(t)``."""
+        B, B1, B2 = _basis(path.xi, self.harmonics)
+        xd, xdd = path.d[0], path.d[1]
+        out = []
+        for c in (self.pitch, self.yaw):
+            f1 = B1 @ c
+            out.append((B @ c, xd * f1, xd**2 * (B2 @ c) + xdd * f1))
+        return tuple(out)
+
+    def mirrored(self) -> AttitudeOffsets:
+        """The offsets of the direction mirror S2 (``xi -> pi - xi``; theta keeps its sign,
+        chi flips, docs/conventions.md): cos(k (pi - xi)) = (-1)^k cos(k xi),
+        sin(k (pi - xi)) = -(-1)^k sin(k xi)."""
+        H = self.harmonics
+        sign = (-1.0) ** np.arange(1, H + 1)
+        m = np.concatenate([[1.0], sign, -sign])
+        return AttitudeOffsets(self.pitch * m, -self.yaw * m)
+
+
+def solve_offsets(model, speed: float, alpha: float, *, bound: float,
+                  harmonics: int = HARMONICS, n_nodes: int = N_NODES):
+    """The least-mean-square offsets that keep the circle's motors in range (module doc).
+
+    Parameters
+    ----------
+    model : Model
+    speed : float, m/s
+        Signed COG speed of the constant-speed circle.
+    alpha : float, rad
+        Circle tilt.
+    bound : float, rad
+        Largest ``|theta|`` and ``|chi|`` allowed anywhere on the circle (at the nodes).
+
+    Returns
+    -------
+    AttitudeOffsets or None
+        None when no offsets within ``bound`` keep the motors in range (or the trim
+        fails on the way).
+
+    Example
+    -------
+    >>> a = np.deg2rad(40)                                                  # doctest: +SKIP
+    >>> off = solve_offsets(model, 15.0, a, bound=np.deg2rad(10))           # doctest: +SKIP
+    >>> z, z_dot, u, tension = trim_path(model, path, a, offsets=off)       # doctest: +SKIP
+    """
+    from .trim import trim_path
+
+    cfg = model.config
+    lo = cfg.vehicle.thrust_min + cfg.feasibility.thrust_margin
+    hi = cfg.vehicle.thrust_max - cfg.feasibility.thrust_margin
+    Tp = period(speed, model.r)
+    check = circle_path(speed, model.r, np.arange(CHECK_SAMPLES) * (Tp / CHECK_SAMPLES))
+    safety = NODE_SAFETY_N
+    for _ in range(4):
+        off = _solve(model, speed, alpha, bound, harmonics, n_nodes, lo + safety, hi - safety)
+        if off is None:
+            return None
+        try:
+            u = trim_path(model, check, alpha, periodic=True, offsets=off)[2]
+        except TrimError:
+            return None
+        if np.all((u >= lo) & (u <= hi)):
+            return off
+        safety *= 2
+    return None
+
+
+def _solve(model, speed, alpha, bound, harmonics, n_nodes, lo, hi):
+    """One SLSQP at node thrust bounds ``[lo, hi]`` (N); None if it fails."""
+    Tp = period(speed, model.r)
+    t = np.arange(n_nodes) * (Tp / n_nodes)
+    nodes = circle_path(speed, model.r, t)
+    D1, D2 = _fourier_operators(n_nodes, Tp)
+    B, _, _ = _basis(nodes.xi, harmonics)
+    nb = B.shape[1]
+    state = dict(zip(("phi", "T"), _initial_guess(model, nodes, alpha), strict=True))
+    cache: dict[bytes, tuple] = {}
+
+    def offsets_of(x):
+        return AttitudeOffsets(x[:nb] * _DEG, x[nb:] * _DEG)
+
+    def solve(p):
+        key = p.tobytes()
+        if key not in cache:
+            off = offsets_of(p).along(nodes)
+            phi, T = _newton(model, nodes, alpha, D1, D2, state["phi"], state["T"],
+                             offsets=off)
+            state["phi"], state["T"] = phi, T
+            # implicit function theorem: R(y(p), p) = 0  ->  dy/dp = -R_y^-1 R_p
+            Jl = _local_jacobians(model, nodes, alpha, phi, D1 @ phi, D2 @ phi, T, off,
+                                  wrt_offsets=True)
+            dB = _basis(nodes.xi, harmonics)
+            xd = nodes.d[0]
+            # node values and time derivatives of the offsets per coefficient (n, nb)
+            trip = (dB[0], xd[:, None] * dB[1], xd[:, None] ** 2 * dB[2])
+            Rp = np.zeros((5 * n_nodes, 2 * nb))
+            for i in range(5):
+                rows = slice(i * n_nodes, (i + 1) * n_nodes)
+                for a in range(2):
+                    Rp[rows, a * nb:(a + 1) * nb] = sum(
+                        Jl[:, i, 7 + 3 * a + j, None] * trip[j] for j in range(3))
+            dy = -np.linalg.solve(_collocation_jacobian(Jl, D1, D2), Rp)
+            cache.clear()
+            cache[key] = (T, dy[n_nodes:] * _DEG)
+        return cache[key]
+
+    G = B.T @ B / n_nodes  # mean square of a series over the nodes: c^T G c
+
+    def objective(p):
+        return float(p[:nb] @ G @ p[:nb] + p[nb:] @ G @ p[nb:])
+
+    def objective_grad(p):
+        return np.concatenate([2 * G @ p[:nb], 2 * G @ p[nb:]])
+
+    def thrust_margins(p):
+        T = solve(p)[0]
+        return np.concatenate([(T - lo).T.reshape(-1), (hi - T).T.reshape(-1)])
+
+    def thrust_margins_grad(p):
+        dT = solve(p)[1]  # rows: motor-major nodes, as thrust_margins
+        return np.concatenate([dT, -dT])
+
+    Z = np.zeros_like(B)
+    A_bound = np.concatenate([np.block([[B, Z], [Z, B]]), -np.block([[B, Z], [Z, B]])])
+    constraints = [
+        {"type": "ineq", "fun": thrust_margins, "jac": thrust_margins_grad},
+        {"type": "ineq", "fun": lambda x: bound / _DEG - A_bound @ x, "jac": lambda x: -A_bound},
+    ]
+    try:
+        sol = minimize(objective, np.zeros(2 * nb), jac=objective_grad, method="SLSQP",
+                       constraints=constraints, options={"maxiter": 100, "ftol": 1e-10})
+        if not sol.success or np.min(thrust_margins(sol.x)) < -1e-6 or np.min(
+                bound / _DEG - A_bound @ sol.x) < -1e-7:
+            return None
+    except (TrimError, np.linalg.LinAlgError):
+        return None
+    return offsets_of(sol.x)
