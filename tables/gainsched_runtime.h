@@ -73,13 +73,19 @@ extern "C" {
 #define GS_TILT_LIMIT 0x1.921fb6p+0f /* pi/2 rounded to float, rad */
 /* gs_lookup_nominal: |xi''|, |xi'''|, |xi''''| above this are GS_BAD_INPUT */
 #define GS_XI_DERIV_LIMIT 1.0e6f /* rad/s^2, rad/s^3, rad/s^4 */
-/* gs_lookup_nominal applies the table's thrust ratio only where the steady closed
- * form's motor thrust exceeds this (N); elsewhere the closed form alone */
-#define GS_FF_MIN_THRUST 1.0e-3f
+/* gs_lookup_nominal corrects a motor's closed-form thrust by the table's ratio where
+ * the steady closed form's thrust u_st is at least GS_FF_RATIO_FULL (N), by the
+ * table's difference where it is at most GS_FF_RATIO_NONE, and blends the two
+ * linearly in u_st between (a ratio near u_st = 0 is ill-conditioned) */
+#define GS_FF_RATIO_FULL 0.5f
+#define GS_FF_RATIO_NONE 0.2f
 
 /* the LQR state starts with 11 base states (docs/conventions.md) that the
  * direction mirror only changes in sign; stateful effects append theirs */
 #define GS_N_BASE_STATES 11u
+
+/* the attitude offsets' Fourier series have at most this many harmonics */
+#define GS_MAX_OFFSET_HARMONICS 8u
 
 /* cell fractions within GS_SNAP of 0 or 1 are snapped onto the grid plane */
 #define GS_SNAP 0x1p-12f
@@ -118,6 +124,9 @@ typedef struct gs_table {
     const uint8_t *state_perm; /* [n_state] ... P_x[state_perm[j]][j] = state_sign[j] */
     const uint8_t *mask;      /* [n_tilt][n_speed][n_xi] 0 = feasible */
     const gs_vehicle *vehicle; /* closed-form constants; NULL: no gs_lookup_nominal */
+    uint32_t n_offset_harmonics; /* H of the attitude offsets, <= GS_MAX_OFFSET_HARMONICS */
+    const float *offsets;     /* [n_tilt][n_speed][2][2H+1] rad: Fourier coefficients of the
+                               * nominal's pitch and yaw offsets per circle; NULL: none */
     uint32_t crc32;           /* CRC-32 of the table data (docs/runtime.md) */
 } gs_table;
 
@@ -137,7 +146,8 @@ int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float 
 typedef struct gs_nominal {
     float u_d[4];  /* nominal motor thrusts T1..T4, N */
     float x_d[10]; /* nominal reduced state: delta, xi, delta', xi', phi, theta, chi,
-                    * omega_B (3) (docs/conventions.md); delta = pi/2, theta = chi = 0 */
+                    * omega_B (3) (docs/conventions.md); delta = pi/2; theta, chi the
+                    * table's attitude offsets (0 without) */
     float tension; /* nominal tether tension of the closed form (paper eq. 18), N */
 } gs_nominal;
 

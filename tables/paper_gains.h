@@ -68,6 +68,9 @@
 #define PAPER_MIN_TENSION_N 0.5f /* taut margin: GS_LOW_TENSION below */
 #define PAPER_DRAG_MU1 0.172f /* body drag (mu1 + mu2 |v|) v, N s/m */
 #define PAPER_DRAG_MU2 0.0025f /* N s^2/m^2 */
+/* harmonics of the nominal's attitude offsets per circle (0: none, theta = chi = 0) */
+#define PAPER_OFFSET_HARMONICS 0u
+
 #if GS_RUNTIME_VERSION != PAPER_RUNTIME_VERSION
 #error "paper_gains.h needs gainsched runtime version 2"
 #endif
@@ -76217,6 +76220,8 @@ static const gs_table paper_table = {
     paper_state_perm,
     &paper_mask[0][0][0],
     &paper_vehicle,
+    PAPER_OFFSET_HARMONICS,
+    NULL,
     PAPER_CRC32,
 };
 

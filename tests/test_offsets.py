@@ -163,3 +163,107 @@ def test_config_keys_are_checked():
     # 0.05 deg is not enough at 40 deg / 15 m/s: the circle stays infeasible (thrust)
     cfg = cfg.with_values({"feasibility.attitude_offsets": "free"})
     assert circle_offsets(Model(cfg), 15.0, A40) is None
+
+
+# --------------------------------------------------------------------------- table, runtime, loop
+
+
+@pytest.fixture(scope="module")
+def free_table(free, tmp_path_factory):
+    """A small table of the free-offset config where the chi = 0 nominal fails: speeds
+    11, 13, 15 m/s at tilts 0, 34, 40 deg."""
+    from gainsched.schedule.grid import build_grid
+    from gainsched.schedule.tables import table_bytes, table_from_bytes
+
+    cfg = free.config.with_values({"grid.speeds": [11.0, 13.0, 15.0],
+                                   "grid.tilts_deg": [0.0, 34.0, 40.0]})
+    return cfg, table_from_bytes(table_bytes(cfg, build_grid(cfg), Model(cfg)))
+
+
+def test_table_has_gains_where_offsets_make_the_circle_feasible(free_table):
+    """Every circle of the small grid has gains (the chi = 0 nominal marks 34 deg at 13-15 m/s
+    and 40 deg at 11-15 m/s thrust-infeasible); the offsets are stored per circle and are
+    zero where chi = 0 was feasible (tilt 0)."""
+    cfg, t = free_table
+    assert not np.any(t.reasons)
+    assert np.all(np.isfinite(t.K)) and np.all(t.spectral_radius < 1)
+    assert t.offsets is not None and t.offsets.shape == (3, 3, 2, 7)
+    assert not np.any(t.offsets[0]) and np.all(np.abs(t.offsets[2]).max(axis=(-2, -1)) > 0)
+
+
+def test_runtime_offsets_follow_the_symmetries(free_table):
+    """The runtime's offsets at a grid circle are the trim's series (float32 coefficients),
+    for both directions (S2) and both tilt signs (S1)."""
+    from gainsched.firmware.runtime import Interpolator
+    from gainsched.schedule.offsets import AttitudeOffsets, _basis
+
+    cfg, t = free_table
+    interp = Interpolator(t)
+    xi = np.linspace(-7, 7, 101)
+    r = cfg.radius
+    off = AttitudeOffsets(t.offsets[2, 2, 0], t.offsets[2, 2, 1])  # 40 deg, 15 m/s
+    for sgn_v, sgn_a in ((1, 1), (-1, 1), (1, -1), (-1, -1)):
+        got = interp.attitude(xi, sgn_v * 15.0 / r, sgn_a * A40)
+        o = off.mirrored() if sgn_v < 0 else off
+        x = xi + (np.pi if sgn_a < 0 else 0.0)
+        B, B1, _ = _basis(x, o.harmonics)
+        want = np.stack([B @ o.pitch, B1 @ o.pitch, B @ o.yaw, B1 @ o.yaw], -1)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-7)
+
+
+def test_c_nominal_carries_the_offsets(free_table, tmp_path):
+    """C gs_lookup_nominal against the Python reference on a table with offsets: theta, chi
+    and the body rates with them, every symmetry branch, inside and between the circles."""
+    from gainsched.firmware import codegen
+    from gainsched.firmware.feedforward import feedforward
+    from gainsched.firmware.runtime import Interpolator, runtime_data
+    from gainsched.schedule.path import maneuver_path
+
+    if codegen.find_cc() is None:
+        pytest.skip("no C compiler")
+    cfg, t = free_table
+    data = runtime_data(t)
+    c = codegen.CRuntime(codegen.build_host(data, tmp_path), data)
+    assert c.verify() == 0 and c.crc32() == data.crc32()
+    interp = Interpolator(data)
+    T = np.arange(0.0, 2.0, 1e-3)
+    path = maneuver_path(11.0, 15.0, 10.0, cfg.radius, T, 0.3)
+    for alpha in (A40, -A40, np.deg2rad(37.0)):
+        for p in (path, AzimuthPath(path.t, -path.xi, tuple(-d for d in path.d))):
+            ff = feedforward(interp, p, alpha)
+            K, U, X, ten, S = c.nominal(np.stack([p.xi, *p.d], 1), alpha)
+            np.testing.assert_array_equal(S, ff.status)
+            assert np.abs(ff.x_d[:, 6]).max() > 1e-3  # the offsets are there
+            err = np.abs(X - ff.x_d) / (1 + np.abs(ff.x_d))
+            assert err.max() <= 2e-5, (err.max(0), alpha)
+            np.testing.assert_allclose(U, ff.u_d, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize(("tilt_deg", "speed"), [(40.0, 11.0), (40.0, 15.0), (34.0, 13.0)])
+def test_newly_feasible_circles_fly(free_table, tilt_deg, speed):
+    """Issue 15's closed-loop must-show: on the design model, ideal sensing and with mocap
+    noise, path mode and firmware mode on the C runtime: stable, no slack, RMS out-of-plane
+    <= 2 mm."""
+    from gainsched.native import find_cc
+    from gainsched.sim.loop import (
+        Scenario,
+        Sensing,
+        c_runtime_scheduler,
+        metrics,
+        simulate,
+        table_scheduler,
+    )
+
+    cfg, t = free_table
+    mocap = Sensing(False, 200.0, 0.0005, np.deg2rad(0.2), 0.0, 0.0, 1)
+    scheds = [("path", table_scheduler(t))]
+    if find_cc() is not None:
+        scheds.append(("firmware", c_runtime_scheduler(t)))
+    for sensing in (Sensing(), mocap):
+        for mode, sched in scheds:
+            scn = Scenario("grid", np.deg2rad(tilt_deg), speed, 3.0, sensing=sensing)
+            res = simulate(cfg, sched, scn, cfg, controller=mode)
+            m = metrics(res)
+            assert res.slack_time is None, (mode, sensing)
+            assert m["rms_out_of_plane_m"] <= 2e-3, (mode, m["rms_out_of_plane_m"])
+            assert not np.any(res.held)

@@ -154,6 +154,19 @@ def render_header(data: RuntimeData) -> str:
     )
     values["state_macros"] = _state_macros(data)
     values.update(_vehicle_values(data))
+    if data.offsets is None:
+        values.update(offset_harmonics=0, offsets_data="", offsets_ref="NULL")
+    else:
+        H = (data.offsets.shape[-1] - 1) // 2
+        values.update(
+            offset_harmonics=H, offsets_ref=f"&{data.name}_offsets[0][0][0][0]",
+            offsets_data=(
+                f"/* pitch and yaw offsets of the nominal per circle, rad: Fourier coefficients "
+                f"in the\n * azimuth [1, cos k xi, sin k xi], k = 1..{H}: "
+                f"[tilt][speed][theta, chi][2 H + 1] */\n"
+                f"static const float {data.name}_offsets[{data.name.upper()}_N_TILT]"
+                f"[{data.name.upper()}_N_SPEED][2][{2 * H + 1}] = {{\n"
+                f"{_body(data.offsets, c_float, per_line=7)}\n}};\n"))
     return render("gains.in.h", **values)
 
 

@@ -39,11 +39,14 @@ from ..schedule.closedform import closed_form
 from ..schedule.path import AzimuthPath
 from .runtime import LOW_TENSION, UNUSABLE, Interpolator, VehicleConstants
 
-__all__ = ["FF_MIN_THRUST", "FeedForward", "feedforward"]
+__all__ = ["FF_RATIO_FULL", "FF_RATIO_NONE", "FeedForward", "feedforward"]
 
-#: the table's thrust ratio is applied only where the steady closed form's motor thrust
-#: exceeds this, N (``GS_FF_MIN_THRUST``)
-FF_MIN_THRUST = 1e-3
+#: a motor's closed-form thrust is corrected by the table's ratio where the steady closed
+#: form's thrust is at least FF_RATIO_FULL (N), by the table's difference where it is at
+#: most FF_RATIO_NONE, linearly blended between (``GS_FF_RATIO_FULL``, ``GS_FF_RATIO_NONE``):
+#: a ratio near zero steady thrust is ill-conditioned
+FF_RATIO_FULL = 0.5
+FF_RATIO_NONE = 0.2
 
 
 @dataclass(frozen=True)
@@ -117,13 +120,27 @@ def feedforward(lookup: Interpolator, path: AzimuthPath, alpha: float) -> FeedFo
     # per motor, the table's thrust over the steady closed form's: a thrust scale or a
     # thrust change with airspeed multiplies the command, so a ratio carries them
     # through the manoeuvre exactly (an offset would not)
-    use = usable[:, None] & (u0 > FF_MIN_THRUST)
-    ratio = np.where(use, lk.u_d / np.where(use, u0, 1.0), 1.0)
+    # (a ratio is ill-conditioned where the steady thrust nears zero: there the table's
+    # difference, and a linear blend between)
+    s_ratio = np.clip((u0 - FF_RATIO_NONE) / (FF_RATIO_FULL - FF_RATIO_NONE), 0.0, 1.0)
+    by_ratio = u_cf * lk.u_d / np.where(u0 > FF_RATIO_NONE, u0, 1.0)
+    corrected = s_ratio * by_ratio + (1 - s_ratio) * (u_cf + lk.u_d - u0)
+    u_d = np.where(usable[:, None], corrected, u_cf)
     dphi = np.where(usable, lk.phi_d - s0[:, 4], 0.0)
     x_d = np.array(s[:, :N_STATE], dtype=float)
     phi = x_d[:, 4] + dphi
-    x_d[:, 4] = phi
-    x_d[:, 8] = xd * np.sin(phi)
-    x_d[:, 9] = xd * np.cos(phi)
+    # the correction's rate, xi' d/dxi (phi_table - phi_steady): the table's slope in its
+    # xi cell, the steady closed form's rate over its own xi'
+    slope = lookup.roll_slope(path.xi, xd, np.full_like(path.t, alpha))
+    x_d[:, 7] += np.where(usable, xd * (slope - s0[:, 7] / xd_grid), 0.0)
+    # the table's attitude offsets (theta, chi and their azimuth slopes) and the body
+    # rates of the ZYX Euler kinematics with them (closedform.state_from_attitude)
+    off = lookup.attitude(path.xi, xd, np.full_like(path.t, alpha))
+    theta, chi = off[:, 0], off[:, 2]
+    dpsi, dtheta = xd * (1 + off[:, 3]), xd * off[:, 1]
+    x_d[:, 4], x_d[:, 5], x_d[:, 6] = phi, theta, chi
+    x_d[:, 7] = x_d[:, 7] - dpsi * np.sin(theta)
+    x_d[:, 8] = dtheta * np.cos(phi) + dpsi * np.cos(theta) * np.sin(phi)
+    x_d[:, 9] = dpsi * np.cos(theta) * np.cos(phi) - dtheta * np.sin(phi)
     status = lk.status.astype(int) | np.where(tension < vehicle.min_tension, LOW_TENSION, 0)
-    return FeedForward(x_d, u_cf * ratio, tension, status)
+    return FeedForward(x_d, u_d, tension, status)

@@ -85,6 +85,7 @@ XI_DOT_LIMIT = F32(constants.XI_DOT_LIMIT)  # rad/s
 TILT_LIMIT = F32(constants.TILT_LIMIT)  # rad
 N_BASE_STATES = 11  # never permuted by the mirror (GS_N_BASE_STATES)
 SNAP = F32(2.0**-12)  # cell fractions this close to 0 or 1 are put on the grid plane
+MAX_OFFSET_HARMONICS = 8  # GS_MAX_OFFSET_HARMONICS
 
 
 #: the closed-form constants a table carries for the firmware's feed-forward (``gs_vehicle``
@@ -198,6 +199,8 @@ class RuntimeData:
     ``vehicle``: the closed-form constants of the feed-forward (:data:`VEHICLE_FIELDS`),
     float32 (30,), or None when the table's config cannot be loaded here (an effect
     registered in another process): the table then has no feed-forward.
+    ``offsets``: the nominal's pitch and yaw offsets per circle, float32 (n_a, n_v, 2,
+    2 H + 1), Fourier coefficients in the azimuth; None when the table has none.
     """
 
     name: str
@@ -217,6 +220,7 @@ class RuntimeData:
     config_sha256: str = ""
     meta: dict = field(default_factory=dict)
     vehicle: np.ndarray | None = None
+    offsets: np.ndarray | None = None
 
     @property
     def dims(self) -> tuple[int, int, int, int]:
@@ -234,6 +238,10 @@ class RuntimeData:
             yield key, np.ascontiguousarray(getattr(self, key), dtype=np.uint8).tobytes()
         if self.vehicle is not None:
             yield "vehicle", np.ascontiguousarray(self.vehicle, dtype="<f4").tobytes()
+        if self.offsets is not None:
+            H = (self.offsets.shape[-1] - 1) // 2
+            yield "offset_harmonics", np.array([H], dtype="<u4").tobytes()
+            yield "offsets", np.ascontiguousarray(self.offsets, dtype="<f4").tobytes()
 
     def crc32(self) -> int:
         """CRC-32 (zlib, IEEE) of :meth:`crc_chunks`, as ``gs_table_crc32`` computes it."""
@@ -244,7 +252,8 @@ class RuntimeData:
 
     def nbytes(self) -> int:
         """Bytes of table data the firmware stores (all arrays, without padding)."""
-        return sum(len(b) for k, b in self.crc_chunks() if k not in ("dims", "xi_scale"))
+        return sum(len(b) for k, b in self.crc_chunks()
+                   if k not in ("dims", "xi_scale", "offset_harmonics"))
 
 
 def c_identifier(name: str) -> str:
@@ -297,6 +306,18 @@ def _signed_permutation(P, source="") -> tuple[np.ndarray, np.ndarray]:
     if not ok or n > 255:
         raise InputError(source, "state map", "S2 state map is not a signed involutive permutation")
     return perm.astype(np.uint8), sign.astype(np.float32)
+
+
+def _offsets(table, src):
+    """The table's attitude offsets in float32, or None when it has none."""
+    off = getattr(table, "offsets", None)
+    if off is None or not np.any(off):
+        return None
+    H = (off.shape[-1] - 1) // 2
+    if H > MAX_OFFSET_HARMONICS:
+        raise InputError(src, "nominal/attitude_offsets",
+                         f"at most {MAX_OFFSET_HARMONICS} harmonics, got {H}")
+    return np.ascontiguousarray(off, dtype=np.float32)
 
 
 def runtime_data(table) -> RuntimeData:
@@ -378,6 +399,7 @@ def runtime_data(table) -> RuntimeData:
         config_sha256=str(table.config_sha256),
         meta=meta,
         vehicle=vehicle,
+        offsets=_offsets(table, src),
         **axes,
     )
 
@@ -511,6 +533,54 @@ class Interpolator:
         )
 
     lookup = __call__
+
+    def attitude(self, xi, xi_dot, alpha) -> np.ndarray:
+        """The nominal's attitude offsets at queries (m,): ``(m, 4)`` = theta rad,
+        d theta / d xi, chi rad, d chi / d xi (zero without offsets or where unusable).
+
+        The offsets' Fourier coefficients are interpolated over the cell's four circles
+        (the lookup's weights summed over the azimuth pair), mapped back through S2
+        (theta keeps its sign, chi flips; ``xi -> pi - xi``) and S1 (``xi -> xi + pi``), and
+        the series evaluated at the query's azimuth.
+        """
+        d = self.data
+        xi = np.asarray(xi, dtype=np.float64).reshape(-1)
+        out = np.zeros((xi.size, 4))
+        if d.offsets is None:
+            return out
+        pts, w, status, mirrored = self.cells(xi, xi_dot, alpha)
+        n_xi, nb = d.xi.size, d.offsets.shape[-1]
+        H = (nb - 1) // 2
+        circ = pts[:, ::2] // n_xi  # (m, 4) flat (tilt, speed) circles
+        wc = (w[:, ::2].astype(np.float64) + w[:, 1::2])  # (m, 4)
+        coef = np.einsum("mc,mcab->mab", wc, d.offsets.reshape(-1, 2, nb)[circ].astype(float))
+        sgn = (-1.0) ** np.arange(1, H + 1)
+        a32 = np.broadcast_to(np.asarray(alpha, dtype=np.float32), xi.shape)
+        shifted = a32 < 0
+        m = np.concatenate([[1.0], sgn, -sgn])
+        coef = np.where(mirrored[:, None, None], coef * m, coef)
+        coef[:, 1] *= np.where(mirrored, -1.0, 1.0)[:, None]
+        sh = np.concatenate([[1.0], sgn, sgn])
+        coef = np.where(shifted[:, None, None], coef * sh, coef)
+        k = np.arange(1, H + 1)
+        c, s = np.cos(np.outer(xi, k)), np.sin(np.outer(xi, k))
+        for a in range(2):
+            ak, bk = coef[:, a, 1:H + 1], coef[:, a, H + 1:]
+            out[:, 2 * a] = coef[:, a, 0] + np.sum(ak * c + bk * s, -1)
+            out[:, 2 * a + 1] = np.sum(k * (bk * c - ak * s), -1)
+        out[(status & UNUSABLE) != 0] = 0.0
+        return out
+
+    def roll_slope(self, xi, xi_dot, alpha) -> np.ndarray:
+        """Slope along xi of the interpolated ``phi_d`` at queries (m,), rad/rad: the
+        (tilt, speed) weights times the difference across the xi cell (the C runtime's
+        ``dphi_dxi``); S2 (``phi -> -phi``, ``xi -> pi - xi``) leaves its sign."""
+        pts, w, status, _ = self.cells(xi, xi_dot, alpha)
+        w = w.astype(np.float64)
+        P = self._P
+        pair = (w[:, ::2] + w[:, 1::2]) * (P[pts[:, 1::2]] - P[pts[:, ::2]])
+        out = pair.sum(-1) * float(self.data.xi_scale)
+        return np.where((status & UNUSABLE) != 0, 0.0, out)
 
     def query(self, xi: float, xi_dot: float, alpha: float):
         """One query, for control loops: ``(K (4, n), u_d (4,) N, phi_d rad, status int)``.

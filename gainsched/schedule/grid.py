@@ -38,7 +38,8 @@ from ..native.reproducible import (
 )
 from .linearize import discretize, jacobians, lqr_system
 from .lqr import dlqr, periodic_lqr, spectral_radius
-from .nominal import circle_nominal
+from .nominal import circle_nominal, circle_offsets
+from .offsets import HARMONICS
 from .path import period
 from .trim import TrimError
 
@@ -91,6 +92,8 @@ class CircleSolution:
     sweeps : (n_a,) int
     lin_samples : (n_a,) int   azimuths of exact linearisation (see :func:`discrete_system`)
     lin_error : (n_a,) float   its interpolation check; steps : int; dt : float, s
+    offsets : (n_a, 2, 2 H + 1) rad   Fourier coefficients of the pitch and yaw offsets of
+        the nominal (:class:`~gainsched.schedule.offsets.AttitudeOffsets`; zero for none)
     """
 
     K: np.ndarray
@@ -105,6 +108,7 @@ class CircleSolution:
     lin_error: np.ndarray
     steps: int
     dt: float
+    offsets: np.ndarray
 
 
 def _sample_steps(N, n_xi):
@@ -253,6 +257,7 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=Tr
     phi_d = np.full((n_a, n_xi), np.nan)
     tension = np.full((n_a, n_xi), np.nan)
     reasons = np.full((n_a, n_xi), Reason.TRIM_FAILED, dtype=np.uint8)
+    offsets = np.zeros((n_a, 2, 2 * HARMONICS + 1))
     for i, a in enumerate(tilts):
         try:
             # feasibility is checked on the nominal at every control step
@@ -262,6 +267,9 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=Tr
             bad[i] = Reason.TRIM_FAILED
             continue
         u_d[i], phi_d[i], tension[i] = g.u, g.phi, g.tension
+        off = circle_offsets(model, speed, a)
+        if off is not None:
+            offsets[i] = off.pitch, off.yaw
         elsewhere = (g.reasons == 0) & (bad[i] != 0)
         reasons[i] = g.reasons | np.where(elsewhere, Reason.ELSEWHERE, 0).astype(np.uint8)
     Qx = np.zeros((n, n))
@@ -291,7 +299,7 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=Tr
         sweeps[idx] = sol.sweeps
     steps = tuple(np.concatenate(x) for x in zip(*kept, strict=True)) if kept else None
     out = CircleSolution(K, S, u_d, phi_d, tension, reasons, radius, sweeps, lin_samples,
-                         lin_error, N, dt)
+                         lin_error, N, dt, offsets)
     return (out, steps) if keep_steps else out
 
 
@@ -312,6 +320,7 @@ class GridResult:
     lin_error: np.ndarray
     steps: np.ndarray
     dt: np.ndarray
+    offsets: np.ndarray
 
 
 def _solve_speed(config, speed: float, tilts, effects=()) -> CircleSolution:
@@ -391,6 +400,7 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
                 progress(1)
 
     per_tilt = {f.name: np.stack([getattr(s, f.name) for s in sols], axis=1)
-                for f in fields(CircleSolution) if f.name not in ("steps", "dt")}
+                for f in fields(CircleSolution) if f.name not in ("steps", "dt", "offsets")}
+    per_tilt["offsets"] = np.stack([s.offsets for s in sols], axis=1)
     return GridResult(**per_tilt, steps=np.array([s.steps for s in sols]),
                       dt=np.array([s.dt for s in sols]))

@@ -94,15 +94,19 @@ def feasibility_reasons(config, u, tension) -> np.ndarray:
 
 
 def nominal_from_path(model, path: AzimuthPath, alpha: float, *,
-                      periodic: bool | None = None) -> Nominal:
+                      periodic: bool | None = None,
+                      offsets: AttitudeOffsets | None = None) -> Nominal:
     """Nominal (state, input, tension, feasibility) along ``path`` at tilt ``alpha`` (rad).
 
-    Uses the closed form when the model's effects allow it, otherwise the
-    numerical trim of :mod:`gainsched.schedule.trim` (``periodic`` selects the Fourier
-    collocation for whole constant-speed circles; default: inferred).
+    Uses the closed form when the model's effects allow it and there are no attitude
+    ``offsets``, otherwise the numerical trim of :mod:`gainsched.schedule.trim`
+    (``periodic`` selects the Fourier collocation for whole constant-speed circles;
+    default: inferred).
     """
     D = model.closed_form_drag()
-    if D is not None:
+    if offsets is not None:
+        z, zdot, u, tension = trim_path(model, path, alpha, periodic=periodic, offsets=offsets)
+    elif D is not None:
         z, zdot, u, tension = closed_form(model, path, alpha, D)
     else:
         z, zdot, u, tension = trim_path(model, path, alpha, periodic=periodic)

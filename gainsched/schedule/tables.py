@@ -48,6 +48,10 @@ class Table:
     reasons : (n_a, n_v, n_xi) uint8 (0 = feasible)
     spectral_radius : (n_a, n_v); Q : (n, n); R : (4, 4); dt : (n_v,) s
     config_text : str; config_sha256 : str; attrs : dict
+    offsets : (n_a, n_v, 2, 2 H + 1) rad or None
+        Fourier coefficients in the azimuth of the nominal's pitch and yaw offsets per
+        circle (:class:`~gainsched.schedule.offsets.AttitudeOffsets`); None: all zero
+        (a table of a config with ``attitude_offsets = "zero"``, or older).
     """
 
     xi: np.ndarray
@@ -68,6 +72,7 @@ class Table:
     config_sha256: str
     attrs: dict
     source: str = ""
+    offsets: np.ndarray | None = None
 
     @property
     def name(self) -> str:
@@ -169,6 +174,10 @@ def table_bytes(config, grid, model) -> bytes:
         _create(nm, "u_d", grid.u_d, "N", "nominal motor thrusts (tilt, speed, xi, 4)")
         _create(nm, "phi_d", grid.phi_d, "rad", "nominal roll")
         _create(nm, "tension", grid.tension, "N", "nominal tether tension")
+        if np.any(grid.offsets):
+            _create(nm, "attitude_offsets", grid.offsets, "rad",
+                    "pitch and yaw offsets per circle: Fourier coefficients in the azimuth "
+                    "(tilt, speed, [theta, chi], [1, cos k xi, sin k xi])")
         fe = _group(f, "feasibility")
         ds = _create(fe, "reasons", grid.reasons, None, "bit mask, 0 = feasible")
         for bit, text in REASONS.items():
@@ -320,6 +329,14 @@ def _read(f, path) -> Table:
     if n < N_STATE or len(names) != n:
         raise InputError(path, "gains/K_tilt0", f"{n} state columns; need >= {N_STATE} and one per "
                          f"name in state_names ({len(names)})")
+    offsets = None
+    if "nominal/attitude_offsets" in f:
+        offsets = np.asarray(f["nominal/attitude_offsets"][()], dtype=float)
+        nb = offsets.shape[-1] if offsets.ndim == 4 else 0
+        if offsets.shape != (n_a, n_v, 2, nb) or nb % 2 != 1 or not np.all(np.isfinite(offsets)):
+            raise InputError(path, "nominal/attitude_offsets",
+                             f"shape {offsets.shape} does not match the axes ({n_a}, {n_v}, 2, "
+                             "2 H + 1), or not finite")
     _verify(f, path)  # after the structure, so that a missing dataset is named as such
     _check_feasible_finite(path, d, tilt, speed, xi)
     return Table(
@@ -327,6 +344,7 @@ def _read(f, path) -> Table:
         d["nominal/tension"], d["feasibility/reasons"].astype(np.uint8),
         d["closed_loop/spectral_radius"], d["weights/Q"], d["weights/R"], d["closed_loop/dt"],
         str(d["config_text"]), str(attrs.get("config_sha256", "")), attrs, str(path),
+        offsets,
     )
 
 

@@ -37,7 +37,7 @@ from ..model.rotations import (
     matrix_from_quaternion,
     quaternion_from_matrix,
 )
-from ..schedule.nominal import nominal_from_path
+from ..schedule.nominal import circle_offsets, nominal_from_path
 from ..schedule.path import AzimuthPath, maneuver_path
 from .fastplant import SUPPORTED_EFFECTS, fast_plant
 
@@ -331,7 +331,10 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     alpha = scenario.tilt
     path = profile_path(scenario, dmodel.r, t)
     if controller == "path":
-        nom = nominal_from_path(dmodel, path, alpha, periodic=False)
+        # a constant-speed circle flies the table's nominal, attitude offsets included
+        offsets = (circle_offsets(dmodel, scenario.speed, alpha) if not scenario.maneuvers
+                   else None)
+        nom = nominal_from_path(dmodel, path, alpha, periodic=False, offsets=offsets)
         z_d, u_d, tension_d = nom.z[:, :N_STATE], nom.u, nom.tension
     elif controller == "firmware":  # no trim of the design model: only what a firmware has
         source = getattr(scheduler, "feedforward", None)

@@ -80,11 +80,31 @@ static inline int gs_table_usable(const gs_table *t)
     return t->n_tilt >= 1u && t->n_speed >= 1u && t->n_xi >= 1u && t->n_state >= 1u &&
            t->n_state <= 255u && t->xi_dot != NULL && t->tilt != NULL && t->K_tilt0 != NULL &&
            (t->K != NULL || t->n_tilt == 1u) && t->u_d != NULL && t->phi_d != NULL &&
-           t->state_sign != NULL && t->state_perm != NULL && t->mask != NULL;
+           t->state_sign != NULL && t->state_perm != NULL && t->mask != NULL &&
+           (t->offsets == NULL || t->n_offset_harmonics <= GS_MAX_OFFSET_HARMONICS);
 }
+
+/* where a query fell: corner indices and fractions per axis, and the symmetry maps */
+typedef struct gs_cell {
+    uint32_t ia[2], iv[2];
+    float fa, fv;
+    int mirrored; /* S2 applied */
+    int shifted;  /* S1 applied */
+    float dphi_dxi; /* slope of the interpolated phi_d along xi (rad/rad), original frame */
+} gs_cell;
+
+static int gs_lookup_cell(const gs_table *t, float xi, float xi_dot, float alpha, float *K,
+                          float *u_d, float *phi_d, gs_cell *cell);
 
 int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float *K, float *u_d,
               float *phi_d)
+{
+    gs_cell cell;
+    return gs_lookup_cell(table, xi, xi_dot, alpha, K, u_d, phi_d, &cell);
+}
+
+static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float alpha, float *K,
+                          float *u_d, float *phi_d, gs_cell *cell)
 {
     const gs_table *t = table;
     size_t n, nK, e;
@@ -113,15 +133,18 @@ int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float 
     }
 
     /* 2-3. symmetry maps into the fundamental domain */
+    cell->shifted = 0;
     if (alpha < 0.0f) { /* S1: (-alpha, xi) == (alpha, xi + pi) */
         xi = xi + GS_PI;
         alpha = -alpha;
+        cell->shifted = 1;
     }
     if (xi_dot < 0.0f) { /* S2: mirror, undone on the outputs */
         xi = GS_PI - xi;
         xi_dot = -xi_dot;
         mirrored = 1;
     }
+    cell->mirrored = mirrored;
 
     /* 4. xi: periodic uniform axis, in cell units; |tt| < 2^24 so the
      * float <-> int conversions below are exact */
@@ -168,6 +191,8 @@ int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float 
         ia[0] = ia[1] = 0u;
         fa = 0.0f;
     }
+    cell->ia[0] = ia[0], cell->ia[1] = ia[1], cell->iv[0] = iv[0], cell->iv[1] = iv[1];
+    cell->fa = fa, cell->fv = fv;
 
     /* 5. the 8 corners c (bit 2: tilt, bit 1: speed, bit 0: xi): regular grid
      * points P[c], weights w[c], gain blocks pk[c] */
@@ -269,6 +294,11 @@ int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float 
         u_d[3] = o[3];
         *phi_d = ((w0 * ph[P[0]] + w1 * ph[P[1]]) + (w2 * ph[P[2]] + w3 * ph[P[3]])) +
                  ((w4 * ph[P[4]] + w5 * ph[P[5]]) + (w6 * ph[P[6]] + w7 * ph[P[7]]));
+        /* its slope along xi inside the cell: (tilt, speed) weights times the xi step;
+         * the mirror S2 (phi -> -phi, xi -> pi - xi) leaves the slope's sign */
+        cell->dphi_dxi = (((w0 + w1) * (ph[P[1]] - ph[P[0]]) + (w2 + w3) * (ph[P[3]] - ph[P[2]])) +
+                          ((w4 + w5) * (ph[P[5]] - ph[P[4]]) + (w6 + w7) * (ph[P[7]] - ph[P[6]]))) *
+                         t->xi_scale;
     }
 
     if (mirrored) {
@@ -403,6 +433,62 @@ float gs_sqrtf(float x)
     return x * gs_rsqrtf(x);
 }
 
+/* ---- attitude offsets -------------------------------------------------------
+ * Pitch and yaw offsets of the nominal, per circle, as Fourier coefficients in the
+ * azimuth, c = [c0, a_1..a_H, b_1..b_H], f(xi) = c0 + sum_k a_k cos(k xi) + b_k sin(k xi)
+ * (gainsched/schedule/offsets.py). Interpolated bilinearly over the lookup's (tilt,
+ * speed) cell, mapped back through the symmetries (S2, xi -> pi - xi: theta keeps
+ * its sign, chi flips, a_k -> (-1)^k a_k, b_k -> -(-1)^k b_k; S1, xi -> xi + pi:
+ * a_k, b_k -> (-1)^k a_k, b_k) and evaluated at the query's azimuth: out = {theta,
+ * dtheta/dxi, chi, dchi/dxi}. */
+static void gs_offsets(const gs_table *t, const gs_cell *c, float sx, float cx, float out[4])
+{
+    const uint32_t H = t->n_offset_harmonics, nb = 2u * H + 1u;
+    const float wa1 = c->fa, wv1 = c->fv, wa0 = 1.0f - c->fa, wv0 = 1.0f - c->fv;
+    const float wq[4] = {wa0 * wv0, wa0 * wv1, wa1 * wv0, wa1 * wv1};
+    const size_t q[4] = {(size_t)c->ia[0] * t->n_speed + c->iv[0],
+                         (size_t)c->ia[0] * t->n_speed + c->iv[1],
+                         (size_t)c->ia[1] * t->n_speed + c->iv[0],
+                         (size_t)c->ia[1] * t->n_speed + c->iv[1]};
+    const float *const o = t->offsets;
+    uint32_t a, k;
+    for (a = 0u; a < 2u; ++a) {
+        const size_t b0 = (q[0] * 2u + a) * nb, b1 = (q[1] * 2u + a) * nb;
+        const size_t b2 = (q[2] * 2u + a) * nb, b3 = (q[3] * 2u + a) * nb;
+        /* the sign of chi under S2 */
+        const float flip = (c->mirrored && a == 1u) ? -1.0f : 1.0f;
+        float ck = cx, sk = sx, sgn = -1.0f; /* cos, sin of k xi; (-1)^k */
+        float f = flip * ((wq[0] * o[b0] + wq[1] * o[b1]) + (wq[2] * o[b2] + wq[3] * o[b3]));
+        float df = 0.0f;
+        for (k = 1u; k <= H; ++k) {
+            const uint32_t ja = k, jb = H + k;
+            float ak = (wq[0] * o[b0 + ja] + wq[1] * o[b1 + ja]) +
+                       (wq[2] * o[b2 + ja] + wq[3] * o[b3 + ja]);
+            float bk = (wq[0] * o[b0 + jb] + wq[1] * o[b1 + jb]) +
+                       (wq[2] * o[b2 + jb] + wq[3] * o[b3 + jb]);
+            float tmp;
+            if (c->mirrored) {
+                ak = sgn * ak;
+                bk = -sgn * bk;
+            }
+            if (c->shifted) {
+                ak = sgn * ak;
+                bk = sgn * bk;
+            }
+            ak *= flip;
+            bk *= flip;
+            f += ak * ck + bk * sk;
+            df += (float)k * (bk * ck - ak * sk);
+            tmp = ck * cx - sk * sx; /* angle addition: (k + 1) xi */
+            sk = sk * cx + ck * sx;
+            ck = tmp;
+            sgn = -sgn;
+        }
+        out[2u * a] = f;
+        out[2u * a + 1u] = df;
+    }
+}
+
 /* ---- manoeuvre feed-forward ----------------------------------------------- */
 
 /* The drag-only closed form (paper eqs. 15-18, eq. 17 corrected) at the reference
@@ -477,7 +563,9 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
     const gs_table *t = table;
     const gs_vehicle *vh;
     float ud_tab[4], phi_tab, u_cf[4], sc[2], dphi, ten, inv_m;
-    float sx, cx, sa, ca, phi, sphi, cphi;
+    float sx, cx, sa, ca, phi, sphi, cphi, st = 0.0f, ct = 1.0f;
+    float off[4] = {0.0f, 0.0f, 0.0f, 0.0f}; /* theta, dtheta/dxi, chi, dchi/dxi */
+    gs_cell cell;
     int status;
     unsigned i;
 
@@ -493,7 +581,7 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
             return GS_BAD_INPUT;
         }
     }
-    status = gs_lookup(t, ref[0], ref[1], alpha, K, ud_tab, &phi_tab);
+    status = gs_lookup_cell(t, ref[0], ref[1], alpha, K, ud_tab, &phi_tab, &cell);
     if ((status & (GS_BAD_INPUT | GS_BAD_ARG)) != 0) {
         gs_zero_nominal(nom);
         return status;
@@ -524,14 +612,27 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
         d_st[0] = xd_g, d_st[1] = 0.0f, d_st[2] = 0.0f, d_st[3] = 0.0f;
         gs_closed_form(vh, inv_m, d_st, sx, cx, sas, cas, u_st, sc_st, &dphi_st, &ten_st);
         for (i = 0u; i < 4u; ++i) {
-            if (u_st[i] > GS_FF_MIN_THRUST) {
+            const float add = u_cf[i] + (ud_tab[i] - u_st[i]);
+            if (u_st[i] >= GS_FF_RATIO_FULL) {
                 u_cf[i] = u_cf[i] * (ud_tab[i] / u_st[i]);
+            } else if (u_st[i] <= GS_FF_RATIO_NONE) {
+                u_cf[i] = add;
+            } else {
+                const float s = (u_st[i] - GS_FF_RATIO_NONE) *
+                                (1.0f / (GS_FF_RATIO_FULL - GS_FF_RATIO_NONE));
+                u_cf[i] = s * (u_cf[i] * (ud_tab[i] / u_st[i])) + (1.0f - s) * add;
             }
         }
+        /* the correction's rate: xi' d/dxi (phi_tab - phi_st) */
+        dphi = dphi + ref[1] * (cell.dphi_dxi - dphi_st / xd_g);
         /* phi = phi_tab + (phi_cf - phi_st): one atan2 of the difference */
         phi = phi_tab + gs_atan2f(sc[0] * sc_st[1] - sc[1] * sc_st[0],
                                   sc[1] * sc_st[1] + sc[0] * sc_st[0]);
         gs_sincosf(phi, &sphi, &cphi);
+        if (t->offsets != NULL) {
+            gs_offsets(t, &cell, sx, cx, off);
+            gs_sincosf(off[0], &st, &ct);
+        }
     } else { /* the closed form alone */
         phi = gs_atan2f(sc[0], sc[1]);
         sphi = sc[0];
@@ -545,11 +646,16 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
     nom->x_d[2] = 0.0f;
     nom->x_d[3] = ref[1];
     nom->x_d[4] = phi;
-    nom->x_d[5] = 0.0f; /* theta */
-    nom->x_d[6] = 0.0f; /* chi */
-    nom->x_d[7] = dphi; /* omega_B (eq. 15) */
-    nom->x_d[8] = ref[1] * sphi;
-    nom->x_d[9] = ref[1] * cphi;
+    nom->x_d[5] = off[0]; /* theta */
+    nom->x_d[6] = off[2]; /* chi */
+    {
+        /* omega_B from the ZYX Euler rates (eq. 15 with offsets): psi' = xi' (1 + chi_xi),
+         * theta' = xi' theta_xi */
+        const float dpsi = ref[1] * (1.0f + off[3]), dth = ref[1] * off[1];
+        nom->x_d[7] = dphi - dpsi * st;
+        nom->x_d[8] = dth * cphi + dpsi * ct * sphi;
+        nom->x_d[9] = dpsi * ct * cphi - dth * sphi;
+    }
     nom->tension = ten;
     if (ten < vh->min_tension) {
         status |= GS_LOW_TENSION;
@@ -635,6 +741,12 @@ uint32_t gs_table_crc32(const gs_table *t)
         crc = gs_crc_u32(crc, gs_bits(vh->drag_mu2));
         crc = gs_crc_floats(crc, vh->J, 9u);
         crc = gs_crc_floats(crc, vh->alloc_inv, 16u);
+    }
+    if (t->offsets != NULL) {
+        crc = gs_crc_u32(crc, t->n_offset_harmonics);
+        crc = gs_crc_floats(crc, t->offsets,
+                            (size_t)t->n_tilt * t->n_speed * 2u *
+                                (2u * t->n_offset_harmonics + 1u));
     }
     return crc ^ 0xffffffffu;
 }

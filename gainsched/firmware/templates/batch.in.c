@@ -89,12 +89,12 @@ uint32_t ${name}_dims(int which)
 
 /* gs_verify on a copy of the table whose array `which` (CRC order: 0 xi, 1 speed,
  * 2 xi_dot, 3 tilt, 4 K_tilt0, 5 K, 6 u_d, 7 phi_d, 8 state_sign, 9 state_perm,
- * 10 mask, 11 vehicle) has byte `byte` XOR-ed with `flip`. -1 if out of range. */
+ * 10 mask, 11 vehicle, 12 offsets) has byte `byte` XOR-ed with `flip`. -1 if out of range. */
 int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
 {
     gs_table t = ${name}_table;
-    const void *src[12];
-    size_t size[12];
+    const void *src[13];
+    size_t size[13];
     size_t n_pts = (size_t)t.n_tilt * t.n_speed * t.n_xi;
     unsigned char *copy;
     int r;
@@ -110,7 +110,11 @@ int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
     src[9] = t.state_perm; size[9] = t.n_state;
     src[10] = t.mask; size[10] = n_pts;
     src[11] = t.vehicle; size[11] = t.vehicle != NULL ? sizeof(gs_vehicle) : 0u;
-    if (which < 0 || which > 11 || byte >= size[which]) {
+    src[12] = t.offsets;
+    size[12] = t.offsets != NULL
+                   ? n_pts / t.n_xi * 2u * (2u * t.n_offset_harmonics + 1u) * sizeof(float)
+                   : 0u;
+    if (which < 0 || which > 12 || byte >= size[which]) {
         return -1;
     }
     copy = (unsigned char *)malloc(size[which]);
@@ -131,7 +135,8 @@ int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
     case 8: t.state_sign = (const float *)(void *)copy; break;
     case 9: t.state_perm = copy; break;
     case 10: t.mask = copy; break;
-    default: t.vehicle = (const gs_vehicle *)(void *)copy; break;
+    case 11: t.vehicle = (const gs_vehicle *)(void *)copy; break;
+    default: t.offsets = (const float *)(void *)copy; break;
     }
     r = gs_verify(&t);
     free(copy);

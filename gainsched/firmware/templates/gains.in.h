@@ -52,6 +52,9 @@ ${state_macros}
 /* the manoeuvre feed-forward's closed form (gs_lookup_nominal): 1 if available */
 #define ${NAME}_HAS_NOMINAL ${has_vehicle}
 ${vehicle_macros}
+/* harmonics of the nominal's attitude offsets per circle (0: none, theta = chi = 0) */
+#define ${NAME}_OFFSET_HARMONICS ${offset_harmonics}u
+
 #if GS_RUNTIME_VERSION != ${NAME}_RUNTIME_VERSION
 #error "${name}_gains.h needs gainsched runtime version ${runtime_version}"
 #endif
@@ -109,7 +112,7 @@ static const uint8_t ${name}_mask[${NAME}_N_TILT][${NAME}_N_SPEED][${NAME}_N_XI]
 ${mask}
 };
 
-${vehicle_data}
+${vehicle_data}${offsets_data}
 static const gs_table ${name}_table = {
     ${NAME}_N_TILT,
     ${NAME}_N_SPEED,
@@ -128,6 +131,8 @@ static const gs_table ${name}_table = {
     ${name}_state_perm,
     &${name}_mask[0][0][0],
     ${vehicle_ref},
+    ${NAME}_OFFSET_HARMONICS,
+    ${offsets_ref},
     ${NAME}_CRC32,
 };
 
