@@ -29,6 +29,7 @@
 #ifndef PAPER_GAINS_H
 #define PAPER_GAINS_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "gainsched_runtime.h"

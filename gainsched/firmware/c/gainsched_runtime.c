@@ -99,8 +99,7 @@ static int gs_lookup_cell(const gs_table *t, float xi, float xi_dot, float alpha
 int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float *K, float *u_d,
               float *phi_d)
 {
-    gs_cell cell;
-    return gs_lookup_cell(table, xi, xi_dot, alpha, K, u_d, phi_d, &cell);
+    return gs_lookup_cell(table, xi, xi_dot, alpha, K, u_d, phi_d, NULL);
 }
 
 static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float alpha, float *K,
@@ -111,7 +110,7 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
     uint32_t ia[2], iv[2], ix[2];
     float fa, fv, fx, tt;
     int32_t fl, jx;
-    int mirrored = 0;
+    int mirrored = 0, shifted = 0;
     int status = GS_OK;
     unsigned any_mask = 0u;
     size_t P[8];
@@ -133,18 +132,17 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
     }
 
     /* 2-3. symmetry maps into the fundamental domain */
-    cell->shifted = 0;
     if (alpha < 0.0f) { /* S1: (-alpha, xi) == (alpha, xi + pi) */
         xi = xi + GS_PI;
         alpha = -alpha;
-        cell->shifted = 1;
+        shifted = 1;
     }
     if (xi_dot < 0.0f) { /* S2: mirror, undone on the outputs */
         xi = GS_PI - xi;
         xi_dot = -xi_dot;
         mirrored = 1;
     }
-    cell->mirrored = mirrored;
+
 
     /* 4. xi: periodic uniform axis, in cell units; |tt| < 2^24 so the
      * float <-> int conversions below are exact */
@@ -191,8 +189,12 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
         ia[0] = ia[1] = 0u;
         fa = 0.0f;
     }
-    cell->ia[0] = ia[0], cell->ia[1] = ia[1], cell->iv[0] = iv[0], cell->iv[1] = iv[1];
-    cell->fa = fa, cell->fv = fv;
+    if (cell != NULL) { /* gs_lookup_nominal's: where the query fell */
+        cell->ia[0] = ia[0], cell->ia[1] = ia[1], cell->iv[0] = iv[0], cell->iv[1] = iv[1];
+        cell->fa = fa, cell->fv = fv;
+        cell->mirrored = mirrored, cell->shifted = shifted;
+        cell->dphi_dxi = 0.0f;
+    }
 
     /* 5. the 8 corners c (bit 2: tilt, bit 1: speed, bit 0: xi): regular grid
      * points P[c], weights w[c], gain blocks pk[c] */
@@ -296,9 +298,12 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
                  ((w4 * ph[P[4]] + w5 * ph[P[5]]) + (w6 * ph[P[6]] + w7 * ph[P[7]]));
         /* its slope along xi inside the cell: (tilt, speed) weights times the xi step;
          * the mirror S2 (phi -> -phi, xi -> pi - xi) leaves the slope's sign */
-        cell->dphi_dxi = (((w0 + w1) * (ph[P[1]] - ph[P[0]]) + (w2 + w3) * (ph[P[3]] - ph[P[2]])) +
-                          ((w4 + w5) * (ph[P[5]] - ph[P[4]]) + (w6 + w7) * (ph[P[7]] - ph[P[6]]))) *
-                         t->xi_scale;
+        if (cell != NULL) {
+            cell->dphi_dxi =
+                (((w0 + w1) * (ph[P[1]] - ph[P[0]]) + (w2 + w3) * (ph[P[3]] - ph[P[2]])) +
+                 ((w4 + w5) * (ph[P[5]] - ph[P[4]]) + (w6 + w7) * (ph[P[7]] - ph[P[6]]))) *
+                t->xi_scale;
+        }
     }
 
     if (mirrored) {

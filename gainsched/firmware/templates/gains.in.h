@@ -29,6 +29,7 @@
 #ifndef ${NAME}_GAINS_H
 #define ${NAME}_GAINS_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "gainsched_runtime.h"
