@@ -154,19 +154,7 @@ def render_header(data: RuntimeData) -> str:
     )
     values["state_macros"] = _state_macros(data)
     values.update(_vehicle_values(data))
-    if data.offsets is None:
-        values.update(offset_harmonics=0, offsets_data="", offsets_ref="NULL")
-    else:
-        H = (data.offsets.shape[-1] - 1) // 2
-        values.update(
-            offset_harmonics=H, offsets_ref=f"&{data.name}_offsets[0][0][0][0]",
-            offsets_data=(
-                f"/* pitch and yaw offsets of the nominal per circle, rad: Fourier coefficients "
-                f"in the\n * azimuth [1, cos k xi, sin k xi], k = 1..{H}: "
-                f"[tilt][speed][theta, chi][2 H + 1] */\n"
-                f"static const float {data.name}_offsets[{data.name.upper()}_N_TILT]"
-                f"[{data.name.upper()}_N_SPEED][2][{2 * H + 1}] = {{\n"
-                f"{_body(data.offsets, c_float, per_line=7)}\n}};\n"))
+    values.update(_offsets_values(data))
     return render("gains.in.h", **values)
 
 
@@ -206,6 +194,20 @@ def _vehicle_values(data: RuntimeData) -> dict:
             f"static const gs_vehicle {name}_vehicle = {{\n" + ",\n".join(inits) + ",\n};\n")
     return dict(has_vehicle=1, vehicle_macros=macros, vehicle_data=body,
                 vehicle_ref=f"&{name}_vehicle")
+
+
+def _offsets_values(data: RuntimeData) -> dict:
+    """Template values of the nominal's attitude offsets (or their absence)."""
+    if data.offsets is None:
+        return dict(offset_harmonics=0, offsets_data="", offsets_ref="NULL")
+    name, NAME = data.name, data.name.upper()
+    H = (data.offsets.shape[-1] - 1) // 2
+    body = (f"/* pitch and yaw offsets of the nominal per circle, rad: Fourier coefficients "
+            f"in the\n * azimuth [1, cos k xi, sin k xi], k = 1..{H}: "
+            f"[tilt][speed][theta, chi][2 H + 1] */\n"
+            f"static const float {name}_offsets[{NAME}_N_TILT][{NAME}_N_SPEED][2][{2 * H + 1}] = "
+            f"{{\n{_body(data.offsets, c_float, per_line=7)}\n}};\n")
+    return dict(offset_harmonics=H, offsets_data=body, offsets_ref=f"&{name}_offsets[0][0][0][0]")
 
 
 def header_name(data: RuntimeData) -> str:

@@ -263,25 +263,34 @@ def c_identifier(name: str) -> str:
     return out if not out[0].isdigit() else f"t{out}"
 
 
-def _state_mirror(table) -> np.ndarray:
-    """P_x of the table's LQR state, from its config's integrals and effects (or, for a
-    config this process cannot load, e.g. one naming an effect registered elsewhere,
-    from the integral states in ``state_names`` when there are no effect states)."""
+def _table_config(table):
+    """``(config, None)`` of the table's config text, or ``(None, error)`` when this
+    process cannot load it (a config naming an effect registered elsewhere)."""
     from ..config import config_from_text
+
+    try:
+        return config_from_text(table.config_text, f"{table.source}:config_text"), None
+    except InputError as exc:
+        return None, exc
+
+
+def _state_mirror(table, cfg, error) -> np.ndarray:
+    """P_x of the table's LQR state, from its config's integrals and effects (or, for a
+    config this process cannot load, ``cfg`` None with the loading ``error``, from the
+    integral states in ``state_names`` when there are no effect states)."""
     from ..constants import INTEGRATORS, REDUCED_NAMES
     from ..model.effects import effects_from_specs
     from ..model.symmetry import state_mirror
 
     n = table.K_tilt0.shape[-1]
-    try:
-        cfg = config_from_text(table.config_text, f"{table.source}:config_text")
+    if cfg is not None:
         P = state_mirror(effects_from_specs(cfg.effects), cfg.control.integrators)
-    except InputError:
+    else:
         names = str(table.attrs.get("state_names", "")).split(",")
         integrators = tuple(x for x in names if x in INTEGRATORS)
         if names[:len(REDUCED_NAMES)] != list(REDUCED_NAMES) or len(names) != len(
                 REDUCED_NAMES) + len(integrators):
-            raise
+            raise error
         P = state_mirror((), integrators)
     if P.shape != (n, n):
         raise InputError(table.source, "config_text", f"state map is {P.shape}, gains have n={n}")
@@ -340,7 +349,8 @@ def runtime_data(table) -> RuntimeData:
         raise InputError(src, "axes/xi_dot", "must be positive")
     if np.any(table.reasons & MASK_NO_GAINS):
         raise InputError(src, "feasibility/reasons", f"bit {MASK_NO_GAINS:#x} is reserved")
-    perm, sign = _signed_permutation(_state_mirror(table), src)
+    cfg, cfg_error = _table_config(table)
+    perm, sign = _signed_permutation(_state_mirror(table, cfg, cfg_error), src)
     K0 = np.asarray(table.K_tilt0, dtype=np.float64)
     K = np.asarray(table.K, dtype=np.float64)
     u_d = np.asarray(table.u_d, dtype=np.float64)
@@ -372,13 +382,8 @@ def runtime_data(table) -> RuntimeData:
         return np.ascontiguousarray(x, dtype=np.float32)
 
     names = tuple(str(table.attrs.get("state_names", "")).split(",")) if table.attrs else ()
-    from ..config import config_from_text
-
-    try:
-        vehicle = vehicle_constants(config_from_text(table.config_text,
-                                                     f"{src}:config_text"))
-    except InputError:  # a config naming an effect registered elsewhere: no feed-forward
-        vehicle = None
+    # a config this process cannot load has no feed-forward
+    vehicle = None if cfg is None else vehicle_constants(cfg)
     meta = {
         k: table.attrs[k]
         for k in ("tool_version", "schema", "terminal", "rate_hz", "radius_m", "config_name",
@@ -543,31 +548,22 @@ class Interpolator:
         (theta keeps its sign, chi flips; ``xi -> pi - xi``) and S1 (``xi -> xi + pi``), and
         the series evaluated at the query's azimuth.
         """
+        from ..schedule.offsets import mirrored_coefficients, series, shifted_coefficients
+
         d = self.data
         xi = np.asarray(xi, dtype=np.float64).reshape(-1)
-        out = np.zeros((xi.size, 4))
         if d.offsets is None:
-            return out
+            return np.zeros((xi.size, 4))
         pts, w, status, mirrored = self.cells(xi, xi_dot, alpha)
-        n_xi, nb = d.xi.size, d.offsets.shape[-1]
-        H = (nb - 1) // 2
-        circ = pts[:, ::2] // n_xi  # (m, 4) flat (tilt, speed) circles
+        nb = d.offsets.shape[-1]
+        circ = pts[:, ::2] // d.xi.size  # (m, 4) flat (tilt, speed) circles
         wc = (w[:, ::2].astype(np.float64) + w[:, 1::2])  # (m, 4)
         coef = np.einsum("mc,mcab->mab", wc, d.offsets.reshape(-1, 2, nb)[circ].astype(float))
-        sgn = (-1.0) ** np.arange(1, H + 1)
-        a32 = np.broadcast_to(np.asarray(alpha, dtype=np.float32), xi.shape)
-        shifted = a32 < 0
-        m = np.concatenate([[1.0], sgn, -sgn])
-        coef = np.where(mirrored[:, None, None], coef * m, coef)
-        coef[:, 1] *= np.where(mirrored, -1.0, 1.0)[:, None]
-        sh = np.concatenate([[1.0], sgn, sgn])
-        coef = np.where(shifted[:, None, None], coef * sh, coef)
-        k = np.arange(1, H + 1)
-        c, s = np.cos(np.outer(xi, k)), np.sin(np.outer(xi, k))
-        for a in range(2):
-            ak, bk = coef[:, a, 1:H + 1], coef[:, a, H + 1:]
-            out[:, 2 * a] = coef[:, a, 0] + np.sum(ak * c + bk * s, -1)
-            out[:, 2 * a + 1] = np.sum(k * (bk * c - ak * s), -1)
+        shifted = np.broadcast_to(np.asarray(alpha, dtype=np.float32), xi.shape) < 0
+        # back from the fundamental domain: S2 undone first, then S1 (the lookup's reverse)
+        coef = np.where(mirrored[:, None, None], mirrored_coefficients(coef), coef)
+        coef = np.where(shifted[:, None, None], shifted_coefficients(coef), coef)
+        out = series(coef, xi)
         out[(status & UNUSABLE) != 0] = 0.0
         return out
 

@@ -400,7 +400,6 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
                 progress(1)
 
     per_tilt = {f.name: np.stack([getattr(s, f.name) for s in sols], axis=1)
-                for f in fields(CircleSolution) if f.name not in ("steps", "dt", "offsets")}
-    per_tilt["offsets"] = np.stack([s.offsets for s in sols], axis=1)
+                for f in fields(CircleSolution) if f.name not in ("steps", "dt")}
     return GridResult(**per_tilt, steps=np.array([s.steps for s in sols]),
                       dt=np.array([s.dt for s in sols]))

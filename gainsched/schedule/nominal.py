@@ -121,13 +121,8 @@ def circle_nominal(model, speed: float, alpha: float, n: int, xi0: float = 0.0) 
     """
     T = period(speed, model.r)
     t = np.arange(n) * (T / n)
-    path = circle_path(speed, model.r, t, xi0)
-    offsets = circle_offsets(model, speed, alpha)
-    if offsets is None:
-        return nominal_from_path(model, path, alpha, periodic=True)
-    z, z_dot, u, tension = trim_path(model, path, alpha, periodic=True, offsets=offsets)
-    return Nominal(t, z, z_dot, u, tension, float(alpha),
-                   feasibility_reasons(model.config, u, tension))
+    return nominal_from_path(model, circle_path(speed, model.r, t, xi0), alpha, periodic=True,
+                             offsets=circle_offsets(model, speed, alpha))
 
 
 # offsets per model and circle: a circle's nominal is asked for at several sample counts

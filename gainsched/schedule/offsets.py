@@ -39,7 +39,14 @@ from .trim import (
     _newton,
 )
 
-__all__ = ["HARMONICS", "AttitudeOffsets", "solve_offsets"]
+__all__ = [
+    "HARMONICS",
+    "AttitudeOffsets",
+    "solve_offsets",
+    "mirrored_coefficients",
+    "shifted_coefficients",
+    "series",
+]
 
 #: highest harmonic of the azimuth in the offset series
 HARMONICS = 3
@@ -63,6 +70,36 @@ def _basis(xi, harmonics: int):
     one, zero = np.ones((np.size(xi), 1)), np.zeros((np.size(xi), 1))
     return (np.concatenate([one, c, s], 1), np.concatenate([zero, -k * s, k * c], 1),
             np.concatenate([zero, -(k**2) * c, -(k**2) * s], 1))
+
+
+def _harmonic_signs(nb: int) -> np.ndarray:
+    """``(-1)^k`` for k = 1..H of a series with ``nb = 2 H + 1`` coefficients."""
+    return (-1.0) ** np.arange(1, (nb - 1) // 2 + 1)
+
+
+def mirrored_coefficients(coef):
+    """Offsets of the direction mirror S2 (``xi -> pi - xi``; theta keeps its sign, chi
+    flips, docs/conventions.md): ``coef (..., 2, 2 H + 1)`` -> the same shape.
+    cos(k (pi - xi)) = (-1)^k cos(k xi), sin(k (pi - xi)) = -(-1)^k sin(k xi)."""
+    sgn = _harmonic_signs(np.shape(coef)[-1])
+    m = np.concatenate([[1.0], sgn, -sgn])
+    return np.asarray(coef) * m * np.array([[1.0], [-1.0]])
+
+
+def shifted_coefficients(coef):
+    """Offsets of the tilt-sign map S1 (the same circle with ``xi -> xi + pi``): cos and
+    sin of ``k (xi + pi)`` are ``(-1)^k`` times those of ``k xi``; ``(..., 2, 2 H + 1)``."""
+    sgn = _harmonic_signs(np.shape(coef)[-1])
+    return np.asarray(coef) * np.concatenate([[1.0], sgn, sgn])
+
+
+def series(coef, xi) -> np.ndarray:
+    """Evaluate offsets at azimuths: ``coef (m, 2, 2 H + 1)``, ``xi (m,)`` rad ->
+    ``(m, 4)`` = theta rad, d theta / d xi, chi rad, d chi / d xi."""
+    B, B1, _ = _basis(xi, (np.shape(coef)[-1] - 1) // 2)
+    val = np.einsum("mj,maj->ma", B, coef)
+    slope = np.einsum("mj,maj->ma", B1, coef)
+    return np.stack([val[:, 0], slope[:, 0], val[:, 1], slope[:, 1]], -1)
 
 
 @dataclass(frozen=True)
@@ -99,10 +136,8 @@ class AttitudeOffsets:
         """The offsets of the direction mirror S2 (``xi -> pi - xi``; theta keeps its sign,
         chi flips, docs/conventions.md): cos(k (pi - xi)) = (-1)^k cos(k xi),
         sin(k (pi - xi)) = -(-1)^k sin(k xi)."""
-        H = self.harmonics
-        sign = (-1.0) ** np.arange(1, H + 1)
-        m = np.concatenate([[1.0], sign, -sign])
-        return AttitudeOffsets(self.pitch * m, -self.yaw * m)
+        pitch, yaw = mirrored_coefficients(np.stack([self.pitch, self.yaw]))
+        return AttitudeOffsets(pitch, yaw)
 
 
 def solve_offsets(model, speed: float, alpha: float, *, bound: float,
