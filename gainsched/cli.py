@@ -7,6 +7,7 @@ line ``gainsched: error: FILE: KEY: what is wrong`` with exit code 2.
 from __future__ import annotations
 
 import functools
+import json
 import sys
 import warnings
 from pathlib import Path
@@ -332,14 +333,26 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
 
 @cli.command()
 @click.argument("table", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Also write envelope.png (speed x tilt: feasible / slack / thrust) and "
+    "envelope.json to this folder.",
+)
 @user_errors
-def inspect(table):
+def inspect(table, out_dir):
     """Summarise a gain table: grid, feasibility map (speed m/s x tilt deg), gain ranges,
-    worst closed-loop spectral radius."""
+    worst closed-loop spectral radius; with --out, the flight envelope as a PNG and JSON."""
     from .firmware.codegen import flash_summary
+    from .publish import check_out_dir
     from .schedule.nominal import REASONS
     from .schedule.tables import load_table
 
+    if out_dir is not None:
+        check_out_dir(out_dir, "--out")
     t = load_table(table)
     click.echo(f"{table}: {t.attrs['schema']}, config {t.name} (sha256 {t.config_sha256[:12]}), "
                f"tool {t.attrs['tool_version']}, terminal cost {t.attrs['terminal']}")
@@ -367,11 +380,28 @@ def inspect(table):
     rho = t.spectral_radius
     if not np.any(np.isfinite(rho)):
         click.echo("  no feasible circle: no gains, no closed loop (see the reasons above)")
-        return
-    i, j = np.unravel_index(np.nanargmax(rho), rho.shape)
-    click.echo(f"  worst closed-loop monodromy spectral radius {rho[i, j]:.5f} "
-               f"(speed {t.speed[j]:g} m/s, tilt {np.rad2deg(t.tilt[i]):g} deg); "
-               f"all < 1: {bool(np.all(rho[np.isfinite(rho)] < 1))}")
+    else:
+        i, j = np.unravel_index(np.nanargmax(rho), rho.shape)
+        click.echo(f"  worst closed-loop monodromy spectral radius {rho[i, j]:.5f} "
+                   f"(speed {t.speed[j]:g} m/s, tilt {np.rad2deg(t.tilt[i]):g} deg); "
+                   f"all < 1: {bool(np.all(rho[np.isfinite(rho)] < 1))}")
+    if out_dir is not None:
+        _write_envelope(t, table, out_dir)
+
+
+def _write_envelope(t, table, out_dir) -> None:
+    """envelope.png and envelope.json of the loaded table ``t`` into ``out_dir`` (one set)."""
+    from .publish import publish
+    from .schedule.envelope import envelope_from_table, envelope_png
+
+    env = envelope_from_table(t)
+    summary = {"table": str(table), "config": t.name, **env.to_json()}
+    paths = publish(out_dir, {
+        "envelope.png": envelope_png(env),
+        "envelope.json": (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode(),
+    }, where="--out")
+    counts = ", ".join(f"{n} {c}" for c, n in env.counts().items())
+    click.echo(f"  envelope: {counts} -> {', '.join(str(p) for p in paths)}")
 
 
 @cli.command("export-c")
@@ -595,7 +625,7 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
     with tqdm(total=n, unit="flight", desc="paper", disable=None) as bar, \
             staged(out_dir) as stage:
         rep = run_paper(cfg, runtime_scheduler(table, runtime), stage, quick=quick, plant=plant,
-                        progress=bar.update, meta=meta)
+                        progress=bar.update, meta=meta, table=table)
     for r in rep.rows:
         mark = {True: "ok ", False: "NO ", None: "-  "}[r.agrees]
         click.echo(f"{mark} {r.figure:16s} {r.quantity}: paper {r.paper}; sim {r.simulated_text}")

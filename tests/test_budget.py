@@ -34,8 +34,10 @@ def test_model_follows_the_grid_sweep(paper_config):
     assert est.steps_max == max(steps) == 7734  # 1.3 m/s
     assert TILT_BATCH == grid_mod.TILT_BATCH
     n = 11  # paper: drag has no state
-    assert est.worker_bytes == 2 * 8 * 6 * 7734 * (n * n + 4 * n)
-    assert est.table_bytes == 6 * 19 * 36 * (n * n + 4 * n + 8) * 8
+    n_a = len(cfg.grid.tilts)  # 7 tilts, one batch
+    assert n_a == 7 <= TILT_BATCH
+    assert est.worker_bytes == 2 * 8 * n_a * 7734 * (n * n + 4 * n)
+    assert est.table_bytes == n_a * 19 * 36 * (n * n + 4 * n + 8) * 8
     assert est.peak_bytes == est.worker_bytes + 2 * est.table_bytes
     # calibrated on the paper vehicle, every circle feasible: an upper bound of its 1.6 s
     assert 1.5 < est.cpu_s < 10
@@ -47,7 +49,7 @@ def test_effect_states_count(paper_text):
     """Motor lag adds 4 states to the LQR state: n = 15."""
     cfg = config_from_text(paper_text + "\n[effects.motor_lag]\ntau = 0.03\n", "lag.toml")
     est = estimate_build(cfg)
-    assert est.worker_bytes == 2 * 8 * 6 * 7734 * (15 * 15 + 4 * 15)
+    assert est.worker_bytes == 2 * 8 * 7 * 7734 * (15 * 15 + 4 * 15)  # 7 tilts
 
 
 @pytest.mark.parametrize(
@@ -71,7 +73,7 @@ def test_effect_states_count(paper_text):
         ("1 mm/s", lambda t: _sub(t, "speeds", "[0.001, 15]"), "grid.speeds",
          "GiB per worker (grid.speeds down to 0.001 m/s: 1e+07 steps per period at 1000 Hz)"),
         ("10000 speeds", lambda t: _sub(t, "speeds", _floats(np.linspace(2, 15, 10000))),
-         "grid.speeds", "CPU-s to build (6 tilts x 10000 speeds = 60000 circles); "
+         "grid.speeds", "CPU-s to build (7 tilts x 10000 speeds = 70000 circles); "
          "limit limits.max_build_cpu_s = 1800"),
     ],
     ids=lambda x: x if isinstance(x, str) and " " in x else None,
@@ -107,7 +109,7 @@ def test_limits_section(paper_text):
     assert info.value.where == "grid.speeds"
     assert info.value.message.endswith("limit limits.max_memory_gib = 0.01")
     low_cpu = paper_text + "\n[limits]\nmax_build_cpu_s = 1\n"
-    with pytest.raises(InputError, match=r"^low.toml: grid.speeds: needs about 4.3 CPU-s"):
+    with pytest.raises(InputError, match=r"^low.toml: grid.tilts_deg: needs about 5 CPU-s"):
         config_from_text(low_cpu, "low.toml")
     # raising the limits admits what the defaults refuse
     big = _sub(paper_text, "speeds", _floats(np.linspace(2, 15, 10000)))

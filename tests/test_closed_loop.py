@@ -78,10 +78,11 @@ PERTURBATION = (0.01, 0.02, 0.02, 0.05, 0.02, 0.02, 0.05, 0.1, 0.1, 0.1)
 
 
 def test_grid_is_what_the_design_notes_say():
-    """Tilt 0: feasible 2-15 m/s; 40 deg: 3 m/s slack and 12-15 m/s out of thrust range."""
+    """Tilt 0: feasible 1.3-15 m/s; 40 deg: 3 m/s slack, 3.5-15 m/s feasible (11-15 m/s
+    with attitude offsets, configs/paper.toml ``attitude_offsets = "free"``)."""
     speeds = {a: [v for b, v in GRID if b == a] for a in (0.0, 20.0, 40.0)}
-    assert speeds[0.0][0] <= 3.0 and speeds[0.0][-1] == 15.0
-    assert 3.0 not in speeds[40.0] and not any(v >= 12.0 for v in speeds[40.0])
+    assert speeds[0.0][0] <= 1.3 and speeds[0.0][-1] == 15.0
+    assert 3.0 not in speeds[40.0] and speeds[40.0][0] == 3.5 and speeds[40.0][-1] == 15.0
     assert len(GRID) > 30
 
 
@@ -97,7 +98,8 @@ def test_feasible_grid_speed_tracks(paper, sched, tilt_deg, speed):
     the unmarked sample (``SAMPLE``) is the slowest and fastest feasible speed and
     8 m/s at each tilt, the rest is marked slow. Measured over the whole set: max
     delta error 0.015 rad, max xi error 0.043 rad, max roll error 1.9 deg; in the last
-    second delta error <= 1.8e-3 rad and xi error <= 0.015 rad; saturation <= 0.3 %."""
+    second delta error <= 1.8e-3 rad and xi error <= 0.015 rad; saturation <= 0.3 %, 1.25 % at
+    40 deg, 15 m/s where the offset nominal holds a motor at thrust_min."""
     scn = Scenario("grid", np.deg2rad(tilt_deg), speed, 5.0, initial_error=PERTURBATION)
     res = simulate(paper, sched, scn)
     assert res.slack_time is None
@@ -113,7 +115,11 @@ def test_feasible_grid_speed_tracks(paper, sched, tilt_deg, speed):
     assert last[:, 0].max() < 0.3 * PERTURBATION[0]  # delta settled
     assert last[:, 1].max() < 0.03
     assert np.rad2deg(last[:, 4:7].max()) < 1.0
-    assert res.saturated.mean() < 0.01
+    # where the nominal has attitude offsets a motor runs at thrust_min on part of the
+    # circle (thrust_margin = 0): the perturbation saturates it a little longer
+    # (measured 1.25 % at 40 deg, 15 m/s)
+    with_offsets = tilt_deg == 40.0 and speed >= 11.0
+    assert res.saturated.mean() < (0.02 if with_offsets else 0.01)
 
 
 # --------------------------------------------------------------------------- mocap noise
@@ -213,11 +219,15 @@ def test_paper_quick_report(tmp_path):
     assert "| paper figure | quantity | paper value | simulated value |" in md
     assert md.count("\n| ") >= len(rows) + 1
     for img in ("horizontal_out_of_plane.png", "braking/speed_roll.png",
-                "staircase/speed_roll.png", "tilted-40/path3d.png"):
+                "staircase/speed_roll.png", "tilted-40/path3d.png", "envelope.png"):
         assert f"]({img})" in md
         assert (out / img).stat().st_size > 1000
     assert (out / "braking" / "log.csv").exists()
     assert set(rep["experiments"]) == set(rep["experiments_run"])
+    # the committed table's envelope: every circle with gains, only slack without
+    assert set(rep["envelope"]) == {"feasible", "feasible with attitude offsets",
+                                    "tether slack"}
+    assert "## Flight envelope of the table" in md
 
 
 def test_paper_bad_table_is_one_line(tmp_path):

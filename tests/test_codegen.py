@@ -127,9 +127,11 @@ def test_crc_covers_documented_bytes(paper):
     d = runtime_data(paper)
     chunks = dict(d.crc_chunks())
     assert list(chunks) == ["dims", "xi_scale", "xi", "speed", "xi_dot", "tilt", "K_tilt0",
-                            "K", "u_d", "phi_d", "state_sign", "state_perm", "mask", "vehicle"]
+                            "K", "u_d", "phi_d", "state_sign", "state_perm", "mask", "vehicle",
+                            "offset_harmonics", "offsets"]  # the paper table has offsets
     assert zlib.crc32(b"".join(chunks.values())) == d.crc32()
-    assert d.nbytes() == sum(len(v) for k, v in chunks.items() if k not in ("dims", "xi_scale"))
+    descriptor = ("dims", "xi_scale", "offset_harmonics")
+    assert d.nbytes() == sum(len(v) for k, v in chunks.items() if k not in descriptor)
 
 
 def test_write_c_outputs(tmp_path):

@@ -250,13 +250,15 @@ def test_paper_config_matches_design_section_8(paper_config):
     np.testing.assert_array_equal(c.control.Q, np.diag(q_eq24))
     np.testing.assert_array_equal(c.control.R, np.eye(4))
     # refined below 6 m/s and above 20 deg so midpoint interpolation stays below 2% (issue 4);
-    # down to the tension margin at tilt 0 (issue 14)
+    # down to the tension margin at tilt 0 (issue 14); 37 deg for the attitude offsets' kink
+    # (issue 15)
     speeds = [1.3, 2, 2.5, 3, 3.5, 4, 4.5, 5, 5.5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15]
     np.testing.assert_array_equal(c.grid.speeds, speeds)
     np.testing.assert_allclose(
-        c.grid.tilts, np.deg2rad([0, 10, 20, 27, 34, 40]), rtol=0, atol=1e-15
+        c.grid.tilts, np.deg2rad([0, 10, 20, 28, 34, 37, 40]), rtol=0, atol=1e-15
     )
     assert c.grid.azimuth_samples == 36
+    assert c.feasibility.attitude_offsets == "free"
 
 
 def test_edit_helpers_change_one_line(paper_text):

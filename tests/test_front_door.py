@@ -197,11 +197,12 @@ def test_build_under_a_regular_file_fails_before_the_build(regular_file, monkeyp
 
 
 @pytest.mark.parametrize("command", ["export-c", "compare", "diagnose", "apply", "nominal",
-                                     "simulate", "paper", "campaign", "sweep"])
+                                     "simulate", "paper", "campaign", "sweep", "inspect"])
 def test_output_under_a_regular_file(regular_file, command):
     bad = regular_file / "sub"
     args, option = {
         "export-c": (["export-c", TABLE, "-o", bad, "--no-code-size"], "-o"),
+        "inspect": (["inspect", TABLE, "--out", bad], "--out"),
         "compare": (["compare", PAPER, FLIGHT, "-o", bad], "-o"),
         "diagnose": (["diagnose", PAPER, FLIGHT, "--report", bad], "--report"),
         "apply": (["diagnose", PAPER, FLIGHT, "--apply", "-o", bad / "new.toml"], "-o"),

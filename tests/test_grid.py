@@ -146,7 +146,11 @@ def test_slack_circle_masked(paper_config):
 
 
 def test_thrust_floor_circle_masked(paper_config):
-    """15 m/s at 40 deg: motor thrusts fall below thrust_min (bit 2)."""
+    """15 m/s at 40 deg with the zero-offset nominal: motor thrusts fall below thrust_min
+    (bit 2); with the paper config's free offsets the circle has gains."""
+    sol = solve_circle(paper_config, 15.0, [np.deg2rad(40)])
+    assert np.all(sol.reasons == 0) and np.isfinite(sol.spectral_radius[0])
+    paper_config = paper_config.with_values({"feasibility.attitude_offsets": "zero"})
     sol = solve_circle(paper_config, 15.0, [np.deg2rad(40)])
     own = _check_infeasible_circle(sol, 2)
     low = np.any(sol.u_d[0] < paper_config.vehicle.thrust_min, -1)
@@ -154,7 +158,9 @@ def test_thrust_floor_circle_masked(paper_config):
 
 
 def test_infeasible_tilt_does_not_affect_feasible_tilts(paper_config):
-    """In a batch, an infeasible tilt is skipped without changing the others' gains."""
+    """In a batch, an infeasible tilt is skipped without changing the others' gains (40 deg
+    at 14 m/s is thrust-infeasible with the zero-offset nominal)."""
+    paper_config = paper_config.with_values({"feasibility.attitude_offsets": "zero"})
     tilts = np.deg2rad([0.0, 40.0])
     both = solve_circle(paper_config, 14.0, tilts)
     alone = solve_circle(paper_config, 14.0, tilts[:1])

@@ -299,7 +299,8 @@ def test_table_closed_loop_stable_at_every_feasible_circle(paper_table):
 
 
 @pytest.mark.parametrize(
-    ("speed", "tilt_deg"), [(3.0, 0.0), (9.0, 20.0), (12.0, 27.0)], ids=["3-0", "9-20", "12-27"]
+    ("speed", "tilt_deg"), [(3.0, 0.0), (9.0, 20.0), (12.0, 28.0), (14.0, 40.0)],
+    ids=["3-0", "9-20", "12-28", "14-40-offsets"]
 )
 def test_monodromy_recomputed(config, paper_table, speed, tilt_deg):
     a = np.deg2rad(tilt_deg)

@@ -3,6 +3,7 @@ the tether carry the torque where the chi = 0 nominal runs the motors out of ran
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -24,14 +25,15 @@ A40 = np.deg2rad(40.0)
 
 @pytest.fixture(scope="module")
 def free():
-    cfg = load_config(ROOT / "configs" / "paper.toml").with_values(
-        {"feasibility.attitude_offsets": "free"})
+    cfg = load_config(ROOT / "configs" / "paper.toml")
+    assert cfg.feasibility.attitude_offsets == "free"
     return Model(cfg)
 
 
 @pytest.fixture(scope="module")
 def zero():
-    return Model(load_config(ROOT / "configs" / "paper.toml"))
+    return Model(load_config(ROOT / "configs" / "paper.toml").with_values(
+        {"feasibility.attitude_offsets": "zero"}))
 
 
 def test_attitude_kinematics_match_the_rotation_matrix():
@@ -148,7 +150,9 @@ def test_constraint_gradients_are_the_central_differences(free):
 
 
 def test_config_keys_are_checked():
-    text = (ROOT / "configs" / "paper.toml").read_text()
+    # the paper config without its own attitude_offsets line (the test inserts its own)
+    text = re.sub(r"^attitude_offsets = .*$", "", (ROOT / "configs" / "paper.toml").read_text(),
+                  flags=re.M)
     from gainsched.config import config_from_text
 
     bad = text + '\n'
@@ -239,11 +243,27 @@ def test_c_nominal_carries_the_offsets(free_table, tmp_path):
             np.testing.assert_allclose(U, ff.u_d, rtol=1e-5, atol=1e-5)
 
 
-@pytest.mark.parametrize(("tilt_deg", "speed"), [(40.0, 11.0), (40.0, 15.0), (34.0, 13.0)])
-def test_newly_feasible_circles_fly(free_table, tilt_deg, speed):
-    """Issue 15's closed-loop must-show: on the design model, ideal sensing and with mocap
+# the circles the chi = 0 nominal cannot fly on configs/paper.toml; the first two unmarked
+NEWLY_FEASIBLE = [(40.0, 15.0), (34.0, 13.0), (40.0, 11.0), (40.0, 12.0), (40.0, 13.0),
+                  (40.0, 14.0), (34.0, 14.0), (34.0, 15.0), (37.0, 12.0), (28.0, 15.0)]
+
+
+@pytest.fixture(scope="module")
+def paper_table():
+    from gainsched.schedule.tables import load_table
+
+    return load_config(ROOT / "configs" / "paper.toml"), load_table(ROOT / "tables" / "paper.h5")
+
+
+@pytest.mark.parametrize(("tilt_deg", "speed"), [
+    pytest.param(a, v, marks=() if i < 2 else pytest.mark.slow, id=f"tilt{a:g}-{v:g}mps")
+    for i, (a, v) in enumerate(NEWLY_FEASIBLE)])
+def test_newly_feasible_circles_fly(paper_table, tilt_deg, speed):
+    """Issue 15's closed-loop must-show on the committed table (configs/paper.toml,
+    ``attitude_offsets = "free"``): on the design model, ideal sensing and with mocap
     noise, path mode and firmware mode on the C runtime: stable, no slack, RMS out-of-plane
-    <= 2 mm."""
+    <= 2 mm, never a held gain. Measured: RMS out-of-plane <= 0.05 mm ideal, <= 0.7 mm
+    with mocap noise."""
     from gainsched.native import find_cc
     from gainsched.sim.loop import (
         Scenario,
@@ -254,7 +274,8 @@ def test_newly_feasible_circles_fly(free_table, tilt_deg, speed):
         table_scheduler,
     )
 
-    cfg, t = free_table
+    cfg, t = paper_table
+    assert t.config_sha256 == cfg.sha256
     mocap = Sensing(False, 200.0, 0.0005, np.deg2rad(0.2), 0.0, 0.0, 1)
     scheds = [("path", table_scheduler(t))]
     if find_cc() is not None:
@@ -266,4 +287,6 @@ def test_newly_feasible_circles_fly(free_table, tilt_deg, speed):
             m = metrics(res)
             assert res.slack_time is None, (mode, sensing)
             assert m["rms_out_of_plane_m"] <= 2e-3, (mode, m["rms_out_of_plane_m"])
-            assert not np.any(res.held)
+            assert not np.any(res.held) and np.all(res.status == 0)
+            print(f"{tilt_deg:g} deg {speed:g} m/s {mode:8s} {sensing.ideal!s:5s}: RMS "
+                  f"out-of-plane {1e3 * m['rms_out_of_plane_m']:.3f} mm")

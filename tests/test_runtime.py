@@ -271,6 +271,10 @@ def test_crc_is_zlib_of_documented_bytes(paper_data):
         blob += np.ascontiguousarray(getattr(d, key), dtype="<f4").tobytes()
     blob += d.state_perm.tobytes() + d.mask.tobytes()
     blob += np.ascontiguousarray(d.vehicle, dtype="<f4").tobytes()  # gs_vehicle, in order
+    # the paper table has attitude offsets: harmonics (u32) then the coefficients
+    assert d.offsets is not None
+    blob += np.uint32((d.offsets.shape[-1] - 1) // 2).astype("<u4").tobytes()
+    blob += np.ascontiguousarray(d.offsets, dtype="<f4").tobytes()
     assert zlib.crc32(blob) == d.crc32()
 
 

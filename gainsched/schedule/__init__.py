@@ -3,5 +3,6 @@
 :mod:`.path` (azimuth profiles) -> :mod:`.closedform` / :mod:`.trim` -> :mod:`.nominal`
 (nominal and feasibility) -> :mod:`.linearize` -> :mod:`.lqr` (periodic LQR) ->
 :mod:`.grid` (every circle of the grid, locally or with :mod:`.distributed`) ->
-:mod:`.tables` (the HDF5 table); :mod:`.sweep` builds one table per vehicle variant.
+:mod:`.tables` (the HDF5 table) -> :mod:`.envelope` (its flight envelope as a plot);
+:mod:`.sweep` builds one table per vehicle variant.
 """

@@ -392,7 +392,7 @@ def _rows(exps: list[Experiment], results: dict) -> list[Row]:
 
 
 def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
-              scenario_dir=None, progress=None, meta=None) -> PaperReport:
+              scenario_dir=None, progress=None, meta=None, table=None) -> PaperReport:
     """Fly every experiment, write its folder, the plots, report.md and report.json.
 
     Parameters
@@ -413,6 +413,9 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
         Called with 1 after each experiment.
     meta : dict, optional
         Extra facts for the report header (table path, hashes).
+    table : Table, optional
+        The table flown: its flight envelope (:mod:`gainsched.schedule.envelope`) goes
+        into the report as envelope.png and the circle counts.
     """
     out_dir = Path(out_dir)
     exps = experiments(scenario_dir, quick=quick)
@@ -446,6 +449,13 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
                     else "design model along the reference"),
         **(meta or {}),
     }
+    if table is not None:
+        from ..publish import write_atomic
+        from ..schedule.envelope import envelope_from_table, envelope_png
+
+        env = envelope_from_table(table)
+        write_atomic(out_dir / "envelope.png", envelope_png(env))
+        info["envelope"] = env.counts()
     report = PaperReport(tuple(_rows(exps, results)), results, info)
     write_report(report, out_dir, exps)
     return report
@@ -576,6 +586,14 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
           f"{r['held_gains_s']:.2f}", f"{r['below_tension_margin_s']:.2f}")
          for n, r in ((e.name, res[e.name]) for e in exps)],
     )
+    if "envelope" in m:
+        counts = ", ".join(f"{n} {c}" for c, n in m["envelope"].items())
+        lines += ["", "## Flight envelope of the table", "",
+                  f"Circles of the grid (tilt x speed): {counts}. Tilts up to 40 deg are flown "
+                  "up to 15 m/s wherever the tether stays taut; where the zero-offset nominal "
+                  "runs a motor out of range the table's nominal has pitch and yaw offsets "
+                  "(docs/conventions.md, \"Attitude offsets\").", "",
+                  "![flight envelope](envelope.png)"]
     lines += ["", "Every experiment folder holds log.csv / log.h5 (flight-log format), "
               "metrics.json, speed_roll.png and path3d.png.", ""]
     write_atomic(out_dir / "report.md", "\n".join(lines).encode())
