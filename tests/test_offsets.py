@@ -255,15 +255,16 @@ def paper_table():
     return load_config(ROOT / "configs" / "paper.toml"), load_table(ROOT / "tables" / "paper.h5")
 
 
-@pytest.mark.parametrize(("tilt_deg", "speed"), [
-    pytest.param(a, v, marks=() if i < 2 else pytest.mark.slow, id=f"tilt{a:g}-{v:g}mps")
+@pytest.mark.parametrize(("tilt_deg", "speed", "full"), [
+    pytest.param(a, v, i < 2, marks=() if i < 2 else pytest.mark.slow, id=f"tilt{a:g}-{v:g}mps")
     for i, (a, v) in enumerate(NEWLY_FEASIBLE)])
-def test_newly_feasible_circles_fly(paper_table, tilt_deg, speed):
+def test_newly_feasible_circles_fly(paper_table, tilt_deg, speed, full):
     """Issue 15's closed-loop must-show on the committed table (configs/paper.toml,
     ``attitude_offsets = "free"``): on the design model, ideal sensing and with mocap
     noise, path mode and firmware mode on the C runtime: stable, no slack, RMS out-of-plane
-    <= 2 mm, never a held gain. Measured: RMS out-of-plane <= 0.05 mm ideal, <= 0.7 mm
-    with mocap noise."""
+    <= 2 mm, never a held gain. The first two circles fly all four combinations, the
+    others (slow) path mode ideal and firmware mode with mocap noise. Measured over all
+    ten and all four: RMS out-of-plane 0.24-0.87 mm."""
     from gainsched.native import find_cc
     from gainsched.sim.loop import (
         Scenario,
@@ -282,6 +283,8 @@ def test_newly_feasible_circles_fly(paper_table, tilt_deg, speed):
         scheds.append(("firmware", c_runtime_scheduler(t)))
     for sensing in (Sensing(), mocap):
         for mode, sched in scheds:
+            if not full and (mode == "path") != sensing.ideal:
+                continue
             scn = Scenario("grid", np.deg2rad(tilt_deg), speed, 3.0, sensing=sensing)
             res = simulate(cfg, sched, scn, cfg, controller=mode)
             m = metrics(res)

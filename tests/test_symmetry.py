@@ -326,3 +326,32 @@ def test_weights_breaking_S2_are_rejected(kwargs, key):
     with pytest.raises(InputError) as exc:
         config_from_text(_weights_text(**kwargs), "weights.toml")
     assert exc.value.where == key
+
+
+def test_offset_circle_quadrants():
+    """40 deg, 15 m/s on configs/paper.toml has pitch and yaw offsets (issue 15): the four
+    quadrants solved directly (each with its own offset optimisation) keep S1 and S2:
+    gains, nominal and the offsets' Fourier coefficients (theta keeps its sign, chi flips
+    under S2; both read at xi + pi under S1). Measured: gains 8e-13, offsets 1e-14."""
+    from gainsched.schedule.offsets import mirrored_coefficients, shifted_coefficients
+
+    cfg = _config()
+    assert cfg.feasibility.attitude_offsets == "free"
+    speed, tilt = 15.0, np.deg2rad(40.0)
+    sols = {(sv, sa): solve_circle(cfg, sv * speed, [sa * tilt])
+            for sv in (1, -1) for sa in (1, -1)}
+    for s in sols.values():
+        assert np.all(s.reasons == 0) and np.abs(s.offsets[0]).max() > 1e-3
+    fwd = sols[1, 1]
+    P_x = state_mirror(Model(cfg).effects, cfg.control.integrators)
+    assert _rel(sols[1, -1].K[0], _shift(fwd.K[0])) <= 1e-8
+    assert _rel(sols[-1, 1].K[0], mirror_gain(_shift(fwd.K[0]), P_x)) <= 1e-8
+    np.testing.assert_allclose(sols[-1, 1].u_d[0], _shift(fwd.u_d[0]) @ P_U.T, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(sols[-1, 1].phi_d[0], -_shift(fwd.phi_d[0]), rtol=0, atol=1e-8)
+    np.testing.assert_allclose(sols[1, -1].u_d[0], _shift(fwd.u_d[0]), rtol=0, atol=1e-8)
+    # offsets, as series in the absolute azimuth: S1 reads the circle at xi + pi, S2 at
+    # pi - xi with chi's sign flipped (measured 1e-14)
+    np.testing.assert_allclose(sols[1, -1].offsets[0], shifted_coefficients(fwd.offsets[0]),
+                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(sols[-1, 1].offsets[0], mirrored_coefficients(fwd.offsets[0]),
+                               rtol=0, atol=1e-9)

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from ..config import Config, EffectSpec, config_from_text
+from ..config import Config, EffectSpec, Tether, config_from_text
 from ..configedit import remove_key, set_section, set_value
 from ..model.effects import EFFECTS, Param, Refit, effects_from_specs
 from ..model.reduced import Model
@@ -77,6 +77,9 @@ THRESHOLDS = {
     "twin_cos": 0.95,  # |cos| of two fitted contributions: VIF >= 10
     "twin_excess_gap": 0.1,  # ... unless the held-out excess explained differs by > 10 points
     "max_param_corr": 0.95,  # within a candidate
+    # a candidate that fits more parameters of the same effect than another passing one
+    # (drag versus drag_quadratic) is preferred only when its delta-BIC is lower by this
+    "nested_bic_gain": 10.0,
 }
 
 
@@ -122,7 +125,13 @@ class Candidate:
     def variant(self, cfg: Config, theta) -> CandidateModel:
         raise NotImplementedError
 
-    def apply_text(self, text: str, cfg: Config, theta, comments: list[str], header: str) -> str:
+    def apply_text(self, text: str, cfg: Config, theta, comments: list[str], header: str,
+                   keep: frozenset = frozenset()) -> str:
+        """``text`` with the candidate at ``theta`` (fit parametrisation); ``comments`` per
+        parameter. ``keep``: names of parameters not identified by the fit, whose ``theta``
+        is already the config's value; a candidate whose written keys derive from several
+        parameters (the tether's damping from compliance and damping time) leaves the keys
+        of those alone."""
         raise NotImplementedError
 
     def report_values(self, theta) -> dict:
@@ -170,7 +179,7 @@ class EffectCandidate(Candidate):
         specs = _specs_with(cfg, self.kind, vals)
         return CandidateModel(cfg, effects_from_specs(specs), cfg.analysis.latency_s)
 
-    def apply_text(self, text, cfg, theta, comments, header):
+    def apply_text(self, text, cfg, theta, comments, header, keep=frozenset()):
         vals = dict(zip((p.name for p in self.params), map(float, theta), strict=True))
         spec = next(s for s in _specs_with(cfg, self.kind, vals) if s.name == self.kind)
         spec = spec.param_dict()
@@ -199,7 +208,7 @@ class ConfigCandidate(Candidate):
         new = cfg.with_values({f"{self.section}.{self.key}": float(theta[0])})
         return CandidateModel(new, None, cfg.analysis.latency_s)
 
-    def apply_text(self, text, cfg, theta, comments, header):
+    def apply_text(self, text, cfg, theta, comments, header, keep=frozenset()):
         return set_value(text, self.section, self.key, float(theta[0]),
                          f"{comments[0]}; {header}")
 
@@ -219,7 +228,7 @@ class LatencyCandidate(Candidate):
     def variant(self, cfg, theta):
         return CandidateModel(cfg, None, float(theta[0]))
 
-    def apply_text(self, text, cfg, theta, comments, header):
+    def apply_text(self, text, cfg, theta, comments, header, keep=frozenset()):
         return set_value(text, "analysis", "latency_s", float(theta[0]), f"{comments[0]}; {header}")
 
 
@@ -264,13 +273,23 @@ class ElasticityCandidate(Candidate):
         k = 1.0 / comp if comp > 0 else math.inf
         return {"stiffness": k, "damping": tc * k if comp > 0 else 0.0}
 
-    def apply_text(self, text, cfg, theta, comments, header):
+    def apply_text(self, text, cfg, theta, comments, header, keep=frozenset()):
         v = self.report_values(theta)
         for key in _ELASTIC_LINK_KEYS:
             text = remove_key(text, "tether", key)
         text = set_value(text, "tether", "link", "spring-damper", header)
         text = set_value(text, "tether", "stiffness", v["stiffness"], f"N/m; {comments[0]}")
-        return set_value(text, "tether", "damping", v["damping"], f"N s/m; {comments[1]}")
+        if "damping_time" not in keep:
+            return set_value(text, "tether", "damping", v["damping"], f"N s/m; {comments[1]}")
+        # an unidentified damping is not written: the config's own value stays, or (from a
+        # rigid link) the key is left out and the link's default applies
+        if cfg.tether.link == "spring-damper":
+            return set_value(text, "tether", "damping", cfg.tether.damping,
+                             f"N s/m; {comments[1]}")
+        text = remove_key(text, "tether", "damping")
+        return set_value(text, "tether", "stiffness", v["stiffness"],
+                         f"N/m; {comments[0]}; damping: not identified on these flights, so "
+                         f"not written (the link's default {Tether.damping:g} N s/m applies)")
 
 
 def candidate_library() -> dict[str, Candidate]:
@@ -862,7 +881,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
         results.append(_fit_candidate(prob, library[n], base_sq, base_vecs))
     results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
     at_floor = all(s.rms_over_noise < AT_NOISE_FLOOR for s in base.stats.values())
-    accepted = next((r for r in results if r.passes), None)
+    accepted = _parsimonious([r for r in results if r.passes], library)
     twins = []
     similarity = {}
     if accepted is not None:
@@ -877,6 +896,8 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
                 continue
             cos = abs(float(np.sum(ca * cb)) / (na_ * nb))
             similarity[r.name] = cos
+            if _same_effect(library, r.name, accepted.name):
+                continue  # another fit of the same effect (drag_linear of drag): no twin
             # told apart anyway when the held-out fits differ clearly: the twin leaves more
             # than a tenth of the residual above noise that the accepted one explains
             clear = accepted.excess_explained - r.excess_explained > THRESHOLDS["twin_excess_gap"]
@@ -885,6 +906,28 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     verdict = _verdict(base, results, accepted, twins, at_floor)
     return Diagnosis(config, base, results, accepted, twins, verdict, at_floor,
                      prob.flight_names, int(round(prob.n_evals)), similarity)
+
+
+def _same_effect(library, a: str, b: str) -> bool:
+    """Whether candidates ``a`` and ``b`` fit the same effect of the library."""
+    ka, kb = getattr(library[a], "kind", None), getattr(library[b], "kind", None)
+    return ka is not None and ka == kb
+
+
+def _parsimonious(passing: list[CandidateResult], library) -> CandidateResult | None:
+    """The best-ranked passing candidate, or a passing one nested in it (a subset of the
+    same effect's parameters, e.g. drag_quadratic in drag) unless the larger fit lowers
+    delta-BIC by ``THRESHOLDS["nested_bic_gain"]`` more: the parsimony between nested
+    models that the held-out ranking alone does not give."""
+    if not passing:
+        return None
+    best = passing[0]
+    for r in passing[1:]:
+        nested = {p.name for p in r.params} < {p.name for p in best.params}
+        if (nested and _same_effect(library, r.name, best.name)
+                and best.delta_bic > r.delta_bic - THRESHOLDS["nested_bic_gain"]):
+            best = r
+    return best
 
 
 def _fmt_values(r: CandidateResult) -> str:
@@ -912,10 +955,31 @@ def _verdict(base, results, accepted, twins, at_floor) -> str:
          f"held-out RMS -{accepted.rms_reduction:.0%}, explains "
          f"{accepted.excess_explained:.0%} of the residual above noise, "
          f"delta-BIC {accepted.delta_bic:.0f}")
+    why = unidentified(accepted)
+    if why:
+        s += ". Not identified, so --apply keeps the config's value: " + "; ".join(
+            f"{n} ({w})" for n, w in why.items())
     for name, cos, sep in twins:
         s += (f". It cannot be told apart from {name} on these flights (|cos| {cos:.3f}); "
               f"to separate them: {sep}")
     return s
+
+
+def unidentified(result: CandidateResult) -> dict[str, str]:
+    """Parameters of a fit that must not be written as fitted, with the reason: a 95 %
+    CI wider than the estimate itself or than the parameter's fit range (it could be
+    anything on these flights), or an estimate on a bound of that range."""
+    out = {}
+    for j, p in enumerate(result.params):
+        v, c = float(result.theta[j]), float(result.ci[j])
+        rng = p.upper - p.lower  # 0: bounds relative to the config's value (mass)
+        if not np.isfinite(c) or (rng > 0 and c >= rng):
+            out[p.name] = f"95% CI +-{c:.2g} {p.unit} wider than its range"
+        elif c >= abs(v):
+            out[p.name] = f"95% CI +-{c:.2g} {p.unit} wider than the estimate {v:.3g}"
+        elif rng > 0 and min(v - p.lower, p.upper - v) <= 1e-9 * rng:  # clipped there
+            out[p.name] = f"estimate {v:.3g} {p.unit} on a bound of [{p.lower:g}, {p.upper:g}]"
+    return out
 
 
 def apply_candidate(config: Config, result: CandidateResult, *, name: str | None = None) -> str:
@@ -926,8 +990,15 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
     from ..configedit import get_value
 
     cand = candidate_library()[result.name]
+    why = unidentified(result)
     comments = []
+    theta = result.theta.copy()
     for j, p in enumerate(result.params):
+        if p.name in why:
+            theta[j] = result.start[j]
+            comments.append(f"not identified on these flights ({why[p.name]}), so not "
+                            "written as fitted: the value before the fit")
+            continue
         lo, hi = result.theta[j] - result.ci[j], result.theta[j] + result.ci[j]
         f = result.folds[:, j]
         comments.append(
@@ -935,7 +1006,10 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
         )
     header = (f"gainsched diagnose: {result.name}, held-out RMS -{result.rms_reduction:.0%}, "
               f"delta-BIC {result.delta_bic:.0f}")
-    text = cand.apply_text(config.text, config, result.theta, comments, header)
+    if why:
+        header += f"; not identified, not written: {', '.join(why)}"
+    text = cand.apply_text(config.text, config, theta, comments, header,
+                           keep=frozenset(why))
     new_name = name or f"{config.name}_{result.name}"
     if get_value(text, "", "name") is not None:
         text = set_value(text, "", "name", new_name)

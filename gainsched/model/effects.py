@@ -174,9 +174,21 @@ class Effect:
     def refits(cls) -> tuple[Refit, ...]:
         """The diagnose candidates of this effect: ``fits``, or one candidate named after
         the effect that fits every parameter with no affine assumption (a bounded 1-D
-        search when there is one parameter, Gauss-Newton steps otherwise)."""
+        search when there is one parameter, Gauss-Newton steps otherwise).
+
+        When ``fits`` fit the parameters one at a time, a joint candidate named after the
+        effect follows them: every parameter any of them fits, together (drag: mu1 and
+        mu2 at once, as the paper's Fig. 6 fit), affine when they all are and none
+        searches. An effect whose parameters are all wrong is then one candidate, not
+        several that each explain part of it.
+        """
         if cls.fits:
-            return cls.fits
+            names = tuple(dict.fromkeys(n for r in cls.fits for n in r.params))
+            if len(names) < 2 or any(set(r.params) == set(names) for r in cls.fits):
+                return cls.fits
+            affine = all(r.affine and r.search is None for r in cls.fits)
+            doc = f"{cls.kind.replace('_', ' ')}: {', '.join(names)} fitted together"
+            return (*cls.fits, Refit(cls.kind, names, doc, affine=affine))
         line = (cls.__doc__ or cls.kind).strip().splitlines()[0]
         names = tuple(p.name for p in cls.params)
         return (Refit(cls.kind, names, line, search=names[0] if len(names) == 1 else None,
@@ -281,6 +293,8 @@ class Drag(Effect):
     fits = (
         Refit("drag_linear", ("mu1",), "linear body drag mu1 |v| (paper eq. 10)"),
         Refit("drag_quadratic", ("mu2",), "quadratic body drag mu2 |v|^2 (paper eq. 10)"),
+        Refit("drag", ("mu1", "mu2"), "body drag, mu1 and mu2 together (paper eq. 10, the "
+              "joint fit of Fig. 6)"),
     )
 
     def wrench(self, T, kin):

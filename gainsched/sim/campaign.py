@@ -84,6 +84,10 @@ HIDDEN: dict[str, HiddenEffect] = {
         HiddenEffect("none", "no hidden effect (negative control)"),
         HiddenEffect("drag_quadratic", "quadratic drag mis-set: mu2 = 0.0075 instead of 0.0025",
                      (("effects.drag", "mu2", 0.0075),), truth=("drag_quadratic", "mu2", 0.0075)),
+        HiddenEffect("drag_both", "both drag coefficients mis-set in opposite directions: "
+                     "mu1 = 0.086 (-50 %), mu2 = 0.0045 (+80 %)",
+                     (("effects.drag", "mu1", 0.086), ("effects.drag", "mu2", 0.0045)),
+                     truth=("drag", "mu2", 0.0045)),
         HiddenEffect("thrust_airspeed", "thrust loss with airspeed, T *= 1 - 0.01 v",
                      (("effects.thrust_airspeed", None, (("c1", -0.01), ("c2", 0.0))),),
                      truth=("thrust_airspeed", "c1", -0.01)),
@@ -103,6 +107,11 @@ HIDDEN: dict[str, HiddenEffect] = {
                      (("tether", "link", "spring-damper"), ("tether", "stiffness", 3000.0),
                       ("tether", "damping", 5.0)),
                      truth=("tether_elasticity", "stiffness", 3000.0)),
+        HiddenEffect("stiff_tether", "stiff elastic tether, k = 2e5 N/m, c = 20 N s/m (the "
+                     "damping is not identified on these flights)",
+                     (("tether", "link", "spring-damper"), ("tether", "stiffness", 2e5),
+                      ("tether", "damping", 20.0)),
+                     truth=("tether_elasticity", "stiffness", 2e5)),
         HiddenEffect("thrust_scale", "thrust scale k_T = 0.92 (static test 8% optimistic)",
                      (("effects.thrust_scale", None, (("k_T", 0.92),)),),
                      truth=("thrust_scale", "k_T", 0.92)),
