@@ -68,6 +68,7 @@ from ..model.rotations import (
     matrix_from_quaternion,
 )
 from .logs import FlightLog, LogWarning, read_log
+from .structure import findings
 
 __all__ = [
     "centred_commands",
@@ -896,6 +897,10 @@ class Comparison:
     notes: list
     segs: list = field(default_factory=list)
     tracking: list = field(default_factory=list)
+    #: significant binned structure (:func:`gainsched.analysis.structure.findings`),
+    #: strongest first, and its tables ``{variable: {axis: BinnedMean}}``
+    structure: list = field(default_factory=list)
+    structure_tables: dict = field(default_factory=dict)
 
     @property
     def axes(self) -> tuple[str, ...]:
@@ -925,6 +930,9 @@ class Comparison:
                                "tables": self.where["tables"]},
             "notes": self.notes,
             "tracking": self.tracking,
+            "structure": {"findings": [f.to_json() for f in self.structure],
+                          "tables": {v: {a: bm.to_json() for a, bm in tab.items()}
+                                     for v, tab in self.structure_tables.items()}},
         }
 
 
@@ -943,8 +951,9 @@ def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
     axes = [a for a in AXES if all(a in r.residual for r in res)]
     stats = {a: axis_stats(res, a, noise[a]) for a in axes}
     where = where_it_fails(res, noise)
+    found, tables = findings(res, noise, units=UNITS)
     return Comparison(config, measured, res, stats, noise, where, list(notes or []), list(segs),
-                      tracking_summary(config, measured, segs or []))
+                      tracking_summary(config, measured, segs or []), found, tables)
 
 
 def tracking_summary(config: Config, measured, segs) -> list[dict]:

@@ -938,18 +938,33 @@ def _fmt_values(r: CandidateResult) -> str:
 
 
 def _verdict(base, results, accepted, twins, at_floor) -> str:
+    if at_floor and accepted is None and base.structure:
+        # the overall RMS hides it; averaging over revolutions (or airspeed, thrust bins)
+        # shows a systematic residual: name it instead of "no effect needed"
+        f = base.structure[0]
+        more = (f" ({len(base.structure) - 1} more in the structure table)"
+                if len(base.structure) > 1 else "")
+        best = results[0] if results else None
+        tail = (f" No candidate explains it (the best, {best.name}, fails: "
+                f"{'; '.join(best.failed())})." if best is not None else "")
+        return (f"significant structure below the noise floor: {f.sentence()}{more}; every "
+                f"axis is within {AT_NOISE_FLOOR:g}x its noise floor overall, but averaged over "
+                f"the revolutions it is systematic.{tail}")
     if at_floor and accepted is None:
         grey = [a for a, st in base.stats.items() if not st.white]
         tail = (f" ({', '.join(grey)} not white at the 99% level: see the autocorrelation "
                 "plot)") if grey else ", and white"
         return (f"no effect needed: every residual axis is within {AT_NOISE_FLOOR:g}x its "
-                f"noise floor{tail}")
+                f"noise floor{tail}, with no significant structure in azimuth, airspeed or "
+                "thrust bins")
     if accepted is None:
         best = results[0] if results else None
         tail = ""
         if best is not None:
             tail = (f" The best candidate, {best.name}, removes {best.rms_reduction:.0%} of the "
                     f"held-out RMS but fails: {'; '.join(best.failed())}.")
+        if base.structure:
+            tail += f" Averaged over the revolutions: {base.structure[0].sentence()}."
         return (f"no candidate explains the residual: {base.where['sentence']}.{tail}")
     s = (f"missing effect: {accepted.name} ({accepted.doc}), {_fmt_values(accepted)}; "
          f"held-out RMS -{accepted.rms_reduction:.0%}, explains "

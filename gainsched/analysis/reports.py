@@ -116,6 +116,11 @@ def compare_lines(cmp: Comparison, paper: PaperFits | None = None) -> list[str]:
     out += _text_table(head, rows, w)
     out.append(f"  normalised RMS (1 = noise): {cmp.normalized_rms():.3f}")
     out.append(f"where it fails: {cmp.where['sentence']}")
+    for f in cmp.structure[:3]:
+        out.append(f"structure: {f.sentence()}")
+    if not cmp.structure:
+        out.append("structure: no significant residual in azimuth, airspeed or thrust bins "
+                   "(block means over revolutions)")
     for tr in cmp.tracking:
         out.append(f"tracking {tr['segment']}: RMS along-track {tr['rms_along_track_m']:.4f} m, "
                    f"max {tr['max_along_track_m']:.4f} m, final azimuth error "
@@ -221,6 +226,31 @@ def _plot_where(cmp: Comparison, path: Path, other: Comparison | None = None):
     plt.close(fig)
 
 
+def _plot_structure(cmp: Comparison, path: Path):
+    """Block-averaged residual per azimuth bin with its 95 % interval, in noise floors."""
+    plt = _plt()
+    tab = cmp.structure_tables.get("azimuth", {})
+    axes = [a for a in cmp.axes if a in tab]
+    fig, ax = plt.subplots(len(axes), 1, figsize=(8, 1.4 * len(axes) + 1), sharex=True,
+                           squeeze=False)
+    for a_, a in zip(ax[:, 0], axes, strict=True):
+        bm = tab[a]
+        nf = cmp.noise[a]
+        a_.errorbar(bm.centers, bm.mean / nf, yerr=1.96 * bm.se / nf, fmt="o", ms=3, lw=0.8)
+        for f in cmp.structure:
+            if f.axis == a and f.variable == "azimuth":
+                a_.axvspan(f.lo % 360, f.lo % 360 + (f.hi - f.lo), color="r", alpha=0.15)
+        a_.axhline(0.0, color="k", lw=0.5)
+        a_.set_ylabel(f"{a}\n/ floor", fontsize=7)
+    ax[-1, 0].set_xlabel("azimuth (deg)")
+    title = ("residual averaged over revolutions (95 % intervals; shaded: significant)"
+             + ("\n" + cmp.structure[0].sentence() if cmp.structure else ""))
+    fig.suptitle(title, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def _plot_paper(p: PaperFits, out: Path) -> list[Path]:
     plt = _plt()
     paths = []
@@ -277,7 +307,9 @@ def write_compare(cmp: Comparison, out_dir, paper: PaperFits | None = None,
     out.mkdir(parents=True, exist_ok=True)
     paths = [write_json(out / f"{prefix}.json", compare_json(cmp, paper))]
     pics = {"residuals": out / f"{prefix}_residuals.png", "corr": out / f"{prefix}_acf_ccf.png",
-            "where": out / f"{prefix}_where.png"}
+            "where": out / f"{prefix}_where.png",
+            "structure": out / f"{prefix}_structure.png"}
+    _plot_structure(cmp, pics["structure"])
     _plot_residuals(cmp, pics["residuals"])
     _plot_acf_ccf(cmp, pics["corr"])
     _plot_where(cmp, pics["where"])
@@ -288,6 +320,10 @@ def write_compare(cmp: Comparison, out_dir, paper: PaperFits | None = None,
     md += ["", f"Normalised RMS (1 = measurement noise): {cmp.normalized_rms():.3f}.", "",
            "## Where it fails", "", cmp.where["sentence"] + ".", "",
            f"![residual by regime]({pics['where'].name})", "",
+           "## Structure averaged over revolutions", "",
+           *([f"- {f.sentence()}" for f in cmp.structure]
+             or ["No significant residual in azimuth, airspeed or thrust bins."]), "",
+           f"![structure]({pics['structure'].name})", "",
            f"![residuals]({pics['residuals'].name})", "",
            "## Whiteness and input correlation", "",
            f"![acf and ccf]({pics['corr'].name})", ""]

@@ -131,6 +131,11 @@ HIDDEN: dict[str, HiddenEffect] = {
                      (("effects.azimuth_thrust_loss", None,
                        (("depth", 0.15), ("xi0_deg", 90.0), ("width_deg", 25.0))),),
                      custom=AzimuthThrustLoss),
+        HiddenEffect("azimuth_thrust_dip", "thrust dip of 5% at azimuth 115 deg, width 12 deg: "
+                     "below the overall noise gate, visible averaged over revolutions",
+                     (("effects.azimuth_thrust_loss", None,
+                       (("depth", 0.05), ("xi0_deg", 115.0), ("width_deg", 12.0))),),
+                     custom=AzimuthThrustLoss),
     )
 }
 
