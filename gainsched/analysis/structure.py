@@ -122,7 +122,7 @@ class Finding:
         return c % 360.0 if self.variable == "azimuth" else c
 
     def sentence(self) -> str:
-        vu = "deg" if self.variable == "azimuth" else UNIT_OF[self.variable]
+        vu = UNIT_OF[self.variable]
         rng = (f"{self.lo % 360:.0f}-{self.hi % 360 or 360:.0f} {vu}" if self.variable == "azimuth"
                else f"{self.lo:.3g}-{self.hi:.3g} {vu}")
         return (f"{self.axis} residual {self.amplitude:+.3g} +- {self.ci95:.2g} {self.unit} "
@@ -136,6 +136,8 @@ class Finding:
                 "noise_floor": self.noise_floor, "sentence": self.sentence()}
 
 
+#: units of the binning variables (as in gainsched.analysis.compare.BIN_VARIABLES, which
+#: imports this module and so cannot be imported here)
 UNIT_OF = {"azimuth": "deg", "airspeed": "m/s", "thrust": "N"}
 
 
