@@ -448,15 +448,17 @@ def write_before_after(before: Comparison, after: Comparison, out_dir,
 def _rank_rows(d: Diagnosis):
     rows = []
     for r in d.results:
-        vals = ", ".join(f"{p.name}={v:.4g}+-{c:.2g}" for p, v, c in
-                         zip(r.params, r.theta, r.ci, strict=True))
+        vals = r.law if r.empirical else ", ".join(
+            f"{p.name}={v:.4g}+-{c:.2g}" for p, v, c in zip(r.params, r.theta, r.ci, strict=True))
         rows.append((r.name, f"{100 * r.rms_reduction:.1f}%",
                      "n/a" if not np.isfinite(r.excess_explained)
                      else f"{100 * r.excess_explained:.0f}%",
+                     "-" if r.structure_reduction is None
+                     else f"{100 * r.structure_reduction:.0f}%",
                      f"{r.delta_bic:.0f}", "yes" if r.plausible else "no",
                      _g(r.fold_spread, 2), "PASS" if r.passes else "-", vals))
-    return ("candidate", "held-out RMS", "excess expl.", "dBIC", "plausible", "fold spread",
-            "verdict", "parameters (95% CI)"), rows
+    return ("candidate", "held-out RMS", "excess expl.", "structure", "dBIC", "plausible",
+            "fold spread", "verdict", "parameters (95% CI) or law"), rows
 
 
 def diagnose_lines(d: Diagnosis) -> list[str]:
@@ -464,7 +466,7 @@ def diagnose_lines(d: Diagnosis) -> list[str]:
     head, rows = _rank_rows(d)
     out = [f"diagnose {d.config.name} on {len(d.flights)} flights "
            f"({', '.join(d.flights)}); {d.evaluations} model evaluations"]
-    w = [18, 12, 12, 8, 9, 11, 7]
+    w = [18, 12, 12, 9, 8, 9, 11, 7]
     out += _text_table(head, rows, w)
     for r in d.results:
         for n in r.notes:

@@ -39,6 +39,9 @@ __all__ = [
     "ThrustPolynomial",
     "ThrustMomentum",
     "MotorLag",
+    "ThrustAzimuth",
+    "fundamental_azimuth",
+    "AZIMUTH_HARMONICS",
     "EFFECTS",
     "registered_effect",
     "registered_effects",
@@ -109,6 +112,10 @@ class Refit:
     affine : bool
         Whether the residual is affine in the least-squares parameters (one step is
         exact); False: a few Gauss-Newton steps.
+    orders : tuple of int
+        Nested fits of the first ``n`` parameters for each ``n`` (a series truncated at
+        several orders); diagnose keeps the one with the best held-out score after a
+        BIC penalty per parameter. Empty: all ``params``.
     """
 
     name: str
@@ -116,6 +123,7 @@ class Refit:
     doc: str
     search: str | None = None
     affine: bool = True
+    orders: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -169,6 +177,9 @@ class Effect:
     doc: ClassVar[str] = ""
     #: how ``gainsched diagnose`` fits the effect; empty: see :meth:`refits`
     fits: ClassVar[tuple[Refit, ...]] = ()
+    #: an empirical law (no physical model behind it): diagnose fits it only when no
+    #: physical candidate explains the residual, and reports its law (:meth:`law`)
+    empirical: ClassVar[bool] = False
 
     @classmethod
     def refits(cls) -> tuple[Refit, ...]:
@@ -255,6 +266,10 @@ class Effect:
     def mirror(self):
         """How the effect's states map under the direction mirror S2, shape (n_states, n_states)."""
         return np.eye(self.n_states)
+
+    def law(self) -> str:
+        """The effect's law in words with its numbers (reports of empirical effects)."""
+        return repr(self)
 
     def drag_coefficients(self):
         """``(mu1, mu2)`` when the effect is a pure COG-velocity drag
@@ -481,9 +496,84 @@ class MotorLag(Effect):
         return lfilter([1 - a], [1, -a], T_cmd, axis=0, zi=(a * T_cmd[0])[None, :])[0]
 
 
+def fundamental_azimuth(kin: Kinematics):
+    """``(cos xi_f, sin xi_f)`` of the COG's azimuth mapped to the table's stored domain
+    (tilt >= 0, positive circulation) by the symmetries S1 and S2 (docs/symmetry.md),
+    each shape (...); complex-step safe (no ``arctan2``; the maps are decided on real parts).
+
+    The azimuth is that of the COG in C, ``xi = atan2(p_y, p_x)``; the direction of
+    circulation is the sign of ``(p_C x v_C)_z``. S1 (negative tilt) turns it by pi, S2
+    (negative circulation) mirrors it to ``pi - xi``: the same maps as
+    :func:`gainsched.model.symmetry.fundamental_from_query`, so an effect of ``xi_f``
+    keeps both symmetries by construction.
+    """
+    x, y = kin.p_C[..., 0], kin.p_C[..., 1]
+    rho = np.sqrt(x * x + y * y + _EPS2)
+    c, s = x / rho, y / rho
+    neg_tilt = np.real(np.asarray(kin.alpha)) < 0
+    c, s = np.where(neg_tilt, -c, c), np.where(neg_tilt, -s, s)
+    backwards = np.real(x * kin.v_C[..., 1] - y * kin.v_C[..., 0]) < 0
+    return np.where(backwards, -c, c), s
+
+
+#: harmonics of :class:`ThrustAzimuth`
+AZIMUTH_HARMONICS = 8
+
+
+class ThrustAzimuth(Effect):
+    """Empirical thrust factor in azimuth: every motor's thrust times
+    ``1 + a0 + sum_k (a_k cos k xi + b_k sin k xi)``, k = 1..8, with xi the azimuth of
+    the COG in C mapped to tilt >= 0 and positive circulation (:func:`fundamental_azimuth`).
+
+    No physical model behind it: a Fourier series for what diagnose finds locked to the
+    azimuth when no effect of the library explains it (an own wake, a draft in the hall).
+    Identified on the flown circles (one direction, tilts >= 0), it is extended to the
+    other quadrants by the table's symmetries.
+    """
+
+    kind = "thrust_azimuth"
+    params = (
+        Param("a0", "-", 0.0, -0.5, 0.5, "mean relative thrust change"),
+        *(Param(f"{ab}{k}", "-", 0.0, -0.5, 0.5, f"{'cos' if ab == 'a' else 'sin'} {k} xi "
+                "coefficient") for k in range(1, AZIMUTH_HARMONICS + 1) for ab in "ab"),
+    )
+    empirical = True
+    fits = (Refit("thrust_azimuth", tuple(p.name for p in params),
+                  "empirical thrust factor, a Fourier series in azimuth",
+                  orders=tuple(1 + 2 * k for k in range(1, AZIMUTH_HARMONICS + 1))),)
+
+    def factor(self, kin: Kinematics):
+        """The thrust factor, shape (...)."""
+        c1, s1 = fundamental_azimuth(kin)
+        f = 1.0 + self.a0 + 0 * c1
+        c, s = c1, s1
+        for k in range(1, AZIMUTH_HARMONICS + 1):
+            a, b = self.values[f"a{k}"], self.values[f"b{k}"]
+            if a or b:
+                f = f + a * c + b * s
+            c, s = c * c1 - s * s1, s * c1 + c * s1  # cos, sin of (k + 1) xi
+        return f
+
+    def modify_thrust(self, T, kin, x):
+        return T * self.factor(kin)[..., None]
+
+    def law(self) -> str:
+        xi = np.deg2rad(np.arange(0.0, 360.0, 0.5))
+        kin = Kinematics(np.eye(3), np.stack([-np.sin(xi), np.cos(xi), 0 * xi], -1),
+                         np.zeros(3), np.stack([np.cos(xi), np.sin(xi), 0 * xi], -1), 0.0)
+        d = self.factor(kin) - 1.0
+        lo, hi = int(np.argmin(d)), int(np.argmax(d))
+        used = [k for k in range(1, AZIMUTH_HARMONICS + 1)
+                if self.values[f"a{k}"] or self.values[f"b{k}"]]
+        return (f"thrust x (1 + Fourier series in azimuth, {max(used, default=0)} "
+                f"harmonics): {d[lo]:+.1%} at {np.rad2deg(xi[lo]):.0f} deg, "
+                f"{d[hi]:+.1%} at {np.rad2deg(xi[hi]):.0f} deg, mean {self.a0:+.1%}")
+
+
 EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
-    for cls in (Drag, RotorDrag, ThrustScale, ThrustPolynomial, ThrustMomentum, MotorLag)
+    for cls in (Drag, RotorDrag, ThrustScale, ThrustPolynomial, ThrustMomentum, MotorLag,
+                ThrustAzimuth)
 }
 
 

@@ -35,6 +35,7 @@ __all__ = [
     "mirror_state",
     "fundamental_from_query",
     "effect_symmetry_errors",
+    "azimuth_invariance_error",
 ]
 
 P_U = np.eye(4)[[3, 2, 1, 0]]
@@ -157,3 +158,39 @@ def effect_symmetry_errors(effect, n: int = 64, seed: int = 0) -> dict[str, floa
                                   effect.state_derivative(x, T, kin) @ P_s.T))
         out[name] = max(errs)
     return out
+
+
+def azimuth_invariance_error(effect, n: int = 64, seed: int = 0) -> float:
+    """How far an effect is from looking the same at every azimuth of a level circle
+    (0: exactly), the assumption behind the table's single tilt-0 gain per speed.
+
+    At tilt 0 a rotation ``Z = Rz(beta)`` of the circle frame about its normal maps the
+    problem onto itself when every effect is invariant: under ``R_CB -> Z R_CB``,
+    ``v_C -> Z v_C``, ``p_C -> Z p_C`` (body rates, thrusts and states unchanged) thrusts,
+    torques and state derivatives stay and forces turn with Z. An effect of speed,
+    thrust, rates or height keeps it; one of the azimuth
+    (:class:`~gainsched.model.effects.ThrustAzimuth`) does not.
+
+    Returns
+    -------
+    float
+        The largest relative difference over random kinematics and angles ``beta``.
+    """
+    rng = np.random.default_rng(seed)
+    R = matrix_from_euler_zyx(*rng.uniform(-1.2, 1.2, (2, n)), rng.uniform(-np.pi, np.pi, n))
+    kin = Kinematics(R, rng.normal(0, 8, (n, 3)), rng.normal(0, 2, (n, 3)),
+                     rng.normal(0, 2, (n, 3)), np.zeros(n))
+    beta = rng.uniform(-np.pi, np.pi, n)
+    Z = matrix_from_euler_zyx(np.zeros(n), np.zeros(n), beta)
+    kin2 = Kinematics(Z @ kin.R_CB, np.einsum("nij,nj->ni", Z, kin.v_C), kin.omega_B,
+                      np.einsum("nij,nj->ni", Z, kin.p_C), kin.alpha)
+    T = rng.uniform(1.0, 8.0, (n, 4))
+    x = rng.uniform(1.0, 8.0, (n, effect.n_states))
+    errs = [_relative(effect.modify_thrust(T, kin2, x), effect.modify_thrust(T, kin, x))]
+    w1, w2 = effect.wrench(T, kin), effect.wrench(T, kin2)
+    if w1 is not None:
+        errs += [_relative(w2[0], np.einsum("nij,nj->ni", Z, w1[0])), _relative(w2[1], w1[1])]
+    if effect.n_states:
+        errs.append(_relative(effect.state_derivative(x, T, kin2),
+                              effect.state_derivative(x, T, kin)))
+    return max(errs)

@@ -27,7 +27,7 @@ from ..constants import N_STATE, TILT_BATCH, Reason
 from ..errors import InputError
 from ..model.effects import registered_effects, registered_effects_context
 from ..model.reduced import Model
-from ..model.symmetry import effect_symmetry_errors
+from ..model.symmetry import azimuth_invariance_error, effect_symmetry_errors
 from ..native.reproducible import (
     blas_single_thread,
     children_ignore_sigint,
@@ -54,7 +54,8 @@ SYMMETRY_TOL = 1e-9
 
 
 def check_effect_symmetries(config) -> None:
-    """Refuse effects that break the symmetries the table relies on.
+    """Refuse effects that break the symmetries the table relies on (S1, S2, and the
+    azimuth invariance of a level circle).
 
     The table stores ``alpha >= 0, xi' > 0`` and the runtime maps every other query
     there (S1, S2; docs/symmetry.md); an effect tied to an inertial heading or azimuth
@@ -71,6 +72,13 @@ def check_effect_symmetries(config) -> None:
                                  f"query maps rely on (relative error {err:.1e} > "
                                  f"{SYMMETRY_TOL:g}; docs/symmetry.md): simulate and diagnose "
                                  "with it, build tables without it")
+        err = azimuth_invariance_error(eff)
+        if not err <= SYMMETRY_TOL:
+            raise InputError(config.source, f"effects.{eff.kind}",
+                             f"depends on the azimuth of a level circle (relative change "
+                             f"{err:.1e} > {SYMMETRY_TOL:g}), but the table stores one tilt-0 "
+                             "gain per speed (docs/table-format.md): simulate and diagnose "
+                             "with it, build tables without it")
 
 
 def steps_per_period(speed: float, r: float, dt: float) -> int:

@@ -1,0 +1,141 @@
+"""Empirical effects beyond the library (issue 16): the azimuth thrust series keeps the
+table's symmetries by construction, is found by diagnose when nothing physical explains
+a residual, and its order is chosen on held-out flights."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gainsched.analysis.diagnose import _one_se_order, _qp, _qp_bvls
+from gainsched.model.effects import (
+    AZIMUTH_HARMONICS,
+    EFFECTS,
+    Kinematics,
+    ThrustAzimuth,
+    fundamental_azimuth,
+)
+from gainsched.model.rotations import matrix_from_euler_zyx
+from gainsched.model.symmetry import (
+    azimuth_invariance_error,
+    effect_symmetry_errors,
+    fundamental_from_query,
+)
+
+
+def _kinematics(n=200, seed=3):
+    rng = np.random.default_rng(seed)
+    R = matrix_from_euler_zyx(*rng.uniform(-1, 1, (2, n)), rng.uniform(-np.pi, np.pi, n))
+    xi = rng.uniform(-np.pi, np.pi, n)
+    xi_dot = rng.choice([-1.0, 1.0], n) * rng.uniform(0.5, 8.0, n)
+    alpha = rng.uniform(-0.7, 0.7, n)
+    r = rng.uniform(1.0, 3.0, n)
+    p = np.stack([r * np.cos(xi), r * np.sin(xi), rng.normal(0, 0.05, n)], -1)
+    v = np.stack([-r * xi_dot * np.sin(xi), r * xi_dot * np.cos(xi), rng.normal(0, 0.3, n)], -1)
+    return Kinematics(R, v, rng.normal(0, 1, (n, 3)), p, alpha), xi, xi_dot, alpha
+
+
+def test_fundamental_azimuth_matches_the_query_maps():
+    """Second formulation: the kinematic map (COG azimuth, circulation sign, tilt sign)
+    equals the table runtime's query map fundamental_from_query to 1e-12."""
+    kin, xi, xi_dot, alpha = _kinematics()
+    c, s = fundamental_azimuth(kin)
+    xi_f, *_ = fundamental_from_query(xi, xi_dot, alpha)
+    np.testing.assert_allclose(c, np.cos(xi_f), atol=1e-12)
+    np.testing.assert_allclose(s, np.sin(xi_f), atol=1e-12)
+
+
+def test_thrust_azimuth_series_and_symmetries():
+    """The factor is the Fourier sum written out term by term at the fundamental azimuth;
+    it keeps S1 and S2 exactly, and (unlike every built-in physical effect) changes with
+    the azimuth of a level circle, which a tilt-0 table with one gain per speed cannot
+    hold."""
+    rng = np.random.default_rng(0)
+    vals = {p.name: float(rng.uniform(-0.05, 0.05)) for p in ThrustAzimuth.params}
+    eff = ThrustAzimuth(**vals)
+    kin, xi, xi_dot, alpha = _kinematics()
+    xi_f = fundamental_from_query(xi, xi_dot, alpha)[0]
+    want = 1 + vals["a0"] + sum(vals[f"a{k}"] * np.cos(k * xi_f) + vals[f"b{k}"] * np.sin(k * xi_f)
+                                for k in range(1, AZIMUTH_HARMONICS + 1))
+    np.testing.assert_allclose(eff.factor(kin), want, rtol=1e-12)
+    T = rng.uniform(1, 8, (xi.size, 4))
+    np.testing.assert_allclose(eff.modify_thrust(T, kin, None), T * want[:, None], rtol=1e-12)
+    assert effect_symmetry_errors(eff) == {"S1": 0.0, "S2": 0.0}
+    assert azimuth_invariance_error(eff) > 1e-3
+    for kind, cls in EFFECTS.items():
+        if cls is not ThrustAzimuth:
+            assert azimuth_invariance_error(cls()) <= 1e-12, kind
+
+
+def test_thrust_azimuth_is_complex_step_safe():
+    """The linearisation differentiates by complex step: d factor / d p_C equals central
+    differences (1e-7)."""
+    eff = ThrustAzimuth(a1=0.03, b2=-0.02, a5=0.01)
+    kin, *_ = _kinematics(n=20)
+    h = 1e-20
+    for j in range(3):
+        dp = np.zeros(3)
+        dp[j] = 1.0
+        cs = eff.factor(Kinematics(kin.R_CB, kin.v_C.astype(complex), kin.omega_B,
+                                   kin.p_C + 1j * h * dp, kin.alpha)).imag / h
+        e = 1e-6
+        fd = (eff.factor(Kinematics(kin.R_CB, kin.v_C, kin.omega_B, kin.p_C + e * dp,
+                                    kin.alpha))
+              - eff.factor(Kinematics(kin.R_CB, kin.v_C, kin.omega_B, kin.p_C - e * dp,
+                                      kin.alpha))) / (2 * e)
+        np.testing.assert_allclose(cs, fd, atol=1e-7)
+
+
+def test_law_names_the_dip():
+    eff = ThrustAzimuth(a1=-0.04 * np.cos(np.deg2rad(115)), b1=-0.04 * np.sin(np.deg2rad(115)))
+    law = eff.law()
+    assert "-4.0% at 115 deg" in law and "+4.0% at 295 deg" in law, law
+
+
+def test_bounded_least_squares_agrees_with_active_sets():
+    """The many-parameter solver (BVLS on the Cholesky factor) against the exact active-set
+    enumeration for k <= 3, bounds active or not, to 1e-9."""
+    rng = np.random.default_rng(1)
+    for k in (1, 2, 3):
+        for _ in range(20):
+            M = rng.normal(size=(12, k))
+            A, b = M.T @ M, rng.normal(size=k) * 3
+            lo, hi = -rng.uniform(0.05, 1, k), rng.uniform(0.05, 1, k)
+            d1, v1 = _qp(A, b, lo, hi)
+            d2, v2 = _qp_bvls(A, b, lo, hi)
+            np.testing.assert_allclose(d2, d1, atol=1e-9)
+            assert v2 == pytest.approx(v1, abs=1e-9)
+    M = rng.normal(size=(40, 13))
+    A, b = M.T @ M, rng.normal(size=13)
+    d, _ = _qp(A, b, np.full(13, -1e3), np.full(13, 1e3))  # bounds inactive: the solve
+    np.testing.assert_allclose(d, np.linalg.solve(A, -b), rtol=1e-8)
+
+
+def test_one_standard_error_rule():
+    """The lowest order whose held-out SSE is within one standard error (flight-to-flight
+    spread of the differences) of the best order's."""
+    best = np.array([10.0, 11.0, 9.0, 10.0])
+    close = best + np.array([0.5, -0.6, 0.9, 0.1])  # +0.9 in sum, SE of the sum 1.28
+    far = best + np.array([3.0, 2.5, 3.5, 3.0])  # +12: clearly worse
+    assert _one_se_order(np.array([far, close, best])) == 1
+    assert _one_se_order(np.array([far, best + 2.0 + np.array([0, 0.1, -0.1, 0]), best])) == 2
+    assert _one_se_order(np.array([best])) == 0
+
+
+def test_build_refuses_an_azimuth_dependent_level_circle():
+    """The table holds one tilt-0 gain per speed: an effect that changes with the azimuth
+    of a level circle is refused with the config file and the effect's key."""
+    from pathlib import Path
+
+    from gainsched.config import config_from_text
+    from gainsched.configedit import set_section
+    from gainsched.errors import InputError
+    from gainsched.schedule.grid import build_grid
+
+    root = Path(__file__).resolve().parents[1]
+    text = set_section((root / "configs/paper.toml").read_text(), "effects.thrust_azimuth",
+                       [("b1", -0.02, None)])
+    cfg = config_from_text(text, "wake.toml")
+    with pytest.raises(InputError, match=r"^wake.toml: effects.thrust_azimuth: depends on "
+                                         r"the azimuth of a level circle"):
+        build_grid(cfg)
