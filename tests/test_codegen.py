@@ -16,7 +16,7 @@ from test_runtime import CC, PAPER_H5, needs_cc, synthetic_table
 
 from gainsched.cli import cli
 from gainsched.config import config_from_text
-from gainsched.firmware import codegen
+from gainsched.firmware import codegen, runtime
 from gainsched.firmware.runtime import MASK_NO_GAINS, c_identifier, runtime_data
 from gainsched.model.reduced import Model
 from gainsched.schedule.linearize import lqr_state_names
@@ -130,8 +130,8 @@ def test_crc_covers_documented_bytes(paper):
                             "K", "u_d", "phi_d", "state_sign", "state_perm", "mask", "vehicle",
                             "offset_harmonics", "offsets"]  # the paper table has offsets
     assert zlib.crc32(b"".join(chunks.values())) == d.crc32()
-    descriptor = ("dims", "xi_scale", "offset_harmonics")
-    assert d.nbytes() == sum(len(v) for k, v in chunks.items() if k not in descriptor)
+    assert d.nbytes() == sum(len(v) for k, v in chunks.items()
+                             if k not in runtime.DESCRIPTOR_CHUNKS)
 
 
 def test_write_c_outputs(tmp_path):

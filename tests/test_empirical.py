@@ -122,20 +122,55 @@ def test_one_standard_error_rule():
     assert _one_se_order(np.array([best])) == 0
 
 
-def test_build_refuses_an_azimuth_dependent_level_circle():
-    """The table holds one tilt-0 gain per speed: an effect that changes with the azimuth
-    of a level circle is refused with the config file and the effect's key."""
+def _wake_config(coefficients):
+    """configs/paper.toml on a small grid with an empirical azimuth thrust law."""
     from pathlib import Path
 
     from gainsched.config import config_from_text
-    from gainsched.configedit import set_section
-    from gainsched.errors import InputError
-    from gainsched.schedule.grid import build_grid
+    from gainsched.configedit import set_section, set_values
 
     root = Path(__file__).resolve().parents[1]
-    text = set_section((root / "configs/paper.toml").read_text(), "effects.thrust_azimuth",
-                       [("b1", -0.02, None)])
-    cfg = config_from_text(text, "wake.toml")
-    with pytest.raises(InputError, match=r"^wake.toml: effects.thrust_azimuth: depends on "
-                                         r"the azimuth of a level circle"):
-        build_grid(cfg)
+    text = set_values((root / "configs/paper.toml").read_text().replace(
+        'name = "paper"', 'name = "wake"'),
+                      {"grid.speeds": [6.0, 9.0], "grid.tilts_deg": [0.0, 20.0],
+                       "grid.azimuth_samples": 12})
+    text = set_section(text, "effects.thrust_azimuth", [(k, v, None) for k, v in coefficients])
+    return config_from_text(text, "wake.toml")
+
+
+def test_tables_hold_an_azimuth_dependent_level_circle():
+    """With an effect that changes with the azimuth, a level circle is no longer the same
+    everywhere: the build solves tilt 0 by the periodic recursion and stores its gains
+    per azimuth. The runtime's direction map (S2) at tilt 0 then reproduces a direct
+    solve of the reversed circle (float32, 1e-5), and the header declares the tilt-0
+    azimuth count. With the law's coefficients at zero the table keeps one tilt-0 gain
+    per speed (the DARE's)."""
+    from gainsched.firmware.codegen import render_header
+    from gainsched.firmware.runtime import Interpolator, runtime_data
+    from gainsched.model.reduced import Model
+    from gainsched.schedule.grid import build_grid, level_circle_invariant, solve_circle
+    from gainsched.schedule.tables import table_bytes, table_from_bytes
+
+    cfg = _wake_config([("a1", -0.03), ("b1", 0.02), ("a2", 0.01)])
+    assert not level_circle_invariant(Model(cfg))
+    table = table_from_bytes(table_bytes(cfg, build_grid(cfg), Model(cfg)))
+    assert not table.reasons.any()
+    n = table.K.shape[-1]
+    assert table.per_azimuth_tilt0 and table.K_tilt0.shape == (2, 12, 4, n)
+    K0 = table.K_tilt0
+    assert np.abs(K0 - K0.mean(1, keepdims=True)).max() / np.abs(K0).max() > 1e-3
+    look = Interpolator(table)
+    j = np.arange(12)
+    for v in (6.0, 9.0):
+        direct = solve_circle(cfg, -v, [0.0])  # the circle flown backwards, at tilt 0
+        got = look(-2 * np.pi * j / 12, np.full(12, -v / cfg.radius), 0.0)
+        assert not got.status.any()
+        rel = np.abs(got.K - direct.K[0]).max() / np.abs(direct.K[0]).max()
+        assert rel <= 1e-5, (v, rel)
+        np.testing.assert_allclose(got.u_d, direct.u_d[0], rtol=1e-5)
+    assert "#define WAKE_N_XI_TILT0 12u" in render_header(runtime_data(table))
+
+    off = _wake_config([("a1", 0.0)])
+    assert level_circle_invariant(Model(off))
+    table0 = table_from_bytes(table_bytes(off, build_grid(off), Model(off)))
+    assert not table0.per_azimuth_tilt0 and table0.K_tilt0.shape == (2, 4, n)

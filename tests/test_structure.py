@@ -97,7 +97,7 @@ def test_thrust_dip_in_a_flight_campaign():
       design model on the measured states);
     - no physical candidate explains it, the empirical azimuth series does: accepted,
       the held-out binned structure falls >= 70 %, its deepest point within 15 deg of
-      the dip; ``--apply`` writes it into a config that loads.
+      the dip; ``--apply`` writes it into a config from which tables rebuild.
 
     Measured: normal -0.33 +- 0.06 m/s^2 at 105-135 deg (t = -9.2); thrust_azimuth with
     6 harmonics, -3.9 % at 114 deg, held-out binned structure -80 %."""
@@ -153,3 +153,10 @@ def test_thrust_dip_in_a_flight_campaign():
     assert abs((deepest - 115.0 + 180) % 360 - 180) <= 15, deepest
     cfg = config_from_text(apply_candidate(paper, a), "applied.toml")
     assert any(s.name == "thrust_azimuth" for s in cfg.effects)
+    # and tables rebuild with it (two speeds, two tilts: the tilt-0 gains per azimuth)
+    from gainsched.schedule.grid import build_grid
+    from gainsched.schedule.tables import table_bytes, table_from_bytes
+
+    small = cfg.with_values({"grid.speeds": [8.0, 9.0], "grid.tilts_deg": [0.0, 20.0]})
+    table = table_from_bytes(table_bytes(small, build_grid(small), Model(small)))
+    assert table.per_azimuth_tilt0 and not table.reasons.any()

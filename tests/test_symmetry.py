@@ -58,11 +58,17 @@ def _config(extra_effects="", azimuth_integral=False):
 EXTRA = "[effects.rotor_drag]\nk_rd = 0.02\n\n[effects.motor_lag]\ntau = 0.03\n"
 
 
-@pytest.fixture(scope="module", params=["paper", "with-effects", "azimuth-integral"])
+#: an empirical law of the azimuth (diagnose's thrust_azimuth): S1 and S2 by construction
+EMPIRICAL = "[effects.thrust_azimuth]\na1 = -0.03\nb1 = 0.02\na2 = 0.01\nb3 = -0.01\n"
+
+
+@pytest.fixture(scope="module",
+                params=["paper", "with-effects", "azimuth-integral", "empirical-azimuth"])
 def quadrants(request):
     """Direct solves in all four quadrants (+-speed, +-tilt) at N_XI azimuths."""
     cfg = {"paper": lambda: _config(), "with-effects": lambda: _config(EXTRA),
-           "azimuth-integral": lambda: _config(EXTRA, azimuth_integral=True)}[request.param]()
+           "azimuth-integral": lambda: _config(EXTRA, azimuth_integral=True),
+           "empirical-azimuth": lambda: _config(EMPIRICAL)}[request.param]()
     sols = {
         (sv, sa): solve_circle(cfg, sv * SPEED, [sa * TILT]) for sv in (1, -1) for sa in (1, -1)
     }

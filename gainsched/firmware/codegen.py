@@ -55,7 +55,7 @@ __all__ = [
 ]
 
 RUNTIME_FILES = ("gainsched_runtime.h", "gainsched_runtime.c")
-RUNTIME_VERSION = 2
+RUNTIME_VERSION = 3
 STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror")
 #: Cortex-M4F flags of ``make firmware-size`` and :func:`code_bytes`
 M4F_CFLAGS = ("-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard")
@@ -146,7 +146,10 @@ def render_header(data: RuntimeData) -> str:
         tilt=_body(data.tilt, c_float),
         state_sign=_body(data.state_sign, c_float, per_line=11),
         state_perm=_body(data.state_perm, _c_uint, per_line=11),
-        K_tilt0=_body(data.K_tilt0, c_float),
+        n_xi_tilt0=data.n_xi_tilt0,
+        tilt0_note=("independent of xi" if data.n_xi_tilt0 == 1
+                    else "per azimuth: an effect changes with the azimuth"),
+        K_tilt0=_body(data.K_tilt0.reshape(n_v, data.n_xi_tilt0, 4, n), c_float),
         K=_body(K, c_float),
         u_d=_body(data.u_d, c_float, per_line=4),
         phi_d=_body(data.phi_d, c_float),

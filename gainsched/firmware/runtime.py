@@ -44,6 +44,7 @@ __all__ = [
     "LOW_TENSION",
     "UNUSABLE",
     "MASK_NO_GAINS",
+    "DESCRIPTOR_CHUNKS",
     "STATUS_NAMES",
     "status_text",
     "RuntimeData",
@@ -188,6 +189,11 @@ def status_text(status: int) -> str:
     return "|".join(names) if names else "OK"
 
 
+#: the chunks of :meth:`RuntimeData.crc_chunks` that describe the table (sizes, scale)
+#: rather than hold its data arrays
+DESCRIPTOR_CHUNKS = ("dims", "xi_scale", "n_xi_tilt0", "offset_harmonics")
+
+
 @dataclass(frozen=True)
 class RuntimeData:
     """A table as the runtime holds it: float32 data, infeasible gains as zeros, the mask.
@@ -227,11 +233,20 @@ class RuntimeData:
         """``(n_tilt, n_speed, n_xi, n_state)``."""
         return self.tilt.size, self.xi_dot.size, self.xi.size, self.state_sign.size
 
+    @property
+    def n_xi_tilt0(self) -> int:
+        """Azimuths of the tilt-0 gains: 1 (independent of xi) or ``n_xi``."""
+        return 1 if self.K_tilt0.ndim == 3 else self.xi.size
+
     def crc_chunks(self):
-        """``(label, bytes)`` in CRC order: dims (uint32 LE), xi_scale, then the arrays."""
+        """``(label, bytes)`` in CRC order: dims (uint32 LE), xi_scale, the tilt-0 azimuth
+        count when it is not 1 (so that tables without it keep their CRC), then the
+        arrays."""
         dims = np.array(self.dims, dtype="<u4")
         yield "dims", dims.tobytes()
         yield "xi_scale", np.array([self.xi_scale], dtype="<f4").tobytes()
+        if self.n_xi_tilt0 != 1:
+            yield "n_xi_tilt0", np.array([self.n_xi_tilt0], dtype="<u4").tobytes()
         for key in ("xi", "speed", "xi_dot", "tilt", "K_tilt0", "K", "u_d", "phi_d", "state_sign"):
             yield key, np.ascontiguousarray(getattr(self, key), dtype="<f4").tobytes()
         for key in ("state_perm", "mask"):
@@ -252,8 +267,7 @@ class RuntimeData:
 
     def nbytes(self) -> int:
         """Bytes of table data the firmware stores (all arrays, without padding)."""
-        return sum(len(b) for k, b in self.crc_chunks()
-                   if k not in ("dims", "xi_scale", "offset_harmonics"))
+        return sum(len(b) for k, b in self.crc_chunks() if k not in DESCRIPTOR_CHUNKS)
 
 
 def c_identifier(name: str) -> str:
@@ -356,10 +370,10 @@ def runtime_data(table) -> RuntimeData:
     u_d = np.asarray(table.u_d, dtype=np.float64)
     phi_d = np.asarray(table.phi_d, dtype=np.float64)
     big = np.finfo(np.float32).max
-    fin0 = np.all(np.isfinite(K0) & (np.abs(K0) <= big), axis=(-2, -1))  # (n_v,)
+    fin0 = np.all(np.isfinite(K0) & (np.abs(K0) <= big), axis=(-2, -1))  # (n_v[, n_xi])
     finK = np.all(np.isfinite(K) & (np.abs(K) <= big), axis=(-2, -1))  # (n_a-1, n_v, n_xi)
     good = np.empty((n_a, n_v, n_xi), dtype=bool)
-    good[0] = fin0[:, None]
+    good[0] = fin0 if K0.ndim == 4 else fin0[:, None]
     good[1:] = finK
     good &= np.all(np.isfinite(u_d) & (np.abs(u_d) <= big), axis=-1)
     good &= np.isfinite(phi_d) & (np.abs(phi_d) <= big)
@@ -367,8 +381,9 @@ def runtime_data(table) -> RuntimeData:
     if np.any(lost):  # load_table checked finiteness at feasible points: a float32 overflow
         i, j, k = (int(x) for x in np.argwhere(lost)[0])
         fits = lambda x: bool(np.all(np.abs(x) <= big))  # noqa: E731
-        key, idx = ((("gains/K_tilt0", (j,)) if i == 0 else ("gains/K", (i - 1, j, k)))
-                    if not fits(K0[j] if i == 0 else K[i - 1, j, k]) else
+        k0 = (j, k) if K0.ndim == 4 else (j,)
+        key, idx = ((("gains/K_tilt0", k0) if i == 0 else ("gains/K", (i - 1, j, k)))
+                    if not fits(K0[k0] if i == 0 else K[i - 1, j, k]) else
                     ("nominal/u_d", (i, j, k)) if not fits(u_d[i, j, k]) else
                     ("nominal/phi_d", (i, j, k)))
         raise InputError(src, f"{key}[{', '.join(map(str, idx))}]",
@@ -436,7 +451,7 @@ class Interpolator:
         n_a, n_v, n_xi, n = d.dims
         self.n = n
         Kg = np.empty((n_a, n_v, n_xi, 4 * n))
-        Kg[0] = d.K_tilt0.reshape(n_v, 1, 4 * n)
+        Kg[0] = d.K_tilt0.reshape(n_v, d.n_xi_tilt0, 4 * n)  # broadcast when 1
         if n_a > 1:
             Kg[1:] = d.K.reshape(n_a - 1, n_v, n_xi, 4 * n)
         self._K = Kg.reshape(-1, 4 * n)

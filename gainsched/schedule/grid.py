@@ -7,10 +7,11 @@ period is ``N = 2 round(T / (2 dt))`` (even, so that the symmetry maps land on
 steps) and the discretisation uses ``dt_k = T / N``, within 0.15 % of the
 control period on the paper grid. The linearisation is exact at 64-128
 azimuths and carried to every step by trigonometric interpolation, checked
-to 1e-10 (:func:`discrete_system`); tilt-0 circles, time-invariant, are solved
-by the DARE. Gains at the azimuth grid are interpolated linearly between the
-two steps that bracket each grid azimuth; only those steps' gains are kept,
-so memory does not grow with the number of steps.
+to 1e-10 (:func:`discrete_system`); tilt-0 circles, time-invariant unless an
+effect changes with the azimuth, are solved by the DARE. Gains at the azimuth
+grid are interpolated linearly between the two steps that bracket each grid
+azimuth; only those steps' gains are kept, so memory does not grow with the
+number of steps.
 
 A circle with any infeasible sample (slack, thrust limits, trim failure) has
 no gains: NaN in K, and the reason bits say why.
@@ -44,7 +45,8 @@ from .path import period
 from .trim import TrimError
 
 __all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "steps_per_period",
-           "discrete_system", "periodic_interp", "check_effect_symmetries", "LIN_TOL",
+           "discrete_system", "periodic_interp", "check_effect_symmetries",
+           "level_circle_invariant", "LIN_TOL",
            "SYMMETRY_TOL"]
 
 #: relative accuracy demanded of the interpolated linearisation (see discrete_system)
@@ -54,8 +56,7 @@ SYMMETRY_TOL = 1e-9
 
 
 def check_effect_symmetries(config) -> None:
-    """Refuse effects that break the symmetries the table relies on (S1, S2, and the
-    azimuth invariance of a level circle).
+    """Refuse effects that break the symmetries the table relies on.
 
     The table stores ``alpha >= 0, xi' > 0`` and the runtime maps every other query
     there (S1, S2; docs/symmetry.md); an effect tied to an inertial heading or azimuth
@@ -72,13 +73,15 @@ def check_effect_symmetries(config) -> None:
                                  f"query maps rely on (relative error {err:.1e} > "
                                  f"{SYMMETRY_TOL:g}; docs/symmetry.md): simulate and diagnose "
                                  "with it, build tables without it")
-        err = azimuth_invariance_error(eff)
-        if not err <= SYMMETRY_TOL:
-            raise InputError(config.source, f"effects.{eff.kind}",
-                             f"depends on the azimuth of a level circle (relative change "
-                             f"{err:.1e} > {SYMMETRY_TOL:g}), but the table stores one tilt-0 "
-                             "gain per speed (docs/table-format.md): simulate and diagnose "
-                             "with it, build tables without it")
+
+
+def level_circle_invariant(model) -> bool:
+    """Whether every effect of ``model`` looks the same at every azimuth of a level circle
+    (:func:`~gainsched.model.symmetry.azimuth_invariance_error` within
+    :data:`SYMMETRY_TOL`): then a tilt-0 circle is time-invariant, solved by the DARE and
+    stored with one gain per speed; otherwise (an empirical azimuth law) it is solved
+    like a tilted one and stored per azimuth (docs/table-format.md)."""
+    return all(azimuth_invariance_error(e) <= SYMMETRY_TOL for e in model.effects)
 
 
 def steps_per_period(speed: float, r: float, dt: float) -> int:
@@ -229,9 +232,10 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
 
 
 def _tilt0(model, config, speed, N, dt, Qx):
-    """Tilt 0: the circle's linearisation is the same at every azimuth (rotation
-    about the vertical), so the periodic problem is time-invariant and its solution is
-    the DARE's, exactly. Returns ``K (4, n), S (n, n), spectral radius``."""
+    """Tilt 0 with effects that keep the rotation about the vertical
+    (:func:`level_circle_invariant`): the circle's linearisation is the same at every
+    azimuth, so the periodic problem is time-invariant and its solution is the DARE's,
+    exactly. Returns ``K (4, n), S (n, n), spectral radius``."""
     Ad, Bd = _discrete_at(model, speed, [0.0], 1, dt)
     K, S, E = dlqr(Ad[0, 0], Bd[0, 0], Qx, config.control.R)
     return K, S, float(np.abs(E).max()) ** N
@@ -242,8 +246,8 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=Tr
 
     Returns a :class:`CircleSolution` (and, with ``keep_steps``, the per-step
     ``(Ad, Bd, K)`` of the tilts solved by the periodic recursion, for checks).
-    ``dare_tilt0`` solves tilt-0 circles by the DARE (see :func:`_tilt0`); with
-    ``keep_steps`` every tilt goes through the periodic recursion.
+    ``dare_tilt0`` solves tilt-0 circles by the DARE (see :func:`_tilt0`) when the
+    effects allow it; with ``keep_steps`` every tilt goes through the periodic recursion.
     """
     model = Model(config)
     tilts = np.asarray(tilts, dtype=float)
@@ -283,7 +287,8 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=Tr
     Qx = np.zeros((n, n))
     Qx[:n_lqr, :n_lqr] = config.control.Q
     ok = np.flatnonzero(bad == 0)
-    if dare_tilt0 and not keep_steps and config.control.terminal == "periodic":
+    if (dare_tilt0 and not keep_steps and config.control.terminal == "periodic"
+            and level_circle_invariant(model)):
         for i in ok[tilts[ok] == 0.0]:
             Ki, Si, radius[i] = _tilt0(model, config, speed, N, dt, Qx)
             K[i], S[i] = Ki, Si

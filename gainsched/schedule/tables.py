@@ -27,6 +27,7 @@ from ..config import N_STATE
 from ..constants import CONTROL_LAW, REASONS
 from ..errors import InputError
 from ..publish import write_atomic
+from .grid import level_circle_invariant
 from .linearize import INPUT_NAMES, lqr_state_names
 
 __all__ = ["SCHEMA", "Table", "table_bytes", "write_table", "load_table", "table_from_bytes"]
@@ -42,7 +43,8 @@ class Table:
     ----------
     xi : (n_xi,) rad, uniform on [0, 2 pi); speed : (n_v,) m/s; xi_dot : (n_v,) rad/s
     tilt : (n_a,) rad, tilt[0] == 0
-    K_tilt0 : (n_v, 4, n) gains at tilt 0 (independent of xi)
+    K_tilt0 : (n_v, 4, n) gains at tilt 0, independent of xi; or (n_v, n_xi, 4, n) when
+        an effect changes with the azimuth of a level circle (``per_azimuth_tilt0``)
     K : (n_a - 1, n_v, n_xi, 4, n) gains at tilt[1:]
     u_d : (n_a, n_v, n_xi, 4) N; phi_d : (n_a, n_v, n_xi) rad; tension : (n_a, n_v, n_xi) N
     reasons : (n_a, n_v, n_xi) uint8 (0 = feasible)
@@ -78,9 +80,16 @@ class Table:
     def name(self) -> str:
         return str(self.attrs["config_name"])
 
+    @property
+    def per_azimuth_tilt0(self) -> bool:
+        """Whether the tilt-0 gains are stored per azimuth (``K_tilt0`` (n_v, n_xi, 4, n))."""
+        return self.K_tilt0.ndim == 4
+
     def K_full(self) -> np.ndarray:
-        """Gains on the regular grid (n_a, n_v, n_xi, 4, n), tilt-0 slice broadcast over xi."""
-        k0 = np.broadcast_to(self.K_tilt0[:, None], (1, *self.K.shape[1:]))
+        """Gains on the regular grid (n_a, n_v, n_xi, 4, n), a tilt-0 slice independent of
+        xi broadcast over it."""
+        k0 = self.K_tilt0 if self.per_azimuth_tilt0 else self.K_tilt0[:, None]
+        k0 = np.broadcast_to(k0, (1, *self.K.shape[1:]))
         return np.concatenate([k0, self.K], axis=0)
 
 
@@ -164,11 +173,13 @@ def table_bytes(config, grid, model) -> bytes:
         _create(ax, "xi_dot", speeds / config.radius, "rad/s", "azimuth rate = speed / (rho + L_e)")
         _create(ax, "tilt", tilts, "rad", "circle tilt alpha_C; tilt[0] = 0")
         g = _group(f, "gains")
-        _create(
-            g, "K_tilt0", grid.K[0, :, 0], "SI", "gains at tilt 0 (xi-independent), (speed, 4, n)"
-        )
+        if level_circle_invariant(model):
+            K0, S0, doc = grid.K[0, :, 0], grid.S[0, :, 0], "xi-independent), (speed, 4, n)"
+        else:  # an effect changes with the azimuth of a level circle
+            K0, S0, doc = grid.K[0], grid.S[0], "per azimuth), (speed, xi, 4, n)"
+        _create(g, "K_tilt0", K0, "SI", f"gains at tilt 0 ({doc}")
         _create(g, "K", grid.K[1:], "SI", "gains at tilt[1:], (tilt-1, speed, xi, 4, n)")
-        _create(g, "S_tilt0", grid.S[0, :, 0], "SI", "Riccati cost-to-go at tilt 0")
+        _create(g, "S_tilt0", S0, "SI", "Riccati cost-to-go at tilt 0")
         _create(g, "S", grid.S[1:], "SI", "Riccati cost-to-go at tilt[1:]")
         nm = _group(f, "nominal")
         _create(nm, "u_d", grid.u_d, "N", "nominal motor thrusts (tilt, speed, xi, 4)")
@@ -212,7 +223,7 @@ def write_table(path, config, grid, model) -> int:
 
 _REQUIRED = {
     "axes/xi": 1, "axes/speed": 1, "axes/xi_dot": 1, "axes/tilt": 1,
-    "gains/K_tilt0": 3, "gains/K": 5, "nominal/u_d": 4, "nominal/phi_d": 3,
+    "gains/K_tilt0": (3, 4), "gains/K": 5, "nominal/u_d": 4, "nominal/phi_d": 3,
     "nominal/tension": 3, "feasibility/reasons": 3, "closed_loop/spectral_radius": 2,
     "closed_loop/dt": 1, "weights/Q": 2, "weights/R": 2, "config_text": 0,
 }
@@ -298,8 +309,9 @@ def _read(f, path) -> Table:
         if key not in f:
             raise InputError(path, key, "missing dataset")
         v = f[key][()]
-        if np.ndim(v) != ndim:
-            raise InputError(path, key, f"must have {ndim} dimensions, has {np.ndim(v)}")
+        if np.ndim(v) not in np.atleast_1d(ndim):
+            want = " or ".join(map(str, np.atleast_1d(ndim)))
+            raise InputError(path, key, f"must have {want} dimensions, has {np.ndim(v)}")
         d[key] = _decoded(v)
     attrs = {k: _decoded(v) for k, v in f.attrs.items()}
     xi, speed, tilt = d["axes/xi"], d["axes/speed"], d["axes/tilt"]
@@ -316,7 +328,8 @@ def _read(f, path) -> Table:
     K0, K = d["gains/K_tilt0"], d["gains/K"]
     n = K0.shape[-1]
     shapes = {
-        "gains/K_tilt0": (n_v, 4, n), "gains/K": (n_a - 1, n_v, n_xi, 4, n),
+        "gains/K_tilt0": (n_v, 4, n) if K0.ndim == 3 else (n_v, n_xi, 4, n),
+        "gains/K": (n_a - 1, n_v, n_xi, 4, n),
         "nominal/u_d": (n_a, n_v, n_xi, 4), "nominal/phi_d": (n_a, n_v, n_xi),
         "nominal/tension": (n_a, n_v, n_xi), "feasibility/reasons": (n_a, n_v, n_xi),
         "closed_loop/spectral_radius": (n_a, n_v), "weights/Q": (n, n), "weights/R": (4, 4),
@@ -352,7 +365,9 @@ def _check_feasible_finite(path, d, tilt, speed, xi) -> None:
     """Gains, nominal thrusts and roll must be finite at every feasible point (reasons 0)."""
     ok = d["feasibility/reasons"] == 0  # (n_a, n_v, n_xi)
     checks = (
-        ("gains/K_tilt0", d["gains/K_tilt0"], ok[0].any(-1), lambda i: (0, i[0], 0)),
+        ("gains/K_tilt0", d["gains/K_tilt0"], ok[0].any(-1), lambda i: (0, i[0], 0))
+        if d["gains/K_tilt0"].ndim == 3 else
+        ("gains/K_tilt0", d["gains/K_tilt0"], ok[0], lambda i: (0, i[0], i[1])),
         ("gains/K", d["gains/K"], ok[1:], lambda i: (i[0] + 1, i[1], i[2])),
         ("nominal/u_d", d["nominal/u_d"], ok, tuple),
         ("nominal/phi_d", d["nominal/phi_d"], ok, tuple),

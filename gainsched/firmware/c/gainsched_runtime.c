@@ -81,7 +81,14 @@ static inline int gs_table_usable(const gs_table *t)
            t->n_state <= 255u && t->xi_dot != NULL && t->tilt != NULL && t->K_tilt0 != NULL &&
            (t->K != NULL || t->n_tilt == 1u) && t->u_d != NULL && t->phi_d != NULL &&
            t->state_sign != NULL && t->state_perm != NULL && t->mask != NULL &&
-           (t->offsets == NULL || t->n_offset_harmonics <= GS_MAX_OFFSET_HARMONICS);
+           (t->offsets == NULL || t->n_offset_harmonics <= GS_MAX_OFFSET_HARMONICS) &&
+           (t->n_xi_tilt0 <= 1u || t->n_xi_tilt0 == t->n_xi);
+}
+
+/* the tilt-0 gain block of speed iv and azimuth ix */
+static inline const float *gs_k_tilt0(const gs_table *t, size_t iv, size_t ix, size_t nK)
+{
+    return t->n_xi_tilt0 > 1u ? t->K_tilt0 + (iv * t->n_xi + ix) * nK : t->K_tilt0 + iv * nK;
 }
 
 /* where a query fell: corner indices and fractions per axis, and the symmetry maps */
@@ -221,9 +228,11 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
         w[5] = w10 * fx;
         w[6] = w11 * wx0;
         w[7] = w11 * fx;
-        if (ia[0] == 0u) { /* tilt 0: the gains do not depend on xi */
-            pk[0] = pk[1] = t->K_tilt0 + (size_t)iv[0] * nK;
-            pk[2] = pk[3] = t->K_tilt0 + (size_t)iv[1] * nK;
+        if (ia[0] == 0u) { /* tilt 0: its own array (per azimuth or not) */
+            pk[0] = gs_k_tilt0(t, iv[0], ix[0], nK);
+            pk[1] = gs_k_tilt0(t, iv[0], ix[1], nK);
+            pk[2] = gs_k_tilt0(t, iv[1], ix[0], nK);
+            pk[3] = gs_k_tilt0(t, iv[1], ix[1], nK);
         } else {
             pk[0] = t->K + (P[0] - n_vx) * nK;
             pk[1] = t->K + (P[1] - n_vx) * nK;
@@ -231,8 +240,10 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
             pk[3] = t->K + (P[3] - n_vx) * nK;
         }
         if (ia[1] == 0u) { /* only with a single tilt */
-            pk[4] = pk[5] = t->K_tilt0 + (size_t)iv[0] * nK;
-            pk[6] = pk[7] = t->K_tilt0 + (size_t)iv[1] * nK;
+            pk[4] = gs_k_tilt0(t, iv[0], ix[0], nK);
+            pk[5] = gs_k_tilt0(t, iv[0], ix[1], nK);
+            pk[6] = gs_k_tilt0(t, iv[1], ix[0], nK);
+            pk[7] = gs_k_tilt0(t, iv[1], ix[1], nK);
         } else {
             pk[4] = t->K + (P[4] - n_vx) * nK;
             pk[5] = t->K + (P[5] - n_vx) * nK;
@@ -723,11 +734,15 @@ uint32_t gs_table_crc32(const gs_table *t)
     crc = gs_crc_u32(crc, t->n_xi);
     crc = gs_crc_u32(crc, t->n_state);
     crc = gs_crc_u32(crc, gs_bits(t->xi_scale));
+    if (t->n_xi_tilt0 > 1u) { /* only then: tables without it keep their CRC */
+        crc = gs_crc_u32(crc, t->n_xi_tilt0);
+    }
     crc = gs_crc_floats(crc, t->xi, t->n_xi);
     crc = gs_crc_floats(crc, t->speed, t->n_speed);
     crc = gs_crc_floats(crc, t->xi_dot, t->n_speed);
     crc = gs_crc_floats(crc, t->tilt, t->n_tilt);
-    crc = gs_crc_floats(crc, t->K_tilt0, (size_t)t->n_speed * 4u * n);
+    crc = gs_crc_floats(crc, t->K_tilt0,
+                        (size_t)t->n_speed * (t->n_xi_tilt0 > 1u ? t->n_xi : 1u) * 4u * n);
     if (t->n_tilt > 1u) {
         crc = gs_crc_floats(crc, t->K, (size_t)(t->n_tilt - 1u) * t->n_speed * t->n_xi * 4u * n);
     }

@@ -47,7 +47,7 @@
 extern "C" {
 #endif
 
-#define GS_RUNTIME_VERSION 2
+#define GS_RUNTIME_VERSION 3
 
 /* ---- status bits returned by gs_lookup (0 = GS_OK) ---------------------- */
 #define GS_OK 0x00            /* inside the table, all corners feasible */
@@ -116,7 +116,7 @@ typedef struct gs_table {
     const float *speed;       /* [n_speed] m/s (informational, in the CRC) */
     const float *xi_dot;      /* [n_speed] rad/s, strictly increasing, > 0 */
     const float *tilt;        /* [n_tilt] rad, strictly increasing, tilt[0] = 0 */
-    const float *K_tilt0;     /* [n_speed][4][n_state] gains at tilt 0 */
+    const float *K_tilt0;     /* [n_speed][n_xi_tilt0][4][n_state] gains at tilt 0 */
     const float *K;           /* [n_tilt-1][n_speed][n_xi][4][n_state] */
     const float *u_d;         /* [n_tilt][n_speed][n_xi][4] N */
     const float *phi_d;       /* [n_tilt][n_speed][n_xi] rad */
@@ -128,6 +128,9 @@ typedef struct gs_table {
     const float *offsets;     /* [n_tilt][n_speed][2][2H+1] rad: Fourier coefficients of the
                                * nominal's pitch and yaw offsets per circle; NULL: none */
     uint32_t crc32;           /* CRC-32 of the table data (docs/runtime.md) */
+    uint32_t n_xi_tilt0;      /* azimuths of K_tilt0: 0 or 1, independent of xi (a level
+                               * circle looks the same at every azimuth); n_xi when an
+                               * effect changes with the azimuth */
 } gs_table;
 
 /*

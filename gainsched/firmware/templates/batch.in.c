@@ -102,7 +102,8 @@ int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
     src[1] = t.speed; size[1] = t.n_speed * sizeof(float);
     src[2] = t.xi_dot; size[2] = t.n_speed * sizeof(float);
     src[3] = t.tilt; size[3] = t.n_tilt * sizeof(float);
-    src[4] = t.K_tilt0; size[4] = (size_t)t.n_speed * NK * sizeof(float);
+    src[4] = t.K_tilt0;
+    size[4] = (size_t)t.n_speed * (t.n_xi_tilt0 > 1u ? t.n_xi : 1u) * NK * sizeof(float);
     src[5] = t.K; size[5] = (size_t)(t.n_tilt - 1u) * t.n_speed * t.n_xi * NK * sizeof(float);
     src[6] = t.u_d; size[6] = n_pts * 4u * sizeof(float);
     src[7] = t.phi_d; size[7] = n_pts * sizeof(float);

@@ -37,6 +37,7 @@
 #define ${NAME}_N_TILT ${n_tilt}u /* tilt axis (tilt[0] = 0) */
 #define ${NAME}_N_SPEED ${n_speed}u /* speed / azimuth-rate axis */
 #define ${NAME}_N_XI ${n_xi}u /* azimuth axis, periodic */
+#define ${NAME}_N_XI_TILT0 ${n_xi_tilt0}u /* azimuths of ${name}_K_tilt0: 1 or N_XI */
 #define ${NAME}_N_STATE ${n_state}u /* LQR state dimension: columns of K */
 /* the column of each state in K and x (order above); which integral states exist */
 ${state_macros}
@@ -88,8 +89,8 @@ static const uint8_t ${name}_state_perm[${NAME}_N_STATE] = {
 ${state_perm}
 };
 
-/* gains at tilt 0 (independent of xi): [speed][input][state] */
-static const float ${name}_K_tilt0[${NAME}_N_SPEED][4][${NAME}_N_STATE] = {
+/* gains at tilt 0 (${tilt0_note}): [speed][xi][input][state] */
+static const float ${name}_K_tilt0[${NAME}_N_SPEED][${NAME}_N_XI_TILT0][4][${NAME}_N_STATE] = {
 ${K_tilt0}
 };
 
@@ -124,7 +125,7 @@ static const gs_table ${name}_table = {
     ${name}_speed,
     ${name}_xi_dot,
     ${name}_tilt,
-    &${name}_K_tilt0[0][0][0],
+    &${name}_K_tilt0[0][0][0][0],
     &${name}_K[0][0][0][0][0],
     &${name}_u_d[0][0][0][0],
     &${name}_phi_d[0][0][0],
@@ -135,6 +136,7 @@ static const gs_table ${name}_table = {
     ${NAME}_OFFSET_HARMONICS,
     ${offsets_ref},
     ${NAME}_CRC32,
+    ${NAME}_N_XI_TILT0,
 };
 
 /* Gains at (xi rad, xi_dot rad/s, alpha rad): returns GS_* status bits. */
