@@ -202,12 +202,17 @@ class Analysis:
     savgol_order : int
         Polynomial order of the Savitzky-Golay fit (2..6; >= 2 for accelerations).
     latency_s : float, s
-        Measurement latency: the logged pose lags the logged thrust commands by this.
+        Measurement latency: the logged pose lags the logged thrust commands (and the
+        on-board sensors: load cell, gyro) by this.
+    use_gyro : bool
+        Take the body angular accelerations from the logged gyro (``p, q, r``: one
+        differentiation) instead of the twice-differentiated attitude, when a log has it.
     """
 
     savgol_window_s: float = 0.1
     savgol_order: int = 3
     latency_s: float = 0.0
+    use_gyro: bool = True
 
 
 @dataclass(frozen=True)
@@ -651,8 +656,9 @@ def _analysis(sec: Section) -> Analysis:
     latency = sec.number("latency_s", Analysis.latency_s, nonneg=True)
     if latency >= 1:
         raise sec.error("latency_s", f"must be < 1 s, got {latency:g}")
+    gyro = sec.boolean("use_gyro", Analysis.use_gyro)
     sec.done()
-    return Analysis(window, order, latency)
+    return Analysis(window, order, latency, gyro)
 
 
 def _limits(sec: Section) -> Limits:

@@ -117,6 +117,8 @@ BIN_VARIABLES = {
 AT_NOISE_FLOOR = 1.25
 _INPUT_NAMES = ("T_C", "tau_x", "tau_y", "tau_z")
 _CHANNELS = ("d", "delta", "xi", "phi", "theta", "psi")
+#: samples of the cubic fit whose residual estimates the gyro's noise
+GYRO_NOISE_WINDOW = 5
 
 
 def window_samples(window_s: float, dt: float, order: int, source="", where="") -> int:
@@ -176,9 +178,16 @@ class Measured:
     tension : (N,) N or None
         Load cell.
     raw_sigma : dict
-        Noise std of each raw channel (d m; angles rad), from the Savitzky-Golay fit residual.
+        Noise std of each raw channel (d m; angles rad; the gyro's p, q, r rad/s), from
+        the Savitzky-Golay fit residual.
     L_e : float, m
         Attachment offset the reduced coordinates were computed with.
+    gyro : (N, 3) rad/s or None
+        The logged gyro (on-board time, like the commands), when the log has one and
+        ``analysis.use_gyro`` is on.
+    gyro_dot : (N, 3) rad/s^2 or None
+        Its Savitzky-Golay derivative: the measured body angular acceleration (one
+        differentiation; ``omega_dot`` is the pose's, two).
     """
 
     name: str
@@ -205,6 +214,16 @@ class Measured:
     raw_sigma: dict = field(default_factory=dict)
     L_e: float = 0.0
     cache: dict = field(default_factory=dict, repr=False)  # model-independent derived arrays
+    gyro: np.ndarray | None = None
+    gyro_dot: np.ndarray | None = None
+
+    def omega_dot_measured(self, latency: float) -> np.ndarray:
+        """The measured body angular acceleration (N, 3), rad/s^2, on the pose's clock:
+        from the gyro when there is one (delayed by ``latency`` s, like the commands it
+        is compared with), else from the pose."""
+        if self.gyro_dot is None:
+            return self.omega_dot
+        return _delayed(self.t, self.gyro_dot, latency)
 
     def derived(self, key: str, fn):
         """``fn()`` computed once per segment (kinematics, projections)."""
@@ -323,6 +342,16 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
     hc = savgol_coeffs(n, an.savgol_order)[h]
     fit_res = (raw - ch)[:, h : len(log) - h]
     sig = np.sqrt(np.mean(fit_res**2, axis=-1) / max(1e-12, 1 - hc))
+    sigma = dict(zip(_CHANNELS, map(float, sig), strict=True))
+    gyro, gyro_dot = _gyro(log, an, n, dt)
+    if gyro is not None:
+        # the gyro's white noise from the residual of a 5-point cubic fit: short enough to
+        # follow the body rates (the roll rate moves within the pose window), so the
+        # residual is noise, not motion
+        g_hc = savgol_coeffs(GYRO_NOISE_WINDOW, 3)[GYRO_NOISE_WINDOW // 2]
+        g_res = (gyro - savgol_filter(gyro, GYRO_NOISE_WINDOW, 3, axis=0))[h : len(log) - h]
+        g_sig = np.sqrt(np.mean(g_res**2, axis=0) / (1 - g_hc))
+        sigma.update(zip(("p", "q", "r"), map(float, g_sig), strict=True))
     tension = log.optional.get("tension")
     if tension is not None and not np.all(np.isfinite(tension)):
         tension = None  # a load cell with missing samples is not used (radial equation instead)
@@ -333,15 +362,29 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
         base, str(log.source), log.alpha_c, log.gamma_c, np.asarray(log.t, float),
         np.asarray(log.t, float), n, an.savgol_order, z, acc, ch[0], ch1[0], p, v, a,
         R, w_dot, e, axes, np.asarray(log.T_cmd, float),
-        None if tension is None else np.asarray(tension, float),
-        dict(zip(_CHANNELS, map(float, sig), strict=True)), L_e,
+        None if tension is None else np.asarray(tension, float), sigma, L_e,
+        gyro=gyro, gyro_dot=gyro_dot,
     )
 
 
-def _noisy(log: FlightLog, meas: Measured, config: Config, rng) -> Measured:
+def _gyro(log: FlightLog, an, n: int, dt: float, noise=None):
+    """The logged gyro (N, 3) rad/s and its Savitzky-Golay derivative (N, 3) rad/s^2, or
+    ``(None, None)`` without one (or with ``analysis.use_gyro`` off, or missing samples).
+    ``noise``: (N, 3) rad/s added first (the noise-floor estimate)."""
+    gyro = log.optional.get("omega_B")
+    if not an.use_gyro or gyro is None or not np.all(np.isfinite(gyro)):
+        return None, None
+    gyro = np.asarray(gyro, float) if noise is None else np.asarray(gyro, float) + noise
+    return gyro, savgol_filter(gyro, deriv=1, delta=dt, window_length=n,
+                               polyorder=an.savgol_order, axis=0, mode="interp")
+
+
+def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None) -> Measured:
     """The same segment with motion-capture noise of the estimated level added once more:
     position noise (std from the tether-distance channel, where attitude noise does not
-    enter to first order) and attitude noise (std from the roll and pitch channels)."""
+    enter to first order) and attitude noise (std from the roll and pitch channels); and
+    gyro noise of its estimated level when the gyro is used (from ``rng_gyro``, its own
+    stream, so that the pose's noise does not depend on whether a gyro is used)."""
     an = config.analysis
     sp = meas.raw_sigma["d"]
     sa = 0.5 * (meas.raw_sigma["phi"] + meas.raw_sigma["theta"])
@@ -357,9 +400,15 @@ def _noisy(log: FlightLog, meas: Measured, config: Config, rng) -> Measured:
     ch1 = savgol_filter(raw, deriv=1, delta=dt, **kw)
     ch2 = savgol_filter(raw, deriv=2, delta=dt, **kw)
     z, acc, p, v, a, R, w_dot, e, axes = _reconstruct(ch, ch1, ch2, meas.L_e)
+    gyro, gyro_dot = None, None
+    if meas.gyro is not None:  # the gyro's own noise, once more
+        g_sig = np.array([meas.raw_sigma[k] for k in ("p", "q", "r")])
+        gyro, gyro_dot = _gyro(log, an, meas.window, dt,
+                               g_sig * (rng_gyro or rng).standard_normal((n, 3)))
     return Measured(meas.name, meas.source, meas.alpha, meas.gamma, meas.t, meas.t_flight,
                     meas.window, meas.order, z, acc, ch[0], ch1[0], p, v, a, R, w_dot, e, axes,
-                    meas.T_cmd, meas.tension, meas.raw_sigma, meas.L_e)
+                    meas.T_cmd, meas.tension, meas.raw_sigma, meas.L_e, gyro=gyro,
+                    gyro_dot=gyro_dot)
 
 
 # --------------------------------------------------------------------------- prediction
@@ -409,7 +458,10 @@ class Prediction:
     ``acc`` (N, 3): predicted COG acceleration projected on the path axes (t, n, r),
     smoothed; ``omega_dot`` (N, 3) rad/s^2 smoothed; ``stretch`` (N,) m; ``tension``
     (N,) N used (load cell or radial equation); ``T`` (N, 4) N actual thrust after effects;
-    ``inputs`` (N, 4) commanded (T_C, tau_x, tau_y, tau_z) at the sample times.
+    ``inputs`` (N, 4) commanded (T_C, tau_x, tau_y, tau_z) at the sample times;
+    ``latency`` s: how far the on-board signals were delayed onto the pose's clock;
+    ``omega_dot_pose`` (N, 3) rad/s^2: the prediction smoothed for the pose's angular
+    acceleration (``omega_dot`` is filtered like the gyro's when the segment has one).
     """
 
     acc: np.ndarray
@@ -419,6 +471,8 @@ class Prediction:
     T: np.ndarray
     inputs: np.ndarray
     tension_source: str
+    latency: float = 0.0
+    omega_dot_pose: np.ndarray | None = None
 
 
 def _kelvin_voigt(f, k, c, dt):
@@ -502,10 +556,18 @@ def predict(model: Model, meas: Measured, *, latency: float | None = None,
     acc = np.einsum("nij,nj->ni", meas.axes, a_pred)
     kw = dict(window_length=meas.window, polyorder=meas.order, axis=0, mode="interp")
     sm = savgol_filter(np.concatenate([acc, wd], -1), **kw)
-    acc, wd = sm[:, :3], sm[:, 3:]
+    acc, wd_pose = sm[:, :3], sm[:, 3:]
+    wd_gyro = wd_pose
+    if meas.gyro_dot is not None:
+        # the gyro's angular acceleration is the filter's derivative of the rate: give the
+        # prediction the same operator (the derivative of its running integral, whose
+        # unknown constant the derivative removes exactly), not the smoothing
+        w_int = np.concatenate([np.zeros((1, 3)), np.cumsum(
+            0.5 * (wd[1:] + wd[:-1]) * np.diff(meas.t)[:, None], axis=0)])
+        wd_gyro = savgol_filter(w_int, deriv=1, delta=meas.dt, **kw)
     stretch = _tether_stretch(cfg, f_t, meas.dt)
     inp = np.einsum("nk,jk->nj", u, model.alloc) if inputs else None
-    return Prediction(acc, wd, stretch, f_t, T, inp, source)
+    return Prediction(acc, wd_gyro, stretch, f_t, T, inp, source, lat, wd_pose)
 
 
 # --------------------------------------------------------------------------- residuals
@@ -548,8 +610,9 @@ def residual_axes(model: Model, meas: Measured, latency: float | None = None) ->
     out = {"tangential": acc_m[:, 0] - pred.acc[c, 0], "normal": acc_m[:, 1] - pred.acc[c, 1]}
     if pred.tension_source == "load cell":
         out["radial"] = acc_m[:, 2] - pred.acc[c, 2]
+    wd = meas.omega_dot_measured(pred.latency)
     for j, ax in enumerate(("roll", "pitch", "yaw")):
-        out[ax] = meas.omega_dot[c, j] - pred.omega_dot[c, j]
+        out[ax] = wd[c, j] - pred.omega_dot[c, j]
     out["stretch"] = meas.d[c] - model.rho - pred.stretch[c]
     return out
 
@@ -561,8 +624,9 @@ def _residual(model: Model, meas: Measured, pred: Prediction) -> Residual:
     predicted = {"tangential": pred.acc[c, 0], "normal": pred.acc[c, 1]}
     if pred.tension_source == "load cell":
         measured["radial"], predicted["radial"] = acc_m[c, 2], pred.acc[c, 2]
+    wd = meas.omega_dot_measured(pred.latency)
     for j, ax in enumerate(("roll", "pitch", "yaw")):
-        measured[ax], predicted[ax] = meas.omega_dot[c, j], pred.omega_dot[c, j]
+        measured[ax], predicted[ax] = wd[c, j], pred.omega_dot[c, j]
     measured["stretch"] = meas.d[c] - model.rho
     predicted["stretch"] = pred.stretch[c]
     residual = {k: measured[k] - predicted[k] for k in measured}
@@ -749,22 +813,39 @@ def axis_stats(res: list[Residual], axis: str, noise_floor: float = math.nan,
 
 
 def noise_floor(config: Config, measured, segs, *, effects=None, latency=None,
-                seed: int = 0) -> dict:
-    """RMS change of each residual axis when motion-capture noise of the estimated level is
-    added to the raw pose channels once more: the residual the noise alone explains."""
+                seed: int = 0) -> tuple[dict, dict]:
+    """RMS change of each residual axis when measurement noise of the estimated level is
+    added once more (motion capture on the raw pose channels, the gyro's on the gyro):
+    the residual the noise alone explains.
+
+    Returns ``(floors, pose_floors)``: the floor per axis, and for the rotational axes of
+    segments measured with the gyro the floor they would have from the pose alone (the
+    twice-differentiated attitude): what the gyro saves.
+    """
     model = Model(config, effects)
-    rng = np.random.default_rng(seed)
-    acc = {}
-    cnt = {}
+    rng, rng_gyro = np.random.default_rng(seed), np.random.default_rng(seed + 1)
+    acc: dict = {}
+    pose: dict = {}
+
+    def add(store, ax, d):
+        s, k = store.get(ax, (0.0, 0))
+        store[ax] = (s + float(np.sum(d * d)), k + d.size)
+
     for m, s in zip(measured, segs, strict=True):
-        r0 = _residual(model, m, predict(model, m, latency=latency))
-        mn = _noisy(s, m, config, rng)
-        r1 = _residual(model, mn, predict(model, mn, latency=latency))
+        p0 = predict(model, m, latency=latency)
+        r0 = _residual(model, m, p0)
+        mn = _noisy(s, m, config, rng, rng_gyro)
+        p1 = predict(model, mn, latency=latency)
+        r1 = _residual(model, mn, p1)
         for ax in r0.residual:
-            d = r1.residual[ax] - r0.residual[ax]
-            acc[ax] = acc.get(ax, 0.0) + float(np.sum(d * d))
-            cnt[ax] = cnt.get(ax, 0) + d.size
-    return {ax: math.sqrt(acc[ax] / cnt[ax]) for ax in acc}
+            add(acc, ax, r1.residual[ax] - r0.residual[ax])
+        if m.gyro_dot is not None:
+            c = m.core
+            for j, ax in enumerate(("roll", "pitch", "yaw")):
+                add(pose, ax, (mn.omega_dot[c, j] - p1.omega_dot_pose[c, j])
+                    - (m.omega_dot[c, j] - p0.omega_dot_pose[c, j]))
+    rms = lambda store: {ax: math.sqrt(s / k) for ax, (s, k) in store.items()}  # noqa: E731
+    return rms(acc), rms(pose)
 
 
 # --------------------------------------------------------------------------- where it fails
@@ -901,6 +982,16 @@ class Comparison:
     #: strongest first, and its tables ``{variable: {axis: BinnedMean}}``
     structure: list = field(default_factory=list)
     structure_tables: dict = field(default_factory=dict)
+    #: the rotational axes' noise floors from the pose alone, when the gyro was used
+    #: (:func:`noise_floor`): what the gyro saved
+    pose_noise: dict = field(default_factory=dict)
+
+    def gyro_lines(self) -> list[str]:
+        """One sentence per rotational axis measured with the gyro: its noise floor from
+        the gyro against the pose's alone."""
+        return [f"{a}: noise floor {self.noise[a]:.3g} rad/s^2 with the gyro, "
+                f"{p:.3g} from the pose alone (-{1 - self.noise[a] / p:.0%})"
+                for a, p in self.pose_noise.items() if a in self.noise and p > 0]
 
     @property
     def axes(self) -> tuple[str, ...]:
@@ -930,6 +1021,9 @@ class Comparison:
                                "tables": self.where["tables"]},
             "notes": self.notes,
             "tracking": self.tracking,
+            "gyro": {"used": bool(self.pose_noise),
+                     "pose_noise_floor": self.pose_noise,
+                     "noise_floor": {a: self.noise[a] for a in self.pose_noise}},
             "structure": {"findings": [f.to_json() for f in self.structure],
                           "tables": {v: {a: bm.to_json() for a, bm in tab.items()}
                                      for v, tab in self.structure_tables.items()}},
@@ -947,13 +1041,13 @@ def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
     if measured is None:
         measured, segs, notes = load_segments(config, logs)
     res = residuals(config, measured, effects=effects)
-    noise = noise_floor(config, measured, segs, effects=effects)
+    noise, pose_noise = noise_floor(config, measured, segs, effects=effects)
     axes = [a for a in AXES if all(a in r.residual for r in res)]
     stats = {a: axis_stats(res, a, noise[a]) for a in axes}
     where = where_it_fails(res, noise)
     found, tables = findings(res, noise, units=UNITS)
     return Comparison(config, measured, res, stats, noise, where, list(notes or []), list(segs),
-                      tracking_summary(config, measured, segs or []), found, tables)
+                      tracking_summary(config, measured, segs or []), found, tables, pose_noise)
 
 
 def tracking_summary(config: Config, measured, segs) -> list[dict]:

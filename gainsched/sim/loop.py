@@ -667,7 +667,8 @@ def runtime_scheduler(table, runtime: str = "auto"):
 def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int | None = None):
     """The flight log a real flight would leave (``flight-log.md``): motion-capture pose at
     the sensing rate with the scenario's noise, commanded thrusts (mean over each sample
-    interval), gyro, load-cell tension and the reference azimuth."""
+    interval), gyro (mean rate over the interval centred on the sample, with the scenario's
+    gyro noise), load-cell tension and the reference azimuth."""
     from ..analysis.logs import log_from_arrays
     from ..model.rotations import Rx, Ry, Rz, matrix_from_quaternion
 
@@ -693,9 +694,17 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
         "flight_id": f"sim-{res.scenario.name}",
         "notes": "simulated by gainsched",
     }
+    # the gyro: the mean body rate over the sample interval centred on the sample time (an
+    # anti-aliased gyro whose filter delay the driver's time stamps compensate), plus noise
+    h = every // 2
+    w = res.z[:, 7:10]
+    wsum = np.concatenate([np.zeros((1, 3)), np.cumsum(w, 0)])
+    lo, hi = np.maximum(idx - h, 0), np.minimum(idx + h + 1, w.shape[0])
+    gyro = (wsum[hi] - wsum[lo]) / (hi - lo)[:, None]
+    gyro = gyro + sens.gyro_noise * rng.standard_normal((idx.size, 3))
     return log_from_arrays(
         res.t[idx], p, q, T, meta, source=f"simulation {res.scenario.name}",
-        omega_B=res.z[idx, 7:10], tension=res.tension[idx],
+        omega_B=gyro, tension=res.tension[idx],
         xi_ref=res.z_d[idx, 1], xi_dot_ref=res.z_d[idx, 3],
     )
 
