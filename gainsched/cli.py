@@ -691,6 +691,10 @@ def compare(config, logs, out_dir, before_path, no_paper):
 @_LOGS
 @click.option("--candidate", "candidates", multiple=True,
               help="Only these candidates (repeatable; default: the whole library).")
+@click.option("--joint", is_flag=True,
+              help="Also fit the best candidates in pairs and triples when a single one "
+                   "passes (they are fitted when none does); a joint fit wins when its "
+                   "delta-BIC is lower by 10.")
 @click.option("--apply", "do_apply", is_flag=True,
               help="Write the accepted effect and its fitted parameters to -o NEWCONFIG.")
 @click.option("-o", "--out", "new_config", type=click.Path(dir_okay=False, path_type=Path),
@@ -698,7 +702,7 @@ def compare(config, logs, out_dir, before_path, no_paper):
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path),
               help="Report folder: diagnose.json/.md, ranking.png, before/after.")
 @user_errors
-def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
+def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir):
     """Which physical effect is missing: fit every candidate effect the model lacks to
     the residual on LOGS, score on held-out flights (leave one flight out), rank, check
     identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
@@ -727,7 +731,7 @@ def diagnose(config, logs, candidates, do_apply, new_config, report_dir):
     for line in compare_lines(base):
         click.echo(line)
     click.echo("")
-    d = run_diagnose(cfg, logs, candidates=candidates or None, comparison=base)
+    d = run_diagnose(cfg, logs, candidates=candidates or None, comparison=base, joint=joint)
     for line in diagnose_lines(d):
         click.echo(line)
     after = None

@@ -316,6 +316,61 @@ class ElasticityCandidate(Candidate):
                          f"not written (the link's default {Tether.damping:g} N s/m applies)")
 
 
+class JointCandidate(Candidate):
+    """Two or three candidates fitted together, for when no single one explains the
+    residual: the parameters of all, started at their single fits and refined by
+    Gauss-Newton steps (a searched parameter too, from its single estimate). The model is
+    the config with each part's edit applied in turn (:meth:`Candidate.apply_text`), so the
+    parts must edit different keys (different effects or config parameters)."""
+
+    affine = False
+
+    def __init__(self, parts, starts, bounds):
+        self.parts = tuple(parts)
+        self.name = " + ".join(p.name for p in self.parts)
+        self.doc = "; ".join(p.doc for p in self.parts)
+        self.params = tuple(q for p in self.parts for q in p.params)
+        self.search = None
+        self._start = np.concatenate(starts)
+        self.bounds = (np.concatenate([b[0] for b in bounds]),
+                       np.concatenate([b[1] for b in bounds]))
+        self._cut = np.cumsum([len(p.params) for p in self.parts])[:-1]
+
+    def present(self, cfg):
+        return any(p.present(cfg) for p in self.parts)
+
+    def start(self, cfg):
+        return self._start.copy()
+
+    def _split(self, values):
+        return np.split(np.asarray(values, dtype=float), self._cut)
+
+    def apply_text(self, text, cfg, theta, comments, header, keep=frozenset()):
+        for p, th, cm in zip(self.parts, self._split(theta),
+                             np.split(np.asarray(comments, dtype=object), self._cut),
+                             strict=True):
+            mine = frozenset(q.name for q in p.params) & keep
+            text = p.apply_text(text, cfg, th, list(cm), header, keep=mine)
+        return text
+
+    def variant(self, cfg, theta):
+        new = config_from_text(self.apply_text(cfg.text, cfg, theta, [""] * len(theta), ""),
+                               cfg.source)
+        return CandidateModel(new, None, new.analysis.latency_s)
+
+    def report_values(self, theta):
+        out = {}
+        for p, th in zip(self.parts, self._split(theta), strict=True):
+            out.update(p.report_values(th))
+        return out
+
+
+#: single candidates whose best are combined into joint fits when none passes
+JOINT_TOP = 4
+#: candidates never fitted jointly (their single fit switches the link model)
+_NOT_JOINT = frozenset({"tether_elasticity"})
+
+
 def candidate_library() -> dict[str, Candidate]:
     """The candidate library, by name: every :meth:`~gainsched.model.effects.Effect.refits`
     of every effect nameable in configs (built-in or registered with
@@ -562,6 +617,7 @@ class CandidateResult:
     structure_reduction: float | None = None
     empirical: bool = False
     law: str = ""
+    candidate: Candidate | None = field(default=None, repr=False)
 
     @property
     def below_noise(self) -> bool:
@@ -672,6 +728,8 @@ class Diagnosis:
 
 
 def _bounds(cand: Candidate, cfg: Config, start):
+    if getattr(cand, "bounds", None) is not None:
+        return cand.bounds
     lo = np.array([p.lower for p in cand.params], float)
     hi = np.array([p.upper for p in cand.params], float)
     rel = getattr(cand, "bounds_rel", None)
@@ -995,7 +1053,7 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
         cand.name, cand.doc, cand.params, theta, ci, folds, start, cand.report_values(theta),
         float(red), float(exc), float(dbic), bool(plausible), float(spread), bool(stable), corr,
         held_fit, n_eff, rb, ra, float(1 - math.sqrt(sse_fit / sse_base)), tuple(notes), contrib,
-        structure, empirical, law,
+        structure, empirical, law, cand,
     )
 
 
@@ -1003,12 +1061,15 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
 
 
 def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | None = None,
-             progress=None) -> Diagnosis:
+             progress=None, joint: bool = False) -> Diagnosis:
     """Fit every candidate on the logs, score on held-out flights, rank, gate, decide.
 
     ``logs``: paths or :class:`~gainsched.analysis.logs.FlightLog` segments (at least two flights
     for held-out scores). ``candidates``: names from :data:`CANDIDATES` (default: all).
-    ``progress``: callable(name) before each candidate.
+    ``progress``: callable(name) before each candidate. Joint fits of the best singles
+    (:func:`_fit_joint`) run when no single candidate passes, or always with ``joint``:
+    then a passing joint fit replaces the accepted single when its delta-BIC is lower by
+    ``THRESHOLDS["nested_bic_gain"]``.
     """
     from ..errors import InputError
 
@@ -1046,6 +1107,11 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     results: list[CandidateResult] = []
     empirical = [n for n in names if getattr(library[n], "empirical", False)]
     accepted = fit([n for n in names if n not in empirical])
+    if (accepted is None and not at_floor) or joint:
+        both = _fit_joint(prob, library, results, base_sq, base_vecs, progress)
+        if both is not None and (accepted is None or both.delta_bic < accepted.delta_bic
+                                 - THRESHOLDS["nested_bic_gain"]):
+            accepted = both
     # beyond the library: empirical laws only when no physical effect explains what is
     # there (an excess over the noise floor or binned structure), or when asked for
     if accepted is None and empirical and (candidates is not None or base.structure
@@ -1077,8 +1143,55 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
                      prob.flight_names, int(round(prob.n_evals)), similarity)
 
 
+def _fit_joint(prob, library, results, base_sq, base_vecs, progress):
+    """When no single candidate passes: the :data:`JOINT_TOP` best singles (held-out RMS
+    reduction, distinct effects) fitted in pairs, and the best pair with each of the
+    others as a triple. Appends to ``results`` (re-ranked) and returns the accepted one:
+    the best passing pair, or a triple whose delta-BIC is lower by
+    ``THRESHOLDS["nested_bic_gain"]`` (parsimony)."""
+    top: list[CandidateResult] = []
+    for r in results:  # ranked already
+        if (r.rms_reduction > 0 and r.name in library and r.name not in _NOT_JOINT
+                and not r.empirical
+                and not any(_same_effect(library, r.name, t.name) for t in top)):
+            top.append(r)
+        if len(top) == JOINT_TOP:
+            break
+    if len(top) < 2:
+        return None
+    cfg = prob.config
+
+    def joint(parts):
+        cands = [library[r.name] for r in parts]
+        bounds = [_bounds(c, cfg, c.start(cfg)) for c in cands]
+        starts = [np.clip(r.theta, b[0], b[1]) for r, b in zip(parts, bounds, strict=True)]
+        cand = JointCandidate(cands, starts, bounds)
+        if progress is not None:
+            progress(cand.name)
+        return _fit_candidate(prob, cand, base_sq, base_vecs)
+
+    pairs = [joint(pr) for pr in itertools.combinations(top, 2)]
+    pairs.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
+    best = pairs[0]
+    names = set(best.name.split(" + "))
+    triples = [joint([*(t for t in top if t.name in names), r]) for r in top
+               if r.name not in names]
+    results.extend(pairs + triples)
+    results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
+    ok_pairs = [r for r in pairs if r.passes]
+    ok_triples = sorted((r for r in triples if r.passes), key=lambda r: r.delta_bic)
+    pick = ok_pairs[0] if ok_pairs else None
+    if ok_triples and (pick is None or ok_triples[0].delta_bic
+                       < pick.delta_bic - THRESHOLDS["nested_bic_gain"]):
+        pick = ok_triples[0]
+    return pick
+
+
 def _same_effect(library, a: str, b: str) -> bool:
-    """Whether candidates ``a`` and ``b`` fit the same effect of the library."""
+    """Whether candidates ``a`` and ``b`` fit the same effect of the library (joint fits:
+    whether they share one)."""
+    if " + " in a or " + " in b:
+        return any(_same_effect(library, x, y) for x in a.split(" + ") for y in b.split(" + "))
     ka, kb = getattr(library[a], "kind", None), getattr(library[b], "kind", None)
     return ka is not None and ka == kb
 
@@ -1149,7 +1262,9 @@ def _verdict(base, results, accepted, twins, at_floor) -> str:
                 f"{score}, delta-BIC {accepted.delta_bic:.0f}. It is a fit, not a model: "
                 "it holds on the circles flown (and, by the table's symmetries, their "
                 "mirror images)")
-    s = (f"missing effect: {accepted.name} ({accepted.doc}), {_fmt_values(accepted)}; "
+    what = ("missing effects, fitted together"
+            if " + " in accepted.name else "missing effect")
+    s = (f"{what}: {accepted.name} ({accepted.doc}), {_fmt_values(accepted)}; "
          f"{score}, delta-BIC {accepted.delta_bic:.0f}")
     why = unidentified(accepted)
     if why:
@@ -1187,9 +1302,7 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
     """
     from ..configedit import get_value
 
-    cand = candidate_library()[result.name]
-    if len(cand.params) != len(result.params):  # a series fitted to a lower order
-        cand = cand.restricted(len(result.params))
+    cand = result.candidate or candidate_library()[result.name]
     why = unidentified(result)
     comments = []
     theta = result.theta.copy()
@@ -1210,7 +1323,7 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
         header += f"; not identified, not written: {', '.join(why)}"
     text = cand.apply_text(config.text, config, theta, comments, header,
                            keep=frozenset(why))
-    new_name = name or f"{config.name}_{result.name}"
+    new_name = name or f"{config.name}_{result.name.replace(' + ', '_')}"
     if get_value(text, "", "name") is not None:
         text = set_value(text, "", "name", new_name)
     cfg = config_from_text(text, "<diagnose --apply>")  # raises if the edit is invalid

@@ -126,6 +126,19 @@ HIDDEN: dict[str, HiddenEffect] = {
                      (("effects.thrust_momentum", None, (("disk_area", 0.006),)),
                       ("effects.motor_lag", None, (("tau", 0.03),))),
                      truth=("thrust_momentum", "disk_area", 0.006)),
+        HiddenEffect("three_effects", "thrust loss with airspeed (c1 = -0.01), a 35 ms motor "
+                     "lag and quadratic drag mu2 = 0.0045 instead of 0.0025, at once",
+                     (("effects.thrust_airspeed", None, (("c1", -0.01), ("c2", 0.0))),
+                      ("effects.motor_lag", None, (("tau", 0.035),)),
+                      ("effects.drag", "mu2", 0.0045)),
+                     truth=("motor_lag", "tau", 0.035)),
+        HiddenEffect("three_small", "three effects of similar size: thrust loss with "
+                     "airspeed c1 = -0.005, quadratic drag mu2 = 0.0055, rotor drag k_rd = "
+                     "0.010 (the best single fit, quadratic drag, absorbs the others)",
+                     (("effects.thrust_airspeed", None, (("c1", -0.005), ("c2", 0.0))),
+                      ("effects.drag", "mu2", 0.0055),
+                      ("effects.rotor_drag", None, (("k_rd", 0.010),))),
+                     truth=("rotor_drag", "k_rd", 0.010)),
         HiddenEffect("azimuth_thrust_loss", "thrust loss of 15% localised at azimuth 90 deg "
                      "(outside the candidate library)",
                      (("effects.azimuth_thrust_loss", None,
