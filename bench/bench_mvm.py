@@ -41,18 +41,11 @@ def make_logs(out: Path, minutes: float, hidden: str) -> list[Path]:
 
 
 def base_candidates() -> list[str]:
-    """The candidate library without the joint fits of issue 16: every candidate except
-    those that fit a superset of another candidate's parameters of the same effect."""
-    from gainsched.analysis.diagnose import CANDIDATES
+    """The candidate library without issue 16's additions (the joint refit of an effect's
+    one-at-a-time parameters, the empirical laws)."""
+    from gainsched.analysis.diagnose import single_parameter_set_candidates
 
-    def joint(name):
-        c = CANDIDATES[name]
-        kind, ps = getattr(c, "kind", None), {p.name for p in c.params}
-        return kind is not None and any(
-            getattr(o, "kind", None) == kind and {p.name for p in o.params} < ps
-            for o in CANDIDATES.values())
-
-    return [n for n in CANDIDATES if not joint(n)]
+    return single_parameter_set_candidates()
 
 
 def run(paths, candidates=None) -> dict:

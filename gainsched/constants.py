@@ -22,6 +22,7 @@ __all__ = [
     "XI_DOT_LIMIT",
     "TILT_LIMIT",
     "TILT_BATCH",
+    "BIN_VARIABLES",
 ]
 
 #: reduced state (delta, xi, delta', xi', phi, theta, chi, omega_x, omega_y, omega_z)
@@ -77,3 +78,14 @@ TILT_LIMIT = 1.5707963267948966
 #: A_k, B_k of a batch: 8 x N x 165 doubles, 20 MB at 1 kHz), so build time and memory
 #: grow linearly with the number of tilts
 TILT_BATCH = 8
+
+#: the variables model-vs-measurement residuals are binned against: (unit, meaning)
+#: (gainsched.analysis.compare where it fails, gainsched.analysis.structure)
+BIN_VARIABLES = {
+    "airspeed": ("m/s", "airspeed |v|"),
+    "tilt": ("deg", "circle tilt alpha_C"),
+    "azimuth": ("deg", "azimuth xi"),
+    "tension": ("N", "tether tension"),
+    "thrust": ("N", "commanded collective thrust"),
+    "time": ("s", "time in flight"),
+}

@@ -439,3 +439,12 @@ def test_joint_fit_of_effects_of_similar_size(paper, fly):
     text = apply_candidate(paper, a)
     new = config_from_text(text, "joint.toml")
     assert {"thrust_airspeed", "rotor_drag", "drag"} <= {s.name for s in new.effects}
+
+
+def test_baseline_library_of_the_benchmark():
+    """The benchmark's baseline: the library without the joint refit of drag's two
+    one-at-a-time parameters and without the empirical law."""
+    from gainsched.analysis.diagnose import single_parameter_set_candidates
+
+    base = single_parameter_set_candidates()
+    assert set(CANDIDATES) - set(base) == {"drag", "thrust_azimuth"}

@@ -52,6 +52,7 @@ import numpy as np
 from scipy.signal import correlate, lfilter, savgol_coeffs, savgol_filter
 
 from ..config import Config
+from ..constants import BIN_VARIABLES
 from ..errors import InputError
 from ..model.effects import Effect, Kinematics
 from ..model.geometry import (
@@ -103,15 +104,6 @@ UNITS = {
     "pitch": "rad/s^2",
     "yaw": "rad/s^2",
     "stretch": "m",
-}
-#: Variables the residual is binned against: name -> (unit, description).
-BIN_VARIABLES = {
-    "airspeed": ("m/s", "airspeed |v|"),
-    "tilt": ("deg", "circle tilt alpha_C"),
-    "azimuth": ("deg", "azimuth xi"),
-    "tension": ("N", "tether tension"),
-    "thrust": ("N", "commanded collective thrust"),
-    "time": ("s", "time in flight"),
 }
 #: RMS / noise floor below which an axis counts as explained down to the noise
 AT_NOISE_FLOOR = 1.25

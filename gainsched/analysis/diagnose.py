@@ -76,6 +76,7 @@ __all__ = [
     "diagnose",
     "apply_candidate",
     "separating_flight",
+    "single_parameter_set_candidates",
 ]
 
 #: Acceptance thresholds (held-out where it says so).
@@ -396,6 +397,23 @@ def candidate_library() -> dict[str, Candidate]:
             raise ValueError(f"two diagnose candidates are named {c.name!r}")
         by_name[c.name] = c
     return by_name
+
+
+def single_parameter_set_candidates(library=None) -> list[str]:
+    """The physical candidates without the refits that fit a superset of another
+    candidate's parameters of the same effect (``drag`` beside ``drag_linear`` and
+    ``drag_quadratic``) and without the empirical ones: the library as it was before
+    issue 16 (the benchmark's baseline)."""
+    library = candidate_library() if library is None else library
+
+    def nested(c):
+        kind, ps = getattr(c, "kind", None), {p.name for p in c.params}
+        return kind is not None and any(
+            getattr(o, "kind", None) == kind and {p.name for p in o.params} < ps
+            for o in library.values())
+
+    return [n for n, c in library.items()
+            if not nested(c) and not getattr(c, "empirical", False)]
 
 
 #: The candidate library of the built-in effects, by name (:func:`candidate_library`).

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..constants import BIN_VARIABLES
+
 __all__ = ["ALPHA", "BLOCK_S", "STRUCTURE_BINS", "BinnedMean", "Finding", "binned_means",
            "findings"]
 
@@ -136,9 +138,8 @@ class Finding:
                 "noise_floor": self.noise_floor, "sentence": self.sentence()}
 
 
-#: units of the binning variables (as in gainsched.analysis.compare.BIN_VARIABLES, which
-#: imports this module and so cannot be imported here)
-UNIT_OF = {"azimuth": "deg", "airspeed": "m/s", "thrust": "N"}
+#: units of the binning variables
+UNIT_OF = {v: BIN_VARIABLES[v][0] for v in STRUCTURE_BINS}
 
 
 def _blocks(res, variable: str) -> list[np.ndarray]:
