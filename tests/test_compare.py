@@ -358,3 +358,24 @@ def test_gyro_channel_is_exact_on_noise_free_flights(paper):
         for a in ("roll", "pitch", "yaw"):
             assert rms(rg.residual[a]) <= 5e-3 * rms(rg.measured[a]), (rg.name, a)
         assert rms(rg.residual["roll"]) * 10 <= rms(rp.residual["roll"]), rg.name
+
+
+@pytest.mark.parametrize("use_gyro", [True, False])
+def test_fit_fast_path_equals_the_report_bit_for_bit(paper, fly, use_gyro):
+    """``residual_axes`` (the fits' path: convolution without the end fits, the pose-smoothed
+    angular acceleration skipped when a gyro supplies it) returns exactly the residual the
+    report computes on the core samples (``savgol_filter``'s interior is the same
+    convolution): bit for bit, with a model that has a state (motor lag) and a latency."""
+    from gainsched.analysis.compare import residual_axes
+    from gainsched.model.reduced import Model
+
+    cfg = paper.with_values({"analysis.use_gyro": use_gyro})
+    model = Model(config_from_text(PAPER.read_text().replace(
+        "[environment]", "[effects.motor_lag]\ntau = 0.03\n\n[environment]", 1)))
+    meas = load_segments(cfg, fly("none", names=("speedup", "v9")))[0]
+    for m in meas:
+        full = residuals(cfg, [m], model=model, latency=0.012)[0].residual
+        fast = residual_axes(model, m, 0.012)
+        assert set(fast) == set(full)
+        for a in full:
+            np.testing.assert_array_equal(fast[a], full[a], err_msg=f"{m.name} {a}")

@@ -398,6 +398,33 @@ def test_joint_candidate_composes_its_parts(paper):
     assert dict(next(s for s in cfg.effects if s.name == "thrust_airspeed").params) == {
         "c1": -0.007, "c2": 0.0002}
     assert joint.report_values(theta) == {"c1": -0.007, "c2": 0.0002, "mass": 0.53}
+    # the variant (made in place, no TOML) is the config its written text parses to, with
+    # a latency part too (second formulation: every field but the text)
+    parts.append(CANDIDATES["latency"])
+    bounds.append(_bounds(parts[-1], paper, parts[-1].start(paper)))
+    joint = JointCandidate(parts, [np.array([-0.01, 0.0]), np.array([0.5]), np.array([0.0])],
+                           bounds)
+    theta = np.append(theta, 0.012)
+    var = joint.variant(paper, theta)
+    ref = config_from_text(joint.apply_text(paper.text, paper, theta, list("abcd"), "h"),
+                           paper.source)
+    assert var.latency == 0.012 and _same_fields(var.config, ref, skip=("text",))
+
+
+def _same_fields(a, b, skip=()) -> bool:
+    """Dataclass equality that compares numpy arrays by value."""
+    import dataclasses
+
+    if dataclasses.is_dataclass(a):
+        return type(a) is type(b) and all(
+            _same_fields(getattr(a, f.name), getattr(b, f.name))
+            for f in dataclasses.fields(a) if f.name not in skip)
+    if isinstance(a, np.ndarray | list | tuple) and not (
+            isinstance(a, tuple) and a and dataclasses.is_dataclass(a[0])):
+        return np.array_equal(np.asarray(a, dtype=object), np.asarray(b, dtype=object))
+    if isinstance(a, tuple):
+        return len(a) == len(b) and all(_same_fields(x, y) for x, y in zip(a, b, strict=True))
+    return a == b
 
 
 @pytest.mark.slow
@@ -448,3 +475,32 @@ def test_baseline_library_of_the_benchmark():
 
     base = single_parameter_set_candidates()
     assert set(CANDIDATES) - set(base) == {"drag", "thrust_azimuth"}
+
+
+@pytest.mark.parametrize("load_cell", [True, False])
+def test_variants_that_change_one_axis_reuse_the_others(paper, load_cell):
+    """A tether variant changes only the stretch axis (CandidateModel.axes): the fit's
+    residual vectors that reuse the base model's other axes equal a full evaluation bit
+    for bit, with the load cell (stretch computed on its own) and without (the tension
+    from the radial equation: the full prediction)."""
+    import dataclasses
+
+    from gainsched.analysis.compare import compare
+    from gainsched.analysis.diagnose import _Problem
+    from gainsched.sim.campaign import default_flights
+
+    scn = [s for s in default_flights(DURATION) if s.name in ("v9", "speedup")]
+    logs = campaign(paper, table_scheduler(load_table(ROOT / "tables/paper.h5")), "none",
+                    duration=DURATION, scenarios=scn, load_cell=load_cell)
+    base = compare(paper, logs)
+    prob = _Problem(paper, base.measured, base.segs, base.noise)
+    var = CANDIDATES["tether_elasticity"].variant(paper, np.array([2e-4, 0.01]))
+    assert var.axes == {"stretch"}
+    fast = prob.vectors(var)
+    full = prob.vectors(dataclasses.replace(var, axes=None))
+    for f_fast, f_full in zip(fast, full, strict=True):
+        assert list(f_fast) == list(f_full)
+        for a in f_full:
+            np.testing.assert_array_equal(f_fast[a], f_full[a], err_msg=a)
+    assert not np.array_equal(fast[0]["stretch"], prob.vectors(
+        CANDIDATES["tether_elasticity"].variant(paper, np.array([0.0, 0.0])))[0]["stretch"])

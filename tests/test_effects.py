@@ -19,7 +19,14 @@ from click.testing import CliRunner
 from gainsched.cli import cli
 from gainsched.config import config_from_text
 from gainsched.errors import InputError
-from gainsched.model.effects import Drag, Effect, MotorLag, Param, registered_effect
+from gainsched.model.effects import (
+    Drag,
+    Effect,
+    MotorLag,
+    Param,
+    _induced_velocity,
+    registered_effect,
+)
 from gainsched.model.reduced import Model
 
 ROOT = Path(__file__).parents[1]
@@ -50,6 +57,33 @@ def test_motor_lag_held_commands_equal_fine_integration():
 def test_stateless_effects_have_no_held_command_form():
     assert Drag(mu1=0.1, mu2=0.0).states_from_held_commands(np.arange(3.0), np.ones((3, 4))) \
         is None
+
+
+def _largest_root(vh, vz, vxy):
+    """Largest positive real root of v^2 ((v + vz)^2 + vxy^2) = vh^4, by numpy's companion
+    matrix (an independent solver)."""
+    r = np.roots([1.0, 2 * vz, vz * vz + vxy * vxy, 0.0, -vh ** 4])
+    r = r[np.abs(r.imag) < 1e-7 * vh].real
+    return float(r[r > 0].max())
+
+
+def test_momentum_induced_velocity_is_the_largest_root_everywhere():
+    """The induced velocity of paper eq. 29 over hover, climb, descent, vortex ring and
+    fast forward flight: the largest root (rel. 1e-9), with its complex-step derivative
+    equal to a central difference (rel. 1e-6)."""
+    vh = np.array([2.0, 5.0, 11.0])  # m/s
+    ratio = np.linspace(-3.0, 3.0, 25)  # vz / vh
+    vxy = np.array([0.0, 1.0, 4.0, 15.0])  # m/s
+    VH, R, VXY = np.meshgrid(vh, ratio, vxy, indexing="ij")
+    VZ = R * VH
+    v = _induced_velocity(VH, VZ, VXY ** 2)
+    ref = np.vectorize(_largest_root)(VH, VZ, VXY)
+    np.testing.assert_allclose(v, ref, rtol=1e-9)
+    h = 1e-6
+    cs = _induced_velocity(VH, VZ + 1e-30j, VXY ** 2 + 0j).imag / 1e-30
+    up, down = (_induced_velocity(VH, VZ + s, VXY ** 2) for s in (h, -h))
+    cd = (up - down) / (2 * h)
+    np.testing.assert_allclose(cs, cd, rtol=1e-6, atol=1e-6)
 
 
 class _Wake(Effect):

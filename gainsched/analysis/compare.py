@@ -43,12 +43,14 @@ tension, thrust and time in flight and names the worst regime.
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import convolve1d
 from scipy.signal import correlate, lfilter, savgol_coeffs, savgol_filter
 
 from ..config import Config
@@ -226,7 +228,7 @@ class Measured:
     @property
     def dt(self) -> float:
         """Median sample interval, s."""
-        return float(np.median(np.diff(self.t)))
+        return self.derived("dt", lambda: float(np.median(np.diff(self.t))))
 
     @property
     def core(self) -> slice:
@@ -511,12 +513,33 @@ def _kinematics(meas: Measured) -> Kinematics:
     return meas.derived("kin", make)
 
 
+@functools.lru_cache(maxsize=64)
+def _savgol_kernel(window: int, order: int, deriv: int, delta: float) -> np.ndarray:
+    """Convolution coefficients of :func:`scipy.signal.savgol_filter` (computed once)."""
+    return savgol_coeffs(window, order, deriv=deriv, delta=delta)
+
+
+def _savgol(x, meas: Measured, deriv: int, edges: bool) -> np.ndarray:
+    """``savgol_filter(x, meas.window, meas.order, deriv, meas.dt, axis=0, mode="interp")``;
+    ``edges=False``: without the end fits, so exact on ``meas.core`` only (the filter's
+    interior is this same convolution, bit for bit)."""
+    delta = meas.dt if deriv else 1.0
+    if edges:
+        return savgol_filter(x, meas.window, meas.order, deriv=deriv, delta=delta, axis=0,
+                             mode="interp")
+    return convolve1d(x, _savgol_kernel(meas.window, meas.order, deriv, delta), axis=0,
+                      mode="constant")
+
+
 def predict(model: Model, meas: Measured, *, latency: float | None = None,
-            inputs: bool = True) -> Prediction:
+            inputs: bool = True, edges: bool = True) -> Prediction:
     """The model's accelerations for the measured state and the logged commands (step 3).
 
     ``latency`` (s, default: the config's ``analysis.latency_s``) delays the commands and
     the load cell (both logged on board) relative to the pose (the pose lags them by it).
+    ``edges=False`` is the fast path of the fits: the filtered outputs are exact on
+    ``meas.core`` only (no polynomial fits at the ends), and the pose-smoothed angular
+    acceleration is left out when a gyro supplies it.
     """
     cfg = model.config
     lat = cfg.analysis.latency_s if latency is None else latency
@@ -537,8 +560,8 @@ def predict(model: Model, meas: Measured, *, latency: float | None = None,
     T = model.thrust(z, u, kin)
     F0, tau0 = model.body_wrench(T, kin, meas.alpha)
     m = model.m
-    if meas.tension is not None:  # on board, like the commands: delayed with them
-        f_t, source = _delayed(meas.t, meas.tension[:, None], lat)[:, 0], "load cell"
+    if meas.tension is not None:
+        f_t, source = _load_cell(meas, lat), "load cell"
     else:
         f_t, source = np.sum(meas.e * (F0 - m * meas.a), -1), "radial equation"
     a_pred = (F0 - f_t[:, None] * meas.e) / m
@@ -546,9 +569,11 @@ def predict(model: Model, meas: Measured, *, latency: float | None = None,
     tau = tau0 - f_t[:, None] * model.tether_lever(e_B)
     wd = np.einsum("nk,jk->nj", tau, np.linalg.inv(model.J))
     acc = np.einsum("nij,nj->ni", meas.axes, a_pred)
-    kw = dict(window_length=meas.window, polyorder=meas.order, axis=0, mode="interp")
-    sm = savgol_filter(np.concatenate([acc, wd], -1), **kw)
-    acc, wd_pose = sm[:, :3], sm[:, 3:]
+    if meas.gyro_dot is None or edges:
+        sm = _savgol(np.concatenate([acc, wd], -1), meas, 0, edges)
+        acc, wd_pose = sm[:, :3], sm[:, 3:]
+    else:
+        acc, wd_pose = _savgol(acc, meas, 0, edges), None
     wd_gyro = wd_pose
     if meas.gyro_dot is not None:
         # the gyro's angular acceleration is the filter's derivative of the rate: give the
@@ -556,7 +581,7 @@ def predict(model: Model, meas: Measured, *, latency: float | None = None,
         # unknown constant the derivative removes exactly), not the smoothing
         w_int = np.concatenate([np.zeros((1, 3)), np.cumsum(
             0.5 * (wd[1:] + wd[:-1]) * np.diff(meas.t)[:, None], axis=0)])
-        wd_gyro = savgol_filter(w_int, deriv=1, delta=meas.dt, **kw)
+        wd_gyro = _savgol(w_int, meas, 1, edges)
     stretch = _tether_stretch(cfg, f_t, meas.dt)
     inp = np.einsum("nk,jk->nj", u, model.alloc) if inputs else None
     return Prediction(acc, wd_gyro, stretch, f_t, T, inp, source, lat, wd_pose)
@@ -594,10 +619,23 @@ class Residual:
         return int(self.t.size)
 
 
-def residual_axes(model: Model, meas: Measured, latency: float | None = None) -> dict:
-    """Only the residual per axis (core samples) of one segment: the fast path for fits."""
-    pred = predict(model, meas, latency=latency, inputs=False)
+def _load_cell(meas: Measured, latency: float) -> np.ndarray:
+    """The logged tension (N), delayed by ``latency`` s: on board, like the commands."""
+    return _delayed(meas.t, meas.tension[:, None], latency)[:, 0]
+
+
+def residual_axes(model: Model, meas: Measured, latency: float | None = None,
+                  axes: frozenset | None = None) -> dict:
+    """Only the residual per axis (core samples) of one segment: the fast path for fits
+    (equal to :func:`_residual`'s bit for bit). ``axes``: the caller needs only these
+    (it knows the others unchanged); with a load cell ``{"stretch"}`` alone skips the
+    prediction (the stretch depends on the link and the logged tension only)."""
+    lat = model.config.analysis.latency_s if latency is None else latency
     c = meas.core
+    if axes == {"stretch"} and meas.tension is not None:
+        f_t = _load_cell(meas, lat)
+        return {"stretch": meas.d[c] - model.rho - _tether_stretch(model.config, f_t, meas.dt)[c]}
+    pred = predict(model, meas, latency=lat, inputs=False, edges=False)
     acc_m = meas.derived("acc_core", lambda: np.einsum("nij,nj->ni", meas.axes[c], meas.a[c]))
     out = {"tangential": acc_m[:, 0] - pred.acc[c, 0], "normal": acc_m[:, 1] - pred.acc[c, 1]}
     if pred.tension_source == "load cell":

@@ -55,7 +55,7 @@ from scipy.optimize import minimize_scalar
 
 from ..config import Config, EffectSpec, Tether, config_from_text
 from ..configedit import remove_key, set_section, set_value
-from ..model.effects import EFFECTS, Param, Refit, effects_from_specs
+from ..model.effects import EFFECTS, Param, Refit
 from ..model.reduced import Model
 from .compare import (
     AT_NOISE_FLOOR,
@@ -116,11 +116,17 @@ class FitParam:
 
 @dataclass(frozen=True)
 class CandidateModel:
-    """What a candidate at given parameters changes: the config, the effects, the latency."""
+    """A candidate at given parameters: the config it makes (a model variant: ``text`` is
+    the base's) and, when given, the only residual ``axes`` it can change (the others are
+    the base model's, reused)."""
 
     config: Config
-    effects: tuple | None
-    latency: float
+    axes: frozenset | None = None
+
+    @property
+    def latency(self) -> float:
+        """The pose's lag behind the commands, s (``analysis.latency_s``)."""
+        return self.config.analysis.latency_s
 
 
 class Candidate:
@@ -155,6 +161,15 @@ class Candidate:
 
     def present(self, cfg: Config) -> bool:
         return False
+
+
+def _replaced(cfg: Config, section: str, key: str, value: float) -> Config:
+    """``cfg`` with ``section.key`` set to ``value``: a model variant for a fit, made in
+    place (``text`` stays the base's; a fit stays inside its bounds, so nothing to
+    validate). Re-parsing the TOML per evaluation (:meth:`Config.with_values`) cost more
+    than the evaluations themselves; written configs go through :func:`apply_candidate`."""
+    return dataclasses.replace(cfg, **{section: dataclasses.replace(getattr(cfg, section),
+                                                                    **{key: value})})
 
 
 def _specs_with(cfg: Config, kind: str, values: dict) -> tuple:
@@ -202,8 +217,8 @@ class EffectCandidate(Candidate):
 
     def variant(self, cfg, theta):
         vals = dict(zip((p.name for p in self.params), map(float, theta), strict=True))
-        specs = _specs_with(cfg, self.kind, vals)
-        return CandidateModel(cfg, effects_from_specs(specs), cfg.analysis.latency_s)
+        new = dataclasses.replace(cfg, effects=_specs_with(cfg, self.kind, vals))
+        return CandidateModel(new)
 
     def apply_text(self, text, cfg, theta, comments, header, keep=frozenset()):
         vals = dict(zip((p.name for p in self.params), map(float, theta), strict=True))
@@ -231,8 +246,8 @@ class ConfigCandidate(Candidate):
         return np.array([self._get(cfg)])
 
     def variant(self, cfg, theta):
-        new = cfg.with_values({f"{self.section}.{self.key}": float(theta[0])})
-        return CandidateModel(new, None, cfg.analysis.latency_s)
+        new = _replaced(cfg, self.section, self.key, float(theta[0]))
+        return CandidateModel(new)
 
     def apply_text(self, text, cfg, theta, comments, header, keep=frozenset()):
         return set_value(text, self.section, self.key, float(theta[0]),
@@ -252,7 +267,7 @@ class LatencyCandidate(Candidate):
         return np.array([cfg.analysis.latency_s])
 
     def variant(self, cfg, theta):
-        return CandidateModel(cfg, None, float(theta[0]))
+        return CandidateModel(_replaced(cfg, "analysis", "latency_s", float(theta[0])))
 
     def apply_text(self, text, cfg, theta, comments, header, keep=frozenset()):
         return set_value(text, "analysis", "latency_s", float(theta[0]), f"{comments[0]}; {header}")
@@ -295,8 +310,7 @@ class ElasticityCandidate(Candidate):
             k = 1.0 / comp
             tether = dataclasses.replace(cfg.tether, link="spring-damper", stiffness=k,
                                          damping=tc * k)
-        return CandidateModel(dataclasses.replace(cfg, tether=tether), None,
-                              cfg.analysis.latency_s)
+        return CandidateModel(dataclasses.replace(cfg, tether=tether), frozenset({"stretch"}))
 
     def report_values(self, theta):
         comp, tc = float(theta[0]), float(theta[1])
@@ -360,9 +374,12 @@ class JointCandidate(Candidate):
         return text
 
     def variant(self, cfg, theta):
-        new = config_from_text(self.apply_text(cfg.text, cfg, theta, [""] * len(theta), ""),
-                               cfg.source)
-        return CandidateModel(new, None, new.analysis.latency_s)
+        # the parts' variants in turn (each changes the config it is given); the text is
+        # the base's: apply_text writes the same edits into the TOML
+        new = cfg
+        for p, th in zip(self.parts, self._split(theta), strict=True):
+            new = p.variant(new, th).config
+        return CandidateModel(new)
 
     def report_values(self, theta):
         out = {}
@@ -498,6 +515,8 @@ class _Problem:
         self.n_evals = 0
         self.residuals = None
         self.structure_keys: list[tuple[str, str]] = []
+        self._base: list[dict] | None = None
+        self._p_before: tuple | None = None
 
     def track_structure(self, comparison: Comparison) -> None:
         """Score fits also on the binned structure that ``comparison`` found (its
@@ -505,6 +524,7 @@ class _Problem:
         self.residuals = comparison.residuals
         keys = [(f.axis, f.variable) for f in comparison.structure if f.axis in self.axes]
         self.structure_keys = list(dict.fromkeys(keys))
+        self._p_before = None
 
     def structure_power(self, vecs) -> float | None:
         """Noise-corrected power of the block-averaged bins of weighted residuals ``vecs``
@@ -530,6 +550,12 @@ class _Problem:
                                                                - bm.se[ok] ** 2, 0.0)))
         return total
 
+    def base_structure_power(self, base_vecs) -> float | None:
+        """:meth:`structure_power` of the base model's ``base_vecs`` (computed once)."""
+        if self._p_before is None:
+            self._p_before = (self.structure_power(base_vecs),)
+        return self._p_before[0]
+
     def measured(self, L_e: float):
         base_L = self.config.tether.attachment_offset
         if L_e not in self._meas:
@@ -541,16 +567,32 @@ class _Problem:
                                for s, m in zip(self.segs, base, strict=True)]
         return self._meas[L_e]
 
+    def _base_residuals(self) -> list[dict]:
+        """Unweighted residual axes of the base config per segment (computed once)."""
+        if self._base is None:
+            model = Model(self.config)
+            self._base = [residual_axes(model, m, self.config.analysis.latency_s)
+                          for m in self.measured(self.config.tether.attachment_offset)]
+        return self._base
+
     def vectors(self, var: CandidateModel, only: int | None = None) -> list[dict]:
         """Weighted residual per flight and axis: list over flights of {axis: (n,)}
         (only flight ``only`` when given: a one-element list)."""
         meas = self.measured(var.config.tether.attachment_offset)
-        model = Model(var.config, var.effects)
+        model = Model(var.config)
         groups = self.flights if only is None else [self.flights[only]]
         self.n_evals += 1 if only is None else 1 / len(self.flights)
+        base = None
+        if (var.axes is not None and var.latency == self.config.analysis.latency_s
+                and var.config.tether.attachment_offset == self.config.tether.attachment_offset):
+            base = self._base_residuals()
         out = []
         for g in groups:
-            per_seg = {i: residual_axes(model, meas[i], var.latency) for i in g}
+            if base is None:
+                per_seg = {i: residual_axes(model, meas[i], var.latency) for i in g}
+            else:
+                per_seg = {i: {**base[i], **residual_axes(model, meas[i], var.latency, var.axes)}
+                           for i in g}
             out.append({a: np.concatenate([per_seg[i][a] for i in g]) * self.weights[a]
                         for a in self.axes})
         return out
@@ -1064,14 +1106,15 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
     contrib = np.concatenate([np.concatenate([bv[a] - v[a] for a in bv])
                               for bv, v in zip(base_vecs, vecs, strict=True)])
     contrib = contrib.astype(np.float32)
-    p_before = prob.structure_power(base_vecs)
+    p_before = prob.base_structure_power(base_vecs)
     structure = None
     if p_before:
         structure = 1 - math.sqrt(prob.structure_power(held_vecs) / p_before)
     empirical = bool(getattr(cand, "empirical", False))
     law = ""
     if empirical:
-        law = next(e for e in cand.variant(cfg, theta).effects if e.kind == cand.kind).law()
+        law = next(e for e in Model(cand.variant(cfg, theta).config).effects
+                   if e.kind == cand.kind).law()
     return CandidateResult(
         cand.name, cand.doc, cand.params, theta, ci, folds, start, cand.report_values(theta),
         float(red), float(exc), float(dbic), bool(plausible), float(spread), bool(stable), corr,
@@ -1113,7 +1156,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     at_floor = all(s.rms_over_noise < AT_NOISE_FLOOR for s in base.stats.values())
     if at_floor:
         prob.track_structure(base)
-    base_vecs = prob.vectors(CandidateModel(config, None, config.analysis.latency_s))
+    base_vecs = prob.vectors(CandidateModel(config))
     base_sq = _sq(base_vecs)
 
     def fit(names_):
@@ -1307,14 +1350,19 @@ def unidentified(result: CandidateResult) -> dict[str, str]:
     for j, p in enumerate(result.params):
         v, c = float(result.theta[j]), float(result.ci[j])
         rng = p.upper - p.lower  # 0: bounds relative to the config's value (mass)
-        if result.empirical:  # a series: its order was chosen held-out, not its terms
-            c = 0.0
-        if not np.isfinite(c) or (rng > 0 and c >= rng):
+        on_bound = rng > 0 and min(v - p.lower, p.upper - v) <= 1e-9 * rng  # clipped there
+        bound = f"estimate {v:.3g} {p.unit} on a bound of [{p.lower:g}, {p.upper:g}]"
+        if result.empirical:
+            # a series: its order was chosen held-out (one-SE rule), not its terms one by
+            # one, and a small harmonic's wide CI is no reason to drop it from the law
+            if on_bound:
+                out[p.name] = bound
+        elif not np.isfinite(c) or (rng > 0 and c >= rng):
             out[p.name] = f"95% CI +-{c:.2g} {p.unit} wider than its range"
-        elif c >= abs(v) and not result.empirical:
+        elif c >= abs(v):
             out[p.name] = f"95% CI +-{c:.2g} {p.unit} wider than the estimate {v:.3g}"
-        elif rng > 0 and min(v - p.lower, p.upper - v) <= 1e-9 * rng:  # clipped there
-            out[p.name] = f"estimate {v:.3g} {p.unit} on a bound of [{p.lower:g}, {p.upper:g}]"
+        elif on_bound:
+            out[p.name] = bound
     return out
 
 

@@ -241,15 +241,19 @@ def _tilt0(model, config, speed, N, dt, Qx):
     return K, S, float(np.abs(E).max()) ** N
 
 
-def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=True):
+def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=None):
     """Periodic LQR for one speed at all ``tilts`` (rad, batched).
 
     Returns a :class:`CircleSolution` (and, with ``keep_steps``, the per-step
     ``(Ad, Bd, K)`` of the tilts solved by the periodic recursion, for checks).
-    ``dare_tilt0`` solves tilt-0 circles by the DARE (see :func:`_tilt0`) when the
-    effects allow it; with ``keep_steps`` every tilt goes through the periodic recursion.
+    ``dare_tilt0`` solves tilt-0 circles by the DARE (see :func:`_tilt0`); ``None``
+    (default): when the effects allow it (:func:`level_circle_invariant`), the decision
+    :func:`build_grid` takes once per build. With ``keep_steps`` every tilt goes through
+    the periodic recursion.
     """
     model = Model(config)
+    if dare_tilt0 is None:
+        dare_tilt0 = level_circle_invariant(model)
     tilts = np.asarray(tilts, dtype=float)
     n_xi = config.grid.azimuth_samples
     N = steps_per_period(speed, model.r, config.control.dt)
@@ -287,8 +291,7 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=Tr
     Qx = np.zeros((n, n))
     Qx[:n_lqr, :n_lqr] = config.control.Q
     ok = np.flatnonzero(bad == 0)
-    if (dare_tilt0 and not keep_steps and config.control.terminal == "periodic"
-            and level_circle_invariant(model)):
+    if dare_tilt0 and not keep_steps and config.control.terminal == "periodic":
         for i in ok[tilts[ok] == 0.0]:
             Ki, Si, radius[i] = _tilt0(model, config, speed, N, dt, Qx)
             K[i], S[i] = Ki, Si
@@ -319,7 +322,8 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=Tr
 @dataclass(frozen=True)
 class GridResult:
     """The whole grid, axes (tilt, speed, xi). Arrays as in CircleSolution with a speed axis
-    after the tilt axis; ``steps`` and ``dt`` per speed."""
+    after the tilt axis; ``steps`` and ``dt`` per speed; ``level_invariant``: tilt 0 was
+    solved by the DARE, one gain per speed (:func:`level_circle_invariant`)."""
 
     K: np.ndarray
     S: np.ndarray
@@ -334,15 +338,16 @@ class GridResult:
     steps: np.ndarray
     dt: np.ndarray
     offsets: np.ndarray
+    level_invariant: bool = True
 
 
-def _solve_speed(config, speed: float, tilts, effects=()) -> CircleSolution:
+def _solve_speed(config, speed: float, tilts, effects=(), dare_tilt0=True) -> CircleSolution:
     """One job of :func:`build_grid`: all tilts of one speed, on one BLAS thread.
     ``effects``: the registered (not built-in) effect classes the config names, which a
     worker process does not know otherwise (they travel with the job, by value)."""
     ensure_blas_single_thread()
     with registered_effects_context(effects):
-        return solve_circle(config, speed, tilts)
+        return solve_circle(config, speed, tilts, dare_tilt0=dare_tilt0)
 
 
 def _dask_active() -> bool:
@@ -404,7 +409,8 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
     speeds = config.grid.speeds
     tilts = config.grid.tilts
     extra = registered_effects({s.name for s in config.effects})
-    args = [(config, float(v), tilts, extra) for v in speeds]
+    invariant = level_circle_invariant(Model(config))  # once per build, not per job
+    args = [(config, float(v), tilts, extra, invariant) for v in speeds]
     sols = []
     with blas_single_thread():
         for s in _solutions(args, n_jobs, backend):
@@ -415,4 +421,4 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
     per_tilt = {f.name: np.stack([getattr(s, f.name) for s in sols], axis=1)
                 for f in fields(CircleSolution) if f.name not in ("steps", "dt")}
     return GridResult(**per_tilt, steps=np.array([s.steps for s in sols]),
-                      dt=np.array([s.dt for s in sols]))
+                      dt=np.array([s.dt for s in sols]), level_invariant=invariant)

@@ -27,7 +27,6 @@ from ..config import N_STATE
 from ..constants import CONTROL_LAW, REASONS
 from ..errors import InputError
 from ..publish import write_atomic
-from .grid import level_circle_invariant
 from .linearize import INPUT_NAMES, lqr_state_names
 
 __all__ = ["SCHEMA", "Table", "table_bytes", "write_table", "load_table", "table_from_bytes"]
@@ -173,7 +172,7 @@ def table_bytes(config, grid, model) -> bytes:
         _create(ax, "xi_dot", speeds / config.radius, "rad/s", "azimuth rate = speed / (rho + L_e)")
         _create(ax, "tilt", tilts, "rad", "circle tilt alpha_C; tilt[0] = 0")
         g = _group(f, "gains")
-        if level_circle_invariant(model):
+        if grid.level_invariant:
             K0, S0, doc = grid.K[0, :, 0], grid.S[0, :, 0], "xi-independent), (speed, 4, n)"
         else:  # an effect changes with the azimuth of a level circle
             K0, S0, doc = grid.K[0], grid.S[0], "per azimuth), (speed, xi, 4, n)"
