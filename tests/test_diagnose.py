@@ -131,7 +131,8 @@ def test_negative_control_accepts_nothing(diagnosed):
     d = diagnosed("none")
     assert d.accepted is None
     assert d.at_noise_floor  # every axis within 1.25x its noise floor
-    assert d.verdict.startswith("no effect needed")
+    assert d.verdict.startswith("no effect needed") and "and white" in d.verdict
+    assert all(st.white for st in d.base.stats.values())
     assert all(not r.passes for r in d.results)
     assert max(r.rms_reduction for r in d.results) < 0.02
 
@@ -504,3 +505,21 @@ def test_variants_that_change_one_axis_reuse_the_others(paper, load_cell):
             np.testing.assert_array_equal(f_fast[a], f_full[a], err_msg=a)
     assert not np.array_equal(fast[0]["stretch"], prob.vectors(
         CANDIDATES["tether_elasticity"].variant(paper, np.array([0.0, 0.0])))[0]["stretch"])
+
+
+def test_no_effect_needed_only_when_white():
+    """At the noise floor with no binned structure, "no effect needed" needs every axis
+    white too; otherwise the verdict names the axis and its whiteness statistic."""
+    from types import SimpleNamespace
+
+    from gainsched.analysis.diagnose import _verdict
+
+    def base(pitch_white):
+        st = lambda w, q: SimpleNamespace(white=w, whiteness_q=q, whiteness_limit=13.3)  # noqa: E731
+        return SimpleNamespace(structure=[], stats={"roll": st(True, 2.0),
+                                                    "pitch": st(pitch_white, 20.2)})
+
+    assert _verdict(base(True), [], None, [], True).startswith("no effect needed")
+    v = _verdict(base(False), [], None, [], True)
+    assert v.startswith("residual correlated in time: pitch (Q 20.2 > 13.3) not white"), v
+    assert "roll" not in v

@@ -1298,13 +1298,22 @@ def _verdict(base, results, accepted, twins, at_floor) -> str:
         return (f"significant structure below the noise floor: {f.sentence()}{more}; every "
                 f"axis is within {AT_NOISE_FLOOR:g}x its noise floor overall, but averaged over "
                 f"the revolutions it is systematic.{tail}")
+    grey = [f"{a} (Q {st.whiteness_q:.1f} > {st.whiteness_limit:.1f})"
+            for a, st in base.stats.items() if not st.white]
+    if at_floor and accepted is None and grey:
+        # "no effect needed" needs a white residual too: a correlation in time that no
+        # bin shows is still something the model does not explain
+        best = results[0] if results else None
+        tail = (f" No candidate explains it (the best, {best.name}, fails: "
+                f"{'; '.join(best.failed())})." if best is not None else "")
+        return (f"residual correlated in time: {', '.join(grey)} not white at the 99% "
+                f"level (see the autocorrelation plot), although every axis is within "
+                f"{AT_NOISE_FLOOR:g}x its noise floor with no significant structure in "
+                f"azimuth, airspeed or thrust bins.{tail}")
     if at_floor and accepted is None:
-        grey = [a for a, st in base.stats.items() if not st.white]
-        tail = (f" ({', '.join(grey)} not white at the 99% level: see the autocorrelation "
-                "plot)") if grey else ", and white"
         return (f"no effect needed: every residual axis is within {AT_NOISE_FLOOR:g}x its "
-                f"noise floor{tail}, with no significant structure in azimuth, airspeed or "
-                "thrust bins")
+                "noise floor, and white, with no significant structure in azimuth, "
+                "airspeed or thrust bins")
     if accepted is None:
         best = results[0] if results else None
         tail = ""
