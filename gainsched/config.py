@@ -207,12 +207,17 @@ class Analysis:
     use_gyro : bool
         Take the body angular accelerations from the logged gyro (``p, q, r``: one
         differentiation) instead of the twice-differentiated attitude, when a log has it.
+    use_accelerometer : bool
+        Take the COG accelerations from the logged accelerometer (``ax, ay, az``: the
+        specific force rotated by the pose's attitude, plus gravity) instead of the
+        twice-differentiated position, when a log has it.
     """
 
     savgol_window_s: float = 0.1
     savgol_order: int = 3
     latency_s: float = 0.0
     use_gyro: bool = True
+    use_accelerometer: bool = True
 
 
 @dataclass(frozen=True)
@@ -657,8 +662,9 @@ def _analysis(sec: Section) -> Analysis:
     if latency >= 1:
         raise sec.error("latency_s", f"must be < 1 s, got {latency:g}")
     gyro = sec.boolean("use_gyro", Analysis.use_gyro)
+    accel = sec.boolean("use_accelerometer", Analysis.use_accelerometer)
     sec.done()
-    return Analysis(window, order, latency, gyro)
+    return Analysis(window, order, latency, gyro, accel)
 
 
 def _limits(sec: Section) -> Limits:

@@ -69,6 +69,7 @@ from ..model.rotations import (
     euler_zyx_from_matrix,
     matrix_from_euler_zyx,
     matrix_from_quaternion,
+    up_C_from_tilt,
 )
 from .logs import FlightLog, LogWarning, read_log
 from .structure import findings
@@ -107,12 +108,15 @@ UNITS = {
     "yaw": "rad/s^2",
     "stretch": "m",
 }
+#: the on-board sensor that measures a translational axis (the rotational: the gyro)
+_SENSOR_OF = {"tangential": "accelerometer", "normal": "accelerometer",
+              "radial": "accelerometer"}
 #: RMS / noise floor below which an axis counts as explained down to the noise
 AT_NOISE_FLOOR = 1.25
 _INPUT_NAMES = ("T_C", "tau_x", "tau_y", "tau_z")
 _CHANNELS = ("d", "delta", "xi", "phi", "theta", "psi")
-#: samples of the cubic fit whose residual estimates the gyro's noise
-GYRO_NOISE_WINDOW = 5
+#: samples of the cubic fit whose residual estimates an IMU channel's noise (gyro, accelerometer)
+IMU_NOISE_WINDOW = 5
 
 
 def window_samples(window_s: float, dt: float, order: int, source="", where="") -> int:
@@ -182,6 +186,11 @@ class Measured:
     gyro_dot : (N, 3) rad/s^2 or None
         Its Savitzky-Golay derivative: the measured body angular acceleration (one
         differentiation; ``omega_dot`` is the pose's, two).
+    accel : (N, 3) m/s^2 or None
+        The logged accelerometer's specific force in B (on-board time), when the log has
+        one and ``analysis.use_accelerometer`` is on.
+    gravity_C : (3,) m/s^2
+        Gravity in C (what the accelerometer does not sense).
     """
 
     name: str
@@ -210,6 +219,25 @@ class Measured:
     cache: dict = field(default_factory=dict, repr=False)  # model-independent derived arrays
     gyro: np.ndarray | None = None
     gyro_dot: np.ndarray | None = None
+    accel: np.ndarray | None = None
+    gravity_C: np.ndarray | None = None
+
+    def acc_measured(self, latency: float) -> np.ndarray:
+        """The measured COG acceleration on the path axes (``axes``: tangential, normal,
+        radial), (N, 3) m/s^2, on the pose's clock: from the accelerometer when there is
+        one (its specific force delayed by ``latency`` s like the commands, rotated by the
+        pose's attitude, plus gravity, projected, then smoothed like the prediction: on
+        the path axes a circle's acceleration is constant, in C it turns), else the
+        twice-differentiated pose (``a``) projected."""
+        if self.accel is None:
+            return self.derived("acc_pose", lambda: np.einsum("nij,nj->ni", self.axes, self.a))
+        hit = self.cache.get("acc_imu")
+        if hit is None or hit[0] != latency:  # one latency kept: a fit moves it step by step
+            f_C = np.einsum("nij,nj->ni", self.R, _delayed(self.t, self.accel, latency))
+            a_path = np.einsum("nij,nj->ni", self.axes, f_C + self.gravity_C)
+            self.cache["acc_imu"] = (latency, savgol_filter(
+                a_path, self.window, self.order, axis=0, mode="interp"))
+        return self.cache["acc_imu"][1]
 
     def omega_dot_measured(self, latency: float) -> np.ndarray:
         """The measured body angular acceleration (N, 3), rad/s^2, on the pose's clock:
@@ -339,13 +367,10 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
     sigma = dict(zip(_CHANNELS, map(float, sig), strict=True))
     gyro, gyro_dot = _gyro(log, an, n, dt)
     if gyro is not None:
-        # the gyro's white noise from the residual of a 5-point cubic fit: short enough to
-        # follow the body rates (the roll rate moves within the pose window), so the
-        # residual is noise, not motion
-        g_hc = savgol_coeffs(GYRO_NOISE_WINDOW, 3)[GYRO_NOISE_WINDOW // 2]
-        g_res = (gyro - savgol_filter(gyro, GYRO_NOISE_WINDOW, 3, axis=0))[h : len(log) - h]
-        g_sig = np.sqrt(np.mean(g_res**2, axis=0) / (1 - g_hc))
-        sigma.update(zip(("p", "q", "r"), map(float, g_sig), strict=True))
+        sigma.update(zip(("p", "q", "r"), _imu_sigma(gyro, h), strict=True))
+    accel = _accelerometer(log, an)
+    if accel is not None:
+        sigma.update(zip(("ax", "ay", "az"), _imu_sigma(accel, h), strict=True))
     tension = log.optional.get("tension")
     if tension is not None and not np.all(np.isfinite(tension)):
         tension = None  # a load cell with missing samples is not used (radial equation instead)
@@ -357,8 +382,28 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
         np.asarray(log.t, float), n, an.savgol_order, z, acc, ch[0], ch1[0], p, v, a,
         R, w_dot, e, axes, np.asarray(log.T_cmd, float),
         None if tension is None else np.asarray(tension, float), sigma, L_e,
-        gyro=gyro, gyro_dot=gyro_dot,
+        gyro=gyro, gyro_dot=gyro_dot, accel=accel,
+        gravity_C=-config.g * up_C_from_tilt(log.alpha_c),
     )
+
+
+def _imu_sigma(x: np.ndarray, h: int) -> list[float]:
+    """White-noise std per column of an IMU channel ``x`` (N, 3), from the residual of a
+    5-point cubic fit: short enough to follow the motion (the roll rate moves within the
+    pose window), so the residual is noise; samples within ``h`` of the ends left out."""
+    hc = savgol_coeffs(IMU_NOISE_WINDOW, 3)[IMU_NOISE_WINDOW // 2]
+    res = (x - savgol_filter(x, IMU_NOISE_WINDOW, 3, axis=0))[h : len(x) - h]
+    return [float(v) for v in np.sqrt(np.mean(res**2, axis=0) / (1 - hc))]
+
+
+def _accelerometer(log: FlightLog, an, noise=None):
+    """The logged specific force (N, 3) m/s^2 in B, or None without one (or with
+    ``analysis.use_accelerometer`` off, or missing samples). ``noise``: (N, 3) m/s^2
+    added (the noise-floor estimate)."""
+    f = log.optional.get("f_B")
+    if not an.use_accelerometer or f is None or not np.all(np.isfinite(f)):
+        return None
+    return np.asarray(f, float) if noise is None else np.asarray(f, float) + noise
 
 
 def _gyro(log: FlightLog, an, n: int, dt: float, noise=None):
@@ -373,12 +418,14 @@ def _gyro(log: FlightLog, an, n: int, dt: float, noise=None):
                                polyorder=an.savgol_order, axis=0, mode="interp")
 
 
-def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None) -> Measured:
+def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None,
+           rng_accel=None) -> Measured:
     """The same segment with motion-capture noise of the estimated level added once more:
     position noise (std from the tether-distance channel, where attitude noise does not
     enter to first order) and attitude noise (std from the roll and pitch channels); and
-    gyro noise of its estimated level when the gyro is used (from ``rng_gyro``, its own
-    stream, so that the pose's noise does not depend on whether a gyro is used)."""
+    gyro and accelerometer noise of their estimated levels when they are used (from
+    ``rng_gyro`` and ``rng_accel``, their own streams, so that the pose's noise does not
+    depend on which sensors are used)."""
     an = config.analysis
     sp = meas.raw_sigma["d"]
     sa = 0.5 * (meas.raw_sigma["phi"] + meas.raw_sigma["theta"])
@@ -399,10 +446,14 @@ def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None) -
         g_sig = np.array([meas.raw_sigma[k] for k in ("p", "q", "r")])
         gyro, gyro_dot = _gyro(log, an, meas.window, dt,
                                g_sig * (rng_gyro or rng).standard_normal((n, 3)))
+    accel = None
+    if meas.accel is not None:  # the accelerometer's own noise, once more
+        a_sig = np.array([meas.raw_sigma[k] for k in ("ax", "ay", "az")])
+        accel = _accelerometer(log, an, a_sig * (rng_accel or rng).standard_normal((n, 3)))
     return Measured(meas.name, meas.source, meas.alpha, meas.gamma, meas.t, meas.t_flight,
                     meas.window, meas.order, z, acc, ch[0], ch1[0], p, v, a, R, w_dot, e, axes,
                     meas.T_cmd, meas.tension, meas.raw_sigma, meas.L_e, gyro=gyro,
-                    gyro_dot=gyro_dot)
+                    gyro_dot=gyro_dot, accel=accel, gravity_C=meas.gravity_C)
 
 
 # --------------------------------------------------------------------------- prediction
@@ -636,7 +687,7 @@ def residual_axes(model: Model, meas: Measured, latency: float | None = None,
         f_t = _load_cell(meas, lat)
         return {"stretch": meas.d[c] - model.rho - _tether_stretch(model.config, f_t, meas.dt)[c]}
     pred = predict(model, meas, latency=lat, inputs=False, edges=False)
-    acc_m = meas.derived("acc_core", lambda: np.einsum("nij,nj->ni", meas.axes[c], meas.a[c]))
+    acc_m = meas.acc_measured(lat)[c]
     out = {"tangential": acc_m[:, 0] - pred.acc[c, 0], "normal": acc_m[:, 1] - pred.acc[c, 1]}
     if pred.tension_source == "load cell":
         out["radial"] = acc_m[:, 2] - pred.acc[c, 2]
@@ -649,7 +700,7 @@ def residual_axes(model: Model, meas: Measured, latency: float | None = None,
 
 def _residual(model: Model, meas: Measured, pred: Prediction) -> Residual:
     c = meas.core
-    acc_m = np.einsum("nij,nj->ni", meas.axes, meas.a)
+    acc_m = meas.acc_measured(pred.latency)
     measured = {"tangential": acc_m[c, 0], "normal": acc_m[c, 1]}
     predicted = {"tangential": pred.acc[c, 0], "normal": pred.acc[c, 1]}
     if pred.tension_source == "load cell":
@@ -865,15 +916,15 @@ def axis_stats(res: list[Residual], axis: str, noise_floor: float = math.nan,
 def noise_floor(config: Config, measured, segs, *, effects=None, latency=None,
                 seed: int = 0) -> tuple[dict, dict]:
     """RMS change of each residual axis when measurement noise of the estimated level is
-    added once more (motion capture on the raw pose channels, the gyro's on the gyro):
-    the residual the noise alone explains.
+    added once more (motion capture on the raw pose channels, the gyro's on the gyro, the
+    accelerometer's on the accelerometer): the residual the noise alone explains.
 
-    Returns ``(floors, pose_floors)``: the floor per axis, and for the rotational axes of
-    segments measured with the gyro the floor they would have from the pose alone (the
-    twice-differentiated attitude): what the gyro saves.
+    Returns ``(floors, pose_floors)``: the floor per axis, and for the axes measured with
+    an on-board sensor (rotational: gyro; translational: accelerometer) the floor they
+    would have from the pose alone (twice differentiated): what the sensor saves.
     """
     model = Model(config, effects)
-    rng, rng_gyro = np.random.default_rng(seed), np.random.default_rng(seed + 1)
+    rng, rng_gyro, rng_accel = (np.random.default_rng(seed + i) for i in range(3))
     acc: dict = {}
     pose: dict = {}
 
@@ -884,16 +935,22 @@ def noise_floor(config: Config, measured, segs, *, effects=None, latency=None,
     for m, s in zip(measured, segs, strict=True):
         p0 = predict(model, m, latency=latency)
         r0 = _residual(model, m, p0)
-        mn = _noisy(s, m, config, rng, rng_gyro)
+        mn = _noisy(s, m, config, rng, rng_gyro, rng_accel)
         p1 = predict(model, mn, latency=latency)
         r1 = _residual(model, mn, p1)
         for ax in r0.residual:
             add(acc, ax, r1.residual[ax] - r0.residual[ax])
+        c = m.core
         if m.gyro_dot is not None:
-            c = m.core
             for j, ax in enumerate(("roll", "pitch", "yaw")):
                 add(pose, ax, (mn.omega_dot[c, j] - p1.omega_dot_pose[c, j])
                     - (m.omega_dot[c, j] - p0.omega_dot_pose[c, j]))
+        if m.accel is not None:
+            d1 = np.einsum("nij,nj->ni", mn.axes[c], mn.a[c]) - p1.acc[c]
+            d0 = np.einsum("nij,nj->ni", m.axes[c], m.a[c]) - p0.acc[c]
+            for j, ax in enumerate(("tangential", "normal", "radial")):
+                if ax in r0.residual:
+                    add(pose, ax, d1[:, j] - d0[:, j])
     rms = lambda store: {ax: math.sqrt(s / k) for ax, (s, k) in store.items()}  # noqa: E731
     return rms(acc), rms(pose)
 
@@ -1032,16 +1089,23 @@ class Comparison:
     #: strongest first, and its tables ``{variable: {axis: BinnedMean}}``
     structure: list = field(default_factory=list)
     structure_tables: dict = field(default_factory=dict)
-    #: the rotational axes' noise floors from the pose alone, when the gyro was used
-    #: (:func:`noise_floor`): what the gyro saved
+    #: the noise floors from the pose alone of the axes an on-board sensor measured
+    #: (:func:`noise_floor`; rotational: gyro, translational: accelerometer): what the
+    #: sensors saved
     pose_noise: dict = field(default_factory=dict)
 
-    def gyro_lines(self) -> list[str]:
-        """One sentence per rotational axis measured with the gyro: its noise floor from
-        the gyro against the pose's alone."""
-        return [f"{a}: noise floor {self.noise[a]:.3g} rad/s^2 with the gyro, "
-                f"{p:.3g} from the pose alone (-{1 - self.noise[a] / p:.0%})"
+    def sensor_lines(self) -> list[str]:
+        """One sentence per axis measured with an on-board sensor: its noise floor with
+        the sensor against the pose's alone."""
+        return [f"{a}: noise floor {self.noise[a]:.3g} {UNITS[a]} with the "
+                f"{_SENSOR_OF.get(a, 'gyro')}, {p:.3g} from the pose alone "
+                f"({self.noise[a] / p - 1:+.0%})"
                 for a, p in self.pose_noise.items() if a in self.noise and p > 0]
+
+    def _sensor_json(self, axes) -> dict:
+        used = {a: p for a, p in self.pose_noise.items() if a in axes}
+        return {"used": bool(used), "pose_noise_floor": used,
+                "noise_floor": {a: self.noise[a] for a in used}}
 
     @property
     def axes(self) -> tuple[str, ...]:
@@ -1071,9 +1135,8 @@ class Comparison:
                                "tables": self.where["tables"]},
             "notes": self.notes,
             "tracking": self.tracking,
-            "gyro": {"used": bool(self.pose_noise),
-                     "pose_noise_floor": self.pose_noise,
-                     "noise_floor": {a: self.noise[a] for a in self.pose_noise}},
+            "gyro": self._sensor_json(("roll", "pitch", "yaw")),
+            "accelerometer": self._sensor_json(("tangential", "normal", "radial")),
             "structure": {"findings": [f.to_json() for f in self.structure],
                           "tables": {v: {a: bm.to_json() for a, bm in tab.items()}
                                      for v, tab in self.structure_tables.items()}},

@@ -115,8 +115,8 @@ def compare_lines(cmp: Comparison, paper: PaperFits | None = None) -> list[str]:
     out = [_header(cmp)]
     out += _text_table(head, rows, w)
     out.append(f"  normalised RMS (1 = noise): {cmp.normalized_rms():.3f}")
-    for line in cmp.gyro_lines():
-        out.append(f"gyro: {line}")
+    for line in cmp.sensor_lines():
+        out.append(f"sensors: {line}")
     out.append(f"where it fails: {cmp.where['sentence']}")
     for f in cmp.structure[:3]:
         out.append(f"structure: {f.sentence()}")

@@ -49,7 +49,7 @@ __all__ = ["MaximalModel", "maximal_from_reduced", "reduced_from_maximal", "N_MA
 
 N_MAXIMAL = 13  # p (3), v (3), q (4), omega (3); elastic links append their states
 LINKS = ("rigid", *ELASTIC_LINKS)
-RK4_REACH = 2.0  # |lambda dt| per RK4 substep (stability boundary ~2.8): see MaximalModel.step
+RK4_REACH = 0.25  # |lambda dt| per RK4 substep: see MaximalModel.substeps
 
 
 def _mv(R, v):
@@ -287,8 +287,11 @@ class MaximalModel:
         return reduced_from_maximal(self.model, x, xi_ref)
 
     def substeps(self, dt: float) -> int:
-        """RK4 substeps per step of ``dt`` s that keep the link's fastest mode stable
-        (``|lambda| dt / n <= RK4_REACH``); 1 for the rigid link."""
+        """RK4 substeps per step of ``dt`` s that keep the link's fastest mode accurate
+        (``|lambda| dt / n <= RK4_REACH``: RK4's relative error per substep ~ (lambda h)^5 /
+        120 < 1e-5); 1 for the rigid link. At the stability bound (lambda h ~ 2) the stiff
+        tether (k = 2e5 N/m) rang at 0.63 per step and its simulated acceleration was
+        0.16 % off its own model: the simulated accelerometer showed it."""
         if self.link_model is None:
             return 1
         rate = self.link_model.max_rate(self.model.m)

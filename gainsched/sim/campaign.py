@@ -156,8 +156,8 @@ HIDDEN: dict[str, HiddenEffect] = {
 def default_flights(duration: float = 3.0, seed: int = 1) -> tuple[Scenario, ...]:
     """Speeds 3-15 m/s at tilt 0, 8 m/s at 20 deg, 7 m/s at 40 deg, a speed-up 3 -> 12 m/s
     and a braking 12 -> 3 m/s; motion-capture noise 0.5 mm / 0.2 deg at 200 Hz, gyro noise
-    0.005 rad/s (a MEMS gyro on a vibrating frame)."""
-    sens = Sensing(False, 200.0, 0.0005, math.radians(0.2), 0.005, 0.0, seed)
+    0.005 rad/s and accelerometer noise 0.1 m/s^2 (MEMS sensors on a vibrating frame)."""
+    sens = Sensing(False, 200.0, 0.0005, math.radians(0.2), 0.005, 0.0, seed, 0.1)
     spec = [
         ("v3", 0, 3.0, ()), ("v9", 0, 9.0, ()), ("v15", 0, 15.0, ()),
         ("tilt20-v8", 20, 8.0, ()), ("tilt40-v7", 40, 7.0, ()),

@@ -78,6 +78,7 @@ class Sensing:
     gyro_noise: float = 0.0
     latency: float = 0.0
     seed: int = 0
+    accel_noise: float = 0.0  # m/s^2, the logged accelerometer's
 
 
 @dataclass(frozen=True)
@@ -126,6 +127,7 @@ def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
         sens.number("gyro_noise", 0.0, nonneg=True),
         sens.number("latency", 0.0, nonneg=True),
         int(sens.number("seed", 0)),
+        sens.number("accel_noise", 0.0, nonneg=True),
     )
     sens.done()
     init = tuple(top.array("initial_error", [])) if "initial_error" in d else ()
@@ -192,6 +194,7 @@ class SimResult:
     held: np.ndarray | None = None
     tension_d: np.ndarray | None = None
     min_tension: float = 0.0
+    f_B: np.ndarray | None = None
 
 
 _FALLBACKS_SEEN: set[str] = set()
@@ -437,7 +440,23 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     PI, QI = P.poses(X[sl], alpha, scenario.gamma)
     return SimResult(t[sl], Z[sl].copy(), Zh[sl], z_d[sl], U[sl], u_d[sl], TEN[sl], PI, QI,
                      SAT[sl], STAT[sl], slack_time, scenario, dmodel.r, plant.vehicle.mass,
-                     plant.g, HELD[sl], tension_d[sl], design.feasibility.min_tension)
+                     plant.g, HELD[sl], tension_d[sl], design.feasibility.min_tension,
+                     specific_force(PI, QI, dt, plant.g))
+
+
+def specific_force(p_I, q_IB, dt: float, g: float) -> np.ndarray:
+    """What an accelerometer at the COG senses, ``f_B = R_IB^T (a_I + g e_z)`` (N, 3) m/s^2,
+    at the control steps: ``a_I`` from second differences of the COG positions ``p_I``
+    (N, 3) m, which the plant integrates at step ``dt`` s (error O(dt^2); the ends repeat
+    their neighbours), ``q_IB`` (N, 4) the attitude, ``g`` m/s^2."""
+    from ..model.rotations import matrix_from_quaternion
+
+    a = np.zeros_like(p_I)
+    if len(p_I) >= 3:
+        a[1:-1] = (p_I[2:] - 2 * p_I[1:-1] + p_I[:-2]) / (dt * dt)
+        a[0], a[-1] = a[1], a[-2]
+    a[:, 2] += g
+    return np.einsum("nji,nj->ni", matrix_from_quaternion(q_IB), a)
 
 
 class _Estimator:
@@ -668,7 +687,8 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
     """The flight log a real flight would leave (``flight-log.md``): motion-capture pose at
     the sensing rate with the scenario's noise, commanded thrusts (mean over each sample
     interval), gyro (mean rate over the interval centred on the sample, with the scenario's
-    gyro noise), load-cell tension and the reference azimuth."""
+    gyro noise), accelerometer (the mean specific force at the COG over the same interval,
+    with the scenario's accelerometer noise), load-cell tension and the reference azimuth."""
     from ..analysis.logs import log_from_arrays
     from ..model.rotations import Rx, Ry, Rz, matrix_from_quaternion
 
@@ -702,10 +722,16 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
     lo, hi = np.maximum(idx - h, 0), np.minimum(idx + h + 1, w.shape[0])
     gyro = (wsum[hi] - wsum[lo]) / (hi - lo)[:, None]
     gyro = gyro + sens.gyro_noise * rng.standard_normal((idx.size, 3))
+    extra = {}
+    if res.f_B is not None:  # the accelerometer, anti-aliased the same way, its own noise
+        fsum = np.concatenate([np.zeros((1, 3)), np.cumsum(res.f_B, 0)])
+        f_B = (fsum[hi] - fsum[lo]) / (hi - lo)[:, None]
+        extra["f_B"] = f_B + sens.accel_noise * np.random.default_rng(
+            (sens.seed + 1000 if seed is None else seed) + 7919).standard_normal((idx.size, 3))
     return log_from_arrays(
         res.t[idx], p, q, T, meta, source=f"simulation {res.scenario.name}",
         omega_B=gyro, tension=res.tension[idx],
-        xi_ref=res.z_d[idx, 1], xi_dot_ref=res.z_d[idx, 3],
+        xi_ref=res.z_d[idx, 1], xi_dot_ref=res.z_d[idx, 3], **extra,
     )
 
 
