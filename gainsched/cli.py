@@ -342,18 +342,27 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
     help="Also write envelope.png (speed x tilt: feasible / slack / thrust) and "
     "envelope.json to this folder.",
 )
+@click.option("--json", "as_json", is_flag=True,
+              help="Print the summary as JSON (grid, feasibility, gain ranges, spectral "
+              "radius per circle) instead of text.")
 @user_errors
-def inspect(table, out_dir):
+def inspect(table, out_dir, as_json):
     """Summarise a gain table: grid, feasibility map (speed m/s x tilt deg), gain ranges,
     worst closed-loop spectral radius; with --out, the flight envelope as a PNG and JSON."""
     from .firmware.codegen import flash_summary
     from .publish import check_out_dir
     from .schedule.nominal import REASONS
     from .schedule.tables import load_table
+    from .schedule.viewer import table_summary
 
     if out_dir is not None:
         check_out_dir(out_dir, "--out")
     t = load_table(table)
+    if as_json:
+        click.echo(json.dumps(table_summary(t, source=str(table)), indent=2, sort_keys=True))
+        if out_dir is not None:
+            _write_envelope(t, table, out_dir, quiet=True)
+        return
     click.echo(f"{table}: {t.attrs['schema']}, config {t.name} (sha256 {t.config_sha256[:12]}), "
                f"tool {t.attrs['tool_version']}, terminal cost {t.attrs['terminal']}")
     tilts = ", ".join(f"{x:g}" for x in np.rad2deg(t.tilt))
@@ -389,7 +398,7 @@ def inspect(table, out_dir):
         _write_envelope(t, table, out_dir)
 
 
-def _write_envelope(t, table, out_dir) -> None:
+def _write_envelope(t, table, out_dir, quiet=False) -> None:
     """envelope.png and envelope.json of the loaded table ``t`` into ``out_dir`` (one set)."""
     from .publish import publish
     from .schedule.envelope import envelope_from_table, envelope_png
@@ -400,8 +409,48 @@ def _write_envelope(t, table, out_dir) -> None:
         "envelope.png": envelope_png(env),
         "envelope.json": (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode(),
     }, where="--out")
-    counts = ", ".join(f"{n} {c}" for c, n in env.counts().items())
-    click.echo(f"  envelope: {counts} -> {', '.join(str(p) for p in paths)}")
+    if not quiet:
+        counts = ", ".join(f"{n} {c}" for c, n in env.counts().items())
+        click.echo(f"  envelope: {counts} -> {', '.join(str(p) for p in paths)}")
+
+
+@cli.command()
+@click.argument("table", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              required=True, help="Folder for the PNGs and plots.json (written as one set).")
+@click.option("--check", "with_check", is_flag=True,
+              help="Also solve the LQR at the cell midpoints (as `gainsched check`) and plot "
+              "the interpolation error (slower).")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary (plots.json) on stdout.")
+@user_errors
+def plot(table, out_dir, with_check, as_json):
+    """Plot a gain table: every gain K_ij over azimuth and speed per tilt (grid points
+    marked), the feasibility envelope, nominal thrusts and roll, the closed-loop spectral
+    radius per circle and, with --check, the midpoint interpolation error; plus a JSON
+    summary (plots.json)."""
+    from tqdm import tqdm
+
+    from .publish import check_out_dir, publish
+    from .schedule.tables import load_table
+    from .schedule.viewer import schedule_plots
+
+    check_out_dir(out_dir, "--out")
+    t = load_table(table)
+    midpoints = None
+    if with_check:
+        from .firmware.check import midpoint_check
+
+        with tqdm(total=max(t.speed.size - 1, 0), unit="speed", desc=f"check {t.name}",
+                  disable=None) as bar:
+            res = midpoint_check(t, progress=bar.update)
+        midpoints = (res.speed, res.tilt, res.rel_err)
+    files = schedule_plots(t, midpoints, source=str(table))
+    paths = publish(out_dir, files, where="--out")
+    if as_json:
+        click.echo(files["plots.json"].decode(), nl=False)
+    else:
+        click.echo(f"{table}: {len(paths)} files -> {out_dir}/ "
+                   f"({', '.join(sorted(p.name for p in paths))})")
 
 
 @cli.command("export-c")

@@ -3,6 +3,7 @@
 :mod:`.path` (azimuth profiles) -> :mod:`.closedform` / :mod:`.trim` -> :mod:`.nominal`
 (nominal and feasibility) -> :mod:`.linearize` -> :mod:`.lqr` (periodic LQR) ->
 :mod:`.grid` (every circle of the grid, locally or with :mod:`.distributed`) ->
-:mod:`.tables` (the HDF5 table) -> :mod:`.envelope` (its flight envelope as a plot);
-:mod:`.sweep` builds one table per vehicle variant.
+:mod:`.tables` (the HDF5 table) -> :mod:`.envelope` (its flight envelope as a plot) and
+:mod:`.viewer` (every gain, the nominal and the closed loop as plots); :mod:`.sweep` builds
+one table per vehicle variant.
 """

@@ -1,0 +1,300 @@
+"""Look at a gain schedule: the plots a control engineer makes first.
+
+:func:`schedule_figures` draws, from a loaded :class:`~gainsched.schedule.tables.Table`:
+
+- ``gains_tilt<deg>.png``, one per tilt: every gain entry ``K_ij`` (4 inputs x n
+  states) as a small map over azimuth (x) and speed (y), the grid points marked, one
+  colour scale per entry (its range in the title); infeasible circles blank;
+- ``envelope.png``: speed x tilt, feasible / with offsets / slack / thrust limits
+  (:func:`~gainsched.schedule.envelope.envelope_png`);
+- ``nominal.png``: the nominal motor thrusts ``u_d`` and roll ``phi_d`` over azimuth
+  and speed, one row per tilt;
+- ``spectral_radius.png``: the closed-loop monodromy spectral radius per circle
+  (speed x tilt);
+- ``midpoint_error.png`` when a midpoint check is given (``gainsched check``, the
+  firmware layer computes it): the largest relative gain error of the interpolation
+  per speed x tilt midpoint.
+
+:func:`schedule_plots` renders them to PNG bytes with a sorted-key JSON summary
+(``plots.json``: :func:`table_summary`, the grid, per-entry gain ranges, the spectral
+radius, plus the files) for
+:func:`gainsched.publish.publish`. Every map draws the table's own arrays (no
+resampling), so a test can read the values back from the figure.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+
+import numpy as np
+
+from .envelope import envelope_from_table, envelope_png
+
+__all__ = ["schedule_figures", "schedule_plots", "table_summary", "gain_file_name"]
+
+INPUT_NAMES = ("T1", "T2", "T3", "T4")
+
+
+def gain_file_name(tilt_rad: float) -> str:
+    """``gains_tilt<deg>.png`` for a tilt in rad (degrees rounded to 0.01)."""
+    return f"gains_tilt{round(float(np.rad2deg(tilt_rad)), 2):g}.png"
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _feasible(table) -> np.ndarray:
+    """(n_a, n_v, n_xi) bool: the azimuth samples with gains."""
+    return table.reasons == 0
+
+
+def _map(ax, xi_deg, speed, values, title, cmap="viridis"):
+    """One map of ``values`` (n_v, n_xi) over azimuth (deg) and speed (m/s), the grid
+    points marked; NaN blank. Returns the QuadMesh."""
+    mesh = ax.pcolormesh(xi_deg, speed, np.ma.masked_invalid(values), shading="nearest",
+                         cmap=cmap)
+    X, V = np.meshgrid(xi_deg, speed)
+    ax.plot(X.ravel(), V.ravel(), ",", color="k", alpha=0.35)
+    ax.set_title(title, fontsize=7)
+    # few fixed ticks: matplotlib's tick machinery is most of the drawing time of ~300 maps
+    ax.set_xticks([0, 120, 240])
+    ax.set_yticks(np.unique(np.round([speed[0], speed[speed.size // 2], speed[-1]], 1)))
+    ax.tick_params(labelsize=6, length=2)
+    return mesh
+
+
+def _outer_labels(axes) -> None:
+    """Axis labels on the outer maps only, tick labels on the left column and bottom row."""
+    for (r, c), ax in np.ndenumerate(axes):
+        if r == axes.shape[0] - 1:
+            ax.set_xlabel("azimuth xi (deg)", fontsize=7)
+        else:
+            ax.tick_params(labelbottom=False)
+        if c == 0:
+            ax.set_ylabel("speed (m/s)", fontsize=7)
+        else:
+            ax.tick_params(labelleft=False)
+
+
+def _gain_figure(plt, table, i: int):
+    K = table.K_full()[i]  # (n_v, n_xi, 4, n)
+    ok = _feasible(table)[i]
+    names = table.attrs["state_names"].split(",")
+    n = K.shape[-1]
+    xi_deg = np.rad2deg(table.xi)
+    # not shared axes: sharing 44 maps makes every limit change visit all of them
+    fig, axes = plt.subplots(4, n, figsize=(1.6 * n + 1, 7.5), squeeze=False)
+    for r in range(4):
+        for c in range(n):
+            vals = np.where(ok, K[..., r, c], np.nan)
+            fin = vals[np.isfinite(vals)]
+            rng = f"{fin.min():.3g}..{fin.max():.3g}" if fin.size else "no gains"
+            mesh = _map(axes[r, c], xi_deg, table.speed, vals,
+                        f"K[{INPUT_NAMES[r]}, {names[c]}]\n{rng}", cmap="coolwarm")
+            mesh.set_gid(f"K_{r}_{c}")
+    _outer_labels(axes)
+    tilt = np.rad2deg(table.tilt[i])
+    fig.suptitle(f"{table.name}: gains K (u = u_d - K (x - x_d)) at tilt {tilt:g} deg, "
+                 f"{int(ok.any(-1).sum())} of {ok.shape[0]} speeds with gains "
+                 "(blank: infeasible; dots: grid points)", fontsize=9)
+    fig.subplots_adjust(left=0.04, right=0.995, bottom=0.06, top=0.9, wspace=0.12,
+                        hspace=0.5)
+    return fig
+
+
+def _nominal_figure(plt, table):
+    n_a = table.tilt.size
+    xi_deg = np.rad2deg(table.xi)
+    ok = _feasible(table)
+    fig, axes = plt.subplots(n_a, 5, figsize=(13, 2.4 * n_a + 0.8), squeeze=False)
+    for i in range(n_a):
+        tilt = np.rad2deg(table.tilt[i])
+        for m in range(4):
+            mesh = _map(axes[i, m], xi_deg, table.speed,
+                        np.where(ok[i], table.u_d[i, ..., m], np.nan),
+                        f"tilt {tilt:g} deg: nominal {INPUT_NAMES[m]} (N)")
+            mesh.set_gid(f"u_d_{i}_{m}")
+            plt.colorbar(mesh, ax=axes[i, m]).ax.tick_params(labelsize=6)
+        mesh = _map(axes[i, 4], xi_deg, table.speed,
+                    np.where(ok[i], np.rad2deg(table.phi_d[i]), np.nan),
+                    f"tilt {tilt:g} deg: nominal roll phi_d (deg)", cmap="coolwarm")
+        mesh.set_gid(f"phi_d_{i}")
+        plt.colorbar(mesh, ax=axes[i, 4]).ax.tick_params(labelsize=6)
+    _outer_labels(axes)
+    fig.suptitle(f"{table.name}: nominal motor thrusts and roll (blank: infeasible)",
+                 fontsize=9)
+    fig.subplots_adjust(left=0.05, right=0.97, bottom=0.04, top=0.95, wspace=0.3,
+                        hspace=0.45)
+    return fig
+
+
+def _speed_tilt_figure(plt, table, values, title, label, gid, speeds=None, tilts=None):
+    """A map over speed x tilt (deg) of ``values`` (n_a, n_v), NaN blank, with the values
+    printed in the cells."""
+    speeds = table.speed if speeds is None else speeds
+    tilts = np.rad2deg(table.tilt if tilts is None else tilts)
+    # one equal cell per grid point (the breakpoints are not uniform), labelled by value
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.6 * speeds.size + 2), 0.45 * tilts.size + 1.6))
+    mesh = ax.pcolormesh(np.arange(speeds.size), np.arange(tilts.size),
+                         np.ma.masked_invalid(values), shading="nearest", cmap="magma_r")
+    mesh.set_gid(gid)
+    for (a, v), x in np.ndenumerate(values):
+        if np.isfinite(x):
+            ax.text(v, a, f"{x:.3g}", ha="center", va="center", fontsize=6, color="tab:cyan")
+    plt.colorbar(mesh, ax=ax, label=label)
+    ax.set_xticks(np.arange(speeds.size), [f"{v:g}" for v in speeds], fontsize=7)
+    ax.set_yticks(np.arange(tilts.size), [f"{a:g}" for a in tilts], fontsize=7)
+    ax.set_xlabel("speed (m/s)")
+    ax.set_ylabel("circle tilt alpha_C (deg)")
+    ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def _midpoint_grid(midpoints):
+    """(speeds, tilts, max error (n_a, n_v)) of a midpoint check's points."""
+    speed, tilt, err = (np.asarray(x, dtype=float) for x in midpoints)
+    vs, ts = np.unique(speed), np.unique(tilt)
+    grid = np.full((ts.size, vs.size), np.nan)
+    for k in range(err.size):
+        if np.isfinite(err[k]):
+            a, v = np.searchsorted(ts, tilt[k]), np.searchsorted(vs, speed[k])
+            grid[a, v] = np.fmax(grid[a, v], err[k])
+    return vs, ts, grid
+
+
+def schedule_figures(table, midpoints=None) -> dict:
+    """The figures of a gain table, by file name (see the module docstring).
+
+    Parameters
+    ----------
+    table : Table
+        A loaded table (:func:`~gainsched.schedule.tables.load_table`).
+    midpoints : tuple of three ndarray, shape (m,), optional
+        ``(speed m/s, tilt rad, relative gain error)`` of checked cell midpoints
+        (:class:`gainsched.firmware.check.MidpointCheck` ``speed, tilt, rel_err``).
+
+    Returns
+    -------
+    dict
+        File name -> :class:`matplotlib.figure.Figure` (the envelope, already a PNG, is
+        left to :func:`schedule_plots`). The maps' ``QuadMesh`` carry gids (``K_r_c``,
+        ``u_d_i_m``, ``phi_d_i``, ``spectral_radius``, ``midpoint_error``).
+
+    Example
+    -------
+    >>> from gainsched.schedule.tables import load_table         # doctest: +SKIP
+    >>> figs = schedule_figures(load_table("tables/paper.h5"))   # doctest: +SKIP
+    >>> sorted(figs)[:2]                                         # doctest: +SKIP
+    ['gains_tilt0.png', 'gains_tilt10.png']
+    """
+    plt = _pyplot()
+    figs = {gain_file_name(a): _gain_figure(plt, table, i) for i, a in enumerate(table.tilt)}
+    figs["nominal.png"] = _nominal_figure(plt, table)
+    rho = table.spectral_radius
+    fin = rho[np.isfinite(rho)]
+    worst = f"worst {fin.max():.5f}" if fin.size else "no feasible circle"
+    figs["spectral_radius.png"] = _speed_tilt_figure(
+        plt, table, rho, f"{table.name}: closed-loop monodromy spectral radius per circle "
+        f"({worst}; < 1 is stable; blank: infeasible)", "spectral radius per period",
+        "spectral_radius")
+    if midpoints is not None:
+        vs, ts, grid = _midpoint_grid(midpoints)
+        fin = grid[np.isfinite(grid)]
+        worst = f"max {100 * fin.max():.2f} %" if fin.size else "nothing checked"
+        figs["midpoint_error.png"] = _speed_tilt_figure(
+            plt, table, 100 * grid, f"{table.name}: interpolation error at cell midpoints, "
+            f"max over azimuth ({worst})", "|K_interp - K|_F / |K|_F (%)",
+            "midpoint_error", speeds=vs, tilts=ts)
+    return figs
+
+
+def _png(fig) -> bytes:
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _json_grid(a) -> list:
+    """A float array as nested lists, NaN as None (JSON has no NaN)."""
+    return np.where(np.isfinite(a), a, None).tolist()
+
+
+def table_summary(table, *, source: str = "") -> dict:
+    """The table at a glance as plain JSON data (``gainsched inspect --json``).
+
+    Keys: ``table``, ``config``, ``config_sha256``, ``schema``, ``tool_version``; the grid
+    (``speeds_mps``, ``tilts_deg``, ``azimuth_samples``); ``feasible_fraction`` (n_a, n_v)
+    of the azimuth samples with gains; ``reasons`` (count of samples per infeasibility
+    reason); ``state_names``; ``gains[tilt_deg][input][state] = [min, max]`` over the
+    feasible samples; ``nominal_thrust_N`` and ``nominal_roll_deg`` ranges;
+    ``spectral_radius`` (n_a, n_v) per circle (None: infeasible) and its ``worst``.
+    """
+    from .nominal import REASONS
+
+    names = table.attrs["state_names"].split(",")
+    K = table.K_full()
+    ok = _feasible(table)
+
+    def rng(x):
+        x = x[np.isfinite(x)]
+        return [float(x.min()), float(x.max())] if x.size else None
+
+    gains = {}
+    for i, a in enumerate(table.tilt):
+        gains[f"{np.rad2deg(a):g}"] = {
+            INPUT_NAMES[r]: {names[c]: rng(K[i, ..., r, c][ok[i]]) for c in range(len(names))}
+            for r in range(4)}
+    rho = table.spectral_radius
+    fin = rho[np.isfinite(rho)]
+    return {
+        "table": source or table.source,
+        "config": table.name,
+        "config_sha256": table.config_sha256,
+        "schema": str(table.attrs.get("schema", "")),
+        "tool_version": str(table.attrs.get("tool_version", "")),
+        "speeds_mps": table.speed.tolist(),
+        "tilts_deg": np.rad2deg(table.tilt).tolist(),
+        "azimuth_samples": int(table.xi.size),
+        "feasible_fraction": ok.mean(-1).tolist(),
+        "reasons": {text: int(np.count_nonzero(table.reasons & bit))
+                    for bit, text in REASONS.items() if np.any(table.reasons & bit)},
+        "state_names": names,
+        "gains": gains,
+        "nominal_thrust_N": rng(np.where(ok[..., None], table.u_d, np.nan)),
+        "nominal_roll_deg": rng(np.where(ok, np.rad2deg(table.phi_d), np.nan)),
+        "spectral_radius": _json_grid(rho),
+        "worst_spectral_radius": float(fin.max()) if fin.size else None,
+    }
+
+
+def schedule_plots(table, midpoints=None, *, source: str = "") -> dict[str, bytes]:
+    """PNG files and ``plots.json`` of a gain table, by file name, for
+    :func:`gainsched.publish.publish` (see :func:`schedule_figures`).
+
+    The JSON holds the grid (speeds m/s, tilts deg, azimuth count), per tilt the range of
+    every gain entry over the feasible points (``gains[tilt_deg][input][state] = [min,
+    max]``), the nominal thrust and roll ranges, the spectral radius per circle, the
+    midpoint errors when given, and the file names.
+    """
+    files = {name: _png(fig) for name, fig in schedule_figures(table, midpoints).items()}
+    files["envelope.png"] = envelope_png(envelope_from_table(table))
+    summary = table_summary(table, source=source)
+    summary["files"] = sorted([*files, "plots.json"])
+    if midpoints is not None:
+        vs, ts, grid = _midpoint_grid(midpoints)
+        summary["midpoint_error"] = {
+            "speeds_mps": vs.tolist(), "tilts_deg": np.rad2deg(ts).tolist(),
+            "max_relative_error": _json_grid(grid)}
+    files["plots.json"] = (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode()
+    return files
