@@ -735,49 +735,13 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
     )
 
 
-def plot_result(res: SimResult, out_dir) -> list[Path]:
-    """Speed tracking (Fig. 3 style), speed and roll (Fig. 4 style) and the 3-D path, as PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    out_dir = Path(out_dir)
-    paths = []
-    v, v_ref = res.z[:, 3] * res.r, res.z_d[:, 3] * res.r
-    fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-    ax[0].plot(res.t, v_ref, "r", label="desired")
-    ax[0].plot(res.t, v, "b", label="simulated")
-    ax[0].set_ylabel("speed (m/s)")
-    ax[0].legend()
-    ax[1].plot(res.t, np.rad2deg(res.z_d[:, 4]), "r", label="nominal")
-    ax[1].plot(res.t, np.rad2deg(res.z[:, 4]), "b", label="simulated")
-    ax[1].set_ylabel("roll phi (deg)")
-    ax[1].set_xlabel("time (s)")
-    ax[0].set_title(f"{res.scenario.name}: speed and roll")
-    fig.tight_layout()
-    paths.append(out_dir / "speed_roll.png")
-    fig.savefig(paths[-1], dpi=100)
-    plt.close(fig)
-    fig = plt.figure(figsize=(6, 6))
-    ax3 = fig.add_subplot(projection="3d")
-    ax3.plot(res.p_I[:, 0], res.p_I[:, 1], res.p_I[:, 2], lw=0.8)
-    ax3.set_xlabel("x (m)")
-    ax3.set_ylabel("y (m)")
-    ax3.set_zlabel("z (m)")
-    ax3.set_title(f"{res.scenario.name}: COG path (inertial frame)")
-    paths.append(out_dir / "path3d.png")
-    fig.savefig(paths[-1], dpi=100)
-    plt.close(fig)
-    return paths
-
-
 def write_run(res: SimResult, out_dir) -> dict:
     """Write log.csv, log.h5, metrics.json and the plots into ``out_dir``; returns the metrics."""
     import json
 
     from ..analysis.logs import write_log
     from ..publish import write_atomic
+    from .plots import plot_result
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

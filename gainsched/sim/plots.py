@@ -1,0 +1,109 @@
+"""Plots of one simulated flight (``gainsched simulate``, the paper report).
+
+:func:`tracking_errors` computes what the plots draw, from a
+:class:`~gainsched.sim.loop.SimResult`: the speed error, the along-track error (how far
+the vehicle runs ahead of the reference azimuth, in metres along the circle) and the
+out-of-plane error (the COG's distance from the circle plane). :func:`plot_result`
+writes ``speed_roll.png`` (speed with its error panel, the along-track error, roll) and
+``path3d.png`` (the path in 3-D at equal scale on every axis, beside the out-of-plane
+error over azimuth, where a flat circle shows as a flat line rather than a corkscrew).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..model.geometry import wrap_angle
+from ..model.rotations import R_IC_from_tilt
+
+__all__ = ["tracking_errors", "plot_result"]
+
+
+def tracking_errors(res) -> dict:
+    """The tracking errors of a flight, by name, each shape (N,).
+
+    Returns
+    -------
+    dict
+        ``speed_mps`` simulated minus desired tangential COG speed, m/s;
+        ``along_track_m`` ``r wrap(xi - xi_ref)``: positive ahead of the reference, m;
+        ``out_of_plane_m`` the COG's distance from the circle plane (along its normal
+        ``R_IC e_z``), m; ``azimuth_deg`` the azimuth xi in [0, 360), deg.
+    """
+    n_I = R_IC_from_tilt(res.scenario.tilt, res.scenario.gamma)[:, 2]
+    return {
+        "speed_mps": (res.z[:, 3] - res.z_d[:, 3]) * res.r,
+        "along_track_m": res.r * wrap_angle(res.z[:, 1] - res.z_d[:, 1]),
+        "out_of_plane_m": res.p_I @ n_I,
+        "azimuth_deg": np.rad2deg(res.z[:, 1]) % 360.0,
+    }
+
+
+def plot_result(res, out_dir) -> list[Path]:
+    """``speed_roll.png`` and ``path3d.png`` of a flight into ``out_dir`` (module
+    docstring); returns their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    err = tracking_errors(res)
+    name = res.scenario.name
+    v, v_ref = res.z[:, 3] * res.r, res.z_d[:, 3] * res.r
+    rms = lambda x: float(np.sqrt(np.mean(x * x)))  # noqa: E731
+    fig, ax = plt.subplots(4, 1, figsize=(8, 8.5), sharex=True,
+                           gridspec_kw={"height_ratios": [2, 1, 1, 2]})
+    ax[0].plot(res.t, v_ref, "r", label="desired")
+    ax[0].plot(res.t, v, "b", label="simulated")
+    ax[0].set_ylabel("speed (m/s)")
+    ax[0].legend()
+    ax[1].plot(res.t, err["speed_mps"], "k", lw=0.8)
+    ax[1].axhline(0.0, color="0.6", lw=0.5)
+    ax[1].set_ylabel(f"speed error (m/s)\nRMS {rms(err['speed_mps']):.3g}", fontsize=8)
+    ax[2].plot(res.t, 100 * err["along_track_m"], "k", lw=0.8)
+    ax[2].axhline(0.0, color="0.6", lw=0.5)
+    ax[2].set_ylabel(f"along-track error (cm)\nRMS {100 * rms(err['along_track_m']):.3g}",
+                     fontsize=8)
+    ax[3].plot(res.t, np.rad2deg(res.z_d[:, 4]), "r", label="nominal")
+    ax[3].plot(res.t, np.rad2deg(res.z[:, 4]), "b", label="simulated")
+    ax[3].set_ylabel("roll phi (deg)")
+    ax[3].set_xlabel("time (s)")
+    ax[3].legend()
+    ax[0].set_title(f"{name}: speed, along-track error (ahead of the reference: > 0) and roll")
+    fig.tight_layout()
+    paths = [out_dir / "speed_roll.png"]
+    fig.savefig(paths[-1], dpi=100)
+    plt.close(fig)
+
+    fig = plt.figure(figsize=(12, 5.5))
+    ax3 = fig.add_subplot(1, 2, 1, projection="3d")
+    p = res.p_I
+    ax3.plot(p[:, 0], p[:, 1], p[:, 2], lw=0.8)
+    # equal scale on every axis: a flat circle looks flat (matplotlib scales each to fit)
+    mid = 0.5 * (p.max(0) + p.min(0))
+    half = 0.5 * float(np.max(p.max(0) - p.min(0))) or 1.0
+    ax3.set_xlim(mid[0] - half, mid[0] + half)
+    ax3.set_ylim(mid[1] - half, mid[1] + half)
+    ax3.set_zlim(mid[2] - half, mid[2] + half)
+    ax3.set_box_aspect((1, 1, 1))
+    ax3.set_xlabel("x (m)")
+    ax3.set_ylabel("y (m)")
+    ax3.set_zlabel("z (m)")
+    ax3.set_title(f"{name}: COG path (inertial frame, equal scale)")
+    ax = fig.add_subplot(1, 2, 2)
+    ax.plot(err["azimuth_deg"], 1000 * err["out_of_plane_m"], ".", ms=1.5)
+    ax.axhline(0.0, color="0.6", lw=0.5)
+    ax.set_xlim(0, 360)
+    ax.set_xlabel("azimuth xi (deg)")
+    ax.set_ylabel("out-of-plane error (mm)")
+    ax.set_title(f"distance from the circle plane (max |.| "
+                 f"{1000 * float(np.max(np.abs(err['out_of_plane_m']))):.3g} mm)")
+    ax.grid(True, lw=0.3)
+    fig.tight_layout()
+    paths.append(out_dir / "path3d.png")
+    fig.savefig(paths[-1], dpi=100)
+    plt.close(fig)
+    return paths
