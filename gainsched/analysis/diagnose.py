@@ -593,9 +593,20 @@ class _Problem:
             else:
                 per_seg = {i: {**base[i], **residual_axes(model, meas[i], var.latency, var.axes)}
                            for i in g}
-            out.append({a: np.concatenate([per_seg[i][a] for i in g]) * self.weights[a]
-                        for a in self.axes})
+            out.append(self._weighted(per_seg, g))
         return out
+
+    def base_vectors(self) -> list[dict]:
+        """:meth:`vectors` of the base config, from :meth:`_base_residuals` (the base
+        model's prediction is computed once per diagnose, for both)."""
+        self.n_evals += 1
+        base = self._base_residuals()
+        return [self._weighted(base, g) for g in self.flights]
+
+    def _weighted(self, per_seg, g) -> dict:
+        """One flight's residual per axis: its segments ``g`` concatenated and weighted."""
+        return {a: np.concatenate([per_seg[i][a] for i in g]) * self.weights[a]
+                for a in self.axes}
 
 
 def _sq(vecs) -> np.ndarray:
@@ -1156,7 +1167,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     at_floor = all(s.rms_over_noise < AT_NOISE_FLOOR for s in base.stats.values())
     if at_floor:
         prob.track_structure(base)
-    base_vecs = prob.vectors(CandidateModel(config))
+    base_vecs = prob.base_vectors()
     base_sq = _sq(base_vecs)
 
     def fit(names_):
