@@ -378,7 +378,7 @@ def inspect(table, out_dir, as_json):
         if n:
             click.echo(f"  {n} points: {text}")
     K = t.K_full()
-    names = t.attrs["state_names"].split(",")
+    names = list(t.state_names)
     click.echo("  gain ranges over feasible points (min .. max per state column)")
     for j, nm in enumerate(names):
         col = K[..., j][np.isfinite(K[..., j])]
@@ -568,15 +568,6 @@ _RUNTIME = click.option(
     "runtime (c), its Python reference (python), or C when a C compiler is found (auto).")
 
 
-def _scenario_path(name: str) -> Path:
-    p = Path(name)
-    if p.suffix == ".toml" or p.exists():
-        return p
-    from .sim.paper import SCENARIO_DIR
-
-    return SCENARIO_DIR / f"{name}.toml"
-
-
 @cli.command()
 @CONFIG
 @click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
@@ -614,7 +605,7 @@ def simulate(config, table_path, scenario, plant_path, speed, runtime, controlle
     table = load_table(table_path)
     if table.config_sha256 != cfg.sha256:
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
-    scn = load_scenario(_scenario_path(scenario))
+    scn = load_scenario(scenario)
     if speed is not None:
         scn = dataclasses.replace(scn, speed=speed)
     n = int(round(scn.duration * cfg.control.rate_hz)) + 1

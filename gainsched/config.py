@@ -238,7 +238,86 @@ class Limits:
 
 @dataclass(frozen=True)
 class Config:
-    """The whole loaded configuration (one source of truth for every parameter)."""
+    """A validated config: every parameter of a build, in SI units, from one TOML file.
+
+    Made by :func:`load_config` or :func:`config_from_text`, never by hand: those check
+    every key. Frozen; :meth:`with_values` makes a validated variant. Each section of the
+    file is a frozen dataclass of its own (:class:`Vehicle`, :class:`Tether`, ...); keys
+    ending in ``_deg`` are held in rad under the name without the suffix.
+
+    Attributes
+    ----------
+    name : str
+        The ``name`` key (default: the config file's stem): the stem of the output files
+        (``NAME.h5``, ``NAME_gains.h``) and the prefix of the C symbols
+        (:func:`check_name`).
+    vehicle : Vehicle
+        ``[vehicle]``: mass (kg), inertia (3, 3) kg m^2, motor layout (``"x"``), arm
+        length (m), reaction torque per newton of thrust ``kappa`` (m, paper eq. 8), and
+        the thrust range of each motor ``thrust_min``, ``thrust_max`` (N).
+    tether : Tether
+        ``[tether]``: length ``rho`` (m), attachment offset ``L_e`` (m, behind the COG),
+        and the link model with its stiffness (N/m), damping (N s/m), mass (kg) and
+        segments; the schedule treats the tether as rigid, the elastic links are used by
+        the maximal-coordinate simulator only.
+    effects : tuple of EffectSpec
+        The ``[effects.NAME]`` tables, sorted by name: each model effect (e.g. ``drag``,
+        paper eq. 10) and its parameters in SI; empty when the file has none.
+    g : float
+        ``[environment] g``: gravitational acceleration, m/s^2.
+    control : Control
+        ``[control]``: control rate ``rate_hz`` (Hz; period ``dt``, s), the LQR weights
+        ``Q`` (n, n) over the LQR state (n = 10 + integral states, 11 for
+        configs/paper.toml; paper eq. 24) and ``R`` (4, 4) over the motor thrusts, the
+        integral states (``integrator``: delta, paper Sec. IV.B; ``azimuth_integral``:
+        xi) and the terminal cost (``"periodic"`` or ``"single-period"``).
+    grid : Grid
+        ``[grid]``: the schedule's axes: tangential COG speeds ``speeds`` (n_v,) m/s,
+        circle tilts ``tilts`` (n_a,) rad (``tilts_deg`` in the file, starting at 0), and
+        ``azimuth_samples`` (n_xi, even) per circle.
+    feasibility : Feasibility
+        ``[feasibility]`` (defaults when absent): the tension margin and thrust margin
+        (N) every nominal keeps, and whether it may use pitch and yaw offsets.
+    source : str
+        Where the config came from: the file path, or the ``source`` given to
+        :func:`config_from_text` (``"<string>"`` by default); errors about it name it.
+    text : str
+        The TOML text as read (newlines normalised to ``\\n``): :attr:`sha256` hashes it
+        and every table built from it embeds it (``config_text``).
+    analysis : Analysis
+        ``[analysis]`` (defaults when absent): how flight logs are differentiated and
+        aligned for model versus measurement (:func:`gainsched.compare`).
+    limits : Limits
+        ``[limits]`` (defaults when absent): the memory (GiB) and CPU time (s) a build
+        may need (:func:`gainsched.budget.check_budget`).
+    radius : float
+        Property: nominal COG circle radius ``r = rho + L_e``, m.
+    sha256 : str
+        Property: SHA-256 of :attr:`text` (hex), stored in the tables and C headers.
+
+    See Also
+    --------
+    load_config : Load and validate a config file.
+    config_from_text : Parse and validate config text.
+
+    Examples
+    --------
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> cfg.vehicle.mass, cfg.tether.length, cfg.radius            # kg, m, m
+    (0.5, 1.5, 1.6)
+    >>> cfg.control.Q.shape, cfg.control.integrators, cfg.control.dt  # dt in s
+    ((11, 11), ('int_delta',), 0.001)
+    >>> [e.name for e in cfg.effects]
+    ['drag']
+    >>> cfg.grid.speeds.size, np.rad2deg(cfg.grid.tilts).round(1).tolist()
+    (19, [0.0, 10.0, 20.0, 28.0, 34.0, 37.0, 40.0])
+
+    A heavier vehicle, validated again (the text and hash follow the change):
+
+    >>> heavy = cfg.with_values({"vehicle.mass": 0.55})
+    >>> heavy.vehicle.mass, heavy.sha256 == cfg.sha256
+    (0.55, False)
+    """
 
     name: str
     vehicle: Vehicle
@@ -678,12 +757,55 @@ SCHEMA = "gainsched-config/1"
 
 
 def config_from_text(text: str, source: str = "<string>") -> Config:
-    """Parse and validate config TOML text. Raises InputError naming ``source`` and the key.
+    """Parse and validate config TOML text held in a string, as load_config does a file.
 
-    Without a ``name`` key the name is the stem of ``source``; for a config file name
-    (``*.toml``) that default must pass :func:`check_name` too. Other sources
-    (``"<string>"``, a table's embedded text) keep their stem unchecked: nothing is
-    written under such a name unless the config comes through :func:`load_config`.
+    The same checks as :func:`load_config`, for text that is not (yet) a file: a
+    config generated in a script, a variant, or the ``config_text`` a table embeds.
+
+    Parameters
+    ----------
+    text : str
+        Config TOML text (schema ``gainsched-config/1``; configs/paper.toml shows every
+        section), at most 1 MiB.
+    source : str or path-like, optional
+        Where the text came from (default ``"<string>"``): every error names it, and
+        without a ``name`` key the config's name is its stem. For a config file name
+        (``*.toml``) that default must pass :func:`check_name` too; other sources
+        (``"<string>"``, a table's embedded text) keep their stem unchecked: nothing is
+        written under such a name unless the config comes through :func:`load_config`.
+
+    Returns
+    -------
+    Config
+        The validated config, in SI units; ``text`` is ``text`` and ``source`` is
+        ``str(source)``.
+
+    Raises
+    ------
+    InputError
+        The text is not TOML, a key is unknown or missing, a value has the wrong type
+        or an impossible value, or the build would exceed ``[limits]``; the message
+        names ``source`` and the dotted key (e.g. ``vehicle.mass``).
+
+    See Also
+    --------
+    load_config : The same for a file.
+    Config.with_values : A variant of a loaded config with some keys changed.
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> text = Path("configs/paper.toml").read_text()
+    >>> cfg = gs.config_from_text(text, "variant.toml")
+    >>> cfg.name, cfg.source, cfg.vehicle.thrust_max                # thrust in N
+    ('paper', 'variant.toml', 3.5)
+
+    A bad value is refused, naming the source and the key:
+
+    >>> gs.config_from_text(text.replace("mass = 0.5 ", "mass = -0.5 "), "variant.toml")
+    Traceback (most recent call last):
+        ...
+    gainsched.errors.InputError: variant.toml: vehicle.mass: must be > 0, got -0.5
     """
     return _config(text, str(source), Path(str(source)).suffix.lower() == ".toml")
 
@@ -794,11 +916,49 @@ def _decode(p: Path, data: bytes) -> str:
 
 
 def load_config(path) -> Config:
-    """Load and validate a config file (TOML, UTF-8). Raises InputError on any bad key.
+    """Load and validate a config file (TOML, UTF-8): every key checked, SI units out.
 
-    The file must be UTF-8 (a leading UTF-8 byte-order mark is accepted); UTF-16,
-    UTF-32 and other encodings are refused naming the file. Without a ``name`` key
-    the name is the file's stem, which must pass :func:`check_name`.
+    Every key is checked here (unknown, missing, wrong type, impossible value), and
+    whatever would only fail late in a build (a control rate that undersamples the
+    fastest circle, a grid that collapses in float32, a build above ``[limits]``); see
+    the module docstring. Degrees exist only in the file (keys ending in ``_deg``).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The config file, e.g. ``"configs/paper.toml"``. It must be UTF-8 (a leading
+        UTF-8 byte-order mark is accepted; UTF-16, UTF-32 and other encodings are
+        refused naming the file), at most 1 MiB. Without a ``name`` key the config's
+        name is the file's stem, which must pass :func:`check_name`.
+
+    Returns
+    -------
+    Config
+        The validated config, in SI units, with ``source`` the path and ``text`` the
+        file's text (newlines normalised).
+
+    Raises
+    ------
+    InputError
+        The file cannot be read or is not UTF-8 TOML, a key is unknown or missing, a
+        value has the wrong type or an impossible value, or the build would exceed
+        ``[limits]``; the message names the file and the dotted key.
+
+    See Also
+    --------
+    config_from_text : The same for text in memory.
+
+    Examples
+    --------
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> cfg.name, cfg.vehicle.mass, cfg.control.rate_hz              # kg, Hz
+    ('paper', 0.5, 1000.0)
+    >>> cfg.grid.speeds[[0, -1]].tolist(), round(float(cfg.grid.tilts[-1]), 3)  # m/s, rad
+    ([1.3, 15.0], 0.698)
+    >>> gs.load_config("configs/missing.toml")
+    Traceback (most recent call last):
+        ...
+    gainsched.errors.InputError: configs/missing.toml: cannot read (No such file or directory)
     """
     p = Path(path)
     try:

@@ -15,16 +15,49 @@ class GainschedError(Exception):
 
 
 class InputError(GainschedError):
-    """Bad user input.
+    """Bad user input (config, log, table, argument): one line naming the file, key and fault.
+
+    A bad config, flight log, scenario, table file or command-line argument raises this
+    (never a traceback from deep inside): ``str(err)`` is ``"SOURCE: WHERE: MESSAGE"``
+    (``"SOURCE: MESSAGE"`` without ``where``). The command line prints it as one line on
+    stderr and exits with :attr:`exit_code` 2; from Python, catch it to report or fix
+    the input.
 
     Parameters
     ----------
     source : str or path-like
         The file (or ``"command line"``) the bad value came from.
     where : str
-        The key, column, row or argument that is wrong (e.g. ``"vehicle.mass"``).
+        The key, column, row, dataset or argument that is wrong (e.g.
+        ``"vehicle.mass"``, ``"gains/K"``); ``""`` when the whole source is bad (not
+        readable, not TOML).
     message : str
         What is wrong, in a few words.
+
+    Attributes
+    ----------
+    source : str
+        ``str(source)``.
+    where : str
+        As given.
+    message : str
+        As given.
+    exit_code : int
+        2, the command line's exit code for it.
+
+    Examples
+    --------
+    >>> err = gs.InputError("configs/paper.toml", "vehicle.mass", "must be > 0, got -0.5")
+    >>> str(err)
+    'configs/paper.toml: vehicle.mass: must be > 0, got -0.5'
+
+    Catching it around a load, to report the key that is wrong:
+
+    >>> try:
+    ...     gs.config_from_text('name = "my config"', "mine.toml")
+    ... except gs.InputError as exc:
+    ...     print(exc.source, exc.where, exc.exit_code)
+    mine.toml name 2
     """
 
     exit_code = 2

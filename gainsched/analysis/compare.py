@@ -1073,8 +1073,71 @@ def where_it_fails(res: list[Residual], noise: dict, n_bins: int = 8, min_count:
 
 @dataclass(frozen=True, eq=False)
 class Comparison:
-    """Everything ``compare`` computes: residuals per segment, statistics per axis, the
-    noise floors, where it fails, and the reading notes (gaps)."""
+    """The model against flight logs: residuals, statistics per axis, noise floors, where it fails.
+
+    Everything :func:`compare` computes (``gainsched compare``; docs/model-vs-measurement.md).
+    The residual axes, in the order of :data:`AXES` and with the units of :data:`UNITS`:
+    tangential, normal, radial (m/s^2; radial only when every segment has a load cell),
+    roll, pitch, yaw (rad/s^2) and stretch (m). ``cmp.axes`` lists those present,
+    ``cmp.normalized_rms()`` is ``sqrt(mean over axes of (RMS / noise floor)^2)`` (1:
+    the residual is measurement noise), ``cmp.to_json()`` is the report's JSON and
+    ``cmp.sensor_lines()`` says what the on-board sensors saved.
+
+    Attributes
+    ----------
+    config : Config
+        The model that was compared.
+    measured : list of Measured
+        Every log segment in reduced coordinates, differentiated
+        (:class:`~gainsched.analysis.compare.Measured`), in the order of ``segs``.
+    residuals : list of Residual
+        Per segment, the measured, predicted and residual time series of each axis on
+        the core samples (half a differentiation window dropped at each end)
+        (:class:`~gainsched.analysis.compare.Residual`).
+    stats : dict of str to AxisStats
+        By axis: RMS, bias, fit %, noise floor, whiteness and input cross-correlation of
+        the residual pooled over the segments, in the axis unit
+        (:class:`~gainsched.analysis.compare.AxisStats`; ``rms_over_noise`` is RMS over
+        the noise floor).
+    noise : dict of str to float
+        By axis: the noise floor, the RMS residual the measurement noise alone produces,
+        in the axis unit.
+    where : dict
+        Where the model fails (:func:`where_it_fails`): ``"sentence"`` (str, the worst
+        regime in words), ``"worst"`` (dict: the axis and, when binned structure names
+        it, the variable and its bin), ``"rms_over_noise"`` (axis to float) and
+        ``"tables"`` (the residual binned against airspeed, tilt, azimuth, tension,
+        thrust and time).
+    notes : list of str
+        What reading the logs reported: gaps and dropped short segments.
+    segs : list of FlightLog
+        The log segments compared.
+    tracking : list of dict
+        Along-track tracking of each segment with a reference azimuth
+        (:func:`tracking_summary`): ``segment``, ``rms_along_track_m``,
+        ``max_along_track_m`` (m), ``final_azimuth_error_rad`` (rad), ``lap_slips``.
+    structure : list of Finding
+        Significant binned structure of the residual (averaged over revolutions, in
+        azimuth, airspeed or thrust bins), strongest first
+        (:func:`gainsched.analysis.structure.findings`; ``f.sentence()`` says it).
+    structure_tables : dict of str to dict
+        Its tables, ``{variable: {axis: BinnedMean}}``.
+    pose_noise : dict of str to float
+        For the axes an on-board sensor measured (rotational: the gyro; translational:
+        the accelerometer), the noise floor from the pose alone (:func:`noise_floor`), in
+        the axis unit: what the sensor saved against ``noise``.
+
+    Examples
+    --------
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> cmp = gs.compare(cfg, ["examples/flights/v9.csv", "examples/flights/v15.csv"])
+    >>> cmp.axes
+    ('tangential', 'normal', 'radial', 'roll', 'pitch', 'yaw', 'stretch')
+    >>> [s.white for s in cmp.stats.values()]  # whiteness of the residual, per axis
+    [False, False, True, False, True, True, True]
+    >>> [t["segment"] for t in cmp.tracking], len(cmp.residuals), cmp.notes
+    (['sim-v9', 'sim-v15'], 2, [])
+    """
 
     config: Config
     measured: list
@@ -1145,11 +1208,71 @@ class Comparison:
 
 def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
             notes=None) -> Comparison:
-    """Load, differentiate, predict and summarise: the whole of ``gainsched compare``.
+    """Compare the model with flight logs: the residual per axis against its noise floor.
 
-    ``logs``: paths or :class:`FlightLog` segments. ``measured``/``segs``/``notes`` may be
-    passed from a previous :func:`load_segments` call with the same attachment offset
-    and analysis settings.
+    The whole of ``gainsched compare`` (docs/model-vs-measurement.md): per gap-free log
+    segment, the pose in reduced coordinates, differentiated by Savitzky-Golay; the
+    model's accelerations for the measured state and the logged commands; the residual
+    ``measured - predicted`` on the axes tangential, normal, radial (m/s^2; radial only
+    with a load cell), roll, pitch, yaw (rad/s^2) and tether stretch (m); then per axis
+    the statistics pooled over the segments, the noise floor (the measurement noise
+    pushed through the same pipeline), where the residual concentrates, and the binned
+    structure averaged over revolutions.
+
+    Parameters
+    ----------
+    config : Config
+        The model under test: its vehicle, tether, effects and ``[analysis]`` settings
+        (Savitzky-Golay window, s, and order; the pose's latency, s; whether to use the
+        gyro and the accelerometer columns).
+    logs : iterable of str, path-like or FlightLog
+        Flight log files (:func:`~gainsched.analysis.logs.read_log`: each split at its
+        gaps) or segments already read. Not read when ``measured`` is given.
+    effects : tuple of Effect, optional
+        Model effects (:mod:`gainsched.model.effects` objects) to predict with instead of
+        the config's: a model variant. Default: the config's.
+    measured : list of Measured, optional
+        The differentiated segments of a previous :func:`load_segments` call with the
+        same attachment offset and analysis settings, to skip reading and
+        differentiating; give its ``segs`` and ``notes`` too.
+    segs : list of FlightLog, optional
+        The log segments of ``measured``, in the same order.
+    notes : list of str, optional
+        The reading notes of ``measured`` (gaps, dropped segments).
+
+    Returns
+    -------
+    Comparison
+        Residuals per segment, statistics and noise floor per axis, where it fails, the
+        binned structure, tracking, notes.
+
+    Raises
+    ------
+    InputError
+        No log given, a log breaks the format's rules (:func:`read_log`; the file,
+        column and row named), a segment is shorter than twice the differentiation
+        window, or its commanded thrust is zero on every sample.
+
+    Examples
+    --------
+    The paper model on the seven example flights (a plant with effects it lacks):
+
+    >>> import glob
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> cmp = gs.compare(cfg, sorted(glob.glob("examples/flights/*.csv")))
+    >>> for axis, s in cmp.stats.items():
+    ...     print(f"{axis:10s} RMS {s.rms:8.3g} {s.unit:7s} {s.rms_over_noise:5.1f}x noise")
+    tangential RMS     1.27 m/s^2     4.8x noise
+    normal     RMS     1.73 m/s^2     7.1x noise
+    radial     RMS    0.302 m/s^2     1.1x noise
+    roll       RMS     3.16 rad/s^2  16.3x noise
+    pitch      RMS     2.98 rad/s^2   2.2x noise
+    yaw        RMS     1.09 rad/s^2   1.2x noise
+    stretch    RMS 0.000161 m         1.0x noise
+    >>> round(cmp.normalized_rms(), 1)  # 1: nothing but measurement noise
+    7.0
+    >>> cmp.where["sentence"]
+    'roll residual concentrates at tension 26-34.1 N (RMS 5.74 rad/s^2, ...)'
     """
     if measured is None:
         measured, segs, notes = load_segments(config, logs)

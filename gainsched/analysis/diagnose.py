@@ -769,7 +769,45 @@ def _num(x):
 
 @dataclass(frozen=True, eq=False)
 class Diagnosis:
-    """Ranking, verdict, twins and the base comparison."""
+    """Which effect is missing: the ranked candidates, the verdict and the twins.
+
+    What :func:`diagnose` returns; ``d.to_json()`` is the report's JSON.
+
+    Attributes
+    ----------
+    config : Config
+        The model that was diagnosed.
+    base : Comparison
+        Its comparison with the logs: the residual the candidates were fitted to.
+    results : list of CandidateResult
+        Every fitted candidate (joint fits ``"a + b"`` included when they ran), ranked by
+        held-out RMS reduction, then delta-BIC: the parameters with their 95 % CIs
+        (``theta``, ``ci``; ``values`` as written to the config), the held-out scores
+        (``rms_reduction``, ``excess_explained``), ``delta_bic``, ``passes`` and
+        ``failed()`` (the thresholds missed, in words)
+        (:class:`~gainsched.analysis.diagnose.CandidateResult`).
+    accepted : CandidateResult or None
+        The verdict's candidate: the best-ranked one clearing every threshold of
+        :data:`THRESHOLDS` (a nested fit of the same effect preferred unless the larger
+        lowers delta-BIC clearly); None when none does. :func:`apply_candidate` writes
+        it into the config.
+    twins : list of (str, float, str)
+        Candidates that cannot be told apart from the accepted one on these flights:
+        ``(name, |cos| of their fitted contributions to the residual, the flight that
+        would separate them)``.
+    verdict : str
+        The conclusion in one paragraph (what ``gainsched diagnose`` prints).
+    at_noise_floor : bool
+        Every residual axis of ``base`` was within ``AT_NOISE_FLOOR`` (1.25) times its
+        noise floor: candidates were then judged on the binned structure they remove.
+    flights : list of str
+        The flights (one per log file), the folds of the leave-one-flight-out scores.
+    evaluations : int
+        How many times the model was evaluated on all flights (the cost of the fits).
+    similarity : dict of str to float
+        ``|cos|`` of each other candidate's fitted contribution to the accepted one's
+        (empty without an accepted candidate).
+    """
 
     config: Config
     base: Comparison
@@ -1139,14 +1177,69 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
 
 def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | None = None,
              progress=None, joint: bool = False) -> Diagnosis:
-    """Fit every candidate on the logs, score on held-out flights, rank, gate, decide.
+    """Find which physical effect the model misses: fit candidates, score them held out.
 
-    ``logs``: paths or :class:`~gainsched.analysis.logs.FlightLog` segments (at least two flights
-    for held-out scores). ``candidates``: names from :data:`CANDIDATES` (default: all).
-    ``progress``: callable(name) before each candidate. Joint fits of the best singles
-    (:func:`_fit_joint`) run when no single candidate passes, or always with ``joint``:
-    then a passing joint fit replaces the accepted single when its delta-BIC is lower by
-    ``THRESHOLDS["nested_bic_gain"]``.
+    The whole of ``gainsched diagnose`` (docs/model-vs-measurement.md, the module
+    docstring): each candidate (a missing effect, a config parameter, the measurement
+    latency) is refitted to the residual of :func:`~gainsched.analysis.compare.compare`,
+    every axis weighted by its noise floor; it is scored on held-out flights
+    (leave-one-flight-out: the RMS reduction and the share of the residual above the
+    noise floor it explains), by delta-BIC, plausibility and fold stability; the
+    candidates are ranked, near-collinear twins are named with the flight that would
+    separate them, and the first candidate clearing every threshold of
+    :data:`THRESHOLDS` is the verdict.
+
+    Parameters
+    ----------
+    config : Config
+        The model to improve.
+    logs : iterable of str, path-like or FlightLog
+        Flight log files or segments, from at least two flights (log files) for held-out
+        scores. Not read when ``comparison`` is given.
+    candidates : list of str, optional
+        Names of the candidates to fit
+        (:func:`~gainsched.analysis.diagnose.candidate_library`: ``"drag_quadratic"``,
+        ``"thrust_momentum"``, ``"motor_lag"``, ``"latency"``, ``"mass"``, ...). Default:
+        all of them. Empirical candidates (a law with no physics behind it, such as
+        ``"thrust_azimuth"``) are fitted only when no physical one is accepted.
+    comparison : Comparison, optional
+        ``compare(config, logs)`` if already computed: it is reused, not recomputed.
+    progress : callable, optional
+        ``progress(name)`` before each candidate is fitted.
+    joint : bool, default False
+        Fit pairs of the best single candidates even when one passes (without
+        ``joint`` they run only when none passes and the residual is above the noise
+        floor): a passing joint fit then replaces the accepted single when its delta-BIC
+        is lower by ``THRESHOLDS["nested_bic_gain"]``.
+
+    Returns
+    -------
+    Diagnosis
+        The ranked candidates, the accepted one (or None), the twins, the verdict.
+
+    Raises
+    ------
+    InputError
+        Fewer than two flights, an unknown candidate name, or a log :func:`compare`
+        refuses.
+
+    Examples
+    --------
+    Two candidates on the seven example flights (held out: each flight predicted by the
+    fit to the six others):
+
+    >>> import glob
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> logs = sorted(glob.glob("examples/flights/*.csv"))
+    >>> d = gs.diagnose(cfg, logs, candidates=["drag_quadratic", "thrust_momentum"])
+    >>> for r in d.results:
+    ...     print(f"{r.name:16s} held-out RMS -{r.rms_reduction:.0%}, passes: {r.passes}")
+    thrust_momentum  held-out RMS -31%, passes: True
+    drag_quadratic   held-out RMS -2%, passes: False
+    >>> d.accepted.name, f"{d.accepted.values['disk_area']:.4f} m^2"
+    ('thrust_momentum', '0.0061 m^2')
+    >>> d.verdict
+    'missing effect: thrust_momentum (thrust change with airspeed by momentum theory ...'
     """
     from ..errors import InputError
 
@@ -1387,9 +1480,58 @@ def unidentified(result: CandidateResult) -> dict[str, str]:
 
 
 def apply_candidate(config: Config, result: CandidateResult, *, name: str | None = None) -> str:
-    """New config text: ``config``'s text with the fitted candidate, CIs as comments.
+    """Write a fitted candidate into the config: the new config text, CIs as comments.
 
-    The result is validated with :func:`~gainsched.config.config_from_text`.
+    ``config``'s own text (its comments and layout kept) with the candidate's fitted
+    values: an effect section added or updated, or a config key changed. Each value
+    carries its unit, 95 % CI and leave-one-flight-out range as a comment, and the
+    section a comment with the held-out scores. A parameter the flights did not identify (a CI wider
+    than the estimate or than its range, or an estimate on a bound) keeps its value
+    before the fit, with the reason as a comment. The text is validated with
+    :func:`~gainsched.config.config_from_text` before it is returned.
+
+    Parameters
+    ----------
+    config : Config
+        The config the candidate was fitted to (``Diagnosis.config``).
+    result : CandidateResult
+        A fitted candidate: ``Diagnosis.accepted`` or any of ``Diagnosis.results``.
+    name : str, optional
+        The new config's ``name``; default ``"<config name>_<candidate>"`` (replaced
+        only when the text has a ``name`` key).
+
+    Returns
+    -------
+    str
+        The new config text (TOML), ready to write to a file or to load with
+        :func:`~gainsched.config.config_from_text`.
+
+    Raises
+    ------
+    InputError
+        The edited text is not a valid config.
+
+    Examples
+    --------
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> logs = ["examples/flights/v3.csv", "examples/flights/v9.csv",
+    ...         "examples/flights/v15.csv"]
+    >>> d = gs.diagnose(cfg, logs, candidates=["thrust_momentum"])
+    >>> text = gs.apply_candidate(cfg, d.accepted, name="paper_momentum")
+    >>> print(text[text.index("[effects.thrust_momentum]"):])
+    [effects.thrust_momentum]              # gainsched diagnose: thrust_momentum, held-out RMS ...
+    disk_area = 0.0060...       # m^2, 95% CI [...], folds ...
+    rho_air = 1.225                        # kept
+    ...
+    >>> improved = gs.config_from_text(text, "paper_momentum.toml")
+    >>> improved.name, [e.name for e in improved.effects]
+    ('paper_momentum', ['drag', 'thrust_momentum'])
+
+    The residual falls on the same flights (normalised RMS, 1 = measurement noise):
+
+    >>> before, after = d.base.normalized_rms(), gs.compare(improved, logs).normalized_rms()
+    >>> f"{before:.1f} -> {after:.1f}"
+    '5.3 -> 2.0'
     """
     from ..configedit import get_value
 

@@ -140,27 +140,67 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class FlightLog:
-    """One contiguous segment of a flight log (no gap inside).
+    """One gap-free segment of a flight log: pose, commanded thrusts, on-board sensors.
+
+    What :func:`read_log` returns per segment (and :func:`log_from_arrays` builds, e.g.
+    :func:`~gainsched.sim.loop.log_from_result` from a simulation). Frames and units of
+    docs/conventions.md: inertial frame at the tether anchor, z up, SI units. The arrays
+    are read-only; N is the number of samples (``len(log)``).
 
     Attributes
     ----------
-    t : (N,) s, strictly increasing
-    p_I : (N, 3) m, COG position in the inertial frame (x, y, z)
-    q : (N, 4) attitude quaternion (w, x, y, z), body -> inertial, unit norm,
-        sign-continuous
-    T_cmd : (N, 4) N, commanded motor thrusts T1..T4
-    optional : known optional columns present, by name: ``omega_B`` (N, 3)
-        rad/s from p, q, r; ``f_B`` (N, 3) m/s^2 from ax, ay, az; ``tension``,
-        ``vbat``, ``xi_ref``, ``xi_dot_ref`` (N,)
-    extra : unknown columns, kept as (N,) float arrays by their column name
-    meta : metadata as strings (schema, alpha_c_deg, gamma_c_deg, and any other key)
-    source : the file the log came from
-    segment : index of this segment among the pieces the file was split into
-        at gaps (0-based; dropped short pieces keep their index)
-    n_segments : how many pieces the file was split into (dropped ones included)
-    gaps : every gap of the source file, as (t_before, t_after) pairs
-    rows : (N,) int, where each sample is in the file (1-based; see ``row_label``)
-    row_label : ``"line"`` (CSV line number) or ``"sample"`` (HDF5 / arrays index)
+    t : ndarray, shape (N,)
+        Sample times, s, strictly increasing.
+    p_I : ndarray, shape (N, 3)
+        COG position (x, y, z) in the inertial frame, m.
+    q : ndarray, shape (N, 4)
+        Attitude quaternion (w, x, y, z), Hamilton, body -> inertial; unit norm and
+        sign-continuous (consecutive samples have a non-negative dot product).
+    T_cmd : ndarray, shape (N, 4)
+        Commanded motor thrusts T1..T4, N, each held over the interval before its sample.
+    optional : dict of str to ndarray
+        The known optional columns present, by name: ``omega_B`` shape (N, 3), the gyro
+        (p, q, r) in the body frame, rad/s; ``f_B`` shape (N, 3), the accelerometer's
+        specific force (ax, ay, az) at the COG in the body frame, m/s^2; ``tension``
+        shape (N,), the tether load cell, N; ``vbat`` shape (N,), the battery voltage, V;
+        ``xi_ref`` shape (N,), the reference azimuth in the circle frame, rad;
+        ``xi_dot_ref`` shape (N,), its rate, rad/s. May hold NaN (a missing sample).
+    extra : dict of str to ndarray
+        Unknown columns by their name, each shape (N,) float (kept; the analysis ignores
+        them).
+    meta : dict of str to str
+        The metadata as strings: ``schema``, ``alpha_c_deg`` and ``gamma_c_deg`` (the
+        commanded circle plane, deg) and any other key (``flight_id``, ``vehicle``,
+        ``notes``, ...).
+    source : str
+        The file the log came from (or the ``source`` of :func:`log_from_arrays`).
+    segment : int
+        Index of this segment among the pieces the file was split into at gaps (0-based;
+        dropped short pieces keep their index).
+    n_segments : int
+        How many pieces the file was split into (dropped ones included).
+    gaps : tuple of (float, float)
+        Every gap of the source file as ``(t_before, t_after)``, s.
+    rows : ndarray of int64, shape (N,), or None
+        Where each sample is in the file, 1-based (see ``row_label``).
+    row_label : str
+        ``"line"`` (``rows`` are CSV line numbers) or ``"sample"`` (HDF5 or arrays:
+        sample indices).
+    alpha_c, gamma_c : float
+        Properties: the commanded circle tilt alpha_C and heading gamma_C of the metadata,
+        rad.
+    duration : float
+        Property: time from the first to the last sample, s.
+    dt_median : float
+        Property: the median sample interval, s (nan with fewer than two samples).
+
+    Examples
+    --------
+    >>> log = gs.read_log("examples/flights/tilt20-v8.csv")[0]
+    >>> round(float(np.rad2deg(log.alpha_c)), 6), log.p_I.shape, log.T_cmd.shape
+    (20.0, (551, 3), (551, 4))
+    >>> log.where(0), log.columns()["T1"].shape  # where sample 0 is in the file
+    ('line 7', (551,))
     """
 
     t: np.ndarray
@@ -528,11 +568,59 @@ def _make(arrays, optional, extra, meta, source, sl, **kw) -> FlightLog:
 def read_log(
     path, *, min_samples: int = DEFAULT_MIN_SAMPLES, gap_factor: float = GAP_FACTOR
 ) -> list[FlightLog]:
-    """Read a flight log (CSV or HDF5 by extension) -> its gap-free segments, in time order.
+    """Read a flight log file (CSV or HDF5) into its gap-free segments, checked against the spec.
 
-    Raises :class:`InputError` (file, column, row) for any bad-data rule of the
-    spec; warns with :class:`LogWarning` for gaps and dropped short segments.
-    See the module docstring for what is normalised.
+    The format is docs/flight-log.md (``gainsched-flightlog/1``), chosen by the file
+    extension. Every bad-data rule of the spec is enforced; the reader normalises only
+    the quaternions (rows off unit norm by more than 1e-12 divided by their norm, signs
+    made continuous) and splits the log at gaps, never interpolating across them (the
+    module docstring has the details).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The log file: ``.csv``, ``.h5`` or ``.hdf5``.
+    min_samples : int, default 31
+        Fewest samples of a segment (the differentiation window): shorter segments are
+        dropped with a warning (:data:`DEFAULT_MIN_SAMPLES`).
+    gap_factor : float, default 1.5
+        A sample interval more than ``gap_factor`` times the file's median interval is a
+        gap: the log is split there.
+
+    Returns
+    -------
+    list of FlightLog
+        The segments kept, in time order: one for a log without gaps.
+
+    Raises
+    ------
+    InputError
+        Naming the file, the column or key and the row (``line 17`` in CSV, ``sample 17``
+        in HDF5): an unknown extension, an unreadable file, a missing required column or
+        metadata key, an unknown schema, an incomplete group of optional columns (``p``,
+        ``q`` without ``r``), a cell that is not a number, NaN or inf in a required
+        column, a value outside the plausible range (:data:`PLAUSIBLE`), time that does not
+        strictly increase, a quaternion norm off unit by more than 0.01, a declared
+        circle plane the positions do not lie in, fewer than ``min_samples`` samples, or
+        no segment left after splitting.
+
+    Warns
+    -----
+    LogWarning
+        For each gap (the log is split there) and each dropped short segment.
+
+    Examples
+    --------
+    >>> segs = gs.read_log("examples/flights/v9.csv")
+    >>> log = segs[0]
+    >>> len(segs), len(log), log.duration, round(1 / log.dt_median)
+    (1, 551, 2.75, 200)
+    >>> sorted(log.optional)  # gyro, load cell, reference azimuth
+    ['omega_B', 'tension', 'xi_dot_ref', 'xi_ref']
+    >>> speed = np.linalg.norm(np.diff(log.p_I, axis=0), axis=1) / np.diff(log.t)
+    >>> print(f"mean COG speed {speed.mean():.1f} m/s, "
+    ...       f"tension {np.mean(log.optional['tension']):.0f} N")
+    mean COG speed 8.9 m/s, tension 25 N
     """
     path = Path(path)
     fmt = _format(path)

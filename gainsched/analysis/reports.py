@@ -302,7 +302,50 @@ def compare_json(cmp: Comparison, paper: PaperFits | None = None) -> dict:
 
 def write_compare(cmp: Comparison, out_dir, paper: PaperFits | None = None,
                   prefix: str = "compare") -> list[Path]:
-    """Write PREFIX.json, PREFIX.md and the PNG plots into ``out_dir``; returns the paths."""
+    """Write the report of a comparison: Markdown with PNG plots, and every number in JSON.
+
+    The files of ``gainsched compare -o OUT_DIR``: ``PREFIX.md`` (the per-axis table,
+    where the model fails, the structure averaged over revolutions, the residual by
+    regime as RMS over the noise floor per bin, the reading notes), ``PREFIX.json``
+    (every number, :func:`compare_json`) and the plots ``PREFIX_residuals.png``
+    (residual time series with the noise band), ``PREFIX_acf_ccf.png``
+    (autocorrelation and input cross-correlation), ``PREFIX_where.png`` (residual by
+    regime) and ``PREFIX_structure.png`` (binned structure); with ``paper``, also the
+    paper's Figs. 5 and 6 (thrust efficiency, drag fit).
+
+    Parameters
+    ----------
+    cmp : Comparison
+        The comparison to report (:func:`~gainsched.analysis.compare.compare`).
+    out_dir : str or path-like
+        Directory to write into, made if missing; files of the same names are replaced.
+    paper : PaperFits, optional
+        The paper's analyses of Sec. V.C on the same logs
+        (:func:`gainsched.analysis.paperfits.paper_fits`): adds their section and plots.
+    prefix : str, default "compare"
+        The files' common name.
+
+    Returns
+    -------
+    list of Path
+        The files written: the JSON, the Markdown, then the plots.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> cmp = gs.compare(cfg, ["examples/flights/v9.csv", "examples/flights/v15.csv"])
+    >>> out = tempfile.mkdtemp()
+    >>> paths = gs.write_compare(cmp, out)
+    >>> [p.name for p in paths]
+    ['compare.json', 'compare.md', 'compare_residuals.png', 'compare_acf_ccf.png',
+     'compare_where.png', 'compare_structure.png']
+    >>> import json
+    >>> report = json.loads(paths[0].read_text())  # RMS over the noise floor, per axis
+    >>> {axis: round(report["axes"][axis]["rms_over_noise"], 1) for axis in cmp.axes}
+    {'tangential': 4.5, 'normal': 7.8, 'radial': 1.1, 'roll': 12.6, 'pitch': 1.4,
+     'yaw': 1.0, 'stretch': 1.0}
+    """
     from ..publish import write_atomic
 
     out = Path(out_dir)
@@ -479,7 +522,43 @@ def diagnose_lines(d: Diagnosis) -> list[str]:
 
 
 def write_diagnose(d: Diagnosis, out_dir) -> list[Path]:
-    """diagnose.{json,md} and ranking.png."""
+    """Write the report of a diagnosis: Markdown with the ranking plot, and every number in JSON.
+
+    The files of ``gainsched diagnose -o OUT_DIR``: ``diagnose.md`` (the flights, the
+    verdict, the ranking table with each candidate's fitted values and held-out scores,
+    the thresholds, the candidates' notes), ``diagnose.json`` (every number,
+    ``Diagnosis.to_json()``) and ``ranking.png`` (held-out RMS reduction and residual
+    above noise explained, %, per candidate).
+
+    Parameters
+    ----------
+    d : Diagnosis
+        The diagnosis to report (:func:`~gainsched.analysis.diagnose.diagnose`).
+    out_dir : str or path-like
+        Directory to write into, made if missing; files of the same names are replaced.
+
+    Returns
+    -------
+    list of Path
+        ``[out_dir / "diagnose.json", out_dir / "diagnose.md", out_dir / "ranking.png"]``.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> logs = ["examples/flights/v9.csv", "examples/flights/v15.csv"]
+    >>> d = gs.diagnose(cfg, logs, candidates=["drag_quadratic", "thrust_momentum"])
+    >>> out = tempfile.mkdtemp()
+    >>> paths = gs.write_diagnose(d, out)
+    >>> [p.name for p in paths]
+    ['diagnose.json', 'diagnose.md', 'ranking.png']
+    >>> print(paths[1].read_text()[:200])
+    # Which effect is missing: paper
+    <BLANKLINE>
+    Flights: sim-v9, sim-v15.
+    <BLANKLINE>
+    **Verdict:** missing effect: thrust_momentum ...
+    """
     from ..publish import write_atomic
 
     plt = _plt()

@@ -37,6 +37,56 @@ def output_files(config, grid, out_dir=".") -> dict[str, bytes]:
 
 
 def write_outputs(out_dir, config, grid) -> list[Path]:
-    """Check and publish the output set of a build in ``out_dir``; returns the paths
-    (table first)."""
+    """Write a built grid as its output set: the HDF5 table, its C header and the runtime.
+
+    Every check runs on the bytes in memory first (the table is read back through the
+    checks of :func:`gainsched.load_table` and the C header rendered from it); the set
+    is then published together (:func:`gainsched.publish.publish`): a failed or
+    interrupted write leaves the old set or the new one in ``out_dir``, never a mix.
+    This is what ``gainsched build CONFIG -o OUT_DIR`` writes.
+
+    Parameters
+    ----------
+    out_dir : str or path-like
+        Output folder, created if needed. Files of the same names there are replaced.
+    config : Config
+        The config the grid was built from (:func:`gainsched.load_config`); its ``name``
+        names the files, its text and SHA-256 are embedded in them.
+    grid : GridResult
+        The built grid (:func:`gainsched.build_grid` of ``config``).
+
+    Returns
+    -------
+    list of Path
+        The written files, ``out_dir / name``: ``NAME.h5`` (the table,
+        docs/table-format.md), ``NAME_gains.h`` (the float32 tables for the firmware),
+        ``gainsched_runtime.h`` and ``gainsched_runtime.c`` (the C lookup,
+        docs/runtime.md).
+
+    Raises
+    ------
+    InputError
+        ``out_dir`` cannot be written (read-only, disk full, under a regular file, no
+        permission), or the table cannot be held by the C runtime (e.g. a value that
+        overflows float32 at a feasible point); nothing is written then.
+
+    See Also
+    --------
+    gainsched.build_grid : The grid to write.
+    gainsched.load_table : Read the table back.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> small = cfg.with_values({"grid.speeds": [6, 9], "grid.tilts_deg": [0, 20],
+    ...                          "grid.azimuth_samples": 8, "name": "small"})
+    >>> out = tempfile.mkdtemp()
+    >>> paths = gs.write_outputs(out, small, gs.build_grid(small))
+    >>> [p.name for p in paths]
+    ['small.h5', 'small_gains.h', 'gainsched_runtime.h', 'gainsched_runtime.c']
+    >>> table = gs.load_table(paths[0])
+    >>> table.name, table.K.shape, table.config_sha256 == small.sha256
+    ('small', (1, 2, 8, 4, 11), True)
+    """
     return publish(out_dir, output_files(config, grid, out_dir))

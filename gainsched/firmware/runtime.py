@@ -426,9 +426,36 @@ def runtime_data(table) -> RuntimeData:
 
 @dataclass(frozen=True)
 class Lookup:
-    """Lookup results for queries of shape ``S``.
+    """The gains, nominal and status an Interpolator returns for an array of queries.
 
-    K : (*S, 4, n); u_d : (*S, 4) N; phi_d : (*S,) rad; status : (*S,) uint8 (GS_* bits)
+    ``S`` is the broadcast shape of the queries ``(xi, xi_dot, alpha)`` (``()`` for
+    scalars); ``n`` the LQR state dimension (11 for configs/paper.toml). Where a query
+    is unusable (``status`` has ``NO_GAINS`` or ``BAD_INPUT``) every output is zero,
+    as in the C runtime.
+
+    Attributes
+    ----------
+    K : ndarray, shape (*S, 4, n)
+        Interpolated gains for ``u = u_d - K (x - x_d)``, N per state unit; rows T1..T4,
+        columns in the table's ``state_names`` order.
+    u_d : ndarray, shape (*S, 4)
+        Nominal motor thrusts T1..T4, N.
+    phi_d : ndarray, shape S
+        Nominal roll, rad.
+    status : ndarray of uint8, shape S
+        The C runtime's status bits (``GS_*``): 0 = ``OK``; ``CLAMPED_SPEED`` (0x01) and
+        ``CLAMPED_TILT`` (0x02): the query was outside the table and clamped onto it;
+        ``INFEASIBLE`` (0x04): a cell corner is infeasible; ``NO_GAINS`` (0x08): such a
+        corner has no gains; ``BAD_INPUT`` (0x10): a non-finite or out-of-limit query.
+        :func:`status_text` names them.
+
+    Examples
+    --------
+    >>> table = gs.load_table("tables/paper.h5")
+    >>> xi = np.linspace(0, 2 * np.pi, 8, endpoint=False)       # rad
+    >>> look = gs.Interpolator(table)(xi, 9.0 / 1.6, np.deg2rad(20))
+    >>> look.K.shape, look.u_d.shape, look.phi_d.shape, look.status.shape
+    ((8, 4, 11), (8, 4), (8,), (8,))
     """
 
     K: np.ndarray
@@ -438,11 +465,95 @@ class Lookup:
 
 
 class Interpolator:
-    """Vectorised reference lookup; ``Interpolator(table)(xi, xi_dot, alpha)`` -> :class:`Lookup`.
+    """Look up gains and nominal in a table exactly as the C firmware runtime does.
+
+    ``Interpolator(table)(xi, xi_dot, alpha)`` returns a :class:`Lookup` (gains ``K``,
+    nominal thrusts ``u_d``, roll ``phi_d``, status bits) for arrays of queries; the
+    Python reference of ``gs_lookup`` in ``gainsched_runtime.c`` (docs/runtime.md), held
+    to it bit for bit on the cell and the status flags by the tests.
 
     Parameters
     ----------
     table : Table or RuntimeData
+        A loaded table (:func:`gainsched.load_table`), converted to the runtime's float32
+        form; or that form already (:func:`runtime_data`).
+
+    Attributes
+    ----------
+    data : RuntimeData
+        The table as the firmware holds it (float32, infeasible gains as zeros, mask).
+    n : int
+        LQR state dimension, the columns of ``K``.
+
+    Methods
+    -------
+    __call__(xi, xi_dot, alpha, *, chunk=16384)
+        Look up arrays of queries (broadcast together): azimuth ``xi`` (rad), azimuth rate
+        ``xi_dot`` (rad/s, speed / (rho + L_e); negative: the reversed direction) and
+        circle tilt ``alpha`` (rad, any sign). Returns a :class:`Lookup`. Alias
+        ``lookup``.
+    query(xi, xi_dot, alpha)
+        One scalar query for control loops: ``(K (4, n), u_d (4,) N, phi_d rad, status
+        int)``, the same numbers bit for bit, about 10x faster per call.
+    attitude(xi, xi_dot, alpha)
+        The nominal's pitch and yaw offsets and their slopes along xi, (m, 4).
+    roll_slope(xi, xi_dot, alpha)
+        Slope of the interpolated ``phi_d`` along xi, rad/rad.
+
+    Raises
+    ------
+    InputError
+        The table cannot be held in the runtime's float32 form (axes that collapse in
+        float32, more than 4096 azimuths, a value that overflows float32 at a feasible
+        point, a state map that is not a signed permutation).
+
+    See Also
+    --------
+    status_text : The names of a status's bits.
+
+    Notes
+    -----
+    A query goes through the steps of the C runtime: a non-finite or out-of-limit input
+    gives ``BAD_INPUT`` and zero outputs; a negative tilt is mapped by S1 (``xi += pi``,
+    ``alpha = -alpha``) and a negative ``xi_dot`` by S2 (``xi = pi - xi``; outputs mapped
+    back with ``K -> P_u K P_x``, ``u_d -> P_u u_d``, ``phi_d -> -phi_d``;
+    docs/symmetry.md); xi is wrapped onto the periodic axis, ``xi_dot`` and ``alpha``
+    are clamped into the table (``CLAMPED_SPEED``, ``CLAMPED_TILT``); the outputs are
+    interpolated trilinearly between the 8 corners of the cell (float32 cell selection,
+    float64 arithmetic on the float32 table data). A corner with non-zero weight that
+    is infeasible sets ``INFEASIBLE``; if it has no gains, also ``NO_GAINS`` and the
+    outputs are zero.
+
+    Examples
+    --------
+    Gains on the 20 deg circle at 9 m/s, at azimuth 0.5 rad:
+
+    >>> table = gs.load_table("tables/paper.h5")
+    >>> interp = gs.Interpolator(table)
+    >>> r = float(table.attrs["radius_m"])             # rho + L_e, m
+    >>> look = interp(0.5, 9.0 / r, np.deg2rad(20))    # xi rad, xi_dot rad/s, alpha rad
+    >>> look.K.shape, int(look.status)
+    ((4, 11), 0)
+    >>> np.round(look.u_d, 3).tolist(), round(float(np.rad2deg(look.phi_d)), 1)  # N, deg
+    ([1.528, 1.236, 1.581, 1.277], -34.9)
+
+    The control law ``u = u_d - K (x - x_d)`` for a 5 deg roll error (state 4, ``phi``):
+
+    >>> dx = np.zeros(interp.n)
+    >>> dx[4] = np.deg2rad(5)
+    >>> np.round(look.u_d - look.K @ dx, 3).tolist()    # motor thrusts, N
+    [1.413, 1.006, 2.019, 1.453]
+
+    One query at a time in a control loop, and what the status says off the table:
+
+    >>> K, u_d, phi_d, status = interp.query(0.5, 9.0 / r, np.deg2rad(20))
+    >>> bool(np.array_equal(K, look.K)), status
+    (True, 0)
+    >>> from gainsched.firmware.runtime import status_text
+    >>> status_text(interp(0.5, 20.0 / r, 0.2).status)          # above 15 m/s: clamped
+    'CLAMPED_SPEED'
+    >>> status_text(interp(0.5, 1.3 / r, np.deg2rad(30)).status)  # slack tether
+    'INFEASIBLE|NO_GAINS'
     """
 
     def __init__(self, table):

@@ -91,20 +91,55 @@ def steps_per_period(speed: float, r: float, dt: float) -> int:
 
 @dataclass(frozen=True)
 class CircleSolution:
-    """Everything the table needs for one speed, all tilts (leading axis: tilt).
+    """The periodic LQR solution of one speed at several tilts: what a table holds of it.
+
+    Returned by :func:`solve_circle`; every array has the tilt as its leading axis
+    (``n_a`` tilts), then the ``n_xi`` grid azimuths ``xi_j = 2 pi j / n_xi`` (rad) where
+    it has them. ``n`` is the LQR state dimension (11 for configs/paper.toml: the order
+    of :func:`gainsched.schedule.linearize.lqr_state_names`, docs/conventions.md), the 4
+    inputs are the motor thrusts T1..T4 (N). A circle with any infeasible sample (slack
+    tether, thrust limits, trim failure) has no gains: NaN in ``K``, ``S`` and
+    ``spectral_radius``, and ``reasons`` says why.
 
     Attributes
     ----------
-    K : (n_a, n_xi, 4, n) gains at the grid azimuths (NaN if infeasible)
-    S : (n_a, n_xi, n, n) cost-to-go at the grid azimuths
-    u_d : (n_a, n_xi, 4) N; phi_d : (n_a, n_xi) rad; tension : (n_a, n_xi) N
-    reasons : (n_a, n_xi) uint8
-    spectral_radius : (n_a,) closed-loop monodromy spectral radius (NaN if infeasible)
-    sweeps : (n_a,) int
-    lin_samples : (n_a,) int   azimuths of exact linearisation (see :func:`discrete_system`)
-    lin_error : (n_a,) float   its interpolation check; steps : int; dt : float, s
-    offsets : (n_a, 2, 2 H + 1) rad   Fourier coefficients of the pitch and yaw offsets of
-        the nominal (:class:`~gainsched.schedule.offsets.AttitudeOffsets`; zero for none)
+    K : ndarray, shape (n_a, n_xi, 4, n)
+        Gains at the grid azimuths for ``u = u_d - K (x - x_d)``, N per state unit
+        (N/rad, N s/rad, N/(rad s) for the integral); NaN where infeasible.
+    S : ndarray, shape (n_a, n_xi, n, n)
+        Riccati cost-to-go at the grid azimuths; NaN where infeasible.
+    u_d : ndarray, shape (n_a, n_xi, 4)
+        Nominal motor thrusts T1..T4, N (paper eqs. 15-18); NaN where the trim failed.
+    phi_d : ndarray, shape (n_a, n_xi)
+        Nominal roll, rad.
+    tension : ndarray, shape (n_a, n_xi)
+        Nominal tether tension, N (negative: the tether would have to push).
+    reasons : ndarray of uint8, shape (n_a, n_xi)
+        Feasibility bits, 0 = feasible (:class:`gainsched.constants.Reason`: 1 slack,
+        2 thrust below minimum, 4 thrust above maximum, 8 trim failed, 16 this sample
+        is fine but another one of the circle is not).
+    spectral_radius : ndarray, shape (n_a,)
+        Spectral radius of the closed-loop monodromy over one period (< 1: stable);
+        NaN if infeasible.
+    sweeps : ndarray of int32, shape (n_a,)
+        Periods folded into the periodic terminal cost plus the final sweep; -1 for a
+        tilt-0 circle solved by the DARE (infinite horizon), 0 if infeasible.
+    lin_samples : ndarray of int32, shape (n_a,)
+        Azimuths of exact linearisation, interpolated to every step
+        (:func:`discrete_system`); 1 for a tilt-0 circle solved by the DARE, ``steps``
+        when computed at every step, 0 if infeasible.
+    lin_error : ndarray, shape (n_a,)
+        Relative error of that interpolation check (0 when computed directly; NaN if
+        infeasible).
+    steps : int
+        Control steps per period, ``N = 2 round(T / (2 dt_c))`` (even), with ``T = 2 pi
+        r / speed`` and ``dt_c`` the configured control period.
+    dt : float
+        Discretisation step ``T / N``, s (within 0.15 % of ``dt_c`` on the paper grid).
+    offsets : ndarray, shape (n_a, 2, 2 H + 1)
+        Fourier coefficients in the azimuth (``[c0, a_1..a_H, b_1..b_H]``, rad, H = 3) of
+        the nominal's pitch and yaw offsets
+        (:class:`~gainsched.schedule.offsets.AttitudeOffsets`); zero for none.
     """
 
     K: np.ndarray
@@ -242,14 +277,79 @@ def _tilt0(model, config, speed, N, dt, Qx):
 
 
 def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=None):
-    """Periodic LQR for one speed at all ``tilts`` (rad, batched).
+    """Solve the periodic LQR of one circle speed at several tilts (one batch).
 
-    Returns a :class:`CircleSolution` (and, with ``keep_steps``, the per-step
-    ``(Ad, Bd, K)`` of the tilts solved by the periodic recursion, for checks).
-    ``dare_tilt0`` solves tilt-0 circles by the DARE (see :func:`_tilt0`); ``None``
-    (default): when the effects allow it (:func:`level_circle_invariant`), the decision
-    :func:`build_grid` takes once per build. With ``keep_steps`` every tilt goes through
-    the periodic recursion.
+    For each tilt the nominal (paper eqs. 15-18, with pitch and yaw offsets where
+    ``[feasibility] attitude_offsets = "free"`` needs them) is checked at every control
+    step, the model is linearised along it and discretised, and the periodic Riccati
+    recursion (paper Sec. IV.B, eq. 23; periodic terminal cost unless the config says
+    ``terminal = "single-period"``) gives the gains, kept at the ``n_xi`` grid azimuths.
+    This is one job of :func:`build_grid`; call it alone to look at one circle.
+
+    Parameters
+    ----------
+    config : Config
+        The config (:func:`load_config`): vehicle, effects, weights, control rate and
+        ``grid.azimuth_samples`` (n_xi).
+    speed : float
+        Tangential COG speed, m/s (> 0; need not be a grid speed). The azimuth rate is
+        ``speed / r``, ``r = rho + L_e`` (``config.radius``, m).
+    tilts : array_like of float, shape (n_a,)
+        Circle tilts ``alpha_C``, rad (>= 0: the table's fundamental domain).
+    keep_steps : bool, default False
+        Also return every control step's discrete system and gain, for checks
+        (:func:`gainsched.midpoint_check`); every tilt then goes through the periodic
+        recursion (no DARE).
+    dare_tilt0 : bool or None, default None
+        Solve tilt-0 circles by the DARE: a level circle whose effects look the same at
+        every azimuth is time-invariant, and its periodic solution is the DARE's,
+        exactly. ``None``: when the effects allow it (:func:`level_circle_invariant`), the
+        decision :func:`build_grid` takes once per build.
+
+    Returns
+    -------
+    sol : CircleSolution
+        Gains, cost-to-go, nominal and feasibility at the tilts (leading axis) and grid
+        azimuths.
+    steps : tuple of ndarray or None
+        Only with ``keep_steps``: ``(A_d, B_d, K)`` of the ``b`` feasible tilts, in order,
+        at all ``N`` steps of the period: shapes (b, N, n, n), (b, N, n, 4), (b, N, 4,
+        n); None when no tilt is feasible.
+
+    See Also
+    --------
+    build_grid : Every (speed, tilt) circle of the config's grid.
+
+    Notes
+    -----
+    ``N = 2 round(T / (2 dt_c))`` steps per period (even, so that the symmetry maps land
+    on steps), discretised with ``dt = T / N``. The linearisation is exact at 64-128
+    azimuths and carried to every step by trigonometric interpolation
+    (:func:`discrete_system`); the gain at a grid azimuth is interpolated linearly between
+    the two steps that bracket it (docs/table-format.md).
+
+    Examples
+    --------
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> sol = gs.solve_circle(cfg, 9.0, np.deg2rad([0, 20]))   # 9 m/s, level and 20 deg
+    >>> sol.K.shape                                 # (tilt, azimuth, input, state)
+    (2, 36, 4, 11)
+    >>> sol.steps, round(sol.dt, 7)                 # steps per period, s
+    (1118, 0.0009991)
+    >>> np.round(sol.spectral_radius, 3).tolist()   # closed loop over a period: stable
+    [0.952, 0.952]
+    >>> np.round(sol.u_d[1, 0], 3).tolist()         # nominal T1..T4 at 20 deg, xi = 0, N
+    [1.412, 1.412, 1.461, 1.461]
+
+    At 2 m/s the 20 deg circle is too slow to keep the tether taut: it has no gains.
+
+    >>> slow = gs.solve_circle(cfg, 2.0, np.deg2rad([0, 20]))
+    >>> np.isnan(slow.spectral_radius).tolist()
+    [False, True]
+    >>> round(float(slow.tension[1].min()), 2)      # N
+    -0.43
+    >>> int(np.bitwise_or.reduce(slow.reasons[1]))  # slack (1), fine elsewhere (16)
+    17
     """
     model = Model(config)
     if dare_tilt0 is None:
@@ -321,9 +421,48 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=No
 
 @dataclass(frozen=True)
 class GridResult:
-    """The whole grid, axes (tilt, speed, xi). Arrays as in CircleSolution with a speed axis
-    after the tilt axis; ``steps`` and ``dt`` per speed; ``level_invariant``: tilt 0 was
-    solved by the DARE, one gain per speed (:func:`level_circle_invariant`)."""
+    """The solved schedule grid: gains and nominal at every (tilt, speed, azimuth) point.
+
+    Returned by :func:`build_grid` and written by :func:`gainsched.write_outputs`. The
+    arrays are those of :class:`CircleSolution` with a speed axis after the tilt axis:
+    ``n_a`` tilts and ``n_v`` speeds of ``[grid]``, ``n_xi`` azimuths, ``n`` LQR states
+    (11 for configs/paper.toml), 4 motor thrusts.
+
+    Attributes
+    ----------
+    K : ndarray, shape (n_a, n_v, n_xi, 4, n)
+        Gains for ``u = u_d - K (x - x_d)``, N per state unit; NaN where infeasible.
+    S : ndarray, shape (n_a, n_v, n_xi, n, n)
+        Riccati cost-to-go; NaN where infeasible.
+    u_d : ndarray, shape (n_a, n_v, n_xi, 4)
+        Nominal motor thrusts T1..T4, N.
+    phi_d : ndarray, shape (n_a, n_v, n_xi)
+        Nominal roll, rad.
+    tension : ndarray, shape (n_a, n_v, n_xi)
+        Nominal tether tension, N.
+    reasons : ndarray of uint8, shape (n_a, n_v, n_xi)
+        Feasibility bits, 0 = feasible (:class:`gainsched.constants.Reason`).
+    spectral_radius : ndarray, shape (n_a, n_v)
+        Closed-loop monodromy spectral radius per circle (< 1: stable); NaN if
+        infeasible.
+    sweeps : ndarray of int32, shape (n_a, n_v)
+        Periods in the terminal cost plus the final sweep (-1: DARE, 0: infeasible).
+    lin_samples : ndarray of int32, shape (n_a, n_v)
+        Azimuths of exact linearisation per circle (1: DARE, 0: infeasible).
+    lin_error : ndarray, shape (n_a, n_v)
+        Relative error of the linearisation's interpolation check (NaN: infeasible).
+    steps : ndarray of int, shape (n_v,)
+        Control steps per period at each speed.
+    dt : ndarray, shape (n_v,)
+        Discretisation step per speed, s.
+    offsets : ndarray, shape (n_a, n_v, 2, 2 H + 1)
+        Fourier coefficients (rad, H = 3) of the nominal's pitch and yaw offsets per
+        circle; zero for none.
+    level_invariant : bool
+        Tilt 0 was solved by the DARE, one gain per speed independent of the azimuth
+        (:func:`level_circle_invariant`); False when an effect changes with the azimuth
+        of a level circle (the table then stores tilt-0 gains per azimuth).
+    """
 
     K: np.ndarray
     S: np.ndarray
@@ -390,20 +529,59 @@ def _solutions(args, n_jobs, backend):
 
 
 def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
-    """Sweep all speeds (one job each) and assemble the grid.
+    """Solve the periodic LQR at every (speed, tilt) circle of a config's grid.
 
-    The result does not depend on ``n_jobs``, ``backend`` or the machine's CPU
-    family (:mod:`gainsched.native.reproducible`).
+    One :func:`solve_circle` job per speed of ``[grid] speeds`` (all tilts batched),
+    assembled in config order. The result does not depend on ``n_jobs``, ``backend`` or
+    the machine's CPU family (pinned numerics, :mod:`gainsched.native.reproducible`), so
+    the table written from it is byte-identical everywhere. Publish it with
+    :func:`gainsched.write_outputs`.
 
     Parameters
     ----------
     config : Config
-    n_jobs : int
-        Workers (-1: all cores).
-    progress : callable(int) or None
-        Called with 1 after each finished speed (e.g. ``tqdm.update``).
+        The config (:func:`gainsched.load_config`); its ``[grid]`` gives the speeds (m/s),
+        tilts (rad) and azimuth samples.
+    n_jobs : int, default 1
+        Worker processes (-1: all cores).
+    progress : callable or None, default None
+        Called with 1 after each finished speed (e.g. ``tqdm(total=n_v).update``).
     backend : str, optional
-        joblib backend name (``"loky"``, ``"threading"``, ``"sequential"``, ``"dask"``).
+        Name of the joblib backend (``"loky"``, ``"threading"``, ``"sequential"``,
+        ``"dask"``); default: local pinned worker processes, or Dask when a Dask joblib
+        backend is active.
+
+    Returns
+    -------
+    GridResult
+        Arrays over (tilt, speed, azimuth): gains ``K`` (n_a, n_v, n_xi, 4, n), nominal,
+        feasibility and closed-loop spectral radius.
+
+    Raises
+    ------
+    InputError
+        An effect of the config breaks the tilt-sign or direction symmetry the table's
+        lookups rely on (names the config and ``effects.<kind>``).
+
+    See Also
+    --------
+    solve_circle : One speed at some tilts.
+    gainsched.write_outputs : Write the grid as a table, C header and runtime.
+
+    Examples
+    --------
+    A small grid of the paper vehicle (2 speeds, 2 tilts, 8 azimuths):
+
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> small = cfg.with_values({"grid.speeds": [6, 9], "grid.tilts_deg": [0, 20],
+    ...                          "grid.azimuth_samples": 8, "name": "small"})
+    >>> grid = gs.build_grid(small)
+    >>> grid.K.shape                                 # (tilt, speed, azimuth, input, state)
+    (2, 2, 8, 4, 11)
+    >>> grid.steps.tolist(), bool(np.all(grid.reasons == 0))
+    ([1676, 1118], True)
+    >>> np.round(grid.spectral_radius, 3).tolist()   # (tilt, speed): all stable
+    [[0.84, 0.952], [0.839, 0.952]]
     """
     check_effect_symmetries(config)
     speeds = config.grid.speeds

@@ -36,23 +36,88 @@ SCHEMA = "gainsched-table/1"
 
 @dataclass(frozen=True)
 class Table:
-    """A loaded gain table (fundamental domain: tilt >= 0, xi_dot > 0).
+    """A gain schedule as loaded from its HDF5 file: axes, gains, nominal, feasibility.
+
+    Made by :func:`load_table` (checked; docs/table-format.md describes the file). It
+    holds the fundamental domain only, tilt >= 0 and xi_dot > 0: negative tilts and
+    reversed circles follow from the symmetries, which
+    :class:`gainsched.Interpolator` applies. Sizes: ``n_a`` tilts, ``n_v`` speeds,
+    ``n_xi`` azimuths, ``n`` LQR states (11 for configs/paper.toml, in the order of
+    ``attrs["state_names"]``), 4 inputs (motor thrusts T1..T4, N). Gains are for
+    ``u = u_d - K (x - x_d)``, in N per state unit; the arrays are float64 as stored.
 
     Attributes
     ----------
-    xi : (n_xi,) rad, uniform on [0, 2 pi); speed : (n_v,) m/s; xi_dot : (n_v,) rad/s
-    tilt : (n_a,) rad, tilt[0] == 0
-    K_tilt0 : (n_v, 4, n) gains at tilt 0, independent of xi; or (n_v, n_xi, 4, n) when
-        an effect changes with the azimuth of a level circle (``per_azimuth_tilt0``)
-    K : (n_a - 1, n_v, n_xi, 4, n) gains at tilt[1:]
-    u_d : (n_a, n_v, n_xi, 4) N; phi_d : (n_a, n_v, n_xi) rad; tension : (n_a, n_v, n_xi) N
-    reasons : (n_a, n_v, n_xi) uint8 (0 = feasible)
-    spectral_radius : (n_a, n_v); Q : (n, n); R : (4, 4); dt : (n_v,) s
-    config_text : str; config_sha256 : str; attrs : dict
-    offsets : (n_a, n_v, 2, 2 H + 1) rad or None
-        Fourier coefficients in the azimuth of the nominal's pitch and yaw offsets per
-        circle (:class:`~gainsched.schedule.offsets.AttitudeOffsets`); None: all zero
-        (a table of a config with ``attitude_offsets = "zero"``, or older).
+    xi : ndarray, shape (n_xi,)
+        Azimuth axis, rad, uniform on [0, 2 pi).
+    speed : ndarray, shape (n_v,)
+        Tangential COG speed axis, m/s, strictly increasing and > 0.
+    xi_dot : ndarray, shape (n_v,)
+        Azimuth rate axis ``speed / r`` (``r = rho + L_e``, ``attrs["radius_m"]``), rad/s:
+        the lookup's speed coordinate.
+    tilt : ndarray, shape (n_a,)
+        Circle tilt axis ``alpha_C``, rad, strictly increasing, ``tilt[0] == 0``.
+    K_tilt0 : ndarray, shape (n_v, 4, n) or (n_v, n_xi, 4, n)
+        Gains at tilt 0, N per state unit: independent of xi, or per azimuth when an
+        effect changes with the azimuth of a level circle (:attr:`per_azimuth_tilt0`).
+        NaN where infeasible.
+    K : ndarray, shape (n_a - 1, n_v, n_xi, 4, n)
+        Gains at ``tilt[1:]``, N per state unit; NaN where infeasible. :meth:`K_full`
+        gives the gains of every tilt on one grid.
+    u_d : ndarray, shape (n_a, n_v, n_xi, 4)
+        Nominal motor thrusts T1..T4, N.
+    phi_d : ndarray, shape (n_a, n_v, n_xi)
+        Nominal roll, rad.
+    tension : ndarray, shape (n_a, n_v, n_xi)
+        Nominal tether tension, N.
+    reasons : ndarray of uint8, shape (n_a, n_v, n_xi)
+        Feasibility bits, 0 = feasible (1 slack, 2 thrust below minimum, 4 thrust above
+        maximum, 8 trim failed, 16 infeasible elsewhere on the circle;
+        :class:`gainsched.constants.Reason`).
+    spectral_radius : ndarray, shape (n_a, n_v)
+        Closed-loop monodromy spectral radius per circle (< 1: stable); NaN if
+        infeasible.
+    Q : ndarray, shape (n, n)
+        LQR state weight (the config's Q, zero for effect states).
+    R : ndarray, shape (4, 4)
+        LQR input weight.
+    dt : ndarray, shape (n_v,)
+        Discretisation step per speed, period / steps, s.
+    config_text : str
+        The config TOML text the table was built from (:func:`gainsched.config_from_text`
+        reads it back).
+    config_sha256 : str
+        SHA-256 (hex) of ``config_text``.
+    attrs : dict
+        The file's root attributes: ``schema``, ``tool_version``, ``config_name``,
+        ``config_sha256``, ``terminal``, ``rate_hz`` (Hz), ``radius_m`` (m),
+        ``state_names`` and ``input_names`` (comma-separated, K's column and row order),
+        ``control_law``, ``data_sha256``.
+    source : str
+        The file it was read from (errors name it); ``""`` when not read from a file.
+    offsets : ndarray, shape (n_a, n_v, 2, 2 H + 1), or None
+        Fourier coefficients in the azimuth (rad, ``[c0, a_1..a_H, b_1..b_H]``) of the
+        nominal's pitch and yaw offsets per circle
+        (:class:`~gainsched.schedule.offsets.AttitudeOffsets`); None: all zero (a table
+        of a config with ``attitude_offsets = "zero"``, or older).
+    name : str
+        Property: the config's name (``attrs["config_name"]``).
+    per_azimuth_tilt0 : bool
+        Property: whether ``K_tilt0`` is stored per azimuth, shape (n_v, n_xi, 4, n).
+    state_names, input_names : tuple of str
+        Properties: the LQR states (K's columns, length n) and the inputs (K's rows:
+        ``T1..T4``), from ``attrs``.
+
+    Examples
+    --------
+    >>> table = gs.load_table("tables/paper.h5")
+    >>> table.K_full().shape                  # (tilt, speed, azimuth, input, state)
+    (7, 19, 36, 4, 11)
+    >>> table.state_names
+    ('delta', 'xi', 'delta_dot', 'xi_dot', 'phi', 'theta', 'chi', 'omega_x', 'omega_y',
+     'omega_z', 'int_delta')
+    >>> float(table.attrs["radius_m"]), round(float(table.xi_dot[-1]), 4)  # m, rad/s
+    (1.6, 9.375)
     """
 
     xi: np.ndarray
@@ -78,6 +143,16 @@ class Table:
     @property
     def name(self) -> str:
         return str(self.attrs["config_name"])
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        """The LQR states in K's column order (``attrs["state_names"]``)."""
+        return tuple(str(self.attrs["state_names"]).split(","))
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        """The inputs in K's row order (``attrs["input_names"]``: T1..T4)."""
+        return tuple(str(self.attrs["input_names"]).split(","))
 
     @property
     def per_azimuth_tilt0(self) -> bool:
@@ -234,11 +309,48 @@ _ATTRS = ("schema", "tool_version", "config_name", "config_sha256", "terminal", 
 
 
 def load_table(path) -> Table:
-    """Read and check a table file; any problem raises InputError naming the file and dataset.
+    """Load a gain table file (HDF5, as gainsched build writes it) and check its integrity.
 
-    Checks the schema, the data checksums (a corrupt or edited file is refused,
-    naming the dataset), shapes against the axes, and that gains, nominal thrusts
-    and roll are finite at every feasible point.
+    Checks the schema and root attributes, the data checksums (a corrupt or edited file
+    is refused, naming the dataset), the shapes against the axes, and that gains,
+    nominal thrusts and roll are finite at every feasible point.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The table file, ``NAME.h5`` (docs/table-format.md), e.g. ``"tables/paper.h5"``.
+
+    Returns
+    -------
+    Table
+        The table's axes, gains, nominal and feasibility, float64 as stored, with
+        ``source`` the path.
+
+    Raises
+    ------
+    InputError
+        The file cannot be read or is not a gainsched table, a dataset or attribute is
+        missing or has the wrong shape, a checksum does not match, or a value at a
+        feasible point is not finite; the message names the file and the dataset.
+
+    See Also
+    --------
+    gainsched.Interpolator : Look up gains in the table as the firmware does.
+    gainsched.table_summary : The table at a glance.
+
+    Examples
+    --------
+    >>> table = gs.load_table("tables/paper.h5")
+    >>> table.name, table.K.shape             # gains at tilt[1:]: (tilt, speed, xi, 4, n)
+    ('paper', (6, 19, 36, 4, 11))
+    >>> table.speed[[0, -1]].tolist(), np.rad2deg(table.tilt).round(1).tolist()  # m/s, deg
+    ([1.3, 15.0], [0.0, 10.0, 20.0, 28.0, 34.0, 37.0, 40.0])
+    >>> int(np.isfinite(table.spectral_radius).sum()), table.spectral_radius.size  # circles
+    (113, 133)
+    >>> gs.load_table("configs/paper.toml")
+    Traceback (most recent call last):
+        ...
+    gainsched.errors.InputError: configs/paper.toml: not a readable HDF5 table (...)
     """
     path = Path(path)
     try:

@@ -86,7 +86,7 @@ def _outer_labels(axes) -> None:
 def _gain_figure(plt, table, i: int):
     K = table.K_full()[i]  # (n_v, n_xi, 4, n)
     ok = _feasible(table)[i]
-    names = table.attrs["state_names"].split(",")
+    names = list(table.state_names)
     n = K.shape[-1]
     xi_deg = np.rad2deg(table.xi)
     # not shared axes: sharing 44 maps makes every limit change visit all of them
@@ -171,29 +171,58 @@ def _midpoint_grid(midpoints):
 
 
 def schedule_figures(table, midpoints=None) -> dict:
-    """The figures of a gain table, by file name (see the module docstring).
+    """Draw the figures a control engineer looks at first in a gain table, by file name.
+
+    One ``gains_tilt<deg>.png`` per tilt (every gain entry ``K_ij`` as a map over
+    azimuth and speed, infeasible circles blank), ``nominal.png`` (the nominal motor
+    thrusts and roll), ``spectral_radius.png`` (closed-loop monodromy spectral radius per
+    speed x tilt circle) and, given a midpoint check, ``midpoint_error.png`` (the
+    largest relative gain error of the interpolation per speed x tilt midpoint). Every
+    map draws the table's own arrays, no resampling.
 
     Parameters
     ----------
     table : Table
-        A loaded table (:func:`~gainsched.schedule.tables.load_table`).
+        A loaded table (:func:`gainsched.load_table`).
     midpoints : tuple of three ndarray, shape (m,), optional
-        ``(speed m/s, tilt rad, relative gain error)`` of checked cell midpoints
-        (:class:`gainsched.firmware.check.MidpointCheck` ``speed, tilt, rel_err``).
+        ``(speed m/s, tilt rad, relative gain error)`` of checked cell midpoints, e.g.
+        ``(chk.speed, chk.tilt, chk.rel_err)`` of ``chk = gs.midpoint_check(table)``;
+        NaN errors are left out.
 
     Returns
     -------
-    dict
-        File name -> :class:`matplotlib.figure.Figure` (the envelope, already a PNG, is
-        left to :func:`schedule_plots`). The maps' ``QuadMesh`` carry gids (``K_r_c``,
-        ``u_d_i_m``, ``phi_d_i``, ``spectral_radius``, ``midpoint_error``).
+    dict of str to matplotlib.figure.Figure
+        File name -> figure (the envelope, already a PNG, is left to
+        :func:`schedule_plots`). The maps' ``QuadMesh`` carry gids (``K_r_c``,
+        ``u_d_i_m``, ``phi_d_i``, ``spectral_radius``, ``midpoint_error``) so that their
+        values can be read back. The figures stay open: close them
+        (``matplotlib.pyplot.close``) when done.
 
-    Example
-    -------
-    >>> from gainsched.schedule.tables import load_table         # doctest: +SKIP
-    >>> figs = schedule_figures(load_table("tables/paper.h5"))   # doctest: +SKIP
-    >>> sorted(figs)[:2]                                         # doctest: +SKIP
-    ['gains_tilt0.png', 'gains_tilt10.png']
+    See Also
+    --------
+    schedule_plots : The same as PNG bytes, with the envelope and a JSON summary.
+
+    Examples
+    --------
+    The figures of a small table of the paper vehicle (``tables/paper.h5`` has 7 gain
+    figures of 44 maps each and takes a few seconds):
+
+    >>> import tempfile
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> small = cfg.with_values({"grid.speeds": [6, 9], "grid.tilts_deg": [0, 20],
+    ...                          "grid.azimuth_samples": 8, "name": "small"})
+    >>> out = tempfile.mkdtemp()
+    >>> table = gs.load_table(gs.write_outputs(out, small, gs.build_grid(small))[0])
+    >>> chk = gs.midpoint_check(table)
+    >>> figs = gs.schedule_figures(table, (chk.speed, chk.tilt, chk.rel_err))
+    >>> sorted(figs)
+    ['gains_tilt0.png', 'gains_tilt20.png', 'midpoint_error.png', 'nominal.png',
+     'spectral_radius.png']
+    >>> len(figs["gains_tilt20.png"].axes)              # 4 inputs x 11 states
+    44
+    >>> figs["spectral_radius.png"].savefig(f"{out}/spectral_radius.png")
+    >>> import matplotlib.pyplot as plt
+    >>> plt.close("all")
     """
     plt = _pyplot()
     figs = {gain_file_name(a): _gain_figure(plt, table, i) for i, a in enumerate(table.tilt)}
@@ -231,18 +260,52 @@ def _json_grid(a) -> list:
 
 
 def table_summary(table, *, source: str = "") -> dict:
-    """The table at a glance as plain JSON data (``gainsched inspect --json``).
+    """Summarise a gain table as plain JSON data: grid, feasibility, gain ranges, stability.
 
-    Keys: ``table``, ``config``, ``config_sha256``, ``schema``, ``tool_version``; the grid
-    (``speeds_mps``, ``tilts_deg``, ``azimuth_samples``); ``feasible_fraction`` (n_a, n_v)
-    of the azimuth samples with gains; ``reasons`` (count of samples per infeasibility
-    reason); ``state_names``; ``gains[tilt_deg][input][state] = [min, max]`` over the
-    feasible samples; ``nominal_thrust_N`` and ``nominal_roll_deg`` ranges;
-    ``spectral_radius`` (n_a, n_v) per circle (None: infeasible) and its ``worst``.
+    What ``gainsched inspect --json`` prints; :func:`schedule_plots` writes it to
+    ``plots.json``. Every value is a str, int, float, None, list or dict, so
+    ``json.dumps`` takes it as it is.
+
+    Parameters
+    ----------
+    table : Table
+        A loaded table (:func:`gainsched.load_table`).
+    source : str, default ""
+        The file name to report as ``"table"`` (default: ``table.source``).
+
+    Returns
+    -------
+    dict
+        ``table``, ``config`` (the config's name), ``config_sha256``, ``schema``,
+        ``tool_version``; the grid: ``speeds_mps`` (n_v, m/s), ``tilts_deg`` (n_a, deg),
+        ``azimuth_samples``; ``feasible_fraction`` (n_a, n_v) nested lists: the fraction
+        of each circle's azimuth samples with gains; ``reasons``: reason text -> number of
+        samples with that bit; ``state_names``; ``gains[tilt_deg][input][state] = [min,
+        max]`` over the feasible samples (N per state unit; None without any);
+        ``nominal_thrust_N`` and ``nominal_roll_deg``: ``[min, max]``;
+        ``spectral_radius`` (n_a, n_v) per circle (None: infeasible) and its
+        ``worst_spectral_radius``.
+
+    See Also
+    --------
+    schedule_plots : The table's figures and this summary as files.
+
+    Examples
+    --------
+    >>> table = gs.load_table("tables/paper.h5")
+    >>> s = gs.table_summary(table)
+    >>> s["config"], s["azimuth_samples"], s["tilts_deg"]
+    ('paper', 36, [0.0, 10.0, 20.0, 28.0, 34.0, 37.0, 40.0])
+    >>> s["reasons"]                                       # samples per reason
+    {'tether slack': 256, 'circle infeasible elsewhere': 464}
+    >>> [round(k, 2) for k in s["gains"]["20"]["T1"]["phi"]]  # K[T1, phi] at 20 deg, N/rad
+    [0.88, 4.94]
+    >>> round(s["worst_spectral_radius"], 3)                # < 1: every circle stable
+    0.993
     """
     from .nominal import REASONS
 
-    names = table.attrs["state_names"].split(",")
+    names = list(table.state_names)
     K = table.K_full()
     ok = _feasible(table)
 
@@ -279,13 +342,56 @@ def table_summary(table, *, source: str = "") -> dict:
 
 
 def schedule_plots(table, midpoints=None, *, source: str = "") -> dict[str, bytes]:
-    """PNG files and ``plots.json`` of a gain table, by file name, for
-    :func:`gainsched.publish.publish` (see :func:`schedule_figures`).
+    """Render a gain table's figures to PNG files plus a JSON summary (plots.json), as bytes.
 
-    The JSON holds the grid (speeds m/s, tilts deg, azimuth count), per tilt the range of
-    every gain entry over the feasible points (``gains[tilt_deg][input][state] = [min,
-    max]``), the nominal thrust and roll ranges, the spectral radius per circle, the
-    midpoint errors when given, and the file names.
+    The figures of :func:`schedule_figures` (at 90 dpi, without a timestamp) and
+    ``envelope.png`` (speed x tilt: feasible, with attitude offsets, slack, thrust
+    limits; with the lowest taut speed, paper eq. 19), ready for
+    :func:`gainsched.publish.publish` (what ``gainsched plot TABLE -o DIR`` writes).
+
+    Parameters
+    ----------
+    table : Table
+        A loaded table (:func:`gainsched.load_table`).
+    midpoints : tuple of three ndarray, shape (m,), optional
+        ``(speed m/s, tilt rad, relative gain error)`` of checked cell midpoints
+        (:func:`gainsched.midpoint_check`): adds ``midpoint_error.png`` and the errors to
+        the JSON.
+    source : str, default ""
+        The file name the JSON reports as ``"table"`` (default: ``table.source``).
+
+    Returns
+    -------
+    dict of str to bytes
+        File name -> contents: the PNG files and ``plots.json``, the
+        :func:`table_summary` (grid, per-tilt gain ranges ``gains[tilt_deg][input][state]
+        = [min, max]``, nominal thrust and roll ranges, spectral radius per circle) plus
+        ``files`` (every file name) and, with ``midpoints``, ``midpoint_error``
+        (``speeds_mps``, ``tilts_deg`` and the ``max_relative_error`` over the azimuth per
+        midpoint); sorted keys.
+
+    See Also
+    --------
+    schedule_figures : The figures as matplotlib objects.
+
+    Examples
+    --------
+    The plots of a small level-circle table, written to a folder:
+
+    >>> import json, tempfile
+    >>> from gainsched.publish import publish
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> small = cfg.with_values({"grid.speeds": [6, 9], "grid.tilts_deg": [0],
+    ...                          "grid.azimuth_samples": 8, "name": "small"})
+    >>> out = tempfile.mkdtemp()
+    >>> table = gs.load_table(gs.write_outputs(out, small, gs.build_grid(small))[0])
+    >>> files = gs.schedule_plots(table)
+    >>> sorted(files)
+    ['envelope.png', 'gains_tilt0.png', 'nominal.png', 'plots.json', 'spectral_radius.png']
+    >>> summary = json.loads(files["plots.json"])
+    >>> summary["speeds_mps"], [round(x, 3) for x in summary["spectral_radius"][0]]
+    ([6.0, 9.0], [0.84, 0.952])
+    >>> paths = publish(f"{out}/plots", files)
     """
     files = {name: _png(fig) for name, fig in schedule_figures(table, midpoints).items()}
     files["envelope.png"] = envelope_png(envelope_from_table(table))

@@ -46,6 +46,7 @@ __all__ = [
     "Sensing",
     "Maneuver",
     "SimResult",
+    "SCENARIO_DIR",
     "load_scenario",
     "scenario_from_dict",
     "profile_path",
@@ -55,6 +56,8 @@ __all__ = [
     "c_runtime_scheduler",
     "RUNTIMES",
     "runtime_scheduler",
+    "log_from_result",
+    "write_run",
 ]
 
 
@@ -83,7 +86,54 @@ class Sensing:
 
 @dataclass(frozen=True)
 class Scenario:
-    """A flight: tilt (rad), gamma (rad), initial speed (m/s), manoeuvres, duration (s)."""
+    """A flight to simulate: the circle, the speed profile, the duration and the sensing.
+
+    Made by :func:`load_scenario` from a TOML file (``gainsched/sim/scenarios/*.toml``
+    shows the keys; angles there in deg, ``*_deg`` keys); here every angle is in rad.
+    Frozen: make a variant with :func:`dataclasses.replace`.
+
+    Attributes
+    ----------
+    name : str
+        Name of the flight (the file's ``name``, default the file name without its
+        suffix); it names the outputs (the log's ``flight_id`` is ``sim-NAME``).
+    tilt : float
+        Circle tilt alpha_C, rad, in (-pi/2, pi/2) (``tilt_deg`` in the file).
+    speed : float
+        Initial tangential COG speed ``v = (rho + L_e) xi_dot``, m/s.
+    duration : float
+        Flight time, s (> 0): the simulation takes ``round(duration / dt) + 1`` steps of
+        the design's control step ``dt``.
+    maneuvers : tuple of Maneuver
+        Speed changes in time order, none overlapping the previous one: each from its
+        ``t_start`` (s) to a new ``speed`` (m/s) along the smooth profile of paper eq. 20
+        with parameter ``a`` (m/s^2; peak tangential acceleration ``2 a``). Empty: the
+        whole flight at ``speed``.
+    gamma : float
+        Circle heading gamma_C, rad (``gamma_deg``): turns the tilted circle about the
+        vertical, ``R_IC = Rz(gamma_C) Rx(alpha_C)`` (docs/conventions.md).
+    sensing : Sensing
+        What the controller sees: the true state (``ideal``), or motion capture at
+        ``rate_hz`` (Hz) with ``position_noise`` (m), ``attitude_noise`` (rad),
+        ``gyro_noise`` (rad/s) and ``latency`` (s), fused with a model prediction (paper
+        Sec. V.A); ``accel_noise`` (m/s^2) is that of the logged accelerometer
+        (:func:`log_from_result`) only; ``seed`` seeds the noise.
+    initial_error : tuple of float
+        Offset of the initial state from the nominal, on the first entries of the reduced
+        state (delta, xi, delta', xi', phi, theta, chi, omega_x, omega_y, omega_z), rad and
+        rad/s; empty: the flight starts on the nominal.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> scn = gs.load_scenario("speedup")
+    >>> scn.speed, [(m.t_start, m.speed, m.a) for m in scn.maneuvers]
+    (2.0, [(0.5, 11.3, 6.25)])
+    >>> round(float(np.rad2deg(gs.load_scenario("tilted40").tilt)), 6)
+    40.0
+    >>> dataclasses.replace(scn, duration=1.0).duration  # a shorter variant
+    1.0
+    """
 
     name: str
     tilt: float
@@ -135,9 +185,40 @@ def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
     return Scenario(name, np.deg2rad(tilt_deg), speed, duration, tuple(mans), gamma, sensing, init)
 
 
+#: The shipped scenarios (package data): horizontal, tilted40, speedup, braking, staircase.
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+
+
 def load_scenario(path) -> Scenario:
-    """Load a scenario TOML file; errors name the file and key."""
+    """Load a scenario: a TOML file, or the name of a shipped one.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A scenario file (``gainsched/sim/scenarios/*.toml`` shows the keys), or the name of
+        a shipped scenario (``"horizontal"``, ``"tilted40"``, ``"speedup"``, ``"braking"``,
+        ``"staircase"``; a name without a ``.toml`` suffix that is no existing file).
+
+    Returns
+    -------
+    Scenario
+        The validated flight.
+
+    Raises
+    ------
+    InputError
+        The file cannot be read, is not TOML, or a key is bad (the message names the file
+        and the key).
+
+    Examples
+    --------
+    >>> scn = gs.load_scenario("horizontal")
+    >>> scn.name, scn.speed, scn.duration
+    ('horizontal', 8.0, 5.0)
+    """
     p = Path(path)
+    if p.suffix != ".toml" and not p.exists():
+        p = SCENARIO_DIR / f"{p}.toml"
     try:
         d = tomllib.loads(p.read_text())
     except OSError as exc:
@@ -165,14 +246,60 @@ def profile_path(scn: Scenario, r: float, t) -> AzimuthPath:
 
 @dataclass(frozen=True)
 class SimResult:
-    """Time histories at the control rate (N samples).
+    """Time histories of a simulated flight, one sample per control step.
 
-    t (N,) s; z (N, 10) true reduced state; z_hat (N, 10) estimate; z_d (N, 10) nominal;
-    u (N, 4) applied (saturated) thrust command, N; tension (N,) N; p_I (N, 3) m COG;
-    q_IB (N, 4); saturated (N, 4) bool; status (N,) runtime status of the lookup;
-    held (N,) bool: the lookup was unusable and the last good gains were flown;
-    tension_d (N,) N: the nominal's tension; min_tension N: the config's margin;
-    slack_time: float or None, s; scenario; alpha rad; r m.
+    What :func:`simulate` returns: N samples at the design's control step ``dt`` from
+    t = 0, ``round(duration / dt) + 1``, fewer when the tether went slack (the flight
+    stops there, ``slack_time``). Reduced states are in the order (delta, xi, delta', xi',
+    phi, theta, chi, omega_x, omega_y, omega_z), rad and rad/s (docs/conventions.md), xi
+    continuous (a lap adds 2 pi). Motors 1..4 in the X layout.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Time of each control step, s.
+    z : ndarray, shape (N, 10)
+        True reduced state of the plant, rad, rad/s.
+    z_hat : ndarray, shape (N, 10)
+        The controller's estimate of it (``z`` with ideal sensing), rad, rad/s.
+    z_d : ndarray, shape (N, 10)
+        Nominal state along the reference path (from the design model, or the table's
+        feed-forward with ``controller="firmware"``), rad, rad/s.
+    u : ndarray, shape (N, 4)
+        Applied (saturated) motor thrust commands, N, held over each step.
+    u_d : ndarray, shape (N, 4)
+        Nominal (feed-forward) motor thrusts, N.
+    tension : ndarray, shape (N,)
+        Tether tension of the plant at each step, N (negative: slack).
+    p_I : ndarray, shape (N, 3)
+        COG position in the inertial frame (origin at the anchor, z up), m.
+    q_IB : ndarray, shape (N, 4)
+        Attitude quaternion (w, x, y, z), Hamilton, body -> inertial.
+    saturated : ndarray of bool, shape (N, 4)
+        The motor's command was clipped to the plant's ``thrust_min`` or ``thrust_max``.
+    status : ndarray of int32, shape (N,)
+        Status bits of the gain lookup (:mod:`gainsched.firmware.runtime`: 0 OK,
+        ``CLAMPED_SPEED`` 0x01, ``NO_GAINS`` 0x08, ...; ``status_text`` names them).
+    slack_time : float or None
+        Time the tether went slack and the simulation stopped, s; None: it stayed taut.
+    scenario : Scenario
+        The flight that was flown.
+    r : float
+        Nominal COG radius ``rho + L_e`` of the design model, m.
+    mass : float
+        Mass of the plant, kg.
+    g : float
+        Gravity of the plant, m/s^2.
+    held : ndarray of bool, shape (N,), or None
+        The lookup was unusable (``NO_GAINS``, bad input) and the last good gains were
+        flown, the firmware's policy.
+    tension_d : ndarray, shape (N,), or None
+        Tension of the nominal, N.
+    min_tension : float
+        The design config's tension margin (``[feasibility] min_tension``), N.
+    f_B : ndarray, shape (N, 3), or None
+        Specific force at the COG in the body frame, ``R_IB^T (a_I + g e_z)``, m/s^2: what
+        an ideal accelerometer senses (from second differences of ``p_I``).
     """
 
     t: np.ndarray
@@ -296,23 +423,41 @@ def _rk4(f, x, u, alpha, dt):
 
 def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None = None,
              progress=None, controller: str = "path") -> SimResult:
-    """Fly ``scenario`` with gains from ``scheduler`` on the ``plant`` (default: design).
+    """Fly a scenario in closed loop: the scheduled LQR on the nonlinear tethered vehicle.
+
+    The control law of paper Sec. IV, ``u = u_d - K(xi_d, xi_d', alpha) (x - x_d)``, at
+    the design's control rate: ``x`` is the LQR state (the 10 reduced states, the azimuth
+    error from continuous azimuths, plus the integral states of ``[control]``),
+    ``(x_d, u_d)`` the nominal of the reference path and ``K`` the scheduled gains,
+    looked up at the reference. The plant is integrated by fixed-step RK4 with the input
+    held over each step (zero-order hold); the commands saturate at the plant's thrust
+    limits; the flight stops cleanly when the tether goes slack.
 
     Parameters
     ----------
     design : Config
-        The model the tables and the nominal come from.
-    scheduler : callable (xi, xi_dot, alpha) -> (K (4, n), status)
-        Gain lookup (Python reference interpolator or the compiled C runtime). It is
-        queried at the reference (xi_d, xi_d', alpha) only, so a scheduler may offer
-        ``scheduler.batch(xi, xi_dot, alpha) -> (K (m, 4, n), status (m,))`` giving the
-        same numbers for arrays of queries: the gains are then looked up in blocks of
-        steps instead of once per step (``table_scheduler`` does).
+        The model the tables were built from: the nominal ``(x_d, u_d)`` along the
+        reference, the control step ``control.dt`` (s), the integral states and the
+        tension margin come from it.
+    scheduler : callable
+        ``scheduler(xi, xi_dot, alpha) -> (K, status)``: the gains ``K``, ndarray of shape
+        (4, n) (N per unit of LQR state: rad, rad/s, rad s), and the lookup's status bits
+        (int) at the reference azimuth xi (rad), its rate xi_dot (rad/s) and the tilt
+        alpha (rad); :func:`table_scheduler`, :func:`runtime_scheduler` or
+        :func:`c_runtime_scheduler` make one. It is queried at the reference only, so a
+        scheduler may offer ``scheduler.batch(xi, xi_dot, alpha) -> (K (m, 4, n),
+        status (m,))`` giving the same numbers for arrays of queries: the gains are then
+        looked up in blocks of steps instead of once per step (``table_scheduler``
+        does). Where a lookup is unusable (``NO_GAINS``, bad input) the last good gains
+        are flown (``SimResult.held``), as the firmware does.
+    scenario : Scenario
+        The flight: circle, speed profile, duration, sensing, initial error.
     plant : Config, optional
-        The truth.
-    progress : callable(int), optional
-        Called with the number of steps done, every 100 steps.
-    controller : {"path", "firmware"}
+        The truth that is flown: its own parameters, effects, link model (rigid or
+        elastic) and thrust limits (N). Default: ``design`` (a perfect model).
+    progress : callable, optional
+        ``progress(100)`` after every 100 steps (a progress bar's increment).
+    controller : {"path", "firmware"}, default "path"
         Where the nominal ``(x_d, u_d)`` comes from. ``"path"``: the design model along
         the reference, computed here (closed form or trim). ``"firmware"``: only what a
         firmware has, the table's lookup plus the drag-only closed form with the
@@ -321,9 +466,52 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         ``gs_lookup_nominal`` (``c_runtime_scheduler``, gains and nominal both from C)
         or its Python reference (``table_scheduler``).
 
-    The rigid-link plant runs on the compiled kernel when available (same results as
-    the numpy model to rounding, see tests/test_fastplant.py); ``GAINSCHED_NATIVE=0``
-    forces the numpy model.
+    Returns
+    -------
+    SimResult
+        Time histories at the control rate from t = 0: ``round(duration / dt) + 1``
+        samples, fewer when the tether went slack.
+
+    Raises
+    ------
+    InputError
+        The table has no usable gains where the flight starts (a firmware would refuse
+        to engage), or ``controller="firmware"`` with a C runtime whose table carries no
+        closed-form constants.
+    ValueError
+        ``controller`` is neither ``"path"`` nor ``"firmware"``, or ``"firmware"`` with a
+        scheduler without ``feedforward``.
+
+    Notes
+    -----
+    Sensing (``scenario.sensing``): the true state, or motion-capture pose updates at
+    the sensing rate with noise and latency, fused with a prediction of the design
+    model between updates, and gyro body rates (paper Sec. V.A). The rigid-link plant
+    runs on the compiled kernel when a C compiler is available (the same results as the
+    numpy model to rounding, see tests/test_fastplant.py); ``GAINSCHED_NATIVE=0`` forces
+    the numpy model (about 0.3x real time instead of 80x).
+
+    Examples
+    --------
+    Half a second of the level 8 m/s circle, started 0.01 rad out of the plane (the
+    scenario's initial error):
+
+    >>> import dataclasses
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> table = gs.load_table("tables/paper.h5")
+    >>> scn = dataclasses.replace(gs.load_scenario("horizontal"), duration=0.5)
+    >>> res = gs.simulate(cfg, gs.table_scheduler(table), scn)
+    >>> res.t.shape, res.z.shape, res.u.shape, res.slack_time
+    ((501,), (501, 10), (501, 4), None)
+    >>> f"{1000 * gs.metrics(res)['max_out_of_plane_m']:.0f} mm"
+    '15 mm'
+
+    The same gains on a vehicle 10 % heavier than the design (a plant of its own):
+
+    >>> heavy = gs.config_from_text(cfg.text.replace("mass = 0.5 ", "mass = 0.55"), "heavy")
+    >>> res = gs.simulate(cfg, gs.table_scheduler(table), scn, plant=heavy)
+    >>> f"{1000 * gs.metrics(res)['max_out_of_plane_m']:.0f} mm"
+    '37 mm'
     """
     plant = design if plant is None else plant
     P = _Plant(plant)
@@ -529,9 +717,61 @@ class _Estimator:
 
 
 def metrics(res: SimResult) -> dict:
-    """Flight metrics: out-of-plane error (m), along-track error (azimuth error, rad, and
-    its arc at the COG radius, m) with lap slips, speed tracking error (m/s), max tension
-    (N), max g-load, saturation fraction, slack events."""
+    """Tracking, load and saturation figures of a simulated flight, by name.
+
+    What ``gainsched simulate`` writes to ``metrics.json``: the out-of-plane error (m),
+    the along-track error (the azimuth error, rad, and its arc at the COG radius, m)
+    with lap slips, the speed tracking error (m/s), the loads, the time spent at the
+    edges of the table and the motors' limits.
+
+    Parameters
+    ----------
+    res : SimResult
+        A simulated flight (:func:`simulate`).
+
+    Returns
+    -------
+    dict
+        By name (the unit ends the name; errors are simulated minus nominal):
+
+        - ``duration_s``: time flown, s (less than the scenario's after a slack stop);
+        - ``rms_out_of_plane_m``, ``max_out_of_plane_m``: the COG's distance from the
+          circle plane, m;
+        - ``rms_along_track_m``, ``max_along_track_m``: the azimuth error times the COG
+          radius ``r``, m;
+        - ``mean_azimuth_error_rad``, ``final_azimuth_error_rad``,
+          ``max_azimuth_error_rad`` (of its magnitude): xi - xi_d from continuous
+          azimuths (a lap behind is -2 pi), rad;
+        - ``lap_slips``: whole laps gained or lost, int;
+        - ``rms_speed_error_mps``, ``mean_speed_error_mps``: tangential COG speed
+          ``r xi_dot`` minus the nominal's, m/s; ``max_speed_mps``, m/s;
+        - ``max_tension_N``: tether tension, N; ``max_g_load``: ``v^2 / (r g)``, the
+          centripetal acceleration in g; ``max_tether_accel_g``: tension / (m g);
+        - ``saturation_fraction``: share of motor commands clipped at a thrust limit,
+          0..1;
+        - ``held_gains_s``: time flown on held gains (an unusable lookup), s;
+          ``clamped_speed_s``: time the lookup's speed was clamped to the table's range, s;
+        - ``min_nominal_tension_N``: lowest tension of the nominal, N (nan if unknown);
+          ``below_tension_margin_s``: time the nominal is below the config's
+          ``min_tension``, s;
+        - ``slack_events``: 1 if the tether went slack, else 0; ``slack_time_s``: when,
+          s, or None;
+        - ``max_roll_deg``: largest roll angle magnitude, deg.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> table = gs.load_table("tables/paper.h5")
+    >>> scn = dataclasses.replace(gs.load_scenario("horizontal"), duration=0.5)
+    >>> m = gs.metrics(gs.simulate(cfg, gs.table_scheduler(table), scn))
+    >>> print(f"{100 * m['rms_along_track_m']:.1f} cm along track, "
+    ...       f"{m['max_tension_N']:.1f} N, {m['max_g_load']:.1f} g, "
+    ...       f"roll {m['max_roll_deg']:.0f} deg")
+    3.1 cm along track, 20.0 N, 4.1 g, roll 17 deg
+    >>> m["lap_slips"], m["saturation_fraction"], m["slack_events"]
+    (0, 0.0, 0)
+    """
     R_IC = R_IC_from_tilt(res.scenario.tilt, res.scenario.gamma)
     p_C = res.p_I @ R_IC  # rows: R_IC^T p
     out_of_plane = p_C[:, 2]
@@ -570,7 +810,47 @@ def metrics(res: SimResult) -> dict:
 
 
 def table_scheduler(table):
-    """Gain lookup through the Python reference interpolator: (xi, xi_dot, alpha) -> (K, status)."""
+    """Gain lookup of a table through the Python reference of the C runtime, for simulate.
+
+    The lookup is :class:`~gainsched.firmware.runtime.Interpolator`, the reference
+    implementation of the firmware's ``gainsched_runtime.c`` (the same cell, weights,
+    mirroring and status bits, in float32), one query per call.
+
+    Parameters
+    ----------
+    table : Table or RuntimeData
+        The gain schedule (:func:`~gainsched.schedule.tables.load_table`), or its
+        runtime form (:func:`gainsched.firmware.runtime.runtime_data`).
+
+    Returns
+    -------
+    callable
+        ``lookup(xi, xi_dot, alpha) -> (K, status)``: at the azimuth xi (rad), the azimuth
+        rate xi_dot (rad/s) and the tilt alpha (rad), the gains ``K``, ndarray of shape
+        (4, n) (N per unit of LQR state: rad, rad/s, rad s), and the status bits (int;
+        0: OK, 0x01 ``CLAMPED_SPEED``: outside the table's speeds, ...; see
+        :func:`gainsched.firmware.runtime.status_text`). Its attributes:
+        ``lookup.batch(xi, xi_dot, alpha) -> (K (m, 4, n), status (m,) int)``, the same
+        numbers for arrays of m queries; ``lookup.interp``, the
+        :class:`~gainsched.firmware.runtime.Interpolator`;
+        ``lookup.feedforward(path, alpha)``, the firmware's nominal along a reference
+        (``simulate(..., controller="firmware")``).
+
+    Examples
+    --------
+    >>> table = gs.load_table("tables/paper.h5")
+    >>> lookup = gs.table_scheduler(table)
+    >>> K, status = lookup(0.5, 9.0 / 1.6, 0.0)  # 9 m/s on the level circle, r = 1.6 m
+    >>> K.shape, status
+    ((4, 11), 0)
+    >>> K, status = lookup(0.5, 32.0 / 1.6, 0.0)  # 32 m/s: clamped to the fastest speed
+    >>> status
+    1
+    >>> xi = np.linspace(0.0, 2 * np.pi, 5)  # one lap, in one call
+    >>> K, status = lookup.batch(xi, np.full(5, 9.0 / 1.6), np.deg2rad(20.0))
+    >>> K.shape, status.tolist()
+    ((5, 4, 11), [0, 0, 0, 0, 0])
+    """
     from ..firmware.runtime import Interpolator
 
     interp = Interpolator(table)
@@ -660,13 +940,49 @@ RUNTIMES = ("auto", "c", "python")
 
 
 def runtime_scheduler(table, runtime: str = "auto"):
-    """The gain source of a flight: ``"c"`` the compiled C runtime
-    (:func:`c_runtime_scheduler`: gains and the firmware's nominal from
-    ``gs_lookup_nominal``), ``"python"`` its Python reference (:func:`table_scheduler`),
-    ``"auto"`` the C runtime when a C compiler is found, else the reference. The returned
-    scheduler's ``source`` says which.
+    """The gain source of a simulated flight: the compiled C runtime or its Python reference.
 
-    Raises InputError for ``"c"`` without a C compiler.
+    The C runtime flies the very code that goes on the vehicle (``gainsched_runtime.c``
+    with the table, compiled for the host); its Python reference mirrors it in float32
+    arithmetic and needs no compiler.
+
+    Parameters
+    ----------
+    table : Table or RuntimeData
+        The gain schedule (:func:`~gainsched.schedule.tables.load_table`).
+    runtime : {"auto", "c", "python"}, default "auto"
+        ``"c"``: the compiled C runtime, the firmware's own code
+        (:func:`c_runtime_scheduler`: gains and the firmware's nominal from
+        ``gs_lookup_nominal``; compiled for the host, a second or two); ``"python"``: its
+        Python reference (:func:`table_scheduler`); ``"auto"``: the C runtime when a C
+        compiler is found (``CC``), else the reference.
+
+    Returns
+    -------
+    callable
+        A scheduler for :func:`simulate`, ``(xi, xi_dot, alpha) -> (K (4, n), status)``
+        (see :func:`table_scheduler`), with ``feedforward`` for
+        ``controller="firmware"``; its ``source`` (str) says which runtime it is:
+        ``"C runtime (gs_lookup_nominal)"`` or ``"Python reference of the C runtime"``.
+
+    Raises
+    ------
+    InputError
+        ``runtime`` is not one of :data:`RUNTIMES`, or ``"c"`` without a C compiler.
+
+    Examples
+    --------
+    A flight on what the firmware has: the table's gains and feed-forward only.
+
+    >>> import dataclasses
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> sched = gs.runtime_scheduler(gs.load_table("tables/paper.h5"), "python")
+    >>> sched.source
+    'Python reference of the C runtime'
+    >>> scn = dataclasses.replace(gs.load_scenario("horizontal"), duration=0.5)
+    >>> res = gs.simulate(cfg, sched, scn, controller="firmware")
+    >>> int(res.status.max()), bool(res.held.any()), bool(res.saturated.any())
+    (0, False, False)
     """
     from ..native import find_cc
 
@@ -684,11 +1000,50 @@ def runtime_scheduler(table, runtime: str = "auto"):
 
 
 def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int | None = None):
-    """The flight log a real flight would leave (``flight-log.md``): motion-capture pose at
-    the sensing rate with the scenario's noise, commanded thrusts (mean over each sample
-    interval), gyro (mean rate over the interval centred on the sample, with the scenario's
-    gyro noise), accelerometer (the mean specific force at the COG over the same interval,
-    with the scenario's accelerometer noise), load-cell tension and the reference azimuth."""
+    """The flight log a real flight would leave: a simulated flight as a FlightLog.
+
+    In the format of docs/flight-log.md, sampled every ``round(1 / (rate_hz dt))``
+    control steps: the motion-capture pose with the scenario's position and attitude
+    noise, the commanded thrusts (the mean over each sample interval, as held since the
+    previous sample), the gyro (the mean body rate over the interval centred on the
+    sample, with the scenario's gyro noise), the accelerometer (the mean specific force
+    at the COG over the same interval, with the scenario's accelerometer noise), the
+    load-cell tension and the reference azimuth and its rate.
+
+    Parameters
+    ----------
+    res : SimResult
+        A simulated flight (:func:`simulate`).
+    rate_hz : float, optional
+        Sampling rate of the log, Hz; default the scenario's motion-capture rate
+        (``scenario.sensing.rate_hz``).
+    seed : int, optional
+        Seed of the pose, gyro and accelerometer noise; default
+        ``scenario.sensing.seed + 1000``.
+
+    Returns
+    -------
+    FlightLog
+        One segment, ``source`` ``"simulation NAME"``, metadata ``alpha_c_deg``,
+        ``gamma_c_deg``, ``flight_id`` ``"sim-NAME"`` and ``notes``; the optional columns
+        ``omega_B`` (rad/s), ``f_B`` (m/s^2), ``tension`` (N), ``xi_ref`` (rad),
+        ``xi_dot_ref`` (rad/s). ``gainsched.analysis.logs.write_log`` writes it.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> table = gs.load_table("tables/paper.h5")
+    >>> scn = dataclasses.replace(gs.load_scenario("horizontal"), duration=0.5)
+    >>> log = gs.log_from_result(gs.simulate(cfg, gs.table_scheduler(table), scn))
+    >>> len(log), round(1 / log.dt_median), log.meta["flight_id"], sorted(log.optional)
+    (101, 200, 'sim-horizontal', ['f_B', 'omega_B', 'tension', 'xi_dot_ref', 'xi_ref'])
+
+    The design model explains its own simulated flight down to the measurement noise:
+
+    >>> round(gs.compare(cfg, [log]).normalized_rms(), 1)  # 1: residual = noise
+    1.0
+    """
     from ..analysis.logs import log_from_arrays
     from ..model.rotations import Rx, Ry, Rz, matrix_from_quaternion
 

@@ -34,7 +34,16 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .loop import Maneuver, Scenario, SimResult, load_scenario, metrics, simulate, write_run
+from .loop import (
+    SCENARIO_DIR,
+    Maneuver,
+    Scenario,
+    SimResult,
+    load_scenario,
+    metrics,
+    simulate,
+    write_run,
+)
 
 __all__ = [
     "Experiment",
@@ -49,7 +58,6 @@ __all__ = [
 ]
 
 SCHEMA = "gainsched-paper-report/1"
-SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"  # package data
 
 # the paper's numbers (Sec. V.B, Figs. 3 and 4)
 RMS_Z_M = 0.013  # RMS z error on horizontal circles, m

@@ -42,8 +42,42 @@ def tracking_errors(res) -> dict:
 
 
 def plot_result(res, out_dir) -> list[Path]:
-    """``speed_roll.png`` and ``path3d.png`` of a flight into ``out_dir`` (module
-    docstring); returns their paths."""
+    """Plot a simulated flight: speed, tracking errors and roll; the 3-D path.
+
+    Two PNG files (matplotlib, Agg backend):
+
+    - ``speed_roll.png``: the speed (desired and simulated, m/s) with its error panel,
+      the along-track error (cm; positive ahead of the reference) and the roll angle
+      (nominal and simulated, deg) over time, each error panel with its RMS;
+    - ``path3d.png``: the COG path in the inertial frame at equal scale on every axis
+      (m), beside the out-of-plane error (mm) over the azimuth (deg), where a flat
+      circle shows as a flat line rather than a corkscrew.
+
+    The errors are those of :func:`tracking_errors`.
+
+    Parameters
+    ----------
+    res : SimResult
+        A simulated flight (:func:`~gainsched.sim.loop.simulate`).
+    out_dir : str or path-like
+        An existing directory; files of the same names in it are replaced.
+
+    Returns
+    -------
+    list of Path
+        ``[out_dir / "speed_roll.png", out_dir / "path3d.png"]``.
+
+    Examples
+    --------
+    >>> import dataclasses, tempfile
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> table = gs.load_table("tables/paper.h5")
+    >>> scn = dataclasses.replace(gs.load_scenario("horizontal"), duration=0.5)
+    >>> res = gs.simulate(cfg, gs.table_scheduler(table), scn)
+    >>> out = tempfile.mkdtemp()
+    >>> [p.name for p in gs.plot_result(res, out)]
+    ['speed_roll.png', 'path3d.png']
+    """
     import matplotlib
 
     matplotlib.use("Agg")
