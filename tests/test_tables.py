@@ -124,6 +124,10 @@ LAYOUT = {
     "closed_loop/linearization_samples": ((2, 2), "-"),
     "closed_loop/linearization_error": ((2, 2), "-"),
     "closed_loop/dt": ((2,), "s"),
+    "closed_loop/mode_tau": ((2, 2, 4), "s"),
+    "closed_loop/mode_frequency": ((2, 2, 4), "rad/s"),
+    "closed_loop/mode_damping": ((2, 2, 4), "-"),
+    "closed_loop/mode_shape": ((2, 2, 4, 11), "-"),
     "weights/Q": ((11, 11), None),
     "weights/R": ((4, 4), None),
 }

@@ -46,7 +46,8 @@ def test_cli_plot_writes_the_pngs_and_a_summary_of_the_table(tmp_path, table):
     summary = json.loads(r.output)
     assert summary == json.loads((out / "plots.json").read_text())
     expected = {gain_file_name(a) for a in table.tilt} | {
-        "envelope.png", "nominal.png", "spectral_radius.png", "plots.json"}
+        "envelope.png", "nominal.png", "spectral_radius.png", "time_constant.png",
+        "plots.json"}
     assert set(summary["files"]) == expected == {p.name for p in out.iterdir()}
     for name in expected - {"plots.json"}:
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
@@ -73,7 +74,7 @@ def test_cli_plot_writes_the_pngs_and_a_summary_of_the_table(tmp_path, table):
 def test_plotted_maps_are_the_tables_arrays(table):
     """Every map draws the table's values at its grid points (no resampling), blank
     exactly where the circle sample is infeasible: every gain entry at two tilts, the
-    nominal thrusts and roll at every tilt, the spectral radius."""
+    nominal thrusts and roll at every tilt, the spectral radius, the slowest time constant."""
     figs = schedule_figures(table)
     try:
         ok = table.reasons == 0
@@ -98,6 +99,9 @@ def test_plotted_maps_are_the_tables_arrays(table):
         np.testing.assert_array_equal(
             _values(_mesh(figs["spectral_radius.png"], "spectral_radius"),
                     table.spectral_radius.shape), table.spectral_radius)
+        np.testing.assert_array_equal(
+            _values(_mesh(figs["time_constant.png"], "time_constant"),
+                    table.spectral_radius.shape), table.mode_tau[..., 0])
     finally:
         import matplotlib.pyplot as plt
 

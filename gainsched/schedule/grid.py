@@ -39,6 +39,7 @@ from ..native.reproducible import (
 )
 from .linearize import discretize, jacobians, lqr_system
 from .lqr import dlqr, periodic_lqr, spectral_radius
+from .modes import MODE_COUNT, floquet_modes
 from .nominal import circle_nominal, circle_offsets
 from .offsets import HARMONICS
 from .path import period
@@ -140,6 +141,16 @@ class CircleSolution:
         Fourier coefficients in the azimuth (``[c0, a_1..a_H, b_1..b_H]``, rad, H = 3) of
         the nominal's pitch and yaw offsets
         (:class:`~gainsched.schedule.offsets.AttitudeOffsets`); zero for none.
+    mode_tau : ndarray, shape (n_a, M)
+        Time constants of the M slowest closed-loop Floquet modes, slowest first, s
+        (:mod:`gainsched.schedule.modes`; M = 4, a complex pair counts once); NaN if
+        infeasible.
+    mode_frequency : ndarray, shape (n_a, M)
+        Their frequencies, rad/s (0: real; a periodic loop's principal value).
+    mode_damping : ndarray, shape (n_a, M)
+        Their damping ratios (1: real).
+    mode_shape : ndarray, shape (n_a, M, n)
+        Their eigenvectors' magnitudes in the states' units, largest entry 1.
     """
 
     K: np.ndarray
@@ -155,6 +166,10 @@ class CircleSolution:
     steps: int
     dt: float
     offsets: np.ndarray
+    mode_tau: np.ndarray
+    mode_frequency: np.ndarray
+    mode_damping: np.ndarray
+    mode_shape: np.ndarray
 
 
 def _sample_steps(N, n_xi):
@@ -270,10 +285,11 @@ def _tilt0(model, config, speed, N, dt, Qx):
     """Tilt 0 with effects that keep the rotation about the vertical
     (:func:`level_circle_invariant`): the circle's linearisation is the same at every
     azimuth, so the periodic problem is time-invariant and its solution is the DARE's,
-    exactly. Returns ``K (4, n), S (n, n), spectral radius``."""
+    exactly. Returns ``K (4, n), S (n, n), spectral radius``, the modes of ``A - B K``
+    (:func:`~gainsched.schedule.modes.floquet_modes` with the step ``dt``)."""
     Ad, Bd = _discrete_at(model, speed, [0.0], 1, dt)
     K, S, E = dlqr(Ad[0, 0], Bd[0, 0], Qx, config.control.R)
-    return K, S, float(np.abs(E).max()) ** N
+    return K, S, float(np.abs(E).max()) ** N, floquet_modes(Ad[0, 0] - Bd[0, 0] @ K, dt)
 
 
 def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=None):
@@ -374,6 +390,14 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=No
     tension = np.full((n_a, n_xi), np.nan)
     reasons = np.full((n_a, n_xi), Reason.TRIM_FAILED, dtype=np.uint8)
     offsets = np.zeros((n_a, 2, 2 * HARMONICS + 1))
+    tau = np.full((n_a, MODE_COUNT), np.nan)
+    frequency, damping = np.full_like(tau, np.nan), np.full_like(tau, np.nan)
+    shape = np.full((n_a, MODE_COUNT, n), np.nan)
+
+    def put_modes(idx, m):
+        tau[idx], frequency[idx], damping[idx], shape[idx] = (
+            m.tau, m.frequency, m.damping, m.shape)
+
     for i, a in enumerate(tilts):
         try:
             # feasibility is checked on the nominal at every control step
@@ -393,8 +417,9 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=No
     ok = np.flatnonzero(bad == 0)
     if dare_tilt0 and not keep_steps and config.control.terminal == "periodic":
         for i in ok[tilts[ok] == 0.0]:
-            Ki, Si, radius[i] = _tilt0(model, config, speed, N, dt, Qx)
+            Ki, Si, radius[i], modes = _tilt0(model, config, speed, N, dt, Qx)
             K[i], S[i] = Ki, Si
+            put_modes(i, modes)
             lin_samples[i], lin_error[i], sweeps[i] = 1, 0.0, -1  # infinite horizon
         ok = ok[tilts[ok] != 0.0]
     keep, lo, hi, w = _sample_steps(N, n_xi)
@@ -412,10 +437,11 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=No
         K[idx] = _sample(Ks, lo, hi, w)
         S[idx] = _sample(Ss, lo, hi, w)
         radius[idx] = spectral_radius(sol.Phi)
+        put_modes(idx, floquet_modes(sol.Phi, N * dt))
         sweeps[idx] = sol.sweeps
     steps = tuple(np.concatenate(x) for x in zip(*kept, strict=True)) if kept else None
     out = CircleSolution(K, S, u_d, phi_d, tension, reasons, radius, sweeps, lin_samples,
-                         lin_error, N, dt, offsets)
+                         lin_error, N, dt, offsets, tau, frequency, damping, shape)
     return (out, steps) if keep_steps else out
 
 
@@ -458,6 +484,12 @@ class GridResult:
     offsets : ndarray, shape (n_a, n_v, 2, 2 H + 1)
         Fourier coefficients (rad, H = 3) of the nominal's pitch and yaw offsets per
         circle; zero for none.
+    mode_tau, mode_frequency, mode_damping : ndarray, shape (n_a, n_v, M)
+        The M slowest closed-loop Floquet modes per circle, slowest first: time constant
+        s, frequency rad/s, damping ratio (as in :class:`CircleSolution`); NaN if
+        infeasible.
+    mode_shape : ndarray, shape (n_a, n_v, M, n)
+        Their eigenvectors' magnitudes in the states' units, largest entry 1.
     level_invariant : bool
         Tilt 0 was solved by the DARE, one gain per speed independent of the azimuth
         (:func:`level_circle_invariant`); False when an effect changes with the azimuth
@@ -477,6 +509,10 @@ class GridResult:
     steps: np.ndarray
     dt: np.ndarray
     offsets: np.ndarray
+    mode_tau: np.ndarray
+    mode_frequency: np.ndarray
+    mode_damping: np.ndarray
+    mode_shape: np.ndarray
     level_invariant: bool = True
 
 

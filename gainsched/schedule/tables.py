@@ -100,6 +100,14 @@ class Table:
         nominal's pitch and yaw offsets per circle
         (:class:`~gainsched.schedule.offsets.AttitudeOffsets`); None: all zero (a table
         of a config with ``attitude_offsets = "zero"``, or older).
+    mode_tau, mode_frequency, mode_damping : ndarray, shape (n_a, n_v, M), or None
+        The M slowest closed-loop Floquet modes per circle, slowest first: time constant
+        ``-T / ln|lambda|`` s, frequency rad/s, damping ratio
+        (:mod:`gainsched.schedule.modes`); NaN if infeasible; None in a table built
+        before they were stored.
+    mode_shape : ndarray, shape (n_a, n_v, M, n), or None
+        Their eigenvector magnitudes in the states' units, largest entry 1
+        (:func:`~gainsched.schedule.modes.dominant_states` names the states).
     name : str
         Property: the config's name (``attrs["config_name"]``).
     per_azimuth_tilt0 : bool
@@ -139,6 +147,10 @@ class Table:
     attrs: dict
     source: str = ""
     offsets: np.ndarray | None = None
+    mode_tau: np.ndarray | None = None
+    mode_frequency: np.ndarray | None = None
+    mode_damping: np.ndarray | None = None
+    mode_shape: np.ndarray | None = None
 
     @property
     def name(self) -> str:
@@ -277,6 +289,15 @@ def table_bytes(config, grid, model) -> bytes:
         _create(cl, "linearization_error", grid.lin_error, "-",
                 "relative error check of the interpolated linearisation per circle")
         _create(cl, "dt", grid.dt, "s", "discretisation step, period / steps")
+        _create(cl, "mode_tau", grid.mode_tau, "s",
+                "time constants -T/ln|lambda| of the slowest closed-loop Floquet modes, "
+                "slowest first (tilt, speed, mode)")
+        _create(cl, "mode_frequency", grid.mode_frequency, "rad/s",
+                "their frequencies |arg lambda|/T (periodic loops: principal value)")
+        _create(cl, "mode_damping", grid.mode_damping, "-", "their damping ratios")
+        _create(cl, "mode_shape", grid.mode_shape, "-",
+                "their eigenvector magnitudes in the states' units, largest entry 1 "
+                "(tilt, speed, mode, state)")
         w = _group(f, "weights")
         _create(w, "Q", Qx)
         _create(w, "R", np.asarray(config.control.R))
@@ -461,6 +482,16 @@ def _read(f, path) -> Table:
             raise InputError(path, "nominal/attitude_offsets",
                              f"shape {offsets.shape} does not match the axes ({n_a}, {n_v}, 2, "
                              "2 H + 1), or not finite")
+    modes = {}
+    if "closed_loop/mode_tau" in f:  # tables before the modes have none
+        for key in ("mode_tau", "mode_frequency", "mode_damping", "mode_shape"):
+            v = f.get(f"closed_loop/{key}")
+            m = v.shape[-1 if key != "mode_shape" else -2] if v is not None and v.ndim else 0
+            want = (n_a, n_v, m) if key != "mode_shape" else (n_a, n_v, m, n)
+            if v is None or v.shape != want:
+                raise InputError(path, f"closed_loop/{key}", "missing, or its shape does not "
+                                 f"match the axes {want}")
+            modes[key] = np.asarray(v[()], dtype=float)
     _verify(f, path)  # after the structure, so that a missing dataset is named as such
     _check_feasible_finite(path, d, tilt, speed, xi)
     return Table(
@@ -468,7 +499,7 @@ def _read(f, path) -> Table:
         d["nominal/tension"], d["feasibility/reasons"].astype(np.uint8),
         d["closed_loop/spectral_radius"], d["weights/Q"], d["weights/R"], d["closed_loop/dt"],
         str(d["config_text"]), str(attrs.get("config_sha256", "")), attrs, str(path),
-        offsets,
+        offsets, **modes,
     )
 
 

@@ -11,6 +11,8 @@
   and speed, one row per tilt;
 - ``spectral_radius.png``: the closed-loop monodromy spectral radius per circle
   (speed x tilt);
+- ``time_constant.png``: the slowest closed-loop time constant per circle (speed x
+  tilt; :mod:`~gainsched.schedule.modes`), the slowest of all and its states in the title;
 - ``midpoint_error.png`` when a midpoint check is given (``gainsched check``, the
   firmware layer computes it): the largest relative gain error of the interpolation
   per speed x tilt midpoint.
@@ -30,8 +32,10 @@ import json
 import numpy as np
 
 from .envelope import envelope_from_table, envelope_png
+from .modes import dominant_states
 
-__all__ = ["schedule_figures", "schedule_plots", "table_summary", "gain_file_name"]
+__all__ = ["schedule_figures", "schedule_plots", "table_summary", "slowest_mode",
+           "gain_file_name"]
 
 INPUT_NAMES = ("T1", "T2", "T3", "T4")
 
@@ -176,7 +180,8 @@ def schedule_figures(table, midpoints=None) -> dict:
     One ``gains_tilt<deg>.png`` per tilt (every gain entry ``K_ij`` as a map over
     azimuth and speed, infeasible circles blank), ``nominal.png`` (the nominal motor
     thrusts and roll), ``spectral_radius.png`` (closed-loop monodromy spectral radius per
-    speed x tilt circle) and, given a midpoint check, ``midpoint_error.png`` (the
+    speed x tilt circle), ``time_constant.png`` (the slowest closed-loop time constant per
+    circle, when the table has modes) and, given a midpoint check, ``midpoint_error.png`` (the
     largest relative gain error of the interpolation per speed x tilt midpoint). Every
     map draws the table's own arrays, no resampling.
 
@@ -217,7 +222,7 @@ def schedule_figures(table, midpoints=None) -> dict:
     >>> figs = gs.schedule_figures(table, (chk.speed, chk.tilt, chk.rel_err))
     >>> sorted(figs)
     ['gains_tilt0.png', 'gains_tilt20.png', 'midpoint_error.png', 'nominal.png',
-     'spectral_radius.png']
+     'spectral_radius.png', 'time_constant.png']
     >>> len(figs["gains_tilt20.png"].axes)              # 4 inputs x 11 states
     44
     >>> figs["spectral_radius.png"].savefig(f"{out}/spectral_radius.png")
@@ -234,6 +239,15 @@ def schedule_figures(table, midpoints=None) -> dict:
         plt, table, rho, f"{table.name}: closed-loop monodromy spectral radius per circle "
         f"({worst}; < 1 is stable; blank: infeasible)", "spectral radius per period",
         "spectral_radius")
+    if table.mode_tau is not None:
+        slow = slowest_mode(table)
+        worst = (f"slowest {slow['time_constant_s']:.3g} s at {slow['speed_mps']:g} m/s, "
+                 f"{slow['tilt_deg']:g} deg: {', '.join(slow['dominant_states'])}"
+                 if slow else "no feasible circle")
+        figs["time_constant.png"] = _speed_tilt_figure(
+            plt, table, table.mode_tau[..., 0], f"{table.name}: slowest closed-loop time "
+            f"constant per circle, s\n({worst}; blank: infeasible)",
+            "tau = -T / ln|lambda| (s)", "time_constant")
     if midpoints is not None:
         vs, ts, grid = _midpoint_grid(midpoints)
         fin = grid[np.isfinite(grid)]
@@ -257,6 +271,51 @@ def _png(fig) -> bytes:
 def _json_grid(a) -> list:
     """A float array as nested lists, NaN as None (JSON has no NaN)."""
     return np.where(np.isfinite(a), a, None).tolist()
+
+
+def slowest_mode(table) -> dict | None:
+    """The slowest closed-loop mode of the whole table and where it is.
+
+    Parameters
+    ----------
+    table : Table
+        A table with modes (``table.mode_tau`` not None).
+
+    Returns
+    -------
+    dict or None
+        ``time_constant_s``, ``frequency_rad_s``, ``damping``, ``speed_mps``, ``tilt_deg``
+        and ``dominant_states`` (:func:`~gainsched.schedule.modes.dominant_states`); None
+        when no circle is feasible.
+    """
+    tau = table.mode_tau[..., 0]
+    if not np.any(np.isfinite(tau)):
+        return None
+    i, j = np.unravel_index(np.nanargmax(tau), tau.shape)
+    return {
+        "time_constant_s": float(tau[i, j]),
+        "frequency_rad_s": float(table.mode_frequency[i, j, 0]),
+        "damping": float(table.mode_damping[i, j, 0]),
+        "speed_mps": float(table.speed[j]),
+        "tilt_deg": float(np.rad2deg(table.tilt[i])),
+        "dominant_states": dominant_states(table.mode_shape[i, j, 0], table.state_names),
+    }
+
+
+def _modes_summary(table) -> dict | None:
+    """Every circle's modes as JSON data (None: a table without modes)."""
+    if table.mode_tau is None:
+        return None
+    names = table.state_names
+    dom = [[[dominant_states(sh, names) if np.all(np.isfinite(sh)) else None for sh in circle]
+            for circle in row] for row in table.mode_shape]
+    return {
+        "tau_s": _json_grid(table.mode_tau),
+        "frequency_rad_s": _json_grid(table.mode_frequency),
+        "damping": _json_grid(table.mode_damping),
+        "dominant_states": dom,
+        "slowest": slowest_mode(table),
+    }
 
 
 def table_summary(table, *, source: str = "") -> dict:
@@ -338,6 +397,7 @@ def table_summary(table, *, source: str = "") -> dict:
         "nominal_roll_deg": rng(np.where(ok, np.rad2deg(table.phi_d), np.nan)),
         "spectral_radius": _json_grid(rho),
         "worst_spectral_radius": float(fin.max()) if fin.size else None,
+        "modes": _modes_summary(table),
     }
 
 
@@ -387,7 +447,8 @@ def schedule_plots(table, midpoints=None, *, source: str = "") -> dict[str, byte
     >>> table = gs.load_table(gs.write_outputs(out, small, gs.build_grid(small))[0])
     >>> files = gs.schedule_plots(table)
     >>> sorted(files)
-    ['envelope.png', 'gains_tilt0.png', 'nominal.png', 'plots.json', 'spectral_radius.png']
+    ['envelope.png', 'gains_tilt0.png', 'nominal.png', 'plots.json', 'spectral_radius.png',
+     'time_constant.png']
     >>> summary = json.loads(files["plots.json"])
     >>> summary["speeds_mps"], [round(x, 3) for x in summary["spectral_radius"][0]]
     ([6.0, 9.0], [0.84, 0.952])

@@ -1,0 +1,135 @@
+"""The closed loop's slowest modes (gainsched/schedule/modes.py): closed forms, a fresh
+monodromy, scipy's DARE, the paper table's figures, and what inspect and plot show."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from scipy.linalg import solve_discrete_are
+
+import gainsched as gs
+from gainsched.cli import cli
+from gainsched.model.reduced import Model
+from gainsched.schedule.grid import _discrete_at
+from gainsched.schedule.lqr import monodromy
+from gainsched.schedule.modes import dominant_states, floquet_modes
+from gainsched.schedule.path import period
+
+ROOT = Path(__file__).parents[1]
+PAPER_H5 = ROOT / "tables/paper.h5"
+
+
+def _rotation(r, theta):
+    c, s = np.cos(theta), np.sin(theta)
+    return r * np.array([[c, -s], [s, c]])
+
+
+def test_modes_of_a_known_map_are_its_closed_forms():
+    """A map with a real mode 0.99, a pair 0.9 e^{+-i 0.3}, a real 0.5 and a fast pair,
+    in a random basis: slowest first, tau = -T/ln|lambda|, frequency = arg/T, damping =
+    -ln r / |ln lambda|, one entry per pair, and the shapes are the basis columns."""
+    rng = np.random.default_rng(3)
+    T = 0.7
+    D = np.zeros((7, 7))
+    D[0, 0] = 0.99
+    D[1:3, 1:3] = _rotation(0.9, 0.3)
+    D[3, 3] = 0.5
+    D[4:6, 4:6] = _rotation(0.1, 2.0)
+    D[6, 6] = -0.05  # a real negative eigenvalue: half a turn per period
+    P = rng.normal(size=(7, 7))
+    m = floquet_modes(P @ D @ np.linalg.inv(P), T, count=5)
+    lam_r = np.array([0.99, 0.9, 0.5, 0.1, 0.05])
+    np.testing.assert_allclose(m.tau, -T / np.log(lam_r), rtol=1e-10)
+    np.testing.assert_allclose(m.frequency, np.array([0, 0.3, 0, 2.0, np.pi]) / T,
+                               rtol=1e-10, atol=1e-12)
+    zeta_pair = -np.log(0.9) / np.hypot(np.log(0.9), 0.3)
+    np.testing.assert_allclose(m.damping[:3], [1, zeta_pair, 1], rtol=1e-10)
+    # shape of the real slow mode: |first basis column|, largest entry 1
+    v = np.abs(P[:, 0]) / np.abs(P[:, 0]).max()
+    np.testing.assert_allclose(m.shape[0], v, rtol=1e-8)
+    assert m.shape.max(axis=-1) == pytest.approx(np.ones(5))
+    # batched: the same per map
+    mb = floquet_modes(np.stack([D, D[::-1, ::-1]]), np.array([T, 2 * T]), count=2)
+    np.testing.assert_allclose(mb.tau[1], -2 * T / np.log([0.99, 0.9]), rtol=1e-10)
+
+
+def test_dominant_states_are_those_near_the_largest():
+    names = ["a", "b", "c", "d"]
+    assert dominant_states(np.array([0.2, 1.0, 0.5, 0.49]), names) == ["b", "c"]
+    assert dominant_states(np.array([1.0, 0.0, 0.0, 0.0]), names) == ["a"]
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return gs.load_config(ROOT / "configs/paper.toml")
+
+
+@pytest.mark.parametrize("speed", [3.0, 9.0, 15.0])
+def test_stored_modes_equal_a_fresh_monodromy_and_the_dare(paper, speed):
+    """The modes a build stores equal -T/ln|eig(monodromy)| of a fresh solve keeping every
+    step (the monodromy multiplied out here), and at tilt 0 -dt/ln|eig(A - B K)| of
+    scipy's DARE solved here, to 1e-9 relative."""
+    tilts = np.deg2rad([0.0, 20.0, 40.0])
+    sol = gs.solve_circle(paper, speed, tilts)
+    fresh, (Ad, Bd, K) = gs.solve_circle(paper, speed, tilts, keep_steps=True)
+    feasible = np.isfinite(sol.spectral_radius)
+    assert feasible[:2].all()
+    T = period(speed, paper.radius)
+    for b, i in enumerate(np.flatnonzero(feasible)):
+        lam = np.linalg.eigvals(monodromy(Ad[b], Bd[b], K[b]))
+        lam = lam[lam.imag >= 0]
+        tau = np.sort(-T / np.log(np.abs(lam)))[::-1][:4]
+        np.testing.assert_allclose(sol.mode_tau[i], tau, rtol=1e-9, err_msg=f"tilt {i}")
+    # tilt 0 by the DARE: the per-step closed loop
+    model = Model(paper)
+    n = sol.K.shape[-1]
+    A, B = _discrete_at(model, speed, [0.0], 1, sol.dt)
+    S = solve_discrete_are(A[0, 0], B[0, 0], paper.control.Q, paper.control.R)
+    Kd = np.linalg.solve(paper.control.R + B[0, 0].T @ S @ B[0, 0], B[0, 0].T @ S @ A[0, 0])
+    lam = np.linalg.eigvals(A[0, 0] - B[0, 0] @ Kd)
+    lam = lam[lam.imag >= 0]
+    order = np.argsort(-np.abs(lam))[:4]
+    np.testing.assert_allclose(sol.mode_tau[0], -sol.dt / np.log(np.abs(lam[order])),
+                               rtol=1e-9)
+    np.testing.assert_allclose(sol.mode_frequency[0], np.abs(np.angle(lam[order])) / sol.dt,
+                               rtol=1e-9, atol=1e-12)
+    assert n == 11
+
+
+def test_paper_table_has_the_slow_integral_the_issue_measured():
+    """configs/paper.toml's table: at tilt 0 the slowest mode is the out-of-plane integral,
+    3.5 s, 22.6 s and 96.6 s at 3, 9 and 15 m/s (issue 20's figures)."""
+    t = gs.load_table(PAPER_H5)
+    for speed, tau in ((3.0, 3.5), (9.0, 22.6), (15.0, 96.6)):
+        j = int(np.flatnonzero(t.speed == speed)[0])
+        assert round(float(t.mode_tau[0, j, 0]), 1) == tau
+        assert dominant_states(t.mode_shape[0, j, 0], t.state_names)[0] == "int_delta"
+    feasible = np.isfinite(t.spectral_radius)
+    assert np.array_equal(np.isfinite(t.mode_tau).all(-1), feasible)
+    # the largest |lambda| is the spectral radius: tau_0 = -T / ln(rho)
+    T = 2 * np.pi / t.xi_dot
+    np.testing.assert_allclose(t.mode_tau[..., 0][feasible],
+                               (-T / np.log(t.spectral_radius))[feasible], rtol=1e-9)
+
+
+def test_inspect_prints_and_json_holds_the_slowest_mode_per_circle():
+    t = gs.load_table(PAPER_H5)
+    r = CliRunner().invoke(cli, ["inspect", str(PAPER_H5)])
+    assert r.exit_code == 0, r.output
+    lines = r.output.splitlines()
+    head = next(k for k, ln in enumerate(lines) if "slowest closed-loop time constant" in ln)
+    for i in range(t.tilt.size):  # one row per tilt, one column per speed
+        cells = lines[head + 2 + i].split()[1:]
+        want = ["-" if not np.isfinite(x) else f"{x:.3g}" for x in t.mode_tau[i, :, 0]]
+        assert cells == want, i
+    assert "slowest of all: 96.6 s at 15 m/s, 0 deg (int_delta" in r.output
+    js = json.loads(CliRunner().invoke(cli, ["inspect", str(PAPER_H5), "--json"]).output)
+    tau = np.array([[[np.nan if x is None else x for x in c] for c in row]
+                    for row in js["modes"]["tau_s"]])
+    np.testing.assert_array_equal(tau, t.mode_tau)
+    assert js["modes"]["slowest"]["time_constant_s"] == np.nanmax(t.mode_tau)
+    assert js["modes"]["dominant_states"][0][18][0][0] == "int_delta"
