@@ -396,6 +396,15 @@ def bench_build(cfg):
                grid_points=int(g.reasons.size), circles=int(g.spectral_radius.size),
                peak_rss_mib=peak, peak_rss_above_imports_mib=peak - base)
 
+    # the closed-loop bound (issue 20: within 1.2x): the scaled LQR, plus the LQR without
+    # the bound for the price line, at every circle
+    bounded = cfg.with_values({"control.max_time_constant_s": 1.5})
+    t_b, g_b = best_of(lambda: build_grid(bounded, n_jobs=1), 2)
+    print(f"  build with max_time_constant_s = 1.5: {t_b:.2f} s, x{t_b / t1:.2f} the paper "
+          f"build (slowest mode {np.nanmax(g_b.mode_tau):.2f} s, was "
+          f"{np.nanmax(g.mode_tau):.1f} s)")
+    out.update(bounded_s=t_b, bounded_ratio=t_b / t1)
+
     # growth in grid points, two ways. Speeds refined: one job per speed, each with the
     # same cost profile, so this is the growth of the work per grid point. Tilts
     # refined at fixed speeds: the tilts of a speed are solved as batches, which

@@ -254,7 +254,7 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     from .firmware.outputs import write_outputs
     from .publish import check_out_dir, recover
     from .schedule.distributed import check_options, executor
-    from .schedule.grid import build_grid
+    from .schedule.grid import bound_price, build_grid
 
     check_options(backend, scheduler)
     cfg = load_config(config)
@@ -277,6 +277,8 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
         f"{time.perf_counter() - t0:.1f} s, {out.stat().st_size / 1024:.0f} KiB"
     )
     click.echo("  C: " + ", ".join(str(p) for p in c_paths))
+    if cfg.control.max_time_constant_s is not None:
+        click.echo("  " + bound_price(cfg.control.max_time_constant_s, grid))
 
 
 @cli.command()

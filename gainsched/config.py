@@ -59,6 +59,8 @@ MASS_RANGE = (0.01, 1000.0)  # kg, a plausible vehicle
 INERTIA_TRIANGLE_TOL = 1e-6  # relative slack of J1 + J2 >= J3 (a flat plate is the limit)
 MAX_SPEED = 100.0  # m/s, tangential COG speed
 MAX_RATE_HZ = 1.0e5  # Hz, control rate
+#: control periods: the shortest closed-loop time constant bound a config may ask for
+MIN_TIME_CONSTANT_STEPS = 10
 MIN_STEPS_PER_PERIOD = 32  # control steps over the fastest circle of the grid
 #: largest config text, characters: a hand-written config is a few KiB, and the largest
 #: grid the default [limits] allow is far below this (parsing 20 MB of TOML takes seconds)
@@ -138,6 +140,9 @@ class Control:
     integrator: bool = True
     terminal: str = "periodic"
     azimuth_integral: bool = False
+    #: s; every closed-loop mode decays at least this fast (None: no bound; see
+    #: :func:`gainsched.schedule.lqr.stability_scale`)
+    max_time_constant_s: float | None = None
 
     @property
     def integrators(self) -> tuple[str, ...]:
@@ -653,10 +658,20 @@ def _control(sec: Section) -> Control:
         raise sec.error("R", "must be invariant under the motor swap 1<->4, 2<->3 "
                         "(R11 = R44, R22 = R33; docs/symmetry.md)")
     term = sec.string("terminal", "periodic", choices=TERMINAL_COSTS)
+    tau_max = None
+    if "max_time_constant_s" in sec.data:
+        tau_max = sec.number("max_time_constant_s", positive=True)
+        if tau_max < MIN_TIME_CONSTANT_STEPS / rate:
+            raise sec.error("max_time_constant_s", f"must be at least {MIN_TIME_CONSTANT_STEPS} "
+                            f"control periods ({MIN_TIME_CONSTANT_STEPS / rate:g} s at "
+                            f"{rate:g} Hz), got {tau_max:g}")
+        if term != "periodic":
+            raise sec.error("max_time_constant_s", "needs terminal = \"periodic\" (a "
+                            "one-period horizon guarantees no decay rate)")
     sec.done()
     Q.setflags(write=False)
     R.setflags(write=False)
-    return Control(rate, Q, R, integ, term, az_integ)
+    return Control(rate, Q, R, integ, term, az_integ, tau_max)
 
 
 def _grid(sec: Section, radius: float) -> Grid:

@@ -462,3 +462,23 @@ def test_integral_states_set_the_size_of_Q():
     Q[0, 11] = Q[11, 0] = 0.1  # int_xi flips under the direction mirror, delta does not
     with pytest.raises(InputError, match=r"control\.Q: must not couple .*int_xi"):
         base.with_values({"control.azimuth_integral": True, "control.Q": Q.tolist()})
+
+
+def test_max_time_constant_is_optional_bounded_below_and_needs_a_periodic_terminal():
+    """``[control] max_time_constant_s``: None by default; at least 10 control periods
+    (0.01 s at 1 kHz); positive; only with the periodic terminal cost (a one-period
+    horizon guarantees no decay rate). Errors name the key."""
+    base = load_config("configs/paper.toml")
+    assert base.control.max_time_constant_s is None
+    assert base.with_values({"control.max_time_constant_s": 1.5}).control.max_time_constant_s \
+        == 1.5
+    assert base.with_values({"control.max_time_constant_s": 0.01}).control \
+        .max_time_constant_s == 0.01
+    with pytest.raises(InputError, match=r"control\.max_time_constant_s: must be at least 10 "
+                                         r"control periods \(0\.01 s at 1000 Hz\), got 0\.005"):
+        base.with_values({"control.max_time_constant_s": 0.005})
+    with pytest.raises(InputError, match=r"control\.max_time_constant_s: .*positive|> 0"):
+        base.with_values({"control.max_time_constant_s": -1.0})
+    with pytest.raises(InputError, match=r"control\.max_time_constant_s: needs terminal = "
+                                         r"\"periodic\""):
+        base.with_values({"control.max_time_constant_s": 1.5, "control.terminal": "single-period"})

@@ -133,3 +133,72 @@ def test_inspect_prints_and_json_holds_the_slowest_mode_per_circle():
     np.testing.assert_array_equal(tau, t.mode_tau)
     assert js["modes"]["slowest"]["time_constant_s"] == np.nanmax(t.mode_tau)
     assert js["modes"]["dominant_states"][0][18][0][0] == "int_delta"
+
+
+# --------------------------------------------------------------------------- the bound
+
+TAU_MAX = 1.5
+
+
+@pytest.fixture(scope="module")
+def bounded(paper):
+    """configs/paper.toml with every closed-loop mode bounded to 1.5 s."""
+    return paper.with_values({"control.max_time_constant_s": TAU_MAX}, "bounded.toml")
+
+
+@pytest.mark.parametrize("speed", [3.0, 9.0, 15.0])
+def test_bound_holds_on_a_fresh_monodromy_and_the_dare(paper, bounded, speed):
+    """With max_time_constant_s = 1.5: the monodromy of the real system (A_k, B_k, not the
+    scaled one) under the stored gains, multiplied out here, has every tau <= 1.5 s and
+    the stored modes; at tilt 0 scipy's DARE of (c A, c B), c = exp(dt / 1.5), solved here
+    gives the stored gain and modes. The feasibility is the paper config's (the bound
+    changes gains, not nominal), and the gains rise: the price."""
+    tilts = np.deg2rad([0.0, 20.0, 40.0])
+    sol = gs.solve_circle(bounded, speed, tilts)
+    free = gs.solve_circle(paper, speed, tilts)
+    np.testing.assert_array_equal(sol.reasons, free.reasons)
+    _, (Ad, Bd, K) = gs.solve_circle(bounded, speed, tilts, keep_steps=True)
+    T = period(speed, bounded.radius)
+    feasible = np.flatnonzero(np.isfinite(sol.spectral_radius))
+    for b, i in enumerate(feasible):
+        lam = np.linalg.eigvals(monodromy(Ad[b], Bd[b], K[b]))
+        tau = -T / np.log(np.abs(lam))
+        assert tau.max() <= TAU_MAX * (1 + 1e-9), (i, tau.max())
+        lam = lam[lam.imag >= 0]
+        np.testing.assert_allclose(sol.mode_tau[i], np.sort(-T / np.log(np.abs(lam)))[::-1][:4],
+                                   rtol=1e-9)
+    A, B = (x[0, 0] for x in _discrete_at(Model(bounded), speed, [0.0], 1, sol.dt))
+    c = np.exp(sol.dt / TAU_MAX)
+    S = solve_discrete_are(c * A, c * B, bounded.control.Q, bounded.control.R)
+    Kd = np.linalg.solve(bounded.control.R + c * c * B.T @ S @ B, c * c * B.T @ S @ A)
+    np.testing.assert_allclose(sol.K[0, 0], Kd, rtol=1e-8, atol=1e-10)
+    lam = np.linalg.eigvals(A - B @ Kd)
+    assert (-sol.dt / np.log(np.abs(lam))).max() <= TAU_MAX
+    np.testing.assert_allclose(sol.mode_tau[0, 0], (-sol.dt / np.log(np.abs(lam))).max(),
+                               rtol=1e-9)
+    assert np.nanmax(np.abs(sol.K)) > np.nanmax(np.abs(free.K))
+    np.testing.assert_allclose(sol.gain_max_free[feasible],
+                               np.abs(free.K[feasible]).max(axis=(1, 2, 3)), rtol=1e-12)
+    np.testing.assert_array_equal(free.gain_max_free[feasible],
+                                  np.abs(free.K[feasible]).max(axis=(1, 2, 3)))
+
+
+def test_build_with_the_bound_meets_it_everywhere_and_prints_the_price(paper, tmp_path):
+    """``gainsched build`` of a grid with max_time_constant_s = 1.5: every feasible circle's
+    slowest tau in the table <= 1.5 s, the same feasibility as without the bound, and the
+    price line (max |K| with and without the bound, both recomputed here)."""
+    small = {"grid.speeds": [3, 9, 15], "grid.tilts_deg": [0, 20], "grid.azimuth_samples": 8}
+    cfg = paper.with_values({**small, "name": "bounded", "control.max_time_constant_s": 1.5})
+    (tmp_path / "bounded.toml").write_text(cfg.text)
+    r = CliRunner().invoke(cli, ["build", str(tmp_path / "bounded.toml"), "-o", str(tmp_path)])
+    assert r.exit_code == 0, r.output
+    t = gs.load_table(tmp_path / "bounded.h5")
+    free = gs.build_grid(paper.with_values(small))
+    feasible = np.isfinite(t.spectral_radius)
+    np.testing.assert_array_equal(feasible, np.isfinite(free.spectral_radius))
+    np.testing.assert_array_equal(t.reasons, free.reasons)
+    assert feasible.sum() >= 5
+    assert np.nanmax(t.mode_tau) <= TAU_MAX
+    k_max, k_free = np.nanmax(np.abs(t.K_full())), np.nanmax(np.abs(free.K))
+    assert (f"slowest closed-loop mode {np.nanmax(t.mode_tau[..., 0]):.3g} s; the price: max |K| "
+            f"{k_max:.3g}, {k_free:.3g} without the bound (x{k_max / k_free:.2f})") in r.output

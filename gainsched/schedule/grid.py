@@ -38,14 +38,15 @@ from ..native.reproducible import (
     process_pinned,
 )
 from .linearize import discretize, jacobians, lqr_system
-from .lqr import dlqr, periodic_lqr, spectral_radius
+from .lqr import dlqr, periodic_lqr, spectral_radius, stability_scale
 from .modes import MODE_COUNT, floquet_modes
 from .nominal import circle_nominal, circle_offsets
 from .offsets import HARMONICS
 from .path import period
 from .trim import TrimError
 
-__all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "steps_per_period",
+__all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "bound_price",
+           "steps_per_period",
            "discrete_system", "periodic_interp", "check_effect_symmetries",
            "level_circle_invariant", "LIN_TOL",
            "SYMMETRY_TOL"]
@@ -151,6 +152,10 @@ class CircleSolution:
         Their damping ratios (1: real).
     mode_shape : ndarray, shape (n_a, M, n)
         Their eigenvectors' magnitudes in the states' units, largest entry 1.
+    gain_max_free : ndarray, shape (n_a,)
+        Largest gain magnitude at the grid azimuths of the LQR without
+        ``[control] max_time_constant_s`` (the price of the bound is ``max |K|`` against
+        it; the same as ``max |K|`` without a bound), N per state unit; NaN if infeasible.
     """
 
     K: np.ndarray
@@ -170,6 +175,7 @@ class CircleSolution:
     mode_frequency: np.ndarray
     mode_damping: np.ndarray
     mode_shape: np.ndarray
+    gain_max_free: np.ndarray
 
 
 def _sample_steps(N, n_xi):
@@ -286,10 +292,17 @@ def _tilt0(model, config, speed, N, dt, Qx):
     (:func:`level_circle_invariant`): the circle's linearisation is the same at every
     azimuth, so the periodic problem is time-invariant and its solution is the DARE's,
     exactly. Returns ``K (4, n), S (n, n), spectral radius``, the modes of ``A - B K``
-    (:func:`~gainsched.schedule.modes.floquet_modes` with the step ``dt``)."""
+    (:func:`~gainsched.schedule.modes.floquet_modes` with the step ``dt``) and max |K|
+    without the config's ``max_time_constant_s`` (the same K without one)."""
     Ad, Bd = _discrete_at(model, speed, [0.0], 1, dt)
-    K, S, E = dlqr(Ad[0, 0], Bd[0, 0], Qx, config.control.R)
-    return K, S, float(np.abs(E).max()) ** N, floquet_modes(Ad[0, 0] - Bd[0, 0] @ K, dt)
+    A, B = Ad[0, 0], Bd[0, 0]
+    scale = stability_scale(dt, config.control.max_time_constant_s)
+    K, S, E = dlqr(A, B, Qx, config.control.R)
+    gain_max_free = float(np.abs(K).max())
+    if scale != 1.0:  # the prescribed degree of stability: the DARE of the scaled system
+        K, S, _ = dlqr(scale * A, scale * B, Qx, config.control.R)
+        E = np.linalg.eigvals(A - B @ K)
+    return K, S, float(np.abs(E).max()) ** N, floquet_modes(A - B @ K, dt), gain_max_free
 
 
 def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=None):
@@ -393,6 +406,7 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=No
     tau = np.full((n_a, MODE_COUNT), np.nan)
     frequency, damping = np.full_like(tau, np.nan), np.full_like(tau, np.nan)
     shape = np.full((n_a, MODE_COUNT, n), np.nan)
+    gain_max_free = np.full(n_a, np.nan)
 
     def put_modes(idx, m):
         tau[idx], frequency[idx], damping[idx], shape[idx] = (
@@ -414,10 +428,11 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=No
         reasons[i] = g.reasons | np.where(elsewhere, Reason.ELSEWHERE, 0).astype(np.uint8)
     Qx = np.zeros((n, n))
     Qx[:n_lqr, :n_lqr] = config.control.Q
+    scale = stability_scale(dt, config.control.max_time_constant_s)
     ok = np.flatnonzero(bad == 0)
     if dare_tilt0 and not keep_steps and config.control.terminal == "periodic":
         for i in ok[tilts[ok] == 0.0]:
-            Ki, Si, radius[i], modes = _tilt0(model, config, speed, N, dt, Qx)
+            Ki, Si, radius[i], modes, gain_max_free[i] = _tilt0(model, config, speed, N, dt, Qx)
             K[i], S[i] = Ki, Si
             put_modes(i, modes)
             lin_samples[i], lin_error[i], sweeps[i] = 1, 0.0, -1  # infinite horizon
@@ -428,20 +443,30 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=No
         idx = ok[c : c + TILT_BATCH]
         Ad, Bd, M, err = discrete_system(model, speed, tilts[idx], N, dt)
         lin_samples[idx], lin_error[idx] = M, err
-        sol = periodic_lqr(Ad, Bd, Qx, config.control.R, terminal=config.control.terminal,
+        As, Bs = (Ad, Bd) if scale == 1.0 else (scale * Ad, scale * Bd)
+        sol = periodic_lqr(As, Bs, Qx, config.control.R, terminal=config.control.terminal,
                            keep_S=True, steps=None if keep_steps else keep)
+        # the monodromy of the real loop: prod (A_k - B_k K_k) = scale^-N prod (scaled)
+        Phi = sol.Phi if scale == 1.0 else sol.Phi * scale ** -N
         Ks, Ss = sol.K, sol.S
         if keep_steps:  # every step was kept: pick the grid's bracketing steps
             Ks, Ss = Ks[:, keep], Ss[:, keep]
             kept.append((Ad, Bd, sol.K))
         K[idx] = _sample(Ks, lo, hi, w)
         S[idx] = _sample(Ss, lo, hi, w)
-        radius[idx] = spectral_radius(sol.Phi)
-        put_modes(idx, floquet_modes(sol.Phi, N * dt))
+        radius[idx] = spectral_radius(Phi)
+        put_modes(idx, floquet_modes(Phi, N * dt))
+        if scale != 1.0:  # the price of the bound: the gains without it
+            free = periodic_lqr(Ad, Bd, Qx, config.control.R, terminal=config.control.terminal,
+                                steps=keep)
+            gain_max_free[idx] = np.abs(_sample(free.K, lo, hi, w)).max(axis=(1, 2, 3))
+        else:
+            gain_max_free[idx] = np.abs(K[idx]).max(axis=(1, 2, 3))
         sweeps[idx] = sol.sweeps
     steps = tuple(np.concatenate(x) for x in zip(*kept, strict=True)) if kept else None
     out = CircleSolution(K, S, u_d, phi_d, tension, reasons, radius, sweeps, lin_samples,
-                         lin_error, N, dt, offsets, tau, frequency, damping, shape)
+                         lin_error, N, dt, offsets, tau, frequency, damping, shape,
+                         gain_max_free)
     return (out, steps) if keep_steps else out
 
 
@@ -490,6 +515,9 @@ class GridResult:
         infeasible.
     mode_shape : ndarray, shape (n_a, n_v, M, n)
         Their eigenvectors' magnitudes in the states' units, largest entry 1.
+    gain_max_free : ndarray, shape (n_a, n_v)
+        Largest gain magnitude of the LQR without ``max_time_constant_s`` per circle, N
+        per state unit (as in :class:`CircleSolution`).
     level_invariant : bool
         Tilt 0 was solved by the DARE, one gain per speed independent of the azimuth
         (:func:`level_circle_invariant`); False when an effect changes with the azimuth
@@ -513,6 +541,7 @@ class GridResult:
     mode_frequency: np.ndarray
     mode_damping: np.ndarray
     mode_shape: np.ndarray
+    gain_max_free: np.ndarray
     level_invariant: bool = True
 
 
@@ -636,3 +665,29 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
                 for f in fields(CircleSolution) if f.name not in ("steps", "dt")}
     return GridResult(**per_tilt, steps=np.array([s.steps for s in sols]),
                       dt=np.array([s.dt for s in sols]), level_invariant=invariant)
+
+
+def bound_price(max_time_constant_s: float, grid: GridResult) -> str:
+    """One line: what ``[control] max_time_constant_s`` bought and what it cost.
+
+    Parameters
+    ----------
+    max_time_constant_s : float
+        The config's bound, s.
+    grid : GridResult
+        A grid built with it.
+
+    Returns
+    -------
+    str
+        The slowest closed-loop time constant of the grid against the bound, and the
+        largest gain against the largest without the bound (N per state unit).
+    """
+    tau = grid.mode_tau[..., 0]
+    if not np.any(np.isfinite(tau)):
+        return f"max_time_constant_s {max_time_constant_s:g} s: no feasible circle"
+    k_max = float(np.nanmax(np.abs(grid.K)))
+    k_free = float(np.nanmax(grid.gain_max_free))
+    return (f"max_time_constant_s {max_time_constant_s:g} s: slowest closed-loop mode "
+            f"{np.nanmax(tau):.3g} s; the price: max |K| {k_max:.3g}, {k_free:.3g} without "
+            f"the bound (x{k_max / k_free:.2f})")

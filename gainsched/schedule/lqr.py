@@ -30,6 +30,7 @@ eigenvalues ``E``; ``u = u_d - K (x - x_d)``.
 from __future__ import annotations
 
 import ctypes
+import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -51,6 +52,7 @@ __all__ = [
     "dlqr",
     "monodromy",
     "spectral_radius",
+    "stability_scale",
 ]
 
 
@@ -336,6 +338,33 @@ def dlqr(A, B, Q, R):
     K = np.linalg.solve(R + B.T @ S @ B, B.T @ S @ A)
     E = np.linalg.eigvals(A - B @ K)
     return K, S, E
+
+
+def stability_scale(dt: float, max_time_constant_s: float | None) -> float:
+    """The factor ``exp(dt / tau_max)`` that gives an LQR a prescribed degree of stability.
+
+    Minimising the exponentially weighted cost ``sum exp(2 k dt / tau_max) (x_k^T Q x_k +
+    u_k^T R u_k)`` is the ordinary LQR of the scaled system ``(c A_k, c B_k)`` with ``c =
+    exp(dt / tau_max)`` (Anderson & Moore, *Optimal Control: Linear Quadratic Methods*,
+    Prentice Hall 1990, the regulator with a prescribed degree of stability). Its
+    gains stabilise the scaled loop, and the real loop's ``A_k - B_k K_k = (c A_k - c B_k
+    K_k) / c``: over a period of N steps the real monodromy is ``c^-N`` times the scaled
+    one, so every closed-loop mode has ``|lambda| < exp(-T / tau_max)``, a time constant
+    below ``tau_max``, by construction.
+
+    Parameters
+    ----------
+    dt : float
+        Discretisation step, s.
+    max_time_constant_s : float or None
+        The bound ``tau_max``, s; None: no bound (factor 1).
+
+    Returns
+    -------
+    float
+        ``exp(dt / tau_max)``, or exactly 1.0 without a bound.
+    """
+    return 1.0 if max_time_constant_s is None else math.exp(dt / max_time_constant_s)
 
 
 def monodromy(Ad, Bd, K):
