@@ -3,6 +3,7 @@ monodromy, scipy's DARE, the paper table's figures, and what inspect and plot sh
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -18,6 +19,8 @@ from gainsched.schedule.grid import _discrete_at
 from gainsched.schedule.lqr import monodromy
 from gainsched.schedule.modes import dominant_states, floquet_modes
 from gainsched.schedule.path import period
+from gainsched.schedule.tables import table_bytes, table_from_bytes
+from gainsched.sim.plots import tracking_errors
 
 ROOT = Path(__file__).parents[1]
 PAPER_H5 = ROOT / "tables/paper.h5"
@@ -202,3 +205,85 @@ def test_build_with_the_bound_meets_it_everywhere_and_prints_the_price(paper, tm
     k_max, k_free = np.nanmax(np.abs(t.K_full())), np.nanmax(np.abs(free.K))
     assert (f"slowest closed-loop mode {np.nanmax(t.mode_tau[..., 0]):.3g} s; the price: max |K| "
             f"{k_max:.3g}, {k_free:.3g} without the bound (x{k_max / k_free:.2f})") in r.output
+
+
+# --------------------------------------------------------------------------- in closed loop
+
+
+def _lqr_error(res):
+    """The LQR state error of a flight with ideal sensing: ``z - z_d`` and the delta integral
+    the controller integrates (``int_delta`` of dt (delta - delta_d), the simulator's)."""
+    dt = res.t[1] - res.t[0]
+    e = res.z - res.z_d
+    return np.column_stack([e, np.concatenate([[0.0], np.cumsum(dt * e[:-1, 0])])])
+
+
+@pytest.fixture(scope="module")
+def bounded_table(paper):
+    """A table of the paper config with max_time_constant_s = 3 (slowest modes ~1.5 s) on
+    the speeds and tilts the decay test flies."""
+    cfg = paper.with_values({"control.max_time_constant_s": 3.0, "name": "bounded3",
+                             "grid.speeds": [2.5, 3, 3.5, 8, 9, 10, 14, 15],
+                             "grid.tilts_deg": [0, 10, 20, 30]})
+    return cfg, table_from_bytes(table_bytes(cfg, gs.build_grid(cfg), Model(cfg)))
+
+
+@pytest.mark.parametrize("which", ["bounded", "paper"])
+@pytest.mark.parametrize("speed", [3.0, 9.0, 15.0])
+@pytest.mark.parametrize("tilt_deg", [0.0, 20.0])
+def test_an_offset_decays_in_the_simulator_with_the_tables_time_constants(
+        paper, bounded_table, which, speed, tilt_deg):
+    """Closed-loop proof on the design model (the nonlinear simulator, gains looked up in
+    the table): a flight started 0.01 rad off in delta and xi, minus the same flight
+    started on the nominal (which removes the small periodic error every flight has),
+    projected on the left eigenvectors of the monodromy (sampled once per period at the
+    azimuth where the period starts), decays mode by mode with the table's time constants:
+    the two slowest, within 5 % (issue 20 asks 20 %; measured <= 1.6 %). The paper's slow
+    integral at 15 m/s (97 s) is left out there: 8 periods do not measure it to 5 %."""
+    cfg, table = (paper, gs.load_table(PAPER_H5)) if which == "paper" else bounded_table
+    modes = (1,) if which == "paper" and speed == 15.0 else (0, 1)
+    _, (Ad, Bd, K) = gs.solve_circle(cfg, speed, np.deg2rad([tilt_deg]), keep_steps=True)
+    lam, W = np.linalg.eig(monodromy(Ad[0], Bd[0], K[0]).T)  # left eigenvectors
+    order = np.argsort(-np.abs(lam))
+    W = W[:, order]
+    T = period(speed, cfg.radius)
+    i = int(np.flatnonzero(np.isclose(table.tilt, np.deg2rad(tilt_deg)))[0])
+    j = int(np.flatnonzero(table.speed == speed)[0])
+    n_per = 8
+    scn = gs.Scenario("decay", np.deg2rad(tilt_deg), speed, n_per * T + 0.01,
+                      initial_error=(0.01, 0.01))
+    sched = gs.table_scheduler(table)
+    x = (_lqr_error(gs.simulate(cfg, sched, scn))
+         - _lqr_error(gs.simulate(cfg, sched, dataclasses.replace(scn, initial_error=()))))
+    ks = np.rint(np.arange(n_per + 1) * T * cfg.control.rate_hz).astype(int)
+    for m in modes:
+        c = np.abs(x[ks] @ W[:, m])
+        slope = np.polyfit(np.arange(1, n_per + 1) * T, np.log(c[1:]), 1)[0]
+        assert -1 / slope == pytest.approx(table.mode_tau[i, j, m], rel=0.05), m
+
+
+def test_the_bound_removes_the_out_of_plane_offset_of_a_weaker_thrust(paper):
+    """On a plant whose thrust is 7 % below the model's (k_T = 0.93), the 20 deg circle at
+    9 m/s starts with an out-of-plane offset (mean over the first period -8 mm); with
+    max_time_constant_s = 1.5 it is gone after 3 tau_max (mean over the next period below
+    5 % of it), while the paper's weights still carry more than half of it."""
+    plant = paper.with_values({"effects.thrust_scale.k_T": 0.93})
+    small = {"grid.speeds": [8, 9, 10], "grid.tilts_deg": [0, 10, 20, 30]}
+    speed, T = 9.0, period(9.0, paper.radius)
+    offsets = {}
+    for tau_max in (None, 1.5):
+        keys = small if tau_max is None else {**small, "control.max_time_constant_s": tau_max}
+        cfg = paper.with_values(keys)
+        table = table_from_bytes(table_bytes(cfg, gs.build_grid(cfg), Model(cfg)))
+        scn = gs.Scenario("weak", np.deg2rad(20.0), speed, 3 * 1.5 + T + 0.01)
+        res = gs.simulate(cfg, gs.table_scheduler(table), scn, plant)
+        assert not res.saturated.any()
+        e = tracking_errors(res)["out_of_plane_m"]
+        first = e[res.t < T].mean()
+        after = e[(res.t >= 4.5) & (res.t < 4.5 + T)].mean()
+        offsets[tau_max] = first, after
+    first, after = offsets[1.5]
+    assert first < -0.005
+    assert abs(after) < 0.05 * abs(first)
+    first, after = offsets[None]
+    assert abs(after) > 0.5 * abs(first)
