@@ -21,7 +21,7 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 lint: $(STAMP)
-	$(BIN)/ruff check gainsched tests bench
+	$(BIN)/ruff check gainsched tests bench examples
 	$(BIN)/lint-imports --no-cache
 
 test: $(STAMP) lint

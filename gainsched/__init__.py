@@ -40,7 +40,7 @@ API = (
                                             "SimResult", "table_scheduler",
                                             "runtime_scheduler", "metrics",
                                             "log_from_result")),
-    ("Seeing a flight", "sim.plots", ("plot_result",)),
+    ("Seeing a flight", "sim.plots", ("plot_result", "tracking_errors")),
     ("Flight logs", "analysis.logs", ("read_log", "FlightLog")),
     ("Model versus measurement", "analysis.compare", ("compare", "Comparison")),
     ("Which effect is missing", "analysis.diagnose", ("diagnose", "Diagnosis",

@@ -287,3 +287,53 @@ def test_the_bound_removes_the_out_of_plane_offset_of_a_weaker_thrust(paper):
     assert abs(after) < 0.05 * abs(first)
     first, after = offsets[None]
     assert abs(after) > 0.5 * abs(first)
+
+
+# --------------------------------------------------------------------------- recommended
+
+
+def test_recommended_config_is_the_paper_with_the_integral_and_the_bound(paper):
+    """configs/recommended.toml differs from configs/paper.toml in the name, the along-track
+    integral (and its Q entry) and max_time_constant_s = 3, nothing else; on the paper's
+    speeds and tilts x {3, 9, 15} m/s every feasible circle's slowest mode is <= 1.5 s and
+    the feasibility is the paper's."""
+    import tomllib
+
+    rec = gs.load_config(ROOT / "configs/recommended.toml")
+    assert rec.control.integrators == ("int_delta", "int_xi")
+    assert rec.control.max_time_constant_s == 3.0
+    a, b = tomllib.loads(paper.text), tomllib.loads(rec.text)
+    ca, cb = a.pop("control"), b.pop("control")
+    assert (a.pop("name"), b.pop("name")) == ("paper", "recommended")
+    assert a == b
+    assert cb.pop("Q") == ca.pop("Q") + [1]
+    assert (cb.pop("azimuth_integral"), cb.pop("max_time_constant_s")) == (True, 3.0)
+    assert ca == cb
+    for speed in (3.0, 9.0, 15.0):
+        sol = gs.solve_circle(rec, speed, rec.grid.tilts)
+        ref = gs.solve_circle(paper, speed, paper.grid.tilts)
+        np.testing.assert_array_equal(sol.reasons, ref.reasons)
+        feasible = np.isfinite(sol.spectral_radius)
+        assert feasible.any()
+        assert np.all(sol.mode_tau[feasible, 0] <= 1.5), (speed, sol.mode_tau[feasible, 0])
+
+
+def test_tradeoff_script_measures_what_the_bound_costs(tmp_path, monkeypatch):
+    """examples/closed_loop_tradeoff.py on a coarse grid: the recommended config's slowest
+    mode is <= 1.5 s against the paper's 97 s, its gains and command noise are larger; the
+    JSON holds what the table prints."""
+    import runpy
+    import sys
+
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "tradeoff.json"
+    monkeypatch.setattr(sys, "argv", [
+        "closed_loop_tradeoff.py", "configs/paper.toml", "configs/recommended.toml",
+        "--speeds", "2.5,3,3.5,8,9,10,14,15", "--tilts", "0,20,40", "--json", str(out)])
+    runpy.run_path(str(ROOT / "examples/closed_loop_tradeoff.py"), run_name="__main__")
+    paper_row, rec_row = json.loads(out.read_text())
+    assert paper_row["slowest_mode_s"] > 90 and rec_row["slowest_mode_s"] <= 1.5
+    assert rec_row["max_abs_K"] > 3 * paper_row["max_abs_K"]
+    for flight, f in rec_row["flights"].items():
+        assert f["command_noise_N"] > paper_row["flights"][flight]["command_noise_N"]
+        assert f["out_of_plane_rms_mm"] < 5.0
