@@ -143,6 +143,9 @@ class Control:
     #: s; every closed-loop mode decays at least this fast (None: no bound; see
     #: :func:`gainsched.schedule.lqr.stability_scale`)
     max_time_constant_s: float | None = None
+    #: the largest gain magnitude a build may produce, N per state unit (None: no cap;
+    #: :func:`gainsched.schedule.grid.check_gain_cap`)
+    max_gain: float | None = None
 
     @property
     def integrators(self) -> tuple[str, ...]:
@@ -668,10 +671,13 @@ def _control(sec: Section) -> Control:
         if term != "periodic":
             raise sec.error("max_time_constant_s", "needs terminal = \"periodic\" (a "
                             "one-period horizon guarantees no decay rate)")
+    max_gain = None
+    if "max_gain" in sec.data:
+        max_gain = sec.number("max_gain", positive=True)
     sec.done()
     Q.setflags(write=False)
     R.setflags(write=False)
-    return Control(rate, Q, R, integ, term, az_integ, tau_max)
+    return Control(rate, Q, R, integ, term, az_integ, tau_max, max_gain)
 
 
 def _grid(sec: Section, radius: float) -> Grid:

@@ -482,3 +482,11 @@ def test_max_time_constant_is_optional_bounded_below_and_needs_a_periodic_termin
     with pytest.raises(InputError, match=r"control\.max_time_constant_s: needs terminal = "
                                          r"\"periodic\""):
         base.with_values({"control.max_time_constant_s": 1.5, "control.terminal": "single-period"})
+
+
+def test_max_gain_is_optional_and_positive():
+    base = load_config("configs/paper.toml")
+    assert base.control.max_gain is None
+    assert base.with_values({"control.max_gain": 50.0}).control.max_gain == 50.0
+    with pytest.raises(InputError, match=r"control\.max_gain: "):
+        base.with_values({"control.max_gain": 0.0})

@@ -337,3 +337,30 @@ def test_tradeoff_script_measures_what_the_bound_costs(tmp_path, monkeypatch):
     for flight, f in rec_row["flights"].items():
         assert f["command_noise_N"] > paper_row["flights"][flight]["command_noise_N"]
         assert f["out_of_plane_rms_mm"] < 5.0
+
+
+def test_a_gain_cap_the_bound_exceeds_is_an_error_naming_the_circle(paper, tmp_path):
+    """``[control] max_gain``: a bound that needs larger gains fails the build with one
+    line naming the config, the key, the circle with the largest gain and both gains, exit
+    code 2, and no table written; a cap above the gains builds."""
+    small = {"grid.speeds": [3, 9, 15], "grid.tilts_deg": [0, 20], "grid.azimuth_samples": 8,
+             "name": "capped", "control.max_time_constant_s": 1.5}
+    grid = gs.build_grid(paper.with_values(small))
+    k = np.nanmax(np.abs(grid.K), axis=(2, 3, 4))
+    i, j = np.unravel_index(np.nanargmax(k), k.shape)
+    cfg = paper.with_values({**small, "control.max_gain": 50.0})
+    path = tmp_path / "capped.toml"
+    path.write_text(cfg.text)
+    r = CliRunner().invoke(cli, ["build", str(path), "-o", str(tmp_path / "out")])
+    assert r.exit_code == 2, r.output
+    line = r.output.strip()
+    assert "\n" not in line and "Traceback" not in line
+    speed, tilt = (3, 9, 15)[j], (0, 20)[i]
+    assert speed == 15  # the fastest circle needs the largest gains
+    assert line == (f"gainsched: error: {path}: control.max_gain: 50 is exceeded: max |K| "
+                    f"{k[i, j]:.3g} at {speed} m/s, tilt {tilt} deg with max_time_constant_s 1.5 s "
+                    f"({grid.gain_max_free[i, j]:.3g} without the bound): raise max_gain or "
+                    "the bound")
+    assert not list((tmp_path / "out").iterdir())  # nothing published
+    ok = paper.with_values({**small, "control.max_gain": float(np.ceil(k.max()))})
+    assert np.array_equal(gs.build_grid(ok).K, grid.K, equal_nan=True)

@@ -46,6 +46,7 @@ from .path import period
 from .trim import TrimError
 
 __all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "bound_price",
+           "check_gain_cap",
            "steps_per_period",
            "discrete_system", "periodic_interp", "check_effect_symmetries",
            "level_circle_invariant", "LIN_TOL",
@@ -75,6 +76,36 @@ def check_effect_symmetries(config) -> None:
                                  f"query maps rely on (relative error {err:.1e} > "
                                  f"{SYMMETRY_TOL:g}; docs/symmetry.md): simulate and diagnose "
                                  "with it, build tables without it")
+
+
+def check_gain_cap(config, grid) -> None:
+    """Refuse a grid whose gains exceed ``[control] max_gain`` anywhere.
+
+    The price of a closed-loop bound (``max_time_constant_s``) or of large weights is
+    gain: a cap says how much the vehicle can take (motor-command noise, saturation on
+    the first error). Raises :class:`InputError` naming the config file, the key and the
+    circle with the largest gain.
+
+    Parameters
+    ----------
+    config : Config
+        The config built (its ``control.max_gain``, N per state unit, or None: no cap).
+    grid : GridResult
+        The built grid.
+    """
+    cap = config.control.max_gain
+    k_max = np.abs(grid.K).max(axis=(2, 3, 4), initial=0.0, where=np.isfinite(grid.K))
+    if cap is None or not np.any(k_max > cap):
+        return
+    i, j = np.unravel_index(np.argmax(k_max), k_max.shape)
+    bound = config.control.max_time_constant_s
+    why = (f" with max_time_constant_s {bound:g} s ({grid.gain_max_free[i, j]:.3g} without "
+           "the bound): raise max_gain or the bound" if bound is not None
+           else ": raise max_gain or lower Q / raise R")
+    raise InputError(config.source, "control.max_gain",
+                     f"{cap:g} is exceeded: max |K| {k_max[i, j]:.3g} at "
+                     f"{config.grid.speeds[j]:g} m/s, tilt {np.rad2deg(config.grid.tilts[i]):g} "
+                     f"deg{why}")
 
 
 def level_circle_invariant(model) -> bool:
@@ -663,8 +694,10 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
 
     per_tilt = {f.name: np.stack([getattr(s, f.name) for s in sols], axis=1)
                 for f in fields(CircleSolution) if f.name not in ("steps", "dt")}
-    return GridResult(**per_tilt, steps=np.array([s.steps for s in sols]),
+    grid = GridResult(**per_tilt, steps=np.array([s.steps for s in sols]),
                       dt=np.array([s.dt for s in sols]), level_invariant=invariant)
+    check_gain_cap(config, grid)
+    return grid
 
 
 def bound_price(max_time_constant_s: float, grid: GridResult) -> str:
