@@ -396,24 +396,27 @@ def _imu_sigma(x: np.ndarray, h: int) -> list[float]:
     return [float(v) for v in np.sqrt(np.mean(res**2, axis=0) / (1 - hc))]
 
 
-def _accelerometer(log: FlightLog, an, noise=None):
-    """The logged specific force (N, 3) m/s^2 in B, or None without one (or with
-    ``analysis.use_accelerometer`` off, or missing samples). ``noise``: (N, 3) m/s^2
-    added (the noise-floor estimate)."""
-    f = log.optional.get("f_B")
-    if not an.use_accelerometer or f is None or not np.all(np.isfinite(f)):
+def _imu_channel(log: FlightLog, column: str, enabled: bool, noise=None):
+    """A logged on-board sensor channel (N, 3) plus ``noise`` (N, 3) when given (the
+    noise-floor estimate), or None without one, with its use switched off in
+    ``[analysis]``, or with missing samples."""
+    x = log.optional.get(column)
+    if not enabled or x is None or not np.all(np.isfinite(x)):
         return None
-    return np.asarray(f, float) if noise is None else np.asarray(f, float) + noise
+    return np.asarray(x, float) if noise is None else np.asarray(x, float) + noise
+
+
+def _accelerometer(log: FlightLog, an, noise=None):
+    """The logged specific force (N, 3) m/s^2 in B, or None (:func:`_imu_channel`)."""
+    return _imu_channel(log, "f_B", an.use_accelerometer, noise)
 
 
 def _gyro(log: FlightLog, an, n: int, dt: float, noise=None):
     """The logged gyro (N, 3) rad/s and its Savitzky-Golay derivative (N, 3) rad/s^2, or
-    ``(None, None)`` without one (or with ``analysis.use_gyro`` off, or missing samples).
-    ``noise``: (N, 3) rad/s added first (the noise-floor estimate)."""
-    gyro = log.optional.get("omega_B")
-    if not an.use_gyro or gyro is None or not np.all(np.isfinite(gyro)):
+    ``(None, None)`` (:func:`_imu_channel`)."""
+    gyro = _imu_channel(log, "omega_B", an.use_gyro, noise)
+    if gyro is None:
         return None, None
-    gyro = np.asarray(gyro, float) if noise is None else np.asarray(gyro, float) + noise
     return gyro, savgol_filter(gyro, deriv=1, delta=dt, window_length=n,
                                polyorder=an.savgol_order, axis=0, mode="interp")
 

@@ -550,10 +550,13 @@ class _Problem:
                                                                - bm.se[ok] ** 2, 0.0)))
         return total
 
-    def base_structure_power(self, base_vecs) -> float | None:
-        """:meth:`structure_power` of the base model's ``base_vecs`` (computed once)."""
+    def base_structure_power(self) -> float | None:
+        """:meth:`structure_power` of the base model's residual (computed once; its
+        prediction is :meth:`_base_residuals`', not counted as a new evaluation)."""
         if self._p_before is None:
-            self._p_before = (self.structure_power(base_vecs),)
+            base = self._base_residuals()
+            vecs = [self._weighted(base, g) for g in self.flights]
+            self._p_before = (self.structure_power(vecs),)
         return self._p_before[0]
 
     def measured(self, L_e: float):
@@ -1155,7 +1158,7 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
     contrib = np.concatenate([np.concatenate([bv[a] - v[a] for a in bv])
                               for bv, v in zip(base_vecs, vecs, strict=True)])
     contrib = contrib.astype(np.float32)
-    p_before = prob.base_structure_power(base_vecs)
+    p_before = prob.base_structure_power()
     structure = None
     if p_before:
         structure = 1 - math.sqrt(prob.structure_power(held_vecs) / p_before)
