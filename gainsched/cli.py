@@ -355,7 +355,7 @@ def inspect(table, out_dir, as_json):
     from .publish import check_out_dir
     from .schedule.nominal import REASONS
     from .schedule.tables import load_table
-    from .schedule.viewer import table_summary
+    from .schedule.viewer import mode_lines, table_summary
 
     if out_dir is not None:
         check_out_dir(out_dir, "--out")
@@ -396,39 +396,10 @@ def inspect(table, out_dir, as_json):
         click.echo(f"  worst closed-loop monodromy spectral radius {rho[i, j]:.5f} "
                    f"(speed {t.speed[j]:g} m/s, tilt {np.rad2deg(t.tilt[i]):g} deg); "
                    f"all < 1: {bool(np.all(rho[np.isfinite(rho)] < 1))}")
-    for line in _mode_lines(t):
+    for line in mode_lines(t):
         click.echo(f"  {line}")
     if out_dir is not None:
         _write_envelope(t, table, out_dir)
-
-
-def _mode_lines(t) -> list[str]:
-    """The slowest closed-loop time constant per circle (tilt rows, speed columns) and the
-    states of those modes."""
-    from collections import Counter
-
-    from .schedule.modes import dominant_states
-    from .schedule.viewer import slowest_mode
-
-    if t.mode_tau is None:
-        return ["no closed-loop modes stored (a table built before they were): rebuild it"]
-    slow = slowest_mode(t)
-    if slow is None:
-        return []
-    tau = t.mode_tau[..., 0]
-    out = ["slowest closed-loop time constant per circle, s (rows: tilt deg, columns: "
-           "speed m/s; -: infeasible)", "        " + "".join(f"{v:6g}" for v in t.speed)]
-    for i, a in enumerate(np.rad2deg(t.tilt)):
-        out.append(f"  {a:5g} " + "".join(f"{x:6.3g}" if np.isfinite(x) else "     -"
-                                          for x in tau[i]))
-    states = Counter(
-        ", ".join(dominant_states(t.mode_shape[i, j, 0], t.state_names))
-        for i, j in zip(*np.nonzero(np.isfinite(tau)), strict=True))
-    out.append("  the slowest mode lives in: " + "; ".join(
-        f"{s} ({n} circles)" for s, n in states.most_common()))
-    out.append(f"  slowest of all: {slow['time_constant_s']:.3g} s at {slow['speed_mps']:g} m/s, "
-               f"{slow['tilt_deg']:g} deg ({', '.join(slow['dominant_states'])})")
-    return out
 
 
 def _write_envelope(t, table, out_dir, quiet=False) -> None:

@@ -94,10 +94,12 @@ def check_gain_cap(config, grid) -> None:
         The built grid.
     """
     cap = config.control.max_gain
-    k_max = np.abs(grid.K).max(axis=(2, 3, 4), initial=0.0, where=np.isfinite(grid.K))
-    if cap is None or not np.any(k_max > cap):
+    if cap is None:
         return
-    i, j = np.unravel_index(np.argmax(k_max), k_max.shape)
+    k_max = grid.gain_max()
+    if not np.nanmax(k_max, initial=0.0) > cap:
+        return
+    i, j = np.unravel_index(np.nanargmax(k_max), k_max.shape)
     bound = config.control.max_time_constant_s
     why = (f" with max_time_constant_s {bound:g} s ({grid.gain_max_free[i, j]:.3g} without "
            "the bound): raise max_gain or the bound" if bound is not None
@@ -575,6 +577,17 @@ class GridResult:
     gain_max_free: np.ndarray
     level_invariant: bool = True
 
+    def gain_max(self) -> np.ndarray:
+        """Largest gain magnitude per circle, N per state unit; NaN where infeasible.
+
+        Returns
+        -------
+        ndarray, shape (n_a, n_v)
+        """
+        finite = np.isfinite(self.K)
+        k_max = np.abs(self.K).max(axis=(2, 3, 4), initial=0.0, where=finite)
+        return np.where(finite.any(axis=(2, 3, 4)), k_max, np.nan)
+
 
 def _solve_speed(config, speed: float, tilts, effects=(), dare_tilt0=True) -> CircleSolution:
     """One job of :func:`build_grid`: all tilts of one speed, on one BLAS thread.
@@ -719,7 +732,7 @@ def bound_price(max_time_constant_s: float, grid: GridResult) -> str:
     tau = grid.mode_tau[..., 0]
     if not np.any(np.isfinite(tau)):
         return f"max_time_constant_s {max_time_constant_s:g} s: no feasible circle"
-    k_max = float(np.nanmax(np.abs(grid.K)))
+    k_max = float(np.nanmax(grid.gain_max()))
     k_free = float(np.nanmax(grid.gain_max_free))
     return (f"max_time_constant_s {max_time_constant_s:g} s: slowest closed-loop mode "
             f"{np.nanmax(tau):.3g} s; the price: max |K| {k_max:.3g}, {k_free:.3g} without "

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import io
 import json
+from collections import Counter
 
 import numpy as np
 
@@ -35,7 +36,7 @@ from .envelope import envelope_from_table, envelope_png
 from .modes import dominant_states
 
 __all__ = ["schedule_figures", "schedule_plots", "table_summary", "slowest_mode",
-           "gain_file_name"]
+           "mode_lines", "gain_file_name"]
 
 INPUT_NAMES = ("T1", "T2", "T3", "T4")
 
@@ -302,18 +303,59 @@ def slowest_mode(table) -> dict | None:
     }
 
 
+def _mode_states(table) -> list:
+    """The dominant states of every stored mode, nested (tilt, speed, mode): a list of state
+    names, or None for an infeasible circle."""
+    names = table.state_names
+    return [[[dominant_states(sh, names) if np.all(np.isfinite(sh)) else None for sh in circle]
+             for circle in row] for row in table.mode_shape]
+
+
+def mode_lines(table) -> list[str]:
+    """The slowest closed-loop time constant per circle as text, and the states of those
+    modes (what ``gainsched inspect`` prints).
+
+    Parameters
+    ----------
+    table : Table
+        A loaded table.
+
+    Returns
+    -------
+    list of str
+        A tau map (rows: tilt, deg; columns: speed, m/s; s), the dominant states of the
+        slowest modes counted over the circles, and the slowest mode of all; one line
+        asking for a rebuild when the table stores no modes.
+    """
+    if table.mode_tau is None:
+        return ["no closed-loop modes stored (a table built before they were): rebuild it"]
+    slow = slowest_mode(table)
+    if slow is None:
+        return []
+    tau = table.mode_tau[..., 0]
+    out = ["slowest closed-loop time constant per circle, s (rows: tilt deg, columns: "
+           "speed m/s; -: infeasible)", "        " + "".join(f"{v:6g}" for v in table.speed)]
+    for i, a in enumerate(np.rad2deg(table.tilt)):
+        out.append(f"  {a:5g} " + "".join(f"{x:6.3g}" if np.isfinite(x) else "     -"
+                                          for x in tau[i]))
+    states = Counter(", ".join(circle[0]) for row in _mode_states(table) for circle in row
+                     if circle[0] is not None)
+    out.append("  the slowest mode lives in: " + "; ".join(
+        f"{s} ({n} circles)" for s, n in states.most_common()))
+    out.append(f"  slowest of all: {slow['time_constant_s']:.3g} s at {slow['speed_mps']:g} m/s, "
+               f"{slow['tilt_deg']:g} deg ({', '.join(slow['dominant_states'])})")
+    return out
+
+
 def _modes_summary(table) -> dict | None:
     """Every circle's modes as JSON data (None: a table without modes)."""
     if table.mode_tau is None:
         return None
-    names = table.state_names
-    dom = [[[dominant_states(sh, names) if np.all(np.isfinite(sh)) else None for sh in circle]
-            for circle in row] for row in table.mode_shape]
     return {
         "tau_s": _json_grid(table.mode_tau),
         "frequency_rad_s": _json_grid(table.mode_frequency),
         "damping": _json_grid(table.mode_damping),
-        "dominant_states": dom,
+        "dominant_states": _mode_states(table),
         "slowest": slowest_mode(table),
     }
 
