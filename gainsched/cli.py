@@ -503,13 +503,19 @@ def export_c(table, out_dir, no_code_size):
     show_default=True,
     help="Pass threshold on the max relative gain error, percent.",
 )
+@click.option(
+    "--compact", "azimuth_error", type=FiniteFloat(0, 100, lo_open=True, unit="%"),
+    default=None, help="Check the table's compact form (Fourier series in the azimuth, "
+    "docs/runtime.md) made with this error bound at the azimuth samples, percent "
+    "(0.5: the default form).")
 @user_errors
-def check(table, speed_stride, max_error):
+def check(table, speed_stride, max_error, azimuth_error):
     """Interpolation accuracy of TABLE: solve the periodic LQR directly at cell midpoints
     (speed x tilt x azimuth) and compare with the interpolated gains (max and median
     relative Frobenius error), then close the loop along each midpoint circle with the
     interpolated gains (monodromy spectral radius). Exit code 1 if the max error is above
-    --max-error or a midpoint closed loop is not stable."""
+    --max-error or a midpoint closed loop is not stable. With --compact, the same for
+    the table's compact form."""
     import time
 
     from tqdm import tqdm
@@ -519,9 +525,21 @@ def check(table, speed_stride, max_error):
 
     t = load_table(table)
     t0 = time.perf_counter()
+    lookup = None
+    if azimuth_error is not None:
+        from .firmware.compact import CompactInterpolator, compact_data
+        from .firmware.runtime import runtime_data
+
+        dense = runtime_data(t)
+        form = compact_data(dense, azimuth_error / 100, source=str(table), key="--compact")
+        click.echo(f"{table}: compact form at {azimuth_error:g}% on the azimuth samples: "
+                   f"{form.nbytes():,} bytes of table data (dense {dense.nbytes():,}); "
+                   f"{int(form.harmonics.max())} harmonics at most; fit error at the "
+                   f"samples max {100 * np.nanmax(form.fit_error, initial=0):.2f}%")
+        lookup = CompactInterpolator(form)
     n_v = len(range(0, max(t.speed.size - 1, 0), speed_stride))
     with tqdm(total=n_v, unit="speed", desc=f"check {t.name}", disable=None) as bar:
-        res = midpoint_check(t, speed_stride=speed_stride, progress=bar.update)
+        res = midpoint_check(t, speed_stride=speed_stride, progress=bar.update, lookup=lookup)
     ok_pts = int(np.count_nonzero(np.isfinite(res.rel_err)))
     n_a = max(t.tilt.size - 1, 1)
     click.echo(

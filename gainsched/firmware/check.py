@@ -75,7 +75,8 @@ class MidpointCheck:
         return out
 
 
-def midpoint_check(table, *, speed_stride: int = 1, progress=None) -> MidpointCheck:
+def midpoint_check(table, *, speed_stride: int = 1, progress=None,
+                   lookup=None) -> MidpointCheck:
     """Check a table's interpolation error at its cell midpoints against direct LQR solves.
 
     At the midpoints of the (speed, tilt, azimuth) cells, where the interpolation is
@@ -97,6 +98,10 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None) -> MidpointCh
         midpoints are checked at each.
     progress : callable or None, default None
         Called with 1 after each checked speed midpoint (e.g. ``tqdm.update``).
+    lookup : callable or None, default None
+        What is checked: ``lookup(xi, xi_dot, alpha) -> Lookup`` on arrays of queries;
+        default the table's dense lookup (``Interpolator(table)``); a
+        :class:`~gainsched.firmware.compact.CompactInterpolator` checks the compact form.
 
     Returns
     -------
@@ -139,7 +144,7 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None) -> MidpointCh
     >>> chk.worst_rho < 1                                # interpolated gains: stable
     True
     """
-    interp = Interpolator(table)
+    interp = Interpolator(table) if lookup is None else lookup
     cfg = config_from_text(table.config_text, f"{table.source}:config_text")
     n_xi = table.xi.size
     cfg2 = cfg.with_values({"grid.azimuth_samples": 2 * n_xi})

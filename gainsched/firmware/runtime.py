@@ -425,6 +425,64 @@ def runtime_data(table) -> RuntimeData:
 
 
 @dataclass(frozen=True)
+class Domain:
+    """Queries mapped into the table's fundamental domain, as the C runtime maps them
+    (steps 1-4 of the module doc; float32, C order). Every array has shape (m,).
+
+    Attributes
+    ----------
+    xi : float32, rad
+        The azimuth after S1 (``+ pi``) and S2 (``pi - xi``), not wrapped.
+    mirrored, shifted : bool
+        S2 (``xi_dot < 0``) and S1 (``alpha < 0``) applied.
+    bad : bool
+        Non-finite or out-of-limit input (``BAD_INPUT``; mapped as zeros).
+    status : uint8
+        ``CLAMPED_SPEED`` and ``CLAMPED_TILT`` bits.
+    speed_cell, tilt_cell : tuple
+        ``(i0, i1, frac)`` on the xi_dot and tilt axes (:func:`_bracket`).
+    """
+
+    xi: np.ndarray
+    mirrored: np.ndarray
+    shifted: np.ndarray
+    bad: np.ndarray
+    status: np.ndarray
+    speed_cell: tuple
+    tilt_cell: tuple
+
+
+def fundamental_domain(d, xi, xi_dot, alpha) -> Domain:
+    """Map queries (broadcast together, flattened) into the fundamental domain of the
+    table ``d`` (anything with float32 ``xi_dot`` and ``tilt`` axes): refuse bad input,
+    apply S1 and S2, clamp and bracket xi_dot and alpha, exactly as ``gs_lookup``."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        x = np.asarray(xi, dtype=np.float32)
+        v = np.asarray(xi_dot, dtype=np.float32)
+        a = np.asarray(alpha, dtype=np.float32)
+    x, v, a = (q.reshape(-1) for q in np.broadcast_arrays(x, v, a))
+    bad = ~(np.isfinite(x) & np.isfinite(v) & np.isfinite(a))
+    bad |= (np.abs(np.where(bad, 0, x)) > XI_LIMIT) | (np.abs(np.where(bad, 0, v)) > XI_DOT_LIMIT)
+    bad |= np.abs(np.where(bad, 0, a)) > TILT_LIMIT
+    zero = F32(0)
+    x, v, a = (np.where(bad, zero, q).astype(np.float32) for q in (x, v, a))
+    # S1, S2 (float32, as in C)
+    shifted = a < 0
+    x = np.where(shifted, x + PI_F, x)
+    a = np.where(shifted, -a, a)
+    mirrored = v < 0
+    x = np.where(mirrored, PI_F - x, x)
+    v = np.where(mirrored, -v, v)
+    status = np.zeros(x.shape, dtype=np.uint8)
+    k0, k1, fv, cs = _bracket(d.xi_dot, v)
+    status |= np.where(cs, CLAMPED_SPEED, 0).astype(np.uint8)
+    i0, i1, fa, ct = _bracket(d.tilt, a)  # a >= 0 = tilt[0]: only the top can clamp
+    status |= np.where(ct, CLAMPED_TILT, 0).astype(np.uint8)
+    return Domain(x.astype(np.float32), mirrored, shifted, bad, status, (k0, k1, fv),
+                  (i0, i1, fa))
+
+
+@dataclass(frozen=True)
 class Lookup:
     """The gains, nominal and status an Interpolator returns for an array of queries.
 
@@ -586,25 +644,9 @@ class Interpolator:
         speed, bit 0 xi), status (m,) uint8, mirrored (m,) bool. Queries are flattened.
         """
         d = self.data
-        with np.errstate(over="ignore", invalid="ignore"):
-            x = np.asarray(xi, dtype=np.float32)
-            v = np.asarray(xi_dot, dtype=np.float32)
-            a = np.asarray(alpha, dtype=np.float32)
-        x, v, a = (q.reshape(-1) for q in np.broadcast_arrays(x, v, a))
-        bad = ~(np.isfinite(x) & np.isfinite(v) & np.isfinite(a))
-        bad |= (np.abs(np.where(bad, 0, x)) > XI_LIMIT) | (
-            np.abs(np.where(bad, 0, v)) > XI_DOT_LIMIT
-        )
-        bad |= np.abs(np.where(bad, 0, a)) > TILT_LIMIT
-        zero = F32(0)
-        x, v, a = (np.where(bad, zero, q).astype(np.float32) for q in (x, v, a))
-        # S1, S2 (float32, as in C)
-        neg = a < 0
-        x = np.where(neg, x + PI_F, x)
-        a = np.where(neg, -a, a)
-        mirrored = v < 0
-        x = np.where(mirrored, PI_F - x, x)
-        v = np.where(mirrored, -v, v)
+        q = fundamental_domain(d, xi, xi_dot, alpha)
+        x, mirrored, status = q.xi, q.mirrored, q.status
+        (i0, i1, fa), (k0, k1, fv) = q.tilt_cell, q.speed_cell
         # xi: periodic axis in cell units
         n_a, n_v, n_xi, _ = d.dims
         tt = x * d.xi_scale
@@ -612,11 +654,6 @@ class Interpolator:
         fx = _snap(tt - fl)
         j0 = np.mod(fl.astype(np.int64), n_xi)
         j1 = np.where(j0 + 1 == n_xi, 0, j0 + 1)
-        status = np.zeros(x.shape, dtype=np.uint8)
-        k0, k1, fv, cs = _bracket(d.xi_dot, v)
-        status |= np.where(cs, CLAMPED_SPEED, 0).astype(np.uint8)
-        i0, i1, fa, ct = _bracket(d.tilt, a)  # a >= 0 = tilt[0]: only the top can clamp
-        status |= np.where(ct, CLAMPED_TILT, 0).astype(np.uint8)
         one = F32(1)
         ia, iv, ix = (i0, i1), (k0, k1), (j0, j1)
         wa, wv, wx = (one - fa, fa), (one - fv, fv), (one - fx, fx)
@@ -630,7 +667,7 @@ class Interpolator:
         m = np.bitwise_or.reduce(np.where(w != 0, self._mask[pts], 0), axis=1)
         status |= np.where(m != 0, INFEASIBLE, 0).astype(np.uint8)
         status |= np.where(m & MASK_NO_GAINS, NO_GAINS, 0).astype(np.uint8)
-        status = np.where(bad, BAD_INPUT, status).astype(np.uint8)
+        status = np.where(q.bad, BAD_INPUT, status).astype(np.uint8)
         return pts, w, status, mirrored
 
     def __call__(self, xi, xi_dot, alpha, *, chunk: int = 16384) -> Lookup:
