@@ -68,24 +68,24 @@ firmware-example: $(STAMP)
 
 # Cortex-M4F section sizes of the runtime and the table (needs arm-none-eabi-gcc).
 firmware-size: $(STAMP)
-	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR) --no-code-size
-	@if command -v arm-none-eabi-gcc >/dev/null 2>&1; then \
-		set -e; \
-		arm-none-eabi-gcc $(FW_CFLAGS) $(M4F_FLAGS) -I$(FW_DIR) -c $(FW_DIR)/gainsched_runtime.c \
-			-o $(FW_DIR)/gainsched_runtime.m4f.o; \
-		arm-none-eabi-gcc $(FW_CFLAGS) $(M4F_FLAGS) -I$(FW_DIR) -c examples/firmware/size_probe.c \
-			-o $(FW_DIR)/table.m4f.o; \
-		echo "Cortex-M4F ($(M4F_FLAGS)):"; \
-		arm-none-eabi-size -A $(FW_DIR)/gainsched_runtime.m4f.o $(FW_DIR)/table.m4f.o \
-			| grep -Ev '^\.(comment|ARM\.attributes|debug)' ; \
-		arm-none-eabi-size $(FW_DIR)/gainsched_runtime.m4f.o $(FW_DIR)/table.m4f.o; \
+	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR)/dense --format dense --no-code-size
+	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR)/compact --format compact --no-code-size
+	@set -e; \
+	if command -v arm-none-eabi-gcc >/dev/null 2>&1; then \
+		CC_SIZE="arm-none-eabi-gcc $(FW_CFLAGS) $(M4F_FLAGS)"; SIZE=arm-none-eabi-size; \
+		TARGET="Cortex-M4F ($(M4F_FLAGS))"; \
 	else \
 		echo "firmware-size: arm-none-eabi-gcc not found (Debian: apt-get install gcc-arm-none-eabi);"; \
-		echo "host sizes instead ($(CC) -Os):"; \
-		$(CC) $(FW_CFLAGS) -Os -I$(FW_DIR) -c $(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/gainsched_runtime.host.o; \
-		$(CC) $(FW_CFLAGS) -Os -I$(FW_DIR) -c examples/firmware/size_probe.c -o $(FW_DIR)/table.host.o; \
-		size $(FW_DIR)/gainsched_runtime.host.o $(FW_DIR)/table.host.o; \
-	fi
+		CC_SIZE="$(CC) $(FW_CFLAGS) -Os"; SIZE=size; TARGET="host ($(CC) -Os)"; \
+	fi; \
+	for fmt in dense compact; do \
+		$$CC_SIZE -I$(FW_DIR)/$$fmt -c $(FW_DIR)/$$fmt/gainsched_runtime.c -o $(FW_DIR)/$$fmt/runtime.o; \
+		$$CC_SIZE -I$(FW_DIR)/$$fmt -c examples/firmware/size_probe.c -o $(FW_DIR)/$$fmt/table.o; \
+		echo "$$fmt table, $$TARGET: code (runtime.o) + data (table.o .rodata), bytes"; \
+		$$SIZE -A $(FW_DIR)/$$fmt/runtime.o $(FW_DIR)/$$fmt/table.o \
+			| grep -Ev '^\.(comment|ARM\.attributes|debug)|^ *$$' ; \
+		$$SIZE $(FW_DIR)/$$fmt/runtime.o $(FW_DIR)/$$fmt/table.o; \
+	done
 
 # Fuzz gs_lookup: libFuzzer when clang is there (FUZZ_SECONDS), else the bounded
 # random driver (FUZZ_RUNS queries); both under AddressSanitizer + UBSan.

@@ -251,8 +251,8 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     from tqdm import tqdm
 
     from .config import load_config
-    from .firmware.outputs import write_outputs
-    from .publish import check_out_dir, recover
+    from .firmware.outputs import certificate_lines, output_set
+    from .publish import check_out_dir, publish, recover
     from .schedule.distributed import check_options, executor
     from .schedule.grid import bound_price, build_grid
 
@@ -267,7 +267,11 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
             click.echo(f"build {cfg.name} on {ex.description}", err=True)
         with tqdm(total=n_v, unit="speed", desc=f"build {cfg.name}", disable=None) as bar:
             grid = build_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update, backend=ex.backend)
-    out, *c_paths = write_outputs(out_dir, cfg, grid)
+    n_mid = max(n_v - 1, 1) if cfg.firmware.format == "compact" else 0
+    with tqdm(total=n_mid, unit="speed", desc="certify compact table",
+              disable=None if n_mid else True) as bar:
+        outputs = output_set(cfg, grid, out_dir, progress=bar.update)
+    out, *c_paths = publish(out_dir, outputs.files)
     n_pts = grid.reasons.size
     feas = np.count_nonzero(grid.reasons == 0)
     click.echo(
@@ -277,6 +281,11 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
         f"{time.perf_counter() - t0:.1f} s, {out.stat().st_size / 1024:.0f} KiB"
     )
     click.echo("  C: " + ", ".join(str(p) for p in c_paths))
+    click.echo(f"  firmware table: {cfg.firmware.format}, {outputs.form.nbytes():,} bytes of data"
+               + (f" (dense: {outputs.form.base.nbytes():,})" if outputs.certificate else ""))
+    if outputs.certificate is not None:
+        for line in certificate_lines(cfg, outputs.certificate):
+            click.echo("  " + line)
     if cfg.control.max_time_constant_s is not None:
         click.echo("  " + bound_price(cfg.control.max_time_constant_s, grid))
 
@@ -468,23 +477,39 @@ def plot(table, out_dir, with_check, as_json):
     help="Output folder (default: the table's folder).",
 )
 @click.option("--no-code-size", is_flag=True, help="Skip compiling the runtime to measure it.")
+@click.option("--format", "fmt", type=click.Choice(["config", "dense", "compact"]),
+              default="config", show_default=True,
+              help="Table format of the header: the table's config ([firmware] format), "
+              "values per azimuth (dense) or Fourier series per circle, certified at the "
+              "cell midpoints (compact; docs/runtime.md).")
 @user_errors
-def export_c(table, out_dir, no_code_size):
+def export_c(table, out_dir, no_code_size, fmt):
     """Write the C99 header NAME_gains.h for TABLE and copy the C runtime
     (gainsched_runtime.c/.h) next to it; print the flash footprint."""
-    from .firmware.codegen import flash_summary, write_c_outputs
-    from .firmware.runtime import runtime_data
+    from tqdm import tqdm
+
+    from .firmware.codegen import c_files, flash_summary
+    from .firmware.outputs import certificate_lines, firmware_form, table_config
+    from .publish import publish
     from .schedule.tables import load_table
 
-    paths = write_c_outputs(table, out_dir)
+    t = load_table(table)
+    cfg = table_config(t, fmt)
+    fmt = "dense" if cfg is None else cfg.firmware.format
+    n_mid = max(t.speed.size - 1, 1) if fmt == "compact" else 0
+    with tqdm(total=n_mid, unit="speed", desc="certify compact table",
+              disable=None if n_mid else True) as bar:
+        form, cert = firmware_form(cfg, t, progress=bar.update)
+    paths = publish(Path(table).parent if out_dir is None else out_dir, c_files(form))
     for p in paths:
         click.echo(f"wrote {p}")
-    data = runtime_data(load_table(table))
-    click.echo(
-        f"  {data.name}: CRC-32 0x{data.crc32():08x}, config sha256 {data.config_sha256[:12]}"
-    )
-    for line in flash_summary(data, compile_code=not no_code_size):
+    click.echo(f"  {form.name}: {fmt}, CRC-32 0x{form.crc32():08x}, config "
+               f"sha256 {t.config_sha256[:12]}")
+    for line in flash_summary(form, compile_code=not no_code_size):
         click.echo(f"  {line}")
+    if cert is not None:
+        for line in certificate_lines(cfg, cert):
+            click.echo(f"  {line}")
 
 
 @cli.command()
@@ -499,15 +524,15 @@ def export_c(table, out_dir, no_code_size):
 @click.option(
     "--max-error",
     type=FiniteFloat(0, 100, lo_open=True, unit="%"),
-    default=2.0,
-    show_default=True,
-    help="Pass threshold on the max relative gain error, percent.",
+    default=None,
+    help="Pass threshold on the max relative gain error, percent (default: the table "
+    "config's grid.max_interpolation_error, 2).",
 )
 @click.option(
     "--compact", "azimuth_error", type=FiniteFloat(0, 100, lo_open=True, unit="%"),
     default=None, help="Check the table's compact form (Fourier series in the azimuth, "
     "docs/runtime.md) made with this error bound at the azimuth samples, percent "
-    "(0.5: the default form).")
+    "(0.5: the default form). Default: the format of the table's config.")
 @user_errors
 def check(table, speed_stride, max_error, azimuth_error):
     """Interpolation accuracy of TABLE: solve the periodic LQR directly at cell midpoints
@@ -526,6 +551,13 @@ def check(table, speed_stride, max_error, azimuth_error):
     t = load_table(table)
     t0 = time.perf_counter()
     lookup = None
+    from .firmware.outputs import table_config
+
+    cfg = table_config(t, "config")
+    if max_error is None:
+        max_error = 2.0 if cfg is None else 100 * cfg.grid.max_interpolation_error
+    if azimuth_error is None and cfg is not None and cfg.firmware.format == "compact":
+        azimuth_error = 100 * cfg.firmware.azimuth_error
     if azimuth_error is not None:
         from .firmware.compact import CompactInterpolator, compact_data
         from .firmware.runtime import runtime_data

@@ -38,6 +38,7 @@ __all__ = [
     "Feasibility",
     "Analysis",
     "Limits",
+    "Firmware",
     "EffectSpec",
     "load_config",
     "config_from_text",
@@ -165,11 +166,40 @@ class Control:
 
 @dataclass(frozen=True)
 class Grid:
-    """Schedule grid: tangential COG speeds (m/s), tilts (rad), azimuth samples."""
+    """Schedule grid: tangential COG speeds (m/s), tilts (rad), azimuth samples, and the
+    interpolation error the table must meet at its cell midpoints (relative gain error,
+    a fraction; ``max_interpolation_error`` in percent in the file, default 2)."""
 
     speeds: np.ndarray
     tilts: np.ndarray
     azimuth_samples: int
+    max_interpolation_error: float = 0.02
+
+
+#: table formats the firmware can be given (``[firmware] format``)
+FORMATS = ("dense", "compact")
+
+
+@dataclass(frozen=True)
+class Firmware:
+    """What the build writes for the flight firmware (``[firmware]``, docs/runtime.md).
+
+    Attributes
+    ----------
+    format : {"dense", "compact"}
+        ``"dense"``: values at every azimuth sample, interpolated linearly; ``"compact"``:
+        per circle, Fourier series in the azimuth, certified at the cell midpoints
+        against ``grid.max_interpolation_error`` by the build.
+    azimuth_error : float
+        The compact format's bound on each circle's series at its azimuth samples,
+        relative (a fraction; ``azimuth_error`` in percent in the file, default 0.5).
+    max_table_bytes : int or None
+        Flash budget: the build fails when the table data exceed it (None: no budget).
+    """
+
+    format: str = "dense"
+    azimuth_error: float = 0.005
+    max_table_bytes: int | None = None
 
 
 @dataclass(frozen=True)
@@ -298,6 +328,9 @@ class Config:
     limits : Limits
         ``[limits]`` (defaults when absent): the memory (GiB) and CPU time (s) a build
         may need (:func:`gainsched.budget.check_budget`).
+    firmware : Firmware
+        ``[firmware]`` (defaults when absent): the table format the C header carries and
+        the flash budget.
     radius : float
         Property: nominal COG circle radius ``r = rho + L_e``, m.
     sha256 : str
@@ -339,6 +372,7 @@ class Config:
     text: str = field(default="", repr=False)
     analysis: Analysis = field(default_factory=Analysis)
     limits: Limits = field(default_factory=Limits)
+    firmware: Firmware = field(default_factory=Firmware)
 
     @property
     def sha256(self) -> str:
@@ -710,10 +744,28 @@ def _grid(sec: Section, radius: float) -> Grid:
         raise sec.error("azimuth_samples", f"must be an integer, got {type(n).__name__}")
     if n < 4 or n % 2 or n > MAX_XI:
         raise sec.error("azimuth_samples", f"must be an even integer in [4, {MAX_XI}], got {n}")
+    err = sec.number("max_interpolation_error", 100 * Grid.max_interpolation_error,
+                     positive=True)
+    if err >= 100:
+        raise sec.error("max_interpolation_error", f"must be < 100 (percent), got {err:g}")
     sec.done()
     for a in (speeds, tilts):
         a.setflags(write=False)
-    return Grid(speeds, tilts, n)
+    return Grid(speeds, tilts, n, err / 100)
+
+
+def _firmware(sec: Section) -> Firmware:
+    fmt = sec.string("format", Firmware.format, choices=FORMATS)
+    err = sec.number("azimuth_error", 100 * Firmware.azimuth_error, positive=True)
+    if err >= 100:
+        raise sec.error("azimuth_error", f"must be < 100 (percent), got {err:g}")
+    budget = None
+    if "max_table_bytes" in sec.data:
+        budget = sec.get("max_table_bytes")
+        if isinstance(budget, bool) or not isinstance(budget, int) or budget < 1:
+            raise sec.error("max_table_bytes", f"must be a positive integer, got {budget!r}")
+    sec.done()
+    return Firmware(fmt, err / 100, budget)
 
 
 def check_rate(source, control: Control, grid: Grid, radius: float) -> None:
@@ -890,11 +942,12 @@ def _config(text: str, source: str, check_default_name: bool) -> Config:
     feas = _feasibility(top.sub("feasibility", {}))
     analysis = _analysis(top.sub("analysis", {}))
     limits = _limits(top.sub("limits", {}))
+    firmware = _firmware(top.sub("firmware", {}))
     if feas.thrust_margin * 2 >= vehicle.thrust_max - vehicle.thrust_min:
         raise InputError(source, "feasibility.thrust_margin", "leaves no usable thrust range")
     top.done()
     cfg = Config(name, vehicle, tether, effects, g, control, grid, feas, source, text,
-                 analysis=analysis, limits=limits)
+                 analysis=analysis, limits=limits, firmware=firmware)
     check_budget(cfg, source)
     return cfg
 

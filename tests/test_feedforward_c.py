@@ -14,6 +14,7 @@ import pytest
 from gainsched import native
 from gainsched.config import load_config
 from gainsched.firmware import codegen, runtime
+from gainsched.firmware.compact import CompactInterpolator, compact_data
 from gainsched.firmware.feedforward import feedforward
 from gainsched.firmware.runtime import Interpolator, runtime_data
 from gainsched.schedule.path import AzimuthPath, circle_path, maneuver_path
@@ -36,11 +37,16 @@ TOL_X = 1e-5
 TOL_TENSION = 2e-5
 
 
-@pytest.fixture(scope="module")
-def paper(tmp_path_factory):
+@pytest.fixture(scope="module", params=["dense", "compact"])
+def paper(request, tmp_path_factory):
+    """(data, Python reference, C runtime) of the paper table in both formats."""
     data = runtime_data(load_table(PAPER_H5))
+    ref = Interpolator(data)
+    if request.param == "compact":
+        data = compact_data(data)
+        ref = CompactInterpolator(data)
     lib = codegen.build_host(data, tmp_path_factory.mktemp("ff"))
-    return data, Interpolator(data), codegen.CRuntime(lib, data)
+    return data, ref, codegen.CRuntime(lib, data)
 
 
 def _reference(path: AzimuthPath):
@@ -177,7 +183,11 @@ def test_bad_input_and_missing_vehicle(paper, tmp_path):
         assert S[0] == runtime.BAD_INPUT, k
         assert not np.any(K) and not np.any(U) and not np.any(X) and ten[0] == 0
     # a table without closed-form constants: GS_BAD_ARG, outputs untouched (sentinel)
-    bare = dataclasses.replace(data, vehicle=None, name="bare")
+    if hasattr(data, "base"):  # compact: the vehicle lives in the dense form it shares
+        bare = dataclasses.replace(data, base=dataclasses.replace(data.base, vehicle=None,
+                                                                  name="bare"))
+    else:
+        bare = dataclasses.replace(data, vehicle=None, name="bare")
     lib = codegen.CRuntime(codegen.build_host(bare, tmp_path), bare)
     K, U, X, ten, S = lib.nominal(np.array([good]), 0.1)
     assert S[0] == runtime.BAD_ARG and np.all(U == 12345.0)

@@ -29,6 +29,7 @@ import numpy as np
 from ..errors import InputError
 from ..native import find_cc
 from ..publish import publish, write_atomic
+from .compact import CompactData
 from .runtime import (
     VEHICLE_FIELDS,
     Lookup,
@@ -44,6 +45,7 @@ __all__ = [
     "c_float",
     "render",
     "render_header",
+    "firmware_data",
     "write_header",
     "copy_runtime",
     "c_files",
@@ -55,7 +57,7 @@ __all__ = [
 ]
 
 RUNTIME_FILES = ("gainsched_runtime.h", "gainsched_runtime.c")
-RUNTIME_VERSION = 3
+RUNTIME_VERSION = 4
 STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror")
 #: Cortex-M4F flags of ``make firmware-size`` and :func:`code_bytes`
 M4F_CFLAGS = ("-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard")
@@ -108,20 +110,23 @@ def _body(arr, fmt, indent=1, per_line=6) -> str:
 # --------------------------------------------------------------------------- header
 
 
-def render_header(data: RuntimeData) -> str:
-    """The text of ``<name>_gains.h`` for runtime data (see :func:`runtime.runtime_data`)."""
+def render_header(data) -> str:
+    """The text of ``<name>_gains.h`` for a table in either format: dense runtime data
+    (:func:`runtime.runtime_data`) or its compact form
+    (:class:`~gainsched.firmware.compact.CompactData`)."""
     from ..constants import MASK_NO_GAINS, REASONS
 
-    n_a, n_v, n_xi, n = data.dims
-    K = data.K if n_a > 1 else np.zeros((1, n_v, n_xi, 4, n), dtype=np.float32)
-    meta = data.meta
+    compact = isinstance(data, CompactData)
+    base = data.base if compact else data
+    n_a, n_v, n_xi, n = base.dims
+    meta = base.meta
     bits = "; ".join(f"{b:#04x} {t}" for b, t in REASONS.items())
     values = dict(
-        name=data.name,
-        NAME=data.name.upper(),
-        config_name=meta.get("config_name", data.name),
+        name=base.name,
+        NAME=base.name.upper(),
+        config_name=meta.get("config_name", base.name),
         tool_version=meta.get("tool_version", "?"),
-        config_sha256=data.config_sha256,
+        config_sha256=base.config_sha256,
         n_tilt=n_a,
         n_speed=n_v,
         n_xi=n_xi,
@@ -130,35 +135,81 @@ def render_header(data: RuntimeData) -> str:
         radius=c_decimal(meta.get("radius_m", 0.0)),
         rate_hz=c_decimal(meta.get("rate_hz", 0.0)),
         xi_note=f"{360 / n_xi:g} deg steps",
-        speed_note=", ".join(f"{v:g}" for v in data.speed),
-        tilt_note=", ".join(f"{v:g}" for v in np.round(np.rad2deg(data.tilt.astype(float)), 6))
+        speed_note=", ".join(f"{v:g}" for v in base.speed),
+        tilt_note=", ".join(f"{v:g}" for v in np.round(np.rad2deg(base.tilt.astype(float)), 6))
         + " deg",
-        xi_scale=c_float(data.xi_scale),
+        xi_scale=c_float(base.xi_scale),
         crc32_hex=f"{data.crc32():08x}",
         data_bytes=data.nbytes(),
         runtime_version=RUNTIME_VERSION,
-        control_law=str(data.meta.get("control_law", "u = u_d - K (x - x_d)")),
-        state_names=", ".join(data.state_names) if data.state_names else "?",
+        control_law=str(meta.get("control_law", "u = u_d - K (x - x_d)")),
+        state_names=", ".join(base.state_names) if base.state_names else "?",
         mask_bits=f"{bits}; {MASK_NO_GAINS:#04x} no gains stored (zeros)",
-        xi=_body(data.xi, c_float),
-        speed=_body(data.speed, c_float),
-        xi_dot=_body(data.xi_dot, c_float),
-        tilt=_body(data.tilt, c_float),
-        state_sign=_body(data.state_sign, c_float, per_line=11),
-        state_perm=_body(data.state_perm, _c_uint, per_line=11),
-        n_xi_tilt0=data.n_xi_tilt0,
+        xi=_body(base.xi, c_float),
+        speed=_body(base.speed, c_float),
+        xi_dot=_body(base.xi_dot, c_float),
+        tilt=_body(base.tilt, c_float),
+        state_sign=_body(base.state_sign, c_float, per_line=11),
+        state_perm=_body(base.state_perm, _c_uint, per_line=11),
+        n_xi_tilt0=base.n_xi_tilt0,
+    )
+    values["state_macros"] = _state_macros(base)
+    values.update(_compact_values(data) if compact else _dense_values(base))
+    values.update(_vehicle_values(base))
+    values.update(_offsets_values(base))
+    return render("gains.in.h", **values)
+
+
+def _dense_values(data: RuntimeData) -> dict:
+    """Template values of a dense table's per-azimuth arrays."""
+    n_a, n_v, n_xi, n = data.dims
+    name, NAME = data.name, data.name.upper()
+    K = data.K if n_a > 1 else np.zeros((1, n_v, n_xi, 4, n), dtype=np.float32)
+    arrays = render(
+        "dense_values.in.h", name=name, NAME=NAME,
         tilt0_note=("independent of xi" if data.n_xi_tilt0 == 1
                     else "per azimuth: an effect changes with the azimuth"),
         K_tilt0=_body(data.K_tilt0.reshape(n_v, data.n_xi_tilt0, 4, n), c_float),
         K=_body(K, c_float),
         u_d=_body(data.u_d, c_float, per_line=4),
         phi_d=_body(data.phi_d, c_float),
-        mask=_body(data.mask, _c_uint, per_line=18),
-    )
-    values["state_macros"] = _state_macros(data)
-    values.update(_vehicle_values(data))
-    values.update(_offsets_values(data))
-    return render("gains.in.h", **values)
+        mask=_body(data.mask, _c_uint, per_line=18))
+    refs = (f"&{name}_K_tilt0[0][0][0][0]", f"&{name}_K[0][0][0][0][0]",
+            f"&{name}_u_d[0][0][0][0]", f"&{name}_phi_d[0][0][0]")
+    return dict(
+        format_macros=f"#define {NAME}_FORMAT GS_FORMAT_DENSE /* values at every azimuth */",
+        value_arrays=arrays, value_refs=",\n".join(f"    {r}" for r in refs),
+        mask_ref=f"&{name}_mask[0][0][0]",
+        format_fields=",\n".join(f"    {v}" for v in (
+            "GS_FORMAT_DENSE", "0u", "0u", "NULL", "NULL", "NULL")))
+
+
+def _compact_values(data) -> dict:
+    """Template values of a compact table's series."""
+    n_a, n_v, n_xi, n = data.dims
+    name, NAME = data.name, data.name.upper()
+    n_coef = int(data.coef.size)
+    macros = "\n".join([
+        f"#define {NAME}_FORMAT GS_FORMAT_COMPACT /* Fourier series in xi per circle */",
+        f"#define {NAME}_N_VALUE {data.n_value}u /* series per circle: 4 N_STATE + 4 + 1 */",
+        f"#define {NAME}_N_HARMONICS {data.n_harmonics}u /* the most harmonics of any series */",
+        f"#define {NAME}_N_COEF {n_coef}u /* coefficients */",
+        f"#define {NAME}_N_COEF_ARRAY {max(n_coef, 1)}u /* length of {name}_coef (>= 1) */",
+    ])
+    arrays = render(
+        "compact_values.in.h", name=name, NAME=NAME, n_xi=n_xi,
+        azimuth_error=f"{100 * data.bound:g}",
+        mask=_body(data.mask, _c_uint, per_line=19),
+        harmonics=_body(data.harmonics, _c_uint, per_line=25),
+        coef_start=_body(data.start.reshape(n_a, n_v), _c_uint, per_line=10),
+        coef=_body(data.coef if n_coef else np.zeros(1, np.float32), c_float))
+    return dict(
+        format_macros=macros, value_arrays=arrays,
+        value_refs=",\n".join(["    NULL"] * 4),
+        mask_ref=f"&{name}_mask[0][0]",
+        format_fields=",\n".join(f"    {v}" for v in (
+            "GS_FORMAT_COMPACT", f"{NAME}_N_HARMONICS", f"{NAME}_N_COEF",
+            f"&{name}_harmonics[0][0][0]", f"&{name}_coef_start[0][0]", f"{name}_coef")))
 
 
 def _state_macros(data: RuntimeData) -> str:
@@ -213,7 +264,14 @@ def _offsets_values(data: RuntimeData) -> dict:
     return dict(offset_harmonics=H, offsets_data=body, offsets_ref=f"&{name}_offsets[0][0][0][0]")
 
 
-def header_name(data: RuntimeData) -> str:
+def firmware_data(table):
+    """What a firmware holds of ``table``: its :class:`RuntimeData` or
+    :class:`~gainsched.firmware.compact.CompactData` as given, else the dense form of a
+    loaded table (:func:`runtime.runtime_data`)."""
+    return table if isinstance(table, RuntimeData | CompactData) else runtime_data(table)
+
+
+def header_name(data) -> str:
     return f"{data.name}_gains.h"
 
 
@@ -228,7 +286,7 @@ def _write(path: Path, text: str) -> Path:
 
 def write_header(table, out_dir) -> Path:
     """Write ``OUT_DIR/<name>_gains.h`` for a loaded table (atomically); returns the path."""
-    data = table if isinstance(table, RuntimeData) else runtime_data(table)
+    data = firmware_data(table)
     return _write(Path(out_dir) / header_name(data), render_header(data))
 
 
@@ -243,7 +301,7 @@ def copy_runtime(out_dir) -> list[Path]:
 def c_files(table) -> dict[str, bytes]:
     """The C outputs of a loaded table (or its :class:`RuntimeData`): file name -> bytes,
     header first, then the runtime. Raises InputError if the table cannot be represented."""
-    data = table if isinstance(table, RuntimeData) else runtime_data(table)
+    data = firmware_data(table)
     files = {header_name(data): render_header(data).encode()}
     files.update((f, _resource("c", f).encode()) for f in RUNTIME_FILES)
     return files
@@ -295,7 +353,7 @@ def code_bytes(*, cross: bool | None = None, opt: str = "-Os") -> tuple[int, str
 
 def flash_summary(table, *, compile_code: bool = True) -> list[str]:
     """Lines describing the flash footprint: table bytes per array and runtime code bytes."""
-    data = table if isinstance(table, RuntimeData) else runtime_data(table)
+    data = firmware_data(table)
     sizes = {k: len(b) for k, b in data.crc_chunks() if k not in ("dims", "xi_scale")}
     big = ", ".join(f"{k} {v}" for k, v in sizes.items() if v >= 1024)
     lines = [f"flash: table data {data.nbytes()} bytes ({data.nbytes() / 1024:.1f} KiB; {big})"]
@@ -321,7 +379,7 @@ def build_host(
     adds AddressSanitizer + UndefinedBehaviorSanitizer (abort on the first report).
     Compiles with the strict warning set and -Werror. Returns the built file.
     """
-    data = table if isinstance(table, RuntimeData) else runtime_data(table)
+    data = firmware_data(table)
     cc = cc or find_cc()
     if cc is None:
         raise RuntimeError("no C compiler found (set CC)")
@@ -391,6 +449,9 @@ class CRuntime:
         self._bench_nominal = getattr(lib, f"{nm}_bench_nominal")
         self._bench_nominal.argtypes = [ctypes.c_size_t, fp, ctypes.c_int]
         self._bench_nominal.restype = ctypes.c_double
+        self._ftz = getattr(lib, f"{nm}_flush_to_zero")
+        self._ftz.argtypes = [ctypes.c_int]
+        self._ftz.restype = ctypes.c_int
         self._queries = getattr(lib, f"{nm}_bench_queries")
         self._queries.argtypes = [ctypes.c_size_t, ctypes.c_uint32, fp]
         self._queries.restype = None
@@ -448,6 +509,11 @@ class CRuntime:
         out = [np.empty_like(x) for _ in range(4)]
         self._trig(x.size, x, y, *out)
         return tuple(out)
+    def flush_to_zero(self, on: bool) -> bool:
+        """Flush-to-zero and denormals-are-zero on or off for the calling thread (x86
+        MXCSR, as FPSCR.FZ on a Cortex-M4F); False where the host has no such switch."""
+        return bool(self._ftz(int(on)))
+
     def verify(self) -> int:
         return int(self._verify())
 

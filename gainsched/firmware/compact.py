@@ -26,6 +26,7 @@ give the same bits.
 from __future__ import annotations
 
 import math
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,11 +41,12 @@ from .runtime import (
     UNUSABLE,
     Lookup,
     RuntimeData,
+    attitude_offsets,
     fundamental_domain,
 )
 
-__all__ = ["DEFAULT_AZIMUTH_ERROR", "CompactData", "compact_data", "fit_harmonics",
-           "sincos_f32", "CompactInterpolator"]
+__all__ = ["DEFAULT_AZIMUTH_ERROR", "MAX_HARMONICS", "FORMAT_COMPACT", "CompactData",
+           "compact_data", "fit_harmonics", "sincos_f32", "CompactInterpolator"]
 
 #: default bound on the relative error of the truncated series at the stored azimuths
 #: (:func:`fit_harmonics`): below the dense table's own azimuth interpolation error
@@ -53,9 +55,14 @@ DEFAULT_AZIMUTH_ERROR = 0.005
 #: the nominal roll's error is taken relative to the circle's largest roll, but to no
 #: less than this (rad): a level circle's small roll is not held to 0.5 % of itself
 ROLL_FLOOR = 0.01
-#: the most harmonics a value may take: a circle that needs more is refused (its values
-#: change too fast along the azimuth for the grid's samples)
-MAX_HARMONICS = 32
+#: the most harmonics a value may take (``GS_MAX_HARMONICS``): a circle that needs more
+#: is refused (its values change too fast along the azimuth for the grid's samples)
+MAX_HARMONICS = 16
+#: ``gs_table.format`` of a compact table (``GS_FORMAT_COMPACT``)
+FORMAT_COMPACT = 1
+#: the chunks of :meth:`CompactData.crc_chunks` that describe the table, not its data
+COMPACT_DESCRIPTOR_CHUNKS = ("dims", "xi_scale", "format", "n_harmonics", "n_coef",
+                             "offset_harmonics")
 
 
 @dataclass(frozen=True)
@@ -111,14 +118,57 @@ class CompactData:
             s += 2 * h + 1
         return out
 
-    def nbytes(self) -> int:
-        """Bytes of table data the firmware stores: the compact arrays plus the axes,
-        the state map, the vehicle constants and the attitude offsets."""
+    def __getattr__(self, key):
+        """The dense form's axes, state map, vehicle constants, offsets and metadata
+        (``xi_dot``, ``tilt``, ``vehicle``, ...) are the compact table's too."""
+        if key.startswith("__") or key == "base":
+            raise AttributeError(key)
+        return getattr(self.base, key)
+
+    @property
+    def dims(self) -> tuple[int, int, int, int]:
+        """``(n_tilt, n_speed, n_xi, n_state)``; ``n_xi``: the azimuth samples fitted."""
+        return self.base.dims
+
+    @property
+    def n_harmonics(self) -> int:
+        """The largest harmonic count of any series (``GS_MAX_HARMONICS`` at most)."""
+        return int(self.harmonics.max(initial=0))
+
+    def crc_chunks(self):
+        """``(label, bytes)`` in the order ``gs_table_crc32`` reads a compact table: the
+        dims, ``xi_scale``, the format and its sizes, the axes, the state map, the circle
+        mask, the harmonic counts, the circles' first coefficients, the coefficients,
+        then the vehicle and the attitude offsets as in the dense form."""
         b = self.base
-        arrays = (b.xi_dot, b.tilt, b.speed, b.state_sign, b.state_perm, self.harmonics,
-                  self.start, self.coef, self.mask)
-        extra = [x for x in (b.vehicle, b.offsets) if x is not None]
-        return int(sum(np.asarray(x).nbytes for x in (*arrays, *extra)))
+        u32 = lambda *v: np.array(v, dtype="<u4").tobytes()  # noqa: E731
+        yield "dims", u32(*b.dims)
+        yield "xi_scale", np.array([b.xi_scale], dtype="<f4").tobytes()
+        yield "format", u32(FORMAT_COMPACT)
+        yield "n_harmonics", u32(self.n_harmonics)
+        yield "n_coef", u32(self.coef.size)
+        for key in ("xi", "speed", "xi_dot", "tilt", "state_sign"):
+            yield key, np.ascontiguousarray(getattr(b, key), dtype="<f4").tobytes()
+        yield "state_perm", np.ascontiguousarray(b.state_perm, dtype=np.uint8).tobytes()
+        yield "mask", np.ascontiguousarray(self.mask, dtype=np.uint8).tobytes()
+        yield "harmonics", np.ascontiguousarray(self.harmonics, dtype=np.uint8).tobytes()
+        yield "coef_start", np.ascontiguousarray(self.start, dtype="<u4").tobytes()
+        yield "coef", np.ascontiguousarray(self.coef, dtype="<f4").tobytes()
+        for label, chunk in b.crc_chunks():
+            if label in ("vehicle", "offset_harmonics", "offsets"):
+                yield label, chunk
+
+    def crc32(self) -> int:
+        """CRC-32 (zlib, IEEE) of :meth:`crc_chunks`, as ``gs_table_crc32`` computes it."""
+        crc = 0
+        for _, chunk in self.crc_chunks():
+            crc = zlib.crc32(chunk, crc)
+        return crc & 0xFFFFFFFF
+
+    def nbytes(self) -> int:
+        """Bytes of table data the firmware stores (every array of :meth:`crc_chunks`,
+        without the descriptor's sizes)."""
+        return sum(len(c) for k, c in self.crc_chunks() if k not in COMPACT_DESCRIPTOR_CHUNKS)
 
 
 def _unit_circle(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -400,14 +450,48 @@ class CompactInterpolator:
 
     lookup = __call__
 
-    def _evaluate(self, q, sl):
-        """Outputs (m, n_value) float32 and status (m,) of the queries ``sl`` of ``q``."""
+    def query(self, xi: float, xi_dot: float, alpha: float):
+        """One query: ``(K (4, n), u_d (4,) N, phi_d rad, status int)``, the numbers of
+        ``self(xi, xi_dot, alpha)``."""
+        r = self(xi, xi_dot, alpha)
+        return r.K, r.u_d, float(r.phi_d), int(r.status)
+
+    def roll_slope(self, xi, xi_dot, alpha) -> np.ndarray:
+        """Slope along xi of the nominal roll at queries (m,), rad/rad: the derivative of
+        the cell's roll series at the query's azimuth (the C runtime's ``dphi_dxi``; S1
+        and S2 leave its sign), float64; zero where unusable."""
+        q = fundamental_domain(self.data.base, xi, xi_dot, alpha)
+        weights, circles, status = self._cell(q, slice(None))
+        x = q.xi.astype(np.float64)
+        out = np.zeros(x.size)
+        roll = self.data.n_value - 1
+        k = np.arange(1, (self._top - 1) // 2 + 1)
+        for w, c in zip(weights, circles, strict=True):
+            cf = self._coef[c, :, roll].astype(np.float64)  # (m, rows), zero past H
+            a, b = cf[:, 1::2], cf[:, 2::2]
+            d = (k * (b * np.cos(np.outer(x, k)) - a * np.sin(np.outer(x, k)))).sum(1)
+            out += np.where(w != 0, w.astype(np.float64) * d, 0.0)
+        return np.where((status & UNUSABLE) != 0, 0.0, out)
+
+    def attitude(self, xi, xi_dot, alpha) -> np.ndarray:
+        """The nominal's attitude offsets at queries (m,): ``(m, 4)`` = theta rad,
+        d theta / d xi, chi rad, d chi / d xi, as the dense lookup's
+        (:func:`~gainsched.firmware.runtime.attitude_offsets`)."""
+        q = fundamental_domain(self.data.base, xi, xi_dot, alpha)
+        weights, circles, status = self._cell(q, slice(None))
+        return attitude_offsets(self.data.base, xi, alpha, np.stack(circles, 1),
+                                np.stack(weights, 1).astype(np.float64), q.mirrored, status)
+
+    def _cell(self, q, sl):
+        """The (tilt, speed) cell of the queries ``sl`` of ``q``: four weights (m,)
+        float32 and four flat circle indices (m,) in ``gs_compact``'s order, and the
+        status with the circles' mask bits and ``BAD_INPUT``."""
         n_v = self.data.base.dims[1]
         (i0, i1, fa), (k0, k1, fv) = (tuple(a[sl] for a in q.tilt_cell),
                                       tuple(a[sl] for a in q.speed_cell))
         one = F32(1)
         wa0, wv0 = one - fa, one - fv
-        weights = (wa0 * wv0, wa0 * fv, fa * wv0, fa * fv)  # gs_lookup's order
+        weights = (wa0 * wv0, wa0 * fv, fa * wv0, fa * fv)
         circles = (i0 * n_v + k0, i0 * n_v + k1, i1 * n_v + k0, i1 * n_v + k1)
         status = q.status[sl].copy()
         mk = np.zeros(status.shape, dtype=np.uint8)
@@ -416,6 +500,11 @@ class CompactInterpolator:
         status |= np.where(mk != 0, INFEASIBLE, 0).astype(np.uint8)
         status |= np.where(mk & MASK_NO_GAINS, NO_GAINS, 0).astype(np.uint8)
         status = np.where(q.bad[sl], BAD_INPUT, status).astype(np.uint8)
+        return weights, circles, status
+
+    def _evaluate(self, q, sl):
+        """Outputs (m, n_value) float32 and status (m,) of the queries ``sl`` of ``q``."""
+        weights, circles, status = self._cell(q, sl)
         live = (status & UNUSABLE) == 0
         # the harmonics of the azimuth: one sin/cos pair, then angle addition
         s1, c1 = sincos_f32(q.xi[sl])

@@ -9,18 +9,165 @@ interrupted build leaves the old set or the new one, never a mix.
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
+from ..errors import InputError
 from ..model.reduced import Model
 from ..publish import publish
 from ..schedule.tables import table_bytes, table_from_bytes
+from .check import MidpointCheck, midpoint_check
 from .codegen import c_files
+from .compact import CompactData, CompactInterpolator, compact_data
+from .runtime import RuntimeData, runtime_data
 
-__all__ = ["output_files", "write_outputs"]
+__all__ = ["OutputSet", "output_set", "output_files", "firmware_form", "certificate_lines",
+           "table_config", "write_outputs"]
+
+
+@dataclass(frozen=True)
+class OutputSet:
+    """A build's outputs, checked, before they are published.
+
+    Attributes
+    ----------
+    files : dict
+        File name -> bytes: ``NAME.h5``, ``NAME_gains.h``, ``gainsched_runtime.h``,
+        ``gainsched_runtime.c``.
+    form : RuntimeData or CompactData
+        What the C header holds (``[firmware] format``).
+    certificate : MidpointCheck or None
+        The compact table checked against directly solved gains at the cell midpoints
+        (None for the dense format, which ``gainsched check`` checks on demand).
+    """
+
+    files: dict
+    form: RuntimeData | CompactData
+    certificate: MidpointCheck | None
+
+
+def firmware_form(config, table, progress=None):
+    """The table as the config's firmware gets it, with its certificate.
+
+    Dense: the runtime data. Compact: the series of :func:`~.compact.compact_data`
+    (``firmware.azimuth_error``), certified at every cell midpoint against directly
+    solved gains (:func:`~.check.midpoint_check`): the largest relative gain error must
+    be within ``grid.max_interpolation_error`` and every midpoint loop closed with the
+    table's gains stable. Either format must fit ``firmware.max_table_bytes``.
+
+    Parameters
+    ----------
+    config : Config or None
+        The table's config (None: the dense form, no budget).
+    table : Table
+        The built table.
+    progress : callable, optional
+        Called with 1 per checked speed midpoint (the compact certificate).
+
+    Returns
+    -------
+    (RuntimeData or CompactData, MidpointCheck or None)
+
+    Raises
+    ------
+    InputError
+        Naming the config and the key whose bound is not met, and where.
+    """
+    form = runtime_data(table)
+    if config is None:
+        return form, None
+    fw = config.firmware
+    cert = None
+    if fw.format == "compact":
+        form = compact_data(form, fw.azimuth_error, source=config.source)
+        cert = midpoint_check(table, lookup=CompactInterpolator(form), progress=progress)
+        _check_certificate(config, cert)
+    if fw.max_table_bytes is not None and form.nbytes() > fw.max_table_bytes:
+        raise InputError(config.source, "firmware.max_table_bytes",
+                         f"{fw.max_table_bytes:,} bytes exceeded: the {fw.format} table holds "
+                         f"{form.nbytes():,} bytes of data"
+                         + ("; try [firmware] format = \"compact\"" if fw.format == "dense"
+                            else "; raise firmware.azimuth_error or thin the grid"))
+    return form, cert
+
+
+def table_config(table, fmt: str = "config"):
+    """The config a table was built from (its embedded text), with ``[firmware] format``
+    set to ``fmt`` unless ``fmt`` is ``"config"``; None when this process cannot load it
+    (an effect registered elsewhere) and ``fmt`` is not ``"compact"``: the dense header
+    needs no config. Raises InputError when ``"compact"`` needs the unloadable config."""
+    from ..config import config_from_text
+
+    try:
+        cfg = config_from_text(table.config_text, f"{table.source}:config_text")
+    except InputError:
+        if fmt == "compact":
+            raise
+        return None
+    if fmt not in ("config", cfg.firmware.format):
+        cfg = cfg.with_values({"firmware.format": fmt})
+    return cfg
+
+
+def _check_certificate(config, cert: MidpointCheck) -> None:
+    """Refuse a compact table whose midpoint error exceeds the bound or whose loop with
+    the table's gains is unstable at a midpoint circle."""
+    bound = config.grid.max_interpolation_error
+    if math.isfinite(cert.max_err) and cert.max_err > bound:
+        v, a, x, e = cert.worst_point()
+        raise InputError(config.source, "grid.max_interpolation_error",
+                         f"{100 * bound:g} % not met by the compact table: {100 * e:.2f} % at "
+                         f"{v:g} m/s, tilt {math.degrees(a):g} deg, xi {math.degrees(x):g} deg "
+                         "(lower firmware.azimuth_error or refine the grid there)")
+    for v, a, rho, _ in cert.circles:
+        if not rho < 1 and math.isfinite(rho):
+            raise InputError(config.source, "firmware.format",
+                             f"the compact table's gains do not stabilise the midpoint circle "
+                             f"{v:g} m/s, tilt {math.degrees(a):g} deg (spectral radius "
+                             f"{rho:.5f}): lower firmware.azimuth_error")
+
+
+def certificate_lines(config, cert: MidpointCheck) -> list[str]:
+    """What ``gainsched build`` prints of a compact table's certificate: the largest gain
+    error at the cell midpoints against the bound, and the worst closed loop (spectral
+    radius and slowest time constant) with the table's gains and with the direct ones."""
+    out = [f"certified at {np.count_nonzero(np.isfinite(cert.rel_err))} cell midpoints: max "
+           f"gain error {100 * cert.max_err:.2f} % (median {100 * cert.median_err:.2f} %, "
+           f"bound {100 * config.grid.max_interpolation_error:g} %)"]
+    live = [c for c in cert.circles if math.isfinite(c[2])]
+    if live:
+        worst = max(live, key=lambda c: c[2])
+        r = config.radius
+
+        def tau(v, rho):  # slowest closed-loop time constant of a circle, s
+            return -2 * math.pi * r / v / math.log(rho)
+
+        slow = max(live, key=lambda c: tau(c[0], c[2]))
+        out.append(f"closed loop at {len(live)} midpoint circles: worst spectral radius "
+                   f"{worst[2]:.5f} (direct gains {worst[3]:.5f}) at {worst[0]:g} m/s, tilt "
+                   f"{math.degrees(worst[1]):g} deg; slowest mode {tau(slow[0], slow[2]):.3g} s "
+                   f"(direct {tau(slow[0], slow[3]):.3g} s)")
+    return out
+
+
+def output_set(config, grid, out_dir=".", progress=None) -> OutputSet:
+    """The checked outputs of a build (:class:`OutputSet`): the HDF5 table, read back
+    through the loader's checks, its C header in the config's format (certified when
+    compact, :func:`firmware_form`) and the runtime. ``out_dir`` only names the table
+    in error messages; ``progress`` goes to the certificate."""
+    name = f"{config.name}.h5"
+    data = table_bytes(config, grid, Model(config))
+    table = table_from_bytes(data, Path(out_dir) / name)
+    form, cert = firmware_form(config, table, progress)
+    return OutputSet({name: data, **c_files(form)}, form, cert)
 
 
 def output_files(config, grid, out_dir=".") -> dict[str, bytes]:
-    """``{NAME.h5, NAME_gains.h, gainsched_runtime.h, gainsched_runtime.c}`` -> bytes, checked.
+    """``{NAME.h5, NAME_gains.h, gainsched_runtime.h, gainsched_runtime.c}`` -> bytes, checked
+    (the files of :func:`output_set`).
 
     Parameters
     ----------
@@ -30,10 +177,7 @@ def output_files(config, grid, out_dir=".") -> dict[str, bytes]:
     out_dir : path-like
         Where the files will go (only for the names in error messages).
     """
-    name = f"{config.name}.h5"
-    data = table_bytes(config, grid, Model(config))
-    table = table_from_bytes(data, Path(out_dir) / name)
-    return {name: data, **c_files(table)}
+    return output_set(config, grid, out_dir).files
 
 
 def write_outputs(out_dir, config, grid) -> list[Path]:

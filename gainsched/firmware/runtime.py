@@ -55,6 +55,9 @@ __all__ = [
     "vehicle_fields",
     "Lookup",
     "Interpolator",
+    "Domain",
+    "fundamental_domain",
+    "attitude_offsets",
 ]
 
 # status bits (gainsched_runtime.h)
@@ -482,6 +485,28 @@ def fundamental_domain(d, xi, xi_dot, alpha) -> Domain:
                   (i0, i1, fa))
 
 
+def attitude_offsets(d, xi, alpha, circles, weights, mirrored, status) -> np.ndarray:
+    """The nominal's attitude offsets at queries (m,), from the cell's circles: ``(m, 4)``
+    = theta rad, d theta / d xi, chi rad, d chi / d xi (zero without offsets or where
+    unusable). ``circles`` (m, 4) flat (tilt, speed) indices and ``weights`` (m, 4) their
+    bilinear weights; ``mirrored`` (m,) S2 applied; ``status`` (m,) the lookup's."""
+    from ..schedule.offsets import mirrored_coefficients, series, shifted_coefficients
+
+    xi = np.asarray(xi, dtype=np.float64).reshape(-1)
+    if d.offsets is None:
+        return np.zeros((xi.size, 4))
+    nb = d.offsets.shape[-1]
+    coef = np.einsum("mc,mcab->mab", weights,
+                     d.offsets.reshape(-1, 2, nb)[circles].astype(float))
+    shifted = np.broadcast_to(np.asarray(alpha, dtype=np.float32), xi.shape) < 0
+    # back from the fundamental domain: S2 undone first, then S1 (the lookup's reverse)
+    coef = np.where(mirrored[:, None, None], mirrored_coefficients(coef), coef)
+    coef = np.where(shifted[:, None, None], shifted_coefficients(coef), coef)
+    out = series(coef, xi)
+    out[(status & UNUSABLE) != 0] = 0.0
+    return out
+
+
 @dataclass(frozen=True)
 class Lookup:
     """The gains, nominal and status an Interpolator returns for an array of queries.
@@ -711,24 +736,10 @@ class Interpolator:
         (theta keeps its sign, chi flips; ``xi -> pi - xi``) and S1 (``xi -> xi + pi``), and
         the series evaluated at the query's azimuth.
         """
-        from ..schedule.offsets import mirrored_coefficients, series, shifted_coefficients
-
-        d = self.data
-        xi = np.asarray(xi, dtype=np.float64).reshape(-1)
-        if d.offsets is None:
-            return np.zeros((xi.size, 4))
         pts, w, status, mirrored = self.cells(xi, xi_dot, alpha)
-        nb = d.offsets.shape[-1]
-        circ = pts[:, ::2] // d.xi.size  # (m, 4) flat (tilt, speed) circles
+        circ = pts[:, ::2] // self.data.xi.size  # (m, 4) flat (tilt, speed) circles
         wc = (w[:, ::2].astype(np.float64) + w[:, 1::2])  # (m, 4)
-        coef = np.einsum("mc,mcab->mab", wc, d.offsets.reshape(-1, 2, nb)[circ].astype(float))
-        shifted = np.broadcast_to(np.asarray(alpha, dtype=np.float32), xi.shape) < 0
-        # back from the fundamental domain: S2 undone first, then S1 (the lookup's reverse)
-        coef = np.where(mirrored[:, None, None], mirrored_coefficients(coef), coef)
-        coef = np.where(shifted[:, None, None], shifted_coefficients(coef), coef)
-        out = series(coef, xi)
-        out[(status & UNUSABLE) != 0] = 0.0
-        return out
+        return attitude_offsets(self.data, xi, alpha, circ, wc, mirrored, status)
 
     def roll_slope(self, xi, xi_dot, alpha) -> np.ndarray:
         """Slope along xi of the interpolated ``phi_d`` at queries (m,), rad/rad: the

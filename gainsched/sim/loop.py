@@ -818,9 +818,11 @@ def table_scheduler(table):
 
     Parameters
     ----------
-    table : Table or RuntimeData
-        The gain schedule (:func:`~gainsched.schedule.tables.load_table`), or its
-        runtime form (:func:`gainsched.firmware.runtime.runtime_data`).
+    table : Table, RuntimeData or CompactData
+        The gain schedule (:func:`~gainsched.schedule.tables.load_table`), its dense
+        runtime form (:func:`gainsched.firmware.runtime.runtime_data`) or its compact
+        form (:func:`gainsched.firmware.compact.compact_data`, looked up by
+        :class:`~gainsched.firmware.compact.CompactInterpolator`).
 
     Returns
     -------
@@ -851,9 +853,10 @@ def table_scheduler(table):
     >>> K.shape, status.tolist()
     ((5, 4, 11), [0, 0, 0, 0, 0])
     """
+    from ..firmware.compact import CompactData, CompactInterpolator
     from ..firmware.runtime import Interpolator
 
-    interp = Interpolator(table)
+    interp = CompactInterpolator(table) if isinstance(table, CompactData) else Interpolator(table)
     query = interp.query  # one query per call: the scalar fast path
 
     def lookup(xi, xi_dot, alpha):
@@ -884,16 +887,16 @@ def c_runtime_scheduler(table, build_dir=None):
 
     Parameters
     ----------
-    table : Table or RuntimeData
+    table : Table, RuntimeData or CompactData
+        The table, in the format the firmware holds (a loaded table: the dense one).
     build_dir : path, optional
     """
     import ctypes
     import tempfile
 
-    from ..firmware.codegen import CRuntime, build_host
-    from ..firmware.runtime import RuntimeData, runtime_data
+    from ..firmware.codegen import CRuntime, build_host, firmware_data
 
-    data = table if isinstance(table, RuntimeData) else runtime_data(table)
+    data = firmware_data(table)
     tmp = None
     if build_dir is None:
         tmp = tempfile.TemporaryDirectory(prefix="gainsched-rt-")

@@ -11,6 +11,15 @@
 
 #include <stddef.h> /* only freestanding headers: no libc, no libm */
 
+/* No contraction of a * b + c into a fused multiply-add, whatever the firmware's flags:
+ * GCC contracts by default outside ISO modes (-std=gnu11) and ignores the standard
+ * pragma (STDC FP_CONTRACT), so each compiler gets its own. */
+#if defined(__clang__)
+#pragma clang fp contract(off)
+#elif defined(__GNUC__)
+#pragma GCC optimize("fp-contract=off")
+#endif
+
 #define GS_PI 0x1.921fb6p+1f /* pi rounded to float */
 
 /* the bits of a float (type punning through a union is defined in C99) */
@@ -77,12 +86,26 @@ static void gs_zero(float *K, size_t nK, float *u_d, float *phi_d)
 /* the fields the lookup relies on (gs_verify checks the rest once, at boot) */
 static inline int gs_table_usable(const gs_table *t)
 {
-    return t->n_tilt >= 1u && t->n_speed >= 1u && t->n_xi >= 1u && t->n_state >= 1u &&
-           t->n_state <= 255u && t->xi_dot != NULL && t->tilt != NULL && t->K_tilt0 != NULL &&
+    const int common = t->n_tilt >= 1u && t->n_speed >= 1u && t->n_xi >= 1u &&
+                       t->n_state >= 1u && t->n_state <= 255u && t->xi_dot != NULL &&
+                       t->tilt != NULL && t->state_sign != NULL && t->state_perm != NULL &&
+                       t->mask != NULL &&
+                       (t->offsets == NULL || t->n_offset_harmonics <= GS_MAX_OFFSET_HARMONICS);
+    if (t->format == GS_FORMAT_COMPACT) {
+        return common && t->harmonics != NULL && t->coef_start != NULL &&
+               (t->coef != NULL || t->n_coef == 0u) && t->n_harmonics <= GS_MAX_HARMONICS;
+    }
+    return common && t->format == GS_FORMAT_DENSE && t->K_tilt0 != NULL &&
            (t->K != NULL || t->n_tilt == 1u) && t->u_d != NULL && t->phi_d != NULL &&
-           t->state_sign != NULL && t->state_perm != NULL && t->mask != NULL &&
-           (t->offsets == NULL || t->n_offset_harmonics <= GS_MAX_OFFSET_HARMONICS) &&
            (t->n_xi_tilt0 <= 1u || t->n_xi_tilt0 == t->n_xi);
+}
+
+/* x < 0 read from the sign bit: a negative subnormal is negative with flush-to-zero
+ * on as well (x < 0.0f would compare it as 0 there), -0 is not */
+static int gs_negative(float x)
+{
+    const uint32_t b = gs_bits(x);
+    return (b >> 31) != 0u && (b & 0x7fffffffu) != 0u;
 }
 
 /* the tilt-0 gain block of speed iv and azimuth ix */
@@ -109,50 +132,27 @@ int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float 
     return gs_lookup_cell(table, xi, xi_dot, alpha, K, u_d, phi_d, NULL);
 }
 
-static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float alpha, float *K,
-                          float *u_d, float *phi_d, gs_cell *cell)
+/* Dense tables, step 5: the 8 corners of the (xi, xi_dot, alpha) cell; xi in the
+ * fundamental domain, cell the tilt and speed cell. Returns GS_INFEASIBLE and GS_NO_GAINS
+ * (outputs zeroed) as they apply; *dphi_dxi (if not NULL) the roll's slope along xi.
+ * (Six pointer arguments and one float: all in registers, a static stack.) */
+static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *K, float *u_d,
+                    float *phi_d, float *dphi_dxi)
 {
-    const gs_table *t = table;
-    size_t n, nK, e;
-    uint32_t ia[2], iv[2], ix[2];
-    float fa, fv, fx, tt;
+    const size_t n = t->n_state, nK = 4u * n;
+    const uint32_t *const ia = cell->ia, *const iv = cell->iv;
+    const float fa = cell->fa, fv = cell->fv;
+    uint32_t ix[2];
+    float fx, tt;
     int32_t fl, jx;
-    int mirrored = 0, shifted = 0;
-    int status = GS_OK;
     unsigned any_mask = 0u;
-    size_t P[8];
+    int status = GS_OK;
+    size_t P[8], e;
     const float *pk[8];
     float w[8];
 
-    if (t == NULL || K == NULL || u_d == NULL || phi_d == NULL || !gs_table_usable(t)) {
-        return GS_BAD_ARG;
-    }
-    n = t->n_state;
-    nK = 4u * n;
-
-    /* 1. refuse NaN, inf and absurd values */
-    if (gs_nonfinite(xi) || gs_nonfinite(xi_dot) || gs_nonfinite(alpha) || xi > GS_XI_LIMIT ||
-        xi < -GS_XI_LIMIT || xi_dot > GS_XI_DOT_LIMIT || xi_dot < -GS_XI_DOT_LIMIT ||
-        alpha > GS_TILT_LIMIT || alpha < -GS_TILT_LIMIT) {
-        gs_zero(K, nK, u_d, phi_d);
-        return GS_BAD_INPUT;
-    }
-
-    /* 2-3. symmetry maps into the fundamental domain */
-    if (alpha < 0.0f) { /* S1: (-alpha, xi) == (alpha, xi + pi) */
-        xi = xi + GS_PI;
-        alpha = -alpha;
-        shifted = 1;
-    }
-    if (xi_dot < 0.0f) { /* S2: mirror, undone on the outputs */
-        xi = GS_PI - xi;
-        xi_dot = -xi_dot;
-        mirrored = 1;
-    }
-
-
-    /* 4. xi: periodic uniform axis, in cell units; |tt| < 2^24 so the
-     * float <-> int conversions below are exact */
+    /* xi: periodic uniform axis, in cell units; |tt| < 2^24 so the float <-> int
+     * conversions below are exact */
     tt = xi * t->xi_scale;
     fl = (int32_t)tt; /* truncation ... */
     if ((float)fl > tt) {
@@ -166,45 +166,8 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
     ix[0] = (uint32_t)jx;
     ix[1] = (ix[0] + 1u == t->n_xi) ? 0u : ix[0] + 1u;
 
-    /* speed axis (xi_dot): clamp, bracket */
-    if (xi_dot < t->xi_dot[0]) {
-        xi_dot = t->xi_dot[0];
-        status |= GS_CLAMPED_SPEED;
-    } else if (xi_dot > t->xi_dot[t->n_speed - 1u]) {
-        xi_dot = t->xi_dot[t->n_speed - 1u];
-        status |= GS_CLAMPED_SPEED;
-    }
-    if (t->n_speed > 1u) {
-        iv[0] = gs_bracket(t->xi_dot, t->n_speed, xi_dot);
-        iv[1] = iv[0] + 1u;
-        fv = gs_snap((xi_dot - t->xi_dot[iv[0]]) / (t->xi_dot[iv[1]] - t->xi_dot[iv[0]]));
-    } else {
-        iv[0] = iv[1] = 0u;
-        fv = 0.0f;
-    }
-
-    /* tilt axis: alpha >= 0 == tilt[0] here; clamp above, bracket */
-    if (alpha > t->tilt[t->n_tilt - 1u]) {
-        alpha = t->tilt[t->n_tilt - 1u];
-        status |= GS_CLAMPED_TILT;
-    }
-    if (t->n_tilt > 1u) {
-        ia[0] = gs_bracket(t->tilt, t->n_tilt, alpha);
-        ia[1] = ia[0] + 1u;
-        fa = gs_snap((alpha - t->tilt[ia[0]]) / (t->tilt[ia[1]] - t->tilt[ia[0]]));
-    } else {
-        ia[0] = ia[1] = 0u;
-        fa = 0.0f;
-    }
-    if (cell != NULL) { /* gs_lookup_nominal's: where the query fell */
-        cell->ia[0] = ia[0], cell->ia[1] = ia[1], cell->iv[0] = iv[0], cell->iv[1] = iv[1];
-        cell->fa = fa, cell->fv = fv;
-        cell->mirrored = mirrored, cell->shifted = shifted;
-        cell->dphi_dxi = 0.0f;
-    }
-
-    /* 5. the 8 corners c (bit 2: tilt, bit 1: speed, bit 0: xi): regular grid
-     * points P[c], weights w[c], gain blocks pk[c] */
+    /* the 8 corners c (bit 2: tilt, bit 1: speed, bit 0: xi): regular grid points
+     * P[c], weights w[c], gain blocks pk[c] */
     {
         const size_t nx = t->n_xi;
         const size_t n_vx = (size_t)t->n_speed * nx;
@@ -309,49 +272,233 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
                  ((w4 * ph[P[4]] + w5 * ph[P[5]]) + (w6 * ph[P[6]] + w7 * ph[P[7]]));
         /* its slope along xi inside the cell: (tilt, speed) weights times the xi step;
          * the mirror S2 (phi -> -phi, xi -> pi - xi) leaves the slope's sign */
-        if (cell != NULL) {
-            cell->dphi_dxi =
+        if (dphi_dxi != NULL) {
+            *dphi_dxi =
                 (((w0 + w1) * (ph[P[1]] - ph[P[0]]) + (w2 + w3) * (ph[P[3]] - ph[P[2]])) +
                  ((w4 + w5) * (ph[P[5]] - ph[P[4]]) + (w6 + w7) * (ph[P[7]] - ph[P[6]]))) *
                 t->xi_scale;
         }
     }
+    return status;
+}
 
-    if (mirrored) {
-        /* K <- P_u K P_x: K'[r][c] = s[c] K[3-r][perm[c]]; u_d <- P_u u_d; phi_d <- -phi_d.
-         * Rows 0<->3 and 1<->2 swap with the column signs applied ... */
-        float *const r0 = K, *const r1 = K + n, *const r2 = K + 2u * n, *const r3 = K + 3u * n;
-        const float *const sg = t->state_sign;
-        const uint8_t *const pm = t->state_perm;
-        float tmp;
-        size_t col;
-        for (col = 0; col < n; ++col) {
-            const float sc = sg[col];
-            tmp = r0[col];
-            r0[col] = sc * r3[col];
-            r3[col] = sc * tmp;
-            tmp = r1[col];
-            r1[col] = sc * r2[col];
-            r2[col] = sc * tmp;
+/* out[e] += sum_j g[j] cf[j] over the 2 H[e] + 1 coefficients of each of the count
+ * series starting at cf, in order; returns the coefficients that follow */
+static const float *gs_series(const float *g, const uint8_t *H, const float *cf, float *out,
+                              size_t count)
+{
+    size_t e;
+    for (e = 0; e < count; ++e) {
+        const uint32_t rows = 2u * (uint32_t)H[e] + 1u;
+        uint32_t j;
+        float acc = out[e];
+        for (j = 0u; j < rows; ++j) {
+            acc = acc + g[j] * cf[j];
         }
-        /* ... then the columns permute in pairs (perm is an involution and
-         * s[perm[c]] == s[c]); the base states are never permuted (gs_verify) */
-        for (col = GS_N_BASE_STATES; col < n; ++col) {
-            const size_t q = pm[col];
-            if (q > col) {
-                tmp = r0[col], r0[col] = r0[q], r0[q] = tmp;
-                tmp = r1[col], r1[col] = r1[q], r1[q] = tmp;
-                tmp = r2[col], r2[col] = r2[q], r2[q] = tmp;
-                tmp = r3[col], r3[col] = r3[q], r3[q] = tmp;
+        out[e] = acc;
+        cf += rows;
+    }
+    return cf;
+}
+
+/* Compact tables, step 5: the series of the (up to) 4 circles of the (xi_dot, alpha)
+ * cell at xi, weighted bilinearly; same contract as gs_dense. Every operation in
+ * float32 in this order: the Python reference (gainsched/firmware/compact.py) gives
+ * the same bits. */
+static int gs_compact(const gs_table *t, float xi, const gs_cell *cell, float *K, float *u_d,
+                      float *phi_d, float *dphi_dxi)
+{
+    const size_t nK = 4u * (size_t)t->n_state, n_value = nK + 5u;
+    const uint32_t *const ia = cell->ia, *const iv = cell->iv;
+    const float fa = cell->fa, fv = cell->fv;
+    const float wa0 = 1.0f - fa, wv0 = 1.0f - fv;
+    const float wq[4] = {wa0 * wv0, wa0 * fv, fa * wv0, fa * fv};
+    const size_t q[4] = {(size_t)ia[0] * t->n_speed + iv[0], (size_t)ia[0] * t->n_speed + iv[1],
+                         (size_t)ia[1] * t->n_speed + iv[0], (size_t)ia[1] * t->n_speed + iv[1]};
+    float ck[GS_MAX_HARMONICS + 1u], sk[GS_MAX_HARMONICS + 1u], g[2u * GS_MAX_HARMONICS + 1u];
+    float slope = 0.0f;
+    int status = GS_OK;
+    unsigned any_mask = 0u, c;
+    uint32_t j;
+    size_t e;
+
+    for (c = 0u; c < 4u; ++c) {
+        if (wq[c] != 0.0f) {
+            any_mask |= t->mask[q[c]];
+        }
+    }
+    if (any_mask != 0u) {
+        status |= GS_INFEASIBLE;
+    }
+    if ((any_mask & GS_MASK_NO_GAINS) != 0u) {
+        gs_zero(K, nK, u_d, phi_d);
+        return status | GS_NO_GAINS;
+    }
+    /* cos k xi, sin k xi: one sin/cos pair, then angle addition. In two arrays, not
+     * interleaved: GCC's SLP vectoriser turns an interleaved pair into a fused
+     * multiply-add-subtract (-O3 with FMA) whatever the contraction setting */
+    ck[0] = 1.0f;
+    sk[0] = 0.0f;
+    gs_sincosf(xi, &sk[1], &ck[1]);
+    for (j = 2u; j <= t->n_harmonics; ++j) {
+        ck[j] = ck[j - 1u] * ck[1] - sk[j - 1u] * sk[1];
+        sk[j] = sk[j - 1u] * ck[1] + ck[j - 1u] * sk[1];
+    }
+    for (e = 0; e < nK; ++e) {
+        K[e] = 0.0f;
+    }
+    u_d[0] = u_d[1] = u_d[2] = u_d[3] = 0.0f;
+    *phi_d = 0.0f;
+    for (c = 0u; c < 4u; ++c) {
+        const uint8_t *H;
+        const float *cf;
+        if (wq[c] == 0.0f) {
+            continue;
+        }
+        H = t->harmonics + q[c] * n_value;
+        cf = t->coef + t->coef_start[q[c]];
+        g[0] = wq[c]; /* the corner's weight times each harmonic */
+        for (j = 1u; j <= t->n_harmonics; ++j) {
+            g[2u * j - 1u] = wq[c] * ck[j];
+            g[2u * j] = wq[c] * sk[j];
+        }
+        cf = gs_series(g, H, cf, K, nK);
+        cf = gs_series(g, H + nK, cf, u_d, 4u);
+        (void)gs_series(g, H + nK + 4u, cf, phi_d, 1u);
+        if (dphi_dxi != NULL) { /* d/dxi of the roll's series: k (b_k cos kxi - a_k sin kxi) */
+            const uint32_t h = H[nK + 4u];
+            float d = 0.0f;
+            for (j = 1u; j <= h; ++j) {
+                d = d + (float)j * (cf[2u * j] * ck[j] - cf[2u * j - 1u] * sk[j]);
             }
+            slope = slope + wq[c] * d;
         }
-        tmp = u_d[0];
-        u_d[0] = u_d[3];
-        u_d[3] = tmp;
-        tmp = u_d[1];
-        u_d[1] = u_d[2];
-        u_d[2] = tmp;
-        *phi_d = -*phi_d;
+    }
+    if (dphi_dxi != NULL) { /* the mirror S2 and the shift S1 leave the slope's sign */
+        *dphi_dxi = slope;
+    }
+    return status;
+}
+
+/* Map outputs computed in the fundamental domain back through S2:
+ * K <- P_u K P_x: K'[r][c] = s[c] K[3-r][perm[c]]; u_d <- P_u u_d; phi_d <- -phi_d */
+static void gs_mirror(const gs_table *t, float *K, float *u_d, float *phi_d)
+{
+    const size_t n = t->n_state;
+    /* rows 0<->3 and 1<->2 swap with the column signs applied ... */
+    float *const r0 = K, *const r1 = K + n, *const r2 = K + 2u * n, *const r3 = K + 3u * n;
+    const float *const sg = t->state_sign;
+    const uint8_t *const pm = t->state_perm;
+    float tmp;
+    size_t col;
+    for (col = 0; col < n; ++col) {
+        const float sc = sg[col];
+        tmp = r0[col];
+        r0[col] = sc * r3[col];
+        r3[col] = sc * tmp;
+        tmp = r1[col];
+        r1[col] = sc * r2[col];
+        r2[col] = sc * tmp;
+    }
+    /* ... then the columns permute in pairs (perm is an involution and
+     * s[perm[c]] == s[c]); the base states are never permuted (gs_verify) */
+    for (col = GS_N_BASE_STATES; col < n; ++col) {
+        const size_t q = pm[col];
+        if (q > col) {
+            tmp = r0[col], r0[col] = r0[q], r0[q] = tmp;
+            tmp = r1[col], r1[col] = r1[q], r1[q] = tmp;
+            tmp = r2[col], r2[col] = r2[q], r2[q] = tmp;
+            tmp = r3[col], r3[col] = r3[q], r3[q] = tmp;
+        }
+    }
+    tmp = u_d[0];
+    u_d[0] = u_d[3];
+    u_d[3] = tmp;
+    tmp = u_d[1];
+    u_d[1] = u_d[2];
+    u_d[2] = tmp;
+    *phi_d = -*phi_d;
+}
+
+static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float alpha, float *K,
+                          float *u_d, float *phi_d, gs_cell *cell)
+{
+    const gs_table *t = table;
+    gs_cell here;
+    uint32_t *const ia = here.ia, *const iv = here.iv;
+    float fa, fv;
+    int mirrored = 0, shifted = 0;
+    int status = GS_OK;
+
+    if (t == NULL || K == NULL || u_d == NULL || phi_d == NULL || !gs_table_usable(t)) {
+        return GS_BAD_ARG;
+    }
+
+    /* 1. refuse NaN, inf and absurd values */
+    if (gs_nonfinite(xi) || gs_nonfinite(xi_dot) || gs_nonfinite(alpha) || xi > GS_XI_LIMIT ||
+        xi < -GS_XI_LIMIT || xi_dot > GS_XI_DOT_LIMIT || xi_dot < -GS_XI_DOT_LIMIT ||
+        alpha > GS_TILT_LIMIT || alpha < -GS_TILT_LIMIT) {
+        gs_zero(K, 4u * (size_t)t->n_state, u_d, phi_d);
+        return GS_BAD_INPUT;
+    }
+
+    /* 2-3. symmetry maps into the fundamental domain */
+    if (gs_negative(alpha)) { /* S1: (-alpha, xi) == (alpha, xi + pi) */
+        xi = xi + GS_PI;
+        alpha = -alpha;
+        shifted = 1;
+    }
+    if (gs_negative(xi_dot)) { /* S2: mirror, undone on the outputs */
+        xi = GS_PI - xi;
+        xi_dot = -xi_dot;
+        mirrored = 1;
+    }
+
+    /* 4. speed axis (xi_dot): clamp, bracket (xi is wrapped by the dense lookup) */
+    if (xi_dot < t->xi_dot[0]) {
+        xi_dot = t->xi_dot[0];
+        status |= GS_CLAMPED_SPEED;
+    } else if (xi_dot > t->xi_dot[t->n_speed - 1u]) {
+        xi_dot = t->xi_dot[t->n_speed - 1u];
+        status |= GS_CLAMPED_SPEED;
+    }
+    if (t->n_speed > 1u) {
+        iv[0] = gs_bracket(t->xi_dot, t->n_speed, xi_dot);
+        iv[1] = iv[0] + 1u;
+        fv = gs_snap((xi_dot - t->xi_dot[iv[0]]) / (t->xi_dot[iv[1]] - t->xi_dot[iv[0]]));
+    } else {
+        iv[0] = iv[1] = 0u;
+        fv = 0.0f;
+    }
+
+    /* tilt axis: alpha >= 0 == tilt[0] here; clamp above, bracket */
+    if (alpha > t->tilt[t->n_tilt - 1u]) {
+        alpha = t->tilt[t->n_tilt - 1u];
+        status |= GS_CLAMPED_TILT;
+    }
+    if (t->n_tilt > 1u) {
+        ia[0] = gs_bracket(t->tilt, t->n_tilt, alpha);
+        ia[1] = ia[0] + 1u;
+        fa = gs_snap((alpha - t->tilt[ia[0]]) / (t->tilt[ia[1]] - t->tilt[ia[0]]));
+    } else {
+        ia[0] = ia[1] = 0u;
+        fa = 0.0f;
+    }
+    here.fa = fa, here.fv = fv;
+    here.mirrored = mirrored, here.shifted = shifted;
+    here.dphi_dxi = 0.0f;
+
+    /* 5. the values at (xi, xi_dot, alpha) */
+    {
+        float *const dphi = cell != NULL ? &here.dphi_dxi : NULL;
+        status |= t->format == GS_FORMAT_COMPACT ? gs_compact(t, xi, &here, K, u_d, phi_d, dphi)
+                                                 : gs_dense(t, xi, &here, K, u_d, phi_d, dphi);
+    }
+    if (mirrored && (status & GS_NO_GAINS) == 0) {
+        gs_mirror(t, K, u_d, phi_d);
+    }
+    if (cell != NULL) { /* gs_lookup_nominal's: where the query fell */
+        *cell = here;
     }
     return status;
 }
@@ -615,13 +762,13 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
          * table): thrust ratio per motor, roll offset */
         const float lo = t->xi_dot[0], hi = t->xi_dot[t->n_speed - 1u];
         const float amax = t->tilt[t->n_tilt - 1u];
-        const float vq = ref[1] < 0.0f ? -ref[1] : ref[1];
-        const float aq = alpha < 0.0f ? -alpha : alpha;
+        const float vq = gs_negative(ref[1]) ? -ref[1] : ref[1];
+        const float aq = gs_negative(alpha) ? -alpha : alpha;
         float d_st[4], u_st[4], sc_st[2], dphi_st, ten_st, sas = sa, cas = ca, xd_g, a_g;
         xd_g = vq < lo ? lo : (vq > hi ? hi : vq);
-        xd_g = ref[1] < 0.0f ? -xd_g : xd_g;
+        xd_g = gs_negative(ref[1]) ? -xd_g : xd_g;
         a_g = aq > amax ? amax : aq;
-        a_g = alpha < 0.0f ? -a_g : a_g;
+        a_g = gs_negative(alpha) ? -a_g : a_g;
         if (a_g != alpha) {
             gs_sincosf(a_g, &sas, &cas);
         }
@@ -723,34 +870,54 @@ static uint32_t gs_crc_bytes(uint32_t crc, const uint8_t *p, size_t count)
 uint32_t gs_table_crc32(const gs_table *t)
 {
     uint32_t crc = 0xffffffffu;
-    size_t n_pts, n;
+    size_t n_pts, n_circles, n;
+    int compact;
     if (t == NULL || !gs_table_usable(t) || t->xi == NULL || t->speed == NULL) {
         return 0u;
     }
     n_pts = (size_t)t->n_tilt * t->n_speed * t->n_xi;
+    n_circles = (size_t)t->n_tilt * t->n_speed;
     n = t->n_state;
+    compact = t->format == GS_FORMAT_COMPACT;
     crc = gs_crc_u32(crc, t->n_tilt);
     crc = gs_crc_u32(crc, t->n_speed);
     crc = gs_crc_u32(crc, t->n_xi);
     crc = gs_crc_u32(crc, t->n_state);
     crc = gs_crc_u32(crc, gs_bits(t->xi_scale));
-    if (t->n_xi_tilt0 > 1u) { /* only then: tables without it keep their CRC */
+    if (compact) { /* the format and its sizes (dense tables keep their CRC) */
+        crc = gs_crc_u32(crc, t->format);
+        crc = gs_crc_u32(crc, t->n_harmonics);
+        crc = gs_crc_u32(crc, t->n_coef);
+    } else if (t->n_xi_tilt0 > 1u) { /* only then: tables without it keep their CRC */
         crc = gs_crc_u32(crc, t->n_xi_tilt0);
     }
     crc = gs_crc_floats(crc, t->xi, t->n_xi);
     crc = gs_crc_floats(crc, t->speed, t->n_speed);
     crc = gs_crc_floats(crc, t->xi_dot, t->n_speed);
     crc = gs_crc_floats(crc, t->tilt, t->n_tilt);
-    crc = gs_crc_floats(crc, t->K_tilt0,
-                        (size_t)t->n_speed * (t->n_xi_tilt0 > 1u ? t->n_xi : 1u) * 4u * n);
-    if (t->n_tilt > 1u) {
-        crc = gs_crc_floats(crc, t->K, (size_t)(t->n_tilt - 1u) * t->n_speed * t->n_xi * 4u * n);
+    if (compact) {
+        size_t i;
+        crc = gs_crc_floats(crc, t->state_sign, n);
+        crc = gs_crc_bytes(crc, t->state_perm, n);
+        crc = gs_crc_bytes(crc, t->mask, n_circles);
+        crc = gs_crc_bytes(crc, t->harmonics, n_circles * (4u * n + 5u));
+        for (i = 0; i < n_circles; ++i) {
+            crc = gs_crc_u32(crc, t->coef_start[i]);
+        }
+        crc = gs_crc_floats(crc, t->coef, t->n_coef);
+    } else {
+        crc = gs_crc_floats(crc, t->K_tilt0,
+                            (size_t)t->n_speed * (t->n_xi_tilt0 > 1u ? t->n_xi : 1u) * 4u * n);
+        if (t->n_tilt > 1u) {
+            crc = gs_crc_floats(crc, t->K,
+                                (size_t)(t->n_tilt - 1u) * t->n_speed * t->n_xi * 4u * n);
+        }
+        crc = gs_crc_floats(crc, t->u_d, n_pts * 4u);
+        crc = gs_crc_floats(crc, t->phi_d, n_pts);
+        crc = gs_crc_floats(crc, t->state_sign, n);
+        crc = gs_crc_bytes(crc, t->state_perm, n);
+        crc = gs_crc_bytes(crc, t->mask, n_pts);
     }
-    crc = gs_crc_floats(crc, t->u_d, n_pts * 4u);
-    crc = gs_crc_floats(crc, t->phi_d, n_pts);
-    crc = gs_crc_floats(crc, t->state_sign, n);
-    crc = gs_crc_bytes(crc, t->state_perm, n);
-    crc = gs_crc_bytes(crc, t->mask, n_pts);
     if (t->vehicle != NULL) { /* the fields in declaration order */
         const gs_vehicle *vh = t->vehicle;
         crc = gs_crc_u32(crc, gs_bits(vh->mass));
@@ -805,6 +972,29 @@ int gs_verify(const gs_table *t)
             bad |= gs_nonfinite(vh->alloc_inv[i]);
         }
         if (bad) {
+            return GS_BAD_TABLE;
+        }
+    }
+    if (t->format == GS_FORMAT_COMPACT) { /* every series inside coef, in order */
+        const size_t n_value = 4u * (size_t)t->n_state + 5u;
+        const size_t n_circles = (size_t)t->n_tilt * t->n_speed;
+        size_t c, e, next = 0;
+        for (c = 0; c < n_circles; ++c) {
+            const uint8_t *H = t->harmonics + c * n_value;
+            if (t->coef_start[c] != next) {
+                return GS_BAD_TABLE;
+            }
+            for (e = 0; e < n_value; ++e) {
+                if (H[e] > t->n_harmonics ||
+                    ((t->mask[c] & GS_MASK_NO_GAINS) != 0u && H[e] != 0u)) {
+                    return GS_BAD_TABLE;
+                }
+                if ((t->mask[c] & GS_MASK_NO_GAINS) == 0u) {
+                    next += 2u * (size_t)H[e] + 1u;
+                }
+            }
+        }
+        if (next != t->n_coef) {
             return GS_BAD_TABLE;
         }
     }

@@ -20,12 +20,22 @@
  *     phi_d -> -phi_d; P_u swaps motors 1<->4 and 2<->3).
  *  4. xi is wrapped onto the periodic uniform axis (xi_j = 2 pi j / n_xi);
  *     xi_dot and alpha are clamped into the table range (GS_CLAMPED_*).
- *  5. Trilinear, element-wise interpolation over (xi, xi_dot, alpha) on the
- *     8 corners of the cell; a cell fraction within GS_SNAP of 0 or 1 is
- *     snapped to the grid plane. If a corner with non-zero weight is marked
- *     infeasible the status has GS_INFEASIBLE; if such a corner has no gains at
- *     all (its whole circle is infeasible) GS_NO_GAINS is added and the outputs
- *     are zeroed.
+ *  5. Dense tables: trilinear, element-wise interpolation over (xi, xi_dot,
+ *     alpha) on the 8 corners of the cell; a cell fraction within GS_SNAP of 0
+ *     or 1 is snapped to the grid plane. If a corner with non-zero weight is
+ *     marked infeasible the status has GS_INFEASIBLE; if such a corner has no
+ *     gains at all (its whole circle is infeasible) GS_NO_GAINS is added and the
+ *     outputs are zeroed.
+ *     Compact tables (GS_FORMAT_COMPACT): every value of the (up to) 4 circles
+ *     around (xi_dot, alpha) is a Fourier series in xi; the series are summed at
+ *     xi, weighted bilinearly over (xi_dot, alpha), with one gs_sincosf per
+ *     lookup and angle addition for the harmonics. The circles' masks take the
+ *     place of the corners' (same status bits).
+ *
+ * Sign tests on the inputs read the sign bit (a negative subnormal counts as
+ * negative with flush-to-zero on or off), and the runtime turns floating-point
+ * contraction off for GCC and clang: the same bits whatever the firmware's
+ * dialect (-std=c99, gnu11) or FPSCR.FZ.
  *
  * Manoeuvre feed-forward (gs_lookup_nominal): the lookup plus the nominal of an
  * accelerating reference xi(t) with four derivatives. The drag-only model's closed
@@ -47,7 +57,7 @@
 extern "C" {
 #endif
 
-#define GS_RUNTIME_VERSION 3
+#define GS_RUNTIME_VERSION 4
 
 /* ---- status bits returned by gs_lookup (0 = GS_OK) ---------------------- */
 #define GS_OK 0x00            /* inside the table, all corners feasible */
@@ -90,6 +100,12 @@ extern "C" {
 /* cell fractions within GS_SNAP of 0 or 1 are snapped onto the grid plane */
 #define GS_SNAP 0x1p-12f
 
+/* table formats (gs_table.format) */
+#define GS_FORMAT_DENSE 0u   /* values at every azimuth sample, interpolated linearly */
+#define GS_FORMAT_COMPACT 1u /* per circle, a Fourier series in xi per value */
+/* a compact table's series have at most this many harmonics */
+#define GS_MAX_HARMONICS 16u
+
 /* The vehicle as the closed-form feed-forward knows it (paper eqs. 15-18): the
  * rigid body, the tether radius, gravity and the body drag of the config's
  * pure-drag effects. Generated headers fill this in. */
@@ -116,13 +132,14 @@ typedef struct gs_table {
     const float *speed;       /* [n_speed] m/s (informational, in the CRC) */
     const float *xi_dot;      /* [n_speed] rad/s, strictly increasing, > 0 */
     const float *tilt;        /* [n_tilt] rad, strictly increasing, tilt[0] = 0 */
-    const float *K_tilt0;     /* [n_speed][n_xi_tilt0][4][n_state] gains at tilt 0 */
-    const float *K;           /* [n_tilt-1][n_speed][n_xi][4][n_state] */
-    const float *u_d;         /* [n_tilt][n_speed][n_xi][4] N */
-    const float *phi_d;       /* [n_tilt][n_speed][n_xi] rad */
+    const float *K_tilt0;     /* [n_speed][n_xi_tilt0][4][n_state] gains at tilt 0 (dense) */
+    const float *K;           /* [n_tilt-1][n_speed][n_xi][4][n_state] (dense) */
+    const float *u_d;         /* [n_tilt][n_speed][n_xi][4] N (dense) */
+    const float *phi_d;       /* [n_tilt][n_speed][n_xi] rad (dense) */
     const float *state_sign;  /* [n_state] +-1, the S2 state map P_x ... */
     const uint8_t *state_perm; /* [n_state] ... P_x[state_perm[j]][j] = state_sign[j] */
-    const uint8_t *mask;      /* [n_tilt][n_speed][n_xi] 0 = feasible */
+    const uint8_t *mask;      /* dense: [n_tilt][n_speed][n_xi]; compact: [n_tilt][n_speed],
+                               * the OR over the circle's azimuths; 0 = feasible */
     const gs_vehicle *vehicle; /* closed-form constants; NULL: no gs_lookup_nominal */
     uint32_t n_offset_harmonics; /* H of the attitude offsets, <= GS_MAX_OFFSET_HARMONICS */
     const float *offsets;     /* [n_tilt][n_speed][2][2H+1] rad: Fourier coefficients of the
@@ -131,6 +148,15 @@ typedef struct gs_table {
     uint32_t n_xi_tilt0;      /* azimuths of K_tilt0: 0 or 1, independent of xi (a level
                                * circle looks the same at every azimuth); n_xi when an
                                * effect changes with the azimuth */
+    uint32_t format;          /* GS_FORMAT_DENSE or GS_FORMAT_COMPACT */
+    /* compact format only (0 / NULL in a dense table); a circle's values are K
+     * (4 x n_state, row-major), u_d (4), phi_d: n_value = 4 n_state + 5 series */
+    uint32_t n_harmonics;     /* the largest harmonic count of any series */
+    uint32_t n_coef;          /* coefficients in coef */
+    const uint8_t *harmonics; /* [n_tilt][n_speed][n_value] H of each series (0: constant) */
+    const uint32_t *coef_start; /* [n_tilt][n_speed] index in coef of the circle's first */
+    const float *coef;        /* per circle, per value: c0, a1, b1, ..., aH, bH of
+                               * f(xi) = c0 + sum_k a_k cos(k xi) + b_k sin(k xi) */
 } gs_table;
 
 /*

@@ -18,7 +18,27 @@
 
 #include "${name}_gains.h"
 
+#if defined(__SSE__) || defined(__x86_64__)
+#include <xmmintrin.h>
+#define GS_HAVE_MXCSR 1
+#endif
+
 #define NK (4u * ${NAME}_N_STATE)
+
+/* Flush-to-zero and denormals-are-zero on (1) or off (0) for this thread, as a Cortex-M4F
+ * firmware with FPSCR.FZ = 1 computes; returns 1 where the CPU has the switch (x86 SSE),
+ * else 0 (nothing changed). */
+int ${name}_flush_to_zero(int on)
+{
+#ifdef GS_HAVE_MXCSR
+    const unsigned bits = 0x8040u; /* FTZ (bit 15) | DAZ (bit 6) */
+    _mm_setcsr(on ? (_mm_getcsr() | bits) : (_mm_getcsr() & ~bits));
+    return 1;
+#else
+    (void)on;
+    return 0;
+#endif
+}
 
 /* m queries (xi, xi_dot, alpha) row-major in q; outputs row-major */
 void ${name}_lookup_batch(size_t m, const float *q, float *K, float *u_d, float *phi_d,
@@ -87,15 +107,18 @@ uint32_t ${name}_dims(int which)
     }
 }
 
-/* gs_verify on a copy of the table whose array `which` (CRC order: 0 xi, 1 speed,
- * 2 xi_dot, 3 tilt, 4 K_tilt0, 5 K, 6 u_d, 7 phi_d, 8 state_sign, 9 state_perm,
- * 10 mask, 11 vehicle, 12 offsets) has byte `byte` XOR-ed with `flip`. -1 if out of range. */
+/* gs_verify on a copy of the table whose array `which` (0 xi, 1 speed, 2 xi_dot,
+ * 3 tilt, 4 K_tilt0, 5 K, 6 u_d, 7 phi_d, 8 state_sign, 9 state_perm, 10 mask,
+ * 11 vehicle, 12 offsets, 13 harmonics, 14 coef_start, 15 coef; the arrays a format
+ * lacks have size 0) has byte `byte` XOR-ed with `flip`. -1 if out of range. */
 int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
 {
     gs_table t = ${name}_table;
-    const void *src[13];
-    size_t size[13];
-    size_t n_pts = (size_t)t.n_tilt * t.n_speed * t.n_xi;
+    const void *src[16];
+    size_t size[16];
+    const int compact = t.format == GS_FORMAT_COMPACT;
+    const size_t n_circles = (size_t)t.n_tilt * t.n_speed;
+    size_t n_pts = n_circles * t.n_xi;
     unsigned char *copy;
     int r;
     src[0] = t.xi; size[0] = t.n_xi * sizeof(float);
@@ -103,19 +126,24 @@ int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
     src[2] = t.xi_dot; size[2] = t.n_speed * sizeof(float);
     src[3] = t.tilt; size[3] = t.n_tilt * sizeof(float);
     src[4] = t.K_tilt0;
-    size[4] = (size_t)t.n_speed * (t.n_xi_tilt0 > 1u ? t.n_xi : 1u) * NK * sizeof(float);
-    src[5] = t.K; size[5] = (size_t)(t.n_tilt - 1u) * t.n_speed * t.n_xi * NK * sizeof(float);
-    src[6] = t.u_d; size[6] = n_pts * 4u * sizeof(float);
-    src[7] = t.phi_d; size[7] = n_pts * sizeof(float);
+    size[4] = compact ? 0u
+                      : (size_t)t.n_speed * (t.n_xi_tilt0 > 1u ? t.n_xi : 1u) * NK * sizeof(float);
+    src[5] = t.K;
+    size[5] = compact ? 0u : (size_t)(t.n_tilt - 1u) * t.n_speed * t.n_xi * NK * sizeof(float);
+    src[6] = t.u_d; size[6] = compact ? 0u : n_pts * 4u * sizeof(float);
+    src[7] = t.phi_d; size[7] = compact ? 0u : n_pts * sizeof(float);
     src[8] = t.state_sign; size[8] = t.n_state * sizeof(float);
     src[9] = t.state_perm; size[9] = t.n_state;
-    src[10] = t.mask; size[10] = n_pts;
+    src[10] = t.mask; size[10] = compact ? n_circles : n_pts;
     src[11] = t.vehicle; size[11] = t.vehicle != NULL ? sizeof(gs_vehicle) : 0u;
     src[12] = t.offsets;
     size[12] = t.offsets != NULL
-                   ? n_pts / t.n_xi * 2u * (2u * t.n_offset_harmonics + 1u) * sizeof(float)
+                   ? n_circles * 2u * (2u * t.n_offset_harmonics + 1u) * sizeof(float)
                    : 0u;
-    if (which < 0 || which > 12 || byte >= size[which]) {
+    src[13] = t.harmonics; size[13] = compact ? n_circles * (NK + 5u) : 0u;
+    src[14] = t.coef_start; size[14] = compact ? n_circles * sizeof(uint32_t) : 0u;
+    src[15] = t.coef; size[15] = compact ? t.n_coef * sizeof(float) : 0u;
+    if (which < 0 || which > 15 || byte >= size[which]) {
         return -1;
     }
     copy = (unsigned char *)malloc(size[which]);
@@ -137,7 +165,10 @@ int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
     case 9: t.state_perm = copy; break;
     case 10: t.mask = copy; break;
     case 11: t.vehicle = (const gs_vehicle *)(void *)copy; break;
-    default: t.offsets = (const float *)(void *)copy; break;
+    case 12: t.offsets = (const float *)(void *)copy; break;
+    case 13: t.harmonics = copy; break;
+    case 14: t.coef_start = (const uint32_t *)(void *)copy; break;
+    default: t.coef = (const float *)(void *)copy; break;
     }
     r = gs_verify(&t);
     free(copy);

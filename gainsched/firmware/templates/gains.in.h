@@ -50,6 +50,7 @@ ${state_macros}
 #define ${NAME}_CRC32 0x${crc32_hex}u /* CRC-32 of the table data (docs/runtime.md) */
 #define ${NAME}_DATA_BYTES ${data_bytes}u /* bytes of table data (flash) */
 #define ${NAME}_RUNTIME_VERSION ${runtime_version}
+${format_macros}
 
 /* the manoeuvre feed-forward's closed form (gs_lookup_nominal): 1 if available */
 #define ${NAME}_HAS_NOMINAL ${has_vehicle}
@@ -89,31 +90,7 @@ static const uint8_t ${name}_state_perm[${NAME}_N_STATE] = {
 ${state_perm}
 };
 
-/* gains at tilt 0 (${tilt0_note}): [speed][xi][input][state] */
-static const float ${name}_K_tilt0[${NAME}_N_SPEED][${NAME}_N_XI_TILT0][4][${NAME}_N_STATE] = {
-${K_tilt0}
-};
-
-/* gains at tilt[1:]: [tilt - 1][speed][xi][input][state] */
-static const float ${name}_K[${NAME}_N_TILT_K][${NAME}_N_SPEED][${NAME}_N_XI][4][${NAME}_N_STATE] = {
-${K}
-};
-
-/* nominal motor thrusts, N: [tilt][speed][xi][input] */
-static const float ${name}_u_d[${NAME}_N_TILT][${NAME}_N_SPEED][${NAME}_N_XI][4] = {
-${u_d}
-};
-
-/* nominal roll, rad: [tilt][speed][xi] */
-static const float ${name}_phi_d[${NAME}_N_TILT][${NAME}_N_SPEED][${NAME}_N_XI] = {
-${phi_d}
-};
-
-/* feasibility mask: [tilt][speed][xi], 0 = feasible */
-static const uint8_t ${name}_mask[${NAME}_N_TILT][${NAME}_N_SPEED][${NAME}_N_XI] = {
-${mask}
-};
-
+${value_arrays}
 ${vehicle_data}${offsets_data}
 static const gs_table ${name}_table = {
     ${NAME}_N_TILT,
@@ -125,18 +102,16 @@ static const gs_table ${name}_table = {
     ${name}_speed,
     ${name}_xi_dot,
     ${name}_tilt,
-    &${name}_K_tilt0[0][0][0][0],
-    &${name}_K[0][0][0][0][0],
-    &${name}_u_d[0][0][0][0],
-    &${name}_phi_d[0][0][0],
+${value_refs},
     ${name}_state_sign,
     ${name}_state_perm,
-    &${name}_mask[0][0][0],
+    ${mask_ref},
     ${vehicle_ref},
     ${NAME}_OFFSET_HARMONICS,
     ${offsets_ref},
     ${NAME}_CRC32,
     ${NAME}_N_XI_TILT0,
+${format_fields},
 };
 
 /* Gains at (xi rad, xi_dot rad/s, alpha rad): returns GS_* status bits. */
