@@ -14,6 +14,11 @@
   queries, ns and instructions, printed as a ratio to the plain lookup measured in
   the same run.
 - Python: vectorised reference lookups per second (100k-query batches).
+- Formats: the compact table (Fourier series per circle, docs/runtime.md) against the
+  dense one: host ns per flight lookup (-O2) as a ratio, and the instructions a lookup
+  executes on the emulated Cortex-M4F (QEMU mps2-an386, ``-Os``, when
+  ``arm-none-eabi-gcc`` and ``qemu-system-arm`` are installed) for interior,
+  symmetry-mapped and NaN queries.
 
 Targets (issue 4): under 1 us and under 1000 instructions per C lookup on x86.
 """
@@ -34,6 +39,8 @@ import numpy as np
 
 from gainsched import native
 from gainsched.firmware import codegen
+from gainsched.firmware.compact import compact_data
+from gainsched.firmware.pil import build_pil, instructions_per_lookup, pil_tools
 from gainsched.firmware.runtime import Interpolator, runtime_data
 from gainsched.schedule.tables import load_table
 
@@ -156,9 +163,44 @@ def main(argv=None) -> int:
     if c:
         ok = c["ns_per_lookup"] < 1000 and (c["instructions_per_lookup"] or 0) < 1000
         print(f"  target (< 1 us and < 1000 instructions, -O2 flight): {'met' if ok else 'MISSED'}")
+    out["formats"] = formats(data, sets["flight"])
     if args.json:
         args.json.write_text(json.dumps(out, indent=2) + "\n")
     return 0
+
+
+def formats(dense, flight) -> dict:
+    """Compact against dense: host ns ratio and emulated Cortex-M4F instructions."""
+    forms = {"dense": dense, "compact": compact_data(dense)}
+    out = {"bytes": {k: f.nbytes() for k, f in forms.items()}}
+    print(f"  formats: table data dense {out['bytes']['dense']:,} B, compact "
+          f"{out['bytes']['compact']:,} B")
+    if native.find_cc() is not None:
+        with tempfile.TemporaryDirectory() as tmp:
+            ns = {k: time_c(codegen.CRuntime(codegen.build_host(f, Path(tmp) / k), f), flight)
+                  for k, f in forms.items()}
+        out["host_ns"] = ns
+        print(f"  host -O2 flight lookup: compact {ns['compact']:.0f} ns, dense "
+              f"{ns['dense']:.0f} ns: compact/dense x{ns['compact'] / ns['dense']:.2f}")
+    if pil_tools() is None:
+        print("  Cortex-M4F instruction counts skipped: arm-none-eabi-gcc or qemu-system-arm "
+              "not found (Debian: gcc-arm-none-eabi, qemu-system-arm)")
+        return out
+    q = flight[:200]
+    kinds = {"interior": (q[:, 0], q[:, 1], q[:, 2]),
+             "symmetry-mapped": (q[:, 0], -q[:, 1], -q[:, 2]),
+             "NaN": (np.full(len(q), np.nan, np.float32), q[:, 1], q[:, 2])}
+    out["m4f_instructions"] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for k, f in forms.items():
+            elf = build_pil(f, Path(tmp) / k, opt="-Os")
+            counts = {kind: instructions_per_lookup(elf, *qs, dense.dims[3])
+                      for kind, qs in kinds.items()}
+            out["m4f_instructions"][k] = counts
+            print(f"  Cortex-M4F -Os (QEMU {k:7s}): "
+                  + ", ".join(f"{kind} {n:,.0f}" for kind, n in counts.items())
+                  + " instructions per lookup")
+    return out
 
 
 if __name__ == "__main__":

@@ -532,7 +532,7 @@ def export_c(table, out_dir, no_code_size, fmt):
     "--compact", "azimuth_error", type=FiniteFloat(0, 100, lo_open=True, unit="%"),
     default=None, help="Check the table's compact form (Fourier series in the azimuth, "
     "docs/runtime.md) made with this error bound at the azimuth samples, percent "
-    "(0.5: the default form). Default: the format of the table's config.")
+    "(1: the default form). Default: the format of the table's config.")
 @user_errors
 def check(table, speed_stride, max_error, azimuth_error):
     """Interpolation accuracy of TABLE: solve the periodic LQR directly at cell midpoints

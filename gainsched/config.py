@@ -192,13 +192,13 @@ class Firmware:
         against ``grid.max_interpolation_error`` by the build.
     azimuth_error : float
         The compact format's bound on each circle's series at its azimuth samples,
-        relative (a fraction; ``azimuth_error`` in percent in the file, default 0.5).
+        relative (a fraction; ``azimuth_error`` in percent in the file, default 1).
     max_table_bytes : int or None
         Flash budget: the build fails when the table data exceed it (None: no budget).
     """
 
     format: str = "dense"
-    azimuth_error: float = 0.005
+    azimuth_error: float = 0.01
     max_table_bytes: int | None = None
 
 

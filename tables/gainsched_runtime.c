@@ -283,21 +283,29 @@ static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *K, 
 }
 
 /* out[e] += sum_j g[j] cf[j] over the 2 H[e] + 1 coefficients of each of the count
- * series starting at cf, in order; returns the coefficients that follow */
+ * (>= 1) series starting at cf, in order; returns the coefficients that follow. The hot
+ * loop of a compact lookup, written so that GCC -Os keeps it to loads, multiply-adds
+ * and one test per harmonic (bottom-tested loops, pointers stepped). */
 static const float *gs_series(const float *g, const uint8_t *H, const float *cf, float *out,
-                              size_t count)
+                              size_t count, int first)
 {
-    size_t e;
-    for (e = 0; e < count; ++e) {
-        const uint32_t rows = 2u * (uint32_t)H[e] + 1u;
-        uint32_t j;
-        float acc = out[e];
-        for (j = 0u; j < rows; ++j) {
-            acc = acc + g[j] * cf[j];
+    const float g0 = g[0];
+    float *const last = out + count;
+    do { /* the first corner starts from 0 (0 + x, as the reference: -0 becomes +0) */
+        const uint32_t k = *H++;
+        float acc = (first ? 0.0f : *out) + g0 * *cf++;
+        if (k != 0u) {
+            const float *gp = g + 1;
+            const float *const stop = cf + 2u * k;
+            do { /* the cosine and the sine term of one harmonic */
+                acc = acc + gp[0] * cf[0];
+                acc = acc + gp[1] * cf[1];
+                gp += 2;
+                cf += 2;
+            } while (cf != stop);
         }
-        out[e] = acc;
-        cf += rows;
-    }
+        *out++ = acc;
+    } while (out != last);
     return cf;
 }
 
@@ -317,10 +325,9 @@ static int gs_compact(const gs_table *t, float xi, const gs_cell *cell, float *K
                          (size_t)ia[1] * t->n_speed + iv[0], (size_t)ia[1] * t->n_speed + iv[1]};
     float ck[GS_MAX_HARMONICS + 1u], sk[GS_MAX_HARMONICS + 1u], g[2u * GS_MAX_HARMONICS + 1u];
     float slope = 0.0f;
-    int status = GS_OK;
+    int status = GS_OK, first = 1;
     unsigned any_mask = 0u, c;
     uint32_t j;
-    size_t e;
 
     for (c = 0u; c < 4u; ++c) {
         if (wq[c] != 0.0f) {
@@ -344,11 +351,6 @@ static int gs_compact(const gs_table *t, float xi, const gs_cell *cell, float *K
         ck[j] = ck[j - 1u] * ck[1] - sk[j - 1u] * sk[1];
         sk[j] = sk[j - 1u] * ck[1] + ck[j - 1u] * sk[1];
     }
-    for (e = 0; e < nK; ++e) {
-        K[e] = 0.0f;
-    }
-    u_d[0] = u_d[1] = u_d[2] = u_d[3] = 0.0f;
-    *phi_d = 0.0f;
     for (c = 0u; c < 4u; ++c) {
         const uint8_t *H;
         const float *cf;
@@ -362,9 +364,10 @@ static int gs_compact(const gs_table *t, float xi, const gs_cell *cell, float *K
             g[2u * j - 1u] = wq[c] * ck[j];
             g[2u * j] = wq[c] * sk[j];
         }
-        cf = gs_series(g, H, cf, K, nK);
-        cf = gs_series(g, H + nK, cf, u_d, 4u);
-        (void)gs_series(g, H + nK + 4u, cf, phi_d, 1u);
+        cf = gs_series(g, H, cf, K, nK, first);
+        cf = gs_series(g, H + nK, cf, u_d, 4u, first);
+        (void)gs_series(g, H + nK + 4u, cf, phi_d, 1u, first);
+        first = 0;
         if (dphi_dxi != NULL) { /* d/dxi of the roll's series: k (b_k cos kxi - a_k sin kxi) */
             const uint32_t h = H[nK + 4u];
             float d = 0.0f;

@@ -16,6 +16,7 @@ from gainsched.errors import InputError
 from gainsched.firmware import codegen, runtime
 from gainsched.firmware.check import midpoint_check
 from gainsched.firmware.compact import (
+    NOMINAL_SHARE,
     CompactInterpolator,
     compact_data,
     fit_harmonics,
@@ -111,8 +112,9 @@ def test_fit_recovers_a_trigonometric_polynomial_exactly():
 
 def test_fit_meets_the_bound_with_the_fewest_harmonics_for_thrust_and_roll(paper):
     """On the paper table: every feasible circle meets the bound at its azimuth samples
-    (an independent float64 evaluation of the stored float32 series), and a thrust or
-    roll series with one harmonic fewer would not (their counts are each the fewest)."""
+    (an independent float64 evaluation of the stored float32 series; the nominal thrusts
+    and roll a quarter of it), and a thrust or roll series with one harmonic fewer would
+    not (their counts are each the fewest)."""
     table, d, c = paper
     n_a, n_v, n_xi, n = d.dims
     nk = 4 * n
@@ -131,9 +133,10 @@ def test_fit_meets_the_bound_with_the_fewest_harmonics_for_thrust_and_roll(paper
             fit = np.stack([_series64(s.astype(np.float64), xi) for s in series], -1)
             eK = np.linalg.norm(fit[:, :nk] - f[:, :nk], axis=1) / np.linalg.norm(f[:, :nk], axis=1)
             assert eK.max() <= c.bound * 1.001, (i, j)
-            u_scale = np.abs(f[:, nk:nk + 4]).max()
+            u_scale = np.abs(f[:, nk:nk + 4]).max() * NOMINAL_SHARE
             for e in range(nk, nk + 5):
-                scale = u_scale if e < nk + 4 else max(np.abs(f[:, -1]).max(), 0.01)
+                scale = u_scale if e < nk + 4 else max(np.abs(f[:, -1]).max(), 0.01) * \
+                    NOMINAL_SHARE
                 assert np.abs(fit[:, e] - f[:, e]).max() <= c.bound * scale * 1.001
                 h = int(c.harmonics[i, j, e])
                 if h:
@@ -203,7 +206,8 @@ def test_statuses_are_the_dense_lookups_and_values_agree(paper):
     edges, snap bands, clamps, infeasible points, NaN/inf and limits), the compact
     lookup's statuses equal the dense lookup's (the paper table has no partly feasible
     circle), outputs are zero where unusable, and the gains agree with the dense table
-    within 1.5 % of the gain norm (azimuth interpolation error of either form)."""
+    within 2.5 % of the gain norm (each is within about 1.2 % of directly solved gains
+    along the azimuth: docs/runtime.md)."""
     table, d, c = paper
     x, v, a = query_mix(d, 40_000, seed=4)
     ref, got = Interpolator(d)(x, v, a), CompactInterpolator(c)(x, v, a)
@@ -213,7 +217,7 @@ def test_statuses_are_the_dense_lookups_and_values_agree(paper):
     live = ~dead
     nrm = np.linalg.norm(ref.K[live], axis=(1, 2))
     rel = np.linalg.norm(got.K[live] - ref.K[live], axis=(1, 2)) / nrm
-    assert rel.max() <= 0.015
+    assert rel.max() <= 0.025
 
 
 def test_symmetry_maps_are_exact(paper):
@@ -306,7 +310,7 @@ def test_check_command_certifies_the_compact_form():
     r = CliRunner().invoke(cli, ["check", str(PAPER_H5), "--speed-stride", "6", "--compact",
                                  "0.5"])
     assert r.exit_code == 0, r.output
-    assert "compact form at 0.5% on the azimuth samples: 135,265 bytes of table data (dense " \
+    assert "compact form at 0.5% on the azimuth samples: 139,025 bytes of table data (dense " \
            "834,147)" in r.output
     assert "PASS" in r.output
     bad = CliRunner().invoke(cli, ["check", str(PAPER_H5), "--compact", "1e-9"])
@@ -449,7 +453,7 @@ def test_firmware_config_keys_are_validated(tmp_path):
 
     cfg = gs.load_config(_small_config(tmp_path, "k0"))
     assert (cfg.firmware.format, cfg.firmware.azimuth_error, cfg.firmware.max_table_bytes,
-            cfg.grid.max_interpolation_error) == ("dense", 0.005, None, 0.05)
+            cfg.grid.max_interpolation_error) == ("dense", 0.01, None, 0.05)
     cfg = gs.load_config(_small_config(tmp_path, "k1", '\n[firmware]\nformat = "compact"\n'
                                        'azimuth_error = 1.0\nmax_table_bytes = 200000\n'))
     assert (cfg.firmware.format, cfg.firmware.azimuth_error, cfg.firmware.max_table_bytes) == (
@@ -523,7 +527,7 @@ def test_export_c_and_check_follow_the_tables_format(tmp_path):
     r, out = _build(tmp_path, "ex", '\n[firmware]\nformat = "compact"\n')
     assert r.exit_code == 0, r.output
     chk = CliRunner().invoke(cli, ["check", str(out / "ex.h5")])
-    assert chk.exit_code == 0 and "compact form at 0.5% on the azimuth samples" in chk.output
+    assert chk.exit_code == 0 and "compact form at 1% on the azimuth samples" in chk.output
     dense = CliRunner().invoke(cli, ["export-c", str(out / "ex.h5"), "-o", str(tmp_path / "d"),
                                      "--format", "dense", "--no-code-size"])
     assert dense.exit_code == 0 and "ex: dense, CRC-32" in dense.output

@@ -1,0 +1,162 @@
+"""Processor in the loop: the C runtime and a table on an emulated Cortex-M4F.
+
+The runtime, the table's header and a bare-metal query driver
+(``templates/pil_driver.in.c``, ``templates/pil.ld``) are cross-compiled with
+``arm-none-eabi-gcc`` for the paper's kind of flight controller (Cortex-M4F with its
+single-precision FPU, hard-float ABI) and run on QEMU's ``mps2-an386`` board; the
+queries go in and the outputs come out through ARM semihosting. The tests compare
+every output bit for bit with the host build and the Python reference
+(``tests/test_pil.py``); ``make bench`` counts the instructions a lookup executes
+(:func:`instructions_per_lookup`). The tools come from the distribution's packages
+(Debian: ``gcc-arm-none-eabi``, ``libnewlib-arm-none-eabi``, ``qemu-system-arm``).
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .codegen import (
+    M4F_CFLAGS,
+    STRICT_CFLAGS,
+    _write,
+    copy_runtime,
+    firmware_data,
+    render,
+    write_header,
+)
+from .runtime import Lookup
+
+__all__ = ["QEMU_MACHINE", "pil_tools", "build_pil", "run_pil", "instructions_per_lookup"]
+
+#: the emulated board: an MPS2 FPGA image with a Cortex-M4F
+QEMU_MACHINE = "mps2-an386"
+#: what :func:`pil_tools` looks for, and the Debian packages that install it
+TOOLS = {"arm-none-eabi-gcc": "gcc-arm-none-eabi", "qemu-system-arm": "qemu-system-arm"}
+
+
+def pil_tools() -> tuple[str, str] | None:
+    """``(arm-none-eabi-gcc, qemu-system-arm)`` paths, or None when either is missing."""
+    found = [shutil.which(t) for t in TOOLS]
+    return (found[0], found[1]) if all(found) else None
+
+
+def build_pil(table, out_dir, *, std: str = "c99", ftz: bool = False, opt: str = "-O2",
+              extra=()) -> Path:
+    """Cross-compile the table, the runtime and the query driver for Cortex-M4F.
+
+    Parameters
+    ----------
+    table : Table, RuntimeData or CompactData
+        The table, in the format the firmware gets.
+    out_dir : path-like
+        Build folder (created).
+    std : str, default "c99"
+        The C dialect (``"gnu11"``: GCC's default, where it would contract
+        multiply-adds; the runtime turns that off itself).
+    ftz : bool, default False
+        Run with flush-to-zero (FPSCR.FZ = 1).
+    opt : str, default "-O2"
+    extra : sequence of str
+        More compiler flags.
+
+    Returns
+    -------
+    Path
+        The ELF image for :func:`run_pil`.
+
+    Raises
+    ------
+    RuntimeError
+        No cross compiler, or the build fails (its output in the message).
+    """
+    tools = pil_tools()
+    if tools is None:
+        raise RuntimeError("arm-none-eabi-gcc or qemu-system-arm not found")
+    data = firmware_data(table)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    write_header(data, out)
+    runtime_c = copy_runtime(out)[1]
+    driver = _write(out / f"{data.name}_pil.c",
+                    render("pil_driver.in.c", name=data.name, NAME=data.name.upper(),
+                           tool_version=data.meta.get("tool_version", "?")))
+    ld = _write(out / "pil.ld", render("pil.ld"))
+    elf = out / f"{data.name}_pil.elf"
+    flags = [f for f in STRICT_CFLAGS if not f.startswith("-std=")]
+    flags = [f"-std={std}", *flags, *M4F_CFLAGS, opt, "-ffreestanding", "-nostdlib",
+             "-nostartfiles", f"-I{out}", *(["-DGS_PIL_FTZ"] if ftz else []), *extra]
+    cmd = [tools[0], *flags, "-T", str(ld), "-o", str(elf), str(driver), str(runtime_c),
+           "-lgcc"]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    if res.returncode:
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{res.stderr}")
+    return elf
+
+
+def _qemu(elf: Path, cwd: Path, extra=(), timeout: float = 600.0):
+    """Run an image on the emulated board with semihosting (files relative to ``cwd``)."""
+    qemu = pil_tools()[1]
+    cmd = [qemu, "-M", QEMU_MACHINE, "-nographic", "-monitor", "none", "-serial", "none",
+           "-semihosting-config", "enable=on,target=native", *extra, "-kernel", str(elf)]
+    return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout)
+
+
+def run_pil(elf, xi, xi_dot, alpha, n_state: int) -> Lookup:
+    """Look up queries on the emulated Cortex-M4F.
+
+    Parameters
+    ----------
+    elf : path-like
+        An image of :func:`build_pil`.
+    xi, xi_dot, alpha : array_like, shape (m,)
+        Queries (rad, rad/s, rad), taken as float32.
+    n_state : int
+        The table's LQR state dimension.
+
+    Returns
+    -------
+    Lookup
+        ``K`` (m, 4, n), ``u_d`` (m, 4), ``phi_d`` (m,) float32 as the target computed
+        them; ``status`` (m,) int32.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        q = np.ascontiguousarray(np.stack(
+            [np.asarray(v, dtype=np.float32).reshape(-1) for v in (xi, xi_dot, alpha)], 1))
+    m, nk = q.shape[0], 4 * n_state
+    with tempfile.TemporaryDirectory(prefix="gainsched-pil-") as tmp:
+        (Path(tmp) / "q.bin").write_bytes(q.tobytes())
+        res = _qemu(Path(elf).resolve(), Path(tmp))
+        raw = (Path(tmp) / "o.bin").read_bytes() if (Path(tmp) / "o.bin").exists() else b""
+    rows = np.frombuffer(raw, dtype=np.float32).reshape(-1, nk + 6)
+    if rows.shape[0] != m:
+        raise RuntimeError(f"the emulated target returned {rows.shape[0]} of {m} lookups "
+                           f"(qemu exit {res.returncode}: {res.stderr.strip()[-300:]})")
+    status = rows[:, nk + 5].copy().view(np.int32)
+    return Lookup(rows[:, :nk].reshape(m, 4, n_state).copy(), rows[:, nk:nk + 4].copy(),
+                  rows[:, nk + 4].copy(), status)
+
+
+def instructions_per_lookup(elf, xi, xi_dot, alpha, n_state: int) -> float:
+    """Guest instructions one lookup executes on the emulated Cortex-M4F, on average over
+    the queries: QEMU's one-instruction-per-block execution trace (``-singlestep -d
+    exec,nochain``) of the driver with the queries, minus its trace with none (the
+    start-up and the semihosting calls)."""
+    counts = []
+    for k in (0, np.size(xi)):
+        with tempfile.TemporaryDirectory(prefix="gainsched-pil-") as tmp:
+            with np.errstate(over="ignore", invalid="ignore"):
+                q = np.stack([np.asarray(v, dtype=np.float32).reshape(-1)[:k]
+                              for v in (xi, xi_dot, alpha)], 1)
+            (Path(tmp) / "q.bin").write_bytes(np.ascontiguousarray(q).tobytes())
+            log = Path(tmp) / "exec.log"
+            _qemu(Path(elf).resolve(), Path(tmp),
+                  ["-singlestep", "-d", "exec,nochain", "-D", str(log)])
+            with open(log, "rb") as fh:
+                counts.append(sum(chunk.count(b"Trace ") for chunk in iter(
+                    lambda: fh.read(1 << 20), b"")))
+    return (counts[1] - counts[0]) / max(np.size(xi), 1)
