@@ -33,6 +33,8 @@ API = (
     ("Publishing a schedule", "firmware.outputs", ("write_outputs",)),
     ("A table", "schedule.tables", ("load_table", "Table")),
     ("Looking up gains", "firmware.runtime", ("Interpolator", "Lookup")),
+    ("The compact table format", "firmware.compact", ("compact_data", "CompactData",
+                                                      "CompactInterpolator")),
     ("Checking a table", "firmware.check", ("midpoint_check",)),
     ("Seeing a table", "schedule.viewer", ("schedule_figures", "schedule_plots",
                                            "table_summary")),

@@ -61,8 +61,9 @@ def test_target_outputs_equal_the_host_bit_for_bit(forms, fmt, std, ftz, tmp_pat
 
 def test_compact_lookup_cost_on_the_emulated_m4(forms, tmp_path):
     """Executed instructions per interior lookup on the emulated Cortex-M4F at -Os (the
-    firmware's setting): compact <= 8,000 (issue 21), dense no worse than the 2,905 the
-    issue measured; ``make bench`` prints them with the symmetry-mapped and NaN cases."""
+    firmware's setting) over 200 flight queries: compact <= 8,000 (issue 21), dense well
+    under the 2,905 the issue measured; ``make bench`` prints them with the
+    symmetry-mapped and NaN cases."""
     dense, _ = forms
     from bench.bench_runtime import query_sets
     from gainsched.firmware.runtime import Interpolator
@@ -73,4 +74,5 @@ def test_compact_lookup_cost_on_the_emulated_m4(forms, tmp_path):
         elf = build_pil(data, tmp_path / fmt, opt="-Os")
         counts[fmt] = instructions_per_lookup(elf, q[:, 0], q[:, 1], q[:, 2], dense.dims[3])
     assert counts["compact"] <= 8000, counts
-    assert counts["dense"] <= 2905, counts
+    # the dense loop without spills (1,895 measured; 2,648 with the spilling loop)
+    assert counts["dense"] <= 2200, counts

@@ -429,12 +429,20 @@ def _sanitizers_work(tmp_path) -> bool:
 
 
 @needs_cc
-@pytest.mark.parametrize("name", ["paper", "synth_lag", "tiny"])
-def test_sanitizer_run_matches_reference(name, tmp_path):
-    """ASan + UBSan driver over a few thousand mixed queries; outputs equal the reference."""
+@pytest.mark.parametrize("name,fmt", [("paper", "dense"), ("synth_lag", "dense"),
+                                      ("tiny", "dense"), ("paper", "compact")])
+def test_sanitizer_run_matches_reference(name, fmt, tmp_path):
+    """ASan + UBSan driver over a few thousand mixed queries; outputs equal the reference
+    (the compact table's: gainsched.firmware.compact.CompactInterpolator)."""
     if not _sanitizers_work(tmp_path):
         pytest.skip("compiler without AddressSanitizer/UBSan")
     data = runtime_data(TABLES[name]())
+    reference = Interpolator(data)
+    if fmt == "compact":
+        from gainsched.firmware.compact import CompactInterpolator, compact_data
+
+        data = compact_data(data)
+        reference = CompactInterpolator(data)
     exe = codegen.build_host(data, tmp_path, opt="-O1", sanitize=True, shared=False)
     x, v, a = query_mix(data, 6000, seed=11)
     q = np.stack([x, v, a], 1)
@@ -457,19 +465,25 @@ def test_sanitizer_run_matches_reference(name, tmp_path):
     P = raw[m * nK + 4 * m : m * nK + 5 * m]
     S = raw[m * nK + 5 * m :].view(np.int32)
     c = runtime.Lookup(K, U, P, S)
-    relK, relU, absP = compare(Interpolator(data)(x, v, a), c)
+    relK, relU, absP = compare(reference(x, v, a), c)
     assert max(relK, relU, absP) <= 1e-5
     res = subprocess.run([str(exe), "verify"], capture_output=True, text=True, env=SAN_ENV)
     assert res.returncode == 0 and "verify 0" in res.stdout, res.stdout + res.stderr
 
 
 @needs_cc
-def test_fuzz_driver_bounded_run(tmp_path):
+@pytest.mark.parametrize("fmt", ["dense", "compact"])
+def test_fuzz_driver_bounded_run(fmt, tmp_path):
     """The fuzz harness (bounded random driver; libFuzzer too when clang has it) under
-    ASan + UBSan on the paper table: the contract holds for every input."""
+    ASan + UBSan on the paper table, in both formats: the contract holds for every input."""
     if not _sanitizers_work(tmp_path):
         pytest.skip("compiler without AddressSanitizer/UBSan")
-    codegen.write_header(runtime_data(load_table(PAPER_H5)), tmp_path)
+    data = runtime_data(load_table(PAPER_H5))
+    if fmt == "compact":
+        from gainsched.firmware.compact import compact_data
+
+        data = compact_data(data)
+    codegen.write_header(data, tmp_path)
     rt = codegen.copy_runtime(tmp_path)[1]
     exe = tmp_path / "fuzz"
     san = ["-g", "-O1", "-fsanitize=address,undefined", "-fno-sanitize-recover=all"]

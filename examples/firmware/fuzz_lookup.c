@@ -48,12 +48,51 @@ static int nonfinite(float x)
     return (u & 0x7f800000u) == 0x7f800000u;
 }
 
+/* A compact table's bounds: a series c0 + sum a_k cos + b_k sin stays within
+ * c0 +- sum(|a_k| + |b_k|), and the lookup blends circles with weights >= 0 summing to 1 */
+static bounds compact_bounds(const gs_table *t)
+{
+    bounds b = {0.0f, 1e30f, -1e30f, 0.0f};
+    const size_t nK = 4u * t->n_state, n_value = nK + 5u;
+    const size_t n_circles = (size_t)t->n_tilt * t->n_speed;
+    size_t c, e, j;
+    for (c = 0; c < n_circles; ++c) {
+        const uint8_t *H = t->harmonics + c * n_value;
+        const float *cf = t->coef + t->coef_start[c];
+        if ((t->mask[c] & GS_MASK_NO_GAINS) != 0u) {
+            continue;
+        }
+        for (e = 0; e < n_value; ++e) {
+            const size_t rows = 2u * (size_t)H[e] + 1u;
+            float amp = 0.0f;
+            for (j = 1u; j < rows; ++j) {
+                amp += f_abs(cf[j]);
+            }
+            if (e < nK) {
+                b.k_abs = f_abs(cf[0]) + amp > b.k_abs ? f_abs(cf[0]) + amp : b.k_abs;
+            } else if (e < nK + 4u) {
+                b.u_min = cf[0] - amp < b.u_min ? cf[0] - amp : b.u_min;
+                b.u_max = cf[0] + amp > b.u_max ? cf[0] + amp : b.u_max;
+            } else {
+                b.phi_abs = f_abs(cf[0]) + amp > b.phi_abs ? f_abs(cf[0]) + amp : b.phi_abs;
+            }
+            cf += rows;
+        }
+    }
+    b.u_min = b.u_min > 0.0f ? 0.0f : b.u_min;
+    b.u_max = b.u_max < 0.0f ? 0.0f : b.u_max;
+    return b;
+}
+
 static bounds table_bounds(const gs_table *t)
 {
     bounds b = {0.0f, 0.0f, 0.0f, 0.0f};
     size_t i, nK = 4u * t->n_state;
     size_t n_pts = (size_t)t->n_tilt * t->n_speed * t->n_xi;
     size_t nk = (size_t)(t->n_tilt - 1u) * t->n_speed * t->n_xi * nK;
+    if (t->format == GS_FORMAT_COMPACT) {
+        return compact_bounds(t);
+    }
     for (i = 0; i < t->n_speed * nK; ++i) {
         b.k_abs = f_abs(t->K_tilt0[i]) > b.k_abs ? f_abs(t->K_tilt0[i]) : b.k_abs;
     }

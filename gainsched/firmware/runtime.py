@@ -58,6 +58,7 @@ __all__ = [
     "Domain",
     "fundamental_domain",
     "attitude_offsets",
+    "crc32_of",
 ]
 
 # status bits (gainsched_runtime.h)
@@ -263,14 +264,20 @@ class RuntimeData:
 
     def crc32(self) -> int:
         """CRC-32 (zlib, IEEE) of :meth:`crc_chunks`, as ``gs_table_crc32`` computes it."""
-        crc = 0
-        for _, b in self.crc_chunks():
-            crc = zlib.crc32(b, crc)
-        return crc & 0xFFFFFFFF
+        return crc32_of(self.crc_chunks())
 
     def nbytes(self) -> int:
         """Bytes of table data the firmware stores (all arrays, without padding)."""
         return sum(len(b) for k, b in self.crc_chunks() if k not in DESCRIPTOR_CHUNKS)
+
+
+def crc32_of(chunks) -> int:
+    """CRC-32 (zlib, IEEE) of ``(label, bytes)`` chunks in order: a table's
+    ``crc_chunks()``, as ``gs_table_crc32`` reads it."""
+    crc = 0
+    for _, chunk in chunks:
+        crc = zlib.crc32(chunk, crc)
+    return crc & 0xFFFFFFFF
 
 
 def c_identifier(name: str) -> str:

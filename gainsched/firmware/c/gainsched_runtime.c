@@ -136,8 +136,8 @@ int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float 
  * fundamental domain, cell the tilt and speed cell. Returns GS_INFEASIBLE and GS_NO_GAINS
  * (outputs zeroed) as they apply; *dphi_dxi (if not NULL) the roll's slope along xi.
  * (Six pointer arguments and one float: all in registers, a static stack.) */
-static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *K, float *u_d,
-                    float *phi_d, float *dphi_dxi)
+static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *restrict K,
+                    float *u_d, float *phi_d, float *dphi_dxi)
 {
     const size_t n = t->n_state, nK = 4u * n;
     const uint32_t *const ia = cell->ia, *const iv = cell->iv;
@@ -247,17 +247,19 @@ static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *K, 
         const float *const ud = t->u_d, *const ph = t->phi_d;
         float o[4];
         unsigned l;
+        /* four elements per pass (nK is a multiple of 4), written out: the 8 corner
+         * pointers, the output and the bound stay in registers on a Cortex-M4 at -Os (no
+         * spills), and a host compiler may run the four as one vector (K is restrict) */
+#define GS_CORNERS(i)                                                                   \
+    (((w0 * p0[i] + w1 * p1[i]) + (w2 * p2[i] + w3 * p3[i])) +                           \
+     ((w4 * p4[i] + w5 * p5[i]) + (w6 * p6[i] + w7 * p7[i])))
         for (e = 0; e < nK; e += 4u) {
-            for (l = 0u; l < 4u; ++l) {
-                const size_t i = e + l;
-                o[l] = ((w0 * p0[i] + w1 * p1[i]) + (w2 * p2[i] + w3 * p3[i])) +
-                       ((w4 * p4[i] + w5 * p5[i]) + (w6 * p6[i] + w7 * p7[i]));
-            }
-            K[e] = o[0];
-            K[e + 1u] = o[1];
-            K[e + 2u] = o[2];
-            K[e + 3u] = o[3];
+            K[e] = GS_CORNERS(e);
+            K[e + 1u] = GS_CORNERS(e + 1u);
+            K[e + 2u] = GS_CORNERS(e + 2u);
+            K[e + 3u] = GS_CORNERS(e + 3u);
         }
+#undef GS_CORNERS
         for (l = 0u; l < 4u; ++l) {
             o[l] = ((w0 * ud[4u * P[0] + l] + w1 * ud[4u * P[1] + l]) +
                     (w2 * ud[4u * P[2] + l] + w3 * ud[4u * P[3] + l])) +
