@@ -355,10 +355,7 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
         )
     L_e = config.tether.attachment_offset
     raw = _raw_channels(log, L_e)
-    kw = dict(window_length=n, polyorder=an.savgol_order, axis=-1, mode="interp")
-    ch = savgol_filter(raw, deriv=0, **kw)
-    ch1 = savgol_filter(raw, deriv=1, delta=dt, **kw)
-    ch2 = savgol_filter(raw, deriv=2, delta=dt, **kw)
+    ch, ch1, ch2 = _smoothed(raw, n, an.savgol_order, dt)
     z, acc, p, v, a, R, w_dot, e, axes = _reconstruct(ch, ch1, ch2, L_e)
     h = n // 2
     hc = savgol_coeffs(n, an.savgol_order)[h]
@@ -421,6 +418,15 @@ def _gyro(log: FlightLog, an, n: int, dt: float, noise=None):
                                polyorder=an.savgol_order, axis=0, mode="interp")
 
 
+def _smoothed(raw, window: int, order: int, dt: float):
+    """The pose channels ``raw`` (k, N) smoothed and differentiated once and twice along
+    the samples (Savitzky-Golay, ``window`` samples, polynomial ``order``, step ``dt`` s):
+    ``(ch, ch1, ch2)``, each (k, N), per s and per s^2."""
+    kw = dict(window_length=window, polyorder=order, axis=-1, mode="interp")
+    return (savgol_filter(raw, deriv=0, **kw), savgol_filter(raw, deriv=1, delta=dt, **kw),
+            savgol_filter(raw, deriv=2, delta=dt, **kw))
+
+
 def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None,
            rng_accel=None) -> Measured:
     """The same segment with motion-capture noise of the estimated level added once more:
@@ -439,10 +445,7 @@ def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None,
     R_IB = matrix_from_quaternion(log.q) @ Rz(rot[:, 2]) @ Ry(rot[:, 1]) @ Rx(rot[:, 0])
     raw = _raw_channels(log, meas.L_e, log.p_I + sp * rng.standard_normal((n, 3)), R_IB)
     dt = meas.dt
-    kw = dict(window_length=meas.window, polyorder=an.savgol_order, axis=-1, mode="interp")
-    ch = savgol_filter(raw, deriv=0, **kw)
-    ch1 = savgol_filter(raw, deriv=1, delta=dt, **kw)
-    ch2 = savgol_filter(raw, deriv=2, delta=dt, **kw)
+    ch, ch1, ch2 = _smoothed(raw, meas.window, an.savgol_order, dt)
     z, acc, p, v, a, R, w_dot, e, axes = _reconstruct(ch, ch1, ch2, meas.L_e)
     gyro, gyro_dot = None, None
     if meas.gyro is not None:  # the gyro's own noise, once more
