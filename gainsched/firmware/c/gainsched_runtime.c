@@ -22,6 +22,13 @@
 
 #define GS_PI 0x1.921fb6p+1f /* pi rounded to float */
 
+/* inlined at every call, -Os too: small helpers of the lookup's hot path */
+#if defined(__GNUC__)
+#define GS_INLINE static inline __attribute__((always_inline))
+#else
+#define GS_INLINE static inline
+#endif
+
 /* the bits of a float (type punning through a union is defined in C99) */
 static uint32_t gs_bits(float x)
 {
@@ -69,6 +76,27 @@ static float gs_snap(float f)
         return 1.0f;
     }
     return f;
+}
+
+/* v clamped into the axis ax[0..n-1] (clamped_bit into *status when it was outside),
+ * then its cell: corner indices i[0], i[1] and the snapped fraction (returned) */
+GS_INLINE float gs_axis_cell(const float *ax, uint32_t n, float v, uint32_t i[2], int *status,
+                             int clamped_bit)
+{
+    if (v < ax[0]) {
+        v = ax[0];
+        *status |= clamped_bit;
+    } else if (v > ax[n - 1u]) {
+        v = ax[n - 1u];
+        *status |= clamped_bit;
+    }
+    if (n > 1u) {
+        i[0] = gs_bracket(ax, n, v);
+        i[1] = i[0] + 1u;
+        return gs_snap((v - ax[i[0]]) / (ax[i[1]] - ax[i[0]]));
+    }
+    i[0] = i[1] = 0u;
+    return 0.0f;
 }
 
 static void gs_zero(float *K, size_t nK, float *u_d, float *phi_d)
@@ -459,36 +487,10 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
         mirrored = 1;
     }
 
-    /* 4. speed axis (xi_dot): clamp, bracket (xi is wrapped by the dense lookup) */
-    if (xi_dot < t->xi_dot[0]) {
-        xi_dot = t->xi_dot[0];
-        status |= GS_CLAMPED_SPEED;
-    } else if (xi_dot > t->xi_dot[t->n_speed - 1u]) {
-        xi_dot = t->xi_dot[t->n_speed - 1u];
-        status |= GS_CLAMPED_SPEED;
-    }
-    if (t->n_speed > 1u) {
-        iv[0] = gs_bracket(t->xi_dot, t->n_speed, xi_dot);
-        iv[1] = iv[0] + 1u;
-        fv = gs_snap((xi_dot - t->xi_dot[iv[0]]) / (t->xi_dot[iv[1]] - t->xi_dot[iv[0]]));
-    } else {
-        iv[0] = iv[1] = 0u;
-        fv = 0.0f;
-    }
-
-    /* tilt axis: alpha >= 0 == tilt[0] here; clamp above, bracket */
-    if (alpha > t->tilt[t->n_tilt - 1u]) {
-        alpha = t->tilt[t->n_tilt - 1u];
-        status |= GS_CLAMPED_TILT;
-    }
-    if (t->n_tilt > 1u) {
-        ia[0] = gs_bracket(t->tilt, t->n_tilt, alpha);
-        ia[1] = ia[0] + 1u;
-        fa = gs_snap((alpha - t->tilt[ia[0]]) / (t->tilt[ia[1]] - t->tilt[ia[0]]));
-    } else {
-        ia[0] = ia[1] = 0u;
-        fa = 0.0f;
-    }
+    /* 4. speed (xi_dot) and tilt axes: clamp, bracket (xi is wrapped by the dense
+     * lookup); alpha >= 0 == tilt[0] here, so only the top of the tilts can clamp */
+    fv = gs_axis_cell(t->xi_dot, t->n_speed, xi_dot, iv, &status, GS_CLAMPED_SPEED);
+    fa = gs_axis_cell(t->tilt, t->n_tilt, alpha, ia, &status, GS_CLAMPED_TILT);
     here.fa = fa, here.fv = fv;
     here.mirrored = mirrored, here.shifted = shifted;
     here.dphi_dxi = 0.0f;
