@@ -43,6 +43,7 @@ from .runtime import (
     attitude_offsets,
     crc32_of,
     fundamental_domain,
+    map_back,
 )
 
 __all__ = ["DEFAULT_AZIMUTH_ERROR", "MAX_HARMONICS", "FORMAT_COMPACT", "CompactData",
@@ -451,10 +452,8 @@ class CompactInterpolator:
         # own rows: vectorised evaluation; rows a value lacks are skipped, not added
         pad = np.zeros((n_c, self._top, n_value), dtype=np.float32)
         for c in np.flatnonzero(good):
-            s = int(data.start[c])
-            for e, r in enumerate(self._rows[c]):
-                pad[c, :r, e] = data.coef[s:s + r]
-                s += r
+            for e, series in enumerate(data.series(*divmod(int(c), n_v))):
+                pad[c, :series.size, e] = series
         self._coef = pad
         self._mask = data.mask.reshape(-1)
         self._perm = data.base.state_perm.astype(np.intp)
@@ -474,13 +473,7 @@ class CompactInterpolator:
         K = out[:, :4 * n].reshape(m, 4, n)
         U = out[:, 4 * n:4 * n + 4]
         P = out[:, -1]
-        mir = q.mirrored
-        if np.any(mir):  # K -> P_u K P_x, u_d -> P_u u_d, phi_d -> -phi_d (exact in float32)
-            K[mir] = K[mir][:, ::-1, :][:, :, self._perm] * self._sign
-            U[mir] = U[mir][:, ::-1]
-            P[mir] = -P[mir]
-        dead = (status & UNUSABLE) != 0
-        K[dead], U[dead], P[dead] = 0.0, 0.0, 0.0
+        map_back(K, U, P, q.mirrored, status, self._perm, self._sign)  # exact in float32
         return Lookup(K.astype(np.float64).reshape(shape + (4, n)),
                       U.astype(np.float64).reshape(shape + (4,)),
                       P.astype(np.float64).reshape(shape), status.reshape(shape))

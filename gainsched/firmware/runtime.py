@@ -58,6 +58,7 @@ __all__ = [
     "Domain",
     "fundamental_domain",
     "attitude_offsets",
+    "map_back",
     "crc32_of",
 ]
 
@@ -492,6 +493,19 @@ def fundamental_domain(d, xi, xi_dot, alpha) -> Domain:
                   (i0, i1, fa))
 
 
+def map_back(K, U, P, mirrored, status, perm, sign) -> None:
+    """Outputs computed in the fundamental domain, in place, as ``gs_lookup`` returns
+    them: mapped back through S2 where ``mirrored`` (``K -> P_u K P_x`` with ``P_x`` of
+    ``perm`` and ``sign``, ``u_d -> P_u u_d``, ``phi_d -> -phi_d``; exact, any float
+    type) and zero where ``status`` is unusable. ``K`` (m, 4, n), ``U`` (m, 4), ``P`` (m,)."""
+    if np.any(mirrored):
+        K[mirrored] = K[mirrored][:, ::-1, :][:, :, perm] * sign
+        U[mirrored] = U[mirrored][:, ::-1]
+        P[mirrored] = -P[mirrored]
+    dead = (status & UNUSABLE) != 0
+    K[dead], U[dead], P[dead] = 0.0, 0.0, 0.0
+
+
 def attitude_offsets(d, xi, alpha, circles, weights, mirrored, status) -> np.ndarray:
     """The nominal's attitude offsets at queries (m,), from the cell's circles: ``(m, 4)``
     = theta rad, d theta / d xi, chi rad, d chi / d xi (zero without offsets or where
@@ -718,13 +732,7 @@ class Interpolator:
             U[sl] = np.einsum("mc,mce->me", wc, self._U[p])
             P[sl] = np.einsum("mc,mc->m", wc, self._P[p])
         K = K.reshape(m, 4, n)
-        if np.any(mirrored):
-            Km = K[mirrored][:, ::-1, :][:, :, self._perm] * self._sign
-            K[mirrored] = Km
-            U[mirrored] = U[mirrored][:, ::-1]
-            P[mirrored] = -P[mirrored]
-        dead = (status & UNUSABLE) != 0
-        K[dead], U[dead], P[dead] = 0.0, 0.0, 0.0
+        map_back(K, U, P, mirrored, status, self._perm, self._sign)
         return Lookup(
             K.reshape(shape + (4, n)),
             U.reshape(shape + (4,)),
