@@ -59,14 +59,19 @@ FUZZ_SECONDS ?= 60
 SAN_FLAGS  = -g -O1 -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer
 CLANG     ?= $(firstword $(foreach c,clang clang-19 clang-18 clang-17 clang-16 clang-15 clang-14,$(shell command -v $(c) 2>/dev/null)))
 
-# The example loop: header from FW_TABLE, runtime copied beside it, strict build, run.
+# The examples: headers from FW_TABLE, runtime and controller copied beside them, strict
+# builds, run: the lookup loop (main.c) and the whole 1 kHz control loop (control_loop.c).
 firmware-example: $(STAMP)
 	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR)
 	$(CC) $(FW_CFLAGS) -I$(FW_DIR) examples/firmware/main.c $(FW_DIR)/gainsched_runtime.c \
 		-o $(FW_DIR)/firmware_example
 	$(FW_DIR)/firmware_example
+	$(CC) $(FW_CFLAGS) -I$(FW_DIR) examples/firmware/control_loop.c \
+		$(FW_DIR)/gainsched_control.c $(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/control_loop
+	$(FW_DIR)/control_loop
 
-# Cortex-M4F section sizes of the runtime and the table (needs arm-none-eabi-gcc).
+# Cortex-M4F section sizes of the runtime, the controller and the table (needs
+# arm-none-eabi-gcc).
 firmware-size: $(STAMP)
 	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR)/dense --format dense --no-code-size
 	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR)/compact --format compact --no-code-size
@@ -80,15 +85,17 @@ firmware-size: $(STAMP)
 	fi; \
 	for fmt in dense compact; do \
 		$$CC_SIZE -I$(FW_DIR)/$$fmt -c $(FW_DIR)/$$fmt/gainsched_runtime.c -o $(FW_DIR)/$$fmt/runtime.o; \
+		$$CC_SIZE -I$(FW_DIR)/$$fmt -c $(FW_DIR)/$$fmt/gainsched_control.c -o $(FW_DIR)/$$fmt/control.o; \
 		$$CC_SIZE -I$(FW_DIR)/$$fmt -c examples/firmware/size_probe.c -o $(FW_DIR)/$$fmt/table.o; \
-		echo "$$fmt table, $$TARGET: code (runtime.o) + data (table.o .rodata), bytes"; \
-		$$SIZE -A $(FW_DIR)/$$fmt/runtime.o $(FW_DIR)/$$fmt/table.o \
+		echo "$$fmt table, $$TARGET: code (runtime.o, control.o) + data (table.o .rodata), bytes"; \
+		$$SIZE -A $(FW_DIR)/$$fmt/runtime.o $(FW_DIR)/$$fmt/control.o $(FW_DIR)/$$fmt/table.o \
 			| grep -Ev '^\.(comment|ARM\.attributes|debug)|^ *$$' ; \
-		$$SIZE $(FW_DIR)/$$fmt/runtime.o $(FW_DIR)/$$fmt/table.o; \
+		$$SIZE $(FW_DIR)/$$fmt/runtime.o $(FW_DIR)/$$fmt/control.o $(FW_DIR)/$$fmt/table.o; \
 	done
 
-# Fuzz gs_lookup: libFuzzer when clang is there (FUZZ_SECONDS), else the bounded
-# random driver (FUZZ_RUNS queries); both under AddressSanitizer + UBSan.
+# Fuzz gs_lookup, then gs_ctrl_update: libFuzzer when clang is there (FUZZ_SECONDS
+# each), else the bounded random drivers (FUZZ_RUNS queries, steps); all under
+# AddressSanitizer + UBSan.
 fuzz: $(STAMP)
 	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR) --no-code-size
 	@if [ -n "$(CLANG)" ] && echo 'int LLVMFuzzerTestOneInput(const char *d, long n){(void)d;(void)n;return 0;}' \
@@ -98,9 +105,18 @@ fuzz: $(STAMP)
 		$(CLANG) $(FW_CFLAGS) $(SAN_FLAGS) -fsanitize=fuzzer -DGS_LIBFUZZER -I$(FW_DIR) \
 			examples/firmware/fuzz_lookup.c $(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/fuzz_lookup_libfuzzer; \
 		$(FW_DIR)/fuzz_lookup_libfuzzer -max_total_time=$(FUZZ_SECONDS) -max_len=12 $(FW_DIR)/fuzz-corpus; \
+		mkdir -p $(FW_DIR)/fuzz-corpus-control; \
+		$(CLANG) $(FW_CFLAGS) $(SAN_FLAGS) -fsanitize=fuzzer -DGS_LIBFUZZER -I$(FW_DIR) \
+			examples/firmware/fuzz_control.c $(FW_DIR)/gainsched_control.c \
+			$(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/fuzz_control_libfuzzer; \
+		$(FW_DIR)/fuzz_control_libfuzzer -max_total_time=$(FUZZ_SECONDS) -max_len=4800 \
+			$(FW_DIR)/fuzz-corpus-control; \
 	else \
-		set -e; echo "fuzz: no clang with libFuzzer; bounded random driver, $(FUZZ_RUNS) queries"; \
+		set -e; echo "fuzz: no clang with libFuzzer; bounded random drivers, $(FUZZ_RUNS) queries"; \
 		$(CC) $(FW_CFLAGS) $(SAN_FLAGS) -I$(FW_DIR) examples/firmware/fuzz_lookup.c \
 			$(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/fuzz_lookup; \
 		$(FW_DIR)/fuzz_lookup $(FUZZ_RUNS) 1; \
+		$(CC) $(FW_CFLAGS) $(SAN_FLAGS) -I$(FW_DIR) examples/firmware/fuzz_control.c \
+			$(FW_DIR)/gainsched_control.c $(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/fuzz_control; \
+		$(FW_DIR)/fuzz_control $(FUZZ_RUNS) 1; \
 	fi

@@ -484,11 +484,14 @@ def plot(table, out_dir, with_check, as_json):
               "cell midpoints (compact; docs/runtime.md).")
 @user_errors
 def export_c(table, out_dir, no_code_size, fmt):
-    """Write the C99 header NAME_gains.h for TABLE and copy the C runtime
-    (gainsched_runtime.c/.h) next to it; print the flash footprint."""
+    """Write the C99 header NAME_gains.h for TABLE, the controller's parameters
+    NAME_control.h (from the table's config) and copy the C runtime and controller
+    (gainsched_runtime.c/.h, gainsched_control.c/.h) next to them; print the flash
+    footprint."""
     from tqdm import tqdm
 
     from .firmware.codegen import c_files, flash_summary
+    from .firmware.controller import controller_params
     from .firmware.outputs import certificate_lines, firmware_form, table_config
     from .publish import publish
     from .schedule.tables import load_table
@@ -500,7 +503,8 @@ def export_c(table, out_dir, no_code_size, fmt):
     with tqdm(total=n_mid, unit="speed", desc="certify compact table",
               disable=None if n_mid else True) as bar:
         form, cert = firmware_form(cfg, t, progress=bar.update)
-    paths = publish(Path(table).parent if out_dir is None else out_dir, c_files(form))
+    params = None if cfg is None else controller_params(cfg)
+    paths = publish(Path(table).parent if out_dir is None else out_dir, c_files(form, params))
     for p in paths:
         click.echo(f"wrote {p}")
     click.echo(f"  {form.name}: {fmt}, CRC-32 0x{form.crc32():08x}, config "
@@ -618,8 +622,9 @@ def check(table, speed_stride, max_error, azimuth_error):
 
 _RUNTIME = click.option(
     "--runtime", type=click.Choice(["auto", "c", "python"]), default="auto", show_default=True,
-    help="Where the flight's gains and firmware feed-forward come from: the compiled C "
-    "runtime (c), its Python reference (python), or C when a C compiler is found (auto).")
+    help="Where the firmware's gains, feed-forward and (--controller firmware) whole "
+    "control step come from: compiled C (c: the runtime and controller, in the loop), "
+    "their Python reference (python), or C when a C compiler is found (auto).")
 
 
 @cli.command()
@@ -636,9 +641,10 @@ _RUNTIME = click.option(
 @_RUNTIME
 @click.option("--controller", type=click.Choice(["path", "firmware"]), default="path",
               show_default=True,
-              help="Nominal source: 'path' computes it from the design model along the "
-              "reference; 'firmware' uses only the table's lookup plus the drag-only closed "
-              "form (what a firmware has; docs/runtime.md).")
+              help="'path': the control law in Python with the design model's nominal "
+              "along the reference; 'firmware': the firmware's whole control step, sensors "
+              "in and thrusts out, with only what a firmware has: its estimator, the table's "
+              "lookup plus the drag-only closed form (docs/runtime.md).")
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               required=True, help="Output folder (log.csv/.h5, metrics.json, plots).")
 @user_errors

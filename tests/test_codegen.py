@@ -141,8 +141,11 @@ def test_write_c_outputs(tmp_path):
     paths = codegen.write_c_outputs(table)
     assert [p.name for p in paths] == [
         "paper_gains.h",
+        "paper_control.h",
         "gainsched_runtime.h",
         "gainsched_runtime.c",
+        "gainsched_control.h",
+        "gainsched_control.c",
     ]
     assert all(p.parent == table.parent and p.stat().st_size > 0 for p in paths)
     again = codegen.write_c_outputs(table, tmp_path / "out")

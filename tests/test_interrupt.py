@@ -32,7 +32,8 @@ from gainsched.publish import recover
 
 ROOT = Path(__file__).parents[1]
 TRIALS = int(os.environ.get("GAINSCHED_INTERRUPT_TRIALS", "8"))
-SET = ("gainsched_runtime.c", "gainsched_runtime.h", "trial.h5", "trial_gains.h")
+SET = ("gainsched_control.c", "gainsched_control.h", "gainsched_runtime.c", "gainsched_runtime.h",
+       "trial.h5", "trial_control.h", "trial_gains.h")
 
 
 def _config(n_xi: int) -> str:

@@ -36,7 +36,8 @@ FAMILIES = {
     "Nehalem": ("sse4_2",),
     "Prescott": ("pni",),  # SSE3 is "pni" in /proc/cpuinfo
 }
-OUTPUTS = ("gainsched_runtime.c", "gainsched_runtime.h", "det.h5", "det_gains.h")
+OUTPUTS = ("gainsched_control.c", "gainsched_control.h", "gainsched_runtime.c",
+           "gainsched_runtime.h", "det.h5", "det_control.h", "det_gains.h")
 #: (kernel family, BLAS threads, numpy dispatch switched off, build options)
 MATRIX = [
     ("Haswell", "2", "", ("-j", "2")),

@@ -193,7 +193,8 @@ def test_cli_build_twice_byte_identical(small, tmp_path):
         res = runner.invoke(cli, ["build", str(cfg_path), "-o", str(out), "-j", jobs])
         assert res.exit_code == 0, res.output
         assert "small.h5" in res.stdout
-        names = ["gainsched_runtime.c", "gainsched_runtime.h", "small.h5", "small_gains.h"]
+        names = ["gainsched_control.c", "gainsched_control.h", "gainsched_runtime.c",
+                 "gainsched_runtime.h", "small.h5", "small_control.h", "small_gains.h"]
         assert sorted(p.name for p in out.iterdir()) == names
         outs.append(b"".join((out / n).read_bytes() for n in names))
         next_second()
@@ -384,7 +385,8 @@ class _Interrupt:
         monkeypatch.setattr(gainsched.publish, "_fsync", fake)
 
 
-SET = ["gainsched_runtime.c", "gainsched_runtime.h", "small.h5", "small_gains.h"]
+SET = ["gainsched_control.c", "gainsched_control.h", "gainsched_runtime.c", "gainsched_runtime.h",
+       "small.h5", "small_control.h", "small_gains.h"]
 
 
 def _set_bytes(folder):

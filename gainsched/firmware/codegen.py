@@ -57,6 +57,8 @@ __all__ = [
 ]
 
 RUNTIME_FILES = ("gainsched_runtime.h", "gainsched_runtime.c")
+#: the controller (pose and gyro to thrusts) shipped beside the runtime
+CONTROL_FILES = ("gainsched_control.h", "gainsched_control.c")
 RUNTIME_VERSION = 4
 STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror")
 #: Cortex-M4F flags of ``make firmware-size`` and :func:`code_bytes`
@@ -291,31 +293,82 @@ def write_header(table, out_dir) -> Path:
 
 
 def copy_runtime(out_dir) -> list[Path]:
-    """Copy ``gainsched_runtime.[ch]`` into ``out_dir`` (atomically); returns the paths."""
+    """Copy ``gainsched_runtime.[ch]`` and ``gainsched_control.[ch]`` into ``out_dir``
+    (atomically); returns the paths in that order."""
     out = []
-    for fname in RUNTIME_FILES:
+    for fname in RUNTIME_FILES + CONTROL_FILES:
         out.append(_write(Path(out_dir) / fname, _resource("c", fname)))
     return out
 
 
-def c_files(table) -> dict[str, bytes]:
+#: ``gs_ctrl_params`` fields: the comment each gets in ``<name>_control.h``
+_PARAM_COMMENTS = {
+    "dt": "control step, s", "rho": "tether length, m",
+    "L_e": "attachment offset behind the COG, m", "thrust_min": "motor range, N",
+    "thrust_max": "motor range, N", "thrust_idle": "idle thrust (GS_CTRL_IDLE), N",
+    "int_limit": "integral state bound, rad s", "n_int": "integral states",
+    "int_of": "the reduced state each integrates (0 delta, 1 xi)",
+    "pose_delay": "s: set to your link's latency", "pose_timeout": "s",
+    "quat_tolerance": "| |q|^2 - 1 | of a usable pose", "gyro_range": "rad/s",
+    "accel_range": "m/s^2", "k_pos": "estimator: position per pose",
+    "k_vel": "estimator: velocity per pose", "k_att": "estimator: attitude per pose",
+    "pose_period": "s between poses",
+}
+
+
+def control_header_name(data) -> str:
+    return f"{data.name}_control.h"
+
+
+def render_control_header(data, params) -> str:
+    """The text of ``<name>_control.h``: ``<name>_ctrl_params`` (the ``gs_ctrl_params`` of
+    :class:`~gainsched.firmware.controller.ControllerParams`) and ``<name>_ctrl_init``."""
+    from dataclasses import fields
+
+    data = data.base if isinstance(data, CompactData) else data
+    names = [f.name for f in fields(params)]
+    names[names.index("int_of"):names.index("int_of") + 1] = ["n_int", "int_of"]
+    lines = []
+    for key, v in zip(names, params.c_values(), strict=True):
+        text = (f"{{{', '.join(_c_uint(i) for i in v)}}}" if key == "int_of" else
+                _c_uint(v) if key == "n_int" else c_decimal(v))
+        lines.append(f"    {text}, /* {key}: {_PARAM_COMMENTS[key]} */")
+    return render("control.in.h", name=data.name, NAME=data.name.upper(),
+                  config_name=data.meta.get("config_name", data.name),
+                  config_sha256=data.config_sha256 or "unknown",
+                  tool_version=data.meta.get("tool_version", "?"),
+                  dt_ms=f"{1000 * params.dt:g}",
+                  fields="\n".join(lines))
+
+
+def c_files(table, params=None) -> dict[str, bytes]:
     """The C outputs of a loaded table (or its :class:`RuntimeData`): file name -> bytes,
-    header first, then the runtime. Raises InputError if the table cannot be represented."""
+    header first, then the runtime and the controller, and with the controller's
+    parameters ``params`` (:class:`~gainsched.firmware.controller.ControllerParams`)
+    ``<name>_control.h``. Raises InputError if the table cannot be represented."""
     data = firmware_data(table)
     files = {header_name(data): render_header(data).encode()}
-    files.update((f, _resource("c", f).encode()) for f in RUNTIME_FILES)
+    if params is not None:
+        files[control_header_name(data)] = render_control_header(data, params).encode()
+    files.update((f, _resource("c", f).encode()) for f in RUNTIME_FILES + CONTROL_FILES)
     return files
 
 
 def write_c_outputs(table_path, out_dir=None) -> list[Path]:
-    """Header and runtime for the table file ``table_path`` into ``out_dir`` (default: the
-    table's folder), published together (:func:`gainsched.publish.publish`). Returns the
-    written paths, header first."""
+    """Header, controller parameters, runtime and controller for the table file
+    ``table_path`` into ``out_dir`` (default: the table's folder), published together
+    (:func:`gainsched.publish.publish`). Returns the written paths, header first."""
+    from ..config import config_from_text
     from ..schedule.tables import load_table
+    from .controller import controller_params
 
     table = load_table(table_path)
     out_dir = Path(table_path).parent if out_dir is None else Path(out_dir)
-    return publish(out_dir, c_files(table))
+    try:  # the controller's parameters come from the table's config, when it loads here
+        params = controller_params(config_from_text(table.config_text, str(table_path)))
+    except InputError:
+        params = None
+    return publish(out_dir, c_files(table, params))
 
 
 # --------------------------------------------------------------------------- sizes

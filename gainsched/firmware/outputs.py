@@ -22,6 +22,7 @@ from ..schedule.tables import table_bytes, table_from_bytes
 from .check import MidpointCheck, midpoint_check
 from .codegen import c_files
 from .compact import CompactData, CompactInterpolator, compact_data
+from .controller import controller_params
 from .runtime import RuntimeData, runtime_data
 
 __all__ = ["OutputSet", "output_set", "output_files", "firmware_form", "certificate_lines",
@@ -35,8 +36,9 @@ class OutputSet:
     Attributes
     ----------
     files : dict
-        File name -> bytes: ``NAME.h5``, ``NAME_gains.h``, ``gainsched_runtime.h``,
-        ``gainsched_runtime.c``.
+        File name -> bytes: ``NAME.h5``, ``NAME_gains.h``, ``NAME_control.h``,
+        ``gainsched_runtime.h``, ``gainsched_runtime.c``, ``gainsched_control.h``,
+        ``gainsched_control.c``.
     form : RuntimeData or CompactData
         What the C header holds (``[firmware] format``).
     certificate : MidpointCheck or None
@@ -162,12 +164,12 @@ def output_set(config, grid, out_dir=".", progress=None) -> OutputSet:
     data = table_bytes(config, grid, Model(config))
     table = table_from_bytes(data, Path(out_dir) / name)
     form, cert = firmware_form(config, table, progress)
-    return OutputSet({name: data, **c_files(form)}, form, cert)
+    return OutputSet({name: data, **c_files(form, controller_params(config))}, form, cert)
 
 
 def output_files(config, grid, out_dir=".") -> dict[str, bytes]:
-    """``{NAME.h5, NAME_gains.h, gainsched_runtime.h, gainsched_runtime.c}`` -> bytes, checked
-    (the files of :func:`output_set`).
+    """The files of :func:`output_set` (the table, the headers, the runtime and the
+    controller) -> bytes, checked.
 
     Parameters
     ----------
@@ -204,8 +206,10 @@ def write_outputs(out_dir, config, grid) -> list[Path]:
     list of Path
         The written files, ``out_dir / name``: ``NAME.h5`` (the table,
         docs/table-format.md), ``NAME_gains.h`` (the float32 tables for the firmware),
-        ``gainsched_runtime.h`` and ``gainsched_runtime.c`` (the C lookup,
-        docs/runtime.md).
+        ``NAME_control.h`` (the controller's parameters from the config),
+        ``gainsched_runtime.h`` and ``gainsched_runtime.c`` (the C lookup),
+        ``gainsched_control.h`` and ``gainsched_control.c`` (the whole control step,
+        pose and gyro to thrusts; docs/runtime.md).
 
     Raises
     ------
@@ -227,8 +231,9 @@ def write_outputs(out_dir, config, grid) -> list[Path]:
     ...                          "grid.azimuth_samples": 8, "name": "small"})
     >>> out = tempfile.mkdtemp()
     >>> paths = gs.write_outputs(out, small, gs.build_grid(small))
-    >>> [p.name for p in paths]
-    ['small.h5', 'small_gains.h', 'gainsched_runtime.h', 'gainsched_runtime.c']
+    >>> [p.name for p in paths]  # doctest: +NORMALIZE_WHITESPACE
+    ['small.h5', 'small_gains.h', 'small_control.h', 'gainsched_runtime.h',
+     'gainsched_runtime.c', 'gainsched_control.h', 'gainsched_control.c']
     >>> table = gs.load_table(paths[0])
     >>> table.name, table.K.shape, table.config_sha256 == small.sha256
     ('small', (1, 2, 8, 4, 11), True)

@@ -1,7 +1,9 @@
-"""Processor in the loop: the C runtime and a table on an emulated Cortex-M4F.
+"""Processor in the loop: the C runtime, the controller and a table on an emulated
+Cortex-M4F.
 
 The runtime, the table's header and a bare-metal query driver
-(``templates/pil_driver.in.c``, ``templates/pil.ld``) are cross-compiled with
+(``templates/pil_driver.in.c``; the controller: ``templates/control_pil.in.c``; their
+board support ``templates/pil_board.c`` and ``templates/pil.ld``) are cross-compiled with
 ``arm-none-eabi-gcc`` for the paper's kind of flight controller (Cortex-M4F with its
 single-precision FPU, hard-float ABI) and run on QEMU's ``mps2-an386`` board; the
 queries go in and the outputs come out through ARM semihosting. The tests compare
@@ -23,6 +25,7 @@ import numpy as np
 from .codegen import (
     M4F_CFLAGS,
     STRICT_CFLAGS,
+    _resource,
     _write,
     copy_runtime,
     firmware_data,
@@ -31,7 +34,8 @@ from .codegen import (
 )
 from .runtime import Lookup
 
-__all__ = ["QEMU_MACHINE", "pil_tools", "build_pil", "run_pil", "instructions_per_lookup"]
+__all__ = ["QEMU_MACHINE", "pil_tools", "build_pil", "run_pil", "instructions_per_lookup",
+           "build_control_pil", "run_control_pil", "instructions_per_step"]
 
 #: the emulated board: an MPS2 FPGA image with a Cortex-M4F
 QEMU_MACHINE = "mps2-an386"
@@ -43,6 +47,27 @@ def pil_tools() -> tuple[str, str] | None:
     """``(arm-none-eabi-gcc, qemu-system-arm)`` paths, or None when either is missing."""
     found = [shutil.which(t) for t in TOOLS]
     return (found[0], found[1]) if all(found) else None
+
+
+def _cross_build(out: Path, elf: Path, sources, *, std: str, ftz: bool, opt: str,
+                 extra=()) -> Path:
+    """Cross-compile ``sources`` with the board support (``pil_board.c``) and the linker
+    script into ``elf`` for Cortex-M4F; raises RuntimeError with the compiler's output."""
+    tools = pil_tools()
+    if tools is None:
+        raise RuntimeError("arm-none-eabi-gcc or qemu-system-arm not found")
+    ld = _write(out / "pil.ld", render("pil.ld"))
+    _write(out / "pil_board.h", _resource("templates", "pil_board.h"))
+    board = _write(out / "pil_board.c", _resource("templates", "pil_board.c"))
+    flags = [f for f in STRICT_CFLAGS if not f.startswith("-std=")]
+    flags = [f"-std={std}", *flags, *M4F_CFLAGS, opt, "-ffreestanding", "-nostdlib",
+             "-nostartfiles", f"-I{out}", *(["-DGS_PIL_FTZ"] if ftz else []), *extra]
+    cmd = [tools[0], *flags, "-T", str(ld), "-o", str(elf), *map(str, sources), str(board),
+           "-lgcc"]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    if res.returncode:
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{res.stderr}")
+    return elf
 
 
 def build_pil(table, out_dir, *, std: str = "c99", ftz: bool = False, opt: str = "-O2",
@@ -74,9 +99,6 @@ def build_pil(table, out_dir, *, std: str = "c99", ftz: bool = False, opt: str =
     RuntimeError
         No cross compiler, or the build fails (its output in the message).
     """
-    tools = pil_tools()
-    if tools is None:
-        raise RuntimeError("arm-none-eabi-gcc or qemu-system-arm not found")
     data = firmware_data(table)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -85,17 +107,27 @@ def build_pil(table, out_dir, *, std: str = "c99", ftz: bool = False, opt: str =
     driver = _write(out / f"{data.name}_pil.c",
                     render("pil_driver.in.c", name=data.name, NAME=data.name.upper(),
                            tool_version=data.meta.get("tool_version", "?")))
-    ld = _write(out / "pil.ld", render("pil.ld"))
-    elf = out / f"{data.name}_pil.elf"
-    flags = [f for f in STRICT_CFLAGS if not f.startswith("-std=")]
-    flags = [f"-std={std}", *flags, *M4F_CFLAGS, opt, "-ffreestanding", "-nostdlib",
-             "-nostartfiles", f"-I{out}", *(["-DGS_PIL_FTZ"] if ftz else []), *extra]
-    cmd = [tools[0], *flags, "-T", str(ld), "-o", str(elf), str(driver), str(runtime_c),
-           "-lgcc"]
-    res = subprocess.run(cmd, capture_output=True, text=True)
-    if res.returncode:
-        raise RuntimeError(f"{' '.join(cmd)} failed:\n{res.stderr}")
-    return elf
+    return _cross_build(out, out / f"{data.name}_pil.elf", [driver, runtime_c], std=std,
+                        ftz=ftz, opt=opt, extra=extra)
+
+
+def build_control_pil(table, params, out_dir, *, std: str = "c99", ftz: bool = False,
+                      opt: str = "-O2", extra=()) -> Path:
+    """Cross-compile the controller (``gainsched_control.c`` with the runtime and the
+    table) and its step driver for Cortex-M4F: the image for :func:`run_control_pil`.
+    Parameters as :func:`build_pil`; ``params`` the
+    :class:`~gainsched.firmware.controller.ControllerParams` of ``<name>_control.h``
+    (the driver sets its own at run time)."""
+    from .sil import write_controller
+
+    data = firmware_data(table)
+    out = Path(out_dir)
+    sources = write_controller(data, params, out)
+    values = dict(name=data.name, tool_version=data.meta.get("tool_version", "?"))
+    shim = _write(out / f"{data.name}_control_sil.c", render("control_sil.in.c", **values))
+    driver = _write(out / f"{data.name}_control_pil.c", render("control_pil.in.c", **values))
+    return _cross_build(out, out / f"{data.name}_control_pil.elf", [driver, shim, *sources],
+                        std=std, ftz=ftz, opt=opt, extra=extra)
 
 
 def _qemu(elf: Path, cwd: Path, extra=(), timeout: float = 600.0):
@@ -104,6 +136,19 @@ def _qemu(elf: Path, cwd: Path, extra=(), timeout: float = 600.0):
     cmd = [qemu, "-M", QEMU_MACHINE, "-nographic", "-monitor", "none", "-serial", "none",
            "-semihosting-config", "enable=on,target=native", *extra, "-kernel", str(elf)]
     return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout)
+
+
+def _instructions(elf: Path, files: dict) -> int:
+    """Guest instructions of one run of ``elf`` with the input ``files`` (name -> bytes):
+    QEMU's one-instruction-per-block execution trace (``-singlestep -d exec,nochain``)."""
+    with tempfile.TemporaryDirectory(prefix="gainsched-pil-") as tmp:
+        for name, data in files.items():
+            (Path(tmp) / name).write_bytes(data)
+        log = Path(tmp) / "exec.log"
+        _qemu(Path(elf).resolve(), Path(tmp), ["-singlestep", "-d", "exec,nochain", "-D",
+                                                 str(log)])
+        with open(log, "rb") as fh:
+            return sum(chunk.count(b"Trace ") for chunk in iter(lambda: fh.read(1 << 20), b""))
 
 
 def run_pil(elf, xi, xi_dot, alpha, n_state: int) -> Lookup:
@@ -143,20 +188,63 @@ def run_pil(elf, xi, xi_dot, alpha, n_state: int) -> Lookup:
 
 def instructions_per_lookup(elf, xi, xi_dot, alpha, n_state: int) -> float:
     """Guest instructions one lookup executes on the emulated Cortex-M4F, on average over
-    the queries: QEMU's one-instruction-per-block execution trace (``-singlestep -d
-    exec,nochain``) of the driver with the queries, minus its trace with none (the
+    the queries: the driver's trace with the queries minus its trace with none (the
     start-up and the semihosting calls)."""
     counts = []
     for k in (0, np.size(xi)):
-        with tempfile.TemporaryDirectory(prefix="gainsched-pil-") as tmp:
-            with np.errstate(over="ignore", invalid="ignore"):
-                q = np.stack([np.asarray(v, dtype=np.float32).reshape(-1)[:k]
-                              for v in (xi, xi_dot, alpha)], 1)
-            (Path(tmp) / "q.bin").write_bytes(np.ascontiguousarray(q).tobytes())
-            log = Path(tmp) / "exec.log"
-            _qemu(Path(elf).resolve(), Path(tmp),
-                  ["-singlestep", "-d", "exec,nochain", "-D", str(log)])
-            with open(log, "rb") as fh:
-                counts.append(sum(chunk.count(b"Trace ") for chunk in iter(
-                    lambda: fh.read(1 << 20), b"")))
+        with np.errstate(over="ignore", invalid="ignore"):
+            q = np.stack([np.asarray(v, dtype=np.float32).reshape(-1)[:k]
+                          for v in (xi, xi_dot, alpha)], 1)
+        counts.append(_instructions(elf, {"q.bin": np.ascontiguousarray(q).tobytes()}))
     return (counts[1] - counts[0]) / max(np.size(xi), 1)
+
+
+def _control_files(params, rows, reset) -> dict:
+    """The control driver's input files: parameters (+ reset state) and the rows."""
+    pv = [float(x) for v in params.c_values() for x in np.ravel(v)]
+    start = [0.0] * 11 if reset is None else [1.0, *np.concatenate(reset)]
+    return {"p.bin": np.asarray(pv + start, dtype=np.float32).tobytes(),
+            "q.bin": np.ascontiguousarray(rows, dtype=np.float32).tobytes()}
+
+
+def run_control_pil(elf, params, rows, reset=None):
+    """Run the controller on the emulated Cortex-M4F over recorded input rows.
+
+    Parameters
+    ----------
+    elf : path-like
+        An image of :func:`build_control_pil`.
+    params : ControllerParams
+    rows : array_like, shape (m, N_INPUT)
+        The steps' inputs (:data:`~gainsched.firmware.controller.INPUT_COLUMNS`), float32.
+    reset : tuple of array_like, optional
+        ``(p_I, v_I, q_IB)``: start the estimator there (``gs_ctrl_reset``).
+
+    Returns
+    -------
+    thrust : ndarray, shape (m, 4), float32
+    status : ndarray, shape (m,), int32
+    z : ndarray, shape (m, 10), float32
+        As :meth:`gainsched.firmware.sil.CController.run` on the host.
+    """
+    with tempfile.TemporaryDirectory(prefix="gainsched-pil-") as tmp:
+        for name, data in _control_files(params, rows, reset).items():
+            (Path(tmp) / name).write_bytes(data)
+        res = _qemu(Path(elf).resolve(), Path(tmp))
+        out = Path(tmp) / "o.bin"
+        raw = out.read_bytes() if out.exists() else b""
+    o = np.frombuffer(raw, dtype=np.float32).reshape(-1, 15)
+    if o.shape[0] != len(rows):
+        raise RuntimeError(f"the emulated target returned {o.shape[0]} of {len(rows)} steps "
+                           f"(qemu exit {res.returncode}: {res.stderr.strip()[-300:]})")
+    return o[:, :4].copy(), o[:, 4].copy().view(np.int32), o[:, 5:].copy()
+
+
+def instructions_per_step(elf, params, rows, reset=None) -> float:
+    """Guest instructions one control step (``gs_ctrl_update``, lookup included) executes
+    on the emulated Cortex-M4F, on average over the rows: the trace with the rows minus
+    the trace with none."""
+    rows = np.asarray(rows)
+    runs = [_instructions(elf, _control_files(params, rows[:k], reset))
+            for k in (0, len(rows))]
+    return (runs[1] - runs[0]) / max(len(rows), 1)

@@ -89,6 +89,7 @@ PI_F = F32(np.pi)
 XI_LIMIT = F32(constants.XI_LIMIT)  # rad
 XI_DOT_LIMIT = F32(constants.XI_DOT_LIMIT)  # rad/s
 TILT_LIMIT = F32(constants.TILT_LIMIT)  # rad
+XI_DERIV_LIMIT = F32(1.0e6)  # |xi''|, |xi'''|, |xi''''| of gs_lookup_nominal (GS_XI_DERIV_LIMIT)
 N_BASE_STATES = 11  # never permuted by the mirror (GS_N_BASE_STATES)
 SNAP = F32(2.0**-12)  # cell fractions this close to 0 or 1 are put on the grid plane
 MAX_OFFSET_HARMONICS = 8  # GS_MAX_OFFSET_HARMONICS

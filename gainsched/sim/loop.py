@@ -27,7 +27,7 @@ from ..config import N_STATE, Config, Section
 from ..constants import INTEGRATORS
 from ..errors import GainschedWarning, InputError
 from ..firmware.feedforward import FeedForward, feedforward
-from ..firmware.runtime import BAD_ARG, CLAMPED_SPEED, UNUSABLE, status_text
+from ..firmware.runtime import BAD_ARG, CLAMPED_SPEED, NO_GAINS, UNUSABLE, status_text
 from ..model.geometry import pose_angles_from_pose, pose_from_reduced, wrap_angle
 from ..model.maximal import MaximalModel, reduced_from_maximal
 from ..model.reduced import Model
@@ -36,10 +36,14 @@ from ..model.rotations import (
     matrix_from_euler_zyx_scalar,
     matrix_from_quaternion,
     quaternion_from_matrix,
+    quaternion_from_matrix_scalar,
 )
 from ..schedule.nominal import circle_offsets, nominal_from_path
 from ..schedule.path import AzimuthPath, maneuver_path
 from .fastplant import SUPPORTED_EFFECTS, fast_plant
+
+#: the lookup's status bits (SimResult.status) among the firmware controller's
+LOOKUP_BITS = 0xFF
 
 __all__ = [
     "Scenario",
@@ -81,7 +85,8 @@ class Sensing:
     gyro_noise: float = 0.0
     latency: float = 0.0
     seed: int = 0
-    accel_noise: float = 0.0  # m/s^2, the logged accelerometer's
+    accel_noise: float = 0.0  # m/s^2, the accelerometer's (the log's; the firmware's)
+    latency_compensation: bool = True  # the firmware controller knows the latency
 
 
 @dataclass(frozen=True)
@@ -178,6 +183,7 @@ def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
         sens.number("latency", 0.0, nonneg=True),
         int(sens.number("seed", 0)),
         sens.number("accel_noise", 0.0, nonneg=True),
+        sens.boolean("latency_compensation", True),
     )
     sens.done()
     init = tuple(top.array("initial_error", [])) if "initial_error" in d else ()
@@ -300,6 +306,10 @@ class SimResult:
     f_B : ndarray, shape (N, 3), or None
         Specific force at the COG in the body frame, ``R_IB^T (a_I + g e_z)``, m/s^2: what
         an ideal accelerometer senses (from second differences of ``p_I``).
+    controller_status : ndarray of int32, shape (N,), or None
+        ``controller="firmware"``: the controller's whole status, the lookup's bits with
+        the ``CTRL_*`` bits of :mod:`gainsched.firmware.controller` (``HELD``,
+        ``SATURATED``, ``BAD_POSE``, ``STALE_POSE``, ``BAD_IMU``, ``IDLE``); else None.
     """
 
     t: np.ndarray
@@ -322,6 +332,7 @@ class SimResult:
     tension_d: np.ndarray | None = None
     min_tension: float = 0.0
     f_B: np.ndarray | None = None
+    controller_status: np.ndarray | None = None
 
 
 _FALLBACKS_SEEN: set[str] = set()
@@ -403,6 +414,24 @@ class _Plant:
             R_IC = R_IC_from_tilt(alpha, gamma)
         return p_C @ R_IC.T, R_IC @ R_CB
 
+    def sensors(self, x, u, alpha, gamma):
+        """What the vehicle's sensors see of one state under the thrusts ``u`` (N): the COG
+        position ``p_I`` (m) and velocity ``v_I`` (m/s) in I, the attitude ``q_IB``, the body
+        rates (rad/s) and the specific force at the COG in B (m/s^2, what an accelerometer
+        there senses)."""
+        R_IC = matrix_from_euler_zyx_scalar(alpha, 0.0, gamma)
+        if self.maximal is None:
+            p_C, v_C, a_C, R_CB = self.model.cog_motion_one(x, self.f(x, u, alpha)[0])
+            f_B = R_CB.T @ (a_C - self.model.g_C(alpha))
+            w = x[7:10]
+        else:
+            p_C, v_C, w = x[0:3], x[3:6], x[10:13]
+            R_CB = matrix_from_quaternion(x[6:10] / np.linalg.norm(x[6:10]))
+            a_C = self.maximal.f(x, u, alpha)[3:6]
+            f_B = R_CB.T @ (a_C - self.model.g_C(alpha))
+        return (R_IC @ p_C, R_IC @ v_C, quaternion_from_matrix_scalar(R_IC @ R_CB),
+                np.array(w), np.asarray(f_B))
+
     def poses(self, X, alpha, gamma):
         """COG positions in I (N, 3), m, and quaternions q_IB (N, 4) of states X (N, n_x)."""
         p_I, R_IB = self.pose(X, alpha, gamma)
@@ -419,6 +448,37 @@ def _rk4(f, x, u, alpha, dt):
     k3, _ = f(x + 0.5 * dt * k2, u, alpha)
     k4, _ = f(x + dt * k3, u, alpha)
     return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), ten
+
+
+class _Record:
+    """The per-step histories of a flight, preallocated, and the :class:`SimResult` they
+    make: plant states ``X`` (poses are computed after the loop), true and estimated
+    reduced states, applied thrusts, tension, saturation, status, held gains."""
+
+    def __init__(self, n_steps: int, x, P: _Plant):
+        self.P = P
+        self.X = np.empty((n_steps, x.size))
+        self.Z = self.X[:, :N_STATE] if P.maximal is None else np.empty((n_steps, N_STATE))
+        self.Zh = np.empty((n_steps, N_STATE))
+        self.U = np.empty((n_steps, 4))
+        self.TEN = np.empty(n_steps)
+        self.SAT = np.zeros((n_steps, 4), dtype=bool)
+        self.STAT = np.zeros(n_steps, dtype=np.int32)
+        self.HELD = np.zeros(n_steps, dtype=bool)
+        self.CTRL = None  # the firmware controller's status bits (its loop sets them)
+
+    def result(self, n_done: int, t, z_d, u_d, tension_d, slack_time, scenario, r: float,
+               design: Config, plant: Config) -> SimResult:
+        """The first ``n_done`` steps as a :class:`SimResult`."""
+        sl = slice(0, n_done)
+        PI, QI = self.P.poses(self.X[sl], scenario.tilt, scenario.gamma)
+        dt = design.control.dt
+        return SimResult(t[sl], self.Z[sl].copy(), self.Zh[sl], z_d[sl], self.U[sl], u_d[sl],
+                         self.TEN[sl], PI, QI, self.SAT[sl], self.STAT[sl], slack_time,
+                         scenario, r, plant.vehicle.mass, plant.g, self.HELD[sl],
+                         tension_d[sl], design.feasibility.min_tension,
+                         specific_force(PI, QI, dt, plant.g),
+                         None if self.CTRL is None else self.CTRL[sl])
 
 
 def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None = None,
@@ -458,13 +518,17 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     progress : callable, optional
         ``progress(100)`` after every 100 steps (a progress bar's increment).
     controller : {"path", "firmware"}, default "path"
-        Where the nominal ``(x_d, u_d)`` comes from. ``"path"``: the design model along
-        the reference, computed here (closed form or trim). ``"firmware"``: only what a
-        firmware has, the table's lookup plus the drag-only closed form with the
-        table's correction (:mod:`gainsched.firmware.feedforward`), from
-        ``scheduler.feedforward(path, alpha)``: the compiled C runtime's
-        ``gs_lookup_nominal`` (``c_runtime_scheduler``, gains and nominal both from C)
-        or its Python reference (``table_scheduler``).
+        ``"path"``: the law above in Python, the nominal ``(x_d, u_d)`` from the design
+        model along the reference (closed form or trim), the state from the sensing
+        below. ``"firmware"``: the firmware's whole control step
+        (:mod:`gainsched.firmware.controller`, docs/runtime.md): sensors in, thrusts
+        out, with only what a firmware has (the table's lookup, the drag-only closed
+        form with the table's correction, its own estimator). With
+        ``c_runtime_scheduler`` it is the C controller itself, through ctypes (software
+        in the loop); with ``table_scheduler`` its Python reference. Ideal sensing gives
+        it the true COG kinematics; motion capture gives it the delayed noisy poses,
+        the gyro and the accelerometer (the plant's specific force), with its pose
+        delay set to the latency unless ``sensing.latency_compensation`` is false.
 
     Returns
     -------
@@ -480,7 +544,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         closed-form constants.
     ValueError
         ``controller`` is neither ``"path"`` nor ``"firmware"``, or ``"firmware"`` with a
-        scheduler without ``feedforward``.
+        scheduler without ``controller`` and ``feedforward``.
 
     Notes
     -----
@@ -528,12 +592,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         nom = nominal_from_path(dmodel, path, alpha, periodic=False, offsets=offsets)
         z_d, u_d, tension_d = nom.z[:, :N_STATE], nom.u, nom.tension
     elif controller == "firmware":  # no trim of the design model: only what a firmware has
-        source = getattr(scheduler, "feedforward", None)
-        if source is None:
-            raise ValueError("controller='firmware' needs a scheduler with the table's "
-                             "feed-forward (table_scheduler or c_runtime_scheduler)")
-        ff = source(path, alpha)
-        z_d, u_d, tension_d = ff.x_d, ff.u_d, ff.tension
+        return _fly_firmware(design, scheduler, scenario, plant, P, path, progress)
     else:
         raise ValueError(f"controller must be 'path' or 'firmware', got {controller!r}")
     u_min, u_max = plant.vehicle.thrust_min, plant.vehicle.thrust_max
@@ -546,13 +605,9 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     rng = np.random.default_rng(sens.seed)
     est = _Estimator(dmodel, P, sens, dt, alpha, scenario.gamma, z0, rng)
 
-    X = np.empty((n_steps, x.size))  # plant states; poses are computed after the loop
-    Z = X[:, :N_STATE] if P.maximal is None else np.empty((n_steps, N_STATE))
-    Zh = np.empty((n_steps, N_STATE))
-    U = np.empty((n_steps, 4))
-    TEN = np.empty(n_steps)
-    SAT = np.zeros((n_steps, 4), dtype=bool)
-    STAT = np.zeros(n_steps, dtype=np.int32)
+    rec = _Record(n_steps, x, P)
+    X, Z, Zh, U, TEN, SAT, STAT, HELD = (rec.X, rec.Z, rec.Zh, rec.U, rec.TEN, rec.SAT,
+                                         rec.STAT, rec.HELD)
     # per-step work kept to a few small numpy calls: bound methods and arrays looked
     # up once, the LQR error vector (11 + zero-padded effect states) reused
     xi_ref, xi_dot_ref = path.xi, path.d[0]
@@ -560,10 +615,6 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     rigid = P.maximal is None
     batch = getattr(scheduler, "batch", None)
     K_blk = S_blk = None
-    # the C runtime returns the gains with the nominal: the firmware's one call per step
-    K_all = S_all = None
-    if controller == "firmware" and ff.K is not None:
-        K_all, S_all = ff.K.astype(np.float64), ff.status.tolist()
     # integral states of the design (int_delta, int_xi): the errors they integrate
     int_idx = [INTEGRATORS[name] for name in design.control.integrators]
     n_lqr = N_STATE + len(int_idx)
@@ -571,7 +622,6 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     integ = np.zeros(len(int_idx))
     xi_true = z0[1]  # the plant's azimuth, tracked continuously (elastic links)
     K_good = None  # the last usable gains (held through NO_GAINS / bad lookups)
-    HELD = np.zeros(n_steps, dtype=bool)
     slack_time = None
     n_done = n_steps
     for k in range(n_steps):
@@ -582,9 +632,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         # no wrap: the estimate and the reference are continuous azimuths, so the error
         # stays right past half a lap (a lag of 4 rad is a lag, not a lead of 2.3 rad)
         err = z_hat - z_d[k]
-        if K_all is not None:
-            K, status = K_all[k], S_all[k]
-        elif batch is None:
+        if batch is None:
             K, status = scheduler(xi_ref[k], xi_dot_ref[k], alpha)
         else:
             j = k % _LOOKUP_BLOCK
@@ -614,7 +662,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         x_next, ten = step(x, u, alpha, dt)
         if not rigid:
             Z[k] = z_true
-        Zh[k], U[k], TEN[k], STAT[k] = z_hat, u, ten, status
+        Zh[k], U[k], TEN[k], STAT[k] = z_hat, u, ten, status & LOOKUP_BITS
         if ten < 0:
             slack_time = float(t[k])
             n_done = k + 1
@@ -624,12 +672,139 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         x = x_next
         if progress is not None and k % 100 == 99:
             progress(100)
-    sl = slice(0, n_done)
-    PI, QI = P.poses(X[sl], alpha, scenario.gamma)
-    return SimResult(t[sl], Z[sl].copy(), Zh[sl], z_d[sl], U[sl], u_d[sl], TEN[sl], PI, QI,
-                     SAT[sl], STAT[sl], slack_time, scenario, dmodel.r, plant.vehicle.mass,
-                     plant.g, HELD[sl], tension_d[sl], design.feasibility.min_tension,
-                     specific_force(PI, QI, dt, plant.g))
+    return rec.result(n_done, t, z_d, u_d, tension_d, slack_time, scenario, dmodel.r, design,
+                      plant)
+
+
+def _firmware_controller(scheduler, params):
+    """The scheduler's firmware controller with ``params``: the C controller (software in
+    the loop) or its Python reference."""
+    make = getattr(scheduler, "controller", None)
+    if make is None:
+        raise ValueError("controller='firmware' needs a scheduler with the table's "
+                         "controller (table_scheduler, c_runtime_scheduler or "
+                         "runtime_scheduler)")
+    return make(params)
+
+
+def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimResult:
+    """``simulate(..., controller="firmware")``: the firmware's whole loop, sensors in and
+    thrusts out (:mod:`gainsched.firmware.controller`), in C through ctypes or its Python
+    reference, on the plant ``P``. Ideal sensing gives the controller the true COG
+    kinematics (``FLAG_KINEMATICS``); motion capture gives it delayed noisy poses at the
+    sensing rate, the gyro and the accelerometer every step."""
+    from ..firmware.controller import (
+        CTRL_HELD,
+        CTRL_SATURATED,
+        FLAG_ACCEL,
+        FLAG_KINEMATICS,
+        FLAG_POSE,
+        INPUT_COLUMNS,
+        N_INPUT,
+        Controller,
+        controller_params,
+    )
+
+    dt, alpha, gamma = design.control.dt, scenario.tilt, scenario.gamma
+    sens = scenario.sensing
+    t = path.t
+    n_steps = t.size
+    xi_w = wrap_angle(path.xi)
+    ref = np.stack([xi_w, *path.d], axis=1)
+    ff = scheduler.feedforward(AzimuthPath(t, xi_w, path.d), alpha)
+    z_d, u_d, tension_d = ff.x_d.copy(), ff.u_d, ff.tension
+    z_d[:, 1] = path.xi  # continuous, as the path controller's
+    every = max(1, int(round(1.0 / (sens.rate_hz * dt))))
+    delay = int(round(sens.latency / dt))
+    params = controller_params(design, pose_period=every * dt,
+                               pose_delay=delay * dt if sens.latency_compensation else 0.0)
+    ctl = _firmware_controller(scheduler, params)
+    reference = isinstance(ctl, Controller)
+    if reference:  # the Python reference takes each step's nominal (gs_lookup_nominal)
+        lk = scheduler.batch(xi_w, path.d[0], np.full(n_steps, alpha))[0]
+    u_min, u_max = plant.vehicle.thrust_min, plant.vehicle.thrust_max
+    z0 = z_d[0].copy()
+    z0[1] = path.xi[0]
+    if scenario.initial_error:
+        z0[: len(scenario.initial_error)] += np.asarray(scenario.initial_error)
+    x = P.initial(z0, u_d[0])
+    rng = np.random.default_rng(sens.seed)
+    col = {}
+    i = 0
+    for key, width in INPUT_COLUMNS.items():
+        col[key] = slice(i, i + width)
+        i += width
+    row = np.zeros(N_INPUT)
+    row[col["alpha"]], row[col["gamma"]] = alpha, gamma
+    u_now = u_d[0]
+    if not sens.ideal:
+        p_I, v_I, q_IB, _, _ = P.sensors(x, u_now, alpha, gamma)
+        ctl.reset(p_I, v_I, q_IB)  # the estimator starts on the true state
+    pending: list[tuple[int, np.ndarray, np.ndarray]] = []
+    rec = _Record(n_steps, x, P)
+    X, Z, Zh, U, TEN, SAT, STAT, HELD = (rec.X, rec.Z, rec.Zh, rec.U, rec.TEN, rec.SAT,
+                                         rec.STAT, rec.HELD)
+    CTRL = rec.CTRL = np.zeros(n_steps, dtype=np.int32)
+    t_lo, t_hi = (float(np.float32(v)) for v in (params.thrust_min, params.thrust_max))
+    slack_time = None
+    n_done = n_steps
+    xi_true = z0[1]
+    for k in range(n_steps):
+        X[k] = x
+        z_true = x[:N_STATE] if P.maximal is None else P.reduced(x, xi_true)
+        xi_true = z_true[1]
+        p_I, v_I, q_IB, w_B, f_B = P.sensors(x, u_now, alpha, gamma)
+        if sens.ideal:
+            row[0] = FLAG_KINEMATICS
+            row[col["p_I"]], row[col["v_I"]], row[col["q_IB"]] = p_I, v_I, q_IB
+            row[col["gyro"]] = w_B
+        else:
+            if k % every == 0:  # a pose taken now arrives after the latency
+                p_m = p_I + sens.position_noise * rng.standard_normal(3)
+                rot = sens.attitude_noise * rng.standard_normal(3)
+                R_m = matrix_from_quaternion(q_IB) @ matrix_from_euler_zyx_scalar(*rot)
+                pending.append((k + delay, p_m, quaternion_from_matrix_scalar(R_m)))
+            flags = FLAG_ACCEL
+            if pending and pending[0][0] <= k:
+                _, p_m, q_m = pending.pop(0)
+                flags |= FLAG_POSE
+                row[col["p_I"]], row[col["q_IB"]] = p_m, q_m
+            row[0] = flags
+            row[col["gyro"]] = w_B + sens.gyro_noise * rng.standard_normal(3)
+            row[col["accel"]] = f_B + sens.accel_noise * rng.standard_normal(3)
+        row[col["ref"]] = ref[k]
+        if reference:
+            thrust, status, z_hat = ctl.step(row, (lk[k], ff.x_d[k], ff.u_d[k],
+                                                   int(ff.status[k])))
+        else:
+            thrust, status, z_hat = ctl.step(row)
+        if k == 0 and status & NO_GAINS:
+            raise InputError(
+                f"scenario {scenario.name}", "speed",
+                f"the table has no usable gains where the flight starts ({status_text(status)}"
+                f" at speed {path.d[0][0] * design.radius:.3g} m/s, tilt "
+                f"{math.degrees(alpha):.3g} deg): a firmware would refuse to engage")
+        u = np.minimum(np.maximum(thrust, u_min), u_max)
+        # clipped: by the plant's limits, or by the controller at the design's
+        SAT[k] = (u != thrust) | (bool(status & CTRL_SATURATED) & ((thrust == t_lo) |
+                                                                   (thrust == t_hi)))
+        HELD[k] = bool(status & CTRL_HELD)
+        CTRL[k] = status
+        x_next, ten = P.step(x, u, alpha, dt)
+        if P.maximal is not None:
+            Z[k] = z_true
+        z_hat = z_hat.copy()
+        z_hat[1] += 2 * np.pi * np.round((z_true[1] - z_hat[1]) / (2 * np.pi))
+        Zh[k], U[k], TEN[k], STAT[k] = z_hat, u, ten, status & LOOKUP_BITS
+        if ten < 0:
+            slack_time = float(t[k])
+            n_done = k + 1
+            break
+        x, u_now = x_next, u
+        if progress is not None and k % 100 == 99:
+            progress(100)
+    return rec.result(n_done, t, z_d, u_d, tension_d, slack_time, scenario, design.radius,
+                      design, plant)
 
 
 def specific_force(p_I, q_IB, dt: float, g: float) -> np.ndarray:
@@ -854,6 +1029,7 @@ def table_scheduler(table):
     ((5, 4, 11), [0, 0, 0, 0, 0])
     """
     from ..firmware.compact import CompactData, CompactInterpolator
+    from ..firmware.controller import Controller
     from ..firmware.runtime import Interpolator
 
     interp = CompactInterpolator(table) if isinstance(table, CompactData) else Interpolator(table)
@@ -872,6 +1048,8 @@ def table_scheduler(table):
     lookup.interp = interp
     # the firmware's nominal along a reference (simulate(controller="firmware"))
     lookup.feedforward = lambda path, alpha: feedforward(interp, path, alpha)
+    # the firmware's whole loop (simulate(controller="firmware")): the Python reference
+    lookup.controller = lambda params: Controller(params, interp)
     return lookup
 
 
@@ -932,7 +1110,17 @@ def c_runtime_scheduler(table, build_dir=None):
                            S.astype(int), K)
 
     lookup.feedforward = nominal
+    built = {}
 
+    def controller(params):
+        """The C controller with ``params`` (gainsched_control.c; compiled once)."""
+        from ..firmware.sil import CController, build_controller
+
+        if "lib" not in built:
+            built["lib"] = build_controller(data, params, Path(build_dir) / "control")
+        return CController(data, params, lib_path=built["lib"])
+
+    lookup.controller = controller
     lookup.runtime = rt  # keeps the library (and the temporary directory) alive
     lookup.build_dir = tmp
     return lookup

@@ -410,8 +410,9 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
     scheduler : callable
         Gain lookup of the committed table (:func:`gainsched.sim.loop.runtime_scheduler`).
         When it offers the table's feed-forward (the C runtime or its Python reference)
-        the flights are the firmware's (``simulate(controller="firmware")``), else they
-        fly the design model's nominal.
+        the flights are the firmware's whole control step (``simulate(controller=
+        "firmware")``: the C controller or its Python reference), else they fly the design
+        model's nominal.
     out_dir : path
     quick : bool
         Short smoke version (see :func:`experiments`).
@@ -451,7 +452,8 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
         "plant": (plant or design).name,
         "quick": bool(quick),
         "experiments_run": [e.name for e in exps],
-        "nominal": (f"firmware feed-forward: table lookup plus the drag-only closed form "
+        "nominal": (f"the firmware's control step: its estimator, the table lookup plus "
+                    f"the drag-only closed form "
                     f"({getattr(scheduler, 'source', 'table')})"
                     if getattr(scheduler, "feedforward", None) is not None
                     else "design model along the reference"),

@@ -6,82 +6,21 @@
  * Reads queries (xi, xi_dot, alpha: float32 triples) from the host file `q.bin` through
  * ARM semihosting, calls gs_lookup on each and writes K[4 n], u_d[4], phi_d (float32)
  * and the status (int32) per query to `o.bin`. With GS_PIL_FTZ the FPU runs with
- * flush-to-zero (FPSCR.FZ = 1), as a firmware may.
+ * flush-to-zero (FPSCR.FZ = 1), as a firmware may. Semihosting and start-up:
+ * pil_board.c.
  */
 #include <stddef.h>
 #include <stdint.h>
 
 #include "${name}_gains.h"
+#include "pil_board.h"
 
 #define NK (4u * ${NAME}_N_STATE)
 #define CHUNK 64u
 
-/* ---- semihosting (ARM DUI 0471: bkpt 0xab, operation in r0, argument block in r1) */
-static int sh_call(int op, const void *arg)
-{
-    register int r0 __asm__("r0") = op;
-    register const void *r1 __asm__("r1") = arg;
-    __asm__ volatile("bkpt 0xab" : "+r"(r0) : "r"(r1) : "memory");
-    return r0;
-}
-
-static int sh_open(const char *path, int mode)
-{
-    size_t n = 0;
-    while (path[n] != '\0') {
-        ++n;
-    }
-    {
-        const uintptr_t a[3] = {(uintptr_t)path, (uintptr_t)mode, (uintptr_t)n};
-        return sh_call(0x01, a);
-    }
-}
-
-/* bytes transferred (SYS_READ and SYS_WRITE return the bytes left) */
-static size_t sh_read(int fd, void *buf, size_t len)
-{
-    const uintptr_t a[3] = {(uintptr_t)fd, (uintptr_t)buf, (uintptr_t)len};
-    return len - (size_t)sh_call(0x06, a);
-}
-
-static void sh_write(int fd, const void *buf, size_t len)
-{
-    const uintptr_t a[3] = {(uintptr_t)fd, (uintptr_t)buf, (uintptr_t)len};
-    (void)sh_call(0x05, a);
-}
-
-static void sh_exit(void)
-{
-    (void)sh_call(0x18, (const void *)0x20026); /* ADP_Stopped_ApplicationExit */
-    for (;;) {
-    }
-}
-
-/* the freestanding compiler may call these for struct copies */
-void *memcpy(void *dst, const void *src, size_t n);
-void *memset(void *dst, int c, size_t n);
-void *memcpy(void *dst, const void *src, size_t n)
-{
-    unsigned char *d = (unsigned char *)dst;
-    const unsigned char *s = (const unsigned char *)src;
-    while (n--) {
-        *d++ = *s++;
-    }
-    return dst;
-}
-void *memset(void *dst, int c, size_t n)
-{
-    unsigned char *d = (unsigned char *)dst;
-    while (n--) {
-        *d++ = (unsigned char)c;
-    }
-    return dst;
-}
-
 static float q_buf[3u * CHUNK];
 static float out_buf[CHUNK * (NK + 5u) + CHUNK];
 
-int main(void);
 int main(void)
 {
     const int in = sh_open("q.bin", 1);   /* "rb" */
@@ -105,39 +44,3 @@ int main(void)
     return 0;
 }
 
-/* ---- start-up: vector table, FPU on, .bss zeroed, main */
-extern uint32_t __bss_start__, __bss_end__, __stack_top__;
-void Reset_Handler(void);
-void Default_Handler(void);
-
-void Default_Handler(void)
-{
-    sh_exit();
-}
-
-void Reset_Handler(void)
-{
-    uint32_t *p;
-    /* CPACR: full access to CP10 and CP11 (the FPU) */
-    *(volatile uint32_t *)0xE000ED88u |= 0xFu << 20;
-    __asm__ volatile("dsb\n\tisb" ::: "memory");
-#ifdef GS_PIL_FTZ
-    {
-        uint32_t fpscr;
-        __asm__ volatile("vmrs %0, fpscr" : "=r"(fpscr));
-        fpscr |= 1u << 24; /* FZ */
-        __asm__ volatile("vmsr fpscr, %0" ::"r"(fpscr));
-    }
-#endif
-    for (p = &__bss_start__; p < &__bss_end__; ++p) {
-        *p = 0u;
-    }
-    (void)main();
-    sh_exit();
-}
-
-__attribute__((section(".vectors"), used)) static void (*const vectors[16])(void) = {
-    (void (*)(void))(uintptr_t)&__stack_top__, Reset_Handler, Default_Handler, Default_Handler,
-    Default_Handler, Default_Handler, Default_Handler, 0, 0, 0, 0, Default_Handler,
-    Default_Handler, 0, Default_Handler, Default_Handler,
-};

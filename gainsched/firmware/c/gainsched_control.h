@@ -1,0 +1,172 @@
+/*
+ * gainsched controller: from a motion-capture pose, a gyro and an accelerometer to
+ * four motor thrusts, for flight firmware (C99).
+ *
+ * Hand-written, shipped with the gainsched package and copied next to each generated
+ * table header with the runtime (`gainsched export-c TABLE`). It sits on the runtime
+ * (gainsched_runtime.h: gs_lookup_nominal, gs_sincosf, gs_atan2f, gs_sqrtf) and keeps
+ * its rules: no malloc, no recursion, no global mutable state (the state lives in a
+ * gs_ctrl the firmware owns), static stack, freestanding (<stdint.h> only), no libm,
+ * floating-point contraction off, so that host and target compute the same bits.
+ *
+ * One control step (gs_ctrl_update), every 1/rate s (docs/runtime.md, "The
+ * controller"):
+ *  1. Estimator (gs_ctrl_estimate): propagate the COG position p_I, velocity v_I and
+ *     attitude q_IB with the gyro and the accelerometer (strapdown, one step); when a
+ *     pose arrives, compare it with the estimate of the time it was taken (the pose
+ *     delay, a ring buffer of past estimates) and correct the estimate and that
+ *     history by a fixed fraction of the innovation (the latency compensation of
+ *     paper Sec. V.A). With GS_CTRL_KINEMATICS the caller gives (p_I, v_I, q_IB)
+ *     itself (its own estimator, or the simulator's true state).
+ *  2. Reduced state (gs_reduced_from_kinematics): the circle frame R_IC = Rz(gamma)
+ *     Rx(alpha), the attachment point p_t = p_C - L_e x_B, delta, xi and their rates
+ *     from p_t and its velocity, the Z-Y-X angles of R_CB and chi = psi - xi.
+ *  3. Control (gs_ctrl_control): gs_lookup_nominal at the reference -> K, x_d, u_d;
+ *     errors x - x_d with the azimuth error unwrapped step to step (a lag of 4 rad
+ *     stays a lag); u = u_d - K (x - x_d); clip to the motors' range; the integral
+ *     states integrate their errors unless a motor is clipped (anti-windup) and stay
+ *     within int_limit.
+ *  4. Status policy: an unusable lookup flies the last good gains (GS_CTRL_HELD);
+ *     with no good gains yet, a bad reference or no state estimate the outputs are
+ *     the idle thrusts (GS_CTRL_IDLE); a bad or stale pose and a bad IMU sample
+ *     degrade the feedback (below). The thrusts are always finite and within
+ *     [thrust_min, thrust_max].
+ */
+#ifndef GAINSCHED_CONTROL_H
+#define GAINSCHED_CONTROL_H
+
+#include <stdint.h>
+
+#include "gainsched_runtime.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define GS_CONTROL_VERSION 1
+
+/* the largest LQR state a gs_ctrl holds (its last good gains), and the longest pose
+ * delay its history buffers, in control steps */
+#define GS_CTRL_MAX_STATE 24u
+#define GS_CTRL_MAX_DELAY 32u
+/* a position (m) or velocity (m/s) component beyond this is rejected as a bad pose */
+#define GS_CTRL_POSE_LIMIT 1.0e3f
+
+/* ---- status bits of gs_ctrl_update, above the runtime's (0x01..0x80) ---------- */
+#define GS_CTRL_HELD 0x0100u       /* the lookup is unusable: the last good gains fly */
+#define GS_CTRL_SATURATED 0x0200u  /* a thrust was clipped: the integrators are frozen */
+#define GS_CTRL_BAD_POSE 0x0400u   /* this step's pose was rejected (NaN, inf, |q| != 1,
+                                    * beyond GS_CTRL_POSE_LIMIT) */
+#define GS_CTRL_STALE_POSE 0x0800u /* no pose for pose_timeout: no position feedback */
+#define GS_CTRL_BAD_IMU 0x1000u    /* gyro or accelerometer NaN or beyond its range */
+#define GS_CTRL_IDLE 0x2000u       /* outputs are the idle thrusts: no state estimate,
+                                    * no good gains yet, or a bad reference */
+
+/* ---- input flags (gs_ctrl_input.flags) --------------------------------------- */
+#define GS_CTRL_POSE 0x1u       /* p_I, q_IB hold a pose taken pose_delay ago */
+#define GS_CTRL_ACCEL 0x2u      /* accel holds this step's accelerometer sample */
+#define GS_CTRL_KINEMATICS 0x4u /* p_I, v_I, q_IB are the current state: no estimator */
+
+/* What the controller knows of the vehicle, the loop and the sensors. The generated
+ * `<name>_control.h` fills it from the table's config (`<name>_ctrl_params`); copy it
+ * to change the sensing fields. */
+typedef struct gs_ctrl_params {
+    float dt;          /* control step, s (1 / rate) */
+    float rho;         /* tether length, m */
+    float L_e;         /* attachment offset behind the COG along -x_B, m */
+    float thrust_min;  /* N: the clip, per motor */
+    float thrust_max;  /* N */
+    float thrust_idle; /* N: the outputs with GS_CTRL_IDLE */
+    float int_limit;   /* |integral state| bound, rad s (anti-windup) */
+    uint32_t n_int;    /* integral states in the LQR state after the 10 reduced ones */
+    uint32_t int_of[2]; /* the reduced state each integrates: 0 delta, 1 xi */
+    /* sensing and estimator */
+    float pose_delay;     /* s: age of a pose when it arrives (rounded to steps) */
+    float pose_timeout;   /* s: no pose for longer -> GS_CTRL_STALE_POSE */
+    float quat_tolerance; /* a pose with | |q|^2 - 1 | above it is rejected */
+    float gyro_range;     /* rad/s: a gyro axis beyond it is saturated (GS_CTRL_BAD_IMU) */
+    float accel_range;    /* m/s^2: the accelerometer's range */
+    float k_pos;          /* position correction per pose: p += k_pos e_p */
+    float k_vel;          /* velocity correction per pose: v += k_vel e_p / T_pose */
+    float k_att;          /* attitude correction per pose: fraction of the angle error */
+    float pose_period;    /* s: T_pose, the interval between poses */
+} gs_ctrl_params;
+
+/* One step's measurements. */
+typedef struct gs_ctrl_input {
+    uint32_t flags;  /* GS_CTRL_POSE | GS_CTRL_ACCEL | GS_CTRL_KINEMATICS */
+    float p_I[3];    /* COG position in I (origin at the anchor, z up), m */
+    float q_IB[4];   /* attitude, Hamilton, scalar first, body -> I */
+    float v_I[3];    /* COG velocity in I, m/s (GS_CTRL_KINEMATICS only) */
+    float gyro[3];   /* body rates in B, rad/s, this step */
+    float accel[3];  /* specific force at the COG in B, m/s^2 (GS_CTRL_ACCEL) */
+} gs_ctrl_input;
+
+/* The reference: the azimuth and four derivatives and the circle. */
+typedef struct gs_ctrl_ref {
+    float xi[5];  /* xi rad (|xi| <= GS_XI_LIMIT), xi' rad/s, xi'' rad/s^2, ... */
+    float alpha;  /* circle tilt, rad */
+    float gamma;  /* circle heading about the vertical, rad */
+} gs_ctrl_ref;
+
+/* The controller's state; the firmware owns it (a static variable), gs_ctrl_init
+ * fills it in. Fields are read-only for the firmware. */
+typedef struct gs_ctrl {
+    const gs_table *table;
+    const gs_ctrl_params *params;
+    uint32_t delay;        /* pose delay, steps */
+    uint32_t timeout;      /* pose timeout, steps */
+    uint32_t head;         /* ring index of the current estimate */
+    uint32_t since_pose;   /* steps since the last accepted pose */
+    uint32_t have_fix;     /* the estimator has been initialised from a pose */
+    uint32_t have_gains;   /* K[good] holds good gains */
+    uint32_t good;         /* 0 or 1 */
+    uint32_t have_az;      /* az_err holds the previous azimuth error */
+    uint32_t fresh;        /* the estimate is of this step already: no propagation */
+    float p[3], v[3], q[4];                      /* the current estimate, I */
+    float hist_p[GS_CTRL_MAX_DELAY + 1u][3];     /* estimates of the last steps */
+    float hist_q[GS_CTRL_MAX_DELAY + 1u][4];
+    float gyro[3], accel[3];                     /* the last good IMU samples */
+    float gyro_prev[3], accel_prev[3];           /* and the previous step's */
+    float az_err;                                /* the previous azimuth error, rad */
+    float integ[2];                              /* the integral states, rad s */
+    float z[10];                                 /* the last reduced state estimate */
+    float K[2][4u * GS_CTRL_MAX_STATE];          /* the last good gains, K[good], and
+                                                  * the other buffer the lookup fills */
+} gs_ctrl;
+
+/*
+ * Prepare a controller for `table` (verified with gs_verify first) with `params`
+ * (both must outlive it). No state estimate yet: give a pose, or gs_ctrl_reset.
+ * Returns GS_OK, or GS_BAD_ARG (NULL, a table without vehicle constants, a state
+ * too large for GS_CTRL_MAX_STATE, a delay beyond GS_CTRL_MAX_DELAY, bad params).
+ */
+int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params);
+
+/* Start the estimator at a known state: COG position p_I (m), velocity v_I (m/s),
+ * attitude q_IB (normalised here). GS_BAD_ARG for NULL or non-finite values. */
+int gs_ctrl_reset(gs_ctrl *c, const float p_I[3], const float v_I[3], const float q_IB[4]);
+
+/*
+ * One control step: the measurements `in`, the reference `ref` -> thrust[4] (N,
+ * motors T1..T4, always finite, within [thrust_min, thrust_max]). Returns the
+ * lookup's status bits (gs_lookup_nominal) with the GS_CTRL_* bits.
+ */
+int gs_ctrl_update(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl_ref *ref,
+                   float thrust[4]);
+
+/*
+ * The reduced state (delta, xi, delta', xi', phi, theta, chi, omega_B) of a COG
+ * position p_I (m), velocity v_I (m/s), attitude q_IB (unit) and body rates omega_B
+ * (rad/s) on the circle of tilt alpha and heading gamma (rad), for a tether of
+ * length rho attached L_e behind the COG (m). xi in [-pi, pi], chi in [-pi, pi].
+ */
+void gs_reduced_from_kinematics(const float p_I[3], const float v_I[3], const float q_IB[4],
+                                const float omega_B[3], float alpha, float gamma, float rho,
+                                float L_e, float z[10]);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* GAINSCHED_CONTROL_H */
