@@ -35,7 +35,7 @@ from gainsched.firmware.compact import compact_data
 from gainsched.firmware.controller import (
     FLAG_ACCEL,
     FLAG_POSE,
-    INPUT_COLUMNS,
+    INPUT_SLICES,
     N_INPUT,
     controller_params,
 )
@@ -67,10 +67,7 @@ def recorded(cfg, table, seconds=0.3, seed=0):
                    dataclasses.replace(scn, duration=seconds,
                                        sensing=dataclasses.replace(scn.sensing, ideal=True)))
     rng = np.random.default_rng(seed)
-    col, i = {}, 0
-    for key, width in INPUT_COLUMNS.items():
-        col[key] = slice(i, i + width)
-        i += width
+    col = INPUT_SLICES
     n = res.t.size
     rows = np.zeros((n, N_INPUT))
     for k in range(n):

@@ -305,8 +305,7 @@ def test_the_generated_parameters_are_the_configs(cfg, table, tmp_path):
     pv = np.zeros(19, dtype=np.float32)
     fn.argtypes = [ctypes.c_void_p]
     fn(pv.ctypes.data)
-    want = np.array([float(x) for v in controller_params(cfg).c_values()
-                     for x in np.ravel(v)], dtype=np.float32)
+    want = controller_params(cfg).c_array()
     np.testing.assert_array_equal(pv, want)
 
 

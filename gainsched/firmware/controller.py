@@ -80,6 +80,7 @@ __all__ = [
     "FLAG_ACCEL",
     "FLAG_KINEMATICS",
     "INPUT_COLUMNS",
+    "INPUT_SLICES",
     "N_INPUT",
     "MAX_DELAY",
     "MAX_STATE",
@@ -128,7 +129,9 @@ def _columns():
     return out
 
 
-_COL = _columns()
+#: name -> the slice of an input row that :data:`INPUT_COLUMNS` gives it
+INPUT_SLICES = _columns()
+_COL = INPUT_SLICES
 
 
 def ctrl_status_text(status: int) -> str:
@@ -204,6 +207,12 @@ class ControllerParams:
     def timeout_steps(self) -> int:
         """The pose timeout in control steps (float32, as in C)."""
         return int(np.float32(self.pose_timeout) / np.float32(self.dt) + np.float32(0.5))
+
+    def c_array(self) -> np.ndarray:
+        """:meth:`c_values` flattened to float32 (the integers as floats): what the SIL
+        and PIL drivers read into a ``gs_ctrl_params``."""
+        return np.array([float(x) for v in self.c_values() for x in np.ravel(v)],
+                        dtype=np.float32)
 
     def c_values(self) -> list:
         """The ``gs_ctrl_params`` initialiser's values, in its field order."""

@@ -201,9 +201,8 @@ def instructions_per_lookup(elf, xi, xi_dot, alpha, n_state: int) -> float:
 
 def _control_files(params, rows, reset) -> dict:
     """The control driver's input files: parameters (+ reset state) and the rows."""
-    pv = [float(x) for v in params.c_values() for x in np.ravel(v)]
-    start = [0.0] * 11 if reset is None else [1.0, *np.concatenate(reset)]
-    return {"p.bin": np.asarray(pv + start, dtype=np.float32).tobytes(),
+    start = np.zeros(11) if reset is None else np.concatenate([[1.0], *reset])
+    return {"p.bin": np.concatenate([params.c_array(), start]).astype(np.float32).tobytes(),
             "q.bin": np.ascontiguousarray(rows, dtype=np.float32).tobytes()}
 
 

@@ -127,9 +127,7 @@ class CController:
         self._run.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p,
                               ctypes.c_void_p]
         self._run.restype = None
-        pv = np.array([float(np.ravel(x)[i]) for x in params.c_values()
-                       for i in range(np.size(x))], dtype=np.float32)
-        self._pv = pv  # the gs_ctrl_params the controller points at are copied from it
+        pv = params.c_array()  # the driver copies it into the gs_ctrl_params in _mem
         if setup(self._mem, pv.ctypes.data_as(fp)) & BAD_ARG:
             raise RuntimeError(f"gs_ctrl_init refused the parameters {params}")
         self._row = np.zeros(N_INPUT, dtype=np.float32)

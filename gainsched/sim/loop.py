@@ -414,23 +414,25 @@ class _Plant:
             R_IC = R_IC_from_tilt(alpha, gamma)
         return p_C @ R_IC.T, R_IC @ R_CB
 
-    def sensors(self, x, u, alpha, gamma):
+    def sensors(self, x, u, alpha, gamma, accel=True):
         """What the vehicle's sensors see of one state under the thrusts ``u`` (N): the COG
         position ``p_I`` (m) and velocity ``v_I`` (m/s) in I, the attitude ``q_IB``, the body
         rates (rad/s) and the specific force at the COG in B (m/s^2, what an accelerometer
-        there senses)."""
+        there senses; None with ``accel=False``, which skips the plant's derivative)."""
         R_IC = matrix_from_euler_zyx_scalar(alpha, 0.0, gamma)
+        f_B = None
         if self.maximal is None:
-            p_C, v_C, a_C, R_CB = self.model.cog_motion_one(x, self.f(x, u, alpha)[0])
-            f_B = R_CB.T @ (a_C - self.model.g_C(alpha))
+            z_dot = self.f(x, u, alpha)[0] if accel else np.zeros_like(x)
+            p_C, v_C, a_C, R_CB = self.model.cog_motion_one(x, z_dot)
             w = x[7:10]
         else:
             p_C, v_C, w = x[0:3], x[3:6], x[10:13]
             R_CB = matrix_from_quaternion(x[6:10] / np.linalg.norm(x[6:10]))
-            a_C = self.maximal.f(x, u, alpha)[3:6]
+            a_C = self.maximal.f(x, u, alpha)[3:6] if accel else None
+        if accel:
             f_B = R_CB.T @ (a_C - self.model.g_C(alpha))
         return (R_IC @ p_C, R_IC @ v_C, quaternion_from_matrix_scalar(R_IC @ R_CB),
-                np.array(w), np.asarray(f_B))
+                np.array(w), f_B)
 
     def poses(self, X, alpha, gamma):
         """COG positions in I (N, 3), m, and quaternions q_IB (N, 4) of states X (N, n_x)."""
@@ -699,7 +701,7 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
         FLAG_ACCEL,
         FLAG_KINEMATICS,
         FLAG_POSE,
-        INPUT_COLUMNS,
+        INPUT_SLICES,
         N_INPUT,
         Controller,
         controller_params,
@@ -729,11 +731,7 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
         z0[: len(scenario.initial_error)] += np.asarray(scenario.initial_error)
     x = P.initial(z0, u_d[0])
     rng = np.random.default_rng(sens.seed)
-    col = {}
-    i = 0
-    for key, width in INPUT_COLUMNS.items():
-        col[key] = slice(i, i + width)
-        i += width
+    col = INPUT_SLICES
     row = np.zeros(N_INPUT)
     row[col["alpha"]], row[col["gamma"]] = alpha, gamma
     u_now = u_d[0]
@@ -753,7 +751,7 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
         X[k] = x
         z_true = x[:N_STATE] if P.maximal is None else P.reduced(x, xi_true)
         xi_true = z_true[1]
-        p_I, v_I, q_IB, w_B, f_B = P.sensors(x, u_now, alpha, gamma)
+        p_I, v_I, q_IB, w_B, f_B = P.sensors(x, u_now, alpha, gamma, accel=not sens.ideal)
         if sens.ideal:
             row[0] = FLAG_KINEMATICS
             row[col["p_I"]], row[col["v_I"]], row[col["q_IB"]] = p_I, v_I, q_IB
