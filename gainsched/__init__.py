@@ -30,6 +30,7 @@ API = (
     ("A config", "config", ("load_config", "config_from_text", "Config")),
     ("A schedule", "schedule.grid", ("solve_circle", "CircleSolution", "build_grid",
                                      "GridResult")),
+    ("Choosing the grid", "schedule.refine", ("refine_grid", "GridChoice")),
     ("Publishing a schedule", "firmware.outputs", ("write_outputs",)),
     ("A table", "schedule.tables", ("load_table", "Table")),
     ("Looking up gains", "firmware.runtime", ("Interpolator", "Lookup")),

@@ -109,8 +109,12 @@ def estimate_build(config: Config) -> BuildEstimate:
 
     Vectorised over the speeds: microseconds even for a million speeds.
     """
-    speeds = np.asarray(config.grid.speeds, dtype=float)
-    n_v, n_t = speeds.size, int(np.asarray(config.grid.tilts).size)
+    grid = config.grid
+    # an axis the build chooses is estimated at its largest: max_count points
+    speeds = (np.linspace(grid.speeds_auto.lo, grid.speeds_auto.hi, grid.speeds_auto.max_count)
+              if grid.speeds_auto else np.asarray(grid.speeds, dtype=float))
+    n_v = speeds.size
+    n_t = grid.tilts_auto.max_count if grid.tilts_auto else int(np.asarray(grid.tilts).size)
     n_xi = int(config.grid.azimuth_samples)
     rate = float(config.control.rate_hz)
     r = config.radius

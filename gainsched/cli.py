@@ -255,22 +255,34 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     from .publish import check_out_dir, publish, recover
     from .schedule.distributed import check_options, executor
     from .schedule.grid import bound_price, build_grid
+    from .schedule.refine import refine_grid
 
     check_options(backend, scheduler)
     cfg = load_config(config)
     check_out_dir(out_dir)  # a bad -o fails now, not after the build
     recover(out_dir)  # finish or clean up after a killed earlier run
     t0 = time.perf_counter()
-    n_v = cfg.grid.speeds.size
+    choice = None
     with executor(backend, scheduler, jobs, connect_timeout=connect_timeout) as ex:
         if backend == "dask":
             click.echo(f"build {cfg.name} on {ex.description}", err=True)
-        with tqdm(total=n_v, unit="speed", desc=f"build {cfg.name}", disable=None) as bar:
-            grid = build_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update, backend=ex.backend)
+        if cfg.grid.auto:  # the build chooses the breakpoints (docs/grid.md)
+            with tqdm(unit="circle", desc=f"choose the grid of {cfg.name}",
+                      disable=None) as bar:
+                choice = refine_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update,
+                                     backend=ex.backend)
+            cfg, grid = choice.config, choice.grid
+        else:
+            with tqdm(total=cfg.grid.speeds.size, unit="speed", desc=f"build {cfg.name}",
+                      disable=None) as bar:
+                grid = build_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update,
+                                  backend=ex.backend)
+    n_v = cfg.grid.speeds.size
     n_mid = max(n_v - 1, 1) if cfg.firmware.format == "compact" else 0
     with tqdm(total=n_mid, unit="speed", desc="certify compact table",
               disable=None if n_mid else True) as bar:
-        outputs = output_set(cfg, grid, out_dir, progress=bar.update)
+        outputs = output_set(cfg, grid, out_dir, progress=bar.update,
+                             grid_auto=None if choice is None else choice.record())
     out, *c_paths = publish(out_dir, outputs.files)
     n_pts = grid.reasons.size
     feas = np.count_nonzero(grid.reasons == 0)
@@ -280,6 +292,9 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
         f"worst closed-loop spectral radius {_nanmax(grid.spectral_radius)}, "
         f"{time.perf_counter() - t0:.1f} s, {out.stat().st_size / 1024:.0f} KiB"
     )
+    if choice is not None:
+        for line in choice.lines():
+            click.echo("  " + line)
     click.echo("  C: " + ", ".join(str(p) for p in c_paths))
     click.echo(f"  firmware table: {cfg.firmware.format}, {outputs.form.nbytes():,} bytes of data"
                + (f" (dense: {outputs.form.base.nbytes():,})" if outputs.certificate else ""))
@@ -327,11 +342,13 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
     plan = make_sweep(base, [parse_vary(v) for v in vary], monte_carlo=monte_carlo, seed=seed,
                       sigma=[parse_sigma(s) for s in sigma])
     t0 = time.perf_counter()
-    total = len(plan.variants) * base.grid.speeds.size
+    # a grid the build chooses counts circles, of a number known only at the end
+    total = None if base.grid.auto else len(plan.variants) * base.grid.speeds.size
     with executor(backend, scheduler, jobs, connect_timeout=connect_timeout) as ex:
         if backend == "dask":
             click.echo(f"sweep {base.name} on {ex.description}", err=True)
-        with tqdm(total=total, unit="speed", desc=f"sweep {base.name} "
+        with tqdm(total=total, unit="circle" if total is None else "speed",
+                  desc=f"sweep {base.name} "
                   f"({len(plan.variants)} variants)", disable=None) as bar:
             with staged(out_dir) as stage:  # every variant appears at once, or none
                 rows = run_sweep(plan, stage, n_jobs=ex.n_jobs, backend=ex.backend,
@@ -363,6 +380,7 @@ def inspect(table, out_dir, as_json):
     from .firmware.codegen import flash_summary
     from .publish import check_out_dir
     from .schedule.nominal import REASONS
+    from .schedule.refine import grid_auto_lines
     from .schedule.tables import load_table
     from .schedule.viewer import mode_lines, table_summary
 
@@ -379,11 +397,15 @@ def inspect(table, out_dir, as_json):
     tilts = ", ".join(f"{x:g}" for x in np.rad2deg(t.tilt))
     click.echo(f"  xi: {t.xi.size} samples over 360 deg; speeds {t.speed[0]:g}..{t.speed[-1]:g} "
                f"m/s ({t.speed.size}); tilts {tilts} deg")
+    if t.grid_auto is not None:
+        for line in grid_auto_lines(t.grid_auto):
+            click.echo(f"  {line}")
     click.echo("  feasible azimuth fraction (rows: tilt deg, columns: speed m/s)")
-    click.echo("        " + "".join(f"{v:6g}" for v in t.speed))
+    w = max(6, 1 + max(len(f"{v:g}") for v in t.speed))  # chosen grids have long values
+    click.echo("        " + "".join(f"{v:{w}g}" for v in t.speed))
     for i, a in enumerate(np.rad2deg(t.tilt)):
         frac = (t.reasons[i] == 0).mean(-1)
-        click.echo(f"  {a:5g} " + "".join(f"{x:6.2f}" for x in frac))
+        click.echo(f"  {a:5g} " + "".join(f"{x:{w}.2f}" for x in frac))
     for bit, text in REASONS.items():
         n = np.count_nonzero(t.reasons & bit)
         if n:
@@ -601,7 +623,9 @@ def check(table, speed_stride, max_error, azimuth_error):
                 f"{np.rad2deg(k):g}: {100 * e:.2f}" for k, e in by_a.items() if np.isfinite(e)
             )
         )
-        click.echo(f"  max nominal thrust error {np.nanmax(res.u_err):.4f} N")
+        click.echo(f"  max nominal thrust error {np.nanmax(res.u_err):.4f} N "
+                   f"({100 * np.nanmax(res.u_rel):.2f}% of the circle's largest), roll "
+                   f"{100 * np.nanmax(res.phi_rel):.2f}% of the circle's largest")
     rho = [(c[2], c) for c in res.circles if np.isfinite(c[2])]
     stable = all(r < 1 for r, _ in rho)
     if rho:
@@ -611,9 +635,18 @@ def check(table, speed_stride, max_error, azimuth_error):
             f"worst spectral radius {r:.5f} (speed {c[0]:g} m/s, tilt "
             f"{np.rad2deg(c[1]):g} deg; direct LQR {c[3]:.5f}); all < 1: {stable}"
         )
-    passed = ok_pts > 0 and 100 * res.max_err <= max_error and stable
+    # a grid the build chose promised gains, nominal thrusts and roll (docs/grid.md)
+    nominal = t.grid_auto is not None
+    if nominal:
+        a = t.grid_auto
+        click.echo(f"  grid chosen by the build for {100 * a['bound']:g}%: speeds "
+                   f"{a['speeds'] or 'as listed'}, tilts {a['tilts_deg'] or 'as listed'}; "
+                   "checked on gains, nominal thrusts and roll")
+    worst = max(res.max_err, res.max_nominal_err) if nominal else res.max_err
+    passed = ok_pts > 0 and 100 * worst <= max_error and stable
+    what = "gain, thrust and roll error" if nominal else "max error"
     click.echo(
-        f"  {'PASS' if passed else 'FAIL'}: max error <= {max_error:g}% and every "
+        f"  {'PASS' if passed else 'FAIL'}: {what} <= {max_error:g}% and every "
         "midpoint closed loop stable"
     )
     if not passed:

@@ -164,16 +164,52 @@ class Control:
         return 1.0 / self.rate_hz
 
 
+#: points an automatic axis starts from (its ends and the middle; docs/grid.md)
+AUTO_SEED_COUNT = 3
+
+
+@dataclass(frozen=True)
+class AxisRange:
+    """An axis the build chooses (``{min = .., max = .., max_count = ..}`` in ``[grid]``):
+    breakpoints in ``[lo, hi]`` in the file's unit (m/s for speeds, deg for tilts), refined
+    by :func:`gainsched.schedule.refine.refine_grid` until the cell midpoints meet
+    ``grid.max_interpolation_error``, at most ``max_count`` of them (docs/grid.md)."""
+
+    lo: float
+    hi: float
+    max_count: int
+
+    def seeds(self) -> np.ndarray:
+        """The breakpoints refinement starts from: the ends and the middle."""
+        return np.linspace(self.lo, self.hi, min(AUTO_SEED_COUNT, self.max_count))
+
+    def spec(self) -> str:
+        """The range as written in a config: ``{min = 3, max = 20, max_count = 40}``."""
+        return f"{{min = {self.lo!r}, max = {self.hi!r}, max_count = {self.max_count}}}"
+
+
 @dataclass(frozen=True)
 class Grid:
     """Schedule grid: tangential COG speeds (m/s), tilts (rad), azimuth samples, and the
     interpolation error the table must meet at its cell midpoints (relative gain error,
-    a fraction; ``max_interpolation_error`` in percent in the file, default 2)."""
+    a fraction; ``max_interpolation_error`` in percent in the file, default 2).
+
+    An axis given as a range (``speeds_auto``, ``tilts_auto``: :class:`AxisRange`, m/s
+    and deg) is chosen by the build; ``speeds`` / ``tilts`` then hold its seeds
+    (:meth:`AxisRange.seeds`) until :func:`gainsched.schedule.refine.refine_grid` returns
+    the config with the chosen breakpoints."""
 
     speeds: np.ndarray
     tilts: np.ndarray
     azimuth_samples: int
     max_interpolation_error: float = 0.02
+    speeds_auto: AxisRange | None = None
+    tilts_auto: AxisRange | None = None
+
+    @property
+    def auto(self) -> bool:
+        """Whether the build chooses an axis (a range in ``[grid]``)."""
+        return self.speeds_auto is not None or self.tilts_auto is not None
 
 
 #: table formats the firmware can be given (``[firmware] format``)
@@ -714,29 +750,60 @@ def _control(sec: Section) -> Control:
     return Control(rate, Q, R, integ, term, az_integ, tau_max, max_gain)
 
 
+#: most breakpoints an automatic axis may be given (``max_count``)
+MAX_AUTO_COUNT = 1024
+
+
+def check_axis_range(sec: Section, k: str) -> AxisRange:
+    """``grid.<k> = {min = .., max = .., max_count = ..}``: finite ends ``min < max`` and an
+    integer ``2 <= max_count <= MAX_AUTO_COUNT``; errors name ``grid.<k>.<field>``."""
+    sub = sec.sub(k)
+    lo, hi = sub.number("min"), sub.number("max")
+    n = sub.get("max_count")
+    if isinstance(n, bool) or not isinstance(n, int) or not 2 <= n <= MAX_AUTO_COUNT:
+        raise sub.error("max_count", f"must be an integer in [2, {MAX_AUTO_COUNT}], got {n!r}")
+    if not lo < hi:
+        raise sub.error("max", f"must be > min ({lo:g}), got {hi:g}")
+    sub.done()
+    return AxisRange(lo, hi, n)
+
+
+def _axis_or_range(sec: Section, k: str, *, nonneg: bool, positive: bool):
+    """A list axis, or a range the build refines: ``(breakpoints or seeds, AxisRange or
+    None)``."""
+    if isinstance(sec.data.get(k), dict):
+        rng = check_axis_range(sec, k)
+        if positive and rng.lo <= 0:
+            raise sec.error(f"{k}.min", f"must be > 0, got {rng.lo:g}")
+        return rng.seeds(), rng
+    return check_axis(sec, k, nonneg=nonneg, positive=positive), None
+
+
 def _grid(sec: Section, radius: float) -> Grid:
     """``[grid]``; ``radius`` (m, rho + L_e) gives the azimuth-rate axis speeds / radius."""
 
-    speeds = check_axis(sec, "speeds", nonneg=False, positive=True)
+    speeds, speeds_auto = _axis_or_range(sec, "speeds", nonneg=False, positive=True)
+    k_lo, k_hi = ("speeds.min", "speeds.max") if speeds_auto else ("speeds", "speeds")
     if speeds[-1] > MAX_SPEED:
-        raise sec.error("speeds", f"must be <= {MAX_SPEED:g} m/s, got {speeds[-1]:g}")
+        raise sec.error(k_hi, f"must be <= {MAX_SPEED:g} m/s, got {speeds[-1]:g}")
     xi_dot = speeds / radius
     if xi_dot[-1] > XI_DOT_LIMIT:
         raise sec.error(
-            "speeds",
+            k_hi,
             f"{speeds[-1]:g} m/s on a {radius:g} m circle is an azimuth rate of "
             f"{xi_dot[-1]:.4g} rad/s, above the runtime's limit {float(XI_DOT_LIMIT):g} rad/s",
         )
     check_float32_axis(sec, "speeds", speeds, "speeds (m/s)")
     check_float32_axis(sec, "speeds", xi_dot, "azimuth rates speed / (rho + L_e) (rad/s)")
-    tilts_deg = check_axis(sec, "tilts_deg", nonneg=True, positive=False)
+    tilts_deg, tilts_auto = _axis_or_range(sec, "tilts_deg", nonneg=True, positive=False)
+    k_lo, k_hi = ("tilts_deg.min", "tilts_deg.max") if tilts_auto else ("tilts_deg",) * 2
     if tilts_deg[0] != 0:
         raise sec.error(
-            "tilts_deg",
+            k_lo,
             f"must start at 0 (negative tilts come from symmetry), got {tilts_deg[0]:g}",
         )
     if tilts_deg[-1] >= 90:
-        raise sec.error("tilts_deg", f"must be < 90, got {tilts_deg[-1]:g}")
+        raise sec.error(k_hi, f"must be < 90, got {tilts_deg[-1]:g}")
     tilts = np.deg2rad(tilts_deg)
     check_float32_axis(sec, "tilts_deg", tilts, "tilts (rad)")
     n = sec.get("azimuth_samples")
@@ -751,7 +818,7 @@ def _grid(sec: Section, radius: float) -> Grid:
     sec.done()
     for a in (speeds, tilts):
         a.setflags(write=False)
-    return Grid(speeds, tilts, n, err / 100)
+    return Grid(speeds, tilts, n, err / 100, speeds_auto, tilts_auto)
 
 
 def _firmware(sec: Section) -> Firmware:

@@ -152,3 +152,27 @@ def test_pin_off_switch(monkeypatch):
     monkeypatch.setenv("GAINSCHED_PIN", "0")
     env: dict[str, str] = {}
     assert reproducible.pin_environ(env) is False and env == {}
+
+
+@pytest.fixture(scope="module")
+def det_auto(tmp_path_factory):
+    """A config whose axes the build chooses (issue 23), and its CLI build here."""
+    from test_refine import auto_text
+
+    d = tmp_path_factory.mktemp("det_auto")
+    path = d / "det.toml"
+    path.write_text(auto_text(name="det"))
+    return path, _cli_build(path, d / "ref", ("-j", "2"), dict(os.environ))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("family, threads, npy_off, options", [MATRIX[3], MATRIX[2]],
+                         ids=["Sandybridge-noAVX2-j1", "SkylakeX-threading-j2"])
+def test_chosen_grid_same_bytes_on_other_kernel_families(det_auto, tmp_path, family, threads,
+                                                         npy_off, options):
+    """The refinement's decisions and its circles do not depend on the kernels either."""
+    if not _runs(family):
+        pytest.skip(f"this CPU cannot run the {family} kernels")
+    path, ref = det_auto
+    got = _cli_build(path, tmp_path / "out", options, _env(family, threads, npy_off))
+    assert got == ref, f"{family}, {threads} BLAS threads, {options}: chosen table bits differ"

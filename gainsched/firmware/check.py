@@ -16,6 +16,7 @@ import numpy as np
 from ..config import config_from_text
 from ..schedule.grid import solve_circle
 from ..schedule.lqr import monodromy, spectral_radius
+from ..schedule.refine import midpoint_errors
 from .runtime import Interpolator
 
 __all__ = ["MidpointCheck", "midpoint_check"]
@@ -30,6 +31,8 @@ class MidpointCheck:
     speed, tilt : (m,) m/s, rad of the checked midpoints; xi : (m,) rad
     rel_err : (m,) ``||K_interp - K_direct||_F / ||K_direct||_F`` (NaN where skipped)
     u_err : (m,) max |u_d interp - u_d direct|, N
+    u_rel : (m,) that error relative to the circle's largest nominal thrust
+    phi_rel : (m,) ``|phi_d interp - phi_d direct|`` relative to the circle's largest roll
     circles : list of (speed m/s, tilt rad, rho_interp, rho_direct) per midpoint circle
     skipped : number of midpoints skipped (direct solve infeasible or an infeasible corner)
     """
@@ -41,6 +44,8 @@ class MidpointCheck:
     u_err: np.ndarray
     circles: list
     skipped: int
+    u_rel: np.ndarray | None = None
+    phi_rel: np.ndarray | None = None
 
     @property
     def max_err(self) -> float:
@@ -56,6 +61,14 @@ class MidpointCheck:
     def worst_rho(self) -> float:
         r = [c[2] for c in self.circles if np.isfinite(c[2])]
         return float(max(r)) if r else float("nan")
+
+    @property
+    def max_nominal_err(self) -> float:
+        """The largest relative error of the nominal thrusts and roll (as the build's grid
+        choice measures them, :func:`gainsched.schedule.refine.midpoint_errors`)."""
+        e = np.concatenate([self.u_rel, self.phi_rel])
+        e = e[np.isfinite(e)]
+        return float(e.max()) if e.size else float("nan")
 
     def worst_point(self):
         """``(speed, tilt, xi, rel_err)`` of the largest error."""
@@ -108,7 +121,9 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
     MidpointCheck
         The checked midpoints ``speed`` (m/s), ``tilt`` (rad), ``xi`` (rad), each (m,);
         ``rel_err`` (m,) ``||K_interp - K_direct||_F / ||K_direct||_F`` (NaN where
-        skipped) and ``u_err`` (m,) the largest nominal-thrust error, N; ``circles``:
+        skipped) and ``u_err`` (m,) the largest nominal-thrust error, N; ``u_rel`` and
+        ``phi_rel`` (m,) the nominal thrust and roll errors relative to the circle's
+        largest (:func:`gainsched.schedule.refine.midpoint_errors`); ``circles``:
         ``(speed m/s, tilt rad, rho_interp, rho_direct)`` closed-loop spectral radii per
         midpoint circle; ``skipped``: midpoints without a comparison (the direct solve
         infeasible or a lookup not OK); summaries ``max_err``, ``median_err``,
@@ -154,7 +169,7 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
     if a_mid.size == 0:
         a_mid = table.tilt[:1]
     xi_mid = (np.arange(n_xi) + 0.5) * (2 * np.pi / n_xi)
-    rows = {k: [] for k in ("speed", "tilt", "xi", "err", "uerr")}
+    rows = {k: [] for k in ("speed", "tilt", "xi", "err", "uerr", "urel", "phirel")}
     circles, skipped = [], 0
     for v in v_mid:
         sol, steps = solve_circle(cfg2, float(v), a_mid, keep_steps=True)
@@ -164,13 +179,18 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
             look = interp(xi_mid, v / r, a)
             use = np.all(np.isfinite(Kd), axis=(-2, -1)) & (look.status == 0)
             skipped += int(np.count_nonzero(~use))
-            err = np.linalg.norm(look.K - Kd, axis=(-2, -1)) / np.linalg.norm(Kd, axis=(-2, -1))
+            with np.errstate(invalid="ignore"):
+                err, urel, phirel = midpoint_errors(
+                    look.K, Kd, look.u_d, sol.u_d[i, 1::2], look.phi_d, sol.phi_d[i, 1::2],
+                    np.abs(sol.u_d[i]).max(), np.abs(sol.phi_d[i]).max())
             uerr = np.abs(look.u_d - sol.u_d[i, 1::2]).max(-1)
             rows["speed"].append(np.full(n_xi, v))
             rows["tilt"].append(np.full(n_xi, a))
             rows["xi"].append(xi_mid)
             rows["err"].append(np.where(use, err, np.nan))
             rows["uerr"].append(np.where(use, uerr, np.nan))
+            rows["urel"].append(np.where(use, urel, np.nan))
+            rows["phirel"].append(np.where(use, phirel, np.nan))
         if steps is not None:
             Ad, Bd, Ks = steps
             N = Ad.shape[-3]
@@ -187,5 +207,6 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
             progress(1)
     cat = {k: np.concatenate(x) if x else np.zeros(0) for k, x in rows.items()}
     return MidpointCheck(
-        cat["speed"], cat["tilt"], cat["xi"], cat["err"], cat["uerr"], circles, skipped
+        cat["speed"], cat["tilt"], cat["xi"], cat["err"], cat["uerr"], circles, skipped,
+        cat["urel"], cat["phirel"]
     )

@@ -155,19 +155,20 @@ def certificate_lines(config, cert: MidpointCheck) -> list[str]:
     return out
 
 
-def output_set(config, grid, out_dir=".", progress=None) -> OutputSet:
+def output_set(config, grid, out_dir=".", progress=None, grid_auto=None) -> OutputSet:
     """The checked outputs of a build (:class:`OutputSet`): the HDF5 table, read back
     through the loader's checks, its C header in the config's format (certified when
     compact, :func:`firmware_form`) and the runtime. ``out_dir`` only names the table
-    in error messages; ``progress`` goes to the certificate."""
+    in error messages; ``progress`` goes to the certificate; ``grid_auto`` is the record
+    of axes the build chose (:meth:`gainsched.schedule.refine.GridChoice.record`)."""
     name = f"{config.name}.h5"
-    data = table_bytes(config, grid, Model(config))
+    data = table_bytes(config, grid, Model(config), grid_auto)
     table = table_from_bytes(data, Path(out_dir) / name)
     form, cert = firmware_form(config, table, progress)
     return OutputSet({name: data, **c_files(form, controller_params(config))}, form, cert)
 
 
-def output_files(config, grid, out_dir=".") -> dict[str, bytes]:
+def output_files(config, grid, out_dir=".", grid_auto=None) -> dict[str, bytes]:
     """The files of :func:`output_set` (the table, the headers, the runtime and the
     controller) -> bytes, checked.
 
@@ -178,11 +179,13 @@ def output_files(config, grid, out_dir=".") -> dict[str, bytes]:
         The built grid (:func:`gainsched.schedule.grid.build_grid`).
     out_dir : path-like
         Where the files will go (only for the names in error messages).
+    grid_auto : dict, optional
+        The record of axes the build chose (:meth:`gainsched.GridChoice.record`).
     """
-    return output_set(config, grid, out_dir).files
+    return output_set(config, grid, out_dir, grid_auto=grid_auto).files
 
 
-def write_outputs(out_dir, config, grid) -> list[Path]:
+def write_outputs(out_dir, config, grid, grid_auto=None) -> list[Path]:
     """Write a built grid as its output set: the HDF5 table, its C header and the runtime.
 
     Every check runs on the bytes in memory first (the table is read back through the
@@ -200,6 +203,10 @@ def write_outputs(out_dir, config, grid) -> list[Path]:
         names the files, its text and SHA-256 are embedded in them.
     grid : GridResult
         The built grid (:func:`gainsched.build_grid` of ``config``).
+    grid_auto : dict, optional
+        For a grid whose axes the build chose (:func:`gainsched.refine_grid`): its
+        record, ``choice.record()``, stored in the table (with ``choice.config`` and
+        ``choice.grid`` as ``config`` and ``grid``).
 
     Returns
     -------
@@ -238,4 +245,4 @@ def write_outputs(out_dir, config, grid) -> list[Path]:
     >>> table.name, table.K.shape, table.config_sha256 == small.sha256
     ('small', (1, 2, 8, 4, 11), True)
     """
-    return publish(out_dir, output_files(config, grid, out_dir))
+    return publish(out_dir, output_files(config, grid, out_dir, grid_auto))

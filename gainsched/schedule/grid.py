@@ -46,6 +46,7 @@ from .path import period
 from .trim import TrimError
 
 __all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "bound_price",
+           "grid_from_solutions",
            "check_gain_cap",
            "steps_per_period",
            "discrete_system", "periodic_interp", "check_effect_symmetries",
@@ -605,8 +606,9 @@ def _dask_active() -> bool:
     return type(get_active_backend()[0]).__name__.startswith("Dask")
 
 
-def _solutions(args, n_jobs, backend):
-    """Run :func:`_solve_speed` over ``args`` and yield the results in submission order.
+def _solutions(args, n_jobs, backend, job=None):
+    """Run ``job`` (default :func:`_solve_speed`) over ``args`` and yield the results in
+    submission order.
 
     Worker processes on this machine (the default, ``"loky"``) come from
     :func:`~gainsched.native.reproducible.pinned_executor`: started with the pinned numerics
@@ -616,19 +618,20 @@ def _solutions(args, n_jobs, backend):
     never depend on the calling process. joblib runs the jobs on Dask, and in this
     process for ``sequential``, ``threading`` or one job when it is pinned.
     """
+    job = _solve_speed if job is None else job
     dask = backend == "dask" or (backend is None and _dask_active())
     here = (process_pinned() or not pin_available()) and (
         backend in ("sequential", "threading") or n_jobs == 1
     )
     if dask or here:
         par = Parallel(n_jobs=n_jobs, backend=backend, return_as="generator")
-        yield from par(delayed(_solve_speed)(*a) for a in args)
+        yield from par(delayed(job)(*a) for a in args)
         return
     n = n_jobs if n_jobs > 0 else max(1, cpu_count() + 1 + n_jobs)
     n = 1 if backend == "sequential" else min(n, len(args))
     with children_ignore_sigint():  # the workers (and loky's tracker) start in here
         pool = pinned_executor(n)
-        futures = [pool.submit(_solve_speed, *a) for a in args]
+        futures = [pool.submit(job, *a) for a in args]
     try:
         for f in futures:
             yield f.result()
@@ -692,6 +695,11 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
     >>> np.round(grid.spectral_radius, 3).tolist()   # (tilt, speed): all stable
     [[0.84, 0.952], [0.839, 0.952]]
     """
+    if config.grid.auto:
+        key = "speeds" if config.grid.speeds_auto else "tilts_deg"
+        raise InputError(config.source, f"grid.{key}", "is a range the build chooses "
+                         "breakpoints in: build it with gainsched.refine_grid (gainsched "
+                         "build does)")
     check_effect_symmetries(config)
     speeds = config.grid.speeds
     tilts = config.grid.tilts
@@ -705,12 +713,18 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
             if progress is not None:
                 progress(1)
 
-    per_tilt = {f.name: np.stack([getattr(s, f.name) for s in sols], axis=1)
-                for f in fields(CircleSolution) if f.name not in ("steps", "dt")}
-    grid = GridResult(**per_tilt, steps=np.array([s.steps for s in sols]),
-                      dt=np.array([s.dt for s in sols]), level_invariant=invariant)
+    grid = grid_from_solutions(sols, invariant)
     check_gain_cap(config, grid)
     return grid
+
+
+def grid_from_solutions(sols, level_invariant: bool) -> GridResult:
+    """The :class:`GridResult` of one :class:`CircleSolution` per speed (in axis order),
+    each over the same tilts: the arrays stacked with the speed after the tilt axis."""
+    per_tilt = {f.name: np.stack([getattr(s, f.name) for s in sols], axis=1)
+                for f in fields(CircleSolution) if f.name not in ("steps", "dt")}
+    return GridResult(**per_tilt, steps=np.array([s.steps for s in sols]),
+                      dt=np.array([s.dt for s in sols]), level_invariant=level_invariant)
 
 
 def bound_price(max_time_constant_s: float, grid: GridResult) -> str:

@@ -355,22 +355,31 @@ def run_sweep(sweep: Sweep, out_dir, *, n_jobs: int = -1,
     in memory at a time), then the results ``OUT/sweep.csv`` and ``OUT/sweep.json``.
     ``n_jobs`` and ``backend`` go to :func:`gainsched.schedule.grid.build_grid` (take them from
     :func:`gainsched.schedule.distributed.executor`); ``progress(1)`` is called per finished speed.
+    A config whose axes the build chooses is refined per variant
+    (:func:`gainsched.schedule.refine.refine_grid`; ``progress`` counts circles then), and
+    ``NAME.toml`` is the chosen config.
 
     Returns the result rows (dicts: ``variant``, the parameter keys, then :data:`COLUMNS`).
     """
     from ..model.reduced import Model
     from ..publish import write_atomic
     from .grid import build_grid
+    from .refine import refine_grid
     from .tables import table_bytes
 
     out_dir = Path(out_dir)
     rows = []
     for v in sweep.variants:
-        grid = build_grid(v.config, n_jobs=n_jobs, progress=progress, backend=backend)
-        data = table_bytes(v.config, grid, Model(v.config))
-        write_atomic(out_dir / f"{v.name}.toml", v.config.text.encode())
+        config, record = v.config, None
+        if config.grid.auto:
+            choice = refine_grid(config, n_jobs=n_jobs, progress=progress, backend=backend)
+            config, grid, record = choice.config, choice.grid, choice.record()
+        else:
+            grid = build_grid(config, n_jobs=n_jobs, progress=progress, backend=backend)
+        data = table_bytes(config, grid, Model(config), record)
+        write_atomic(out_dir / f"{v.name}.toml", config.text.encode())
         write_atomic(out_dir / f"{v.name}.h5", data)
-        row = {"variant": v.name, **dict(v.params), **summarize(v.config, grid)}
+        row = {"variant": v.name, **dict(v.params), **summarize(config, grid)}
         row["table_sha256"] = hashlib.sha256(data).hexdigest()
         row["table"] = f"{v.name}.h5"
         rows.append(row)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -108,6 +109,12 @@ class Table:
     mode_shape : ndarray, shape (n_a, n_v, M, n), or None
         Their eigenvector magnitudes in the states' units, largest entry 1
         (:func:`~gainsched.schedule.modes.dominant_states` names the states).
+    grid_auto : dict or None
+        How the build chose the speed and tilt axes (``grid_auto`` in the file, JSON;
+        :meth:`gainsched.schedule.refine.GridChoice.record`): the bound (a fraction), the
+        ranges as written, the errors met at the cell midpoints (fractions: ``gain_error``,
+        ``thrust_error``, ``roll_error``), the worst midpoint loop ``worst_rho`` and the
+        cost in circles; None: the axes were given as lists.
     name : str
         Property: the config's name (``attrs["config_name"]``).
     per_azimuth_tilt0 : bool
@@ -151,6 +158,7 @@ class Table:
     mode_frequency: np.ndarray | None = None
     mode_damping: np.ndarray | None = None
     mode_shape: np.ndarray | None = None
+    grid_auto: dict | None = None
 
     @property
     def name(self) -> str:
@@ -226,8 +234,10 @@ def _datasets(f) -> dict:
     return out
 
 
-def table_bytes(config, grid, model) -> bytes:
-    """Serialise a built grid (``grid.GridResult``) to HDF5 bytes, deterministically."""
+def table_bytes(config, grid, model, grid_auto: dict | None = None) -> bytes:
+    """Serialise a built grid (``grid.GridResult``) to HDF5 bytes, deterministically;
+    ``grid_auto``: the record of axes the build chose
+    (:meth:`~gainsched.schedule.refine.GridChoice.record`), stored as sorted-key JSON."""
     speeds, tilts = config.grid.speeds, config.grid.tilts
     n_xi = config.grid.azimuth_samples
     n = grid.K.shape[-1]
@@ -253,6 +263,9 @@ def table_bytes(config, grid, model) -> bytes:
         a["input_names"] = ",".join(INPUT_NAMES)
         a["control_law"] = CONTROL_LAW
         _create(f, "config_text", config.text)
+        if grid_auto is not None:
+            _create(f, "grid_auto", json.dumps(grid_auto, sort_keys=True), None,
+                    "how the build chose the speed and tilt axes (docs/grid.md), JSON")
         ax = _group(f, "axes")
         _create(ax, "xi", 2 * np.pi * np.arange(n_xi) / n_xi, "rad", "azimuth, uniform, periodic")
         _create(ax, "speed", speeds, "m/s", "tangential COG speed")
@@ -492,6 +505,14 @@ def _read(f, path) -> Table:
                 raise InputError(path, f"closed_loop/{key}", "missing, or its shape does not "
                                  f"match the axes {want}")
             modes[key] = np.asarray(v[()], dtype=float)
+    grid_auto = None
+    if "grid_auto" in f:
+        try:
+            grid_auto = json.loads(_decoded(f["grid_auto"][()]))
+        except (TypeError, ValueError):
+            raise InputError(path, "grid_auto", "not a JSON record") from None
+        if not isinstance(grid_auto, dict) or not isinstance(grid_auto.get("bound"), float):
+            raise InputError(path, "grid_auto", "must be a JSON object with a bound")
     _verify(f, path)  # after the structure, so that a missing dataset is named as such
     _check_feasible_finite(path, d, tilt, speed, xi)
     return Table(
@@ -499,7 +520,7 @@ def _read(f, path) -> Table:
         d["nominal/tension"], d["feasibility/reasons"].astype(np.uint8),
         d["closed_loop/spectral_radius"], d["weights/Q"], d["weights/R"], d["closed_loop/dt"],
         str(d["config_text"]), str(attrs.get("config_sha256", "")), attrs, str(path),
-        offsets, **modes,
+        offsets, **modes, grid_auto=grid_auto,
     )
 
 

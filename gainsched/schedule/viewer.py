@@ -430,6 +430,7 @@ def table_summary(table, *, source: str = "") -> dict:
         "speeds_mps": table.speed.tolist(),
         "tilts_deg": np.rad2deg(table.tilt).tolist(),
         "azimuth_samples": int(table.xi.size),
+        "grid_auto": table.grid_auto,
         "feasible_fraction": ok.mean(-1).tolist(),
         "reasons": {text: int(np.count_nonzero(table.reasons & bit))
                     for bit, text in REASONS.items() if np.any(table.reasons & bit)},

@@ -1,0 +1,739 @@
+"""Automatic breakpoints: speed and tilt axes refined until every cell midpoint meets a bound.
+
+A ``[grid]`` axis given as a range (``speeds = {min = 3, max = 20, max_count = 40}``,
+the same for ``tilts_deg``; :class:`gainsched.config.AxisRange`) is chosen by the
+build (docs/grid.md):
+
+1. **Seeds.** The range's ends and its middle.
+2. **Breakpoint circles.** Every (speed, tilt) pair of breakpoints not solved yet is
+   solved (:func:`~.grid.solve_circle`, one job per speed), once: later rounds reuse it.
+3. **Plan from what is solved.** A breakpoint that halved an interval measures that
+   interval's interpolation error at its midpoint for free (its hierarchical
+   surplus): the linear interpolation between the ends against the circle there. The
+   error of linear interpolation shrinks with the square of the width, so each half is
+   estimated at a quarter of it, and a cell's centre at the sum of its speed and tilt
+   estimates. Where that exceeds the bound, the cell is halved along the axis with the
+   larger estimate (as many times as the square law says) and the round starts again,
+   without any other solve. Cells the envelope's edge runs through (a feasible and an
+   infeasible corner along the speed) are halved until they span at most
+   :data:`EDGE_SHARE` of the range, so that the usable table reaches that close to it.
+4. **Certificate.** At the centre of every cell (mid speed, mid tilt) the periodic LQR
+   is solved at twice the azimuth samples, so that its odd samples are the azimuth
+   midpoints: where the runtime's trilinear interpolation is furthest from its
+   corners. The errors there (:func:`midpoint_errors`: gains as ``gainsched check``
+   measures them, nominal thrusts and roll) and the loop closed along the centre
+   circle with the interpolated gains (monodromy spectral radius) decide. A cell with
+   an infeasible corner has no usable lookup and is skipped, as ``check`` skips it. A
+   cell that fails is halved along the axis with the larger estimate, back to 2; a
+   cell's certificate is kept until the cell is split. The build ends when every cell
+   passes, or fails with an :class:`~gainsched.errors.InputError` naming the key and
+   the worst cell when an axis would exceed its ``max_count`` (or when the azimuth
+   interpolation alone exceeds the bound: no speed or tilt can mend that).
+
+The result does not depend on the machine: the circles are solved on pinned numerics
+(as every build), and every decision compares errors rounded to
+:data:`ERROR_QUANTUM` (0.01 %) with the bound less one quantum (so ``check``, which
+interpolates the float32 table, passes too).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+from ..errors import InputError
+from ..model.effects import registered_effects, registered_effects_context
+from ..model.reduced import Model
+from ..native.reproducible import blas_single_thread, ensure_blas_single_thread
+from .grid import (
+    CircleSolution,
+    GridResult,
+    _solutions,
+    check_effect_symmetries,
+    check_gain_cap,
+    grid_from_solutions,
+    level_circle_invariant,
+    solve_circle,
+)
+from .lqr import monodromy, spectral_radius
+
+__all__ = ["refine_grid", "GridChoice", "midpoint_errors", "grid_auto_lines", "ERROR_QUANTUM"]
+
+#: decisions compare errors rounded to this (a fraction: 0.01 %) with the bound less one
+#: quantum, so that last-bit differences never change the grid
+ERROR_QUANTUM = 1e-4
+#: cells the envelope's edge runs through are halved until they span at most this share of
+#: their axis's range (the usable table then reaches that close to the edge)
+EDGE_SHARE = 1 / 16
+#: a midpoint loop counts as stable with a spectral radius below this
+STABLE_RADIUS = 1.0 - 1e-6
+
+
+def midpoint_errors(K, K_d, u, u_d, phi, phi_d, u_scale, phi_scale):
+    """Relative errors of interpolated gains and nominal against directly solved ones.
+
+    Parameters
+    ----------
+    K, K_d : ndarray, shape (m, 4, n)
+        Interpolated and direct gains at m azimuths, N per state unit.
+    u, u_d : ndarray, shape (m, 4)
+        Interpolated and direct nominal thrusts, N.
+    phi, phi_d : ndarray, shape (m,)
+        Interpolated and direct nominal roll, rad.
+    u_scale : float
+        The circle's largest nominal thrust magnitude, N.
+    phi_scale : float
+        The circle's largest nominal roll magnitude, rad (0: the roll error is absolute).
+
+    Returns
+    -------
+    gain, thrust, roll : ndarray, shape (m,)
+        ``||K - K_d||_F / ||K_d||_F`` (as ``gainsched check``), ``max |u - u_d| /
+        u_scale`` and ``|phi - phi_d| / phi_scale``.
+    """
+    gain = np.linalg.norm(K - K_d, axis=(-2, -1)) / np.linalg.norm(K_d, axis=(-2, -1))
+    thrust = np.abs(u - u_d).max(-1) / u_scale
+    roll = np.abs(phi - phi_d) / (phi_scale if phi_scale > 0 else 1.0)
+    return gain, thrust, roll
+
+
+def _quanta(err: float) -> float:
+    """An error in quanta of :data:`ERROR_QUANTUM`, rounded (inf stays inf)."""
+    return round(err / ERROR_QUANTUM) if math.isfinite(err) else math.inf
+
+
+@dataclass(frozen=True)
+class _Centre:
+    """The certificate of one cell: worst errors over its azimuth midpoints, the closed
+    loop along its centre circle with interpolated (``rho``) and direct gains, and the
+    error of the azimuth interpolation alone (direct gains at the grid azimuths)."""
+
+    gain: float = math.nan
+    thrust: float = math.nan
+    roll: float = math.nan
+    azimuth: float = math.nan
+    rho: float = math.nan
+    rho_direct: float = math.nan
+
+    @property
+    def usable(self) -> bool:
+        return math.isfinite(self.gain)
+
+    @property
+    def error(self) -> float:
+        return max(self.gain, self.thrust, self.roll)
+
+
+def _xi_linear(X, xs):
+    """Linear interpolation of samples ``X`` (n_xi, ...) at the uniform periodic azimuths
+    onto the azimuths ``xs`` (rad), as the runtime interpolates along xi."""
+    n_xi = X.shape[0]
+    pos = np.mod(xs, 2 * np.pi) * (n_xi / (2 * np.pi))
+    j = np.minimum(np.floor(pos).astype(int), n_xi - 1)
+    w = (pos - j).reshape((-1,) + (1,) * (X.ndim - 1))
+    return (1 - w) * X[j] + w * X[(j + 1) % n_xi]
+
+
+def _check_centres(config2, speed, tilts, corners, effects=(), dare_tilt0=True):
+    """One certificate job: the centre circles of the cells at one mid speed.
+
+    ``config2`` has twice the table's azimuth samples; ``tilts`` (rad) are the cells' mid
+    tilts; ``corners[i]`` the four corner circles' ``(K (4, n_xi, 4, n), u_d (4, n_xi,
+    4), phi_d (4, n_xi))``. Returns one :class:`_Centre` per tilt (all NaN when the direct
+    solve is infeasible)."""
+    ensure_blas_single_thread()
+    with registered_effects_context(effects):
+        sol, steps = solve_circle(config2, speed, tilts, keep_steps=True, dare_tilt0=dare_tilt0)
+    ok = list(np.flatnonzero(np.isfinite(sol.spectral_radius)))
+    out = []
+    for i in range(len(tilts)):
+        if i not in ok:
+            out.append(_Centre())
+            continue
+        K4, u4, phi4 = corners[i]
+        K_d, u_d, phi_d = sol.K[i, 1::2], sol.u_d[i, 1::2], sol.phi_d[i, 1::2]
+        u_scale, phi_scale = np.abs(sol.u_d[i]).max(), np.abs(sol.phi_d[i]).max()
+
+        def mid(X):  # centre of the cell (speed x tilt weights 1/4) at the azimuth midpoints
+            return 0.5 * (X + np.roll(X, -1, axis=1)).mean(axis=0)
+
+        gain, thrust, roll = midpoint_errors(mid(K4), K_d, mid(u4), u_d, mid(phi4), phi_d,
+                                             u_scale, phi_scale)
+        az = midpoint_errors(mid(sol.K[i, None, 0::2]), K_d, mid(sol.u_d[i, None, 0::2]), u_d,
+                             mid(sol.phi_d[i, None, 0::2]), phi_d, u_scale, phi_scale)
+        out.append(_Centre(float(gain.max()), float(thrust.max()), float(roll.max()),
+                           float(max(e.max() for e in az)), math.nan,
+                           float(sol.spectral_radius[i])))
+    if ok:  # the loops closed with the interpolated gains, all tilts at once
+        Ad, Bd, _ = steps
+        N = Ad.shape[-3]
+        xs = 2 * np.pi * np.arange(N) / N
+        K_steps = np.stack([_xi_linear(np.moveaxis(corners[i][0], 0, 1), xs).mean(axis=1)
+                            for i in ok])
+        rho = spectral_radius(monodromy(Ad, Bd, K_steps))
+        for b, i in enumerate(ok):
+            out[i] = replace(out[i], rho=float(rho[b]))
+    return out
+
+
+@dataclass(frozen=True)
+class GridChoice:
+    """The axes a build chose and what they cost (:func:`refine_grid`).
+
+    Attributes
+    ----------
+    config : Config
+        The config with the chosen breakpoints as lists (its text keeps the ranges as
+        comments): the table's config.
+    grid : GridResult
+        The grid solved on them.
+    bound : float
+        ``grid.max_interpolation_error``, a fraction.
+    speeds_spec, tilts_spec : str or None
+        The ranges as written (None: a list axis, kept).
+    gain_error, thrust_error, roll_error : float
+        The largest relative errors at the cell midpoints (fractions).
+    worst_rho : float
+        The largest closed-loop spectral radius along a midpoint circle with
+        interpolated gains.
+    worst_cell : tuple
+        ``(v_lo, v_hi, a_lo, a_hi)`` (m/s, deg) of the largest error.
+    cells, skipped : int
+        Cells certified; cells skipped (an infeasible corner or centre).
+    rounds : int
+        Refinement rounds.
+    circles : int
+        Breakpoint circles solved, each once (the chosen grid's).
+    reused : int
+        Breakpoint circles a round took from the earlier rounds instead of solving
+        them again (the reuse counter).
+    centres, centres_final : int
+        Centre circles solved (the certificate); of them, the chosen grid's usable
+        cells (the others belong to cells split later).
+    """
+
+    config: object
+    grid: GridResult
+    bound: float
+    speeds_spec: str | None
+    tilts_spec: str | None
+    gain_error: float
+    thrust_error: float
+    roll_error: float
+    worst_rho: float
+    worst_cell: tuple
+    cells: int
+    skipped: int
+    rounds: int
+    circles: int
+    reused: int
+    centres: int
+    centres_final: int
+
+    @property
+    def max_error(self) -> float:
+        """The largest of the gain, thrust and roll errors (a fraction)."""
+        return max(self.gain_error, self.thrust_error, self.roll_error)
+
+    def record(self) -> dict:
+        """What the table records of the choice (JSON-able, ``grid_auto`` in the table)."""
+        g = self.config.grid
+        return {
+            "bound": self.bound,
+            "speeds": self.speeds_spec,
+            "tilts_deg": self.tilts_spec,
+            "speed_count": int(g.speeds.size),
+            "tilt_count": int(g.tilts.size),
+            "azimuth_samples": int(g.azimuth_samples),
+            "gain_error": self.gain_error,
+            "thrust_error": self.thrust_error,
+            "roll_error": self.roll_error,
+            "worst_rho": self.worst_rho,
+            "worst_cell": list(self.worst_cell),
+            "cells": self.cells,
+            "skipped": self.skipped,
+            "rounds": self.rounds,
+            "circles": self.circles,
+            "reused": self.reused,
+            "centres": self.centres,
+            "centres_final": self.centres_final,
+        }
+
+    def lines(self) -> list[str]:
+        """What ``gainsched build`` prints of the choice."""
+        g = self.config.grid
+        tilts = np.rad2deg(g.tilts)
+        v_lo, v_hi, a_lo, a_hi = self.worst_cell
+        return [
+            f"grid chosen for {100 * self.bound:g} %: {g.speeds.size} speeds x {tilts.size} "
+            f"tilts = {g.speeds.size * tilts.size} circles ({self.rounds} rounds)",
+            "  speeds (m/s): " + ", ".join(f"{v:g}" for v in g.speeds),
+            "  tilts (deg): " + ", ".join(f"{a:g}" for a in tilts),
+            f"  at {self.cells} cell midpoints ({self.skipped} skipped as infeasible): max "
+            f"error {100 * self.max_error:.2f} % (gains {100 * self.gain_error:.2f}, thrusts "
+            f"{100 * self.thrust_error:.2f}, roll {100 * self.roll_error:.2f}) in the cell "
+            f"{v_lo:g}-{v_hi:g} m/s x {a_lo:g}-{a_hi:g} deg; worst midpoint closed loop "
+            f"{self.worst_rho:.5f}",
+            f"  cost: {self.circles + self.centres} circles solved = {self.circles} "
+            f"breakpoints, each once ({self.reused} reused by later rounds) + "
+            f"{self.centres} cell centres ({self.centres_final} certify the chosen grid)",
+        ]
+
+
+@dataclass
+class _Axis:
+    """One axis during refinement: breakpoints in the config's unit (m/s or deg)."""
+
+    key: str  # "speeds" or "tilts_deg"
+    values: list
+    auto: object  # AxisRange or None
+    parent: dict = field(default_factory=dict)  # interval -> the interval it halves
+
+    def intervals(self):
+        v = self.values
+        return list(zip(v[:-1], v[1:], strict=True)) if len(v) > 1 else [(v[0], v[0])]
+
+    def room(self) -> int:
+        """Breakpoints still allowed (0 on a list axis)."""
+        return self.auto.max_count - len(self.values) if self.auto else 0
+
+    @staticmethod
+    def halves(intervals, levels=None):
+        """The breakpoints that halve ``intervals`` ``levels[iv]`` times (default once),
+        with the parent of every new half: ``(new values, {half: parent})``."""
+        new, parent = [], {}
+        for iv in intervals:
+            todo = [iv]
+            for _ in range(1 if levels is None else levels[iv]):
+                nxt = []
+                for lo, hi in todo:
+                    mid = 0.5 * (lo + hi)
+                    parent[lo, mid] = parent[mid, hi] = (lo, hi)
+                    new.append(mid)
+                    nxt += [(lo, mid), (mid, hi)]
+                todo = nxt
+        return new, parent
+
+    def split(self, intervals, levels=None) -> None:
+        """Insert the breakpoints of :meth:`halves`."""
+        new, parent = self.halves(intervals, levels)
+        self.parent.update(parent)
+        self.values = sorted(self.values + new)
+
+
+#: the per-tilt arrays of a CircleSolution (the others, steps and dt, are per speed)
+_PER_TILT = tuple(f.name for f in fields(CircleSolution) if f.name not in ("steps", "dt"))
+
+
+def _one(sol: CircleSolution, i: int) -> CircleSolution:
+    """Tilt ``i`` of a solution, as a one-tilt solution."""
+    return replace(sol, **{k: getattr(sol, k)[i:i + 1] for k in _PER_TILT})
+
+
+def _rad(a_deg) -> np.ndarray:
+    """Tilts as the config holds them (``np.deg2rad`` of the file's degrees)."""
+    return np.deg2rad(np.asarray(a_deg, dtype=float))
+
+
+def _feasible(sol: CircleSolution) -> bool:
+    return bool(np.isfinite(sol.spectral_radius[0]))
+
+
+class _Refiner:
+    """The state of one refinement (module docs): the axes, every circle solved, the
+    surpluses measured and the cells certified; one method per step."""
+
+    def __init__(self, config, n_jobs, progress, backend):
+        g = config.grid
+        self.config, self.n_jobs, self.progress, self.backend = config, n_jobs, progress, backend
+        self.bound = g.max_interpolation_error
+        self.limit = _quanta(self.bound) - 1  # one quantum of margin to the bound
+        self.speeds = _Axis("speeds", [float(v) for v in g.speeds], g.speeds_auto)
+        tilt_deg = g.tilts_auto.seeds() if g.tilts_auto else np.rad2deg(g.tilts)
+        self.tilts = _Axis("tilts_deg", [float(a) for a in tilt_deg], g.tilts_auto)
+        # a list tilt axis is kept in the config's radians exactly
+        self.rad_of = {} if g.tilts_auto else dict(zip(self.tilts.values, g.tilts.tolist(),
+                                                       strict=True))
+        for axis in (self.speeds, self.tilts):
+            if axis.auto is not None and len(axis.values) == 3:  # the seeds halve the range
+                lo, mid, hi = axis.values
+                axis.parent[lo, mid] = axis.parent[mid, hi] = (lo, hi)
+        self.effects = registered_effects({s.name for s in config.effects})
+        self.invariant = level_circle_invariant(Model(config))
+        self.config2 = config.with_values({"grid.azimuth_samples": 2 * g.azimuth_samples})
+        self.points = {}  # (v, a_deg) -> CircleSolution of one tilt
+        self.meta = {}  # v -> (steps, dt)
+        self.centres = {}  # (v_lo, v_hi, a_lo, a_hi) -> _Centre
+        self.surpluses = {}  # (axis key, parent interval, other breakpoint) -> error
+        self.reused = self.centre_solves = self.rounds = 0
+
+    # ------------------------------------------------------------------ solving
+
+    def rad(self, a) -> float:
+        return self.rad_of.get(a, float(_rad(a)))
+
+    def _run(self, job, args):
+        with blas_single_thread():
+            for a, res in zip(args, _solutions(args, self.n_jobs, self.backend, job),
+                              strict=True):
+                yield a, res
+                if self.progress is not None:
+                    self.progress(len(a[2]))
+
+    def solve_points(self, pts) -> None:
+        """Solve the breakpoint circles ``pts`` ((v, a_deg)) not solved yet."""
+        todo = defaultdict(list)
+        for v, a in sorted(set(pts)):
+            if (v, a) in self.points:
+                self.reused += 1
+            else:
+                todo[v].append(a)
+        args = [(self.config, v, np.array([self.rad(a) for a in ts]), self.effects,
+                 self.invariant) for v, ts in todo.items()]
+        for (_, v, _, _, _), sol in self._run(None, args):
+            self.meta[v] = (sol.steps, sol.dt)
+            for i, a in enumerate(todo[v]):
+                self.points[v, a] = _one(sol, i)
+
+    def certify(self, cells) -> None:
+        """Solve the centres of the cells not certified yet (a cell with an infeasible
+        corner gets an empty certificate: it is skipped)."""
+        todo = defaultdict(list)
+        for cell in cells:
+            if cell in self.centres:
+                continue
+            cs = [self.points[p] for p in _corners(cell)]
+            if not all(_feasible(c) for c in cs):
+                self.centres[cell] = _Centre()
+                continue
+            data = tuple(np.stack([getattr(c, k)[0] for c in cs]) for k in ("K", "u_d", "phi_d"))
+            todo[0.5 * (cell[0] + cell[1])].append((cell, data))
+            self.centre_solves += 1
+        args = [(self.config2, v, np.array([self.rad(0.5 * (c[2] + c[3])) for c, _ in items]),
+                 [d for _, d in items], self.effects, self.invariant)
+                for v, items in todo.items()]
+        for (_, v, _, _, _, _), res in self._run(_check_centres, args):
+            for (cell, _), centre in zip(todo[v], res, strict=True):
+                self.centres[cell] = centre
+
+    def fails(self, cell) -> bool:
+        c = self.centres[cell]
+        return c.usable and (_quanta(c.error) > self.limit or not c.rho < STABLE_RADIUS)
+
+    # ------------------------------------------------------------------ estimates
+
+    def edge_error(self, p_lo, p_hi, p_mid) -> float:
+        """Largest error of the linear interpolation between two circles at the middle
+        one, at the grid azimuths (NaN when one of them is infeasible)."""
+        a, b, m = self.points[p_lo], self.points[p_hi], self.points[p_mid]
+        if not all(_feasible(c) for c in (a, b, m)):
+            return math.nan
+        errs = midpoint_errors(0.5 * (a.K[0] + b.K[0]), m.K[0], 0.5 * (a.u_d[0] + b.u_d[0]),
+                               m.u_d[0], 0.5 * (a.phi_d[0] + b.phi_d[0]), m.phi_d[0],
+                               np.abs(m.u_d[0]).max(), np.abs(m.phi_d[0]).max())
+        return float(max(e.max() for e in errs))
+
+    def estimate(self, axis, iv, others) -> float:
+        """Estimated error at the midpoint of the interval ``iv`` of ``axis`` along the
+        other axis's breakpoints ``others``: a quarter (h^2) of the error its parent
+        interval had at its midpoint, a breakpoint now (the hierarchical surplus); 0 on
+        a list axis, inf where unknown (no parent, or its circles infeasible)."""
+        if axis.auto is None or iv[0] == iv[1]:
+            return 0.0
+        parent = axis.parent.get(iv)
+        if parent is None:
+            return math.inf
+        lo, hi = parent
+        mid = 0.5 * (lo + hi)
+        errs = []
+        for o in others:
+            key = (axis.key, parent, o)
+            if key not in self.surpluses:
+                pts = ([(lo, o), (hi, o), (mid, o)] if axis is self.speeds
+                       else [(o, lo), (o, hi), (o, mid)])
+                self.surpluses[key] = self.edge_error(*pts)
+            errs.append(self.surpluses[key])
+        # unknown where the parent's circles are infeasible: halve to learn it
+        return max((e for e in errs if not math.isnan(e)), default=math.inf) / 4
+
+    def cell_estimates(self, cell):
+        """``(speed, tilt)`` estimates of a cell's edge errors."""
+        v0, v1, a0, a1 = cell
+        return (self.estimate(self.speeds, (v0, v1), {a0, a1}),
+                self.estimate(self.tilts, (a0, a1), {v0, v1}))
+
+    def edge_interval(self, cell):
+        """For a cell with feasible and infeasible corners along the speed (the
+        envelope's edge, a slowest or fastest speed per tilt, runs through it) on an
+        automatic speed axis: its speed interval; else None."""
+        v0, v1, a0, a1 = cell
+        if self.speeds.auto is None:
+            return None
+        f = {p: _feasible(self.points[p]) for p in _corners(cell)}
+        if any(f[v0, a] != f[v1, a] for a in (a0, a1)):
+            return v0, v1
+        return None
+
+    def choose(self, cell):
+        """``(axis, e_split, e_other)``: the axis to halve a cell along (the larger
+        estimate among the axes with room; ties to the speed), or None."""
+        e_v, e_a = self.cell_estimates(cell)
+        opts = [(e, ax, o) for e, ax, o in ((e_v, self.speeds, e_a), (e_a, self.tilts, e_v))
+                if ax.auto is not None and ax.room() > 0]
+        if not opts:
+            return None
+        return max(opts, key=lambda t: (_quanta(t[0]), t[1] is self.speeds))
+
+    # ------------------------------------------------------------------ rounds
+
+    def cells(self):
+        return [(v0, v1, a0, a1) for v0, v1 in self.speeds.intervals()
+                for a0, a1 in self.tilts.intervals()]
+
+    def plan(self) -> bool:
+        """Halve the cells the estimates (no solve) say fail, and the envelope's edge
+        cells wider than :data:`EDGE_SHARE`; False when there is none."""
+        want = {"speeds": {}, "tilts_deg": {}}
+        target = self.limit * ERROR_QUANTUM
+        for cell in self.cells():
+            edge = self.edge_interval(cell)
+            if edge is not None:
+                rng = self.speeds.auto
+                if edge[1] - edge[0] > EDGE_SHARE * (rng.hi - rng.lo):
+                    want["speeds"].setdefault(edge, 1)
+                continue
+            if (not all(_feasible(self.points[p]) for p in _corners(cell))
+                    or _quanta(sum(self.cell_estimates(cell))) <= self.limit):
+                continue
+            pick = self.choose(cell)
+            if pick is None:
+                continue
+            e, axis, other = pick
+            iv = (cell[0], cell[1]) if axis is self.speeds else (cell[2], cell[3])
+            k = _halvings(e, max(target - other, 0.5 * target))
+            want[axis.key][iv] = max(k, want[axis.key].get(iv, 0))
+        planned = False
+        for axis in (self.speeds, self.tilts):
+            free, take = axis.room(), {}
+            for iv in sorted(want[axis.key]):
+                n = 2 ** want[axis.key][iv] - 1
+                if n <= free:
+                    take[iv], free = want[axis.key][iv], free - n
+            if take:
+                new, _ = axis.halves(sorted(take), take)
+                _check_float32(self.config, axis, new, self.bound,
+                               "the cells' surpluses ask for them")
+                axis.split(sorted(take), take)
+                planned = True
+        return planned
+
+    def mend(self, failing) -> None:
+        """Halve every failing cell along its :meth:`choose` axis; raise when no axis has
+        room or a split would exceed ``max_count`` or collapse in float32."""
+        worst = max(failing, key=lambda c: (_quanta(self.centres[c].error), c))
+        pick = {"speeds": set(), "tilts_deg": set()}
+        for cell in failing:
+            _check_azimuth(self.config, cell, self.centres[cell], self.bound, self.limit)
+            choice = self.choose(cell)
+            if choice is None:  # every automatic axis is at its max_count
+                axis = self.speeds if self.speeds.auto is not None else self.tilts
+                _refuse_count(self.config, axis, cell, self.centres[cell], self.bound)
+            axis = choice[1]
+            pick[axis.key].add((cell[0], cell[1]) if axis is self.speeds
+                               else (cell[2], cell[3]))
+        for axis in (self.speeds, self.tilts):
+            if pick[axis.key]:
+                new, _ = axis.halves(sorted(pick[axis.key]))
+                _check_split(self.config, axis, new, worst, self.centres[worst], self.bound)
+                axis.split(sorted(pick[axis.key]))
+
+    def run(self) -> GridChoice:
+        while True:
+            self.rounds += 1
+            self.solve_points([(v, a) for v in self.speeds.values for a in self.tilts.values])
+            if self.plan():
+                continue
+            cells = self.cells()
+            self.certify(cells)
+            failing = [c for c in cells if self.fails(c)]
+            if not failing:
+                return self.result(cells)
+            self.mend(failing)
+
+    # ------------------------------------------------------------------ the result
+
+    def result(self, cells) -> GridChoice:
+        """The chosen config (the axes as lists, the ranges kept as comments), the grid
+        assembled from the solved circles, and the certificate's figures."""
+        from ..config import config_from_text
+        from ..configedit import set_value
+
+        text = self.config.text
+        for axis in (self.speeds, self.tilts):
+            if axis.auto is not None:
+                text = set_value(text, "grid", axis.key, axis.values, comment=(
+                    f"chosen by the build from {axis.auto.spec()} (docs/grid.md)"))
+        chosen = config_from_text(text, self.config.source)
+        assert chosen.grid.speeds.tolist() == self.speeds.values
+        assert chosen.grid.tilts.tolist() == [self.rad(a) for a in self.tilts.values]
+        sols = []
+        for v in self.speeds.values:
+            parts = [self.points[v, a] for a in self.tilts.values]
+            steps, dt = self.meta[v]
+            sols.append(CircleSolution(
+                **{k: np.concatenate([getattr(p, k) for p in parts]) for k in _PER_TILT},
+                steps=steps, dt=dt))
+        grid = grid_from_solutions(sols, self.invariant)
+        check_gain_cap(chosen, grid)
+        live = [(c, self.centres[c]) for c in cells if self.centres[c].usable]
+
+        def worst_of(attr):
+            return max((getattr(c, attr) for _, c in live), default=math.nan)
+
+        worst = max(live, key=lambda x: (x[1].error, x[0]))[0] if live else (math.nan,) * 4
+        return GridChoice(
+            config=chosen, grid=grid, bound=self.bound,
+            speeds_spec=self.speeds.auto.spec() if self.speeds.auto else None,
+            tilts_spec=self.tilts.auto.spec() if self.tilts.auto else None,
+            gain_error=worst_of("gain"), thrust_error=worst_of("thrust"),
+            roll_error=worst_of("roll"), worst_rho=worst_of("rho"),
+            worst_cell=tuple(float(x) for x in worst), cells=len(live),
+            skipped=len(cells) - len(live), rounds=self.rounds, circles=len(self.points),
+            reused=self.reused, centres=self.centre_solves, centres_final=len(live))
+
+
+def _corners(cell):
+    v0, v1, a0, a1 = cell
+    return (v0, a0), (v1, a0), (v0, a1), (v1, a1)
+
+
+def refine_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridChoice:
+    """Choose the breakpoints of the axes ``[grid]`` gives as ranges, and solve the grid.
+
+    Refines ``grid.speeds`` and ``grid.tilts_deg`` (those given as ``{min, max,
+    max_count}``) until the largest relative error of the interpolated gains, nominal
+    thrusts and roll at every usable cell midpoint is within ``grid.max_interpolation_error``
+    and the loop closed with interpolated gains along every midpoint circle is stable
+    (module docs; docs/grid.md). Deterministic: the same config gives the same
+    breakpoints and the same grid on every machine, with any ``n_jobs``.
+
+    Parameters
+    ----------
+    config : Config
+        A config with at least one axis as a range (``config.grid.auto``).
+    n_jobs : int, default 1
+        Worker processes (-1: all cores).
+    progress : callable or None, default None
+        Called with the number of circles solved after each job.
+    backend : str, optional
+        The joblib backend, as for :func:`~.grid.build_grid`.
+
+    Returns
+    -------
+    GridChoice
+        The config with the chosen axes, the grid, the errors met and the cost.
+
+    Raises
+    ------
+    InputError
+        An axis needs more than its ``max_count`` breakpoints, its cells would collapse
+        in float32, or the azimuth interpolation alone exceeds the bound; naming the
+        key and the worst cell.
+
+    Examples
+    --------
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> auto = cfg.with_values({"grid.speeds": {"min": 6, "max": 9, "max_count": 8},
+    ...                         "grid.tilts_deg": {"min": 0, "max": 20, "max_count": 8},
+    ...                         "grid.azimuth_samples": 16})
+    >>> choice = gs.refine_grid(auto)
+    >>> choice.config.grid.speeds.tolist()                  # m/s, chosen
+    [6.0, 7.5, 9.0]
+    >>> np.rad2deg(choice.config.grid.tilts).round(3).tolist()  # deg, chosen
+    [0.0, 5.0, 10.0, 15.0, 20.0]
+    >>> round(100 * choice.max_error, 2), choice.bound     # %, at the cell midpoints
+    (1.93, 0.02)
+    >>> choice.circles, choice.centres                      # solved: grid, certificate
+    (15, 8)
+    """
+    if not config.grid.auto:
+        raise InputError(config.source, "grid.speeds", "refine_grid needs an axis given as "
+                         "a range {min, max, max_count}; a list grid is built by build_grid")
+    check_effect_symmetries(config)
+    return _Refiner(config, n_jobs, progress, backend).run()
+
+
+def grid_auto_lines(record: dict) -> list[str]:
+    """What ``gainsched inspect`` prints of a table's ``grid_auto`` record
+    (:meth:`GridChoice.record`)."""
+    r = record
+    worst = max(r["gain_error"], r["thrust_error"], r["roll_error"])
+    return [
+        f"grid chosen by the build for {100 * r['bound']:g}% (docs/grid.md): speeds "
+        f"{r['speeds'] or 'as listed'}, tilts {r['tilts_deg'] or 'as listed'}",
+        f"  at {r['cells']} cell midpoints: max error {100 * worst:.2f}% (gains "
+        f"{100 * r['gain_error']:.2f}, thrusts {100 * r['thrust_error']:.2f}, roll "
+        f"{100 * r['roll_error']:.2f}); worst midpoint closed loop {r['worst_rho']:.5f}; "
+        f"{r['circles'] + r['centres']} circles solved in {r['rounds']} rounds",
+    ]
+
+
+def _halvings(estimate: float, target: float) -> int:
+    """Halvings of an interval whose midpoint error is ``estimate`` until the error
+    (quartered by each, h^2) meets ``target``; 1 for an unknown (inf) estimate, at most 3."""
+    k = 1
+    while k < 3 and math.isfinite(estimate) and estimate / 4 ** k > target:
+        k += 1
+    return k
+
+
+def _where(cell) -> str:
+    v0, v1, a0, a1 = cell
+    return f"the cell {v0:g}-{v1:g} m/s x {a0:g}-{a1:g} deg"
+
+
+def _check_azimuth(config, cell, c: _Centre, bound: float, limit: int) -> None:
+    """Refuse a cell that no speed or tilt breakpoint can mend: the azimuth interpolation
+    alone exceeds the bound there."""
+    if _quanta(c.azimuth) > limit:
+        raise InputError(config.source, "grid.azimuth_samples",
+                         f"{config.grid.azimuth_samples} samples are too few for "
+                         f"{100 * bound:g} %: the interpolation along the azimuth alone has "
+                         f"{100 * c.azimuth:.2f} % at the centre of {_where(cell)}; raise "
+                         "grid.azimuth_samples")
+
+
+def _why(cell, c: _Centre) -> str:
+    return (f"{_where(cell)} has {100 * c.error:.2f} % at its centre (gains "
+            f"{100 * c.gain:.2f}, thrusts {100 * c.thrust:.2f}, roll {100 * c.roll:.2f}; "
+            f"closed loop {c.rho:.5f})")
+
+
+def _refuse_count(config, axis: _Axis, cell, c: _Centre, bound: float) -> None:
+    """The error when a cell fails and its axes are at their ``max_count``."""
+    raise InputError(config.source, f"grid.{axis.key}.max_count",
+                     f"{axis.auto.max_count} breakpoints are not enough for {100 * bound:g} "
+                     f"%: {_why(cell, c)}; raise max_count or grid.max_interpolation_error")
+
+
+def _check_split(config, axis: _Axis, new, worst, c: _Centre, bound: float) -> None:
+    """Refuse a split beyond ``max_count`` or one that collapses in float32."""
+    why = _why(worst, c)
+    if len(axis.values) + len(new) > axis.auto.max_count:
+        _refuse_count(config, axis, worst, c, bound)
+    _check_float32(config, axis, new, bound, why)
+
+
+def _check_float32(config, axis: _Axis, new, bound: float, why: str) -> None:
+    """Refuse breakpoints the table's float32 axes cannot tell apart."""
+    values = np.array(sorted(axis.values + list(new)))
+    # as the table stores the axis: tilts in rad, speeds and azimuth rates speed / r
+    stored = [_rad(values)] if axis.key == "tilts_deg" else [values, values / config.radius]
+    for x in stored:
+        if np.any(np.diff(x.astype(np.float32)) <= 0):
+            raise InputError(config.source, f"grid.{axis.key}",
+                             f"breakpoints closer than float32 resolves are needed for "
+                             f"{100 * bound:g} %: {why}; raise grid.max_interpolation_error")
