@@ -115,7 +115,7 @@ def estimate_build(config: Config) -> BuildEstimate:
               if grid.speeds_auto else np.asarray(grid.speeds, dtype=float))
     n_v = speeds.size
     n_t = grid.tilts_auto.max_count if grid.tilts_auto else int(np.asarray(grid.tilts).size)
-    n_xi = int(config.grid.azimuth_samples)
+    n_xi = grid.azimuth_auto.hi if grid.azimuth_auto else int(grid.azimuth_samples)
     rate = float(config.control.rate_hz)
     r = config.radius
     n = _lqr_states(config)

@@ -138,11 +138,21 @@ def validate(config):
         f"{e.name}({', '.join(f'{k}={x:g}' for k, x in e.params)})" for e in cfg.effects
     )
     click.echo(f"  effects  {effects or 'none'}")
+    def axis(values, rng, what, unit):
+        if rng is None:
+            return f"{values.size} {what} {values[0]:g}..{values[-1]:g} {unit}"
+        return f"{what} {rng.lo:g}..{rng.hi:g} {unit} (at most {rng.max_count}, chosen)"
+
+    az = gr.azimuth_auto
     click.echo(
-        f"  grid     {gr.speeds.size} speeds {gr.speeds[0]:g}..{gr.speeds[-1]:g} m/s, "
-        f"{gr.tilts.size} tilts {np.rad2deg(gr.tilts[0]):g}..{np.rad2deg(gr.tilts[-1]):g} deg, "
-        f"{gr.azimuth_samples} azimuth samples"
+        f"  grid     {axis(gr.speeds, gr.speeds_auto, 'speeds', 'm/s')}, "
+        f"{axis(np.rad2deg(gr.tilts), gr.tilts_auto, 'tilts', 'deg')}, "
+        + (f"{gr.azimuth_samples} azimuth samples" if az is None
+           else f"{az.lo}..{az.hi} azimuth samples (chosen)")
     )
+    if gr.auto:
+        click.echo(f"           chosen by the build for {100 * gr.max_interpolation_error:g} % "
+                   "at the cell midpoints (docs/grid.md)")
     for a in gr.tilts:
         click.echo(f"  taut above {min_taut_speed(cfg, a):.2f} m/s at tilt {np.rad2deg(a):g} deg")
 
@@ -640,8 +650,9 @@ def check(table, speed_stride, max_error, azimuth_error):
     if nominal:
         a = t.grid_auto
         click.echo(f"  grid chosen by the build for {100 * a['bound']:g}%: speeds "
-                   f"{a['speeds'] or 'as listed'}, tilts {a['tilts_deg'] or 'as listed'}; "
-                   "checked on gains, nominal thrusts and roll")
+                   f"{a['speeds'] or 'as listed'}, tilts {a['tilts_deg'] or 'as listed'}, "
+                   f"azimuth samples {a['azimuth_samples_range'] or 'as given'}; checked on "
+                   "gains, nominal thrusts and roll")
     worst = max(res.max_err, res.max_nominal_err) if nominal else res.max_err
     passed = ok_pts > 0 and 100 * worst <= max_error and stable
     what = "gain, thrust and roll error" if nominal else "max error"

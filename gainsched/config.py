@@ -189,6 +189,21 @@ class AxisRange:
 
 
 @dataclass(frozen=True)
+class AzimuthRange:
+    """Azimuth samples the build chooses (``azimuth_samples = {min = .., max = ..}``): the
+    smallest of ``lo, 2 lo, 4 lo, ...`` up to ``hi`` whose interpolation along the
+    azimuth meets half of ``grid.max_interpolation_error`` at every cell centre
+    (:func:`gainsched.schedule.refine.refine_grid`, docs/grid.md)."""
+
+    lo: int
+    hi: int
+
+    def spec(self) -> str:
+        """The range as written in a config: ``{min = 12, max = 96}``."""
+        return f"{{min = {self.lo}, max = {self.hi}}}"
+
+
+@dataclass(frozen=True)
 class Grid:
     """Schedule grid: tangential COG speeds (m/s), tilts (rad), azimuth samples, and the
     interpolation error the table must meet at its cell midpoints (relative gain error,
@@ -205,11 +220,22 @@ class Grid:
     max_interpolation_error: float = 0.02
     speeds_auto: AxisRange | None = None
     tilts_auto: AxisRange | None = None
+    azimuth_auto: AzimuthRange | None = None
 
     @property
     def auto(self) -> bool:
         """Whether the build chooses an axis (a range in ``[grid]``)."""
-        return self.speeds_auto is not None or self.tilts_auto is not None
+        return any(x is not None for x in (self.speeds_auto, self.tilts_auto,
+                                           self.azimuth_auto))
+
+    @property
+    def auto_key(self) -> str | None:
+        """The first key the build chooses (``grid.speeds``, ...), None for lists."""
+        for key, x in (("speeds", self.speeds_auto), ("tilts_deg", self.tilts_auto),
+                       ("azimuth_samples", self.azimuth_auto)):
+            if x is not None:
+                return f"grid.{key}"
+        return None
 
 
 #: table formats the firmware can be given (``[firmware] format``)
@@ -806,11 +832,17 @@ def _grid(sec: Section, radius: float) -> Grid:
         raise sec.error(k_hi, f"must be < 90, got {tilts_deg[-1]:g}")
     tilts = np.deg2rad(tilts_deg)
     check_float32_axis(sec, "tilts_deg", tilts, "tilts (rad)")
-    n = sec.get("azimuth_samples")
-    if isinstance(n, bool) or not isinstance(n, int):
-        raise sec.error("azimuth_samples", f"must be an integer, got {type(n).__name__}")
-    if n < 4 or n % 2 or n > MAX_XI:
-        raise sec.error("azimuth_samples", f"must be an even integer in [4, {MAX_XI}], got {n}")
+    azimuth_auto = None
+    if isinstance(sec.data.get("azimuth_samples"), dict):
+        sub = sec.sub("azimuth_samples")
+        lo, hi = _azimuth_count(sub, "min"), _azimuth_count(sub, "max")
+        if hi < lo:
+            raise sub.error("max", f"must be >= min ({lo}), got {hi}")
+        sub.done()
+        azimuth_auto = AzimuthRange(lo, hi)
+        n = lo
+    else:
+        n = _azimuth_count(sec, "azimuth_samples")
     err = sec.number("max_interpolation_error", 100 * Grid.max_interpolation_error,
                      positive=True)
     if err >= 100:
@@ -818,7 +850,17 @@ def _grid(sec: Section, radius: float) -> Grid:
     sec.done()
     for a in (speeds, tilts):
         a.setflags(write=False)
-    return Grid(speeds, tilts, n, err / 100, speeds_auto, tilts_auto)
+    return Grid(speeds, tilts, n, err / 100, speeds_auto, tilts_auto, azimuth_auto)
+
+
+def _azimuth_count(sec: Section, k: str) -> int:
+    """An azimuth sample count: an even integer in [4, MAX_XI]."""
+    n = sec.get(k)
+    if isinstance(n, bool) or not isinstance(n, int):
+        raise sec.error(k, f"must be an integer, got {type(n).__name__}")
+    if n < 4 or n % 2 or n > MAX_XI:
+        raise sec.error(k, f"must be an even integer in [4, {MAX_XI}], got {n}")
+    return n
 
 
 def _firmware(sec: Section) -> Firmware:

@@ -262,3 +262,59 @@ def test_budget_counts_an_automatic_axis_at_its_max_count():
         tilts="[" + ", ".join(repr(float(a)) for a in np.linspace(0, 30, 9)) + "]"), "list.toml")
     a, b = estimate_build(auto), estimate_build(listed)
     assert (a.cpu_s, a.peak_bytes) == (b.cpu_s, b.peak_bytes)
+    az = estimate_build(config_from_text(auto_text(n_xi="{min = 8, max = 64}"), "az.toml"))
+    at_max = estimate_build(config_from_text(auto_text(n_xi=64), "max.toml"))
+    assert (az.cpu_s, az.peak_bytes) == (at_max.cpu_s, at_max.peak_bytes)
+
+
+# ------------------------------------------------------------------ the azimuth count
+
+
+@pytest.mark.parametrize("n_xi, key", [
+    ("{min = 7, max = 64}", "grid.azimuth_samples.min"),
+    ("{min = 8, max = 6}", "grid.azimuth_samples.max"),
+    ("{min = 8, max = 8192}", "grid.azimuth_samples.max"),
+    ("{min = 8}", "grid.azimuth_samples.max"),
+    ("{min = 8, max = 64, step = 2}", "grid.azimuth_samples.step"),
+])
+def test_bad_azimuth_ranges_name_the_key(n_xi, key):
+    with pytest.raises(InputError) as info:
+        config_from_text(auto_text(n_xi=n_xi), "bad.toml")
+    assert str(info.value).startswith(f"bad.toml: {key}:"), str(info.value)
+
+
+def test_the_azimuth_count_is_chosen_by_doubling():
+    """8 samples are too few for 3 % (test_too_few_azimuth_samples_names_the_key); from
+    a range the build doubles the count until the azimuth alone takes at most half the
+    bound, and the independent check passes on every azimuth midpoint."""
+    cfg = config_from_text(auto_text(n_xi="{min = 8, max = 64}"), "az.toml")
+    solved = []
+    choice = refine_grid(cfg, progress=solved.append)
+    n = choice.config.grid.azimuth_samples
+    assert n in (16, 32, 64) and choice.restarts >= 1
+    assert choice.azimuth_error <= 0.5 * cfg.grid.max_interpolation_error
+    assert sum(solved) == choice.circles + choice.centres + choice.dropped
+    line = next(x for x in choice.config.text.splitlines() if x.startswith("azimuth_samples"))
+    assert f"azimuth_samples = {n}" in line and "{min = 8, max = 64}" in line
+    files = output_files(choice.config, choice.grid, grid_auto=choice.record())
+    res = midpoint_check(table_from_bytes(files["auto.h5"], "auto.h5"))
+    assert res.xi.size == n * (choice.config.grid.speeds.size - 1) * (
+        choice.config.grid.tilts.size - 1)
+    assert max(res.max_err, res.max_nominal_err) <= cfg.grid.max_interpolation_error
+
+
+def test_an_azimuth_range_too_small_names_its_max():
+    cfg = config_from_text(auto_text(n_xi="{min = 4, max = 8}", bound=3), "az.toml")
+    with pytest.raises(InputError, match=r"^az\.toml: grid\.azimuth_samples\.max: 8 samples "
+                       r"are too few for 3 %"):
+        refine_grid(cfg)
+
+
+def test_validate_says_the_build_chooses(tmp_path):
+    path = tmp_path / "auto.toml"
+    path.write_text(auto_text(n_xi="{min = 8, max = 64}"))
+    res = CliRunner().invoke(cli, ["validate", str(path)])
+    assert res.exit_code == 0, res.output
+    assert ("grid     speeds 6..12 m/s (at most 9, chosen), tilts 0..30 deg (at most 9, "
+            "chosen), 8..64 azimuth samples (chosen)") in res.output
+    assert "chosen by the build for 3 % at the cell midpoints" in res.output

@@ -696,8 +696,7 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
     [[0.84, 0.952], [0.839, 0.952]]
     """
     if config.grid.auto:
-        key = "speeds" if config.grid.speeds_auto else "tilts_deg"
-        raise InputError(config.source, f"grid.{key}", "is a range the build chooses "
+        raise InputError(config.source, config.grid.auto_key, "is a range the build chooses "
                          "breakpoints in: build it with gainsched.refine_grid (gainsched "
                          "build does)")
     check_effect_symmetries(config)

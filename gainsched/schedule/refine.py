@@ -30,6 +30,13 @@ build (docs/grid.md):
    the worst cell when an axis would exceed its ``max_count`` (or when the azimuth
    interpolation alone exceeds the bound: no speed or tilt can mend that).
 
+An azimuth count given as a range (``azimuth_samples = {min = 12, max = 96}``) starts at
+``min``. Each centre solve also measures the interpolation along the azimuth alone;
+where that takes more than :data:`AZIMUTH_SHARE` of the bound (checked first at the
+seed cells' centres, then at every certificate), the count is doubled as often as the
+square law asks, up to ``max``, and every circle is solved again at the new azimuths
+(the speed and tilt breakpoints are kept).
+
 The result does not depend on the machine: the circles are solved on pinned numerics
 (as every build), and every decision compares errors rounded to
 :data:`ERROR_QUANTUM` (0.01 %) with the bound less one quantum (so ``check``, which
@@ -68,6 +75,9 @@ ERROR_QUANTUM = 1e-4
 #: cells the envelope's edge runs through are halved until they span at most this share of
 #: their axis's range (the usable table then reaches that close to the edge)
 EDGE_SHARE = 1 / 16
+#: share of the bound the interpolation along the azimuth alone may take at a cell centre
+#: when the build chooses the azimuth count (the speed and tilt take the rest)
+AZIMUTH_SHARE = 0.5
 #: a midpoint loop counts as stable with a spectral radius below this
 STABLE_RADIUS = 1.0 - 1e-6
 
@@ -192,8 +202,15 @@ class GridChoice:
         The grid solved on them.
     bound : float
         ``grid.max_interpolation_error``, a fraction.
-    speeds_spec, tilts_spec : str or None
-        The ranges as written (None: a list axis, kept).
+    speeds_spec, tilts_spec, azimuth_spec : str or None
+        The ranges as written (None: a list axis, or a fixed azimuth count, kept).
+    azimuth_error : float
+        The largest error of the interpolation along the azimuth alone at the cell
+        centres (direct gains at the azimuth samples against the midpoints; a fraction).
+    restarts : int
+        Times the azimuth count was doubled and the circles solved again.
+    dropped : int
+        Breakpoint circles solved at a smaller azimuth count, dropped at a restart.
     gain_error, thrust_error, roll_error : float
         The largest relative errors at the cell midpoints (fractions).
     worst_rho : float
@@ -220,6 +237,10 @@ class GridChoice:
     bound: float
     speeds_spec: str | None
     tilts_spec: str | None
+    azimuth_spec: str | None
+    azimuth_error: float
+    restarts: int
+    dropped: int
     gain_error: float
     thrust_error: float
     roll_error: float
@@ -245,6 +266,10 @@ class GridChoice:
             "bound": self.bound,
             "speeds": self.speeds_spec,
             "tilts_deg": self.tilts_spec,
+            "azimuth_samples_range": self.azimuth_spec,
+            "azimuth_error": self.azimuth_error,
+            "restarts": self.restarts,
+            "dropped": self.dropped,
             "speed_count": int(g.speeds.size),
             "tilt_count": int(g.tilts.size),
             "azimuth_samples": int(g.azimuth_samples),
@@ -272,14 +297,19 @@ class GridChoice:
             f"tilts = {g.speeds.size * tilts.size} circles ({self.rounds} rounds)",
             "  speeds (m/s): " + ", ".join(f"{v:g}" for v in g.speeds),
             "  tilts (deg): " + ", ".join(f"{a:g}" for a in tilts),
+            f"  azimuth samples: {g.azimuth_samples}"
+            + (f" (chosen from {self.azimuth_spec}; restarted {self.restarts} times)"
+               if self.azimuth_spec else "")
+            + f", interpolation along the azimuth alone {100 * self.azimuth_error:.2f} %",
             f"  at {self.cells} cell midpoints ({self.skipped} skipped as infeasible): max "
             f"error {100 * self.max_error:.2f} % (gains {100 * self.gain_error:.2f}, thrusts "
             f"{100 * self.thrust_error:.2f}, roll {100 * self.roll_error:.2f}) in the cell "
             f"{v_lo:g}-{v_hi:g} m/s x {a_lo:g}-{a_hi:g} deg; worst midpoint closed loop "
             f"{self.worst_rho:.5f}",
-            f"  cost: {self.circles + self.centres} circles solved = {self.circles} "
-            f"breakpoints, each once ({self.reused} reused by later rounds) + "
-            f"{self.centres} cell centres ({self.centres_final} certify the chosen grid)",
+            f"  cost: {self.circles + self.centres + self.dropped} circles solved = "
+            f"{self.circles} breakpoints, each once ({self.reused} reused by later rounds) "
+            f"+ {self.centres} cell centres ({self.centres_final} certify the chosen grid)"
+            + (f" + {self.dropped} at a smaller azimuth count" if self.dropped else ""),
         ]
 
 
@@ -363,12 +393,26 @@ class _Refiner:
                 axis.parent[lo, mid] = axis.parent[mid, hi] = (lo, hi)
         self.effects = registered_effects({s.name for s in config.effects})
         self.invariant = level_circle_invariant(Model(config))
-        self.config2 = config.with_values({"grid.azimuth_samples": 2 * g.azimuth_samples})
+        self.azimuth = g.azimuth_auto  # AzimuthRange or None
+        self.reused = self.centre_solves = self.rounds = self.restarts = self.dropped = 0
+        self._start(g.azimuth_samples)
+
+    def set_azimuth(self, n_xi: int) -> None:
+        """Solve at ``n_xi`` azimuth samples from now on: every circle solved so far is
+        dropped (its samples are at the old azimuths); the axes are kept."""
+        self.restarts += 1
+        self.dropped += len(self.points)
+        self._start(n_xi)
+
+    def _start(self, n_xi: int) -> None:
+        """No circle solved yet, at ``n_xi`` azimuth samples."""
+        self.n_xi = n_xi
+        self.solve_config = self.config.with_values({"grid.azimuth_samples": n_xi})
+        self.config2 = self.config.with_values({"grid.azimuth_samples": 2 * n_xi})
         self.points = {}  # (v, a_deg) -> CircleSolution of one tilt
         self.meta = {}  # v -> (steps, dt)
         self.centres = {}  # (v_lo, v_hi, a_lo, a_hi) -> _Centre
         self.surpluses = {}  # (axis key, parent interval, other breakpoint) -> error
-        self.reused = self.centre_solves = self.rounds = 0
 
     # ------------------------------------------------------------------ solving
 
@@ -391,7 +435,7 @@ class _Refiner:
                 self.reused += 1
             else:
                 todo[v].append(a)
-        args = [(self.config, v, np.array([self.rad(a) for a in ts]), self.effects,
+        args = [(self.solve_config, v, np.array([self.rad(a) for a in ts]), self.effects,
                  self.invariant) for v, ts in todo.items()]
         for (_, v, _, _, _), sol in self._run(None, args):
             self.meta[v] = (sol.steps, sol.dt)
@@ -536,7 +580,8 @@ class _Refiner:
         worst = max(failing, key=lambda c: (_quanta(self.centres[c].error), c))
         pick = {"speeds": set(), "tilts_deg": set()}
         for cell in failing:
-            _check_azimuth(self.config, cell, self.centres[cell], self.bound, self.limit)
+            _check_azimuth(self.config, self.n_xi, cell, self.centres[cell], self.bound,
+                           self.limit)
             choice = self.choose(cell)
             if choice is None:  # every automatic axis is at its max_count
                 axis = self.speeds if self.speeds.auto is not None else self.tilts
@@ -550,14 +595,41 @@ class _Refiner:
                 _check_split(self.config, axis, new, worst, self.centres[worst], self.bound)
                 axis.split(sorted(pick[axis.key]))
 
+    def choose_azimuth(self, worst: float) -> bool:
+        """For an automatic azimuth count: when the interpolation along the azimuth
+        alone is above :data:`AZIMUTH_SHARE` of the bound at a cell centre (``worst``),
+        double the count (as often as the square law asks, up to the range's largest)
+        and start the circles again; False when the count stays."""
+        if self.azimuth is None:
+            return False
+        target = AZIMUTH_SHARE * self.limit * ERROR_QUANTUM
+        top = self.azimuth.lo * 2 ** int(math.log2(self.azimuth.hi // self.azimuth.lo))
+        if _quanta(worst) <= math.floor(AZIMUTH_SHARE * self.limit) or self.n_xi >= top:
+            return False
+        self.set_azimuth(min(self.n_xi * 2 ** _halvings(worst, target), top))
+        return True
+
+    def azimuth_at(self, cells) -> float:
+        """Certify ``cells``; the largest error of the azimuth interpolation alone at
+        their centres."""
+        self.certify(cells)
+        return max((self.centres[c].azimuth for c in cells if self.centres[c].usable),
+                   default=0.0)
+
     def run(self) -> GridChoice:
+        probed = self.azimuth is None
         while True:
             self.rounds += 1
             self.solve_points([(v, a) for v in self.speeds.values for a in self.tilts.values])
+            if not probed:  # the seed cells' centres tell the azimuth count first
+                probed = True
+                if self.choose_azimuth(self.azimuth_at(self.cells())):
+                    continue
             if self.plan():
                 continue
             cells = self.cells()
-            self.certify(cells)
+            if self.choose_azimuth(self.azimuth_at(cells)):
+                continue
             failing = [c for c in cells if self.fails(c)]
             if not failing:
                 return self.result(cells)
@@ -572,11 +644,15 @@ class _Refiner:
         from ..configedit import set_value
 
         text = self.config.text
-        for axis in (self.speeds, self.tilts):
-            if axis.auto is not None:
-                text = set_value(text, "grid", axis.key, axis.values, comment=(
-                    f"chosen by the build from {axis.auto.spec()} (docs/grid.md)"))
+        for key, value, rng in ((a.key, a.values, a.auto) for a in (self.speeds, self.tilts)):
+            if rng is not None:
+                text = set_value(text, "grid", key, value, comment=(
+                    f"chosen by the build from {rng.spec()} (docs/grid.md)"))
+        if self.azimuth is not None:
+            text = set_value(text, "grid", "azimuth_samples", self.n_xi, comment=(
+                f"chosen by the build from {self.azimuth.spec()} (docs/grid.md)"))
         chosen = config_from_text(text, self.config.source)
+        assert chosen.grid.azimuth_samples == self.n_xi
         assert chosen.grid.speeds.tolist() == self.speeds.values
         assert chosen.grid.tilts.tolist() == [self.rad(a) for a in self.tilts.values]
         sols = []
@@ -598,6 +674,8 @@ class _Refiner:
             config=chosen, grid=grid, bound=self.bound,
             speeds_spec=self.speeds.auto.spec() if self.speeds.auto else None,
             tilts_spec=self.tilts.auto.spec() if self.tilts.auto else None,
+            azimuth_spec=self.azimuth.spec() if self.azimuth else None,
+            azimuth_error=worst_of("azimuth"), restarts=self.restarts, dropped=self.dropped,
             gain_error=worst_of("gain"), thrust_error=worst_of("thrust"),
             roll_error=worst_of("roll"), worst_rho=worst_of("rho"),
             worst_cell=tuple(float(x) for x in worst), cells=len(live),
@@ -673,11 +751,13 @@ def grid_auto_lines(record: dict) -> list[str]:
     worst = max(r["gain_error"], r["thrust_error"], r["roll_error"])
     return [
         f"grid chosen by the build for {100 * r['bound']:g}% (docs/grid.md): speeds "
-        f"{r['speeds'] or 'as listed'}, tilts {r['tilts_deg'] or 'as listed'}",
+        f"{r['speeds'] or 'as listed'}, tilts {r['tilts_deg'] or 'as listed'}, azimuth "
+        f"samples {r['azimuth_samples_range'] or 'as given'}",
         f"  at {r['cells']} cell midpoints: max error {100 * worst:.2f}% (gains "
         f"{100 * r['gain_error']:.2f}, thrusts {100 * r['thrust_error']:.2f}, roll "
         f"{100 * r['roll_error']:.2f}); worst midpoint closed loop {r['worst_rho']:.5f}; "
-        f"{r['circles'] + r['centres']} circles solved in {r['rounds']} rounds",
+        f"{r['circles'] + r['centres'] + r['dropped']} circles solved in {r['rounds']} "
+        "rounds",
     ]
 
 
@@ -695,15 +775,15 @@ def _where(cell) -> str:
     return f"the cell {v0:g}-{v1:g} m/s x {a0:g}-{a1:g} deg"
 
 
-def _check_azimuth(config, cell, c: _Centre, bound: float, limit: int) -> None:
+def _check_azimuth(config, n_xi: int, cell, c: _Centre, bound: float, limit: int) -> None:
     """Refuse a cell that no speed or tilt breakpoint can mend: the azimuth interpolation
     alone exceeds the bound there."""
     if _quanta(c.azimuth) > limit:
-        raise InputError(config.source, "grid.azimuth_samples",
-                         f"{config.grid.azimuth_samples} samples are too few for "
-                         f"{100 * bound:g} %: the interpolation along the azimuth alone has "
-                         f"{100 * c.azimuth:.2f} % at the centre of {_where(cell)}; raise "
-                         "grid.azimuth_samples")
+        key = "azimuth_samples" + (".max" if config.grid.azimuth_auto else "")
+        raise InputError(config.source, f"grid.{key}",
+                         f"{n_xi} samples are too few for {100 * bound:g} %: the "
+                         f"interpolation along the azimuth alone has {100 * c.azimuth:.2f} "
+                         f"% at the centre of {_where(cell)}; raise grid.{key}")
 
 
 def _why(cell, c: _Centre) -> str:
@@ -713,7 +793,11 @@ def _why(cell, c: _Centre) -> str:
 
 
 def _refuse_count(config, axis: _Axis, cell, c: _Centre, bound: float) -> None:
-    """The error when a cell fails and its axes are at their ``max_count``."""
+    """The error when a cell fails and its axes are at their ``max_count`` (or lists)."""
+    if axis.auto is None:
+        raise InputError(config.source, f"grid.{axis.key}",
+                         f"the listed breakpoints do not meet {100 * bound:g} %: "
+                         f"{_why(cell, c)}; give grid.speeds or grid.tilts_deg as a range")
     raise InputError(config.source, f"grid.{axis.key}.max_count",
                      f"{axis.auto.max_count} breakpoints are not enough for {100 * bound:g} "
                      f"%: {_why(cell, c)}; raise max_count or grid.max_interpolation_error")
