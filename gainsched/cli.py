@@ -582,6 +582,7 @@ def check(table, speed_stride, max_error, azimuth_error):
     from tqdm import tqdm
 
     from .firmware.check import midpoint_check
+    from .schedule.refine import grid_auto_lines
     from .schedule.tables import load_table
 
     t = load_table(table)
@@ -648,11 +649,8 @@ def check(table, speed_stride, max_error, azimuth_error):
     # a grid the build chose promised gains, nominal thrusts and roll (docs/grid.md)
     nominal = t.grid_auto is not None
     if nominal:
-        a = t.grid_auto
-        click.echo(f"  grid chosen by the build for {100 * a['bound']:g}%: speeds "
-                   f"{a['speeds'] or 'as listed'}, tilts {a['tilts_deg'] or 'as listed'}, "
-                   f"azimuth samples {a['azimuth_samples_range'] or 'as given'}; checked on "
-                   "gains, nominal thrusts and roll")
+        click.echo(f"  {grid_auto_lines(t.grid_auto)[0]}; checked on gains, nominal "
+                   "thrusts and roll")
     worst = max(res.max_err, res.max_nominal_err) if nominal else res.max_err
     passed = ok_pts > 0 and 100 * worst <= max_error and stable
     what = "gain, thrust and roll error" if nominal else "max error"

@@ -288,28 +288,22 @@ class GridChoice:
         }
 
     def lines(self) -> list[str]:
-        """What ``gainsched build`` prints of the choice."""
+        """What ``gainsched build`` prints of the choice: the grid, then the errors met
+        and the cost as :func:`grid_auto_lines` renders the record."""
         g = self.config.grid
         tilts = np.rad2deg(g.tilts)
-        v_lo, v_hi, a_lo, a_hi = self.worst_cell
+
+        def source(spec, fixed="as listed"):
+            return f"chosen from {spec}" if spec else fixed
+
         return [
             f"grid chosen for {100 * self.bound:g} %: {g.speeds.size} speeds x {tilts.size} "
-            f"tilts = {g.speeds.size * tilts.size} circles ({self.rounds} rounds)",
-            "  speeds (m/s): " + ", ".join(f"{v:g}" for v in g.speeds),
-            "  tilts (deg): " + ", ".join(f"{a:g}" for a in tilts),
-            f"  azimuth samples: {g.azimuth_samples}"
-            + (f" (chosen from {self.azimuth_spec}; restarted {self.restarts} times)"
-               if self.azimuth_spec else "")
-            + f", interpolation along the azimuth alone {100 * self.azimuth_error:.2f} %",
-            f"  at {self.cells} cell midpoints ({self.skipped} skipped as infeasible): max "
-            f"error {100 * self.max_error:.2f} % (gains {100 * self.gain_error:.2f}, thrusts "
-            f"{100 * self.thrust_error:.2f}, roll {100 * self.roll_error:.2f}) in the cell "
-            f"{v_lo:g}-{v_hi:g} m/s x {a_lo:g}-{a_hi:g} deg; worst midpoint closed loop "
-            f"{self.worst_rho:.5f}",
-            f"  cost: {self.circles + self.centres + self.dropped} circles solved = "
-            f"{self.circles} breakpoints, each once ({self.reused} reused by later rounds) "
-            f"+ {self.centres} cell centres ({self.centres_final} certify the chosen grid)"
-            + (f" + {self.dropped} at a smaller azimuth count" if self.dropped else ""),
+            f"tilts = {g.speeds.size * tilts.size} circles, {g.azimuth_samples} azimuth "
+            f"samples ({source(self.azimuth_spec, 'as given')}; {self.rounds} rounds)",
+            f"  speeds (m/s, {source(self.speeds_spec)}): "
+            + ", ".join(f"{v:g}" for v in g.speeds),
+            f"  tilts (deg, {source(self.tilts_spec)}): " + ", ".join(f"{a:g}" for a in tilts),
+            *grid_auto_lines(self.record())[1:],
         ]
 
 
@@ -745,19 +739,26 @@ def refine_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridChoice:
 
 
 def grid_auto_lines(record: dict) -> list[str]:
-    """What ``gainsched inspect`` prints of a table's ``grid_auto`` record
-    (:meth:`GridChoice.record`)."""
+    """A table's ``grid_auto`` record (:meth:`GridChoice.record`) as ``inspect`` and
+    ``check`` print it (``build`` prints all but the first line): the ranges, the errors
+    met at the cell midpoints, the cost."""
     r = record
     worst = max(r["gain_error"], r["thrust_error"], r["roll_error"])
+    v_lo, v_hi, a_lo, a_hi = r["worst_cell"]
     return [
         f"grid chosen by the build for {100 * r['bound']:g}% (docs/grid.md): speeds "
         f"{r['speeds'] or 'as listed'}, tilts {r['tilts_deg'] or 'as listed'}, azimuth "
         f"samples {r['azimuth_samples_range'] or 'as given'}",
-        f"  at {r['cells']} cell midpoints: max error {100 * worst:.2f}% (gains "
-        f"{100 * r['gain_error']:.2f}, thrusts {100 * r['thrust_error']:.2f}, roll "
-        f"{100 * r['roll_error']:.2f}); worst midpoint closed loop {r['worst_rho']:.5f}; "
-        f"{r['circles'] + r['centres'] + r['dropped']} circles solved in {r['rounds']} "
-        "rounds",
+        f"  at {r['cells']} cell midpoints ({r['skipped']} skipped as infeasible): max "
+        f"error {100 * worst:.2f} % (gains {100 * r['gain_error']:.2f}, thrusts "
+        f"{100 * r['thrust_error']:.2f}, roll {100 * r['roll_error']:.2f}) in the cell "
+        f"{v_lo:g}-{v_hi:g} m/s x {a_lo:g}-{a_hi:g} deg; along the azimuth alone "
+        f"{100 * r['azimuth_error']:.2f} %; worst midpoint closed loop {r['worst_rho']:.5f}",
+        f"  cost: {r['circles'] + r['centres'] + r['dropped']} circles solved = "
+        f"{r['circles']} breakpoints, each once ({r['reused']} reused by later rounds) + "
+        f"{r['centres']} cell centres ({r['centres_final']} certify the chosen grid)"
+        + (f" + {r['dropped']} at a smaller azimuth count ({r['restarts']} restarts)"
+           if r["dropped"] else ""),
     ]
 
 
