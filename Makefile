@@ -7,8 +7,14 @@ BIN   = $(VENV)/bin
 STAMP = $(VENV)/.stamp
 
 PYTEST_ARGS ?=
+# The suite runs in parallel (pytest-xdist), one worker per core, a test module whole on
+# one worker: its tests share what its module fixtures build (flown campaigns, compiled
+# runtimes, tables). (Not --dist loadgroup: xdist 3.8 cannot tag nodes of pytest 9.)
+# PYTEST_WORKERS=0 runs in-process.
+PYTEST_WORKERS ?= auto
+PYTEST_XDIST = -n $(PYTEST_WORKERS) --dist loadfile
 
-.PHONY: venv lint test tables bench paper clean distclean firmware-example firmware-size fuzz \
+.PHONY: venv lint test test-fast test-count tables bench paper clean distclean firmware-example firmware-size fuzz \
 	interrupt-trials
 
 # (Re)create the virtualenv whenever the dependency pins change.
@@ -25,7 +31,16 @@ lint: $(STAMP)
 	$(BIN)/lint-imports --no-cache
 
 test: $(STAMP) lint
-	$(BIN)/python -m pytest $(PYTEST_ARGS)
+	$(BIN)/python -m pytest $(PYTEST_XDIST) $(PYTEST_ARGS)
+
+# The fast tier for iterating: every test module, without the tests marked slow (README).
+test-fast: $(STAMP) lint
+	$(BIN)/python -m pytest $(PYTEST_XDIST) -m "not slow" $(PYTEST_ARGS)
+
+# How many tests and assertions the suite has (tests/tally.py; `python tests/tally.py REV`
+# counts a revision's assertions).
+test-count: $(STAMP)
+	$(BIN)/python tests/tally.py
 
 tables: $(STAMP)
 	$(BIN)/gainsched build configs/paper.toml -o tables/

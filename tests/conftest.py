@@ -1,22 +1,66 @@
-"""Shared fixtures: the paper config (configs/paper.toml) and the reduced model built from it."""
+"""Shared fixtures, factories and markers of the whole suite (one place; docs in README,
+"Tests").
+
+- the paper config (configs/paper.toml), its reduced model and its committed table
+  (tables/paper.h5), loaded once per test process;
+- ``small_config(**keys)``: configs/paper.toml on a 2 x 2 x 8 grid with keys set on top
+  (:mod:`support`), the one way a test makes a variant config;
+- the markers ``needs_cc`` (a host C compiler) and ``needs_arm`` (the Cortex-M4F cross
+  compiler and QEMU), turned into skips with the reason in one hook
+  (:func:`pytest_runtest_setup`);
+- the reference circle of the link-model tests.
+
+Parallel runs (``make test`` runs pytest-xdist): every fixture here is per worker
+process and writes nothing outside pytest's own temporary folders; compiled kernels go
+to the build's content-keyed cache, which concurrent builders share safely
+(gainsched/native/__init__.py).
+"""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
+from threadpoolctl import threadpool_limits
 
 from gainsched.config import load_config
 from gainsched.model.reduced import Model
 from gainsched.schedule.nominal import nominal_from_path
 from gainsched.schedule.path import circle_path, period
+from gainsched.schedule.tables import load_table
 
-REPO = Path(__file__).parents[1]
-PAPER_TOML = REPO / "configs" / "paper.toml"
-#: the open-loop reference circle of the link-model tests: m/s, rad
-CIRCLE_SPEED, CIRCLE_TILT = 8.0, np.deg2rad(20.0)
+import support
+from support import ARM_TOOLS, CC, CIRCLE_SPEED, CIRCLE_TILT, PAPER_H5, PAPER_TOML
+
+# One BLAS thread per test process when pytest-xdist runs one process per core: OpenBLAS'
+# threads spin while they wait, and two processes' spinning threads on two cores made the
+# solve-heavy tests up to 10x slower (measured: a 2 s grid fixture took 20 s). The
+# results do not depend on it: builds pin one BLAS thread themselves
+# (gainsched/native/reproducible.py).
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    threadpool_limits(limits=1, user_api="blas")
+
+#: marker -> the reason a test with it is skipped, or None when the tools are here
+_TOOL_SKIPS = {
+    "needs_cc": None if CC is not None else "no C compiler (set CC, or install gcc)",
+    "needs_arm": None if ARM_TOOLS is not None and CC is not None else (
+        "processor-in-the-loop tests skipped: arm-none-eabi-gcc or qemu-system-arm not found "
+        "(Debian: apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm; "
+        ".ci/run installs them)"),
+}
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Skip a test whose toolchain marker names a tool this machine lacks, saying which."""
+    for name, reason in _TOOL_SKIPS.items():
+        if reason is not None and item.get_closest_marker(name) is not None:
+            pytest.skip(reason)
+
+
+# --------------------------------------------------------------------------- the paper
 
 
 @pytest.fixture(scope="session")
@@ -35,6 +79,25 @@ def paper_text() -> str:
 def paper_config():
     """The loaded paper config (frozen; safe to share)."""
     return load_config(PAPER_TOML)
+
+
+@pytest.fixture(scope="session")
+def paper_table():
+    """The committed paper table, tables/paper.h5 (read once per test process; treat it as
+    read-only)."""
+    return load_table(PAPER_H5)
+
+
+@pytest.fixture(scope="session")
+def paper_c_scheduler(paper_table):
+    """The paper table's gain source through the compiled C runtime
+    (:func:`gainsched.sim.loop.c_runtime_scheduler`), compiled once per test process;
+    None without a C compiler (a test that needs it is marked ``needs_cc``)."""
+    if CC is None:
+        return None
+    from gainsched.sim.loop import c_runtime_scheduler
+
+    return c_runtime_scheduler(paper_table)
 
 
 @pytest.fixture(scope="session")
@@ -58,3 +121,20 @@ def circle(model):
     assert np.all(nom.reasons == 0)
     spline = CubicSpline(t, nom.u, bc_type="periodic")
     return nom, (lambda s: spline(s % T))
+
+
+# --------------------------------------------------------------------------- factories
+
+
+@pytest.fixture(scope="session")
+def small_config():
+    """The factory :func:`support.small_config`: ``small_config(grid__speeds=[3, 9])`` is
+    the paper config on the small grid (2 x 2 x 8) with the speeds changed, validated."""
+    return support.small_config
+
+
+@pytest.fixture(scope="session")
+def small_config_text():
+    """The factory :func:`support.small_config_text`: the same as unvalidated TOML text
+    (for a test that writes a bad value, or a file for the command line)."""
+    return support.small_config_text

@@ -125,6 +125,7 @@ def example_dir(tmp_path_factory):
     return d
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_docstring_examples_run(name, example_dir, monkeypatch):
     obj = getattr(gainsched, name)

@@ -12,11 +12,22 @@ import pytest
 
 from gainsched.budget import GIB, TILT_BATCH, check_budget, estimate_build
 from gainsched.config import Grid, Limits, config_from_text, load_config
+from gainsched.configedit import set_values
 from gainsched.errors import InputError
 from gainsched.schedule import grid as grid_mod
 
 
+def _set(text: str, values: dict) -> str:
+    """``values`` (dotted keys) set in the config text (gainsched.configedit)."""
+    new = set_values(text, values)
+    assert new != text
+    return new
+
+
 def _sub(text: str, key: str, value: str) -> str:
+    """``key = value`` substituted in the text: only for the huge axes (10^4 to 10^6
+    values), which configedit (tomlkit) would take seconds to minutes to write (8 s for
+    10^4 floats, growing with the square of the length)."""
     new = re.sub(rf"(?m)^{key} = .*$", f"{key} = {value}", text)
     assert new != text
     return new
@@ -47,7 +58,7 @@ def test_model_follows_the_grid_sweep(paper_config):
 
 def test_effect_states_count(paper_text):
     """Motor lag adds 4 states to the LQR state: n = 15."""
-    cfg = config_from_text(paper_text + "\n[effects.motor_lag]\ntau = 0.03\n", "lag.toml")
+    cfg = config_from_text(_set(paper_text, {"effects.motor_lag.tau": 0.03}), "lag.toml")
     est = estimate_build(cfg)
     assert est.worker_bytes == 2 * 8 * 7 * 7734 * (15 * 15 + 4 * 15)  # 7 tilts
 
@@ -55,22 +66,24 @@ def test_effect_states_count(paper_text):
 @pytest.mark.parametrize(
     ("case", "edit", "key", "words"),
     [
-        ("azimuth 1e6", lambda t: _sub(t, "azimuth_samples", "1000000"),
+        ("azimuth 1e6", lambda t: _set(t, {"grid.azimuth_samples": 1000000}),
          "grid.azimuth_samples", "[4, 4096]"),
-        ("rate 1e9", lambda t: _sub(t, "rate_hz", "1e9"), "control.rate_hz", "<= 100000 Hz"),
+        ("rate 1e9", lambda t: _set(t, {"control.rate_hz": 1e9}), "control.rate_hz",
+         "<= 100000 Hz"),
         ("1e6 speeds", lambda t: _sub(t, "speeds", _floats(np.linspace(2, 15, 10**6))),
          "grid.speeds", "at most 1 MiB"),
         ("1e5 tilts", lambda t: _sub(t, "tilts_deg", _floats(np.linspace(0, 80, 10**5))),
          "grid.tilts_deg", "at most 1 MiB"),
         ("1000 x 100 grid",
-         lambda t: _sub(_sub(t, "speeds", _floats(np.linspace(2, 15, 1000))), "tilts_deg",
-                        _floats(np.linspace(0, 45, 100))),
+         lambda t: _set(t, {"grid.speeds": [float(v) for v in np.linspace(2, 15, 1000)],
+                            "grid.tilts_deg": [float(a) for a in np.linspace(0, 45, 100)]}),
          "grid.speeds", "GiB per worker (the table of 100 tilts x 1000 speeds x 36 azimuth"),
-        ("1e5 Hz at 0.5 m/s", lambda t: _sub(_sub(t, "rate_hz", "1e5"), "speeds", "[0.5, 15]"),
+        ("1e5 Hz at 0.5 m/s",
+         lambda t: _set(t, {"control.rate_hz": 1e5, "grid.speeds": [0.5, 15]}),
          "control.rate_hz",
          "GiB per worker (control.rate_hz 100000 Hz: 2e+06 steps per period at 0.5 m/s); "
          "limit limits.max_memory_gib = 8"),
-        ("1 mm/s", lambda t: _sub(t, "speeds", "[0.001, 15]"), "grid.speeds",
+        ("1 mm/s", lambda t: _set(t, {"grid.speeds": [0.001, 15]}), "grid.speeds",
          "GiB per worker (grid.speeds down to 0.001 m/s: 1e+07 steps per period at 1000 Hz)"),
         ("10000 speeds", lambda t: _sub(t, "speeds", _floats(np.linspace(2, 15, 10000))),
          "grid.speeds", "CPU-s to build (7 tilts x 10000 speeds = 70000 circles); "
@@ -103,19 +116,19 @@ def test_estimate_is_fast_for_a_million_speeds(paper_config):
 
 
 def test_limits_section(paper_text):
-    low_mem = paper_text + "\n[limits]\nmax_memory_gib = 0.01\n"
+    low_mem = _set(paper_text, {"limits.max_memory_gib": 0.01})
     with pytest.raises(InputError) as info:
         config_from_text(low_mem, "low.toml")
     assert info.value.where == "grid.speeds"
     assert info.value.message.endswith("limit limits.max_memory_gib = 0.01")
-    low_cpu = paper_text + "\n[limits]\nmax_build_cpu_s = 1\n"
+    low_cpu = _set(paper_text, {"limits.max_build_cpu_s": 1})
     with pytest.raises(InputError, match=r"^low.toml: grid.tilts_deg: needs about 5 CPU-s"):
         config_from_text(low_cpu, "low.toml")
     # raising the limits admits what the defaults refuse
     big = _sub(paper_text, "speeds", _floats(np.linspace(2, 15, 10000)))
     with pytest.raises(InputError, match="max_build_cpu_s = 1800"):
         config_from_text(big, "big.toml")
-    cfg = config_from_text(big + "\n[limits]\nmax_build_cpu_s = 1e4\n", "big.toml")
+    cfg = config_from_text(_set(big, {"limits.max_build_cpu_s": 1e4}), "big.toml")
     assert cfg.limits == Limits(8.0, 1e4)
 
 

@@ -443,11 +443,11 @@ def test_plausible_edges_pass(paper_text):
     assert (cfg.limits.max_memory_gib, cfg.limits.max_build_cpu_s) == (0.5, 1800.0)
 
 
-def test_integral_states_set_the_size_of_Q():
+def test_integral_states_set_the_size_of_Q(paper_config):
     """``integrator`` (int_delta) and ``azimuth_integral`` (int_xi) each add one LQR state
     after the reduced state; Q must have one entry per state, and a wrong size is refused
     naming the order."""
-    base = load_config("configs/paper.toml")
+    base = paper_config
     assert base.control.integrators == ("int_delta",) and base.control.n_lqr == 11
     both = base.with_values({"control.azimuth_integral": True,
                              "control.Q": [3, 0.2, 1, 1, 1, 2, 0.5, 1, 1, 1, 0.5, 2.0]})
@@ -464,11 +464,12 @@ def test_integral_states_set_the_size_of_Q():
         base.with_values({"control.azimuth_integral": True, "control.Q": Q.tolist()})
 
 
-def test_max_time_constant_is_optional_bounded_below_and_needs_a_periodic_terminal():
+def test_max_time_constant_is_optional_bounded_below_and_needs_a_periodic_terminal(
+        paper_config):
     """``[control] max_time_constant_s``: None by default; at least 10 control periods
     (0.01 s at 1 kHz); positive; only with the periodic terminal cost (a one-period
     horizon guarantees no decay rate). Errors name the key."""
-    base = load_config("configs/paper.toml")
+    base = paper_config
     assert base.control.max_time_constant_s is None
     assert base.with_values({"control.max_time_constant_s": 1.5}).control.max_time_constant_s \
         == 1.5
@@ -484,8 +485,8 @@ def test_max_time_constant_is_optional_bounded_below_and_needs_a_periodic_termin
         base.with_values({"control.max_time_constant_s": 1.5, "control.terminal": "single-period"})
 
 
-def test_max_gain_is_optional_and_positive():
-    base = load_config("configs/paper.toml")
+def test_max_gain_is_optional_and_positive(paper_config):
+    base = paper_config
     assert base.control.max_gain is None
     assert base.with_values({"control.max_gain": 50.0}).control.max_gain == 50.0
     with pytest.raises(InputError, match=r"control\.max_gain: "):

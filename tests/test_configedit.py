@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import tomllib
-from pathlib import Path
 
 import pytest
 
 from gainsched.config import config_from_text
 from gainsched.configedit import get_value, remove_key, set_section, set_value, set_values
 
-PAPER = Path(__file__).resolve().parents[1] / "configs/paper.toml"
+from support import PAPER_TOML as PAPER
 
 
 def test_set_value_keeps_everything_else():

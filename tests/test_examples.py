@@ -65,6 +65,7 @@ def test_plot_gains_is_15_lines_and_plots_the_table(root_like, monkeypatch):
     plt.close("all")
 
 
+@pytest.mark.slow
 def test_model_vs_measurement_loop_finds_the_effects_and_converges(root_like):
     """The loop from Python on the example flights: two effects are added, the last round
     says no effect is needed, the improved config is valid and the reports are written."""

@@ -2,16 +2,14 @@
 
 The contract: one line ``gainsched: error: FILE: KEY: ...`` naming the file and
 the key, dataset, column or option; exit code 2; no traceback; the old outputs
-intact. (Config and flight-log checks: tests/test_config.py, tests/test_logs.py.)
+intact. (Config and flight-log checks: tests/test_config.py, tests/analysis/test_logs.py.)
 """
 
 from __future__ import annotations
 
 import errno
 import os
-import re
 import struct
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -24,10 +22,11 @@ from gainsched.errors import InputError
 from gainsched.publish import JOURNAL, publish, recover, staged
 from gainsched.schedule.tables import _dataset_sha256, _datasets, _root_sha256, load_table
 
-ROOT = Path(__file__).parents[1]
-PAPER = ROOT / "configs" / "paper.toml"
-TABLE = ROOT / "tables" / "paper.h5"
-FLIGHT = ROOT / "examples" / "flights" / "v9.csv"
+from support import PAPER_H5 as TABLE
+from support import PAPER_TOML as PAPER
+from support import REPO, paper_config_text, small_config_text
+
+FLIGHT = REPO / "examples" / "flights" / "v9.csv"
 
 
 def _run(*args):
@@ -141,9 +140,8 @@ def test_table_with_three_states_is_refused(table_copy):
 
 def test_inspect_all_infeasible_table(tmp_path):
     """A table gainsched built itself with no feasible circle (too slow: slack)."""
-    text = re.sub(r"^speeds = .*$", "speeds = [0.5, 1.0]", PAPER.read_text(), flags=re.M)
     cfg = tmp_path / "slow.toml"
-    cfg.write_text(re.sub(r'^name = ".*"$', 'name = "slow"', text, flags=re.M))
+    cfg.write_text(paper_config_text(name="slow", grid__speeds=[0.5, 1.0]))
     res = _run("build", cfg, "-o", tmp_path / "out")
     assert res.exit_code == 0, res.output
     res = _run("inspect", tmp_path / "out" / "slow.h5")
@@ -232,6 +230,7 @@ def _disk_full_after(monkeypatch, n_ok):
     monkeypatch.setattr(pub, "_fsync", fake)
 
 
+@pytest.mark.slow
 def test_compare_on_a_full_disk_keeps_the_old_report(tmp_path, monkeypatch):
     out = tmp_path / "report"
     res = _run("compare", PAPER, FLIGHT, "-o", out, "--no-paper")
@@ -243,14 +242,12 @@ def test_compare_on_a_full_disk_keeps_the_old_report(tmp_path, monkeypatch):
 
 
 def test_build_on_a_full_disk_keeps_the_old_set(tmp_path, monkeypatch):
-    text = re.sub(r"^speeds = .*$", "speeds = [6, 9]", PAPER.read_text(), flags=re.M)
-    text = re.sub(r"^tilts_deg = .*$", "tilts_deg = [0, 20]", text, flags=re.M)
     cfg = tmp_path / "small.toml"
-    cfg.write_text(re.sub(r'^name = ".*"$', 'name = "small"', text, flags=re.M))
+    cfg.write_text(small_config_text(grid__azimuth_samples=None))  # the paper's 36 azimuths
     out = tmp_path / "out"
     assert _run("build", cfg, "-o", out).exit_code == 0
     old = {p.name: p.read_bytes() for p in out.iterdir()}
-    cfg.write_text(cfg.read_text().replace("azimuth_samples = 36", "azimuth_samples = 12"))
+    cfg.write_text(small_config_text(grid__azimuth_samples=12))
     _disk_full_after(monkeypatch, 2)
     one_line_error(_run("build", cfg, "-o", out), out, "-o", "disk full")
     assert {p.name: p.read_bytes() for p in out.iterdir()} == old

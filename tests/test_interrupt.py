@@ -30,18 +30,16 @@ import pytest
 
 from gainsched.publish import recover
 
-ROOT = Path(__file__).parents[1]
+from support import small_config_text
+
 TRIALS = int(os.environ.get("GAINSCHED_INTERRUPT_TRIALS", "8"))
 SET = ("gainsched_control.c", "gainsched_control.h", "gainsched_runtime.c", "gainsched_runtime.h",
        "trial.h5", "trial_control.h", "trial_gains.h")
 
 
 def _config(n_xi: int) -> str:
-    text = (ROOT / "configs" / "paper.toml").read_text()
-    text = re.sub(r'^name = ".*"$', 'name = "trial"', text, flags=re.M)
-    text = re.sub(r"^speeds = .*$", "speeds = [4, 6, 9, 12, 15]", text, flags=re.M)
-    text = re.sub(r"^tilts_deg = .*$", "tilts_deg = [0, 10, 20, 30]", text, flags=re.M)
-    return re.sub(r"^azimuth_samples = .*$", f"azimuth_samples = {n_xi}", text, flags=re.M)
+    return small_config_text(name="trial", grid__speeds=[4, 6, 9, 12, 15],
+                             grid__tilts_deg=[0, 10, 20, 30], grid__azimuth_samples=n_xi)
 
 
 def _build(cfg: Path, out: Path) -> subprocess.Popen:

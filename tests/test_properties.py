@@ -11,7 +11,6 @@ table that still loads after a flipped byte must hold exactly the old data
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,23 +22,16 @@ from gainsched.cli import cli
 from gainsched.errors import InputError
 from gainsched.schedule.tables import load_table
 
-ROOT = Path(__file__).parents[1]
-PAPER = ROOT / "configs" / "paper.toml"
-FLIGHT = ROOT / "examples" / "flights" / "v9.csv"
+from support import PAPER_TOML as PAPER
+from support import REPO, small_config_text
+
+FLIGHT = REPO / "examples" / "flights" / "v9.csv"
 SETTINGS = dict(deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
                                        HealthCheck.too_slow])
 
 
-def _small_config() -> str:
-    text = PAPER.read_text()
-    text = re.sub(r'^name = ".*"$', 'name = "prop"', text, flags=re.M)
-    text = re.sub(r"^speeds = .*$", "speeds = [6, 9]", text, flags=re.M)
-    text = re.sub(r"^tilts_deg = .*$", "tilts_deg = [0, 20]", text, flags=re.M)
-    return re.sub(r"^azimuth_samples = .*$", "azimuth_samples = 8", text, flags=re.M)
-
-
-CONFIG = _small_config()
+CONFIG = small_config_text(name="prop")
 LINES = CONFIG.splitlines()
 VALUE_LINES = [i for i, ln in enumerate(LINES) if re.match(r"^\s*[A-Za-z_]+\s*=", ln)]
 
@@ -172,6 +164,7 @@ def small_table(tmp_path_factory):
     return d / "prop.h5"
 
 
+@pytest.mark.slow
 @settings(max_examples=80, **SETTINGS)
 @given(pos=st.floats(0, 1, exclude_max=True), bit=st.integers(0, 7))
 def test_flipped_table_bit_is_refused_or_harmless(small_table, tmp_path_factory, pos, bit):

@@ -10,22 +10,19 @@ scenarios load, and nothing reaches back into the checkout.
 from __future__ import annotations
 
 import os
-import re
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
+from support import small_config_text
+
 ROOT = Path(__file__).parents[1]
 
 
 def _small_config(path: Path) -> Path:
-    text = (ROOT / "configs" / "paper.toml").read_text()
-    text = re.sub(r'^name = ".*"$', 'name = "wheel"', text, flags=re.M)
-    text = re.sub(r"^speeds = .*$", "speeds = [6, 9]", text, flags=re.M)
-    text = re.sub(r"^tilts_deg = .*$", "tilts_deg = [0, 20]", text, flags=re.M)
-    path.write_text(re.sub(r"^azimuth_samples = .*$", "azimuth_samples = 8", text, flags=re.M))
+    path.write_text(small_config_text(name="wheel"))
     return path
 
 

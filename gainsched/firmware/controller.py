@@ -41,7 +41,7 @@ One control step (``gs_ctrl_update``; docs/runtime.md, "The controller"):
    feedback and freezes the integrators; a bad gyro sample (``CTRL_BAD_IMU``) keeps
    the last good one and drops the rate feedback.
 
-This module computes the same in double precision; tests/test_controller.py holds
+This module computes the same in double precision; tests/firmware/test_controller.py holds
 the C controller (compiled for the host, and on the emulated Cortex-M4F) to it.
 """
 

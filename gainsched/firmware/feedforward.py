@@ -24,7 +24,7 @@ This module is the Python reference of that computation (``feedforward``), in do
 precision on the table's own float32 constants (``RuntimeData.vehicle``, the
 ``gs_vehicle`` of the header); ``gs_lookup_nominal`` in
 ``gainsched/firmware/c/gainsched_runtime.c`` is its C form, with the same clamps and
-guards, and tests/test_feedforward_c.py holds the two together.
+guards, and tests/firmware/test_feedforward_c.py holds the two together.
 """
 
 from __future__ import annotations

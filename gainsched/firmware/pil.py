@@ -8,7 +8,7 @@ board support ``templates/pil_board.c`` and ``templates/pil.ld``) are cross-comp
 single-precision FPU, hard-float ABI) and run on QEMU's ``mps2-an386`` board; the
 queries go in and the outputs come out through ARM semihosting. The tests compare
 every output bit for bit with the host build and the Python reference
-(``tests/test_pil.py``); ``make bench`` counts the instructions a lookup executes
+(``tests/firmware/test_pil.py``); ``make bench`` counts the instructions a lookup executes
 (:func:`instructions_per_lookup`). The tools come from the distribution's packages
 (Debian: ``gcc-arm-none-eabi``, ``libnewlib-arm-none-eabi``, ``qemu-system-arm``).
 """

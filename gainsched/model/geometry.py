@@ -224,7 +224,7 @@ def pose_from_reduced(z, rho, p_e):
 # One-sample forms of the two pose conversions, in scalar math: the simulator's pose
 # sensor calls them once per sample, where numpy's per-operation overhead (~80 us per
 # call for the batched forms) would cost more than the plant step. Same formulas;
-# tests/test_geometry.py checks them against the batched forms.
+# tests/model/test_geometry.py checks them against the batched forms.
 
 
 def _pose_from_reduced_one(z, rho, p_e):

@@ -299,7 +299,7 @@ class Model:
         (n_z,) moving at ``z_dot`` (real): the one-sample form of :meth:`kinematics` and
         :meth:`cog_acceleration` in scalar math, for per-step code (the simulator's
         sensors: ~20 us where the batched forms spend ~0.5 ms in numpy's per-call
-        overhead). tests/test_controller.py checks it against them.
+        overhead). tests/firmware/test_controller.py checks it against them.
 
         Returns
         -------

@@ -20,7 +20,7 @@ Determinism: the flags keep IEEE semantics (no ``-ffast-math``, no FMA
 contraction, no ``-march=native``) and the vector width only changes how many
 points share an instruction, never the order of the operations of one point,
 so a kernel gives the same bits on any x86-64 machine whatever its vector unit
-(checked in ``tests/test_lqr.py`` by building every variant the host can run).
+(checked in ``tests/schedule/test_lqr.py`` by building every variant the host can run).
 
 Cache: ``$GAINSCHED_CACHE`` or ``$XDG_CACHE_HOME/gainsched`` (default
 ``~/.cache/gainsched``); the library name carries a hash of the source, the

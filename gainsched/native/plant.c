@@ -8,7 +8,7 @@
  * overhead of ~100 small numpy operations), which caps the simulator at
  * ~0.3x real time. The physics here is a line-by-line transcription of
  * Model.evaluate and of the state-only effects of gainsched/model/effects.py; the
- * numpy model stays the reference (tests/test_fastplant.py holds the two
+ * numpy model stays the reference (tests/sim/test_fastplant.py holds the two
  * together to 1e-12) and the fallback (gainsched/sim/fastplant.py).
  *
  * State z = (delta, xi, delta', xi', phi, theta, chi, wx, wy, wz, effect states)

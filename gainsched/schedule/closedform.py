@@ -27,7 +27,7 @@ def _state_from_roll(path: AzimuthPath, phi, dphi, ddphi):
 
     Kept in this operation order (not the general formula with zero offsets, which
     rounds differently in the last bit) so that tables stay byte-identical to those
-    built before the offsets existed; tests/test_offsets.py holds the two equal.
+    built before the offsets existed; tests/schedule/test_offsets.py holds the two equal.
     """
     n = path.t.shape[0]
     xd, xdd = path.d[0], path.d[1]

@@ -554,7 +554,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     the sensing rate with noise and latency, fused with a prediction of the design
     model between updates, and gyro body rates (paper Sec. V.A). The rigid-link plant
     runs on the compiled kernel when a C compiler is available (the same results as the
-    numpy model to rounding, see tests/test_fastplant.py); ``GAINSCHED_NATIVE=0`` forces
+    numpy model to rounding, see tests/sim/test_fastplant.py); ``GAINSCHED_NATIVE=0`` forces
     the numpy model (about 0.3x real time instead of 80x).
 
     Examples

@@ -200,7 +200,7 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
 /*
  * The runtime's own single-precision trigonometry (no libm, so that host and
  * target compute the same bits). Error bounds against double precision of the
- * same float input (held by tests/test_feedforward_c.py):
+ * same float input (held by tests/firmware/test_feedforward_c.py):
  *   gs_sincosf  |error| <= 1.5e-7 for |x| <= GS_XI_LIMIT (1e4 rad)
  *   gs_atan2f   |error| <= 3e-7 rad, all quadrants; gs_atan2f(0, 0) = 0 and
  *               gs_atan2f(-0, x < 0) = +pi

@@ -1,0 +1,139 @@
+"""Effects as the one place physics is added (issue 13): hooks and the registry.
+
+- the exact held-command states of the motor lag against a fine integration of its
+  own ``state_derivative`` (an independent second formulation);
+- a user-defined effect becomes nameable in configs through ``registered_effect``,
+  and only inside the block;
+- the simulator says once, in one line, when the compiled plant cannot run a config.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gainsched.cli import cli
+from gainsched.config import config_from_text
+from gainsched.errors import InputError
+from gainsched.model.effects import (
+    Drag,
+    Effect,
+    MotorLag,
+    Param,
+    _induced_velocity,
+    registered_effect,
+)
+from gainsched.model.reduced import Model
+
+from support import PAPER_H5, PAPER_TOML, REPO, paper_config_text
+
+
+def test_motor_lag_held_commands_equal_fine_integration():
+    tau, dt = 0.03, 0.005  # s
+    lag = MotorLag(tau=tau)
+    rng = np.random.default_rng(3)
+    t = np.arange(60) * dt
+    T_cmd = 1.2 + 0.3 * rng.standard_normal((60, 4))  # N, held over each interval
+    exact = lag.states_from_held_commands(t, T_cmd)
+    x = T_cmd[0].copy()  # steady state at the first command
+    sub, ref = 50, [T_cmd[0].copy()]
+    h = dt / sub
+    for k in range(1, t.size):  # the command of sample k acts over (t_{k-1}, t_k]
+        f = lambda y, u=T_cmd[k]: lag.state_derivative(y, u, None)  # noqa: E731
+        for _ in range(sub):  # classical RK4, error ~ (h / tau)^5 ~ 1e-12
+            k1 = f(x)
+            k2 = f(x + h / 2 * k1)
+            k3 = f(x + h / 2 * k2)
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + f(x + h * k3))
+        ref.append(x.copy())
+    np.testing.assert_allclose(exact, np.array(ref), rtol=0, atol=1e-10)  # N
+
+
+def test_stateless_effects_have_no_held_command_form():
+    assert Drag(mu1=0.1, mu2=0.0).states_from_held_commands(np.arange(3.0), np.ones((3, 4))) \
+        is None
+
+
+def _largest_root(vh, vz, vxy):
+    """Largest positive real root of v^2 ((v + vz)^2 + vxy^2) = vh^4, by numpy's companion
+    matrix (an independent solver)."""
+    r = np.roots([1.0, 2 * vz, vz * vz + vxy * vxy, 0.0, -vh ** 4])
+    r = r[np.abs(r.imag) < 1e-7 * vh].real
+    return float(r[r > 0].max())
+
+
+def test_momentum_induced_velocity_is_the_largest_root_everywhere():
+    """The induced velocity of paper eq. 29 over hover, climb, descent, vortex ring and
+    fast forward flight: the largest root (rel. 1e-9), with its complex-step derivative
+    equal to a central difference (rel. 1e-6)."""
+    vh = np.array([2.0, 5.0, 11.0])  # m/s
+    ratio = np.linspace(-3.0, 3.0, 25)  # vz / vh
+    vxy = np.array([0.0, 1.0, 4.0, 15.0])  # m/s
+    VH, R, VXY = np.meshgrid(vh, ratio, vxy, indexing="ij")
+    VZ = R * VH
+    v = _induced_velocity(VH, VZ, VXY ** 2)
+    ref = np.vectorize(_largest_root)(VH, VZ, VXY)
+    np.testing.assert_allclose(v, ref, rtol=1e-9)
+    h = 1e-6
+    cs = _induced_velocity(VH, VZ + 1e-30j, VXY ** 2 + 0j).imag / 1e-30
+    up, down = (_induced_velocity(VH, VZ + s, VXY ** 2) for s in (h, -h))
+    cd = (up - down) / (2 * h)
+    np.testing.assert_allclose(cs, cd, rtol=1e-6, atol=1e-6)
+
+
+class _Wake(Effect):
+    """A test effect: a relative thrust loss (position- or velocity-free, for the registry)."""
+
+    kind = "test_wake"
+    params = (Param("depth", "-", 0.0, 0.0, 0.5, "relative thrust loss"),)
+
+    def modify_thrust(self, T, kin, x):
+        return T * (1 - self.depth)
+
+
+def _with_wake(depth: float) -> str:
+    return paper_config_text(**{"effects.test_wake.depth": depth})
+
+
+def test_registered_effect_is_nameable_only_inside_the_block():
+    text = _with_wake(0.1)
+    with pytest.raises(InputError, match="unknown effect"):
+        config_from_text(text, "wake.toml")
+    with registered_effect(_Wake):
+        cfg = config_from_text(text, "wake.toml")
+        model = Model(cfg)
+        assert any(isinstance(e, _Wake) and e.depth == 0.1 for e in model.effects)
+        with pytest.raises(InputError, match=r"effects.test_wake.depth"):
+            config_from_text(_with_wake(0.9), "wake.toml")  # bounds from the class's Param
+    with pytest.raises(InputError, match="unknown effect"):
+        config_from_text(text, "wake.toml")
+
+
+def test_registered_effect_refuses_a_clash():
+    class OtherDrag(Effect):
+        kind = "drag"
+
+    with pytest.raises(ValueError, match="exists already"), registered_effect(OtherDrag):
+        pass
+
+
+@pytest.mark.slow
+def test_simulator_says_once_when_the_compiled_plant_cannot_run_it(tmp_path):
+    """thrust_momentum has no compiled form: one warning line, and the flight still flies."""
+    import gainsched.sim.loop as loop
+
+    loop._FALLBACKS_SEEN.clear()
+    text = paper_config_text(**{"effects.thrust_momentum.disk_area": 0.02})
+    plant = tmp_path / "plant.toml"
+    plant.write_text(text)
+    scenario = tmp_path / "short.toml"  # the numpy plant is slow: a 0.5 s flight
+    scenario.write_text((REPO / "gainsched/sim/scenarios/horizontal.toml").read_text()
+                        .replace("duration = 5.0", "duration = 0.5"))
+    args = ["simulate", str(PAPER_TOML), "--tables", str(PAPER_H5), "--scenario",
+            str(scenario), "--plant", str(plant), "-o", str(tmp_path / "out")]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0, res.output
+    lines = [ln for ln in res.stderr.splitlines() if ln.startswith("gainsched: warning:")]
+    assert len(lines) == 1 and "thrust_momentum" in lines[0] and "numpy model" in lines[0]
+    assert "Warning:" not in res.stderr  # no Python-style warning text

@@ -1,0 +1,223 @@
+"""Maximal coordinates (gainsched.model.maximal) agree with the reduced model where both apply."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from gainsched.model.effects import MotorLag
+from gainsched.model.maximal import MaximalModel, maximal_from_reduced, reduced_from_maximal
+from gainsched.model.rotations import matrix_from_quaternion
+
+from support import CIRCLE_TILT as TILT
+
+K_STIFF = 1e6  # N/m
+C_STIFF = 2 * np.sqrt(K_STIFF * 0.5)  # N s/m, critical for the 0.5 kg vehicle on the spring
+
+
+def random_states(rng, n):
+    """Random reduced states with xi in (-pi, pi) and |theta| < pi/2, shape (n, 10)."""
+    z = np.empty((n, 10))
+    z[:, 0] = rng.uniform(0.3, np.pi - 0.3, n)
+    z[:, 1] = rng.uniform(-3.1, 3.1, n)
+    z[:, 2:4] = rng.uniform(-8.0, 8.0, (n, 2))
+    z[:, 4] = rng.uniform(-3.0, 3.0, n)
+    z[:, 5] = rng.uniform(-1.4, 1.4, n)
+    z[:, 6] = rng.uniform(-3.0, 3.0, n)
+    z[:, 7:10] = rng.uniform(-5.0, 5.0, (n, 3))
+    return z
+
+
+def prestretched(model, x, u, alpha, k):
+    """Move the COG outward by the static stretch f_t / k (the spring starts near equilibrium)."""
+    f_t = MaximalModel(model, "rigid").tension(x, u, alpha)
+    R = matrix_from_quaternion(x[6:10])
+    p_t = x[:3] + R @ model.p_e
+    out = x.copy()
+    out[:3] += p_t / np.linalg.norm(p_t) * f_t / k
+    return out
+
+
+def simulate_both(model, mx, z0, u_fn, alpha, t_end=1.0, method="DOP853", rtol=1e-11):
+    """COG positions (m) of the reduced and the maximal run on a common time grid."""
+    ts = np.linspace(0.0, t_end, 201)
+    red = solve_ivp(lambda t, z: model.f(z, u_fn(t), alpha), (0, t_end), z0, method="DOP853",
+                    rtol=1e-11, atol=1e-11, t_eval=ts)
+    x0 = maximal_from_reduced(model, z0)
+    if mx.link == "spring-damper":
+        x0 = prestretched(model, x0, u_fn(0.0), alpha, mx.k)
+    mxs = solve_ivp(lambda t, x: mx.f(x, u_fn(t), alpha), (0, t_end), x0, method=method,
+                    rtol=rtol, atol=rtol, t_eval=ts)
+    assert red.success and mxs.success
+    return ts, model.cog_position(red.y.T), mxs.y.T, red.y.T
+
+
+# --------------------------------------------------------------------------- conversions
+
+
+def test_round_trip_reduced_maximal_reduced(model):
+    rng = np.random.default_rng(11)
+    z = random_states(rng, 200)
+    x = maximal_from_reduced(model, z)
+    assert x.shape == (200, 13)
+    np.testing.assert_allclose(np.linalg.norm(x[:, 6:10], axis=1), 1.0, rtol=0, atol=1e-15)
+    back = reduced_from_maximal(model, x)
+    np.testing.assert_allclose(back, z, rtol=0, atol=1e-12)
+    # one state at a time (unbatched) and the xi branch
+    np.testing.assert_allclose(reduced_from_maximal(model, x[0]), z[0], rtol=0, atol=1e-12)
+    far = reduced_from_maximal(model, x[:5], xi_ref=z[:5, 1] + 20 * np.pi)
+    np.testing.assert_allclose(far[:, 1] - z[:5, 1], 20 * np.pi, rtol=0, atol=1e-12)
+
+
+def test_maximal_state_geometry(model):
+    """The attachment point of the converted state is at rho e(delta, xi); v is the COG velocity."""
+    rng = np.random.default_rng(12)
+    z = random_states(rng, 20)
+    x = maximal_from_reduced(model, z)
+    R = matrix_from_quaternion(x[:, 6:10])
+    p_t = x[:, :3] + R @ model.p_e
+    e = np.stack([np.sin(z[:, 0]) * np.cos(z[:, 1]), np.sin(z[:, 0]) * np.sin(z[:, 1]),
+                  np.cos(z[:, 0])], -1)
+    np.testing.assert_allclose(p_t, model.rho * e, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(x[:, :3], model.cog_position(z), rtol=0, atol=1e-14)
+    h = 1e-6
+    zd = model.f(z, np.ones(4), 0.3)
+    v_fd = (model.cog_position(z + h * zd) - model.cog_position(z - h * zd)) / (2 * h)
+    np.testing.assert_allclose(x[:, 3:6], v_fd, rtol=0, atol=1e-7)
+
+
+# --------------------------------------------------------------------------- instantaneous
+
+
+def test_rigid_link_matches_reduced_accelerations(model):
+    """At random taut states: same tension, same COG acceleration, same omega'.
+
+    The COG acceleration of the reduced model is the central difference (h = 1e-6) of the
+    COG velocity along z' (error ~1e-9 relative); tolerance 1e-7 of the scale.
+    """
+    rng = np.random.default_rng(13)
+    z = random_states(rng, 50)
+    u = rng.uniform(0.2, 3.0, (50, 4))
+    alpha = 0.4
+    mx = MaximalModel(model, "rigid")
+    ev = model.evaluate(z, u, alpha)
+    x = maximal_from_reduced(model, z)
+    x_dot, f_t = mx.evaluate(x, u, alpha)
+    np.testing.assert_allclose(f_t, ev.tension, rtol=0, atol=1e-9 * np.abs(ev.tension).max())
+    h = 1e-6
+    a_fd = (maximal_from_reduced(model, z + h * ev.z_dot)[:, 3:6]
+            - maximal_from_reduced(model, z - h * ev.z_dot)[:, 3:6]) / (2 * h)
+    np.testing.assert_allclose(x_dot[:, 3:6], a_fd, rtol=0, atol=1e-7 * np.abs(a_fd).max())
+    np.testing.assert_allclose(x_dot[:, 10:13], ev.z_dot[:, 7:10], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(x_dot[:, 0:3], x[:, 3:6], rtol=0, atol=0)
+    # a single state evaluates like the batch
+    one = mx.evaluate(x[3], u[3], alpha)
+    np.testing.assert_allclose(one[0], x_dot[3], rtol=1e-13, atol=1e-12)
+
+
+def test_spring_damper_is_tension_only(model):
+    """Slack (inside the sphere, or stretched but retracting fast enough): zero tension."""
+    rng = np.random.default_rng(14)
+    z = random_states(rng, 10)
+    z[:, 2:4] = 0.0  # attachment point at rest relative to the anchor (rate term 0 below)
+    z[:, 7:10] = 0.0
+    x = maximal_from_reduced(model, z)
+    mx = MaximalModel(model, "spring-damper", stiffness=1e4, damping=10.0)
+    R = matrix_from_quaternion(x[:, 6:10])
+    n = (x[:, :3] + R @ model.p_e) / model.rho
+    u = np.full((10, 4), 1.0)
+    for shift in (-1e-3, -0.2):  # inside the sphere: slack
+        xs = x.copy()
+        xs[:, :3] += shift * n
+        assert np.all(mx.tension(xs, u, 0.3) == 0.0)
+        acc = mx.f(xs, u, 0.3)[:, 3:6]  # free flight: thrust + gravity + drag (v = 0)
+        free = (R[:, :, 2] * 4.0 + model.m * model.g_C(0.3)) / model.m
+        np.testing.assert_allclose(acc, free, rtol=0, atol=1e-12)
+    xs = x.copy()
+    xs[:, :3] += 1e-3 * n  # stretched 1 mm, at rest: k * stretch
+    np.testing.assert_allclose(mx.tension(xs, u, 0.3), 10.0, rtol=1e-9)
+    xs[:, 3:6] -= 2.0 * n  # retracting at 2 m/s: 10 - 10 * 2 < 0 -> slack
+    assert np.all(mx.tension(xs, u, 0.3) == 0.0)
+    # the rigid link keeps its bilateral multiplier (can be negative when pushed)
+    assert np.all(np.isfinite(MaximalModel(model, "rigid").tension(xs, u, 0.3)))
+
+
+def test_stateful_effects_not_supported(paper_config):
+    from gainsched.model.reduced import Model
+
+    with pytest.raises(NotImplementedError):
+        MaximalModel(Model(paper_config, effects=(MotorLag(),)))
+    with pytest.raises(ValueError, match="link"):
+        MaximalModel(Model(paper_config), link="bungee")
+
+
+# --------------------------------------------------------------------------- trajectories
+
+
+@pytest.mark.parametrize("perturbed", [False, True], ids=["nominal", "perturbed"])
+def test_rigid_trajectory_agrees(model, circle, perturbed):
+    """1 s open loop on the 8 m/s, 20 deg circle with u_d(t): COG difference <= 1 mm.
+
+    (Measured ~1e-12 m; the constraint drift |p_t| - rho stays below 1e-9 m.)
+    """
+    nom, u_fn = circle
+    z0 = nom.z[0].copy()
+    if perturbed:
+        rng = np.random.default_rng(21)
+        z0 += np.concatenate(
+            [rng.normal(0, 0.02, 4), rng.normal(0, 0.05, 3), rng.normal(0, 0.3, 3)]
+        )
+    mx = MaximalModel(model, "rigid")
+    ts, p_red, xs, zs = simulate_both(model, mx, z0, u_fn, TILT)
+    assert np.abs(p_red - xs[:, :3]).max() <= 1e-3
+    assert np.abs(p_red - xs[:, :3]).max() <= 1e-8  # far tighter in practice
+    R = matrix_from_quaternion(xs[:, 6:10])
+    dist = np.linalg.norm(xs[:, :3] + R @ model.p_e, axis=1)
+    assert np.abs(dist - model.rho).max() <= 1e-9
+    assert model.evaluate(zs, u_fn(ts), TILT).tension.min() > 0
+    # and the comparison can fail: the COG moved far over the second
+    assert np.abs(p_red - p_red[0]).max() > 1.0
+    back = reduced_from_maximal(model, xs, xi_ref=zs[:, 1])
+    np.testing.assert_allclose(back, zs, rtol=0, atol=1e-7)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("perturbed", [False, True], ids=["nominal", "perturbed"])
+def test_stiff_spring_trajectory_agrees(model, circle, perturbed):
+    """k = 1e6 N/m, critical damping: COG difference <= 1 mm over 1 s.
+
+    The spring's fast mode (|lambda| ~ 1.4e3 1/s) makes DOP853 stability-limited
+    (~5e4 evaluations); Radau, an L-stable implicit method, is used instead.
+    The difference is dominated by the stretch f_t / k ~ 2e-5 m (measured 7.5e-5 m).
+    """
+    nom, u_fn = circle
+    z0 = nom.z[0].copy()
+    if perturbed:
+        rng = np.random.default_rng(22)
+        z0 += np.concatenate(
+            [rng.normal(0, 0.02, 4), rng.normal(0, 0.05, 3), rng.normal(0, 0.3, 3)]
+        )
+    mx = MaximalModel(model, "spring-damper", stiffness=K_STIFF, damping=C_STIFF)
+    ts, p_red, xs, _ = simulate_both(model, mx, z0, u_fn, TILT, method="Radau", rtol=1e-9)
+    assert np.abs(p_red - xs[:, :3]).max() <= 1e-3
+    f_t = mx.tension(xs, u_fn(ts), TILT)
+    assert f_t.min() > 5.0  # taut throughout: the comparison is meaningful
+    R = matrix_from_quaternion(xs[:, 6:10])
+    stretch = np.linalg.norm(xs[:, :3] + R @ model.p_e, axis=1) - model.rho
+    np.testing.assert_allclose(stretch, f_t / K_STIFF, rtol=0.05, atol=2e-6)
+
+
+def test_rigid_energy_conserved(model_nodrag):
+    """Maximal rigid link, zero thrust, no drag: relative energy drift <= 1e-6 over 1 s."""
+    md = model_nodrag
+    mx = MaximalModel(md, "rigid")
+    phi = 0.2
+    z0 = np.array([np.pi / 2, 0.3, 0.1, 8.0, phi, 0.0, 0.0, 0.3, 8 * np.sin(phi), 8 * np.cos(phi)])
+    x0 = maximal_from_reduced(md, z0)
+    sol = solve_ivp(lambda t, x: mx.f(x, np.zeros(4), 0.3), (0.0, 1.0), x0, method="DOP853",
+                    rtol=1e-12, atol=1e-12, dense_output=True)
+    xs = sol.sol(np.linspace(0.0, 1.0, 101)).T
+    E = mx.energy(xs, 0.3)
+    assert np.abs(E - E[0]).max() / abs(E[0]) <= 1e-6
+    np.testing.assert_allclose(E[0], md.energy(z0, 0.3), rtol=1e-14)

@@ -1,0 +1,217 @@
+"""Compiled plant (gainsched/native/plant.c) against the numpy reference model (issue 5).
+
+- z_dot, tension and actual thrusts of ``FastPlant`` equal ``Model.evaluate`` at
+  random seeded states, inputs and tilts, for every combination of the supported
+  effects (and both orders of the thrust modifiers): relative error <= 1e-12 of the
+  largest entry (entries near zero inherit the rounding of the 6x6 solve, so a
+  per-entry relative bound would test LAPACK's pivoting order, not the physics).
+- One RK4 step equals ``sim._rk4`` on the numpy model.
+- A closed-loop flight with the compiled plants equals the numpy-plant flight.
+- The numpy model is used with ``GAINSCHED_NATIVE=0`` and for configs the kernel
+  does not implement.
+- The simulator's single-query interpolator path gives the vectorised reference's
+  numbers bit for bit, and a flight with block-wise (batched) gain lookups is bit
+  for bit the flight with per-step lookups.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import numpy as np
+import pytest
+
+from gainsched import native
+from gainsched.config import N_STATE, EffectSpec, config_from_text
+from gainsched.configedit import remove_key, set_values
+from gainsched.firmware.runtime import Interpolator
+from gainsched.model.effects import EFFECTS
+from gainsched.model.reduced import Model
+from gainsched.schedule.tables import load_table
+from gainsched.sim.fastplant import SUPPORTED_EFFECTS, FastPlant, fast_plant, fast_plant_supported
+from gainsched.sim.loop import Scenario, Sensing, _Plant, _rk4, simulate, table_scheduler
+
+from support import PAPER_H5
+
+pytestmark = [
+    pytest.mark.needs_cc,
+    # the compiled plant in use, not only a compiler: GAINSCHED_NATIVE=0 switches it off too
+    pytest.mark.skipif(not native.available("plant"), reason="no C compiler"),
+]
+
+# one table per supported effect, with non-default parameters
+EFFECT_PARAMS = {
+    "drag": {"mu1": 0.172, "mu2": 0.0025},
+    "rotor_drag": {"k_rd": 0.03},
+    "thrust_scale": {"k_T": 0.93},
+    "thrust_airspeed": {"c1": -0.012, "c2": 0.0004},
+    "motor_lag": {"tau": 0.03},
+}
+COMBOS = [
+    c for r in range(len(EFFECT_PARAMS) + 1) for c in itertools.combinations(EFFECT_PARAMS, r)
+] + [("thrust_airspeed", "thrust_scale", "drag")]  # modifiers in the other order
+
+
+def with_effects(paper_text: str, names) -> object:
+    """The paper config with exactly the named effects (in this order)."""
+    base = remove_key(paper_text, "effects", "drag")
+    assert "mu1" not in base
+    keys = {f"effects.{n}.{k}": v for n in names for k, v in EFFECT_PARAMS[n].items()}
+    return config_from_text(set_values(base, keys), "fx.toml")
+
+
+def random_states(model: Model, n: int, seed: int):
+    """States (n, n_z) around the circle (fast, tilted, rotating), inputs (n, 4) N, tilts (n,)."""
+    rng = np.random.default_rng(seed)
+    z = np.zeros((n, model.n_z))
+    z[:, 0] = np.pi / 2 + rng.normal(0, 0.2, n)
+    z[:, 1] = rng.uniform(-np.pi, np.pi, n)
+    z[:, 2] = rng.normal(0, 1.0, n)
+    z[:, 3] = rng.uniform(-10, 10, n)
+    z[:, 4:7] = rng.normal(0, 0.4, (n, 3))
+    z[:, 7:10] = rng.normal(0, 3.0, (n, 3))
+    z[:, N_STATE:] = rng.uniform(0.1, 3.5, (n, model.n_z - N_STATE))
+    return z, rng.uniform(0.1, 3.5, (n, 4)), rng.uniform(-0.8, 0.8, n)
+
+
+@pytest.mark.parametrize("names", COMBOS, ids=lambda c: "+".join(c) or "none")
+def test_derivative_and_tension_equal_numpy_model(paper_text, names):
+    cfg = with_effects(paper_text, names)
+    assert fast_plant_supported(cfg)
+    model = Model(cfg)
+    fp = fast_plant(cfg)
+    assert isinstance(fp, FastPlant) and fp.n_z == model.n_z
+    z, u, alpha = random_states(model, 64, seed=len(names) * 7 + 1)
+    ref = model.evaluate(z, u, alpha)  # batched numpy
+    for i in range(z.shape[0]):
+        z_dot, ten, T = fp.evaluate(z[i], u[i], alpha[i])
+        scale = np.abs(ref.z_dot[i]).max()
+        assert np.abs(z_dot - ref.z_dot[i]).max() <= 1e-12 * scale
+        assert abs(ten - ref.tension[i]) <= 1e-12 * max(abs(ref.tension[i]), 1.0)
+        assert np.abs(T - ref.T[i]).max() <= 1e-12 * np.abs(ref.T[i]).max()
+        z_dot2, ten2 = fp.f(z[i], u[i], alpha[i])
+        np.testing.assert_array_equal(z_dot2, z_dot)
+        assert ten2 == ten
+
+
+@pytest.mark.parametrize("names", [("drag",), tuple(EFFECT_PARAMS)], ids=["drag", "all"])
+def test_rk4_step_equals_numpy(paper_text, names):
+    cfg = with_effects(paper_text, names)
+    model, fp = Model(cfg), fast_plant(cfg)
+
+    def f(x, u, a):
+        ev = model.evaluate(x, u, a)
+        return ev.z_dot, ev.tension
+
+    z, u, alpha = random_states(model, 8, seed=3)
+    for i in range(z.shape[0]):
+        x_ref, ten_ref = _rk4(f, z[i], u[i], alpha[i], 1e-3)
+        x_next, ten = fp.rk4_step(z[i], u[i], alpha[i], 1e-3)
+        assert np.abs(x_next - x_ref).max() <= 1e-12 * np.abs(x_ref).max()
+        assert ten == fp.f(z[i], u[i], alpha[i])[1]
+        assert abs(ten - ten_ref) <= 1e-12 * max(abs(ten_ref), 1.0)
+
+
+@pytest.mark.slow
+def test_closed_loop_equals_numpy_plant(paper_config, paper_text, monkeypatch):
+    """1 s tilted flight, motion-capture sensing (the estimator's prediction model is
+    compiled too), truth plant with more effects than the design model: the compiled
+    and the numpy flights agree to 1e-9 m."""
+    sched = table_scheduler(load_table(PAPER_H5))
+    truth = with_effects(paper_text, ("drag", "rotor_drag", "thrust_scale"))
+    sens = Sensing(False, 200.0, 0.0005, np.deg2rad(0.2), 0.01, 0.005, 7)
+    scn = Scenario("cmp", np.deg2rad(20), 9.0, 1.0, sensing=sens, initial_error=(0.02, 0.05))
+    assert _Plant(truth).fast is not None
+    fast = simulate(paper_config, sched, scn, truth)
+    monkeypatch.setenv("GAINSCHED_NATIVE", "0")
+    assert _Plant(truth).fast is None
+    slow = simulate(paper_config, sched, scn, truth)
+    assert fast.t.size == slow.t.size == 1001 and fast.slack_time is None
+    assert np.abs(fast.p_I - slow.p_I).max() <= 1e-9
+    assert np.abs(fast.z - slow.z).max() <= 1e-9
+    assert np.abs(fast.tension - slow.tension).max() <= 1e-9 * slow.tension.max()
+    np.testing.assert_array_equal(fast.status, slow.status)
+    np.testing.assert_array_equal(fast.saturated, slow.saturated)
+
+
+def test_fallback_without_native(paper_config, monkeypatch):
+    monkeypatch.setenv("GAINSCHED_NATIVE", "0")
+    native._load.cache_clear()
+    assert native.load("plant") is None
+    assert fast_plant(paper_config) is None
+    assert _Plant(paper_config).fast is None
+    monkeypatch.delenv("GAINSCHED_NATIVE")
+    assert _Plant(paper_config).fast is not None
+
+
+def test_fallback_for_unsupported_configs(paper_config):
+    elastic = dataclasses.replace(
+        paper_config, tether=dataclasses.replace(paper_config.tether, link="spring-damper")
+    )
+    assert not fast_plant_supported(elastic)
+    assert fast_plant(elastic) is None
+    assert _Plant(elastic).fast is None and _Plant(elastic).maximal is not None
+    other = dataclasses.replace(paper_config, effects=(EffectSpec("latency", ()),))
+    assert not fast_plant_supported(other) and fast_plant(other) is None
+    for kind in sorted(set(EFFECTS) - SUPPORTED_EFFECTS):  # real effects plant.c lacks
+        cfg = dataclasses.replace(paper_config, effects=(EffectSpec(kind, ()),))
+        assert not fast_plant_supported(cfg)
+        assert _Plant(cfg).fast is None  # numpy model
+    with pytest.raises(ValueError, match="not supported"):
+        FastPlant(elastic, native.load("plant"))
+
+
+def test_single_query_interpolator_is_bitwise_the_reference():
+    """``Interpolator.query`` (the simulator's per-step lookup) against ``__call__`` on
+    scalars: every symmetry branch, clamped, infeasible, grid planes and bad inputs."""
+    it = Interpolator(load_table(PAPER_H5))
+    d = it.data
+    rng = np.random.default_rng(11)
+    n = 2000
+    vmax, amax = float(d.xi_dot[-1]), float(d.tilt[-1])
+    q = np.stack(
+        [
+            rng.uniform(-20, 20, n),
+            rng.choice([-1, 1], n) * rng.uniform(0, 1.2 * vmax, n),
+            rng.choice([-1, 1], n) * rng.uniform(0, 1.2 * amax, n),
+        ],
+        1,
+    )
+    q[::50, 0] = np.nan
+    q[1::97, 2] = 1.7  # beyond the tilt limit
+    q[2::89, 1] = 0.0
+    q[3::83, 0] = np.round(q[3::83, 0] / (2 * np.pi / d.xi.size)) * (2 * np.pi / d.xi.size)
+    q[4::71, 1] = d.xi_dot[rng.integers(0, d.xi_dot.size, q[4::71].shape[0])]
+    q[5::67, 2] = d.tilt[rng.integers(0, d.tilt.size, q[5::67].shape[0])]
+    statuses = set()
+    for x, v, a in q:
+        ref = it(x, v, a)
+        K, u_d, phi_d, status = it.query(x, v, a)
+        statuses.add(status)
+        assert status == int(ref.status)
+        np.testing.assert_array_equal(K, ref.K)
+        assert K.flags.c_contiguous  # so that K @ x rounds as with the reference's K
+        np.testing.assert_array_equal(u_d, ref.u_d)
+        assert phi_d == float(ref.phi_d)
+    assert {0, 1, 2, 16} <= statuses and any(s & 4 for s in statuses)
+
+
+def test_batched_gain_lookup_flies_the_same_as_per_step(paper_config):
+    """``table_scheduler`` offers ``batch`` (gains of the reference path looked up in
+    blocks); a flight with it is bit for bit the flight with per-step lookups, on
+    every symmetry branch (negative tilt, reversed direction) and across blocks."""
+    sched = table_scheduler(load_table(PAPER_H5))
+    assert callable(sched.batch)
+
+    def per_step(xi, xi_dot, alpha):  # no batch attribute
+        return sched(xi, xi_dot, alpha)
+
+    sens = Sensing(False, 200.0, 0.0005, np.deg2rad(0.2), 0.01, 0.005, 2)
+    for scn in (
+        Scenario("m", np.deg2rad(-30), -7.0, 1.2, sensing=sens, initial_error=(0.02, 0.05)),
+        Scenario("p", np.deg2rad(10), 9.0, 1.2, initial_error=(0.02, 0.05)),
+    ):
+        a, b = simulate(paper_config, sched, scn), simulate(paper_config, per_step, scn)
+        for key in ("z", "z_hat", "u", "tension", "p_I", "q_IB", "status", "saturated"):
+            np.testing.assert_array_equal(getattr(a, key), getattr(b, key), err_msg=key)

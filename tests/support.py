@@ -1,0 +1,265 @@
+"""Test support shared by every test folder: the repository's paths, the tools found on
+this machine, and the config factory.
+
+``tests/conftest.py`` turns these into fixtures and markers; a test module imports from
+here only what it needs at collection time (paths in ``parametrize`` lists, say). The
+folder ``tests/`` is on ``sys.path`` (pytest puts the root conftest's folder there), so
+``from support import ...`` works from every test folder.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import tomlkit
+
+from gainsched import native
+from gainsched.config import Config, config_from_text
+from gainsched.configedit import set_values
+from gainsched.firmware.pil import pil_tools
+from gainsched.schedule.tables import Table
+
+REPO = Path(__file__).resolve().parents[1]
+PAPER_TOML = REPO / "configs" / "paper.toml"
+PAPER_H5 = REPO / "tables" / "paper.h5"
+
+#: the host C compiler (``$CC``, cc, gcc, clang), or None: tests marked ``needs_cc`` skip
+CC = native.find_cc()
+#: the Cortex-M4F cross compiler and QEMU, or None: tests marked ``needs_arm`` skip
+ARM_TOOLS = pil_tools()
+
+#: the open-loop reference circle of the link-model tests (the ``circle`` fixture): m/s, rad
+CIRCLE_SPEED, CIRCLE_TILT = 8.0, np.deg2rad(20.0)
+
+#: what ``small_config`` changes in configs/paper.toml unless told otherwise: 2 speeds x
+#: 2 tilts x 8 azimuths, a table built in about a second
+SMALL_GRID = {
+    "name": "small",
+    "grid.speeds": [6, 9],
+    "grid.tilts_deg": [0, 20],
+    "grid.azimuth_samples": 8,
+}
+
+
+def _dotted(keys: dict) -> dict:
+    """``grid__speeds`` -> ``grid.speeds``; dotted keys pass as they are."""
+    return {k.replace("__", "."): v for k, v in keys.items()}
+
+
+def small_config_text(**keys) -> str:
+    """The text of configs/paper.toml on the small grid, with ``keys`` set on top.
+
+    Keys are dotted config keys, written with ``__`` for the dot as keyword arguments
+    (``grid__speeds=[3, 9]``, ``control__azimuth_integral=True``) or passed as a dict
+    (``**{"effects.motor_lag.tau": 0.03}``); a value of None keeps the paper's value of
+    a key the small grid sets (``grid__speeds=None``: the paper's speeds). The text is
+    edited with :func:`gainsched.configedit.set_values`, so comments and layout are kept,
+    and it is not validated: a test of a refusal writes the bad value this way.
+    """
+    values = {**SMALL_GRID, **_dotted(keys)}
+    return set_values(PAPER_TOML.read_text(), {k: v for k, v in values.items() if v is not None})
+
+
+def small_config(**keys) -> Config:
+    """:func:`small_config_text`, validated: a :class:`gainsched.config.Config` whose
+    source is ``<name>.toml``."""
+    text = small_config_text(**keys)
+    values = {**SMALL_GRID, **_dotted(keys)}
+    return config_from_text(text, f"{values['name']}.toml")
+
+
+def paper_config_text(**keys) -> str:
+    """The text of configs/paper.toml (its own grid) with ``keys`` set, as
+    :func:`small_config_text` sets them."""
+    return set_values(PAPER_TOML.read_text(), _dotted(keys)) if keys else PAPER_TOML.read_text()
+
+
+# --------------------------------------------------------------------------- firmware
+
+
+def synthetic_table(n_a=4, n_v=5, n_xi=8, *, motor_lag=False, azimuth_integral=False, seed=0,
+                    name="synth", tilt0_per_azimuth=False) -> Table:
+    """Random gains on a small nonuniform grid, with every kind of infeasible point:
+    whole circles without gains (tilt > 0 and tilt 0) and flagged points that keep them.
+    ``tilt0_per_azimuth``: tilt-0 gains per azimuth (an effect that changes with it)."""
+    rng = np.random.default_rng(seed)
+    keys = {"name": name}
+    if motor_lag:
+        keys["effects.motor_lag.tau"] = 0.03
+    if azimuth_integral:  # int_xi after int_delta: 12 LQR states
+        keys.update({"control.azimuth_integral": True,
+                     "control.Q": [3, 0.2, 1, 1, 1, 2, 0.5, 1, 1, 1, 0.5, 1]})
+    text = paper_config_text(**keys)
+    n = 11 + int(azimuth_integral) + (4 if motor_lag else 0)
+    r = 1.6
+    speed = np.array([2.0, 3.5, 4.0, 7.0, 11.0, 12.5, 15.0][:n_v])
+    tilt = np.deg2rad([0.0, 12.0, 25.0, 40.0, 55.0][:n_a])
+    K0 = rng.normal(size=(n_v, n_xi, 4, n) if tilt0_per_azimuth else (n_v, 4, n))
+    K = rng.normal(size=(n_a - 1, n_v, n_xi, 4, n))
+    u_d = rng.uniform(0.2, 3.0, size=(n_a, n_v, n_xi, 4))
+    phi_d = rng.uniform(-1.0, 1.0, size=(n_a, n_v, n_xi))
+    reasons = np.zeros((n_a, n_v, n_xi), dtype=np.uint8)
+    if n_a >= 3 and n_v >= 4:
+        K[1, 3] = np.nan  # circle (tilt 2, speed 3) has no gains
+        reasons[2, 3] = 16
+        reasons[2, 3, :2] = 1
+        reasons[1, 1, 2] = 2  # flagged, gains kept
+        reasons[n_a - 1, 0, n_xi - 1] = 4
+    if n_v >= 5:
+        K0[4] = np.nan  # tilt 0 circle without gains
+        reasons[0, 4] = 1
+    return Table(
+        xi=2 * np.pi * np.arange(n_xi) / n_xi,
+        speed=speed,
+        xi_dot=speed / r,
+        tilt=tilt,
+        K_tilt0=K0,
+        K=K,
+        u_d=u_d,
+        phi_d=phi_d,
+        tension=np.ones((n_a, n_v, n_xi)),
+        reasons=reasons,
+        spectral_radius=np.full((n_a, n_v), 0.5),
+        Q=np.eye(n),
+        R=np.eye(4),
+        dt=np.full(n_v, 1e-3),
+        config_text=text,
+        config_sha256="0" * 64,
+        attrs={
+            "config_name": name,
+            "radius_m": r,
+            "rate_hz": 1000.0,
+            "tool_version": "test",
+            "state_names": ",".join(f"s{i}" for i in range(n)),
+        },
+        source=f"<{name}>",
+    )
+
+
+def query_mix(d, m, seed=0):
+    """``m`` queries (xi, xi_dot, alpha), float64, in eight equal families: uniform over and
+    beyond the table, exact grid values, the tilt-0 slice, table edges +- ulps, the snap
+    band at cell faces, out of range, invalid (NaN/inf/beyond the limits), far wraps."""
+    rng = np.random.default_rng(seed)
+    vmax, amax = float(d.xi_dot[-1]), float(d.tilt[-1])
+    k = m // 8
+    sign = lambda n: rng.choice([-1.0, 1.0], n)  # noqa: E731
+    uni_x = lambda n: rng.uniform(-4 * np.pi, 4 * np.pi, n)  # noqa: E731
+    uni_v = lambda n: sign(n) * rng.uniform(0, 1.2 * vmax, n)  # noqa: E731
+    uni_a = lambda n: sign(n) * rng.uniform(0, 1.2 * amax + 0.01, n)  # noqa: E731
+
+    def ulps(x, n):
+        x = np.asarray(x, dtype=np.float32)
+        steps = rng.integers(-3, 4, n)
+        out = x.copy()
+        for s in (-1, 1):
+            for _ in range(3):
+                sel = steps * s > 0
+                out[sel] = np.nextafter(out[sel], np.float32(s * np.inf))
+                steps = steps - s * sel
+        return out.astype(np.float64)
+
+    fam = []
+    fam.append((uni_x(k), uni_v(k), uni_a(k)))
+    fam.append(
+        (
+            rng.choice(d.xi, k) + 2 * np.pi * rng.integers(-2, 3, k),
+            sign(k) * rng.choice(d.xi_dot, k),
+            sign(k) * rng.choice(d.tilt, k),
+        )
+    )
+    fam.append((uni_x(k), uni_v(k), rng.choice([0.0, -0.0], k)))
+    edge_v = rng.choice(np.r_[d.xi_dot[[0, -1]], d.xi_dot], k)
+    edge_a = rng.choice(np.r_[d.tilt[[0, -1]], d.tilt], k)
+    edge_x = rng.choice(np.r_[0.0, np.pi, 2 * np.pi, -np.pi, d.xi], k)
+    fam.append((ulps(edge_x, k), sign(k) * ulps(edge_v, k), sign(k) * ulps(edge_a, k)))
+    # within ~2^-12 of a cell face: the snap band and its borders
+    dv = np.diff(d.xi_dot.astype(float)) if d.xi_dot.size > 1 else np.ones(1)
+    da = np.diff(d.tilt.astype(float)) if d.tilt.size > 1 else np.ones(1)
+    band = lambda n: rng.choice([-1, 1], n) * 2.0**-12 * rng.uniform(0.5, 1.5, n)  # noqa: E731
+    iv, ia = rng.integers(0, dv.size, k), rng.integers(0, da.size, k)
+    fam.append(
+        (
+            rng.choice(d.xi, k) + band(k) * 2 * np.pi / d.xi.size,
+            sign(k) * np.abs(d.xi_dot[iv] + band(k) * dv[iv]),
+            sign(k) * np.abs(d.tilt[ia] + band(k) * da[ia]),
+        )
+    )
+    fam.append(
+        (
+            uni_x(k),
+            sign(k) * rng.choice([0.0, 0.5 * float(d.xi_dot[0]), 1.5 * vmax, 999.0], k),
+            sign(k) * rng.uniform(amax, np.pi / 2, k),
+        )
+    )
+    bad = np.array([np.nan, np.inf, -np.inf, 1e4 * 1.001, -2e4, 1e30, 3e38, 1e300])
+    bx, bv, ba = uni_x(k), uni_v(k), uni_a(k)
+    which = rng.integers(0, 3, k)
+    pick = rng.choice(bad, k)
+    bx = np.where(which == 0, pick, bx)
+    bv = np.where(which == 1, np.where(np.isfinite(pick), pick / 10, pick), bv)
+    ba = np.where(which == 2, np.where(np.isfinite(pick), np.pi / 2 + np.abs(pick) / 1e4, pick), ba)
+    fam.append((bx, bv, ba))
+    rest = m - 7 * k
+    fam.append((rng.uniform(-1e4, 1e4, rest), uni_v(rest), sign(rest) * rng.uniform(0, amax, rest)))
+    x, v, a = (np.concatenate(c) for c in zip(*fam, strict=True))
+    return x, v, a
+
+
+#: examples/firmware: the example firmware and the fuzz drivers
+FIRMWARE_EXAMPLES = REPO / "examples" / "firmware"
+#: the environment of a program built with AddressSanitizer and UBSan: stop at the first error
+SAN_ENV = {
+    **os.environ,
+    "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=0:halt_on_error=1",
+    "UBSAN_OPTIONS": "halt_on_error=1:print_stacktrace=1",
+}
+
+
+def compile_c(args, cwd=None):
+    """Run the host C compiler (``CC``) with ``args``; it must succeed without a warning."""
+    res = subprocess.run([CC, *args], capture_output=True, text=True, cwd=cwd)
+    assert res.returncode == 0, res.stderr
+    assert "warning" not in res.stderr, res.stderr
+
+
+def sanitizers_work(tmp_path) -> bool:
+    """True if the host C compiler links a program with AddressSanitizer and UBSan."""
+    src = tmp_path / "probe.c"
+    src.write_text("int main(void) { return 0; }\n")
+    res = subprocess.run(
+        [CC, "-fsanitize=address,undefined", str(src), "-o", str(tmp_path / "probe")],
+        capture_output=True,
+    )
+    return res.returncode == 0
+
+
+# --------------------------------------------------------------------------- chosen axes
+
+#: the automatic axes of :func:`auto_text` (issue 23): the build chooses the breakpoints
+AUTO_SPEEDS = {"min": 6, "max": 12, "max_count": 9}
+AUTO_TILTS = {"min": 0, "max": 30, "max_count": 9}
+
+
+def toml_range(value):
+    """``value`` as a config value: a dict as an inline table (``{min = 6, max = 12}``,
+    the range syntax of docs/grid.md; :func:`small_config_text` would write a dict as a
+    ``[section]``), anything else as it is."""
+    if not isinstance(value, dict):
+        return value
+    table = tomlkit.inline_table()
+    table.update(value)
+    return table
+
+
+def auto_text(speeds=AUTO_SPEEDS, tilts=AUTO_TILTS, n_xi=16, bound=3, name="auto"):
+    """:func:`small_config_text` with ranges for the axes (a list: the breakpoints
+    themselves), ``n_xi`` azimuth samples (a dict: a range) and the interpolation bound
+    ``bound`` percent."""
+    return small_config_text(name=name, grid__speeds=toml_range(speeds),
+                             grid__tilts_deg=toml_range(tilts),
+                             grid__azimuth_samples=toml_range(n_xi),
+                             grid__max_interpolation_error=bound)
