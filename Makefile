@@ -33,7 +33,7 @@ lint: $(STAMP)
 test: $(STAMP) lint
 	$(BIN)/python -m pytest $(PYTEST_XDIST) $(PYTEST_ARGS)
 
-# The fast tier for iterating: every test module, without the tests marked slow (README).
+# The fast tier for iterating: the suite without the tests marked slow (README, Tests).
 test-fast: $(STAMP) lint
 	$(BIN)/python -m pytest $(PYTEST_XDIST) -m "not slow" $(PYTEST_ARGS)
 
