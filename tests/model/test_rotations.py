@@ -74,3 +74,31 @@ def test_circle_frame_is_Rz_Rx(tilt_deg, gamma_deg):
     # gravity in C is -g (0, sin alpha, cos alpha) (docs/conventions.md)
     np.testing.assert_allclose(rot.R_IC_from_tilt(a, g).T @ [0, 0, -1.0],
                                [0, -np.sin(a), -np.cos(a)], atol=1e-15)
+
+
+def test_one_quaternion_takes_the_scalar_path_with_the_same_bits():
+    """The one-sample form of matrix_from_quaternion (the per-step simulators) equals the
+    batched form bit for bit, and a non-unit or complex quaternion keeps the batched path
+    (complex steps)."""
+    R = Rotation.from_euler("ZYX", ANGLES[:, ::-1]).as_matrix()
+    q = rot.quaternion_from_matrix(R) * RNG.uniform(0.9, 1.1, (len(R), 1))  # not unit
+    batched = rot.matrix_from_quaternion(q)
+    one = np.stack([rot.matrix_from_quaternion(qi) for qi in q])
+    assert one.shape == batched.shape == (len(R), 3, 3)
+    assert np.array_equal(one, batched)
+    qc = q[0] + 1e-20j * np.arange(4)
+    Rc = rot.matrix_from_quaternion(qc)
+    assert np.iscomplexobj(Rc)
+    np.testing.assert_allclose(Rc.real, batched[0], rtol=1e-15, atol=0)
+
+
+@pytest.mark.parametrize("alpha", [0.0, 0.35, -0.7, np.float64(1.2), 1])
+def test_up_direction_of_one_tilt_is_cached_with_the_same_bits(alpha):
+    """A scalar tilt's up direction comes from a cache: the same bits as the batched form,
+    read-only so that no caller can change it for the next."""
+    batched = rot.up_C_from_tilt(np.array([alpha, alpha], dtype=float))[0]
+    one = rot.up_C_from_tilt(alpha)
+    assert one.shape == (3,) and np.array_equal(one, batched)
+    assert rot.up_C_from_tilt(alpha) is one
+    with pytest.raises(ValueError, match="read-only"):
+        one[0] = 1.0
