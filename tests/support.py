@@ -66,9 +66,8 @@ def small_config_text(**keys) -> str:
 def small_config(**keys) -> Config:
     """:func:`small_config_text`, validated: a :class:`gainsched.config.Config` whose
     source is ``<name>.toml``."""
-    text = small_config_text(**keys)
-    values = {**SMALL_GRID, **_dotted(keys)}
-    return config_from_text(text, f"{values['name']}.toml")
+    name = _dotted(keys).get("name", SMALL_GRID["name"])
+    return config_from_text(small_config_text(**keys), f"{name}.toml")
 
 
 def paper_config_text(**keys) -> str:

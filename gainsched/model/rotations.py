@@ -91,6 +91,16 @@ def euler_zyx_from_matrix(R):
     return phi, theta, psi
 
 
+def _quaternion_entries(w, x, y, z):
+    """The nine entries of the rotation matrix of ``(w, x, y, z)``, row by row (scalars or
+    arrays alike)."""
+    return (
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    )
+
+
 def matrix_from_quaternion(q):
     """Rotation matrix from a unit quaternion ``q = (w, x, y, z)``, shape (..., 4).
 
@@ -99,20 +109,8 @@ def matrix_from_quaternion(q):
     operations in the same order, so the same bits.
     """
     if np.ndim(q) == 1 and np.asarray(q).dtype == np.float64:
-        w, x, y, z = (float(v) for v in q)
-        return np.array(
-            [
-                [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-            ]
-        )
-    w, x, y, z = (q[..., i] for i in range(4))
-    return _stack3x3(
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    )
+        return np.array(_quaternion_entries(*(float(v) for v in q))).reshape(3, 3)
+    return _stack3x3(*_quaternion_entries(*(q[..., i] for i in range(4))))
 
 
 def quaternion_from_matrix(R):
@@ -207,14 +205,17 @@ def up_C_from_tilt(alpha_C):
     """
     if isinstance(alpha_C, (float, int, np.floating, np.integer)):
         return _up_C_one(float(alpha_C))
+    return _up_C(alpha_C)
+
+
+def _up_C(alpha_C):
     a = np.asarray(alpha_C)
     return np.stack([np.zeros_like(a, dtype=float), np.sin(a), np.cos(a)], axis=-1)
 
 
 @lru_cache(maxsize=256)
 def _up_C_one(alpha_C: float) -> np.ndarray:
-    a = np.asarray(alpha_C)
-    up = np.stack([np.zeros_like(a, dtype=float), np.sin(a), np.cos(a)], axis=-1)
+    up = _up_C(alpha_C)
     up.setflags(write=False)
     return up
 
