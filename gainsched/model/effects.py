@@ -25,6 +25,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from ._vec import dot, mtv, mv
 from .rotations import up_C_from_tilt
 
 __all__ = [
@@ -56,7 +57,7 @@ _EPS2 = 1e-24  # keeps sqrt differentiable at exactly zero speed; changes values
 
 def norm(v):
     """Euclidean norm over the last axis, complex-step safe (no ``abs``)."""
-    return np.sqrt(np.sum(v * v, axis=-1) + _EPS2)
+    return np.sqrt(dot(v, v) + _EPS2)
 
 
 @dataclass(frozen=True)
@@ -154,7 +155,7 @@ class Kinematics:
     @property
     def v_B(self):
         """COG velocity in B, shape (..., 3), m/s."""
-        return np.einsum("...ji,...j->...i", self.R_CB, self.v_C)
+        return mtv(self.R_CB, self.v_C)
 
     @property
     def up_C(self):
@@ -165,7 +166,7 @@ class Kinematics:
     @property
     def height(self):
         """COG height above the anchor, ``(R_IC p_C)_z``, shape (...), m."""
-        return np.sum(self.p_C * self.up_C, axis=-1)
+        return dot(self.p_C, self.up_C)
 
 
 class Effect:
@@ -331,10 +332,10 @@ class RotorDrag(Effect):
                   "rotor drag: thrust x in-plane airspeed (with its normal-axis signature)"),)
 
     def wrench(self, T, kin):
-        T_C = np.sum(T, axis=-1)
+        T_C = T.sum(-1)
         v_B = kin.v_B
         F_B = -self.k_rd * T_C[..., None] * (v_B * np.array([1.0, 1.0, 0.0]))
-        F_C = np.einsum("...ij,...j->...i", kin.R_CB, F_B)
+        F_C = mv(kin.R_CB, F_B)
         return F_C, np.zeros_like(F_C)
 
 

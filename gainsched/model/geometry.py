@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._vec import dot, mv
 from .rotations import (
     euler_zyx_from_matrix,
     matrix_from_euler_zyx,
@@ -40,11 +41,6 @@ __all__ = [
     "pose_from_reduced",
     "wrap_angle",
 ]
-
-
-def _mv(R, v):
-    """Batched ``R @ v``, shapes (..., 3, 3), (..., 3) -> (..., 3)."""
-    return np.einsum("...ij,...j->...i", R, v)
 
 
 def wrap_angle(a):
@@ -113,6 +109,17 @@ def tether_direction(delta, xi) -> TetherDirection:
     ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     """
     sd, cd, sx, cx = np.sin(delta), np.cos(delta), np.sin(xi), np.cos(xi)
+    if np.ndim(sd) == 0 and np.ndim(sx) == 0 and np.result_type(sd, sx) == np.float64:
+        # one real direction (the per-step plants): the same products, without the
+        # stacking overhead (bit for bit the batched values)
+        sd, cd, sx, cx = float(sd), float(cd), float(sx), float(cx)
+        return TetherDirection(
+            e=np.array([sd * cx, sd * sx, cd]),
+            e_delta=np.array([cd * cx, cd * sx, -sd]),
+            e_xi=np.array([-sd * sx, sd * cx, 0.0]),
+            e_delta_xi=np.array([-cd * sx, cd * cx, 0.0]),
+            e_xi_xi=np.array([-sd * cx, -sd * sx, 0.0]),
+        )
     shape = np.broadcast_shapes(np.shape(sd), np.shape(sx))
     zero = np.zeros(shape, dtype=np.result_type(sd, sx))
     cd_, sd_ = np.broadcast_to(cd, shape), np.broadcast_to(sd, shape)
@@ -137,7 +144,7 @@ def spherical_from_point(p):
         Azimuth from the C x axis.
     """
     p = np.asarray(p, dtype=float)
-    dist = np.sqrt(np.sum(p * p, axis=-1))
+    dist = np.sqrt(dot(p, p))
     delta = np.arctan2(np.hypot(p[..., 0], p[..., 1]), p[..., 2])
     xi = np.arctan2(p[..., 1], p[..., 0])
     return dist, delta, xi
@@ -155,13 +162,13 @@ def attachment_from_cog(p_q, R_CB, p_e):
     p_e : ndarray, shape (3,), m
         Attachment point in B relative to the COG, ``(-L_e, 0, 0)``.
     """
-    return p_q + _mv(R_CB, p_e)
+    return p_q + mv(R_CB, p_e)
 
 
 def cog_from_attachment(p_t, R_CB, p_e):
     """COG position ``p_q = p_t - R_CB p_e`` (..., 3), m, in C (inverse of
     :func:`attachment_from_cog`)."""
-    return p_t - _mv(R_CB, p_e)
+    return p_t - mv(R_CB, p_e)
 
 
 def pose_angles_from_pose(p_q, R_CB, p_e, xi_ref=None):

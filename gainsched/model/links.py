@@ -47,6 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._vec import broadcast, dot
+
 __all__ = [
     "LinkOutput",
     "SpringDamper",
@@ -58,10 +60,6 @@ __all__ = [
 
 #: config ``tether.link`` values served by this module (``"rigid"`` is in ``maximal``)
 ELASTIC_LINKS = ("spring-damper", "sls", "lumped-mass")
-
-
-def _dot(a, b):
-    return np.sum(a * b, axis=-1)
 
 
 @dataclass(frozen=True)
@@ -91,9 +89,9 @@ class LinkOutput:
 
 
 def _radial(p_t, v_t, rho):
-    dist = np.sqrt(_dot(p_t, p_t))
+    dist = np.sqrt(dot(p_t, p_t))
     n = p_t / dist[..., None]
-    return n, dist - rho, _dot(n, v_t)
+    return n, dist - rho, dot(n, v_t)
 
 
 @dataclass(frozen=True)
@@ -231,14 +229,14 @@ class LumpedMassChain:
         S = np.broadcast_shapes(np.shape(p_t)[:-1], np.shape(v_t)[:-1], np.shape(s)[:-1])
         nodes = np.asarray(s, dtype=float).reshape(np.shape(s)[:-1] + (2, nn, 3))
         zero = np.zeros(S + (1, 3))
-        P = np.concatenate([zero, np.broadcast_to(nodes[..., 0, :, :], S + (nn, 3)),
-                            np.broadcast_to(p_t, S + (3,))[..., None, :]], -2)
-        V = np.concatenate([zero, np.broadcast_to(nodes[..., 1, :, :], S + (nn, 3)),
-                            np.broadcast_to(v_t, S + (3,))[..., None, :]], -2)
+        P = np.concatenate([zero, broadcast(nodes[..., 0, :, :], S + (nn, 3)),
+                            broadcast(p_t, S + (3,))[..., None, :]], -2)
+        V = np.concatenate([zero, broadcast(nodes[..., 1, :, :], S + (nn, 3)),
+                            broadcast(v_t, S + (3,))[..., None, :]], -2)
         d = np.diff(P, axis=-2)
-        length = np.sqrt(_dot(d, d))
+        length = np.sqrt(dot(d, d))
         u = d / length[..., None]
-        rate = _dot(u, np.diff(V, axis=-2))
+        rate = dot(u, np.diff(V, axis=-2))
         raw = N * self.k * (length - self.rho / N) + N * self.c * rate
         return P, V, length, u, rate, raw
 

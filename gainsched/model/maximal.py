@@ -35,6 +35,7 @@ import dataclasses
 import numpy as np
 
 from ..constants import N_STATE
+from ._vec import broadcast, cross, dot, mtv, mv
 from .effects import Kinematics
 from .geometry import (
     attachment_from_cog,
@@ -50,22 +51,6 @@ __all__ = ["MaximalModel", "maximal_from_reduced", "reduced_from_maximal", "N_MA
 N_MAXIMAL = 13  # p (3), v (3), q (4), omega (3); elastic links append their states
 LINKS = ("rigid", *ELASTIC_LINKS)
 RK4_REACH = 0.25  # |lambda dt| per RK4 substep: see MaximalModel.substeps
-
-
-def _mv(R, v):
-    """Batched matrix-vector product ``R @ v``, shapes (..., 3, 3), (..., 3) -> (..., 3)."""
-    return np.einsum("...ij,...j->...i", R, v)
-
-
-def _dot(a, b):
-    return np.sum(a * b, axis=-1)
-
-
-def _cross(a, b):
-    """Cross product over the last axis (faster than ``np.cross`` for small batches)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], -1)
 
 
 class MaximalModel:
@@ -152,7 +137,7 @@ class MaximalModel:
         u = np.asarray(u, dtype=float)
         m, p_e = md.m, md.p_e
         p, v, q, w = x[..., 0:3], x[..., 3:6], x[..., 6:10], x[..., 10:13]
-        qn = q / np.sqrt(_dot(q, q))[..., None]
+        qn = q / np.sqrt(dot(q, q))[..., None]
         R = matrix_from_quaternion(qn)
         kin = Kinematics(R, v, w, p, alpha)
         # thrust after the (stateless) thrust modifiers; everything but the tether
@@ -163,11 +148,11 @@ class MaximalModel:
         # attachment point: position, velocity, direction
         w_pe = w @ self._S  # omega x p_e
         p_t = attachment_from_cog(p, R, p_e)
-        v_t = v + _mv(R, w_pe)
+        v_t = v + mv(R, w_pe)
         link = None
         if self.link_model is not None:
             link = self.link_model.evaluate(p_t, v_t, x[..., N_MAXIMAL:], md.g_C(alpha))
-            F_B = np.einsum("...ji,...j->...i", R, link.force)
+            F_B = mtv(R, link.force)
             a_q = (F0 + link.force) / m
             w_dot = (tau0 + F_B @ self._S.T) @ self.J_inv.T  # p_e x F_B
             f_t = link.tension
@@ -175,28 +160,28 @@ class MaximalModel:
             a_q, w_dot, f_t = self._rigid(F0, tau0, R, w, w_pe, p_t, v_t)
         # quaternion kinematics q' = q (x) (0, omega) / 2
         qw, qv = q[..., :1], q[..., 1:]
-        q_dot = 0.5 * np.concatenate([-_dot(qv, w)[..., None], qw * w + _cross(qv, w)], -1)
-        parts = [np.broadcast_to(v, shape), a_q, np.broadcast_to(q_dot, shape[:-1] + (4,)), w_dot]
+        q_dot = 0.5 * np.concatenate([-dot(qv, w)[..., None], qw * w + cross(qv, w)], -1)
+        parts = [broadcast(v, shape), a_q, broadcast(q_dot, shape[:-1] + (4,)), w_dot]
         if link is not None:
             sd = link.state_dot
-            parts.append(np.broadcast_to(sd, shape[:-1] + sd.shape[-1:]))
+            parts.append(broadcast(sd, shape[:-1] + sd.shape[-1:]))
         return np.concatenate(parts, -1), f_t, link
 
     def _rigid(self, F0, tau0, R, w, w_pe, p_t, v_t):
         """COG acceleration, omega' and multiplier f_t of the Baumgarte-stabilised constraint."""
         md, m = self.model, self.model.m
-        dist = np.sqrt(_dot(p_t, p_t))
+        dist = np.sqrt(dot(p_t, p_t))
         n = p_t / dist[..., None]
-        lever = md.tether_lever(np.einsum("...ji,...j->...i", R, n))
+        lever = md.tether_lever(mtv(R, n))
         # c'' = c0 - kf f with the tension-free part c0 and kf = |p_t| (1/m + l^T J^-1 l)
         a_q0 = F0 / m
         wd0 = tau0 @ self.J_inv.T
-        a_t0 = a_q0 + _mv(R, wd0 @ self._S + _cross(w, w_pe))
-        c0 = _dot(v_t, v_t) + _dot(p_t, a_t0)
-        kf = dist * (1.0 / m + _dot(lever, lever @ self.J_inv.T))
+        a_t0 = a_q0 + mv(R, wd0 @ self._S + cross(w, w_pe))
+        c0 = dot(v_t, v_t) + dot(p_t, a_t0)
+        kf = dist * (1.0 / m + dot(lever, lever @ self.J_inv.T))
         a, b = self.baumgarte
         c = 0.5 * (dist * dist - md.rho**2)
-        c_dot = _dot(p_t, v_t)
+        c_dot = dot(p_t, v_t)
         f_t = (c0 + 2 * a * c_dot + b * b * c) / kf
         a_q = (F0 - f_t[..., None] * n) / m
         w_dot = (tau0 - f_t[..., None] * lever) @ self.J_inv.T
@@ -231,8 +216,8 @@ class MaximalModel:
     def _attachment(self, x):
         """Attachment point position (m) and velocity (m/s) in C, shapes (..., 3)."""
         p, v, q, w = x[..., 0:3], x[..., 3:6], x[..., 6:10], x[..., 10:13]
-        R = matrix_from_quaternion(q / np.sqrt(_dot(q, q))[..., None])
-        return attachment_from_cog(p, R, self.model.p_e), v + _mv(R, w @ self._S)
+        R = matrix_from_quaternion(q / np.sqrt(dot(q, q))[..., None])
+        return attachment_from_cog(p, R, self.model.p_e), v + mv(R, w @ self._S)
 
     def energy(self, x, alpha):
         """Mechanical energy of the vehicle (kinetic + gravitational potential), J.
@@ -240,8 +225,8 @@ class MaximalModel:
         Excludes the link (see :meth:`link_energy`)."""
         md = self.model
         p, v, w = x[..., 0:3], x[..., 3:6], x[..., 10:13]
-        kinetic = 0.5 * md.m * _dot(v, v) + 0.5 * np.einsum("...i,ij,...j", w, md.J, w)
-        return kinetic - md.m * _dot(md.g_C(alpha), p)
+        kinetic = 0.5 * md.m * dot(v, v) + 0.5 * np.einsum("...i,ij,...j", w, md.J, w)
+        return kinetic - md.m * dot(md.g_C(alpha), p)
 
     def link_energy(self, x, alpha):
         """Energy held by an elastic link (springs; chain nodes' kinetic and potential), J."""
@@ -335,7 +320,7 @@ def maximal_from_reduced(model, z, stretch=0.0):
     p_t = model.rho * d.e
     if np.any(stretch):
         scale = (1.0 + np.asarray(stretch, dtype=float) / model.rho)[..., None]
-        Rw = _mv(R, w_x_pe)
+        Rw = mv(R, w_x_pe)
         p_t = scale * p_t
         v_q = scale * (v_q + Rw) - Rw  # v_t scales with the radius; v_q = v_t - R (w x p_e)
     p_q = cog_from_attachment(p_t, R, model.p_e)
@@ -353,12 +338,12 @@ def reduced_from_maximal(model, x, xi_ref=None):
     """
     x = np.asarray(x, dtype=float)
     p, v, q, w = x[..., 0:3], x[..., 3:6], x[..., 6:10], x[..., 10:13]
-    R = matrix_from_quaternion(q / np.sqrt(_dot(q, q))[..., None])
+    R = matrix_from_quaternion(q / np.sqrt(dot(q, q))[..., None])
     dist, pose = pose_angles_from_pose(p, R, model.p_e, xi_ref)
     delta, xi = pose[..., 0], pose[..., 1]
-    v_t = v + _mv(R, _cross(w, np.broadcast_to(model.p_e, w.shape)))
+    v_t = v + mv(R, cross(w, np.broadcast_to(model.p_e, w.shape)))
     d = tether_direction(delta, xi)
-    delta_dot = _dot(d.e_delta, v_t) / dist
-    xi_dot = _dot(d.e_xi, v_t) / (dist * np.sin(delta) ** 2)  # |e_xi| = sin(delta)
+    delta_dot = dot(d.e_delta, v_t) / dist
+    xi_dot = dot(d.e_xi, v_t) / (dist * np.sin(delta) ** 2)  # |e_xi| = sin(delta)
     z = np.concatenate([pose[..., :2], np.stack([delta_dot, xi_dot], -1), pose[..., 2:]], -1)
     return np.concatenate([z, w], -1)[..., :N_STATE]

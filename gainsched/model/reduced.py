@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..constants import N_STATE
+from ._vec import broadcast, cross, mtv, mv
 from .effects import Effect, Kinematics, effects_from_specs, polynomial_drag
 from .geometry import cog_from_attachment, pose_from_reduced, tether_direction
 from .rotations import (
@@ -146,10 +147,15 @@ class Model:
         """
         xi, dd, dx = s[..., 1], s[..., 2], s[..., 3]
         phi, theta, chi, w = s[..., 4], s[..., 5], s[..., 6], s[..., 7:10]
-        R = matrix_from_euler_zyx(phi, theta, chi + xi)
+        if s.ndim == 1 and s.dtype == np.float64:  # one real state (the per-step plants):
+            # the closed form in scalar math, ~3 us against ~0.3 ms of numpy overhead; the
+            # batched builds keep the matrix product (equal to rounding, not bit for bit)
+            R = matrix_from_euler_zyx_scalar(float(phi), float(theta), float(chi + xi))
+        else:
+            R = matrix_from_euler_zyx(phi, theta, chi + xi)
         d = tether_direction(s[..., 0], xi)
-        w_x_pe = np.cross(w, self.p_e)
-        v_q = self.rho * d.rate(dd, dx) - np.einsum("...ij,...j->...i", R, w_x_pe)
+        w_x_pe = cross(w, self.p_e)
+        v_q = self.rho * d.rate(dd, dx) - mv(R, w_x_pe)
         return R, d, v_q, w_x_pe
 
     def effect_kinematics(self, s, alpha):
@@ -210,9 +216,9 @@ class Model:
         """
         F, tau = self.effect_wrench(T, kin)
         w = kin.omega_B
-        T_C = np.sum(T, axis=-1)
+        T_C = T.sum(-1)
         F_C = kin.R_CB[..., :, 2] * T_C[..., None] + self.m * self.g_C(alpha) + F
-        tau_B = T @ self.alloc[1:].T - np.cross(w, w @ self.J.T) + tau
+        tau_B = T @ self.alloc[1:].T - cross(w, w @ self.J.T) + tau
         return F_C, tau_B
 
     def tether_lever(self, n_B):
@@ -248,10 +254,10 @@ class Model:
 
         # p_t'' = rho (e_delta delta'' + e_xi xi'' + c2), c2 the velocity-product terms
         c2 = d.velocity_products(dd, dx)
-        w_w_pe = np.cross(w, w_x_pe)
-        rhs_F = F0 - m * self.rho * c2 + m * np.einsum("...ij,...j->...i", R, w_w_pe)
+        w_w_pe = cross(w, w_x_pe)
+        rhs_F = F0 - m * self.rho * c2 + m * mv(R, w_w_pe)
 
-        e_B = np.einsum("...ji,...j->...i", R, e)
+        e_B = mtv(R, e)
         A = np.zeros(rhs_F.shape[:-1] + (6, 6), dtype=rhs_F.dtype)
         A[..., :3, 0] = m * self.rho * d.e_delta
         A[..., :3, 1] = m * self.rho * d.e_xi
@@ -276,7 +282,7 @@ class Model:
                 parts.append(eff.state_derivative(z[..., i : i + eff.n_states], u, kin))
                 i += eff.n_states
         shape = np.broadcast_shapes(*(p.shape[:-1] for p in parts))
-        z_dot = np.concatenate([np.broadcast_to(p, shape + p.shape[-1:]) for p in parts], -1)
+        z_dot = np.concatenate([broadcast(p, shape + p.shape[-1:]) for p in parts], -1)
         return Evaluation(z_dot, sol[..., 5], T)
 
     def f(self, z, u, alpha):
@@ -291,14 +297,14 @@ class Model:
         R, d, _, w_x_pe = self.kinematics(z)
         w, w_dot = z[..., 7:10], z_dot[..., 7:10]
         p_tt = self.rho * d.acceleration(z[..., 2], z[..., 3], z_dot[..., 2], z_dot[..., 3])
-        arm = np.cross(w_dot, self.p_e) + np.cross(w, w_x_pe)
-        return p_tt - np.einsum("...ij,...j->...i", R, arm)
+        arm = cross(w_dot, self.p_e) + cross(w, w_x_pe)
+        return p_tt - mv(R, arm)
 
     def cog_motion_one(self, z, z_dot):
         """COG position, velocity and acceleration in C and ``R_CB`` of one state ``z``
         (n_z,) moving at ``z_dot`` (real): the one-sample form of :meth:`kinematics` and
         :meth:`cog_acceleration` in scalar math, for per-step code (the simulator's
-        sensors: ~20 us where the batched forms spend ~0.5 ms in numpy's per-call
+        sensors: ~10 us where the batched forms spend ~0.5 ms in numpy's per-call
         overhead). tests/firmware/test_controller.py checks it against them.
 
         Returns
@@ -306,33 +312,38 @@ class Model:
         p_q, v_q, a_q : ndarray, shape (3,), m, m/s, m/s^2
         R_CB : ndarray, shape (3, 3)
         """
-        delta, xi, dd, dx = (float(v) for v in z[:4])
-        ddd, dxx = float(z_dot[2]), float(z_dot[3])
-        R = matrix_from_euler_zyx_scalar(float(z[4]), float(z[5]), float(z[6]) + xi)
+        delta, xi, dd, dx, phi, theta, chi, w0, w1, w2 = np.asarray(z[:10], dtype=float).tolist()
+        _, _, ddd, dxx, _, _, _, _, wd1, wd2 = np.asarray(z_dot[:10], dtype=float).tolist()
+        R = matrix_from_euler_zyx_scalar(phi, theta, chi + xi)
+        r = R.tolist()
         sd, cd, sx, cx = math.sin(delta), math.cos(delta), math.sin(xi), math.cos(xi)
-        e = np.array([sd * cx, sd * sx, cd])
-        e_d = np.array([cd * cx, cd * sx, -sd])
-        e_x = np.array([-sd * sx, sd * cx, 0.0])
-        e_dx = np.array([-cd * sx, cd * cx, 0.0])
-        e_xx = np.array([-sd * cx, -sd * sx, 0.0])
-        w, w_dot = z[7:10], z_dot[7:10]
-        L = self.L_e
-        w_pe = np.array([0.0, -L * w[2], L * w[1]])  # omega x p_e, p_e = (-L_e, 0, 0)
-        w_w_pe = np.array([w[1] * w_pe[2] - w[2] * w_pe[1], w[2] * w_pe[0] - w[0] * w_pe[2],
-                           w[0] * w_pe[1] - w[1] * w_pe[0]])
-        arm = np.array([0.0, -L * w_dot[2], L * w_dot[1]]) + w_w_pe
-        p_q = self.rho * e + L * R[:, 0]
-        v_q = self.rho * (e_d * dd + e_x * dx) - R @ w_pe
-        a_q = self.rho * (e_d * ddd + e_x * dxx - e * dd * dd + 2 * e_dx * dd * dx
-                          + e_xx * dx * dx) - R @ arm
-        return p_q, v_q, a_q, R
+        e = (sd * cx, sd * sx, cd)
+        e_d = (cd * cx, cd * sx, -sd)
+        e_x = (-sd * sx, sd * cx, 0.0)
+        e_dx = (-cd * sx, cd * cx, 0.0)
+        e_xx = (-sd * cx, -sd * sx, 0.0)
+        L, rho = self.L_e, self.rho
+        w_pe = (0.0, -L * w2, L * w1)  # omega x p_e, p_e = (-L_e, 0, 0)
+        w_w_pe = (w1 * w_pe[2] - w2 * w_pe[1], w2 * w_pe[0] - w0 * w_pe[2],
+                  w0 * w_pe[1] - w1 * w_pe[0])
+        arm = (w_w_pe[0], -L * wd2 + w_w_pe[1], L * wd1 + w_w_pe[2])
+        p_q, v_q, a_q = [], [], []
+        for i in range(3):
+            ri = r[i]
+            p_q.append(rho * e[i] + L * ri[0])
+            v_q.append(rho * (e_d[i] * dd + e_x[i] * dx)
+                       - (ri[0] * w_pe[0] + ri[1] * w_pe[1] + ri[2] * w_pe[2]))
+            a_q.append(rho * (e_d[i] * ddd + e_x[i] * dxx - e[i] * dd * dd
+                              + 2 * e_dx[i] * dd * dx + e_xx[i] * dx * dx)
+                       - (ri[0] * arm[0] + ri[1] * arm[1] + ri[2] * arm[2]))
+        return np.array(p_q), np.array(v_q), np.array(a_q), R
 
     def specific_force(self, z, z_dot, alpha):
         """What an accelerometer at the COG senses, in B, shape (..., 3), m/s^2:
         ``R_CB^T (p_q'' - g_C)`` (:meth:`cog_acceleration`) on a circle of tilt ``alpha``."""
         R = self.kinematics(z)[0]
         f_C = self.cog_acceleration(z, z_dot) - self.g_C(alpha)
-        return np.einsum("...ji,...j->...i", R, f_C)
+        return mtv(R, f_C)
 
     def cog_position(self, z, alpha=0.0, gamma=0.0, frame="C"):
         """COG position ``p_q = rho e + L_e x_B`` in C (or I with ``frame="I"``), m."""

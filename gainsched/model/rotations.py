@@ -152,9 +152,9 @@ def quaternion_from_matrix(R):
 def quaternion_from_matrix_scalar(R) -> np.ndarray:
     """:func:`quaternion_from_matrix` of one rotation matrix (3, 3) in scalar math (the
     one-sample form for per-step code: ~3 us where the batched form spends ~120 us)."""
-    r = [[float(R[i][j]) for j in range(3)] for i in range(3)]
+    r = np.asarray(R, dtype=float).tolist()
     tr = r[0][0] + r[1][1] + r[2][2]
-    k = max(range(4), key=lambda i: (tr, r[0][0], r[1][1], r[2][2])[i])
+    k = max(range(4), key=(tr, r[0][0], r[1][1], r[2][2]).__getitem__)  # first largest
     if k == 0:
         s = math.sqrt(1.0 + tr) * 2
         q = (0.25 * s, (r[2][1] - r[1][2]) / s, (r[0][2] - r[2][0]) / s, (r[1][0] - r[0][1]) / s)

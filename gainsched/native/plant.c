@@ -1,6 +1,7 @@
 /*
- * plant.c: the reduced-coordinate tethered-quadcopter model (rigid link) for one
- * state, and one RK4 step of it with the input held (paper Sec. II).
+ * plant.c: the tethered-quadcopter plants of the closed-loop simulator for one state,
+ * and one RK4 step of each with the input held (paper Sec. II): the reduced-coordinate
+ * model (rigid link) and the maximal-coordinate model with the spring-damper link.
  *
  * Why hand-written C: the closed-loop simulator evaluates the model four times
  * per control step at 1 kHz on a single state. gainsched.model.reduced.Model.evaluate
@@ -22,13 +23,28 @@
  *
  * the unknowns (delta'', xi'', omega', f_t) solve one 6x6 linear system.
  *
+ * The maximal model (gs_maximal_eval, gainsched.model.maximal.MaximalModel with
+ * gainsched.model.links.SpringDamper) is a free rigid body, x = (p_q, v_q, q_CB,
+ * omega_B) (m, m/s, Hamilton quaternion, rad/s), pulled by a tension-only Kelvin-Voigt
+ * tether from the anchor to the attachment point p_t = p_q + R p_e (M. Tognon and
+ * A. Franchi, "Theory and Applications for Control of Aerial Robots in Physical
+ * Interaction Through Tethers", Springer, 2021, sec. 3.1):
+ *
+ *   f = max(0, k (|p_t| - rho) + c n . v_t),  n = p_t / |p_t|
+ *   m p_q'' = R (0,0,T_C) + m g_C + F_eff - f n
+ *   J omega' = sum L_i x T_i + tau_M - omega x J omega + tau_eff + p_e x R^T (-f n)
+ *   q' = q (x) (0, omega) / 2
+ *
+ * It takes the stateless effects only (as MaximalModel does). The stiff links it serves
+ * need RK4 substeps (MaximalModel.substeps): gs_maximal_rk4 takes their count.
+ *
  * Parameters: one read-only double array built by gainsched/sim/fastplant.py
  * (layout below, GS_PLANT_LAYOUT); no globals, no allocation, C99.
  */
 #include <math.h>
 #include <stddef.h>
 
-#define GS_PLANT_LAYOUT 1
+#define GS_PLANT_LAYOUT 2
 #define N_BASE 10
 #define MAX_Z 64 /* largest state the RK4 scratch holds (10 + effect states) */
 #define EPS2 1e-24 /* effects.norm: keeps sqrt differentiable at zero speed */
@@ -43,7 +59,10 @@ enum {
     P_G,          /* gravity, m/s^2 */
     P_J,          /* inertia J, 3x3 row-major, kg m^2 (9 entries) */
     P_ALLOC = P_J + 9, /* rows 1..3 of the allocation matrix, 3x4 row-major (12) */
-    P_NEFF = P_ALLOC + 12, /* number of effects */
+    P_LINK_K = P_ALLOC + 12, /* spring-damper stiffness k, N/m (maximal model only) */
+    P_LINK_C,     /* spring-damper damping c, N s/m (maximal model only) */
+    P_JINV,       /* J^-1, 3x3 row-major, 1/(kg m^2) (9; maximal model only) */
+    P_NEFF = P_JINV + 9, /* number of effects */
     P_EFF,        /* effects in model order, EFF_STRIDE doubles each */
 };
 #define EFF_STRIDE 4 /* kind, param a, param b, first state index */
@@ -54,7 +73,8 @@ enum {
     FX_ROTOR_DRAG = 2,   /* RotorDrag: a = k_rd */
     FX_THRUST_SCALE = 3, /* ThrustScale: a = k_T */
     FX_THRUST_POLY = 4,  /* ThrustPolynomial: a = c1, b = c2 */
-    FX_MOTOR_LAG = 5     /* MotorLag: a = tau, 4 states */
+    FX_MOTOR_LAG = 5,    /* MotorLag: a = tau, 4 states */
+    FX_THRUST_MOMENTUM = 6 /* ThrustMomentum: a = disk_area, b = rho_air (eq. 29) */
 };
 
 /* exported (ctypes, gainsched/sim/fastplant.py) */
@@ -64,6 +84,10 @@ int gs_plant_eval(const double *p, const double *z, const double *u, double alph
                   double *z_dot, double *tension, double *T_out);
 int gs_plant_rk4(const double *p, const double *x, const double *u, double alpha, double dt,
                  double *x_next, double *tension);
+int gs_maximal_eval(const double *p, const double *x, const double *u, double alpha,
+                    double *x_dot, double *tension);
+int gs_maximal_rk4(const double *p, const double *x, const double *u, double alpha, double dt,
+                   int substeps, double *x_next, double *tension);
 
 int gs_plant_layout(void) { return GS_PLANT_LAYOUT; }
 
@@ -122,6 +146,138 @@ static int solve6(double A[6][6], double b[6], double x[6])
     return 0;
 }
 
+/* |v| as effects.norm computes it, once per evaluation (*speed < 0: not yet) */
+static double speed_of(const double v[3], double *speed)
+{
+    if (*speed < 0.0) {
+        *speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] + EPS2);
+    }
+    return *speed;
+}
+
+/* Induced velocity v_i (m/s) of ThrustMomentum (effects._induced_velocity, one rotor):
+ * the largest root of g(v) = v^2 ((v + vz)^2 + vxy2) - vh^4 in [0, vh + max(0, -vz)] by
+ * safeguarded Newton steps (bisection where a step leaves the bracket) from Glauert's
+ * estimate, or from the bracket's top where g may have three roots; stops when a step
+ * moves less than 1e-12 vh (at most 80 steps). */
+static double induced_velocity(double vh, double vz, double vxy2)
+{
+    const double vh2 = vh * vh;
+    double hi = vh + 0.5 * (sqrt(vz * vz + 1e-12) - vz), lo = 0.0, v;
+    int it;
+    if (vz >= 0.0 || 8.0 * vxy2 >= vz * vz) {
+        v = vh2 / sqrt(vxy2 + (vh + vz) * (vh + vz) + 1e-12);
+    } else {
+        v = hi;
+    }
+    for (it = 0; it < 80; ++it) {
+        const double w = v + vz;
+        const double g = v * v * (w * w + vxy2) - vh2 * vh2;
+        const double dg = 2 * v * (w * w + vxy2) + 2 * v * v * w;
+        double vn;
+        if (g > 0.0) {
+            hi = v;
+        } else {
+            lo = v;
+        }
+        vn = dg > 0.0 ? v - g / dg : lo - 1.0; /* lo - 1: outside, so bisect */
+        if (!(vn >= lo && vn <= hi)) {
+            vn = 0.5 * (lo + hi);
+        }
+        if (!(fabs(vn - v) > 1e-12 * vh)) {
+            return vn;
+        }
+        v = vn;
+    }
+    return v;
+}
+
+/* T / T_h of ThrustMomentum for a rotor at thrust T (N) meeting the air at v_B (m/s, in
+ * B): momentum theory with the inflow floored smoothly at half its hover value
+ * (paper eq. 29; gainsched.model.effects.ThrustMomentum.ratio). */
+static double momentum_ratio(double T, const double v_B[3], double disk_area, double rho_air)
+{
+    const double vh = sqrt(sqrt(T * T + 1e-12) / (2 * rho_air * disk_area));
+    const double vz = v_B[2];
+    const double v = induced_velocity(vh, vz, v_B[0] * v_B[0] + v_B[1] * v_B[1]);
+    const double lam0 = 0.5 * vh, eps = 0.02 * vh;
+    double lam = v + vz;
+    lam = 0.5 * (lam + lam0 + sqrt((lam - lam0) * (lam - lam0) + eps * eps));
+    return vh / lam;
+}
+
+/* Actual motor thrusts T (4, N) from the command u (4, N) after the effects, in model
+ * order (motor lag: its states in z, which may be NULL without one; thrust scale;
+ * thrust polynomial in |v|; momentum theory in v_B = R^T v); v is the COG velocity in C
+ * (m/s), R = R_CB. Returns T_C = sum T (N). Model.thrust. */
+static double effect_thrust(const double *p, const double *z, const double *u,
+                            double R[3][3], const double v[3], double *speed, double T[4])
+{
+    const int n_eff = (int)p[P_NEFF];
+    int j, k;
+    for (j = 0; j < 4; ++j) {
+        T[j] = u[j];
+    }
+    for (k = 0; k < n_eff; ++k) {
+        const double *ef = p + P_EFF + EFF_STRIDE * k;
+        const int kind = (int)ef[0];
+        if (kind == FX_MOTOR_LAG) {
+            const int s0 = (int)ef[3];
+            for (j = 0; j < 4; ++j) {
+                T[j] = z[s0 + j];
+            }
+        } else if (kind == FX_THRUST_SCALE) {
+            for (j = 0; j < 4; ++j) {
+                T[j] = ef[1] * T[j];
+            }
+        } else if (kind == FX_THRUST_POLY) {
+            const double sp = speed_of(v, speed);
+            const double f = 1.0 + ef[1] * sp + ef[2] * sp * sp;
+            for (j = 0; j < 4; ++j) {
+                T[j] = T[j] * f;
+            }
+        } else if (kind == FX_THRUST_MOMENTUM && ef[1] != 0.0) { /* disk_area 0: off */
+            double v_B[3];
+            for (j = 0; j < 3; ++j) {
+                v_B[j] = R[0][j] * v[0] + R[1][j] * v[1] + R[2][j] * v[2];
+            }
+            for (j = 0; j < 4; ++j) {
+                T[j] = T[j] * momentum_ratio(T[j], v_B, ef[1], ef[2]);
+            }
+        }
+    }
+    return T[0] + T[1] + T[2] + T[3];
+}
+
+/* The effects' force at the COG F (3, N, in C; accumulated onto F) for the actual
+ * collective thrust T_C (N), body rotation R = R_CB and COG velocity v (m/s, in C).
+ * None of the supported effects has a torque. Model.effect_wrench. */
+static void effect_force(const double *p, double T_C, double R[3][3], const double v[3],
+                         double *speed, double F[3])
+{
+    const int n_eff = (int)p[P_NEFF];
+    int i, j, k;
+    for (k = 0; k < n_eff; ++k) {
+        const double *ef = p + P_EFF + EFF_STRIDE * k;
+        const int kind = (int)ef[0];
+        if (kind == FX_DRAG) { /* F = -(mu1 + mu2 |v|) v (paper eq. 10) */
+            const double c = ef[1] + ef[2] * speed_of(v, speed);
+            for (i = 0; i < 3; ++i) {
+                F[i] = F[i] + (-c) * v[i];
+            }
+        } else if (kind == FX_ROTOR_DRAG) { /* F_B = -k_rd T_C (v_Bx, v_By, 0) */
+            double v_B[2], F_B[2];
+            for (j = 0; j < 2; ++j) {
+                v_B[j] = R[0][j] * v[0] + R[1][j] * v[1] + R[2][j] * v[2];
+                F_B[j] = -ef[1] * T_C * v_B[j];
+            }
+            for (i = 0; i < 3; ++i) {
+                F[i] = F[i] + (R[i][0] * F_B[0] + R[i][1] * F_B[1]);
+            }
+        }
+    }
+}
+
 /*
  * State derivative z_dot (n_z) and tether tension f_t (N, negative = slack) of the
  * reduced model at state z (n_z) and commanded thrust u (4, N); T_out (4, N, may be
@@ -177,59 +333,9 @@ int gs_plant_eval(const double *p, const double *z, const double *u, double alph
         v[i] = rho * (e_d[i] * dd + e_x[i] * dx) - R_wxpe[i];
     }
 
-    /* thrust: command -> effects in model order (stateful first, then config order) */
-    for (j = 0; j < 4; ++j) {
-        T[j] = u[j];
-    }
-    for (k = 0; k < n_eff; ++k) {
-        const double *ef = p + P_EFF + EFF_STRIDE * k;
-        const int kind = (int)ef[0];
-        if (kind == FX_MOTOR_LAG) {
-            const int s0 = (int)ef[3];
-            for (j = 0; j < 4; ++j) {
-                T[j] = z[s0 + j];
-            }
-        } else if (kind == FX_THRUST_SCALE) {
-            for (j = 0; j < 4; ++j) {
-                T[j] = ef[1] * T[j];
-            }
-        } else if (kind == FX_THRUST_POLY) {
-            double f;
-            if (speed < 0.0) {
-                speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] + EPS2);
-            }
-            f = 1.0 + ef[1] * speed + ef[2] * speed * speed;
-            for (j = 0; j < 4; ++j) {
-                T[j] = T[j] * f;
-            }
-        }
-    }
-    const double T_C = T[0] + T[1] + T[2] + T[3];
-
-    /* wrench effects (see the final thrust): force at the COG in C, torque in B */
-    for (k = 0; k < n_eff; ++k) {
-        const double *ef = p + P_EFF + EFF_STRIDE * k;
-        const int kind = (int)ef[0];
-        if (kind == FX_DRAG) { /* F = -(mu1 + mu2 |v|) v (paper eq. 10) */
-            double c;
-            if (speed < 0.0) {
-                speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] + EPS2);
-            }
-            c = ef[1] + ef[2] * speed;
-            for (i = 0; i < 3; ++i) {
-                F[i] = F[i] + (-c) * v[i];
-            }
-        } else if (kind == FX_ROTOR_DRAG) { /* F_B = -k_rd T_C (v_Bx, v_By, 0) */
-            double v_B[2], F_B[2];
-            for (j = 0; j < 2; ++j) {
-                v_B[j] = R[0][j] * v[0] + R[1][j] * v[1] + R[2][j] * v[2];
-                F_B[j] = -ef[1] * T_C * v_B[j];
-            }
-            for (i = 0; i < 3; ++i) {
-                F[i] = F[i] + (R[i][0] * F_B[0] + R[i][1] * F_B[1]);
-            }
-        }
-    }
+    /* thrust: command -> effects in model order; then the effects' force (see T) */
+    const double T_C = effect_thrust(p, z, u, R, v, &speed, T);
+    effect_force(p, T_C, R, v, &speed, F);
 
     /* p_t'' = rho (e_d delta'' + e_x xi'' + c2) */
     for (i = 0; i < 3; ++i) {
@@ -354,6 +460,134 @@ int gs_plant_rk4(const double *p, const double *x, const double *u, double alpha
     }
     for (i = 0; i < n; ++i) {
         x_next[i] = x[i] + h6 * (((k1[i] + 2.0 * k2[i]) + 2.0 * k3[i]) + k4[i]);
+    }
+    return 0;
+}
+
+/*
+ * State derivative x_dot (13) and tether tension (N) of the maximal model with the
+ * spring-damper link at state x (13: p_q m, v_q m/s, q_CB, omega_B rad/s; p and v in C)
+ * and commanded thrust u (4, N). The tension is the force law k s + c s' before the
+ * tension-only clip: negative (minus the push the link would need) when slack, as
+ * MaximalModel.step reports it. MaximalModel.evaluate, one state. Returns 0.
+ */
+int gs_maximal_eval(const double *p, const double *x, const double *u, double alpha,
+                    double *x_dot, double *tension)
+{
+    const double m = p[P_M], rho = p[P_RHO], L_e = p[P_LE], g = p[P_G];
+    const double k_link = p[P_LINK_K], c_link = p[P_LINK_C];
+    const double *J = p + P_J, *Al = p + P_ALLOC;
+    const double *pq = x, *v = x + 3, *q = x + 6, *w = x + 10;
+    const double p_e[3] = {-L_e, 0.0, 0.0};
+    double R[3][3], T[4], F[3] = {0, 0, 0}, w_pe[3], p_t[3], v_t[3], n[3], f_link[3];
+    double F_B[3], pe_FB[3], Jw[3], wJw[3], tau[3], speed = -1.0;
+    int i;
+
+    {   /* R_CB of the normalised quaternion (rotations.matrix_from_quaternion) */
+        const double s = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        const double qw = q[0] / s, qx = q[1] / s, qy = q[2] / s, qz = q[3] / s;
+        R[0][0] = 1 - 2 * (qy * qy + qz * qz);
+        R[0][1] = 2 * (qx * qy - qw * qz);
+        R[0][2] = 2 * (qx * qz + qw * qy);
+        R[1][0] = 2 * (qx * qy + qw * qz);
+        R[1][1] = 1 - 2 * (qx * qx + qz * qz);
+        R[1][2] = 2 * (qy * qz - qw * qx);
+        R[2][0] = 2 * (qx * qz - qw * qy);
+        R[2][1] = 2 * (qy * qz + qw * qx);
+        R[2][2] = 1 - 2 * (qx * qx + qy * qy);
+    }
+    /* everything but the tether (Model.body_wrench) */
+    const double T_C = effect_thrust(p, NULL, u, R, v, &speed, T);
+    effect_force(p, T_C, R, v, &speed, F);
+    for (i = 0; i < 3; ++i) {
+        Jw[i] = J[3 * i] * w[0] + J[3 * i + 1] * w[1] + J[3 * i + 2] * w[2];
+    }
+    cross(w, Jw, wJw);
+    for (i = 0; i < 3; ++i) {
+        const double *a = Al + 4 * i;
+        tau[i] = (a[0] * T[0] + a[1] * T[1] + a[2] * T[2] + a[3] * T[3]) - wJw[i];
+    }
+    /* the link at the attachment point */
+    cross(w, p_e, w_pe);
+    for (i = 0; i < 3; ++i) {
+        p_t[i] = pq[i] + (R[i][0] * p_e[0] + R[i][1] * p_e[1] + R[i][2] * p_e[2]);
+        v_t[i] = v[i] + (R[i][0] * w_pe[0] + R[i][1] * w_pe[1] + R[i][2] * w_pe[2]);
+    }
+    {
+        const double dist = sqrt(p_t[0] * p_t[0] + p_t[1] * p_t[1] + p_t[2] * p_t[2]);
+        double raw, f;
+        for (i = 0; i < 3; ++i) {
+            n[i] = p_t[i] / dist;
+        }
+        raw = k_link * (dist - rho) + c_link * (n[0] * v_t[0] + n[1] * v_t[1] + n[2] * v_t[2]);
+        f = raw > 0.0 ? raw : 0.0;
+        for (i = 0; i < 3; ++i) {
+            f_link[i] = -f * n[i];
+        }
+        *tension = raw;
+    }
+    for (i = 0; i < 3; ++i) {
+        F_B[i] = R[0][i] * f_link[0] + R[1][i] * f_link[1] + R[2][i] * f_link[2];
+    }
+    cross(p_e, F_B, pe_FB);
+    {
+        const double g_C[3] = {0.0, -g * sin(alpha), -g * cos(alpha)};
+        const double *Ji = p + P_JINV;
+        double rhs[3];
+        for (i = 0; i < 3; ++i) {
+            x_dot[i] = v[i];
+            x_dot[3 + i] = ((R[i][2] * T_C + m * g_C[i] + F[i]) + f_link[i]) / m;
+            rhs[i] = tau[i] + pe_FB[i];
+        }
+        for (i = 0; i < 3; ++i) {
+            x_dot[10 + i] = Ji[3 * i] * rhs[0] + Ji[3 * i + 1] * rhs[1] + Ji[3 * i + 2] * rhs[2];
+        }
+    }
+    /* q' = q (x) (0, omega) / 2 */
+    x_dot[6] = 0.5 * -(q[1] * w[0] + q[2] * w[1] + q[3] * w[2]);
+    x_dot[7] = 0.5 * (q[0] * w[0] + (q[2] * w[2] - q[3] * w[1]));
+    x_dot[8] = 0.5 * (q[0] * w[1] + (q[3] * w[0] - q[1] * w[2]));
+    x_dot[9] = 0.5 * (q[0] * w[2] + (q[1] * w[1] - q[2] * w[0]));
+    return 0;
+}
+
+/*
+ * Advance the maximal model by dt (s) with u held: `substeps` classical RK4 steps of
+ * dt / substeps (MaximalModel.step). *tension receives the force law at x (N, negative:
+ * slack). Returns 0, or 2 if substeps < 1.
+ */
+int gs_maximal_rk4(const double *p, const double *x, const double *u, double alpha, double dt,
+                   int substeps, double *x_next, double *tension)
+{
+    double k1[13], k2[13], k3[13], k4[13], xs[13], xc[13], ten;
+    const double h = dt / substeps;
+    int i, s;
+    if (substeps < 1) {
+        return 2;
+    }
+    for (i = 0; i < 13; ++i) {
+        xc[i] = x[i];
+    }
+    for (s = 0; s < substeps; ++s) {
+        (void)gs_maximal_eval(p, xc, u, alpha, k1, s == 0 ? tension : &ten);
+        for (i = 0; i < 13; ++i) {
+            xs[i] = xc[i] + 0.5 * h * k1[i];
+        }
+        (void)gs_maximal_eval(p, xs, u, alpha, k2, &ten);
+        for (i = 0; i < 13; ++i) {
+            xs[i] = xc[i] + 0.5 * h * k2[i];
+        }
+        (void)gs_maximal_eval(p, xs, u, alpha, k3, &ten);
+        for (i = 0; i < 13; ++i) {
+            xs[i] = xc[i] + h * k3[i];
+        }
+        (void)gs_maximal_eval(p, xs, u, alpha, k4, &ten);
+        for (i = 0; i < 13; ++i) {
+            xc[i] = xc[i] + h / 6 * (((k1[i] + 2 * k2[i]) + 2 * k3[i]) + k4[i]);
+        }
+    }
+    for (i = 0; i < 13; ++i) {
+        x_next[i] = xc[i];
     }
     return 0;
 }

@@ -1,4 +1,4 @@
-"""Compiled reduced-coordinate plant for the closed-loop simulator (``gainsched/native/plant.c``).
+"""Compiled plants for the closed-loop simulator (``gainsched/native/plant.c``).
 
 The simulator needs the model on *one* state four times per control step;
 :meth:`gainsched.model.reduced.Model.evaluate` is batched numpy and spends ~0.4 ms per
@@ -9,10 +9,13 @@ packs a :class:`~gainsched.model.reduced.Model` into the C parameter array and c
 kernel through ctypes with preallocated buffers.
 
 Supported: the rigid link with the state-only effects ``drag`` (eq. 10),
-``rotor_drag``, ``thrust_scale``, ``thrust_airspeed`` and ``motor_lag`` (4 extra
-states). Anything else (other effects, elastic links) uses the numpy model:
-:func:`fast_plant` returns None and the caller falls back, as it does when no C
-compiler is available or ``GAINSCHED_NATIVE=0`` (:func:`gainsched.native.load`).
+``rotor_drag``, ``thrust_scale``, ``thrust_airspeed``, ``thrust_momentum`` (eq. 29)
+and ``motor_lag`` (4 extra states) (:class:`FastPlant`); the spring-damper link with
+the same effects but the stateful ``motor_lag`` (:class:`FastMaximal`, the
+maximal-coordinate model of :mod:`gainsched.model.maximal`, which has no stateful
+effects either). Anything else (other effects, the SLS and lumped-mass links) uses the
+numpy model: :func:`fast_plant` returns None and the caller falls back, as it does when
+no C compiler is available or ``GAINSCHED_NATIVE=0`` (:func:`gainsched.native.load`).
 """
 
 from __future__ import annotations
@@ -22,13 +25,22 @@ import ctypes
 import numpy as np
 
 from ..config import N_STATE, Config
-from ..model.effects import Drag, MotorLag, RotorDrag, ThrustPolynomial, ThrustScale
+from ..model.effects import (
+    Drag,
+    MotorLag,
+    RotorDrag,
+    ThrustMomentum,
+    ThrustPolynomial,
+    ThrustScale,
+)
+from ..model.maximal import N_MAXIMAL, MaximalModel
 from ..model.reduced import Model
 from ..native import load
 
-__all__ = ["FastPlant", "fast_plant", "fast_plant_supported", "SUPPORTED_EFFECTS"]
+__all__ = ["FastPlant", "FastMaximal", "fast_plant", "fast_plant_supported",
+           "SUPPORTED_EFFECTS"]
 
-_LAYOUT = 1  # GS_PLANT_LAYOUT in plant.c
+_LAYOUT = 2  # GS_PLANT_LAYOUT in plant.c
 _EFF_STRIDE = 4  # kind, param a, param b, first state index
 #: effect class -> (kind code in plant.c, names of the parameters a, b)
 _CODES = {
@@ -37,25 +49,33 @@ _CODES = {
     ThrustScale: (3, ("k_T",)),
     ThrustPolynomial: (4, ("c1", "c2")),
     MotorLag: (5, ("tau",)),
+    ThrustMomentum: (6, ("disk_area", "rho_air")),
 }
 #: config effect names the compiled plant implements
 SUPPORTED_EFFECTS = frozenset(cls.kind for cls in _CODES)
 
 
 def fast_plant_supported(config: Config) -> bool:
-    """Whether the compiled plant implements ``config``: rigid link, supported effects only.
+    """Whether a compiled plant implements ``config``: the rigid link with the supported
+    effects, or the spring-damper link with the supported stateless effects.
 
     Says nothing about whether a compiler is available (see :func:`fast_plant`).
     """
-    return config.tether.link == "rigid" and all(
-        s.name in SUPPORTED_EFFECTS for s in config.effects
-    )
+    link = config.tether.link
+    names = {s.name for s in config.effects}
+    if link == "spring-damper":
+        return names <= SUPPORTED_EFFECTS - {MotorLag.kind}
+    return link == "rigid" and names <= SUPPORTED_EFFECTS
 
 
-def _params(model: Model) -> np.ndarray:
-    """The ``plant.c`` parameter array of a model (layout in plant.c), float64."""
+def _params(model: Model, maximal: MaximalModel | None = None) -> np.ndarray:
+    """The ``plant.c`` parameter array of a model (layout in plant.c), float64; with
+    ``maximal`` (spring-damper link) its link constants and state size."""
     alloc = np.asarray(model.alloc, dtype=float)
-    head = [_LAYOUT, model.n_z, model.m, model.rho, model.L_e, model.g]
+    n_x = model.n_z if maximal is None else maximal.n_x
+    link = [0.0, 0.0] if maximal is None else [maximal.link_model.k, maximal.link_model.c]
+    J_inv = np.linalg.inv(model.J) if maximal is None else maximal.J_inv
+    head = [_LAYOUT, n_x, model.m, model.rho, model.L_e, model.g]
     eff = []
     i = N_STATE
     for e in model.effects:
@@ -68,6 +88,8 @@ def _params(model: Model) -> np.ndarray:
             np.asarray(head, dtype=float),
             np.asarray(model.J, dtype=float).reshape(9),
             alloc[1:].reshape(12),
+            link,
+            np.asarray(J_inv, dtype=float).reshape(9),
             [len(eff)],
             np.asarray(eff, dtype=float).reshape(-1),
         ]
@@ -90,7 +112,7 @@ class FastPlant:
     """
 
     def __init__(self, config: Config, lib: ctypes.CDLL):
-        if not fast_plant_supported(config):
+        if config.tether.link != "rigid" or not fast_plant_supported(config):
             raise ValueError(f"{config.source}: not supported by the compiled plant")
         model = Model(config)
         if int(lib.gs_plant_layout()) != _LAYOUT:
@@ -159,7 +181,67 @@ class FastPlant:
         return self._out.copy(), float(self._ten[0])
 
 
-def fast_plant(config: Config) -> FastPlant | None:
+class FastMaximal:
+    """The maximal-coordinate model of ``config`` with its spring-damper link
+    (:class:`gainsched.model.maximal.MaximalModel`) evaluated by ``plant.c``.
+
+    The simulator's plant interface, as :class:`FastPlant`: :meth:`f` and
+    :meth:`rk4_step` (with the RK4 substeps of :meth:`MaximalModel.substeps`). Not
+    thread-safe; make one per thread.
+
+    Parameters
+    ----------
+    config : Config
+        Spring-damper link; must satisfy :func:`fast_plant_supported`.
+    lib : ctypes.CDLL
+        The loaded ``plant`` kernel.
+    """
+
+    def __init__(self, config: Config, lib: ctypes.CDLL):
+        if config.tether.link != "spring-damper" or not fast_plant_supported(config):
+            raise ValueError(f"{config.source}: not supported by the compiled maximal plant")
+        if int(lib.gs_plant_layout()) != _LAYOUT:
+            raise RuntimeError("plant.c parameter layout does not match fastplant.py")
+        self.maximal = MaximalModel(Model(config))
+        self.n_x = N_MAXIMAL
+        self._p = _params(self.maximal.model, self.maximal)
+        self._x = np.zeros(self.n_x)
+        self._u = np.zeros(4)
+        self._out = np.zeros(self.n_x)
+        self._ten = np.zeros(1)
+        bufs = (self._p, self._x, self._u, self._out, self._ten)
+        self._pp, self._px, self._pu, self._pout, self._pten = (a.ctypes.data for a in bufs)
+        vp, dbl = ctypes.c_void_p, ctypes.c_double
+        self._eval = lib["gs_maximal_eval"]
+        self._eval.argtypes = [vp, vp, vp, dbl, vp, vp]
+        self._eval.restype = ctypes.c_int
+        self._rk4 = lib["gs_maximal_rk4"]
+        self._rk4.argtypes = [vp, vp, vp, dbl, dbl, ctypes.c_int, vp, vp]
+        self._rk4.restype = ctypes.c_int
+        self._substeps: dict[float, int] = {}
+        self._lib = lib
+
+    def f(self, x, u, alpha):
+        """State derivative (13,) and tether tension (float, N, >= 0) at one state, as
+        ``MaximalModel.f`` and ``MaximalModel.tension``."""
+        self._x[:] = x
+        self._u[:] = u
+        self._eval(self._pp, self._px, self._pu, alpha, self._pout, self._pten)
+        return self._out.copy(), max(0.0, float(self._ten[0]))
+
+    def rk4_step(self, x, u, alpha, dt):
+        """Advance by ``dt`` s with ``u`` held, as ``MaximalModel.step``: ``(x_next (13,),
+        signed tension at x, N)`` (negative: slack, the push the link would need)."""
+        n = self._substeps.get(dt)
+        if n is None:
+            n = self._substeps[dt] = self.maximal.substeps(dt)
+        self._x[:] = x
+        self._u[:] = u
+        self._rk4(self._pp, self._px, self._pu, alpha, dt, n, self._pout, self._pten)
+        return self._out.copy(), float(self._ten[0])
+
+
+def fast_plant(config: Config) -> FastPlant | FastMaximal | None:
     """The compiled plant for ``config``, or None: unsupported config, no compiler, or
     ``GAINSCHED_NATIVE=0`` (the caller then uses the numpy model)."""
     if not fast_plant_supported(config):
@@ -167,4 +249,6 @@ def fast_plant(config: Config) -> FastPlant | None:
     lib = load("plant")
     if lib is None:
         return None
+    if config.tether.link == "spring-damper":
+        return FastMaximal(config, lib)
     return FastPlant(config, lib)

@@ -355,17 +355,18 @@ def _warn_numpy_plant(cfg: Config) -> None:
 class _Plant:
     """Reduced model (rigid link) or maximal model (elastic links) behind one interface.
 
-    The rigid link runs on the compiled plant (:mod:`gainsched.sim.fastplant`) when it
-    supports the config and a compiler is available, else on the numpy model (the
-    reference). Other link models keep their own path: set ``self.maximal`` (an object
-    with ``f(x, u, alpha)`` and ``tension(x, u, alpha)``) and ``self.fast = None``.
+    The rigid and the spring-damper links run on the compiled plants
+    (:mod:`gainsched.sim.fastplant`) when they support the config and a compiler is
+    available, else on the numpy models (the reference). The SLS and lumped-mass links
+    keep their own path: set ``self.maximal`` (an object with ``f(x, u, alpha)`` and
+    ``tension(x, u, alpha)``) and ``self.fast = None``.
     """
 
     def __init__(self, cfg: Config):
         self.model = Model(cfg)
         self.maximal = None if cfg.tether.link == "rigid" else MaximalModel(self.model)
-        # compiled RK4 of the reduced model; None: numpy model
-        self.fast = fast_plant(cfg) if self.maximal is None else None
+        # compiled RK4 of the reduced or the spring-damper maximal model; None: numpy model
+        self.fast = fast_plant(cfg)
         if self.maximal is None and self.fast is None:
             _warn_numpy_plant(cfg)
 
@@ -380,18 +381,19 @@ class _Plant:
 
     def f(self, x, u, alpha):
         """State derivative and tether tension (N) at one state."""
+        if self.fast is not None:
+            return self.fast.f(x, u, alpha)
         if self.maximal is None:
-            if self.fast is not None:
-                return self.fast.f(x, u, alpha)
             ev = self.model.evaluate(x, u, alpha)
             return ev.z_dot, ev.tension
         return self.maximal.f(x, u, alpha), self.maximal.tension(x, u, alpha)
 
     def step(self, x, u, alpha, dt):
-        """One RK4 step of ``dt`` s with ``u`` held: ``(x_next, tension at x in N)``."""
+        """One RK4 step of ``dt`` s with ``u`` held: ``(x_next, tension at x in N)``
+        (elastic links: RK4 substeps, and a negative tension when slack)."""
         if self.fast is not None:
             return self.fast.rk4_step(x, u, alpha, dt)
-        if self.maximal is not None:  # RK4 substeps for stiff links; tension < 0: slack
+        if self.maximal is not None:
             return self.maximal.step(x, u, alpha, dt)
         return _rk4(self.f, x, u, alpha, dt)
 
@@ -428,7 +430,7 @@ class _Plant:
         else:
             p_C, v_C, w = x[0:3], x[3:6], x[10:13]
             R_CB = matrix_from_quaternion(x[6:10] / np.linalg.norm(x[6:10]))
-            a_C = self.maximal.f(x, u, alpha)[3:6] if accel else None
+            a_C = self.f(x, u, alpha)[0][3:6] if accel else None
         if accel:
             f_B = R_CB.T @ (a_C - self.model.g_C(alpha))
         return (R_IC @ p_C, R_IC @ v_C, quaternion_from_matrix_scalar(R_IC @ R_CB),
@@ -591,7 +593,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         # a constant-speed circle flies the table's nominal, attitude offsets included
         offsets = (circle_offsets(dmodel, scenario.speed, alpha) if not scenario.maneuvers
                    else None)
-        nom = nominal_from_path(dmodel, path, alpha, periodic=False, offsets=offsets)
+        nom = nominal_from_path(dmodel, path, alpha, offsets=offsets)
         z_d, u_d, tension_d = nom.z[:, :N_STATE], nom.u, nom.tension
     elif controller == "firmware":  # no trim of the design model: only what a firmware has
         return _fly_firmware(design, scheduler, scenario, plant, P, path, progress)
@@ -840,9 +842,10 @@ class _Estimator:
         self.hist: list[np.ndarray] = []
         self.pending: list[tuple[int, np.ndarray]] = []
         self.R_IC = matrix_from_euler_zyx_scalar(alpha, 0.0, gamma)
-        # prediction model: the compiled design model when it applies (same numbers)
+        # prediction model: the compiled reduced design model when it applies (same
+        # numbers); an elastic design link predicts with the reduced (rigid) model too
         fast = None
-        if not sens.ideal and model.n_z == N_STATE:
+        if not sens.ideal and model.n_z == N_STATE and model.config.tether.link == "rigid":
             fast = fast_plant(model.config)
         self._f = (lambda z, u, a: fast.f(z, u, a)[0]) if fast is not None else model.f
 

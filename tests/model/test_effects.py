@@ -120,11 +120,12 @@ def test_registered_effect_refuses_a_clash():
 
 @pytest.mark.slow
 def test_simulator_says_once_when_the_compiled_plant_cannot_run_it(tmp_path):
-    """thrust_momentum has no compiled form: one warning line, and the flight still flies."""
+    """thrust_azimuth (the empirical series) has no compiled form: one warning line, and
+    the flight still flies."""
     import gainsched.sim.loop as loop
 
     loop._FALLBACKS_SEEN.clear()
-    text = paper_config_text(**{"effects.thrust_momentum.disk_area": 0.02})
+    text = paper_config_text(**{"effects.thrust_azimuth.a1": -0.02})
     plant = tmp_path / "plant.toml"
     plant.write_text(text)
     scenario = tmp_path / "short.toml"  # the numpy plant is slow: a 0.5 s flight
@@ -135,5 +136,5 @@ def test_simulator_says_once_when_the_compiled_plant_cannot_run_it(tmp_path):
     res = CliRunner().invoke(cli, args)
     assert res.exit_code == 0, res.output
     lines = [ln for ln in res.stderr.splitlines() if ln.startswith("gainsched: warning:")]
-    assert len(lines) == 1 and "thrust_momentum" in lines[0] and "numpy model" in lines[0]
+    assert len(lines) == 1 and "thrust_azimuth" in lines[0] and "numpy model" in lines[0]
     assert "Warning:" not in res.stderr  # no Python-style warning text

@@ -102,3 +102,26 @@ def test_up_direction_of_one_tilt_is_cached_with_the_same_bits(alpha):
     assert rot.up_C_from_tilt(alpha) is one
     with pytest.raises(ValueError, match="read-only"):
         one[0] = 1.0
+
+
+@pytest.mark.parametrize("dtype", [float, complex])
+def test_small_vector_helpers_are_numpys_forms_bit_for_bit(dtype):
+    """model._vec's cross and dot (the hot paths' forms) equal np.cross and np.sum bit for
+    bit, on batches, one vector, broadcast against a constant vector, real and complex
+    (complex steps ride through them)."""
+    from gainsched.model import _vec
+
+    a = RNG.normal(size=(64, 3)).astype(dtype)
+    b = RNG.normal(size=(64, 3)).astype(dtype)
+    if dtype is complex:
+        a = a + 1e-20j * RNG.normal(size=a.shape)
+    for x, y in ((a, b), (a[5], b[7]), (a, b[0]), (a[3], b)):
+        c = _vec.cross(x, y)
+        assert c.shape == np.cross(x, y).shape and np.array_equal(c, np.cross(x, y))
+        d = _vec.dot(x, y)
+        assert np.array_equal(d, np.sum(x * y, axis=-1))
+    R = rot.matrix_from_euler_zyx(*ANGLES[:4].T)  # mv, mtv: R v and R^T v (summation order
+    # is einsum's, not matmul's: equal to rounding)
+    np.testing.assert_allclose(_vec.mv(R, a[:4]), (R @ a[:4, :, None])[..., 0], rtol=1e-14)
+    np.testing.assert_allclose(_vec.mtv(R, a[:4]),
+                               (np.swapaxes(R, -1, -2) @ a[:4, :, None])[..., 0], rtol=1e-14)

@@ -6,6 +6,9 @@
   largest entry (entries near zero inherit the rounding of the 6x6 solve, so a
   per-entry relative bound would test LAPACK's pivoting order, not the physics).
 - One RK4 step equals ``sim._rk4`` on the numpy model.
+- The maximal model with the spring-damper link (``FastMaximal``) equals
+  ``MaximalModel``: derivative and tension at random states (taut and slack, every
+  combination of the stateless effects), and a step with its RK4 substeps (a stiff link).
 - A closed-loop flight with the compiled plants equals the numpy-plant flight.
 - The numpy model is used with ``GAINSCHED_NATIVE=0`` and for configs the kernel
   does not implement.
@@ -27,9 +30,16 @@ from gainsched.config import N_STATE, EffectSpec, config_from_text
 from gainsched.configedit import remove_key, set_values
 from gainsched.firmware.runtime import Interpolator
 from gainsched.model.effects import EFFECTS
+from gainsched.model.maximal import MaximalModel
 from gainsched.model.reduced import Model
 from gainsched.schedule.tables import load_table
-from gainsched.sim.fastplant import SUPPORTED_EFFECTS, FastPlant, fast_plant, fast_plant_supported
+from gainsched.sim.fastplant import (
+    SUPPORTED_EFFECTS,
+    FastMaximal,
+    FastPlant,
+    fast_plant,
+    fast_plant_supported,
+)
 from gainsched.sim.loop import Scenario, Sensing, _Plant, _rk4, simulate, table_scheduler
 
 from support import PAPER_H5
@@ -47,6 +57,7 @@ EFFECT_PARAMS = {
     "thrust_scale": {"k_T": 0.93},
     "thrust_airspeed": {"c1": -0.012, "c2": 0.0004},
     "motor_lag": {"tau": 0.03},
+    "thrust_momentum": {"disk_area": 0.006},
 }
 COMBOS = [
     c for r in range(len(EFFECT_PARAMS) + 1) for c in itertools.combinations(EFFECT_PARAMS, r)
@@ -146,12 +157,15 @@ def test_fallback_without_native(paper_config, monkeypatch):
 
 
 def test_fallback_for_unsupported_configs(paper_config):
-    elastic = dataclasses.replace(
-        paper_config, tether=dataclasses.replace(paper_config.tether, link="spring-damper")
-    )
-    assert not fast_plant_supported(elastic)
-    assert fast_plant(elastic) is None
-    assert _Plant(elastic).fast is None and _Plant(elastic).maximal is not None
+    def link(name, cfg=paper_config):
+        return dataclasses.replace(cfg, tether=dataclasses.replace(cfg.tether, link=name))
+
+    for name in ("sls", "lumped-mass"):  # elastic links plant.c lacks: numpy maximal model
+        elastic = link(name)
+        assert not fast_plant_supported(elastic) and fast_plant(elastic) is None
+        assert _Plant(elastic).fast is None and _Plant(elastic).maximal is not None
+    lagged = link("spring-damper", with_effects(paper_config.text, ("drag", "motor_lag")))
+    assert not fast_plant_supported(lagged)  # no stateful effects in maximal coordinates
     other = dataclasses.replace(paper_config, effects=(EffectSpec("latency", ()),))
     assert not fast_plant_supported(other) and fast_plant(other) is None
     for kind in sorted(set(EFFECTS) - SUPPORTED_EFFECTS):  # real effects plant.c lacks
@@ -159,7 +173,73 @@ def test_fallback_for_unsupported_configs(paper_config):
         assert not fast_plant_supported(cfg)
         assert _Plant(cfg).fast is None  # numpy model
     with pytest.raises(ValueError, match="not supported"):
-        FastPlant(elastic, native.load("plant"))
+        FastPlant(link("spring-damper"), native.load("plant"))
+    with pytest.raises(ValueError, match="not supported"):
+        FastMaximal(paper_config, native.load("plant"))
+
+
+# ----------------------------------------------------------- maximal model, spring-damper
+STATELESS = [c for c in COMBOS if "motor_lag" not in c]
+
+
+def spring_damper(paper_text: str, names, stiffness: float, damping: float):
+    """The paper config with the named effects and a spring-damper tether."""
+    cfg = with_effects(paper_text, names)
+    text = set_values(cfg.text, {"tether.link": "spring-damper", "tether.stiffness": stiffness,
+                                 "tether.damping": damping})
+    return config_from_text(text, "elastic.toml")
+
+
+def maximal_states(mm: MaximalModel, n: int, seed: int):
+    """Maximal states (n, 13) from random reduced states, the link stretched to 0-40 N and
+    the radius jittered by 1e-4; every third one 1 mm shorter than its rest length
+    (slack); inputs (n, 4) N, tilts (n,)."""
+    model = mm.model
+    z, u, alpha = random_states(model, n, seed)
+    rng = np.random.default_rng(seed + 100)
+    tension = rng.uniform(0.0, 40.0, n)
+    tension[::3] = 0.0
+    x = mm.from_reduced(z[:, :N_STATE], tension=tension)
+    x[:, :3] *= 1 + 1e-4 * rng.standard_normal((n, 1))
+    x[::3, :3] *= 1 - 1e-3 / model.rho
+    return x, u, alpha
+
+
+@pytest.mark.parametrize("names", STATELESS, ids=lambda c: "+".join(c) or "none")
+def test_maximal_derivative_and_tension_equal_numpy_model(paper_text, names):
+    """x' within 1e-12 of its largest entry, tension within 1e-12 N; slack states
+    (tension 0, no push) among them."""
+    cfg = spring_damper(paper_text, names, 3000.0, 5.0)
+    fm = fast_plant(cfg)
+    assert isinstance(fm, FastMaximal)
+    mm = MaximalModel(Model(cfg))
+    x, u, alpha = maximal_states(mm, 48, seed=len(names) * 5 + 2)
+    ref, ten_ref = mm.f(x, u, alpha), mm.tension(x, u, alpha)
+    assert np.any(ten_ref == 0) and np.any(ten_ref > 10)  # both sides of the clip
+    for i in range(x.shape[0]):
+        x_dot, ten = fm.f(x[i], u[i], alpha[i])
+        assert np.abs(x_dot - ref[i]).max() <= 1e-12 * np.abs(ref[i]).max()
+        assert abs(ten - ten_ref[i]) <= 1e-12 * max(ten_ref[i], 1.0)
+
+
+@pytest.mark.parametrize("names", [(), tuple(STATELESS[-1])], ids=["none", "all"])
+def test_maximal_step_with_substeps_equals_numpy(paper_text, names):
+    """A stiff link (k = 2e5 N/m: 3 RK4 substeps per 1 ms) and a soft one (1 substep): the
+    compiled step equals ``MaximalModel.step``, the signed tension (negative when
+    slack) included."""
+    for k, c, subs in ((2e5, 20.0, 3), (3000.0, 5.0, 1)):
+        cfg = spring_damper(paper_text, names, k, c)
+        fm, mm = fast_plant(cfg), MaximalModel(Model(cfg))
+        assert mm.substeps(1e-3) == subs
+        x, u, alpha = maximal_states(mm, 12, seed=9)
+        signs = set()
+        for i in range(x.shape[0]):
+            x_ref, ten_ref = mm.step(x[i], u[i], alpha[i], 1e-3)
+            x_next, ten = fm.rk4_step(x[i], u[i], alpha[i], 1e-3)
+            assert np.abs(x_next - x_ref).max() <= 1e-12 * np.abs(x_ref).max()
+            assert abs(ten - ten_ref) <= 1e-12 * max(abs(ten_ref), 1.0)
+            signs.add(bool(ten_ref > 0))
+        assert signs == {True, False}
 
 
 def test_single_query_interpolator_is_bitwise_the_reference():
