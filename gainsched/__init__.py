@@ -28,6 +28,7 @@ except PackageNotFoundError:  # running from a source tree without install
 #: it: ``__all__``, ``__getattr__`` and the page are made from it.
 API = (
     ("A config", "config", ("load_config", "config_from_text", "Config")),
+    ("The shipped configs", "resources", ("reference_configs",)),
     ("A schedule", "schedule.grid", ("solve_circle", "CircleSolution", "build_grid",
                                      "GridResult")),
     ("Choosing the grid", "schedule.refine", ("refine_grid", "GridChoice")),

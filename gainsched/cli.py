@@ -730,16 +730,42 @@ def simulate(config, table_path, scenario, plant_path, speed, runtime, controlle
 _REPO = Path(__file__).resolve().parents[1]
 
 
+def _table_of(cfg):
+    """``(table, path)`` of a config when no table is given: the checkout's
+    ``tables/NAME.h5`` when it was built from this config, else the cached table
+    (:mod:`gainsched.schedule.cached`), built there on first use."""
+    from tqdm import tqdm
+
+    from .schedule.cached import cached_table, cached_table_path
+    from .schedule.tables import load_table
+
+    local = _REPO / "tables" / f"{cfg.name}.h5"
+    if local.is_file():
+        table = load_table(local)
+        if table.config_sha256 == cfg.sha256:
+            return table, local
+    path = cached_table_path(cfg)
+    total = None if cfg.grid.auto else cfg.grid.speeds.size
+    with tqdm(total=total, unit="speed" if total else "circle", disable=None if not
+              path.is_file() else True, desc=f"build {cfg.name} (first use, kept in the cache)"
+              ) as bar:
+        table, built = cached_table(cfg, progress=bar.update)
+    if built:
+        click.echo(f"built {path}", err=True)
+    return table, path
+
+
 @cli.command()
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               required=True, help="Output folder (report.md, report.json, one folder per "
               "experiment).")
 @click.option("--config", "config", type=click.Path(dir_okay=False, path_type=Path),
-              default=_REPO / "configs" / "paper.toml", show_default="configs/paper.toml",
+              default="paper", show_default="paper, the shipped configs/paper.toml",
               help="Design config (the paper vehicle).")
 @click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=_REPO / "tables" / "paper.h5", show_default="tables/paper.h5",
-              help="Gain table built from the config.")
+              help="Gain table built from the config [default: the checkout's "
+              "tables/NAME.h5 when it is the config's, else the config's table from the cache, "
+              "built there on first use].")
 @click.option("--plant", "plant_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Truth config for the plant (default: the design config).")
 @click.option("--quick", is_flag=True, help="Short smoke flights (for tests; seconds).")
@@ -758,7 +784,10 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
 
     cfg = load_config(config)
     plant = load_config(plant_path) if plant_path else None
-    table = load_table(table_path)
+    if table_path is None:
+        table, table_path = _table_of(cfg)
+    else:
+        table = load_table(table_path)
     if table.config_sha256 != cfg.sha256:
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     n = len(experiments(quick=quick))
@@ -775,7 +804,19 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
 
 
 _LOGS = click.argument("logs", nargs=-1, required=True,
-                       type=click.Path(exists=True, dir_okay=False, path_type=Path))
+                       type=click.Path(exists=True, path_type=Path))
+_MAP = click.option("--map", "map_path", help="Channel map of PX4 ULogs and ROS 2 bags among "
+                    "the logs: a TOML file or a shipped map (px4, px4_legacy, ros2); default "
+                    "for a ULog: px4 (docs/flight-log.md).")
+
+
+def _channel_map(map_path):
+    """The validated channel map of --map, or None (checked before any work)."""
+    if map_path is None:
+        return None
+    from .analysis.channelmap import load_channel_map
+
+    return load_channel_map(map_path)
 
 
 def _load_for_compare(config):
@@ -792,9 +833,11 @@ def _load_for_compare(config):
 @click.option("--before", "before_path", type=click.Path(dir_okay=False, path_type=Path),
               help="An earlier config: its residual beside CONFIG's (before/after).")
 @click.option("--no-paper", is_flag=True, help="Skip the paper's thrust/drag analyses.")
+@_MAP
 @user_errors
-def compare(config, logs, out_dir, before_path, no_paper):
-    """Compare the model of CONFIG with flight LOGS (CSV or HDF5): residual per axis
+def compare(config, logs, out_dir, before_path, no_paper, map_path):
+    """Compare the model of CONFIG with flight LOGS (CSV, HDF5, PX4 ULog or ROS 2 bag
+    through a channel map): residual per axis
     (path frame m/s^2, body rad/s^2, tether stretch m), RMS, bias, fit %, whiteness,
     input correlation, where it fails; the paper's Sec. V.C analyses."""
     from .analysis.compare import compare as run
@@ -808,15 +851,16 @@ def compare(config, logs, out_dir, before_path, no_paper):
     from .publish import check_out_dir, staged
 
     cfg = _load_for_compare(config)
+    cmap = _channel_map(map_path)
     if out_dir is not None:
         check_out_dir(out_dir)
-    cmp = run(cfg, logs)
+    cmp = run(cfg, logs, channel_map=cmap)
     paper = None if no_paper else paper_fits(cfg, cmp.measured)
     for line in compare_lines(cmp, paper):
         click.echo(line)
     before = None
     if before_path is not None:
-        before = run(_load_for_compare(before_path), logs)
+        before = run(_load_for_compare(before_path), logs, channel_map=cmap)
         click.echo("")
         for line in before_after_lines(before, cmp):
             click.echo(line)
@@ -843,8 +887,9 @@ def compare(config, logs, out_dir, before_path, no_paper):
               help="New config file for --apply.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path),
               help="Report folder: diagnose.json/.md, ranking.png, before/after.")
+@_MAP
 @user_errors
-def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir):
+def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir, map_path):
     """Which physical effect is missing: fit every candidate effect the model lacks to
     the residual on LOGS, score on held-out flights (leave one flight out), rank, check
     identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
@@ -865,11 +910,12 @@ def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir):
     if do_apply and new_config is None:
         raise InputError("command line", "--apply", "needs -o NEWCONFIG")
     cfg = _load_for_compare(config)
+    cmap = _channel_map(map_path)
     if new_config is not None:
         check_out_dir(new_config.parent, "-o")
     if report_dir is not None:
         check_out_dir(report_dir, "--report")
-    base = run(cfg, logs)
+    base = run(cfg, logs, channel_map=cmap)
     for line in compare_lines(base):
         click.echo(line)
     click.echo("")
@@ -885,7 +931,7 @@ def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir):
             write_atomic(new_config, text.encode(), where="-o")
             click.echo(f"wrote {new_config} ({d.accepted.name}); rebuild the tables with "
                        f"`gainsched build {new_config}`")
-            after = run(config_from_text(text, str(new_config)), logs)
+            after = run(config_from_text(text, str(new_config)), logs, channel_map=cmap)
             click.echo("")
             for line in before_after_lines(base, after):
                 click.echo(line)
@@ -896,6 +942,37 @@ def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir):
                 paths += write_compare(after, stage, prefix="after")
                 paths += write_before_after(base, after, stage, d)
         click.echo(f"wrote {len(paths)} files to {report_dir}")
+
+
+@cli.command()
+@click.argument("log", type=click.Path(exists=True, path_type=Path))
+@click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path),
+              required=True, help="The converted log: OUT.csv or OUT.h5.")
+@_MAP
+@click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="A config whose vehicle.thrust_max is a motor's thrust at full command "
+                   "(normalised or PWM commands, when the map gives no thrust_max_N).")
+@user_errors
+def convert(log, out_path, map_path, config_path):
+    """Convert a PX4 ULog or a ROS 2 bag to the project's flight-log format
+    (docs/flight-log.md) for inspection, and say what was mapped to what."""
+    from .analysis.logs import convert_log
+    from .config import load_config
+    from .publish import check_out_dir
+
+    cmap = _channel_map(map_path)
+    thrust_max = load_config(config_path).vehicle.thrust_max if config_path else None
+    check_out_dir(out_path.parent, "-o")
+    report, segs = convert_log(log, out_path, channel_map=cmap, thrust_max=thrust_max)
+    for line in report:
+        click.echo("  " + line)
+    n = sum(len(s) for s in segs)
+    span = (f"{segs[0].duration:.3g} s" if len(segs) == 1 else
+            f"{len(segs)} segments (split at gaps)")
+    meta = segs[0].meta
+    alpha, gamma = float(meta["alpha_c_deg"]), float(meta["gamma_c_deg"])
+    click.echo(f"wrote {out_path}: {n} samples, {span}, alpha_c {alpha:.2f} deg, "
+               f"gamma_c {gamma:.2f} deg")
 
 
 @cli.command()

@@ -28,6 +28,7 @@ import numpy as np
 
 from .constants import INTEGRATORS, MAX_XI, N_INPUT, N_STATE, REDUCED_NAMES, XI_DOT_LIMIT
 from .errors import InputError
+from .resources import config_path, reference_configs
 
 __all__ = [
     "Config",
@@ -1109,7 +1110,9 @@ def load_config(path) -> Config:
     Parameters
     ----------
     path : str or path-like
-        The config file, e.g. ``"configs/paper.toml"``. It must be UTF-8 (a leading
+        The config file, e.g. ``"configs/paper.toml"``, or the bare name of a config the
+        package ships (``"paper"``: :func:`gainsched.resources.reference_configs`; a file
+        of that name in the current folder comes first). It must be UTF-8 (a leading
         UTF-8 byte-order mark is accepted; UTF-16, UTF-32 and other encodings are
         refused naming the file), at most 1 MiB. Without a ``name`` key the config's
         name is the file's stem, which must pass :func:`check_name`.
@@ -1138,17 +1141,22 @@ def load_config(path) -> Config:
     ('paper', 0.5, 1000.0)
     >>> cfg.grid.speeds[[0, -1]].tolist(), round(float(cfg.grid.tilts[-1]), 3)  # m/s, rad
     ([1.3, 15.0], 0.698)
+    >>> gs.load_config("paper").text == cfg.text                     # the shipped copy
+    True
     >>> gs.load_config("configs/missing.toml")
     Traceback (most recent call last):
         ...
     gainsched.errors.InputError: configs/missing.toml: cannot read (No such file or directory)
     """
-    p = Path(path)
+    p = config_path(path)
     try:
         if p.stat().st_size > 64 * MAX_CONFIG_CHARS:  # do not even read it
             raise InputError(p, "", f"{p.stat().st_size / 2**20:.3g} MiB is no config (a config "
                              f"may have at most {MAX_CONFIG_CHARS // 2**20} MiB)")
         data = p.read_bytes()
     except OSError as exc:
-        raise InputError(p, "", f"cannot read ({exc.strerror})") from None
+        hint = ""
+        if len(p.parts) == 1 and not p.suffix:  # a bare name: perhaps a shipped config
+            hint = f"; the shipped configs are {', '.join(reference_configs())}"
+        raise InputError(p, "", f"cannot read ({exc.strerror}){hint}") from None
     return _config(_decode(p, data), str(p), True)

@@ -262,3 +262,69 @@ def auto_text(speeds=AUTO_SPEEDS, tilts=AUTO_TILTS, n_xi=16, bound=3, name="auto
                              grid__tilts_deg=toml_range(tilts),
                              grid__azimuth_samples=toml_range(n_xi),
                              grid__max_interpolation_error=bound)
+
+
+# --------------------------------------------------------------------------- foreign logs
+
+
+def write_ulog(path, topics: dict, params: dict | None = None) -> None:
+    """Write a PX4 ULog with pyulog's own writer (``ULog.write_ulog``), built from arrays.
+
+    ``topics`` maps a topic name to its fields in the log's order: ``"timestamp"``
+    (microseconds, written uint64) first, then float32 fields, ``"q[0]"``.. ``"q[3]"``
+    written as one ``float[4] q`` field; ``params`` the initial parameters (float or
+    int). pyulog has no builder API, so the reader's own classes are filled as its
+    parser fills them; its writer then writes every message.
+    """
+    import struct
+
+    from pyulog import ULog
+
+    ulog = ULog(None)
+    ulog._file_version = 1
+    ulog._start_timestamp = int(min(int(f["timestamp"][0]) for f in topics.values()))
+    for name, fields in topics.items():
+        parts: list[str] = []
+        for key in fields:
+            base, _, rest = key.partition("[")
+            if not rest:
+                parts.append(f"{'uint64_t' if key == 'timestamp' else 'float'} {key};")
+            elif rest == "0]":
+                n = sum(1 for k in fields if k.startswith(base + "["))
+                parts.append(f"float[{n}] {base};")
+        ulog._message_formats[name] = ULog.MessageFormat(
+            f"{name}:{''.join(parts)}".encode(), None)
+    for msg_id, (name, fields) in enumerate(topics.items()):
+        add = ULog._MessageAddLogged(struct.pack("<BH", 0, msg_id) + name.encode(), None,
+                                     ulog._message_formats)
+        rec = np.zeros(len(fields["timestamp"]), dtype=add.dtype)
+        for fd in add.field_data:
+            rec[fd.field_name] = fields[fd.field_name]
+        add.buffer = bytearray(rec.tobytes())
+        ulog._data_list.append(ULog.Data(add))
+    ulog._initial_parameters = dict(params or {})
+    ulog.write_ulog(str(path))
+
+
+def write_bag(path, messages: dict, storage: str = "mcap") -> None:
+    """Write a ROS 2 bag (rosbag2, ``"mcap"`` or ``"sqlite3"`` storage) with rosbags'
+    writer: ``messages`` maps a topic to ``(msgtype, [(t_ns, message), ...])``, the
+    messages built from the standard type store (:func:`ros_types`)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    store = ros_types()
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    with Writer(path, version=9 if storage == "mcap" else 8, storage_plugin=plugin) as w:
+        items = []
+        for topic, (msgtype, msgs) in messages.items():
+            conn = w.add_connection(topic, msgtype, typestore=store)
+            items += [(t, conn, msgtype, m) for t, m in msgs]
+        for t, conn, msgtype, m in sorted(items, key=lambda x: x[0]):
+            w.write(conn, int(t), store.serialize_cdr(m, msgtype))
+
+
+def ros_types():
+    """rosbags' type store of the latest ROS 2 LTS (its message classes by name)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.LATEST)

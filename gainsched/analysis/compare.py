@@ -746,10 +746,14 @@ def residuals(config: Config, measured, *, effects=None, latency=None,
 # --------------------------------------------------------------------------- loading
 
 
-def load_segments(config: Config, logs) -> tuple[list[Measured], list[FlightLog], list[str]]:
+def load_segments(config: Config, logs, channel_map=None
+                  ) -> tuple[list[Measured], list[FlightLog], list[str]]:
     """Read log files (or take :class:`FlightLog` objects) and differentiate every segment.
 
-    Returns (measured segments, the log segments, warnings as text: gaps, dropped pieces).
+    ``channel_map``: for PX4 ULogs and ROS 2 bags (:func:`read_log`); their normalised or
+    PWM commands reach newtons through the config's ``vehicle.thrust_max`` unless the
+    map gives a thrust. Returns (measured segments, the log segments, warnings as text:
+    gaps, dropped pieces).
     """
     segs: list[FlightLog] = []
     notes: list[str] = []
@@ -759,7 +763,8 @@ def load_segments(config: Config, logs) -> tuple[list[Measured], list[FlightLog]
             continue
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", LogWarning)
-            segs.extend(read_log(item))
+            segs.extend(read_log(item, channel_map=channel_map,
+                                 thrust_max=config.vehicle.thrust_max))
         notes.extend(str(w.message) for w in caught if issubclass(w.category, LogWarning))
     if not segs:
         raise InputError("command line", "LOG", "no flight log given")
@@ -1213,7 +1218,7 @@ class Comparison:
 
 
 def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
-            notes=None) -> Comparison:
+            notes=None, channel_map=None) -> Comparison:
     """Compare the model with flight logs: the residual per axis against its noise floor.
 
     The whole of ``gainsched compare`` (docs/model-vs-measurement.md): per gap-free log
@@ -1245,6 +1250,10 @@ def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
         The log segments of ``measured``, in the same order.
     notes : list of str, optional
         The reading notes of ``measured`` (gaps, dropped segments).
+    channel_map : ChannelMap, str or path-like, optional
+        How PX4 ULogs and ROS 2 bags among ``logs`` hold the channels
+        (:func:`~gainsched.analysis.logs.read_log`; default for a ULog: the shipped
+        ``px4`` map).
 
     Returns
     -------
@@ -1281,7 +1290,7 @@ def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
     'roll residual concentrates at tension 26-34.1 N (RMS 5.74 rad/s^2, ...)'
     """
     if measured is None:
-        measured, segs, notes = load_segments(config, logs)
+        measured, segs, notes = load_segments(config, logs, channel_map)
     res = residuals(config, measured, effects=effects)
     noise, pose_noise = noise_floor(config, measured, segs, effects=effects)
     axes = [a for a in AXES if all(a in r.residual for r in res)]

@@ -1179,7 +1179,7 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
 
 
 def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | None = None,
-             progress=None, joint: bool = False) -> Diagnosis:
+             progress=None, joint: bool = False, channel_map=None) -> Diagnosis:
     """Find which physical effect the model misses: fit candidates, score them held out.
 
     The whole of ``gainsched diagnose`` (docs/model-vs-measurement.md, the module
@@ -1214,6 +1214,8 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
         ``joint`` they run only when none passes and the residual is above the noise
         floor): a passing joint fit then replaces the accepted single when its delta-BIC
         is lower by ``THRESHOLDS["nested_bic_gain"]``.
+    channel_map : ChannelMap, str or path-like, optional
+        For PX4 ULogs and ROS 2 bags among ``logs`` (:func:`compare`).
 
     Returns
     -------
@@ -1246,7 +1248,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     """
     from ..errors import InputError
 
-    base = comparison or compare(config, logs)
+    base = comparison or compare(config, logs, channel_map=channel_map)
     meas = base.measured
     segs = base.segs
     prob = _Problem(config, meas, segs, base.noise)

@@ -56,6 +56,7 @@ only (:func:`read_log`); :func:`log_from_arrays` (simulations) is not checked.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import re
@@ -79,6 +80,7 @@ __all__ = [
     "LogWarning",
     "FlightLog",
     "read_log",
+    "convert_log",
     "write_log",
     "log_bytes",
     "log_from_arrays",
@@ -566,20 +568,31 @@ def _make(arrays, optional, extra, meta, source, sl, **kw) -> FlightLog:
 
 
 def read_log(
-    path, *, min_samples: int = DEFAULT_MIN_SAMPLES, gap_factor: float = GAP_FACTOR
+    path, *, channel_map=None, thrust_max: float | None = None,
+    min_samples: int = DEFAULT_MIN_SAMPLES, gap_factor: float = GAP_FACTOR,
 ) -> list[FlightLog]:
-    """Read a flight log file (CSV or HDF5) into its gap-free segments, checked against the spec.
+    """Read a flight log file into its gap-free segments, checked against the spec.
 
-    The format is docs/flight-log.md (``gainsched-flightlog/1``), chosen by the file
-    extension. Every bad-data rule of the spec is enforced; the reader normalises only
-    the quaternions (rows off unit norm by more than 1e-12 divided by their norm, signs
-    made continuous) and splits the log at gaps, never interpolating across them (the
-    module docstring has the details).
+    The format is docs/flight-log.md (``gainsched-flightlog/1``, CSV or HDF5), chosen by
+    the file extension; a PX4 ULog (``.ulg``) or a ROS 2 bag (a rosbag2 folder, or its
+    ``.mcap`` / ``.db3`` file) is converted to it first through a channel map
+    (:mod:`gainsched.analysis.foreign`). Every bad-data rule of the spec is enforced; the
+    reader normalises only the quaternions (rows off unit norm by more than 1e-12
+    divided by their norm, signs made continuous) and splits the log at gaps, never
+    interpolating across them (the module docstring has the details).
 
     Parameters
     ----------
     path : str or path-like
-        The log file: ``.csv``, ``.h5`` or ``.hdf5``.
+        The log file: ``.csv``, ``.h5``, ``.hdf5``, ``.ulg``, ``.mcap``, ``.db3`` or a
+        rosbag2 folder.
+    channel_map : ChannelMap, str or path-like, optional
+        How a ULog or a bag holds the channels (:func:`gainsched.analysis.channelmap.
+        load_channel_map`: a file or a shipped map's name). Default for a ULog: the
+        shipped ``px4``; a bag needs one.
+    thrust_max : float, optional
+        A motor's thrust at full command, N, for normalised or PWM commands when the map
+        does not give it (the analysis config's ``vehicle.thrust_max``).
     min_samples : int, default 31
         Fewest samples of a segment (the differentiation window): shorter segments are
         dropped with a warning (:data:`DEFAULT_MIN_SAMPLES`).
@@ -623,6 +636,10 @@ def read_log(
     mean COG speed 8.9 m/s, tension 25 N
     """
     path = Path(path)
+    foreign = _foreign(path, channel_map, thrust_max)
+    if foreign is not None:
+        return _segments(path, foreign.meta, foreign.columns, foreign.rows, foreign.label,
+                         min_samples, gap_factor)
     fmt = _format(path)
     if fmt == "csv":
         meta, raw, rows, label = _read_csv(path)
@@ -636,6 +653,77 @@ def read_log(
         cols = {name: _parse_column(path, name, s, rows, label) for name, s in raw.items()}
     else:
         cols = raw
+    return _segments(path, meta, cols, rows, label, min_samples, gap_factor)
+
+
+def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None
+                ) -> tuple[tuple[str, ...], list[FlightLog]]:
+    """Convert a PX4 ULog or a ROS 2 bag to ``gainsched-flightlog/1`` at ``out``.
+
+    The whole converted log is written (gaps included, as the format allows), after it
+    passed every rule :func:`read_log` applies; nothing is written otherwise.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The ULog (``.ulg``) or bag (a rosbag2 folder, ``.mcap`` or ``.db3``).
+    out : str or path-like
+        ``.csv``, ``.h5`` or ``.hdf5``.
+    channel_map, thrust_max
+        As for :func:`read_log`.
+
+    Returns
+    -------
+    (tuple of str, list of FlightLog)
+        What was mapped to what (one line per channel, the plane, the left-out samples),
+        and the segments as :func:`read_log` gives them.
+    """
+    path, out = Path(path), Path(out)
+    _format(out)  # a bad output name fails before any reading
+    conv = _foreign(path, channel_map, thrust_max)
+    if conv is None:
+        raise InputError(path, "", "not a PX4 ULog (.ulg) or a ROS 2 bag (.mcap, .db3, or a "
+                         "rosbag2 folder): nothing to convert")
+    segs = _segments(path, conv.meta, conv.columns, conv.rows, conv.label,
+                     DEFAULT_MIN_SAMPLES, GAP_FACTOR)
+    write_log(out, conv.columns, conv.meta)
+    return conv.report, segs
+
+
+def _foreign(path: Path, channel_map, thrust_max):
+    """The converted columns of a ULog or a bag (None for the project's own formats)."""
+    from .foreign import convert_topics, foreign_format, read_topics
+
+    fmt = foreign_format(path)
+    if fmt is None:
+        return None
+    from .channelmap import ChannelMap, load_channel_map
+
+    if channel_map is None:
+        if fmt != "ulog":
+            raise InputError(path, "", "a ROS 2 bag needs a channel map (--map; the "
+                             "shipped ros2 map is a template to copy)")
+        channel_map = "px4"
+    cmap = channel_map if isinstance(channel_map, ChannelMap) else load_channel_map(
+        channel_map)
+    if not path.exists():
+        raise InputError(path, "", "cannot read (No such file or directory)")
+    topics, params = read_topics(path, cmap)
+    conv = convert_topics(path, topics, params, cmap, thrust_max=thrust_max)
+    if "alpha_c_deg" in conv.meta:
+        return conv
+    n, _ = fitted_plane(np.stack([conv.columns[c] for c in "xyz"], -1))
+    alpha = math.degrees(math.acos(min(1.0, float(n[2]))))
+    gamma = math.degrees(math.atan2(float(n[0]), -float(n[1]))) if alpha > 1e-9 else 0.0
+    meta = {**conv.meta, "alpha_c_deg": repr(alpha), "gamma_c_deg": repr(gamma),
+            "plane_source": "estimated from the logged positions"}
+    line = (f"circle plane: alpha_c {alpha:.2f} deg, gamma_c {gamma:.2f} deg, estimated "
+            "from the positions")
+    return dataclasses.replace(conv, meta=meta, report=(*conv.report, line))
+
+
+def _segments(path, meta, cols, rows, label, min_samples, gap_factor) -> list[FlightLog]:
+    """The common half of reading: the numeric rules, the plane, the split at gaps."""
     arrays, optional, extra = _canonical(path, cols, rows, label)
     t = arrays["t"]
     n = t.shape[0]

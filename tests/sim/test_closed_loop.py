@@ -185,12 +185,26 @@ def test_c_runtime_and_python_interpolator_fly_the_same(paper_config, paper_tabl
 
 
 @pytest.mark.slow
-def test_paper_quick_report(tmp_path):
+def test_paper_quick_report(tmp_path, monkeypatch):
     """``gainsched paper --quick``: report.md and report.json with a row per paper claim
-    (figure, paper value, simulated value), the plots beside them."""
+    (figure, paper value, simulated value), the plots beside them. Flown as an installed
+    package would: no checkout tables, the shipped paper config, its table from the
+    cache (seeded with the committed table, as a first use would have left it)."""
+    import shutil
+
+    from gainsched import cli as cli_module
+    from gainsched.config import load_config
+    from gainsched.schedule.cached import cached_table_path
+
+    monkeypatch.setenv("GAINSCHED_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(cli_module, "_REPO", tmp_path / "no-checkout")
+    seeded = cached_table_path(load_config("paper"))
+    seeded.parent.mkdir(parents=True)
+    shutil.copyfile(PAPER_H5, seeded)
     out = tmp_path / "paper"
     res = CliRunner().invoke(cli, ["paper", "-o", str(out), "--quick"])
     assert res.exit_code == 0, res.output
+    assert "built" not in res.stderr and "warning" not in res.stderr
     assert "report.md" in res.output
     rep = json.loads((out / "report.json").read_text())
     assert rep["schema"] == "gainsched-paper-report/1" and rep["quick"] is True
@@ -215,6 +229,7 @@ def test_paper_quick_report(tmp_path):
         assert (out / img).stat().st_size > 1000
     assert (out / "braking" / "log.csv").exists()
     assert set(rep["experiments"]) == set(rep["experiments_run"])
+    assert rep["table"] == str(seeded)  # the report says which table it flew
     # the committed table's envelope: every circle with gains, only slack without
     assert set(rep["envelope"]) == {"feasible", "feasible with attitude offsets",
                                     "tether slack"}

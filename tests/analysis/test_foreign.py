@@ -1,0 +1,403 @@
+"""PX4 ULog in through a channel map (issue 36).
+
+A simulated flight (the paper table on the design model, 20 deg tilt, heading 30 deg,
+1 kHz states) is written twice: as the project's own log at 100 Hz
+(:func:`gainsched.sim.loop.log_from_result`) and as a PX4 ULog by pyulog's writer in
+PX4's conventions: NED positions about an anchor that is not the origin, the FRD
+attitude of ``vehicle_attitude`` at 250 Hz, ``vehicle_local_position`` at 100 Hz, the
+gyro at 1 kHz, ``actuator_motors`` at 400 Hz normalised through PX4's thrust curve
+(``THR_MDL_FAC`` 0.3 among the log's parameters) in PX4's motor order; and in the
+older generation, ``actuator_outputs`` in PWM with ``sensor_combined``. Read through the
+shipped maps, the ULog gives the CSV's columns and ``compare`` its residuals.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+
+import numpy as np
+import pytest
+
+from gainsched.analysis.channelmap import (
+    PX4_MOTOR_ORDER,
+    channel_map_from_text,
+    load_channel_map,
+)
+from gainsched.analysis.compare import compare
+from gainsched.analysis.logs import read_log, write_log
+from gainsched.configedit import set_values
+from gainsched.errors import InputError
+from gainsched.model.rotations import matrix_from_quaternion, quaternion_from_matrix
+from gainsched.sim.loop import Scenario, Sensing, log_from_result, simulate, table_scheduler
+
+from support import ros_types, write_bag, write_ulog
+
+#: NED <-> ENU (its own inverse), FLU <-> FRD
+M_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+C_FRD = np.diag([1.0, -1.0, -1.0])
+ANCHOR_NED = np.array([1.5, -2.0, -0.75])  # where the anchor is in PX4's local frame, m
+BOOT = 12.0  # s on the autopilot's clock when the flight starts
+FAC = 0.3  # THR_MDL_FAC
+TILT, HEADING = 20.0, 30.0
+
+
+def normalized(T, thrust_max, fac=FAC):
+    """Invert PX4's thrust curve T / T_max = (1 - f) c + f c^2 for the command c."""
+    y = T / thrust_max
+    return (-(1 - fac) + np.sqrt((1 - fac) ** 2 + 4 * fac * y)) / (2 * fac)
+
+
+@pytest.fixture(scope="module")
+def flight(paper_config, paper_table):
+    scn = Scenario("ulog", math.radians(TILT), 9.0, 2.5, gamma=math.radians(HEADING))
+    return simulate(paper_config, table_scheduler(paper_table), scn)
+
+
+@pytest.fixture(scope="module")
+def mocap_floor(paper_config, flight):
+    """The scale of the residual tolerances: per axis, the noise floor of the same flight
+    logged at 100 Hz by a motion capture of 0.5 mm and 0.2 deg (what the conversions'
+    own differences are measured against: the 400 Hz command stream against the 1 kHz
+    one, float32 fields)."""
+    mocap = Sensing(False, 200.0, 0.0005, math.radians(0.2), 0.005, 0.0, 3, 0.1)
+    noisy = dataclasses.replace(flight, scenario=dataclasses.replace(flight.scenario,
+                                                                     sensing=mocap))
+    return compare(paper_config, [log_from_result(noisy, rate_hz=100.0)]).noise
+
+
+def px4_topics(res, thrust_max, legacy=False):
+    """The flight as PX4 logs it (module docstring)."""
+    n = res.t.size
+    us = lambda t: np.round((t + BOOT) * 1e6).astype(np.uint64)  # noqa: E731
+    ip, ia = np.arange(0, n, 10), np.arange(0, n, 4)
+    p_ned = res.p_I @ M_NED.T + ANCHOR_NED
+    q_nf = quaternion_from_matrix(M_NED @ matrix_from_quaternion(res.q_IB) @ C_FRD)
+    gyro = res.z[:, 7:10] @ C_FRD.T
+    tm = np.arange(0.0, res.t[-1], 0.0025)  # 400 Hz, the last command on the 1 kHz stream
+    c = normalized(res.u[np.floor(tm / 1e-3 + 1e-9).astype(int)], thrust_max)
+    px4 = np.full((tm.size, 12 if not legacy else 16), np.nan if not legacy else 900.0)
+    for k, m in enumerate(PX4_MOTOR_ORDER):
+        px4[:, m - 1] = c[:, k] if not legacy else 1000.0 + 1000.0 * c[:, k]
+    topics = {
+        "vehicle_local_position": {"timestamp": us(res.t[ip]),
+                                   **{a: p_ned[ip, j] for j, a in enumerate("xyz")}},
+        "vehicle_attitude": {"timestamp": us(res.t[ia]),
+                             **{f"q[{j}]": q_nf[ia, j] for j in range(4)}},
+    }
+    accel = res.f_B @ C_FRD.T  # specific force at the COG, FRD
+    imu = {f"accelerometer_m_s2[{j}]": accel[:, j] for j in range(3)}
+    rates = {f"xyz[{j}]": gyro[:, j] for j in range(3)}
+    if legacy:
+        imu = {**{f"gyro_rad[{j}]": gyro[:, j] for j in range(3)}, **imu}
+    else:
+        topics["vehicle_angular_velocity"] = {"timestamp": us(res.t), **rates}
+    topics["sensor_combined"] = {"timestamp": us(res.t), **imu}
+    name, field = ("actuator_outputs", "output") if legacy else ("actuator_motors", "control")
+    topics[name] = {"timestamp": us(tm), **{f"{field}[{j}]": px4[:, j]
+                                             for j in range(px4.shape[1])}}
+    # a load cell on a topic of the integrator's own, 200 Hz, in grams-force (scale in map)
+    it = np.arange(0, n, 5)
+    topics["tether_load"] = {"timestamp": us(res.t[it]), "force": res.tension[it] / 9.81e-3}
+    params = {"THR_MDL_FAC": FAC}
+    if legacy:
+        params.update(PWM_MAIN_MIN=1000, PWM_MAIN_MAX=2000)
+    return topics, params
+
+
+def px4_map(name="px4", **keys):
+    """A shipped PX4 map with the anchor and the load cell set (and ``keys``)."""
+    with open(load_channel_map(name).source) as fh:
+        src = fh.read()
+    keys = {"frames.anchor_m": ANCHOR_NED.tolist(), "tension.topic": "tether_load",
+            "tension.fields": ["force"], "tension.scale": 9.81e-3, **keys}
+    return channel_map_from_text(set_values(src, keys), f"{name}.toml")
+
+
+@pytest.mark.parametrize("legacy", [False, True], ids=["actuator_motors", "actuator_outputs"])
+def test_ulog_gives_the_logs_columns_and_compare_its_residuals(
+        paper_config, flight, mocap_floor, tmp_path, legacy):
+    """Columns: positions to 1e-5 m (float32 in the ULog), the attitude to 1e-6, thrusts
+    to 3 % of the largest (the 400 Hz command stream against the 1 kHz one, averaged
+    over each 10 ms pose interval), body rates to 1e-4 rad/s, specific force to 1e-3
+    m/s^2, the load cell (grams-force on a topic of its own) to 2 %; the plane estimated
+    within 0.05 deg. compare: every axis' residual RMS equal to the CSV's within 10 % of
+    the noise floor a 0.5 mm / 0.2 deg motion capture gives the same flight."""
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max, legacy)
+    ulg = tmp_path / "flight.ulg"
+    write_ulog(ulg, topics, params)
+    csv = tmp_path / "flight.csv"
+    write_log(csv, log_from_result(flight, rate_hz=100.0))
+    cmap = px4_map("px4_legacy" if legacy else "px4")
+    (ref,) = read_log(csv)
+    (got,) = read_log(ulg, channel_map=cmap, thrust_max=paper_config.vehicle.thrust_max)
+    assert got.meta["plane_source"].startswith("estimated")
+    assert float(got.meta["alpha_c_deg"]) == pytest.approx(TILT, abs=0.05)
+    assert float(got.meta["gamma_c_deg"]) == pytest.approx(HEADING, abs=0.05)
+    i = np.clip(np.searchsorted(got.t - BOOT, ref.t - 1e-6), 0, got.t.size - 1)
+    both = np.abs(got.t[i] - BOOT - ref.t) < 1e-6  # the same instants (the ULog's first
+    i, j = i[both], np.flatnonzero(both)  # pose sample is left out: no command before it)
+    assert j.size >= ref.t.size - 2
+    np.testing.assert_allclose(got.p_I[i], ref.p_I[j], atol=1e-5)
+    np.testing.assert_allclose(np.abs(np.sum(got.q[i] * ref.q[j], -1)), 1.0, atol=1e-6)
+    scale = np.abs(ref.T_cmd).max()
+    assert np.abs(got.T_cmd[i][1:] - ref.T_cmd[j][1:]).max() <= 0.03 * scale
+    # the load cell: its last sample (200 Hz), grams-force scaled
+    assert np.abs(got.optional["tension"][i] - ref.optional["tension"][j]).max() <= 0.02 * (
+        ref.optional["tension"].max())
+    for key in ("omega_B", "f_B"):  # rad/s, m/s^2
+        np.testing.assert_allclose(got.optional[key][i][1:-1], ref.optional[key][j][1:-1],
+                                   atol=1e-4 if key == "omega_B" else 1e-3, err_msg=key)
+    a = compare(paper_config, [csv])
+    b = compare(paper_config, [ulg], channel_map=cmap)
+    assert set(a.stats) == set(b.stats)
+    for axis in a.stats:
+        ra, rb = a.stats[axis].rms, b.stats[axis].rms
+        assert abs(rb - ra) <= 0.1 * mocap_floor[axis], (axis, ra, rb, mocap_floor[axis])
+
+
+def test_a_missing_topic_or_field_is_named(paper_config, flight, tmp_path):
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max)
+    del topics["vehicle_angular_velocity"]
+    ulg = tmp_path / "nogyro.ulg"
+    write_ulog(ulg, topics, params)
+    with pytest.raises(InputError, match=r"nogyro.ulg: topic vehicle_angular_velocity: not in "
+                                         r"the log \(it has: .*actuator_motors"):
+        read_log(ulg, channel_map=px4_map(), thrust_max=3.5)
+    bad = px4_map(**{"gyro.fields": ["xyz[0]", "xyz[1]", "rates[2]"]})
+    topics, _ = px4_topics(flight, paper_config.vehicle.thrust_max)
+    write_ulog(ulg, topics, params)
+    with pytest.raises(InputError, match=r"topic vehicle_angular_velocity, field rates\[2\]"):
+        read_log(ulg, channel_map=bad, thrust_max=3.5)
+
+
+def test_a_command_outside_the_curve_is_an_error_and_disarmed_ends_are_cut(
+        paper_config, flight, tmp_path):
+    """NaN (disarmed) before the first and after the last valid command: those pose
+    samples are left out; a command of 1.5 in the middle: one error naming the sample."""
+    thrust_max = paper_config.vehicle.thrust_max
+    topics, params = px4_topics(flight, thrust_max)
+    ctl = topics["actuator_motors"]
+    for j in range(4):
+        ctl[f"control[{j}]"] = ctl[f"control[{j}]"].copy()
+        ctl[f"control[{j}]"][:40] = np.nan  # the first 0.1 s disarmed
+    ulg = tmp_path / "armed.ulg"
+    write_ulog(ulg, topics, params)
+    (log,) = read_log(ulg, channel_map=px4_map(), thrust_max=thrust_max)
+    assert log.t[0] - BOOT >= 0.0975 and log.t[0] - BOOT < 0.12
+    ctl["control[2]"][500] = 1.5
+    write_ulog(ulg, topics, params)
+    with pytest.raises(InputError, match=r"topic actuator_motors, field control\[2\], sample "
+                                         r"501: command 1.5 is outside the normalized range"):
+        read_log(ulg, channel_map=px4_map(), thrust_max=thrust_max)
+
+
+@pytest.mark.parametrize(("key", "value", "match"), [
+    ("frames.world", "NWU", r"frames.world: must be one of NED, ENU, got 'NWU'"),
+    ("motors.order", [1, 1, 2, 3], r"motors.order: must be 4 different field numbers"),
+    ("motors.unit", "rpm", r"motors.unit: must be one of N, normalized, pwm"),
+    ("motors.thr_mdl_fac", 1.5, r"motors.thr_mdl_fac: must be in 0..1"),
+    ("attitude.order", "zyxw", r"attitude.order: must be one of wxyz, xyzw"),
+    ("gyro.fields", ["xyz[0]"], r"gyro.fields: needs 3 fields, got 1"),
+    ("frames.anchor", [0, 0, 0], r"frames.anchor: unknown key"),
+])
+def test_a_bad_map_names_the_key(key, value, match):
+    with pytest.raises(InputError, match=r"^px4.toml: " + match):
+        px4_map(**{key: value})
+
+
+def test_cli_convert_writes_the_log_and_says_what_it_mapped(paper_config, flight, tmp_path):
+    """``gainsched convert LOG.ulg -o OUT.csv --map MAP --config CFG``: the report names
+    every channel and the estimated plane; OUT.csv reads back as the ULog reads; a bad
+    output name or map is one line, exit 2, nothing written."""
+    from click.testing import CliRunner
+
+    from gainsched.cli import cli
+
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max)
+    ulg = tmp_path / "f.ulg"
+    write_ulog(ulg, topics, params)
+    mp = tmp_path / "mine.toml"
+    mp.write_text(set_values(open(load_channel_map("px4").source).read(), {
+        "frames.anchor_m": ANCHOR_NED.tolist(), "tension.topic": "tether_load",
+        "tension.fields": ["force"], "tension.scale": 9.81e-3}))
+    out = tmp_path / "f.csv"
+    r = CliRunner().invoke(cli, ["convert", str(ulg), "-o", str(out), "--map", str(mp),
+                                 "--config", "paper"])
+    assert r.exit_code == 0, r.output
+    for word in ("position: vehicle_local_position", "attitude: vehicle_attitude",
+                 "motors: actuator_motors control[2], control[1], control[3], control[0]",
+                 "gyro: vehicle_angular_velocity", "tension: tether_load"):
+        assert word in r.output, (word, r.output)
+    assert re.search(r"circle plane: alpha_c (19.9\d|20.0\d) deg, gamma_c (29.9\d|30.0\d) "
+                     r"deg, estimated from the positions", r.output), r.output
+    (back,) = read_log(out)
+    (direct,) = read_log(ulg, channel_map=str(mp), thrust_max=paper_config.vehicle.thrust_max)
+    np.testing.assert_array_equal(back.t, direct.t)
+    np.testing.assert_array_equal(back.T_cmd, direct.T_cmd)
+    np.testing.assert_allclose(back.q, direct.q, rtol=0, atol=1e-15)
+    for args, key in (([str(ulg), "-o", str(tmp_path / "f.txt"), "--map", str(mp)], "f.txt"),
+                      ([str(ulg), "-o", str(tmp_path / "g.csv"), "--map", "px5"], "px5")):
+        r = CliRunner().invoke(cli, ["convert", *args])
+        assert r.exit_code == 2 and key in r.output and "Traceback" not in r.output, r.output
+        assert len(r.output.strip().splitlines()) == 1
+    assert not (tmp_path / "g.csv").exists() and not (tmp_path / "f.txt").exists()
+
+
+# --------------------------------------------------------------------------- ROS 2 bags
+ANCHOR_ENU = np.array([-0.4, 2.2, 0.3])  # the anchor in the motion capture's frame, m
+
+
+def ros2_messages(res, types):
+    """The flight as a ROS 2 lab records it: the mocap's geometry_msgs/PoseStamped at 100
+    Hz (ENU about an anchor off the origin, header stamps), sensor_msgs/Imu at 1 kHz (FLU),
+    the thrusts (N) as std_msgs/Float32MultiArray at 400 Hz, the load cell as
+    std_msgs/Float64 (no header: its bag time)."""
+    T = types.types
+    n = res.t.size
+    t_ns = lambda t: int(round((t + BOOT) * 1e9))  # noqa: E731
+
+    def header(t):
+        ns = t_ns(t)
+        return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](
+            sec=ns // 10**9, nanosec=ns % 10**9), frame_id="mocap")
+
+    vec = T["geometry_msgs/msg/Vector3"]
+    pose, imu, motors, load = [], [], [], []
+    p = res.p_I + ANCHOR_ENU
+    for k in range(0, n, 10):
+        q = res.q_IB[k]
+        msg = T["geometry_msgs/msg/PoseStamped"](header=header(res.t[k]), pose=T[
+            "geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](*p[k]),
+                                      orientation=T["geometry_msgs/msg/Quaternion"](
+                                          x=q[1], y=q[2], z=q[3], w=q[0])))
+        pose.append((t_ns(res.t[k]) + 3_000_000, msg))  # received 3 ms late
+    zero9 = np.zeros(9)
+    for k in range(n):
+        w, f = res.z[k, 7:10], res.f_B[k]
+        imu.append((t_ns(res.t[k]), T["sensor_msgs/msg/Imu"](
+            header=header(res.t[k]), orientation=T["geometry_msgs/msg/Quaternion"](
+                x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=zero9,
+            angular_velocity=vec(*w), angular_velocity_covariance=zero9,
+            linear_acceleration=vec(*f), linear_acceleration_covariance=zero9)))
+    layout = T["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
+    for tm in np.arange(0.0, res.t[-1], 0.0025):
+        u = res.u[int(np.floor(tm / 1e-3 + 1e-9))].astype(np.float32)
+        motors.append((t_ns(tm), T["std_msgs/msg/Float32MultiArray"](layout=layout, data=u)))
+    for k in range(0, n, 5):
+        load.append((t_ns(res.t[k]), T["std_msgs/msg/Float64"](data=float(res.tension[k]))))
+    return {"/mocap/pose": ("geometry_msgs/msg/PoseStamped", pose),
+            "/imu": ("sensor_msgs/msg/Imu", imu),
+            "/motor_thrusts": ("std_msgs/msg/Float32MultiArray", motors),
+            "/load_cell": ("std_msgs/msg/Float64", load)}
+
+
+def ros2_map():
+    with open(load_channel_map("ros2").source) as fh:
+        src = fh.read()
+    return channel_map_from_text(set_values(src, {
+        "frames.anchor_m": ANCHOR_ENU.tolist(), "tension.topic": "/load_cell",
+        "tension.fields": ["data"], "circle.alpha_c_deg": TILT,
+        "circle.gamma_c_deg": HEADING}), "lab.toml")
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_ros2_bag_gives_the_logs_columns_and_compare_its_residuals(
+        paper_config, flight, mocap_floor, tmp_path, storage):
+    """A rosbag2 written by rosbags' writer, read through a copy of the shipped ros2
+    template (the circle plane given): the columns and the compare residuals of the CSV
+    as for the ULog (the header stamps, not the 3 ms late bag times, place the pose)."""
+    bag = tmp_path / "bag"
+    write_bag(bag, ros2_messages(flight, ros_types()), storage)
+    csv = tmp_path / "flight.csv"
+    write_log(csv, log_from_result(flight, rate_hz=100.0))
+    (ref,) = read_log(csv)
+    cmap = ros2_map()
+    (got,) = read_log(bag, channel_map=cmap)
+    assert got.meta["plane_source"] == "channel map ros2"  # the copy keeps its name
+    i = np.clip(np.searchsorted(got.t - BOOT, ref.t - 1e-6), 0, got.t.size - 1)
+    both = np.abs(got.t[i] - BOOT - ref.t) < 1e-6
+    i, j = i[both], np.flatnonzero(both)
+    assert j.size >= ref.t.size - 2
+    np.testing.assert_allclose(got.p_I[i], ref.p_I[j], atol=1e-9)
+    np.testing.assert_allclose(np.abs(np.sum(got.q[i] * ref.q[j], -1)), 1.0, atol=1e-12)
+    assert np.abs(got.T_cmd[i][1:] - ref.T_cmd[j][1:]).max() <= 0.03 * np.abs(ref.T_cmd).max()
+    np.testing.assert_allclose(got.optional["omega_B"][i][1:-1],
+                               ref.optional["omega_B"][j][1:-1], atol=1e-9)
+    a = compare(paper_config, [csv])
+    b = compare(paper_config, [bag], channel_map=cmap)
+    for axis in a.stats:
+        ra, rb = a.stats[axis].rms, b.stats[axis].rms
+        assert abs(rb - ra) <= 0.1 * mocap_floor[axis], (axis, ra, rb, mocap_floor[axis])
+    with pytest.raises(InputError, match=r"a ROS 2 bag needs a channel map"):
+        read_log(bag)
+
+
+@pytest.mark.parametrize(("keys", "match"), [
+    ({"frames.world": "ENU"}, r"^px4.toml: frames: .*the logged attitude's thrust axis "
+                              r"points away from what holds the vehicle up .* world frame ENU"),
+    ({"frames.body": "FLU"}, r"^px4.toml: frames: .*thrust axis points away .* body frame FLU"),
+    ({"frames.body": "FLU", "accelerometer": None},
+     r"^px4.toml: frames: .*thrust axis points away .* body frame FLU"),
+    ({"attitude.order": "xyzw", "accelerometer": None},
+     r"^px4.toml: frames: .*thrust axis points away .* the quaternion xyzw\?$"),
+], ids=["ENU-for-NED", "FLU-for-FRD", "FLU-for-FRD-gyro-only", "xyzw-for-wxyz"])
+def test_a_frame_mistake_is_caught_not_fitted(paper_config, flight, tmp_path, keys, match):
+    """A map whose frames or quaternion order contradict the log: the sensors' physics
+    catches it at reading (one line naming the map and the key), before any analysis."""
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max)
+    ulg = tmp_path / "f.ulg"
+    write_ulog(ulg, topics, params)
+    cmap = px4_map(**{k: v for k, v in keys.items() if v is not None})
+    if "accelerometer" in keys:
+        cmap = dataclasses.replace(cmap, accelerometer=None)
+    with pytest.raises(InputError, match=match):
+        read_log(ulg, channel_map=cmap, thrust_max=paper_config.vehicle.thrust_max)
+
+
+def test_a_wrong_motor_order_is_not_accepted_as_physics(paper_config, flight, tmp_path):
+    """The motors read in the tool's order instead of PX4's: the roll torque comes out
+    mirrored, and compare's roll residual is 50x the right map's (the model-versus-
+    measurement loop sees it at once, before any fit)."""
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max)
+    ulg = tmp_path / "f.ulg"
+    write_ulog(ulg, topics, params)
+    good = compare(paper_config, [ulg], channel_map=px4_map())
+    bad = compare(paper_config, [ulg], channel_map=px4_map(**{"motors.order": [1, 2, 3, 4]}))
+    assert bad.stats["roll"].rms > 50 * good.stats["roll"].rms
+    assert bad.normalized_rms() > 10 * good.normalized_rms()
+
+
+def test_a_gyro_turned_against_the_attitude_is_caught(paper_config, flight, tmp_path):
+    """A gyro mounted upside down (its y and z negated) against a right attitude: the
+    body rates from the attitude turn the other way: one line naming frames.body."""
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max)
+    rates = topics["vehicle_angular_velocity"]
+    for j in (1, 2):
+        rates[f"xyz[{j}]"] = -rates[f"xyz[{j}]"]
+    ulg = tmp_path / "f.ulg"
+    write_ulog(ulg, topics, params)
+    with pytest.raises(InputError, match=r"^px4.toml: frames.body: .*the gyro's [qr] turns "
+                                         r"against the logged attitude"):
+        read_log(ulg, channel_map=px4_map(), thrust_max=paper_config.vehicle.thrust_max)
+
+
+def test_an_empty_or_truncated_log_is_one_line(paper_config, flight, tmp_path):
+    """An empty file, a ULog cut in its header, a ULog cut in its data (pyulog reads what
+    is whole: too few pose samples then), a folder that is no bag: one line each."""
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max)
+    whole = tmp_path / "whole.ulg"
+    write_ulog(whole, topics, params)
+    data = whole.read_bytes()
+    cases = {"empty.ulg": b"", "header.ulg": data[:40], "cut.ulg": data[: len(data) // 40]}
+    for name, blob in cases.items():
+        (tmp_path / name).write_bytes(blob)
+        with pytest.raises(InputError) as err:
+            read_log(tmp_path / name, channel_map=px4_map(), thrust_max=3.5)
+        assert str(err.value).startswith(str(tmp_path / name)), err.value
+        assert "\n" not in str(err.value)
+    (tmp_path / "nobag").mkdir()
+    (tmp_path / "nobag" / "metadata.yaml").write_text("not: a bag\n")
+    with pytest.raises(InputError, match=r"nobag: not a readable ROS 2 bag"):
+        read_log(tmp_path / "nobag", channel_map=ros2_map())
