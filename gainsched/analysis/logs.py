@@ -524,6 +524,14 @@ def _plane_normal(alpha_deg: float, gamma_deg: float) -> np.ndarray:
     return np.array([math.sin(a) * math.sin(g), -math.sin(a) * math.cos(g), math.cos(a)])
 
 
+def _plane_angles(n) -> tuple[float, float]:
+    """``(alpha_c, gamma_c)`` in deg of a plane's unit normal ``n`` (``n[2] >= 0``): the
+    inverse of :func:`_plane_normal`; gamma_c 0 for a level plane."""
+    alpha = math.degrees(math.acos(min(1.0, float(n[2]))))
+    gamma = math.degrees(math.atan2(float(n[0]), -float(n[1]))) if alpha > 1e-9 else 0.0
+    return alpha, gamma
+
+
 def _check_plane(path, meta: dict[str, str], p_I: np.ndarray) -> None:
     """The positions' plane must be the declared circle plane (module docstring)."""
     if p_I.shape[0] < 3:
@@ -536,8 +544,7 @@ def _check_plane(path, meta: dict[str, str], p_I: np.ndarray) -> None:
     angle = math.degrees(math.acos(min(1.0, abs(float(n @ d)))))
     if angle <= PLANE_TOL_DEG:
         return
-    tilt = math.degrees(math.acos(min(1.0, n[2])))
-    heading = math.degrees(math.atan2(n[0], -n[1]))
+    tilt, heading = _plane_angles(n)
     declared_tilt = math.degrees(math.acos(min(1.0, abs(d[2]))))
     key = "alpha_c_deg" if abs(tilt - declared_tilt) > PLANE_TOL_DEG else "gamma_c_deg"
     plane = f"tilt {tilt:.1f} deg" + (f", gamma_c {heading:.1f} deg" if tilt > 0.5 else "")
@@ -712,9 +719,8 @@ def _foreign(path: Path, channel_map, thrust_max):
     conv = convert_topics(path, topics, params, cmap, thrust_max=thrust_max)
     if "alpha_c_deg" in conv.meta:
         return conv
-    n, _ = fitted_plane(np.stack([conv.columns[c] for c in "xyz"], -1))
-    alpha = math.degrees(math.acos(min(1.0, float(n[2]))))
-    gamma = math.degrees(math.atan2(float(n[0]), -float(n[1]))) if alpha > 1e-9 else 0.0
+    alpha, gamma = _plane_angles(fitted_plane(np.stack([conv.columns[c] for c in "xyz"],
+                                                       -1))[0])
     meta = {**conv.meta, "alpha_c_deg": repr(alpha), "gamma_c_deg": repr(gamma),
             "plane_source": "estimated from the logged positions"}
     line = (f"circle plane: alpha_c {alpha:.2f} deg, gamma_c {gamma:.2f} deg, estimated "
