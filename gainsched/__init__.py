@@ -38,6 +38,7 @@ API = (
     ("The compact table format", "firmware.compact", ("compact_data", "CompactData",
                                                       "CompactInterpolator")),
     ("Checking a table", "firmware.check", ("midpoint_check",)),
+    ("Motor commands", "actuators", ("command_from_thrust", "thrust_from_command")),
     ("Seeing a table", "schedule.viewer", ("schedule_figures", "schedule_plots",
                                            "table_summary")),
     ("A flight in simulation", "sim.loop", ("load_scenario", "Scenario", "simulate",

@@ -514,8 +514,22 @@ def plot(table, out_dir, with_check, as_json):
               help="Table format of the header: the table's config ([firmware] format), "
               "values per azimuth (dense) or Fourier series per circle, certified at the "
               "cell midpoints (compact; docs/runtime.md).")
+@click.option("--motor-order", type=click.Choice(["config", "gainsched", "px4"]),
+              default="config", show_default=True,
+              help="Numbering of the controller's outputs: the table's config ([firmware] "
+              "motor_order), the tool's T1..T4 or PX4's quad-X (docs/runtime.md, \"PX4\").")
+@click.option("--command", type=click.Choice(["config", "thrust", "normalized"]),
+              default="config", show_default=True,
+              help="The controller's outputs: thrusts in N or commands 0..1 through the "
+              "thrust curve (with --thr-mdl-fac, --thrust-max-n).")
+@click.option("--thr-mdl-fac", type=FiniteFloat(0, 1), default=None,
+              help="The thrust curve's quadratic part, PX4's THR_MDL_FAC (normalized).")
+@click.option("--thrust-max-n", type=FiniteFloat(0, 1e6, lo_open=True, unit="N"),
+              default=None, help="Thrust at full command, N (normalized; default: the "
+              "config's vehicle.thrust_max).")
 @user_errors
-def export_c(table, out_dir, no_code_size, fmt):
+def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fac,
+             thrust_max_n):
     """Write the C99 header NAME_gains.h for TABLE, the controller's parameters
     NAME_control.h (from the table's config) and copy the C runtime and controller
     (gainsched_runtime.c/.h, gainsched_control.c/.h) next to them; print the flash
@@ -530,6 +544,16 @@ def export_c(table, out_dir, no_code_size, fmt):
 
     t = load_table(table)
     cfg = table_config(t, fmt)
+    outputs = {k: v for k, v in (("firmware.motor_order", motor_order),
+                                 ("firmware.command", command),
+                                 ("firmware.thr_mdl_fac", thr_mdl_fac),
+                                 ("firmware.thrust_max_N", thrust_max_n))
+               if v not in (None, "config")}
+    if outputs and cfg is None:
+        raise InputError(str(table), "config_text", "the controller's outputs need the "
+                         "table's config, which this installation cannot load")
+    if outputs:
+        cfg = cfg.with_values(outputs, source=f"{table} (export-c options)")
     fmt = "dense" if cfg is None else cfg.firmware.format
     n_mid = max(t.speed.size - 1, 1) if fmt == "compact" else 0
     with tqdm(total=n_mid, unit="speed", desc="certify compact table",

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .actuators import MOTOR_ORDERS
 from .constants import INTEGRATORS, MAX_XI, N_INPUT, N_STATE, REDUCED_NAMES, XI_DOT_LIMIT
 from .errors import InputError
 from .resources import config_path, reference_configs
@@ -241,6 +242,9 @@ class Grid:
 
 #: table formats the firmware can be given (``[firmware] format``)
 FORMATS = ("dense", "compact")
+#: what the generated controller outputs (``[firmware] command``): thrusts in N, or
+#: normalised commands through PX4's thrust curve (:mod:`gainsched.actuators`)
+COMMANDS = ("thrust", "normalized")
 
 
 @dataclass(frozen=True)
@@ -258,11 +262,24 @@ class Firmware:
         relative (a fraction; ``azimuth_error`` in percent in the file, default 1).
     max_table_bytes : int or None
         Flash budget: the build fails when the table data exceed it (None: no budget).
+    motor_order : {"gainsched", "px4"}
+        The numbering of the generated controller's outputs
+        (:data:`gainsched.actuators.MOTOR_ORDERS`; docs/runtime.md, "PX4").
+    command : {"thrust", "normalized"}
+        Its outputs: thrusts in N, or commands in 0..1 through the thrust curve.
+    thr_mdl_fac : float
+        The thrust curve's quadratic part (PX4's ``THR_MDL_FAC``), 0..1.
+    thrust_full : float or None, N
+        Thrust at full command (``thrust_max_N`` in the file; None: ``vehicle.thrust_max``).
     """
 
     format: str = "dense"
     azimuth_error: float = 0.01
     max_table_bytes: int | None = None
+    motor_order: str = "gainsched"
+    command: str = "thrust"
+    thr_mdl_fac: float = 0.0
+    thrust_full: float | None = None
 
 
 @dataclass(frozen=True)
@@ -874,8 +891,29 @@ def _firmware(sec: Section) -> Firmware:
         budget = sec.get("max_table_bytes")
         if isinstance(budget, bool) or not isinstance(budget, int) or budget < 1:
             raise sec.error("max_table_bytes", f"must be a positive integer, got {budget!r}")
+    order = sec.string("motor_order", Firmware.motor_order, choices=tuple(MOTOR_ORDERS))
+    command = sec.string("command", Firmware.command, choices=COMMANDS)
+    for k in ("thr_mdl_fac", "thrust_max_N"):
+        if k in sec.data and command != "normalized":
+            raise sec.error(k, 'applies to normalised outputs only: set command = "normalized"')
+    fac = sec.number("thr_mdl_fac", Firmware.thr_mdl_fac, nonneg=True)
+    if fac > 1:
+        raise sec.error("thr_mdl_fac", f"must be in 0..1, got {fac:g}")
+    full = sec.number("thrust_max_N", positive=True) if "thrust_max_N" in sec.data else None
     sec.done()
-    return Firmware(fmt, err / 100, budget)
+    return Firmware(fmt, err / 100, budget, order, command, fac, full)
+
+
+def _check_commands(source, firmware: Firmware, vehicle: Vehicle) -> None:
+    """Normalised outputs must cover the motors' range (``vehicle.thrust_min >= 0``
+    already): ``vehicle.thrust_max <= firmware.thrust_max_N``, the thrust at full command."""
+    if firmware.command != "normalized":
+        return
+    if firmware.thrust_full is not None and firmware.thrust_full < vehicle.thrust_max:
+        raise InputError(source, "firmware.thrust_max_N",
+                         f"{firmware.thrust_full:g} N at full command is below "
+                         f"vehicle.thrust_max = {vehicle.thrust_max:g} N: the controller's "
+                         "range would need commands above 1")
 
 
 def check_rate(source, control: Control, grid: Grid, radius: float) -> None:
@@ -1053,6 +1091,7 @@ def _config(text: str, source: str, check_default_name: bool) -> Config:
     analysis = _analysis(top.sub("analysis", {}))
     limits = _limits(top.sub("limits", {}))
     firmware = _firmware(top.sub("firmware", {}))
+    _check_commands(source, firmware, vehicle)
     if feas.thrust_margin * 2 >= vehicle.thrust_max - vehicle.thrust_min:
         raise InputError(source, "feasibility.thrust_margin", "leaves no usable thrust range")
     top.done()

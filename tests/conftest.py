@@ -8,7 +8,10 @@
 - the markers ``needs_cc`` (a host C compiler) and ``needs_arm`` (the Cortex-M4F cross
   compiler and QEMU), turned into skips with the reason in one hook
   (:func:`pytest_runtest_setup`);
-- the reference circle of the link-model tests.
+- the reference circle of the link-model tests;
+- ``fly(hidden)`` and ``diagnosed(hidden)``: the default campaign of
+  :mod:`gainsched.sim.campaign` flown on a plant with a hidden effect, and its
+  diagnosis, once per test module.
 
 Parallel runs (``make test`` runs pytest-xdist): every fixture here is per worker
 process and writes nothing outside pytest's own temporary folders; compiled kernels go
@@ -138,3 +141,53 @@ def small_config_text():
     """The factory :func:`support.small_config_text`: the same as unvalidated TOML text
     (for a test that writes a bad value, or a file for the command line)."""
     return support.small_config_text
+
+
+# --------------------------------------------------------------------------- campaigns
+
+
+@pytest.fixture(scope="module")
+def fly(paper_config, paper_table):
+    """The factory ``fly(hidden="none", scenarios=None, load_cell=True)``: the flight logs
+    (list of FlightLog) of :func:`gainsched.sim.campaign.campaign` on the plant with the
+    hidden effect ``hidden`` (a name of ``HIDDEN``), the paper table flying, flights of
+    :data:`support.CAMPAIGN_DURATION` s: the default flights, or ``scenarios`` (Scenario
+    objects, or names of default flights); ``load_cell=False`` drops the tension. Flown
+    once per module."""
+    from gainsched.sim.campaign import campaign, default_flights
+    from gainsched.sim.loop import table_scheduler
+
+    sched = table_scheduler(paper_table)
+    cache = {}
+
+    def get(hidden="none", scenarios=None, load_cell=True):
+        if scenarios is not None and all(isinstance(s, str) for s in scenarios):
+            scenarios = [s for s in default_flights(support.CAMPAIGN_DURATION)
+                         if s.name in scenarios]
+        key = (hidden, None if scenarios is None else tuple(s.name for s in scenarios),
+               load_cell)
+        if key not in cache:
+            cache[key] = campaign(paper_config, sched, hidden, duration=support.CAMPAIGN_DURATION,
+                                  scenarios=scenarios, load_cell=load_cell)
+        return cache[key]
+
+    return get
+
+
+@pytest.fixture(scope="module")
+def diagnosed(paper_config, fly):
+    """The factory ``diagnosed(hidden, scenarios=None)``: :func:`gainsched.analysis.
+    diagnose.diagnose` of the paper config on ``fly(hidden, scenarios)``, once per
+    module."""
+    from gainsched.analysis.diagnose import diagnose
+
+    cache = {}
+
+    def get(hidden, scenarios=None):
+        key = (hidden, None if scenarios is None else tuple(
+            s if isinstance(s, str) else s.name for s in scenarios))
+        if key not in cache:
+            cache[key] = diagnose(paper_config, fly(hidden, scenarios))
+        return cache[key]
+
+    return get

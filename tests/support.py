@@ -264,6 +264,12 @@ def auto_text(speeds=AUTO_SPEEDS, tilts=AUTO_TILTS, n_xi=16, bound=3, name="auto
                              grid__max_interpolation_error=bound)
 
 
+# --------------------------------------------------------------------------- campaigns
+
+#: s, the flight time of the campaigns the analysis tests fly (conftest ``fly``)
+CAMPAIGN_DURATION = 2.5
+
+
 # --------------------------------------------------------------------------- foreign logs
 
 
@@ -328,3 +334,32 @@ def ros_types():
     from rosbags.typesys import Stores, get_typestore
 
     return get_typestore(Stores.LATEST)
+
+
+def recorded_rows(res, *, every=5, delay=12, rng=None, bad=()):
+    """A flight's sensor inputs (a SimResult) as the firmware gets them, shape (m, N_INPUT):
+    poses every `every` steps, arriving `delay` steps late, with noise; the gyro and the
+    accelerometer every step; `bad`: (step, column, value) written over them."""
+    from gainsched.firmware.controller import FLAG_ACCEL, FLAG_POSE, N_INPUT
+
+    rng = rng or np.random.default_rng(0)
+    n = res.t.size
+    rows = np.zeros((n, N_INPUT))
+    pend = []
+    xi = (res.z_d[:, 1] + np.pi) % (2 * np.pi) - np.pi
+    for k in range(n):
+        flags = FLAG_ACCEL
+        if k % every == 0:
+            pend.append((k + delay, res.p_I[k] + 5e-4 * rng.standard_normal(3), res.q_IB[k]))
+        if pend and pend[0][0] <= k:
+            _, p, q = pend.pop(0)
+            flags |= FLAG_POSE
+            rows[k, 1:4], rows[k, 4:8] = p, q
+        rows[k, 0] = flags
+        rows[k, 11:14] = res.z[k, 7:10] + 0.003 * rng.standard_normal(3)
+        rows[k, 14:17] = res.f_B[k] + 0.05 * rng.standard_normal(3)
+        rows[k, 17], rows[k, 18] = xi[k], res.z_d[k, 3]
+        rows[k, 22], rows[k, 23] = res.scenario.tilt, res.scenario.gamma
+    for k, col, value in bad:
+        rows[k, col] = value
+    return rows

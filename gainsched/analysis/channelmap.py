@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..actuators import PX4_MOTOR_ORDER
 from ..errors import InputError
 
 __all__ = [
@@ -42,10 +43,6 @@ MAP_SCHEMA = "gainsched-channelmap/1"
 WORLD_FRAMES = ("NED", "ENU")
 BODY_FRAMES = ("FRD", "FLU")
 UNITS = ("N", "normalized", "pwm")
-#: PX4's quad-X motors for the tool's motors 1..4 (docs/conventions.md, "Motors"): tool
-#: motor 1 (front left) is PX4's 3, 2 (rear left) its 2, 3 (rear right) its 4, 4 (front
-#: right) its 1. The spin directions agree (tool 1 and 3, PX4 3 and 4: one way).
-PX4_MOTOR_ORDER = (3, 2, 4, 1)
 _PART = r"[A-Za-z_][A-Za-z0-9_]*(\[[0-9]+\])?"  # name or name[index]
 _FIELD = re.compile(rf"^{_PART}(\.{_PART})*$")
 _SECTIONS = {

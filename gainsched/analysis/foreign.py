@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..actuators import thrust_from_command
 from ..errors import InputError
 from .channelmap import ChannelMap
 
@@ -75,7 +76,9 @@ class ConvertedLog:
     ``alpha_c_deg`` and ``gamma_c_deg`` when the map says ``"estimate"``: the reader
     fits them to the positions); ``rows``: 1-based sample numbers of the position topic;
     ``label``: how a row is named in errors; ``report``: lines saying what was mapped to
-    what.
+    what. The metadata name the source: ``source_format``, ``channel_map`` (its name)
+    and ``motors_order`` (its ``motors.order``, ``"[3, 2, 4, 1]"``: the compare's motor
+    order check, :func:`~gainsched.analysis.compare.check_motor_order`, names it).
     """
 
     columns: dict[str, np.ndarray]
@@ -292,8 +295,7 @@ def _thrust(path, cmap: ChannelMap, cmd: np.ndarray, params: dict, thrust_max):
     tol = 1e-6
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(c) & (c >= -tol) & (c <= 1 + tol)
-    c = np.clip(np.where(valid, c, 0.0), 0.0, 1.0)
-    return t_max * ((1.0 - f) * c + f * c * c), valid
+    return thrust_from_command(np.clip(np.where(valid, c, 0.0), 0.0, 1.0), f, t_max), valid
 
 
 def convert_topics(path, topics: dict[str, Topic], params: dict[str, float],
@@ -387,7 +389,8 @@ def convert_topics(path, topics: dict[str, Topic], params: dict[str, float],
         report.append(f"tension: {cmap.tension.topic} {cmap.tension.fields[0]} x "
                       f"{cmap.tension.scale:g} (held)")
     meta = {"schema": "gainsched-flightlog/1", "flight_id": Path(path).stem,
-            "source_format": foreign_format(path) or "", "channel_map": cmap.name}
+            "source_format": foreign_format(path) or "", "channel_map": cmap.name,
+            "motors_order": str(list(cmap.motor_order))}
     if cmap.alpha_c_deg is not None and cmap.gamma_c_deg is not None:
         meta["alpha_c_deg"] = repr(float(cmap.alpha_c_deg))
         meta["gamma_c_deg"] = repr(float(cmap.gamma_c_deg))

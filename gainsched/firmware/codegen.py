@@ -21,6 +21,7 @@ import os
 import shutil
 import string
 import subprocess
+import textwrap
 from importlib import resources
 from pathlib import Path
 
@@ -313,6 +314,8 @@ _PARAM_COMMENTS = {
     "accel_range": "m/s^2", "k_pos": "estimator: position per pose",
     "k_vel": "estimator: velocity per pose", "k_att": "estimator: attitude per pose",
     "pose_period": "s between poses",
+    "motor_slot": "output slot of T1..T4", "normalized": "1: commands 0..1, 0: N",
+    "thr_mdl_fac": "thrust curve (PX4 THR_MDL_FAC)", "thrust_full": "N at command 1",
 }
 
 
@@ -323,22 +326,36 @@ def control_header_name(data) -> str:
 def render_control_header(data, params) -> str:
     """The text of ``<name>_control.h``: ``<name>_ctrl_params`` (the ``gs_ctrl_params`` of
     :class:`~gainsched.firmware.controller.ControllerParams`) and ``<name>_ctrl_init``."""
-    from dataclasses import fields
-
     data = data.base if isinstance(data, CompactData) else data
-    names = [f.name for f in fields(params)]
-    names[names.index("int_of"):names.index("int_of") + 1] = ["n_int", "int_of"]
     lines = []
-    for key, v in zip(names, params.c_values(), strict=True):
-        text = (f"{{{', '.join(_c_uint(i) for i in v)}}}" if key == "int_of" else
-                _c_uint(v) if key == "n_int" else c_decimal(v))
+    for key, ctype, v in params.c_fields():
+        text = (c_decimal(v) if ctype == "float" else _c_uint(v) if ctype == "uint32_t" else
+                f"{{{', '.join(_c_uint(i) for i in v)}}}")
         lines.append(f"    {text}, /* {key}: {_PARAM_COMMENTS[key]} */")
     return render("control.in.h", name=data.name, NAME=data.name.upper(),
                   config_name=data.meta.get("config_name", data.name),
                   config_sha256=data.config_sha256 or "unknown",
                   tool_version=data.meta.get("tool_version", "?"),
                   dt_ms=f"{1000 * params.dt:g}",
-                  fields="\n".join(lines))
+                  fields="\n".join(lines), **_output_values(params))
+
+
+def _output_values(params) -> dict:
+    """The control header's words for the controller's outputs."""
+    from ..actuators import MOTOR_ORDERS, slots_from_order
+
+    order = next((k for k, v in MOTOR_ORDERS.items()
+                  if slots_from_order(v) == tuple(params.motor_slot)), "custom")
+    slots = ", ".join(f"T{i + 1} -> out[{s}]" for i, s in enumerate(params.motor_slot))
+    if params.normalized:
+        unit = (f"commands 0..1 through the thrust curve T / {params.thrust_full:g} N = "
+                f"(1 - f) u + f u^2, f = THR_MDL_FAC = {params.thr_mdl_fac:g}")
+    else:
+        unit = "thrusts in N"
+    text = textwrap.fill(f"Outputs (out[4]): {order} order ({slots}), {unit}.", width=84,
+                         subsequent_indent=" * ")
+    return dict(motor_order=order, command="normalized" if params.normalized else "thrust",
+                outputs=text)
 
 
 def c_files(table, params=None) -> dict[str, bytes]:

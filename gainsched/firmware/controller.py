@@ -41,6 +41,11 @@ One control step (``gs_ctrl_update``; docs/runtime.md, "The controller"):
    feedback and freezes the integrators; a bad gyro sample (``CTRL_BAD_IMU``) keeps
    the last good one and drops the rate feedback.
 
+5. **Outputs** (:meth:`ControllerParams.commands_from_thrust`): the thrusts, renumbered
+   to the flight stack's motors and, for PX4, as normalised commands through its thrust
+   curve (``[firmware] motor_order``, ``command``; docs/runtime.md, "PX4"). By default
+   the thrusts of T1..T4 in N.
+
 This module computes the same in double precision; tests/firmware/test_controller.py holds
 the C controller (compiled for the host, and on the emulated Cortex-M4F) to it.
 """
@@ -53,6 +58,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from ..actuators import MOTOR_ORDERS, command_from_thrust, slots_from_order, thrust_from_command
 from ..constants import INTEGRATORS, N_STATE
 from ..errors import InputError
 from ..model.rotations import matrix_from_quaternion
@@ -178,6 +184,15 @@ class ControllerParams:
         ``k_vel e_p / pose_period``, attitude ``k_att e_theta``.
     pose_period : float, s
         Interval between poses.
+    motor_slot : tuple of 4 int
+        The output slot (0-based) of the tool's motors T1..T4: ``(0, 1, 2, 3)`` the tool's
+        numbering, ``(2, 1, 3, 0)`` PX4's quad-X (:mod:`gainsched.actuators`).
+    normalized : bool
+        Outputs are normalised commands through the thrust curve, not thrusts in N.
+    thr_mdl_fac : float
+        The thrust curve's quadratic part (PX4's ``THR_MDL_FAC``), 0..1.
+    thrust_full : float, N
+        Thrust at full command (normalised outputs).
     """
 
     dt: float
@@ -197,6 +212,10 @@ class ControllerParams:
     k_vel: float = 0.04
     k_att: float = 0.15
     pose_period: float = 0.005
+    motor_slot: tuple[int, ...] = (0, 1, 2, 3)
+    normalized: bool = False
+    thr_mdl_fac: float = 0.0
+    thrust_full: float = 0.0
 
     @property
     def delay_steps(self) -> int:
@@ -209,26 +228,88 @@ class ControllerParams:
         return int(np.float32(self.pose_timeout) / np.float32(self.dt) + np.float32(0.5))
 
     def c_array(self) -> np.ndarray:
-        """:meth:`c_values` flattened to float32 (the integers as floats): what the SIL
+        """:meth:`c_fields` flattened to float32 (the integers as floats): what the SIL
         and PIL drivers read into a ``gs_ctrl_params``."""
-        return np.array([float(x) for v in self.c_values() for x in np.ravel(v)],
+        return np.array([float(x) for _, _, v in self.c_fields() for x in np.ravel(v)],
                         dtype=np.float32)
 
-    def c_values(self) -> list:
-        """The ``gs_ctrl_params`` initialiser's values, in its field order."""
+    def c_fields(self) -> list[tuple[str, str, float | int | tuple[int, ...]]]:
+        """The ``gs_ctrl_params`` fields in its order: ``(name, C type, value)``, the type
+        ``"float"``, ``"uint32_t"`` or ``"uint32_t[n]"`` (``int_of`` is ``n_int`` and the
+        array padded to 2)."""
         out = []
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name == "int_of":
-                out += [len(v), tuple(v) + (0,) * (2 - len(v))]
-            else:
-                out.append(v)
+                out += [("n_int", "uint32_t", len(v)),
+                        ("int_of", "uint32_t[2]", tuple(v) + (0,) * (2 - len(v)))]
+            elif f.type == "float":
+                out.append((f.name, "float", float(v)))
+            elif f.type == "bool":
+                out.append((f.name, "uint32_t", int(v)))
+            else:  # tuple[int, ...]
+                out.append((f.name, f"uint32_t[{len(v)}]", tuple(int(i) for i in v)))
         return out
+
+    def commands_from_thrust(self, thrust) -> np.ndarray:
+        """The controller's outputs of thrusts: renumbered by :attr:`motor_slot` and, when
+        :attr:`normalized`, through the thrust curve (``gs_ctrl_commands``).
+
+        Parameters
+        ----------
+        thrust : array_like, shape (..., 4), N
+            Thrusts of the tool's motors T1..T4.
+
+        Returns
+        -------
+        ndarray, shape (..., 4)
+            The outputs in slot order: N, or commands in 0..1.
+
+        Examples
+        --------
+        >>> p = dataclasses.replace(controller_params(gs.load_config("paper")),
+        ...                         motor_slot=(2, 1, 3, 0))
+        >>> p.commands_from_thrust([1.0, 2.0, 3.0, 4.0]).tolist()
+        [4.0, 2.0, 1.0, 3.0]
+        """
+        t = np.asarray(thrust, dtype=float)
+        c = command_from_thrust(t, self.thr_mdl_fac, self.thrust_full) if self.normalized else t
+        out = np.empty_like(c)
+        out[..., list(self.motor_slot)] = c
+        return out
+
+    def thrust_from_commands(self, commands) -> np.ndarray:
+        """The thrusts of the controller's outputs: the inverse of
+        :meth:`commands_from_thrust` (what the flight stack's mixer and motors do).
+
+        Parameters
+        ----------
+        commands : array_like, shape (..., 4)
+            Outputs in slot order: N, or commands in 0..1 when :attr:`normalized`.
+
+        Returns
+        -------
+        ndarray, shape (..., 4), N
+            Thrusts of the tool's motors T1..T4.
+
+        Examples
+        --------
+        >>> p = dataclasses.replace(controller_params(gs.load_config("paper")),
+        ...                         motor_slot=(2, 1, 3, 0))
+        >>> p.thrust_from_commands([4.0, 2.0, 1.0, 3.0]).tolist()
+        [1.0, 2.0, 3.0, 4.0]
+        """
+        c = np.asarray(commands, dtype=float)[..., list(self.motor_slot)]
+        if self.normalized:
+            return thrust_from_command(c, self.thr_mdl_fac, self.thrust_full)
+        return c
 
 
 def controller_params(config, **sensing) -> ControllerParams:
     """The controller's parameters from a config: the loop, the vehicle and the motors,
-    plus the sensing fields (defaults of :class:`ControllerParams`, or ``sensing``).
+    the outputs (``[firmware] motor_order``, ``command``, ``thr_mdl_fac``,
+    ``thrust_max_N``), plus the sensing fields (defaults of :class:`ControllerParams`, or
+    ``sensing``).
 
     Parameters
     ----------
@@ -245,12 +326,16 @@ def controller_params(config, **sensing) -> ControllerParams:
     >>> p.dt, p.rho, p.int_of, p.delay_steps
     (0.001, 1.5, (0,), 12)
     """
-    v, t = config.vehicle, config.tether
+    v, t, fw = config.vehicle, config.tether, config.firmware
     base = dict(dt=config.control.dt, rho=t.length, L_e=t.attachment_offset,
                 thrust_min=v.thrust_min, thrust_max=v.thrust_max, thrust_idle=v.thrust_min,
-                int_limit=0.5, int_of=tuple(INTEGRATORS[n] for n in config.control.integrators))
-    names = {f.name for f in fields(ControllerParams)} - {"dt", "rho", "L_e", "thrust_min",
-                                                           "thrust_max", "int_of"}
+                int_limit=0.5, int_of=tuple(INTEGRATORS[n] for n in config.control.integrators),
+                motor_slot=slots_from_order(MOTOR_ORDERS[fw.motor_order]),
+                normalized=fw.command == "normalized", thr_mdl_fac=fw.thr_mdl_fac,
+                thrust_full=v.thrust_max if fw.thrust_full is None else fw.thrust_full)
+    names = {f.name for f in fields(ControllerParams)} - {
+        "dt", "rho", "L_e", "thrust_min", "thrust_max", "int_of", "motor_slot", "normalized",
+        "thr_mdl_fac", "thrust_full"}
     for k in sensing:
         if k not in names:
             raise TypeError(f"controller_params() got an unexpected field {k!r}")
@@ -555,7 +640,9 @@ class Controller:
 
         Returns
         -------
-        thrust : ndarray, shape (4,), N
+        outputs : ndarray, shape (4,)
+            The motor outputs (:meth:`ControllerParams.commands_from_thrust`: by default
+            the thrusts of T1..T4, N).
         status : int
         z : ndarray, shape (10,)
             The reduced state estimate the step used.
@@ -587,7 +674,8 @@ class Controller:
             st, gyro_bad = self._estimate(row, flags, ref, alpha, gamma)
             if self.have_fix and _within(alpha, TILT_LIMIT) and _within(gamma, XI_LIMIT):
                 self._reduced(alpha, gamma)
-        return self._control(nominal, st, gyro_bad, gamma)
+        u, st, z = self._control(nominal, st, gyro_bad, gamma)
+        return pr.commands_from_thrust(u), st, z
 
     def _reduced(self, alpha, gamma):
         self.z = reduced_from_kinematics(self.hist_p[self.head], self.v, self.hist_q[self.head],
@@ -637,8 +725,9 @@ class Controller:
         return u, st, self.z.copy()
 
     def run(self, rows):
-        """Run a recorded input sequence (m, N_INPUT) at one tilt: thrusts (m, 4), statuses
-        (m,) and the state estimates (m, 10) of every step."""
+        """Run a recorded input sequence (m, N_INPUT) at one tilt: outputs (m, 4; thrusts by
+        default, :meth:`step`), statuses (m,) and the state estimates (m, 10) of every
+        step."""
         rows = np.asarray(rows, dtype=float)
         m = len(rows)
         ref = rows[:, _COL["ref"]]

@@ -118,12 +118,12 @@ def build_control_pil(table, params, out_dir, *, std: str = "c99", ftz: bool = F
     Parameters as :func:`build_pil`; ``params`` the
     :class:`~gainsched.firmware.controller.ControllerParams` of ``<name>_control.h``
     (the driver sets its own at run time)."""
-    from .sil import write_controller
+    from .sil import driver_values, write_controller
 
     data = firmware_data(table)
     out = Path(out_dir)
     sources = write_controller(data, params, out)
-    values = dict(name=data.name, tool_version=data.meta.get("tool_version", "?"))
+    values = driver_values(data, params)
     shim = _write(out / f"{data.name}_control_sil.c", render("control_sil.in.c", **values))
     driver = _write(out / f"{data.name}_control_pil.c", render("control_pil.in.c", **values))
     return _cross_build(out, out / f"{data.name}_control_pil.elf", [driver, shim, *sources],

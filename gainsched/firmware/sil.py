@@ -32,7 +32,8 @@ from .codegen import (
 from .controller import N_INPUT, ControllerParams
 from .runtime import BAD_ARG
 
-__all__ = ["N_OUTPUT", "write_controller", "build_controller", "CController"]
+__all__ = ["N_OUTPUT", "write_controller", "driver_values", "build_controller",
+           "CController"]
 
 #: the driver's output row: thrust (4), status (int32 bits), z (10)
 N_OUTPUT = 15
@@ -51,6 +52,25 @@ def write_controller(table, params: ControllerParams, out_dir) -> list[Path]:
     return [paths[1], paths[3]]
 
 
+def driver_values(data, params: ControllerParams) -> dict:
+    """The values the SIL and PIL drivers' templates are rendered with: the table's name,
+    and the ``gs_ctrl_params`` fields in :meth:`ControllerParams.c_fields` order as the
+    flat float array the drivers read (``n_params``, ``setup``: the assignments from
+    ``pv``, ``getters``: the generated params back as floats)."""
+    setup, getters = [], []
+    for name, ctype, value in params.c_fields():
+        lvalues = ([f"p->{name}"] if ctype in ("float", "uint32_t") else
+                   [f"p->{name}[{j}]" for j in range(len(value))])
+        for lv in lvalues:
+            i = len(setup)
+            setup.append(f"    {lv} = pv[{i}];" if ctype == "float" else
+                         f"    {lv} = (uint32_t)pv[{i}];")
+            getters.append(lv if ctype == "float" else f"(float){lv}")
+    return dict(name=data.name, tool_version=data.meta.get("tool_version", "?"),
+                n_params=str(len(setup)), setup="\n".join(setup),
+                getters=",\n        ".join(getters))
+
+
 def build_controller(table, params: ControllerParams, out_dir, *, cc=None, opt="-O2",
                      extra=()) -> Path:
     """Compile the controller with ``table`` for the host as a shared library (the strict
@@ -63,8 +83,7 @@ def build_controller(table, params: ControllerParams, out_dir, *, cc=None, opt="
     out = Path(out_dir)
     sources = write_controller(data, params, out)
     shim = _write(out / f"{data.name}_control_sil.c",
-                  render("control_sil.in.c", name=data.name,
-                         tool_version=data.meta.get("tool_version", "?")))
+                  render("control_sil.in.c", **driver_values(data, params)))
     lib = out / f"lib{data.name}_control.so"
     cmd = [cc, *STRICT_CFLAGS, opt, f"-I{out}", "-shared", "-fPIC", *extra, "-o", str(lib),
            str(shim), *map(str, sources)]

@@ -746,6 +746,10 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
                                          rec.STAT, rec.HELD)
     CTRL = rec.CTRL = np.zeros(n_steps, dtype=np.int32)
     t_lo, t_hi = (float(np.float32(v)) for v in (params.thrust_min, params.thrust_max))
+    # outputs other than N in T1..T4 come back through the thrust curve: a clipped
+    # thrust to float32 rounding of the command
+    newtons = params.motor_slot == (0, 1, 2, 3) and not params.normalized
+    clip_tol = 0.0 if newtons else 1e-5 * max(abs(t_lo), abs(t_hi))
     slack_time = None
     n_done = n_steps
     xi_true = z0[1]
@@ -774,10 +778,11 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
             row[col["accel"]] = f_B + sens.accel_noise * rng.standard_normal(3)
         row[col["ref"]] = ref[k]
         if reference:
-            thrust, status, z_hat = ctl.step(row, (lk[k], ff.x_d[k], ff.u_d[k],
-                                                   int(ff.status[k])))
+            out, status, z_hat = ctl.step(row, (lk[k], ff.x_d[k], ff.u_d[k],
+                                                int(ff.status[k])))
         else:
-            thrust, status, z_hat = ctl.step(row)
+            out, status, z_hat = ctl.step(row)
+        thrust = out if newtons else params.thrust_from_commands(out)  # mixer and motors
         if k == 0 and status & NO_GAINS:
             raise InputError(
                 f"scenario {scenario.name}", "speed",
@@ -786,8 +791,8 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
                 f"{math.degrees(alpha):.3g} deg): a firmware would refuse to engage")
         u = np.minimum(np.maximum(thrust, u_min), u_max)
         # clipped: by the plant's limits, or by the controller at the design's
-        SAT[k] = (u != thrust) | (bool(status & CTRL_SATURATED) & ((thrust == t_lo) |
-                                                                   (thrust == t_hi)))
+        SAT[k] = (u != thrust) | (bool(status & CTRL_SATURATED) & (
+            (np.abs(thrust - t_lo) <= clip_tol) | (np.abs(thrust - t_hi) <= clip_tol)))
         HELD[k] = bool(status & CTRL_HELD)
         CTRL[k] = status
         x_next, ten = P.step(x, u, alpha, dt)

@@ -23,29 +23,11 @@ from gainsched.configedit import set_values
 from gainsched.errors import InputError
 from gainsched.model.rotations import matrix_from_euler_zyx, quaternion_from_matrix
 from gainsched.schedule.tables import load_table
-from gainsched.sim.campaign import campaign, default_flights, write_campaign
+from gainsched.sim.campaign import default_flights, write_campaign
 from gainsched.sim.loop import table_scheduler
 
 from support import PAPER_H5, paper_config_text
 from support import PAPER_TOML as PAPER
-
-
-@pytest.fixture(scope="module")
-def fly(paper_config, paper_table):
-    sched = table_scheduler(paper_table)
-    cache = {}
-
-    def get(hidden="none", load_cell=True, names=None):
-        key = (hidden, load_cell, names)
-        if key not in cache:
-            scn = None
-            if names is not None:
-                scn = [s for s in default_flights(2.5) if s.name in names]
-            cache[key] = campaign(paper_config, sched, hidden, duration=2.5,
-                                  load_cell=load_cell, scenarios=scn)
-        return cache[key]
-
-    return get
 
 
 @pytest.fixture(scope="module")
@@ -165,7 +147,7 @@ def test_latency_in_config_removes_the_residual(paper_config, fly):
 def test_tension_from_radial_equation_without_load_cell(paper_config, fly):
     """No load cell: the radial equation gives the tension, the radial axis is not
     reported, and the other axes are still at the noise floor for the true model."""
-    logs = fly("none", load_cell=False, names=("v9", "tilt40-v7", "braking"))
+    logs = fly("none", ("v9", "tilt40-v7", "braking"), load_cell=False)
     c = compare(paper_config, logs)
     assert "radial" not in c.axes
     assert {r.tension_source for r in c.residuals} == {"radial equation"}
@@ -389,7 +371,7 @@ def test_fit_fast_path_equals_the_report_bit_for_bit(paper_config, fly, use_gyro
 
     cfg = paper_config.with_values({"analysis.use_gyro": use_gyro})
     model = Model(config_from_text(paper_config_text(**{"effects.motor_lag.tau": 0.03})))
-    meas = load_segments(cfg, fly("none", names=("speedup", "v9")))[0]
+    meas = load_segments(cfg, fly("none", ("speedup", "v9")))[0]
     for m in meas:
         full = residuals(cfg, [m], model=model, latency=0.012)[0].residual
         fast = residual_axes(model, m, 0.012)

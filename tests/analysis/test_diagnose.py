@@ -24,37 +24,8 @@ from gainsched.schedule.tables import load_table
 from gainsched.sim.campaign import HIDDEN, campaign, default_flights, write_campaign
 from gainsched.sim.loop import table_scheduler
 
+from support import CAMPAIGN_DURATION as DURATION
 from support import PAPER_H5, PAPER_TOML
-
-DURATION = 2.5
-
-
-@pytest.fixture(scope="module")
-def fly(paper_config, paper_table):
-    sched = table_scheduler(paper_table)
-    cache = {}
-
-    def get(hidden, scenarios=None):
-        key = (hidden, None if scenarios is None else tuple(s.name for s in scenarios))
-        if key not in cache:
-            cache[key] = campaign(paper_config, sched, hidden, duration=DURATION,
-                                  scenarios=scenarios)
-        return cache[key]
-
-    return get
-
-
-@pytest.fixture(scope="module")
-def diagnosed(paper_config, fly):
-    cache = {}
-
-    def get(hidden, scenarios=None):
-        key = (hidden, None if scenarios is None else tuple(s.name for s in scenarios))
-        if key not in cache:
-            cache[key] = diagnose(paper_config, fly(hidden, scenarios))
-        return cache[key]
-
-    return get
 
 
 def _excess_rms_fall(r) -> float:

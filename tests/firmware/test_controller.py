@@ -38,7 +38,7 @@ from gainsched.sim.loop import (
     simulate,
 )
 
-from support import FIRMWARE_EXAMPLES, SAN_ENV, compile_c, sanitizers_work
+from support import FIRMWARE_EXAMPLES, SAN_ENV, compile_c, recorded_rows, sanitizers_work
 
 pytestmark = pytest.mark.needs_cc
 
@@ -122,32 +122,6 @@ def test_specific_force_equals_second_differences_of_the_flown_path(paper_config
     assert np.abs(f).max() > 20
 
 
-def _recorded_rows(res, *, every=5, delay=12, rng=None, bad=()):
-    """A flight's sensor inputs as the firmware gets them: poses every `every` steps,
-    arriving `delay` steps late, with noise; the gyro and the accelerometer every step."""
-    rng = rng or np.random.default_rng(0)
-    n = res.t.size
-    rows = np.zeros((n, N_INPUT))
-    pend = []
-    xi = (res.z_d[:, 1] + np.pi) % (2 * np.pi) - np.pi
-    for k in range(n):
-        flags = FLAG_ACCEL
-        if k % every == 0:
-            pend.append((k + delay, res.p_I[k] + 5e-4 * rng.standard_normal(3), res.q_IB[k]))
-        if pend and pend[0][0] <= k:
-            _, p, q = pend.pop(0)
-            flags |= FLAG_POSE
-            rows[k, 1:4], rows[k, 4:8] = p, q
-        rows[k, 0] = flags
-        rows[k, 11:14] = res.z[k, 7:10] + 0.003 * rng.standard_normal(3)
-        rows[k, 14:17] = res.f_B[k] + 0.05 * rng.standard_normal(3)
-        rows[k, 17], rows[k, 18] = xi[k], res.z_d[k, 3]
-        rows[k, 22], rows[k, 23] = res.scenario.tilt, res.scenario.gamma
-    for k, col, value in bad:
-        rows[k, col] = value
-    return rows
-
-
 def _pair(cfg, table, tmp_path, **kw):
     params = controller_params(cfg, **kw)
     c = CController(table, params, build_dir=tmp_path)
@@ -171,7 +145,7 @@ def test_c_controller_equals_the_python_reference_on_recorded_sequences(paper_co
     res = simulate(paper_config, runtime_scheduler(paper_table, "python"),
                    dataclasses.replace(load_scenario(name), duration=1.5))
     bad = [(202, 1, np.nan), (402, 4, 0.5), (600, 12, 80.0), (700, 15, np.inf)]  # poses: 12 + 5 j
-    rows = _recorded_rows(res, bad=bad)
+    rows = recorded_rows(res, bad=bad)
     rows[900:960, 0] = FLAG_ACCEL  # 60 ms without poses: stale
     c, py = _pair(paper_config, paper_table, tmp_path, pose_delay=0.012)
     _start(c, res), _start(py, res)
@@ -201,7 +175,7 @@ def test_bad_inputs_give_a_status_and_safe_thrusts_fuzzed(paper_config, paper_ta
     motors' range, C and Python statuses identical."""
     res = simulate(paper_config, runtime_scheduler(paper_table, "python"),
                    dataclasses.replace(load_scenario("horizontal"), duration=0.3))
-    rows = _recorded_rows(res, delay=0)
+    rows = recorded_rows(res, delay=0)
     rng = np.random.default_rng(11)
     fuzz = np.repeat(rows[-1:], 3000, axis=0)
     specials = np.array([np.nan, np.inf, -np.inf, 1e30, -1e30, 0.0, 1e4, 40.0])
@@ -231,7 +205,7 @@ def test_status_policy_named_cases(paper_config, paper_table, tmp_path):
     """Each bad input on its own: the status it gets and the thrusts it leaves."""
     res = simulate(paper_config, runtime_scheduler(paper_table, "python"),
                    dataclasses.replace(load_scenario("horizontal"), duration=0.2))
-    rows = _recorded_rows(res, delay=0)
+    rows = recorded_rows(res, delay=0)
     c, _ = _pair(paper_config, paper_table, tmp_path)
     _start(c, res)
     c.run(rows[:100])
@@ -274,7 +248,7 @@ def test_an_unusable_lookup_holds_the_last_good_gains(paper_config, paper_table,
     assert lk.status[0] & NO_GAINS
     res = simulate(paper_config, runtime_scheduler(paper_table, "python"),
                    dataclasses.replace(load_scenario("horizontal"), duration=0.1))
-    rows = _recorded_rows(res, delay=0)
+    rows = recorded_rows(res, delay=0)
     rows[50:, 18] = rt.xi_dot[0]
     rows[50:, 22] = float(rt.tilt[-1])
     c, py = _pair(paper_config, paper_table, tmp_path)
@@ -292,10 +266,10 @@ def test_the_generated_parameters_are_the_configs(paper_config, paper_table, tmp
     header)."""
     c, _ = _pair(paper_config, paper_table, tmp_path)
     fn = c.lib.paper_sil_params
-    pv = np.zeros(19, dtype=np.float32)
+    want = controller_params(paper_config).c_array()
+    pv = np.zeros(want.size, dtype=np.float32)
     fn.argtypes = [ctypes.c_void_p]
     fn(pv.ctypes.data)
-    want = controller_params(paper_config).c_array()
     np.testing.assert_array_equal(pv, want)
 
 

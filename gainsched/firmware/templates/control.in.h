@@ -9,7 +9,8 @@
  *     static gs_ctrl ctrl;                        (the controller's state)
  *     if (${name}_verify() != GS_OK || ${name}_ctrl_init(&ctrl) != GS_OK) { refuse to arm }
  *     every ${dt_ms} ms (${NAME}_RATE_HZ):
- *         int status = gs_ctrl_update(&ctrl, &in, &ref, thrust);
+ *         int status = gs_ctrl_update(&ctrl, &in, &ref, out);
+ * ${outputs}
  * From the config: the control step, the tether, the motors' range, the integral
  * states. Sensing fields (pose delay, timeout, ranges, estimator gains): defaults,
  * set them for your motion capture, radio link and IMU.
@@ -19,6 +20,9 @@
 
 #include "${name}_gains.h"
 #include "gainsched_control.h"
+
+#define ${NAME}_MOTOR_ORDER "${motor_order}" /* the numbering of out[] ([firmware] motor_order) */
+#define ${NAME}_COMMAND "${command}" /* thrust: N; normalized: 0..1 ([firmware] command) */
 
 static const gs_ctrl_params ${name}_ctrl_params = {
 ${fields}

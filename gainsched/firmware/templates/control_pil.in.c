@@ -15,7 +15,7 @@
 #include "${name}_control.h"
 #include "pil_board.h"
 
-#define N_PARAMS 19u
+#define N_PARAMS ${n_params}u
 #define N_IN 24u
 #define N_OUT 15u
 #define CHUNK 32u

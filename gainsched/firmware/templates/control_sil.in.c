@@ -17,6 +17,7 @@
 
 #define N_IN 24u
 #define N_OUT 15u
+#define N_PARAMS ${n_params}u /* the gs_ctrl_params fields as floats */
 
 /* the params after the gs_ctrl, 8-byte aligned */
 #define PARAMS_AT ((sizeof(gs_ctrl) + 7u) / 8u * 8u)
@@ -32,25 +33,7 @@ int ${name}_sil_setup(void *mem, const float *pv);
 int ${name}_sil_setup(void *mem, const float *pv)
 {
     gs_ctrl_params *p = (gs_ctrl_params *)(void *)((char *)mem + PARAMS_AT);
-    p->dt = pv[0];
-    p->rho = pv[1];
-    p->L_e = pv[2];
-    p->thrust_min = pv[3];
-    p->thrust_max = pv[4];
-    p->thrust_idle = pv[5];
-    p->int_limit = pv[6];
-    p->n_int = (uint32_t)pv[7];
-    p->int_of[0] = (uint32_t)pv[8];
-    p->int_of[1] = (uint32_t)pv[9];
-    p->pose_delay = pv[10];
-    p->pose_timeout = pv[11];
-    p->quat_tolerance = pv[12];
-    p->gyro_range = pv[13];
-    p->accel_range = pv[14];
-    p->k_pos = pv[15];
-    p->k_vel = pv[16];
-    p->k_att = pv[17];
-    p->pose_period = pv[18];
+${setup}
     return gs_ctrl_init((gs_ctrl *)mem, &${name}_table, p);
 }
 
@@ -59,11 +42,8 @@ void ${name}_sil_params(float *pv);
 void ${name}_sil_params(float *pv)
 {
     const gs_ctrl_params *p = &${name}_ctrl_params;
-    const float v[19] = {p->dt, p->rho, p->L_e, p->thrust_min, p->thrust_max, p->thrust_idle,
-                         p->int_limit, (float)p->n_int, (float)p->int_of[0],
-                         (float)p->int_of[1], p->pose_delay, p->pose_timeout,
-                         p->quat_tolerance, p->gyro_range, p->accel_range, p->k_pos,
-                         p->k_vel, p->k_att, p->pose_period};
+    const float v[N_PARAMS] = {
+        ${getters}};
     memcpy(pv, v, sizeof v);
 }
 
