@@ -46,6 +46,11 @@ from support import ARM_TOOLS, CC, CIRCLE_SPEED, CIRCLE_TILT, PAPER_H5, PAPER_TO
 if os.environ.get("PYTEST_XDIST_WORKER"):
     threadpool_limits(limits=1, user_api="blas")
 
+# Every test converts the foreign logs it reads (the cache of converted logs would keep
+# a conversion across runs and hide a change of the converter a test patches); the
+# cache's own tests turn it on in a folder of their own (tests/analysis/test_logcache.py).
+os.environ["GAINSCHED_LOG_CACHE"] = "0"
+
 #: marker -> the reason a test with it is skipped, or None when the tools are here
 _TOOL_SKIPS = {
     "needs_cc": None if CC is not None else "no C compiler (set CC, or install gcc)",

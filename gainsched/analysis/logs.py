@@ -699,7 +699,7 @@ def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None
 
 def _foreign(path: Path, channel_map, thrust_max):
     """The converted columns of a ULog or a bag (None for the project's own formats)."""
-    from .foreign import convert_topics, foreign_format, read_topics
+    from .foreign import foreign_format
 
     fmt = foreign_format(path)
     if fmt is None:
@@ -715,8 +715,9 @@ def _foreign(path: Path, channel_map, thrust_max):
         channel_map)
     if not path.exists():
         raise InputError(path, "", "cannot read (No such file or directory)")
-    topics, params = read_topics(path, cmap)
-    conv = convert_topics(path, topics, params, cmap, thrust_max=thrust_max)
+    from .logcache import converted_log
+
+    conv = converted_log(path, cmap, thrust_max)
     if "alpha_c_deg" in conv.meta:
         return conv
     alpha, gamma = _plane_angles(fitted_plane(np.stack([conv.columns[c] for c in "xyz"],

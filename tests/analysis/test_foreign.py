@@ -20,6 +20,7 @@ import re
 import numpy as np
 import pytest
 
+from gainsched.analysis import foreign, logcache
 from gainsched.analysis.channelmap import (
     PX4_MOTOR_ORDER,
     channel_map_from_text,
@@ -557,3 +558,111 @@ def test_diagnose_finds_the_hidden_effect_in_ulogs_and_bags_as_in_the_csvs(
         for r in ref.results:  # the accepted candidate and every other fit
             for p, a, b, ci in zip(r.params, r.theta, fits[r.name].theta, r.ci, strict=True):
                 assert abs(b - a) <= ci, (what, r.name, p.name, a, b, ci)
+
+
+def test_ros2_time_stamps_and_the_pose_clock_offset(paper_config, flight, tmp_path):
+    """``time.stamp = "log"`` places each message at the time the bag recorded it (the
+    pose 3 ms late against its header stamp); ``time.pose_offset_s`` moves the pose
+    channels by that much, back onto the on-board clock: then the log is the header
+    stamps' log again (the commands and the IMU agree to rounding)."""
+    bag = tmp_path / "bag"
+    write_bag(bag, ros2_messages(flight, ros_types()), "mcap")
+    (header,) = read_log(bag, channel_map=ros2_map())
+    late = dataclasses.replace(ros2_map(), stamp="log")
+    (recorded,) = read_log(bag, channel_map=late)
+    n = min(len(header), len(recorded))
+    np.testing.assert_allclose(recorded.t[:n] - header.t[:n], 0.003, atol=1e-9)
+    back = dataclasses.replace(late, pose_offset_s=-0.003)
+    (fixed,) = read_log(bag, channel_map=back)
+    i = np.searchsorted(fixed.t, header.t[1:-1] - 1e-7)
+    np.testing.assert_allclose(fixed.t[i], header.t[1:-1], atol=1e-9)
+    np.testing.assert_allclose(fixed.T_cmd[i], header.T_cmd[1:-1], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(fixed.optional["omega_B"][i], header.optional["omega_B"][1:-1],
+                               atol=1e-9)
+
+# ---------------------------------------------------------------- the cache of converted logs
+# gainsched/analysis/logcache.py: a log converted once is read from the cache with the
+# same columns, and converted again whenever its bytes, the map, the full-command thrust
+# or a cache entry change; errors are not kept.
+
+
+@pytest.fixture
+def cache(monkeypatch, tmp_path):
+    """The cache on, in a folder of this test's; counts the conversions from the log."""
+    monkeypatch.setenv("GAINSCHED_LOG_CACHE", "1")
+    monkeypatch.setenv("GAINSCHED_CACHE", str(tmp_path / "cache"))
+    calls = []
+    real = foreign.read_topics
+
+    def counted(path, cmap):
+        calls.append(path)
+        return real(path, cmap)
+
+    monkeypatch.setattr(logcache, "read_topics", counted)
+    return calls
+
+
+@pytest.fixture
+def ulog_file(paper_config, flight, tmp_path):
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max)
+    path = tmp_path / "flight.ulg"
+    write_ulog(path, topics, params)
+    return path
+
+
+def _read_cached(path, cmap=None, thrust_max=3.5):
+    (log,) = read_log(path, channel_map=cmap or px4_map(), thrust_max=thrust_max)
+    return log
+
+
+def _same_log(a, b):
+    np.testing.assert_array_equal(a.t, b.t)
+    np.testing.assert_array_equal(a.p_I, b.p_I)
+    np.testing.assert_array_equal(a.q, b.q)
+    np.testing.assert_array_equal(a.T_cmd, b.T_cmd)
+    for k in a.optional:
+        np.testing.assert_array_equal(a.optional[k], b.optional[k])
+    assert a.meta == b.meta
+
+
+def test_a_log_read_again_comes_from_the_cache_bit_for_bit(cache, ulog_file, tmp_path):
+    first = _read_cached(ulog_file)
+    assert len(cache) == 1 and len(list((tmp_path / "cache" / "logs").glob("*.npz"))) == 1
+    again = _read_cached(ulog_file)
+    assert len(cache) == 1  # not parsed again
+    _same_log(first, again)
+
+
+def test_another_map_thrust_or_log_converts_again(cache, ulog_file):
+    base = _read_cached(ulog_file)
+    other = _read_cached(ulog_file, px4_map(**{"motors.thr_mdl_fac": 0.2}))
+    assert len(cache) == 2 and not np.array_equal(other.T_cmd, base.T_cmd)
+    _read_cached(ulog_file, thrust_max=3.6)
+    assert len(cache) == 3
+    data = bytearray(ulog_file.read_bytes())
+    data[-5] ^= 0x01  # one bit of the last message's payload
+    ulog_file.write_bytes(bytes(data))
+    _read_cached(ulog_file)
+    assert len(cache) == 4
+
+
+def test_a_damaged_entry_is_converted_again(cache, ulog_file, tmp_path):
+    first = _read_cached(ulog_file)
+    (entry,) = (tmp_path / "cache" / "logs").glob("*.npz")
+    entry.write_bytes(entry.read_bytes()[:100])
+    _same_log(first, _read_cached(ulog_file))
+    assert len(cache) == 2
+
+
+def test_errors_are_not_kept(cache, ulog_file, tmp_path):
+    bad = px4_map(**{"gyro.topic": "no_such_topic"})
+    for _ in range(2):
+        with pytest.raises(InputError, match="no_such_topic"):
+            _read_cached(ulog_file, bad)
+    assert len(cache) == 2 and not (tmp_path / "cache" / "logs").exists()
+
+
+def test_the_cache_can_be_turned_off(cache, ulog_file, monkeypatch):
+    monkeypatch.setenv("GAINSCHED_LOG_CACHE", "0")
+    _read_cached(ulog_file), _read_cached(ulog_file)
+    assert len(cache) == 2
