@@ -22,7 +22,7 @@ out = Path(sys.argv[1] if len(sys.argv) > 1 else "mvm-report")
 logs = sorted(Path("examples/flights").glob("*.csv"))
 paper = config = gs.load_config("configs/paper.toml")
 comparison = gs.compare(config, logs)
-for round_ in range(1, 4):  # each round adds at most one effect
+for round_ in range(1, 4):  # each round adds the effects diagnose accepts
     print(f"round {round_}: {config.name}, normalised RMS {comparison.normalized_rms():.2f}")
     diagnosis = gs.diagnose(config, logs, comparison=comparison)
     gs.write_diagnose(diagnosis, out / f"round{round_}")

@@ -55,7 +55,7 @@ from scipy.optimize import minimize_scalar
 
 from ..config import Config, EffectSpec, Tether, config_from_text
 from ..configedit import remove_key, set_section, set_value
-from ..model.effects import EFFECTS, Param, Refit
+from ..model.effects import EFFECTS, Effect, Param, Refit
 from ..model.reduced import Model
 from .compare import (
     AT_NOISE_FLOOR,
@@ -95,6 +95,10 @@ THRESHOLDS = {
     # below the noise floor (no excess to explain) a candidate must instead remove this
     # share of the held-out binned structure (analysis.structure) that compare found
     "min_structure_explained": 0.5,
+    # forward selection adds a candidate only when the fit together explains this much
+    # more of the residual power above the noise floor (and lowers delta-BIC by
+    # nested_bic_gain)
+    "forward_excess_gain": 0.1,
 }
 
 
@@ -204,7 +208,7 @@ class EffectCandidate(Candidate):
         r = self.refit
         doc = f"{r.doc}, first {n} of {len(r.params)} terms" if n < len(r.params) else r.doc
         return EffectCandidate(self.kind, Refit(r.name, r.params[:n], doc, r.search,
-                                                r.affine))
+                                                r.affine, contains=r.contains))
 
     def present(self, cfg):
         return any(s.name == self.kind for s in cfg.effects)
@@ -390,8 +394,11 @@ class JointCandidate(Candidate):
 
 #: single candidates whose best are combined into joint fits when none passes
 JOINT_TOP = 4
-#: candidates never fitted jointly (their single fit switches the link model)
+#: candidates never fitted in the pairs of :func:`_fit_joint` (their single fit switches
+#: the link model); forward selection (:func:`_forward`) adds them
 _NOT_JOINT = frozenset({"tether_elasticity"})
+#: the most candidates forward selection fits together
+FORWARD_PARTS = 3
 
 
 def candidate_library() -> dict[str, Candidate]:
@@ -1116,20 +1123,24 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
     n_total = sum(v.size for f_ in vecs for v in f_.values())
     sse_fit = float(fit_sq.sum())
     s2 = sse_fit / max(n_total - k, 1)
+    # a parameter the residual does not see at all (a zero Jacobian column: a joint
+    # fit's unidentified damping) has no interval; the others have theirs
+    ci, corr = np.full(k, math.inf), np.full((k, k), math.nan)
+    seen = np.diag(Atot) > 1e-12 * max(float(np.max(np.diag(Atot))), 1e-300)
     try:
-        cov = np.linalg.inv(Atot) * s2 * prob.window
-        ci = 1.96 * np.sqrt(np.maximum(np.diag(cov), 0.0))
+        cov = np.linalg.inv(Atot[np.ix_(seen, seen)]) * s2 * prob.window
+        ci[seen] = 1.96 * np.sqrt(np.maximum(np.diag(cov), 0.0))
         sd = np.sqrt(np.maximum(np.diag(cov), 1e-300))
-        corr = cov / np.outer(sd, sd)
+        corr[np.ix_(seen, seen)] = cov / np.outer(sd, sd)
     except np.linalg.LinAlgError:
-        ci = np.full(k, math.inf)
-        corr = np.full((k, k), math.nan)
+        pass
     for j, q in enumerate(cand.params):
         if not ci[j] < (hi[j] - lo[j]):
             notes.append(f"{q.name} is not identified on these flights (95% CI wider than "
                          "its range)")
-    if k > 1 and np.all(np.isfinite(corr)):
-        off = np.abs(corr - np.diag(np.diag(corr))).max()
+    sub = corr[np.ix_(seen, seen)]
+    if sub.shape[0] > 1 and np.all(np.isfinite(sub)):
+        off = np.abs(sub - np.diag(np.diag(sub))).max()
         if off >= THRESHOLDS["max_param_corr"]:
             names = [q.name for q in cand.params]
             notes.append(f"parameters {' and '.join(names)} are correlated ({off:.3f}, VIF "
@@ -1163,10 +1174,14 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
     if p_before:
         structure = 1 - math.sqrt(prob.structure_power(held_vecs) / p_before)
     empirical = bool(getattr(cand, "empirical", False))
+    # an empirical law, or a physical effect's own words (the weak motor), of the
+    # candidate or of the parts of a joint one
+    kinds = [k for k in (getattr(c, "kind", None) for c in getattr(cand, "parts", (cand,)))
+             if k is not None and (EFFECTS[k].empirical or EFFECTS[k].law is not Effect.law)]
     law = ""
-    if empirical:
-        law = next(e for e in Model(cand.variant(cfg, theta).config).effects
-                   if e.kind == cand.kind).law()
+    if kinds:
+        effects = Model(cand.variant(cfg, theta).config).effects
+        law = "; ".join(e.law() for k in kinds for e in effects if e.kind == k)
     return CandidateResult(
         cand.name, cand.doc, cand.params, theta, ci, folds, start, cand.report_values(theta),
         float(red), float(exc), float(dbic), bool(plausible), float(spread), bool(stable), corr,
@@ -1179,7 +1194,8 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
 
 
 def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | None = None,
-             progress=None, joint: bool = False, channel_map=None) -> Diagnosis:
+             progress=None, joint: bool = False, forward: bool = True,
+             channel_map=None) -> Diagnosis:
     """Find which physical effect the model misses: fit candidates, score them held out.
 
     The whole of ``gainsched diagnose`` (docs/model-vs-measurement.md, the module
@@ -1214,6 +1230,11 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
         ``joint`` they run only when none passes and the residual is above the noise
         floor): a passing joint fit then replaces the accepted single when its delta-BIC
         is lower by ``THRESHOLDS["nested_bic_gain"]``.
+    forward : bool, default True
+        Forward selection (:func:`_forward`): when the accepted fit, or the best single if
+        none passes, leaves more than ``THRESHOLDS["forward_excess_gain"]`` of the
+        residual above noise, add the next best effects while each explains clearly
+        more; False: the single and joint fits only.
     channel_map : ChannelMap, str or path-like, optional
         For PX4 ULogs and ROS 2 bags among ``logs`` (:func:`compare`).
 
@@ -1231,16 +1252,18 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     Examples
     --------
     Two candidates on the seven example flights (held out: each flight predicted by the
-    fit to the six others):
+    fit to the six others; the accepted one leaves a residual above noise, so forward
+    selection tries the other with it, which does not explain clearly more):
 
     >>> import glob
     >>> cfg = gs.load_config("configs/paper.toml")
     >>> logs = sorted(glob.glob("examples/flights/*.csv"))
     >>> d = gs.diagnose(cfg, logs, candidates=["drag_quadratic", "thrust_momentum"])
     >>> for r in d.results:
-    ...     print(f"{r.name:16s} held-out RMS -{r.rms_reduction:.0%}, passes: {r.passes}")
-    thrust_momentum  held-out RMS -31%, passes: True
-    drag_quadratic   held-out RMS -2%, passes: False
+    ...     print(f"{r.name:32s} held-out RMS -{r.rms_reduction:.0%}, passes: {r.passes}")
+    thrust_momentum                  held-out RMS -31%, passes: True
+    thrust_momentum + drag_quadratic held-out RMS -30%, passes: True
+    drag_quadratic                   held-out RMS -2%, passes: False
     >>> d.accepted.name, f"{d.accepted.values['disk_area']:.4f} m^2"
     ('thrust_momentum', '0.0061 m^2')
     >>> d.verdict
@@ -1292,6 +1315,15 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     if accepted is None and empirical and (candidates is not None or base.structure
                                            or not at_floor):
         accepted = fit(empirical)
+    # several effects of similar size: add the next best while it explains clearly more
+    if forward and not at_floor and (accepted is None or accepted.excess_explained
+                                     < 1 - THRESHOLDS["forward_excess_gain"]):
+        if empirical and not any(r.empirical for r in results):
+            fit(empirical)  # what no effect of the library named may be the rest
+        start = accepted or next((r for r in results if " + " not in r.name
+                                  and r.rms_reduction > 0), None)
+        if start is not None:
+            accepted = _forward(prob, library, results, start, base_sq, base_vecs, progress)
     twins = []
     similarity = {}
     if accepted is not None and not accepted.empirical:
@@ -1306,8 +1338,10 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
                 continue
             cos = abs(float(np.sum(ca * cb)) / (na_ * nb))
             similarity[r.name] = cos
-            if _same_effect(library, r.name, accepted.name):
-                continue  # another fit of the same effect (drag_linear of drag): no twin
+            if (_same_effect(library, r.name, accepted.name) or _nested(library, r, accepted)
+                    or _nested(library, accepted, r)):
+                continue  # another fit of the same effect (drag_linear of drag), or one
+                # containing the other (thrust_scale in motor_efficiency): no twin
             # told apart anyway when the held-out fits differ clearly: the twin leaves more
             # than a tenth of the residual above noise that the accepted one explains
             clear = accepted.excess_explained - r.excess_explained > THRESHOLDS["twin_excess_gap"]
@@ -1328,22 +1362,16 @@ def _fit_joint(prob, library, results, base_sq, base_vecs, progress):
     for r in results:  # ranked already
         if (r.rms_reduction > 0 and r.name in library and r.name not in _NOT_JOINT
                 and not r.empirical
-                and not any(_same_effect(library, r.name, t.name) for t in top)):
+                and not any(_same_effect(library, r.name, t.name) or _nested(library, r, t)
+                            or _nested(library, t, r) for t in top)):
             top.append(r)
         if len(top) == JOINT_TOP:
             break
     if len(top) < 2:
         return None
-    cfg = prob.config
 
     def joint(parts):
-        cands = [library[r.name] for r in parts]
-        bounds = [_bounds(c, cfg, c.start(cfg)) for c in cands]
-        starts = [np.clip(r.theta, b[0], b[1]) for r, b in zip(parts, bounds, strict=True)]
-        cand = JointCandidate(cands, starts, bounds)
-        if progress is not None:
-            progress(cand.name)
-        return _fit_candidate(prob, cand, base_sq, base_vecs)
+        return _joint_fit(prob, parts, base_sq, base_vecs, progress)
 
     pairs = [joint(pr) for pr in itertools.combinations(top, 2)]
     pairs.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
@@ -1362,6 +1390,63 @@ def _fit_joint(prob, library, results, base_sq, base_vecs, progress):
     return pick
 
 
+def _joint_fit(prob, parts, base_sq, base_vecs, progress) -> CandidateResult:
+    """The candidates of the fits ``parts`` (CandidateResult, single or joint) fitted
+    together (:class:`JointCandidate`), started at their fits."""
+    cfg = prob.config
+    cands, starts, bounds = [], [], []
+    for r in parts:
+        subs = r.candidate.parts if isinstance(r.candidate, JointCandidate) else (r.candidate,)
+        thetas = (np.split(np.asarray(r.theta, dtype=float), r.candidate._cut)
+                  if isinstance(r.candidate, JointCandidate) else (r.theta,))
+        for c, th in zip(subs, thetas, strict=True):
+            b = _bounds(c, cfg, c.start(cfg))
+            cands.append(c)
+            bounds.append(b)
+            starts.append(np.clip(th, b[0], b[1]))
+    cand = JointCandidate(cands, starts, bounds)
+    if progress is not None:
+        progress(cand.name)
+    return _fit_candidate(prob, cand, base_sq, base_vecs)
+
+
+def _forward(prob, library, results, start, base_sq, base_vecs, progress):
+    """Forward selection from the fit ``start`` (the accepted one, or the best single
+    when none passes): add the best-ranked single of another effect (held-out RMS
+    reduction > 0; the tether's elasticity and empirical terms included), all fitted
+    together, while the addition passes, lowers delta-BIC by
+    ``THRESHOLDS["nested_bic_gain"]`` and explains ``THRESHOLDS["forward_excess_gain"]``
+    more of the residual above noise; at most :data:`FORWARD_PARTS` parts, the best
+    :data:`JOINT_TOP` tried at each step. Appends its fits to ``results`` and returns the
+    last accepted fit (None when ``start`` did not pass and no extension does)."""
+    current = start
+    accepted = start if start.passes else None
+    gain = THRESHOLDS["forward_excess_gain"]
+    while current.name.count(" + ") + 1 < FORWARD_PARTS and current.excess_explained < 1 - gain:
+        names = current.name.split(" + ")
+        pool = []
+        for r in results:  # ranked
+            if (" + " in r.name or r.name in names or r.rms_reduction <= 0
+                    or r.candidate is None
+                    or any(_same_effect(library, r.name, n) for n in names)
+                    or any(_nested(library, r, t) or _nested(library, t, r)
+                           for t in results if t.name in names)):
+                continue
+            pool.append(r)
+            if len(pool) == JOINT_TOP:
+                break
+        tries = [_joint_fit(prob, [current, r], base_sq, base_vecs, progress) for r in pool]
+        results.extend(tries)
+        ok = [t for t in tries if t.passes
+              and t.delta_bic < current.delta_bic - THRESHOLDS["nested_bic_gain"]
+              and t.excess_explained >= current.excess_explained + gain]
+        if not ok:
+            break
+        current = accepted = min(ok, key=lambda t: t.delta_bic)
+    results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
+    return accepted
+
+
 def _same_effect(library, a: str, b: str) -> bool:
     """Whether candidates ``a`` and ``b`` fit the same effect of the library (joint fits:
     whether they share one)."""
@@ -1371,17 +1456,27 @@ def _same_effect(library, a: str, b: str) -> bool:
     return ka is not None and ka == kb
 
 
+def _nested(library, small: CandidateResult, big: CandidateResult) -> bool:
+    """Whether every model of candidate ``small`` is one of ``big``'s: a subset of the
+    same effect's parameters (drag_quadratic in drag), or a candidate ``big``'s refit
+    declares it contains (thrust_scale in motor_efficiency, :class:`Refit` ``contains``)."""
+    if ({p.name for p in small.params} < {p.name for p in big.params}
+            and _same_effect(library, small.name, big.name)):
+        return True
+    refit = getattr(library.get(big.name), "refit", None)
+    return refit is not None and small.name in refit.contains
+
+
 def _parsimonious(passing: list[CandidateResult], library) -> CandidateResult | None:
-    """The best-ranked passing candidate, or a passing one nested in it (a subset of the
-    same effect's parameters, e.g. drag_quadratic in drag) unless the larger fit lowers
-    delta-BIC by ``THRESHOLDS["nested_bic_gain"]`` more: the parsimony between nested
-    models that the held-out ranking alone does not give."""
+    """The best-ranked passing candidate, or a passing one nested in it
+    (:func:`_nested`) unless the larger fit lowers delta-BIC by
+    ``THRESHOLDS["nested_bic_gain"]`` more: the parsimony between nested models that the
+    held-out ranking alone does not give."""
     if not passing:
         return None
     best = passing[0]
     for r in passing[1:]:
-        nested = {p.name for p in r.params} < {p.name for p in best.params}
-        if (nested and _same_effect(library, r.name, best.name)
+        if (_nested(library, r, best)
                 and best.delta_bic > r.delta_bic - THRESHOLDS["nested_bic_gain"]):
             best = r
     return best
@@ -1446,10 +1541,16 @@ def _verdict(base, results, accepted, twins, at_floor) -> str:
                 f"{score}, delta-BIC {accepted.delta_bic:.0f}. It is a fit, not a model: "
                 "it holds on the circles flown (and, by the table's symmetries, their "
                 "mirror images)")
-    what = ("missing effects, fitted together"
-            if " + " in accepted.name else "missing effect")
-    s = (f"{what}: {accepted.name} ({accepted.doc}), {_fmt_values(accepted)}; "
+    parts = getattr(accepted.candidate, "parts", ())
+    what = "missing effects, fitted together" if parts else "missing effect"
+    law = f" ({accepted.law})" if accepted.law else ""
+    s = (f"{what}: {accepted.name} ({accepted.doc}), {_fmt_values(accepted)}{law}; "
          f"{score}, delta-BIC {accepted.delta_bic:.0f}")
+    fits = [q.name for q in parts if getattr(q, "empirical", False)]
+    if fits:
+        s += (f". {' and '.join(fits)} is an empirical correction: a fit, not a model, that "
+              "holds on the circles flown (and, by the table's symmetries, their mirror "
+              "images)")
     why = unidentified(accepted)
     if why:
         s += ". Not identified, so --apply keeps the config's value: " + "; ".join(

@@ -37,6 +37,7 @@ __all__ = [
     "polynomial_drag",
     "RotorDrag",
     "ThrustScale",
+    "MotorEfficiency",
     "ThrustPolynomial",
     "ThrustMomentum",
     "MotorLag",
@@ -117,6 +118,11 @@ class Refit:
         Nested fits of the first ``n`` parameters for each ``n`` (a series truncated at
         several orders); diagnose keeps the one with the best held-out score after a
         BIC penalty per parameter. Empty: all ``params``.
+    contains : tuple of str
+        Candidates of other effects whose every model is one of this candidate's
+        (``thrust_scale`` in ``motor_efficiency``: four equal efficiencies). Diagnose
+        then prefers the smaller one unless this one fits clearly better (the parsimony
+        of nested fits), and does not call them twins.
     """
 
     name: str
@@ -125,6 +131,7 @@ class Refit:
     search: str | None = None
     affine: bool = True
     orders: tuple[int, ...] = ()
+    contains: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -349,6 +356,38 @@ class ThrustScale(Effect):
 
     def modify_thrust(self, T, kin, x):
         return self.k_T * T
+
+
+class MotorEfficiency(Effect):
+    """One efficiency per motor: motor ``i`` gives ``eta_i`` times its commanded thrust,
+    and its reaction torque with it (``kappa eta_i T_i``: the same rotor at another
+    operating point; a damaged or worn propeller, a weak ESC or motor).
+
+    ``thrust_scale`` is the case of four equal efficiencies. Unequal ones break the
+    direction mirror S2 (the mirrored vehicle swaps motors 1 <-> 4 and 2 <-> 3;
+    docs/symmetry.md): simulate and diagnose with them, build tables without them.
+    """
+
+    kind = "motor_efficiency"
+    params = tuple(Param(f"eta{i}", "-", 1.0, 0.3, 1.5, f"motor {i}: real / commanded thrust",
+                         fit=(0.5, 1.3)) for i in range(1, 5))
+    fits = (Refit("motor_efficiency", tuple(f"eta{i}" for i in range(1, 5)),
+                  "one efficiency per motor: thrust and reaction torque (the body torques "
+                  "tell the motors apart)", contains=("thrust_scale",)),)
+
+    def factors(self) -> np.ndarray:
+        """``(eta1, eta2, eta3, eta4)``, shape (4,)."""
+        return np.array([self.values[f"eta{i}"] for i in range(1, 5)])
+
+    def modify_thrust(self, T, kin, x):
+        return T * self.factors()
+
+    def law(self) -> str:
+        eta = self.factors()
+        i = int(np.argmax(np.abs(eta - np.median(eta))))
+        others = ", ".join(f"motor {k + 1} {eta[k] - 1:+.1%}" for k in range(4) if k != i)
+        return (f"motor {i + 1} gives {eta[i] - 1:+.1%} thrust and reaction torque "
+                f"({others})")
 
 
 class ThrustPolynomial(Effect):
@@ -593,8 +632,8 @@ class ThrustAzimuth(Effect):
 
 EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
-    for cls in (Drag, RotorDrag, ThrustScale, ThrustPolynomial, ThrustMomentum, MotorLag,
-                ThrustAzimuth)
+    for cls in (Drag, RotorDrag, ThrustScale, MotorEfficiency, ThrustPolynomial,
+                ThrustMomentum, MotorLag, ThrustAzimuth)
 }
 
 

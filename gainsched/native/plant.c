@@ -44,7 +44,7 @@
 #include <math.h>
 #include <stddef.h>
 
-#define GS_PLANT_LAYOUT 2
+#define GS_PLANT_LAYOUT 3
 #define N_BASE 10
 #define MAX_Z 64 /* largest state the RK4 scratch holds (10 + effect states) */
 #define EPS2 1e-24 /* effects.norm: keeps sqrt differentiable at zero speed */
@@ -65,7 +65,8 @@ enum {
     P_NEFF = P_JINV + 9, /* number of effects */
     P_EFF,        /* effects in model order, EFF_STRIDE doubles each */
 };
-#define EFF_STRIDE 4 /* kind, param a, param b, first state index */
+#define EFF_STRIDE 6 /* kind, params a, b, c, d, first state index */
+#define EFF_STATE 5  /* where in an effect's entry its first state index is */
 
 /* effect kinds (gainsched.model.effects) */
 enum {
@@ -74,7 +75,8 @@ enum {
     FX_THRUST_SCALE = 3, /* ThrustScale: a = k_T */
     FX_THRUST_POLY = 4,  /* ThrustPolynomial: a = c1, b = c2 */
     FX_MOTOR_LAG = 5,    /* MotorLag: a = tau, 4 states */
-    FX_THRUST_MOMENTUM = 6 /* ThrustMomentum: a = disk_area, b = rho_air (eq. 29) */
+    FX_THRUST_MOMENTUM = 6, /* ThrustMomentum: a = disk_area, b = rho_air (eq. 29) */
+    FX_MOTOR_EFFICIENCY = 7 /* MotorEfficiency: a..d = eta1..eta4 */
 };
 
 /* exported (ctypes, gainsched/sim/fastplant.py) */
@@ -222,13 +224,17 @@ static double effect_thrust(const double *p, const double *z, const double *u,
         const double *ef = p + P_EFF + EFF_STRIDE * k;
         const int kind = (int)ef[0];
         if (kind == FX_MOTOR_LAG) {
-            const int s0 = (int)ef[3];
+            const int s0 = (int)ef[EFF_STATE];
             for (j = 0; j < 4; ++j) {
                 T[j] = z[s0 + j];
             }
         } else if (kind == FX_THRUST_SCALE) {
             for (j = 0; j < 4; ++j) {
                 T[j] = ef[1] * T[j];
+            }
+        } else if (kind == FX_MOTOR_EFFICIENCY) {
+            for (j = 0; j < 4; ++j) {
+                T[j] = T[j] * ef[1 + j];
             }
         } else if (kind == FX_THRUST_POLY) {
             const double sp = speed_of(v, speed);
@@ -406,7 +412,7 @@ int gs_plant_eval(const double *p, const double *z, const double *u, double alph
     for (k = 0; k < n_eff; ++k) {
         const double *ef = p + P_EFF + EFF_STRIDE * k;
         if ((int)ef[0] == FX_MOTOR_LAG) { /* T_actual' = (T_cmd - T_actual) / tau */
-            const int s0 = (int)ef[3];
+            const int s0 = (int)ef[EFF_STATE];
             for (j = 0; j < 4; ++j) {
                 z_dot[s0 + j] = (u[j] - z[s0 + j]) / ef[1];
             }

@@ -115,6 +115,9 @@ HIDDEN: dict[str, HiddenEffect] = {
         HiddenEffect("thrust_scale", "thrust scale k_T = 0.92 (static test 8% optimistic)",
                      (("effects.thrust_scale", None, (("k_T", 0.92),)),),
                      truth=("thrust_scale", "k_T", 0.92)),
+        HiddenEffect("motor_efficiency", "motor 3 gives 8 % less thrust (eta3 = 0.92: a worn "
+                     "propeller)", (("effects.motor_efficiency", None, (("eta3", 0.92),)),),
+                     truth=("motor_efficiency", "eta3", 0.92)),
         HiddenEffect("mass", "mass 0.55 kg instead of 0.5 kg", (("vehicle", "mass", 0.55),),
                      truth=("mass", "mass", 0.55)),
         HiddenEffect("attachment_offset", "attachment offset L_e = 0.12 m instead of 0.10 m",
@@ -149,6 +152,14 @@ HIDDEN: dict[str, HiddenEffect] = {
                      (("effects.azimuth_thrust_loss", None,
                        (("depth", 0.05), ("xi0_deg", 115.0), ("width_deg", 12.0))),),
                      custom=AzimuthThrustLoss),
+        HiddenEffect("elastic_and_dip", "two effects of similar size: a stiff elastic tether "
+                     "(k = 9e4 N/m, c = 20 N s/m) and a thrust dip of 7% at azimuth 114 deg, "
+                     "width 15 deg (the vehicle in its own wake; outside the library)",
+                     (("tether", "link", "spring-damper"), ("tether", "stiffness", 9e4),
+                      ("tether", "damping", 20.0),
+                      ("effects.azimuth_thrust_loss", None,
+                       (("depth", 0.07), ("xi0_deg", 114.0), ("width_deg", 15.0)))),
+                     truth=("tether_elasticity", "stiffness", 9e4), custom=AzimuthThrustLoss),
     )
 }
 

@@ -27,6 +27,7 @@ import numpy as np
 from ..config import N_STATE, Config
 from ..model.effects import (
     Drag,
+    MotorEfficiency,
     MotorLag,
     RotorDrag,
     ThrustMomentum,
@@ -40,8 +41,8 @@ from ..native import load
 __all__ = ["FastPlant", "FastMaximal", "fast_plant", "fast_plant_supported",
            "SUPPORTED_EFFECTS"]
 
-_LAYOUT = 2  # GS_PLANT_LAYOUT in plant.c
-_EFF_STRIDE = 4  # kind, param a, param b, first state index
+_LAYOUT = 3  # GS_PLANT_LAYOUT in plant.c
+_EFF_STRIDE = 6  # kind, params a..d, first state index (EFF_STRIDE in plant.c)
 #: effect class -> (kind code in plant.c, names of the parameters a, b)
 _CODES = {
     Drag: (1, ("mu1", "mu2")),
@@ -50,6 +51,7 @@ _CODES = {
     ThrustPolynomial: (4, ("c1", "c2")),
     MotorLag: (5, ("tau",)),
     ThrustMomentum: (6, ("disk_area", "rho_air")),
+    MotorEfficiency: (7, ("eta1", "eta2", "eta3", "eta4")),
 }
 #: config effect names the compiled plant implements
 SUPPORTED_EFFECTS = frozenset(cls.kind for cls in _CODES)
@@ -80,7 +82,7 @@ def _params(model: Model, maximal: MaximalModel | None = None) -> np.ndarray:
     i = N_STATE
     for e in model.effects:
         code, names = _CODES[type(e)]
-        vals = [float(e.values[n]) for n in names] + [0.0] * (2 - len(names))
+        vals = [float(e.values[n]) for n in names] + [0.0] * (_EFF_STRIDE - 2 - len(names))
         eff.append([code, *vals, i])
         i += e.n_states
     p = np.concatenate(

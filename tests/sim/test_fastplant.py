@@ -58,10 +58,15 @@ EFFECT_PARAMS = {
     "thrust_airspeed": {"c1": -0.012, "c2": 0.0004},
     "motor_lag": {"tau": 0.03},
     "thrust_momentum": {"disk_area": 0.006},
+    "motor_efficiency": {"eta1": 1.04, "eta2": 0.97, "eta3": 0.92, "eta4": 1.01},
 }
+#: every combination of the first six, and the per-motor one after a lag, before and
+#: after the airspeed modifiers
 COMBOS = [
-    c for r in range(len(EFFECT_PARAMS) + 1) for c in itertools.combinations(EFFECT_PARAMS, r)
-] + [("thrust_airspeed", "thrust_scale", "drag")]  # modifiers in the other order
+    c for r in range(7) for c in itertools.combinations(list(EFFECT_PARAMS)[:6], r)
+] + [("thrust_airspeed", "thrust_scale", "drag"),  # modifiers in the other order
+     ("motor_efficiency",), ("motor_lag", "motor_efficiency", "thrust_momentum"),
+     ("thrust_airspeed", "motor_efficiency", "rotor_drag")]
 
 
 def with_effects(paper_text: str, names) -> object:
