@@ -17,12 +17,6 @@ the command line would pay on every call.
 """
 
 from importlib import import_module
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("gainsched")
-except PackageNotFoundError:  # running from a source tree without install
-    __version__ = "0.0.0"
 
 #: The public API: (task, module, names), in the order of docs/api.md. The one list of
 #: it: ``__all__``, ``__getattr__`` and the page are made from it.
@@ -59,7 +53,21 @@ _MODULE_OF = {name: module for _, module, names in API for name in names}
 __all__ = ["__version__", *_MODULE_OF]
 
 
+def _version() -> str:
+    # importlib.metadata takes 40 ms to import: not before the command line's entry point
+    # is ready for a Ctrl-C (gainsched/__main__.py)
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("gainsched")
+    except PackageNotFoundError:  # running from a source tree without install
+        return "0.0.0"
+
+
 def __getattr__(name: str):
+    if name == "__version__":
+        value = globals()[name] = _version()
+        return value
     module = _MODULE_OF.get(name)
     if module is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -16,6 +16,7 @@ import click
 import numpy as np
 
 from . import __version__
+from .constants import MAX_FLIGHT_S, MAX_JOBS, MAX_SEED, MAX_SWEEP_VARIANTS
 from .errors import GainschedWarning, InputError
 
 __all__ = ["main", "cli"]
@@ -33,9 +34,6 @@ def user_errors(fn):
             sys.exit(2)
 
     return wrapper
-
-
-CONFIG = click.argument("config", type=click.Path(dir_okay=False, path_type=Path))
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None):
@@ -99,6 +97,37 @@ class FiniteFloat(click.ParamType):
             unit = f" {self.unit}" if self.unit else ""
             self.fail(f"{value!r}: must be a finite number{rng}{unit}", param, ctx)
         return x
+
+
+class FilePath(click.Path):
+    """click's Path that refuses an empty name (``-o ""`` would be the current folder)."""
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str) and not value.strip():
+            self.fail("an empty name: give a file or folder", param, ctx)
+        return super().convert(value, param, ctx)
+
+
+class Jobs(click.ParamType):
+    """``-j``: -1 (every core) or 1..MAX_JOBS workers (joblib reads -1000 as "all cores
+    but 999", 0 as an error deep in a pool)."""
+
+    name = "N"
+
+    def convert(self, value, param, ctx):
+        try:
+            n = int(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not an integer", param, ctx)
+        if n != -1 and not 1 <= n <= MAX_JOBS:
+            self.fail(f"{value!r}: must be -1 (all cores) or a number of workers in "
+                      f"[1, {MAX_JOBS}]", param, ctx)
+        return n
+
+
+CONFIG = click.argument("config", type=FilePath(dir_okay=False, path_type=Path))
+#: seeds of the noise: non-negative integers (numpy refuses negative ones)
+SEED = click.IntRange(0, MAX_SEED)
 
 
 #: the fastest circle a command accepts, m/s (the config's grid.speeds bound)
@@ -173,7 +202,7 @@ def _speed_option(fn):
 )
 @click.option("--samples", type=click.IntRange(4, 3600), default=12, show_default=True,
               help="Azimuth samples over one period (4-3600).")
-@click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--csv", "csv_path", type=FilePath(dir_okay=False, path_type=Path),
               help="Also write the table as CSV (SI units, xi in deg).")
 @user_errors
 def nominal(config, speed, tilt, samples, csv_path):
@@ -181,7 +210,7 @@ def nominal(config, speed, tilt, samples, csv_path):
     thrusts (N), tether tension (N), centripetal g-load, feasibility."""
     from .config import load_config
     from .model.reduced import Model
-    from .publish import write_atomic
+    from .publish import check_out_dir, write_atomic
     from .schedule.nominal import REASONS, circle_nominal, min_taut_speed
 
     cfg = load_config(config)
@@ -189,6 +218,8 @@ def nominal(config, speed, tilt, samples, csv_path):
         raise InputError("command line", "--speed", "must be a finite non-zero speed in m/s")
     if not -90 < tilt < 90:
         raise InputError("command line", "--tilt", "must be in (-90, 90) deg")
+    if csv_path is not None:
+        check_out_dir(csv_path.parent, "--csv")  # a bad --csv fails before anything prints
     model = Model(cfg)
     nom = circle_nominal(model, speed, np.deg2rad(tilt), samples)
     g_load = speed**2 / model.r / cfg.g
@@ -224,15 +255,16 @@ def _cluster_options(fn):
     from .schedule.distributed import BACKENDS, DEFAULT_CONNECT_TIMEOUT
 
     options = [
-        click.option("-j", "--jobs", type=int, default=-1, show_default=True,
-                     help="Parallel workers (joblib; -1 = all cores, or every Dask worker "
-                     "thread)."),
+        click.option("-j", "--jobs", type=Jobs(), default=-1, show_default=True,
+                     help=f"Parallel workers, 1..{MAX_JOBS} (joblib; -1 = all cores, or every "
+                     "Dask worker thread)."),
         click.option("--backend", type=click.Choice(BACKENDS), default="local",
                      show_default=True, help="Where the grid runs: local (= loky processes), "
                      "threading, sequential, or dask (needs --scheduler; docs/distributed.md)."),
         click.option("--scheduler", metavar="tcp://HOST:PORT",
                      help="Dask scheduler address (with --backend dask)."),
-        click.option("--connect-timeout", type=float, default=DEFAULT_CONNECT_TIMEOUT,
+        click.option("--connect-timeout", type=FiniteFloat(0, 3600, lo_open=True, unit="s"),
+                     default=DEFAULT_CONNECT_TIMEOUT,
                      show_default=True, metavar="SECONDS",
                      help="How long to wait for the Dask scheduler and a first worker."),
     ]
@@ -248,7 +280,7 @@ def _nanmax(a) -> str:
 
 @cli.command()
 @CONFIG
-@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
               default=Path("tables"), show_default=True, help="Output folder.")
 @_cluster_options
 @user_errors
@@ -320,14 +352,15 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
 @click.option("--vary", multiple=True, metavar="KEY=v1,v2,...",
               help="Values of one parameter, SI (e.g. vehicle.mass=0.45,0.5,0.55); repeat "
               "for a Cartesian product. Keys: docs/distributed.md.")
-@click.option("--monte-carlo", type=click.IntRange(0), default=0, metavar="N",
-              help="Monte Carlo samples (per --vary combination) of the --sigma keys.")
-@click.option("--seed", type=click.IntRange(0), default=0, show_default=True,
-              help="Seed of the Monte Carlo draws.")
+@click.option("--monte-carlo", type=click.IntRange(0, MAX_SWEEP_VARIANTS), default=0,
+              metavar="N", help="Monte Carlo samples (per --vary combination) of the --sigma "
+              f"keys; at most {MAX_SWEEP_VARIANTS} variants in all.")
+@click.option("--seed", type=SEED, default=0, show_default=True,
+              help="Seed of the Monte Carlo draws (a non-negative integer).")
 @click.option("--sigma", multiple=True, metavar="KEY=REL",
               help="Relative standard deviation of a sampled parameter (e.g. "
               "vehicle.mass=0.05): value = nominal (1 + REL z), z ~ N(0, 1).")
-@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
               required=True, help="Output folder (NAME.toml, NAME.h5 per variant; "
               "sweep.csv, sweep.json).")
 @_cluster_options
@@ -348,9 +381,9 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
 
     check_options(backend, scheduler)
     base = load_config(config)
-    check_out_dir(out_dir)
     plan = make_sweep(base, [parse_vary(v) for v in vary], monte_carlo=monte_carlo, seed=seed,
                       sigma=[parse_sigma(s) for s in sigma])
+    check_out_dir(out_dir)  # once every option passed: a refused sweep creates nothing
     t0 = time.perf_counter()
     # a grid the build chooses counts circles, of a number known only at the end
     total = None if base.grid.auto else len(plan.variants) * base.grid.speeds.size
@@ -370,12 +403,12 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
 
 
 @cli.command()
-@click.argument("table", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("table", type=FilePath(dir_okay=False, path_type=Path))
 @click.option(
     "-o",
     "--out",
     "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=FilePath(file_okay=False, path_type=Path),
     default=None,
     help="Also write envelope.png (speed x tilt: feasible / slack / thrust) and "
     "envelope.json to this folder.",
@@ -460,8 +493,8 @@ def _write_envelope(t, table, out_dir, quiet=False) -> None:
 
 
 @cli.command()
-@click.argument("table", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.argument("table", type=FilePath(dir_okay=False, path_type=Path))
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
               required=True, help="Folder for the PNGs and plots.json (written as one set).")
 @click.option("--check", "with_check", is_flag=True,
               help="Also solve the LQR at the cell midpoints (as `gainsched check`) and plot "
@@ -499,12 +532,12 @@ def plot(table, out_dir, with_check, as_json):
 
 
 @cli.command("export-c")
-@click.argument("table", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("table", type=FilePath(dir_okay=False, path_type=Path))
 @click.option(
     "-o",
     "--out",
     "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=FilePath(file_okay=False, path_type=Path),
     default=None,
     help="Output folder (default: the table's folder).",
 )
@@ -539,9 +572,10 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     from .firmware.codegen import c_files, flash_summary
     from .firmware.controller import controller_params
     from .firmware.outputs import certificate_lines, firmware_form, table_config
-    from .publish import publish
+    from .publish import check_out_dir, publish
     from .schedule.tables import load_table
 
+    out_dir = Path(table).parent if out_dir is None else out_dir
     t = load_table(table)
     cfg = table_config(t, fmt)
     outputs = {k: v for k, v in (("firmware.motor_order", motor_order),
@@ -555,12 +589,13 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     if outputs:
         cfg = cfg.with_values(outputs, source=f"{table} (export-c options)")
     fmt = "dense" if cfg is None else cfg.firmware.format
+    check_out_dir(out_dir)  # a bad -o fails before the certification
     n_mid = max(t.speed.size - 1, 1) if fmt == "compact" else 0
     with tqdm(total=n_mid, unit="speed", desc="certify compact table",
               disable=None if n_mid else True) as bar:
         form, cert = firmware_form(cfg, t, progress=bar.update)
     params = None if cfg is None else controller_params(cfg)
-    paths = publish(Path(table).parent if out_dir is None else out_dir, c_files(form, params))
+    paths = publish(out_dir, c_files(form, params))
     for p in paths:
         click.echo(f"wrote {p}")
     click.echo(f"  {form.name}: {fmt}, CRC-32 0x{form.crc32():08x}, config "
@@ -573,7 +608,7 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
 
 
 @cli.command()
-@click.argument("table", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("table", type=FilePath(dir_okay=False, path_type=Path))
 @click.option(
     "--speed-stride",
     type=click.IntRange(1),
@@ -695,12 +730,12 @@ _RUNTIME = click.option(
 
 @cli.command()
 @CONFIG
-@click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
               required=True, help="Gain table (HDF5) built from CONFIG.")
 @click.option("--scenario", required=True,
               help="Scenario file, or the name of a shipped scenario (horizontal, tilted40, "
               "speedup, braking, staircase).")
-@click.option("--plant", "plant_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--plant", "plant_path", type=FilePath(dir_okay=False, path_type=Path),
               help="Truth config for the plant (default: CONFIG).")
 @click.option("--speed", type=FiniteFloat(0, MAX_SPEED, lo_open=True, unit="m/s"),
               help="Override the scenario's initial speed, m/s (0 < speed <= 100).")
@@ -711,7 +746,7 @@ _RUNTIME = click.option(
               "along the reference; 'firmware': the firmware's whole control step, sensors "
               "in and thrusts out, with only what a firmware has: its estimator, the table's "
               "lookup plus the drag-only closed form (docs/runtime.md).")
-@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
               required=True, help="Output folder (log.csv/.h5, metrics.json, plots).")
 @user_errors
 def simulate(config, table_path, scenario, plant_path, speed, runtime, controller, out_dir):
@@ -723,19 +758,19 @@ def simulate(config, table_path, scenario, plant_path, speed, runtime, controlle
     from .config import load_config
     from .publish import check_out_dir, staged
     from .schedule.tables import load_table
-    from .sim.loop import load_scenario, runtime_scheduler, write_run
+    from .sim.loop import check_flight_steps, load_scenario, runtime_scheduler, write_run
     from .sim.loop import simulate as run
 
     cfg = load_config(config)
     plant = load_config(plant_path) if plant_path else None
     table = load_table(table_path)
-    if table.config_sha256 != cfg.sha256:
-        click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     scn = load_scenario(scenario)
     if speed is not None:
         scn = dataclasses.replace(scn, speed=speed)
-    n = int(round(scn.duration * cfg.control.rate_hz)) + 1
+    n = check_flight_steps(scn.duration, cfg.control.rate_hz, scenario, "duration")
     check_out_dir(out_dir)
+    if table.config_sha256 != cfg.sha256:  # once every input passed
+        click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     with tqdm(total=n, unit="step", desc=f"simulate {scn.name}", disable=None) as bar:
         res = run(cfg, runtime_scheduler(table, runtime), scn, plant, progress=bar.update,
                   controller=controller)
@@ -780,17 +815,17 @@ def _table_of(cfg):
 
 
 @cli.command()
-@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
               required=True, help="Output folder (report.md, report.json, one folder per "
               "experiment).")
-@click.option("--config", "config", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--config", "config", type=FilePath(dir_okay=False, path_type=Path),
               default="paper", show_default="paper, the shipped configs/paper.toml",
               help="Design config (the paper vehicle).")
-@click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
               help="Gain table built from the config [default: the checkout's "
               "tables/NAME.h5 when it is the config's, else the config's table from the cache, "
               "built there on first use].")
-@click.option("--plant", "plant_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--plant", "plant_path", type=FilePath(dir_okay=False, path_type=Path),
               help="Truth config for the plant (default: the design config).")
 @click.option("--quick", is_flag=True, help="Short smoke flights (for tests; seconds).")
 @_RUNTIME
@@ -808,6 +843,7 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
 
     cfg = load_config(config)
     plant = load_config(plant_path) if plant_path else None
+    check_out_dir(out_dir)  # before a first use builds the table (half a minute)
     if table_path is None:
         table, table_path = _table_of(cfg)
     else:
@@ -816,7 +852,6 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     n = len(experiments(quick=quick))
     meta = {"table": str(table_path), "table_config_sha256": table.config_sha256}
-    check_out_dir(out_dir)
     with tqdm(total=n, unit="flight", desc="paper", disable=None) as bar, \
             staged(out_dir) as stage:
         rep = run_paper(cfg, runtime_scheduler(table, runtime), stage, quick=quick, plant=plant,
@@ -828,7 +863,7 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
 
 
 _LOGS = click.argument("logs", nargs=-1, required=True,
-                       type=click.Path(exists=True, path_type=Path))
+                       type=FilePath(exists=True, path_type=Path))
 _MAP = click.option("--map", "map_path", help="Channel map of PX4 ULogs and ROS 2 bags among "
                     "the logs: a TOML file or a shipped map (px4, px4_legacy, ros2); default "
                     "for a ULog: px4 (docs/flight-log.md).")
@@ -852,9 +887,9 @@ def _load_for_compare(config):
 @cli.command()
 @CONFIG
 @_LOGS
-@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
               help="Report folder: compare.json, compare.md and PNG plots.")
-@click.option("--before", "before_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--before", "before_path", type=FilePath(dir_okay=False, path_type=Path),
               help="An earlier config: its residual beside CONFIG's (before/after).")
 @click.option("--no-paper", is_flag=True, help="Skip the paper's thrust/drag analyses.")
 @_MAP
@@ -875,6 +910,7 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path):
     from .publish import check_out_dir, staged
 
     cfg = _load_for_compare(config)
+    before_cfg = None if before_path is None else _load_for_compare(before_path)
     cmap = _channel_map(map_path)
     if out_dir is not None:
         check_out_dir(out_dir)
@@ -884,7 +920,7 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path):
         click.echo(line)
     before = None
     if before_path is not None:
-        before = run(_load_for_compare(before_path), logs, channel_map=cmap)
+        before = run(before_cfg, logs, channel_map=cmap)
         click.echo("")
         for line in before_after_lines(before, cmp):
             click.echo(line)
@@ -907,9 +943,9 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path):
                    "delta-BIC is lower by 10.")
 @click.option("--apply", "do_apply", is_flag=True,
               help="Write the accepted effect and its fitted parameters to -o NEWCONFIG.")
-@click.option("-o", "--out", "new_config", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("-o", "--out", "new_config", type=FilePath(dir_okay=False, path_type=Path),
               help="New config file for --apply.")
-@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--report", "report_dir", type=FilePath(file_okay=False, path_type=Path),
               help="Report folder: diagnose.json/.md, ranking.png, before/after.")
 @_MAP
 @user_errors
@@ -918,7 +954,7 @@ def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir, 
     the residual on LOGS, score on held-out flights (leave one flight out), rank, check
     identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
     from .analysis.compare import compare as run
-    from .analysis.diagnose import apply_candidate
+    from .analysis.diagnose import apply_candidate, candidate_library
     from .analysis.diagnose import diagnose as run_diagnose
     from .analysis.reports import (
         before_after_lines,
@@ -933,6 +969,17 @@ def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir, 
 
     if do_apply and new_config is None:
         raise InputError("command line", "--apply", "needs -o NEWCONFIG")
+    if new_config is not None and not do_apply:
+        raise InputError("command line", "-o", "is the new config of --apply: give --apply "
+                         "too (or --report DIR for a report)")
+    if len({p.resolve() for p in logs}) < 2:
+        raise InputError("command line", "LOG", "diagnose needs at least two flights (log "
+                         "files) for held-out scores")
+    library = candidate_library()
+    for n in candidates:
+        if n not in library:
+            raise InputError("command line", "--candidate",
+                             f"unknown candidate {n!r} (known: {', '.join(library)})")
     cfg = _load_for_compare(config)
     cmap = _channel_map(map_path)
     if new_config is not None:
@@ -969,11 +1016,11 @@ def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir, 
 
 
 @cli.command()
-@click.argument("log", type=click.Path(exists=True, path_type=Path))
-@click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.argument("log", type=FilePath(exists=True, path_type=Path))
+@click.option("-o", "--out", "out_path", type=FilePath(dir_okay=False, path_type=Path),
               required=True, help="The converted log: OUT.csv or OUT.h5.")
 @_MAP
-@click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--config", "config_path", type=FilePath(dir_okay=False, path_type=Path),
               help="A config whose vehicle.thrust_max is a motor's thrust at full command "
                    "(normalised or PWM commands, when the map gives no thrust_max_N).")
 @user_errors
@@ -1001,17 +1048,18 @@ def convert(log, out_path, map_path, config_path):
 
 @cli.command()
 @CONFIG
-@click.option("--tables", "table_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
               required=True, help="Gain table (HDF5) built from CONFIG.")
 @click.option("--hidden", default="none", show_default=True,
               help="Hidden effect of the plant (gainsched.sim.campaign.HIDDEN).")
-@click.option("--duration", type=click.FloatRange(1.0), default=3.0, show_default=True,
-              help="Seconds per flight.")
+@click.option("--duration", type=FiniteFloat(1.0, MAX_FLIGHT_S, unit="s"), default=3.0,
+              show_default=True, help=f"Seconds per flight (1..{MAX_FLIGHT_S:g}).")
 @click.option("--no-load-cell", is_flag=True, help="Drop the tether tension column.")
 @click.option("--format", "fmt", type=click.Choice(["csv", "h5"]), default="csv",
               show_default=True)
-@click.option("--seed", type=int, default=1, show_default=True)
-@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--seed", type=SEED, default=1, show_default=True,
+              help="Seed of the sensor noise (a non-negative integer).")
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
               required=True, help="Output folder for the flight logs.")
 @user_errors
 def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_dir):
@@ -1021,15 +1069,17 @@ def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_
     from .schedule.tables import load_table
     from .sim.campaign import HIDDEN, write_campaign
     from .sim.campaign import campaign as fly
-    from .sim.loop import table_scheduler
+    from .sim.loop import check_flight_steps, table_scheduler
 
     if hidden not in HIDDEN:
         known = ", ".join(HIDDEN)
         raise InputError("command line", "--hidden",
                          f"unknown hidden effect {hidden!r} (known: {known})")
     cfg = _load_for_compare(config)
+    check_flight_steps(duration, cfg.control.rate_hz, "command line", "--duration")
+    table = load_table(table_path)
     check_out_dir(out_dir)
-    logs = fly(cfg, table_scheduler(load_table(table_path)), hidden, duration=duration,
+    logs = fly(cfg, table_scheduler(table), hidden, duration=duration,
                load_cell=not no_load_cell, seed=seed)
     with staged(out_dir) as stage:
         paths = write_campaign(stage, logs, fmt)

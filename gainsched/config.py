@@ -20,7 +20,6 @@ from __future__ import annotations
 import hashlib
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,6 +29,7 @@ from .actuators import MOTOR_ORDERS
 from .constants import INTEGRATORS, MAX_XI, N_INPUT, N_STATE, REDUCED_NAMES, XI_DOT_LIMIT
 from .errors import InputError
 from .resources import config_path, reference_configs
+from .textinput import parse_toml, read_text
 
 __all__ = [
     "Config",
@@ -525,13 +525,34 @@ class Section:
         v = self.get(k, default)
         if isinstance(v, bool) or not isinstance(v, int | float):
             raise self.error(k, f"must be a number, got {type(v).__name__}")
-        v = float(v)
+        try:
+            v = float(v)
+        except OverflowError:  # an integer beyond the floats (TOML integers are unbounded)
+            raise self.error(k, "must be finite") from None
         if not math.isfinite(v):
             raise self.error(k, "must be finite")
         if positive and v <= 0:
             raise self.error(k, f"must be > 0, got {v:g}")
         if nonneg and v < 0:
             raise self.error(k, f"must be >= 0, got {v:g}")
+        return v
+
+    def bounded(self, k, default=..., *, lo: float, hi: float, unit: str,
+                lo_open: bool = False) -> float:
+        """A finite number in ``[lo, hi]`` (``lo_open``: ``(lo, hi]``); the message gives
+        the range and the unit."""
+        v = self.number(k, default)
+        if (v <= lo if lo_open else v < lo) or v > hi:
+            raise self.error(k, f"must be in {'(' if lo_open else '['}{lo:g}, {hi:g}] {unit}, "
+                             f"got {v:g}")
+        return v
+
+    def integer(self, k, default=..., *, lo: int, hi: int, what: str = "") -> int:
+        """An integer (not a float, not a boolean) in ``[lo, hi]``."""
+        v = self.get(k, default)
+        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+            shown = repr(v) if isinstance(v, int | float | bool) else type(v).__name__
+            raise self.error(k, f"must be an integer in [{lo}, {hi}]{what}, got {shown}")
         return v
 
     def string(self, k, default=..., choices=None) -> str:
@@ -554,7 +575,7 @@ class Section:
             raise self.error(k, "must be a list of numbers (or a list of rows)")
         try:
             a = np.array(v, dtype=float)
-        except (TypeError, ValueError):  # ragged rows
+        except (TypeError, ValueError, OverflowError):  # ragged rows, integers beyond floats
             raise self.error(k, "must be a list of numbers (or a list of rows)") from None
         if not np.all(np.isfinite(a)):
             raise self.error(k, "entries must be finite")
@@ -1063,10 +1084,7 @@ def _config(text: str, source: str, check_default_name: bool) -> Config:
     from .budget import check_budget  # imported here: budget reads the Config classes
 
     _check_size(source, text)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(source, "", f"not valid TOML ({exc})") from None
+    data = parse_toml(text, source)
     top = Section(source, "", data)
     schema = top.string("schema", SCHEMA)
     if schema != SCHEMA:
@@ -1099,43 +1117,6 @@ def _config(text: str, source: str, check_default_name: bool) -> Config:
                  analysis=analysis, limits=limits, firmware=firmware)
     check_budget(cfg, source)
     return cfg
-
-
-_UTF32_BOMS = (b"\xff\xfe\x00\x00", b"\x00\x00\xfe\xff")
-_UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
-
-
-def _decode(p: Path, data: bytes) -> str:
-    """Config bytes -> text: UTF-8 (a UTF-8 byte-order mark is dropped), newlines as ``\\n``.
-
-    Raises InputError naming the file for UTF-16/UTF-32 text (with or without a
-    byte-order mark) and for bytes that are not UTF-8 (e.g. latin-1).
-    """
-    if data.startswith(_UTF32_BOMS):
-        raise InputError(p, "", "UTF-32 text (byte-order mark); save it as UTF-8")
-    if data.startswith(_UTF16_BOMS):
-        raise InputError(p, "", "UTF-16 text (byte-order mark); save it as UTF-8")
-    if b"\x00" in data:
-        # TOML text never holds NUL; ASCII text in UTF-16 without a BOM is half NULs
-        even, odd = data[0::2].count(0), data[1::2].count(0)
-        if max(even, odd) > len(data) // 8:
-            raise InputError(p, "", "looks like UTF-16 text (NUL bytes between the "
-                             "characters); save it as UTF-8")
-        line = data[: data.index(b"\x00")].count(b"\n") + 1
-        raise InputError(p, "", f"not a text file (NUL byte on line {line})")
-    if data.startswith(b"\xef\xbb\xbf"):
-        data = data[3:]
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data[: exc.start].count(b"\n") + 1
-        col = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
-        raise InputError(
-            p, "", f"not UTF-8 text (byte 0x{data[exc.start]:02x} at line {line}, column "
-            f"{col}: {exc.reason}); save it as UTF-8"
-        ) from None
-    # as text-mode reading did: universal newlines, so the config hash does not depend on them
-    return text.replace("\r\n", "\n").replace("\r", "\n")
 
 
 def load_config(path) -> Config:
@@ -1188,14 +1169,11 @@ def load_config(path) -> Config:
     gainsched.errors.InputError: configs/missing.toml: cannot read (No such file or directory)
     """
     p = config_path(path)
-    try:
-        if p.stat().st_size > 64 * MAX_CONFIG_CHARS:  # do not even read it
-            raise InputError(p, "", f"{p.stat().st_size / 2**20:.3g} MiB is no config (a config "
-                             f"may have at most {MAX_CONFIG_CHARS // 2**20} MiB)")
-        data = p.read_bytes()
-    except OSError as exc:
-        hint = ""
-        if len(p.parts) == 1 and not p.suffix:  # a bare name: perhaps a shipped config
-            hint = f"; the shipped configs are {', '.join(reference_configs())}"
-        raise InputError(p, "", f"cannot read ({exc.strerror}){hint}") from None
-    return _config(_decode(p, data), str(p), True)
+    hint = ""
+    if len(p.parts) == 1 and not p.suffix:  # a bare name: perhaps a shipped config
+        hint = f"; the shipped configs are {', '.join(reference_configs())}"
+    # up to 64 MiB is read so that _check_size can name the key that makes a config too
+    # long (a list of a million speeds is 20 MiB); a longer file is refused unread
+    text = read_text(p, what="config", limit=64 * MAX_CONFIG_CHARS,
+                     allowed=f"{MAX_CONFIG_CHARS // 2**20} MiB", hint=hint)
+    return _config(text, str(p), True)

@@ -23,6 +23,11 @@ __all__ = [
     "TILT_LIMIT",
     "TILT_BATCH",
     "BIN_VARIABLES",
+    "MAX_FLIGHT_S",
+    "MAX_FLIGHT_STEPS",
+    "MAX_SEED",
+    "MAX_SWEEP_VARIANTS",
+    "MAX_JOBS",
 ]
 
 #: reduced state (delta, xi, delta', xi', phi, theta, chi, omega_x, omega_y, omega_z)
@@ -89,3 +94,26 @@ BIN_VARIABLES = {
     "thrust": ("N", "commanded collective thrust"),
     "time": ("s", "time in flight"),
 }
+
+# ------------------------------------------------------------- input limits (issue 38)
+# Every count and duration a user gives is bounded where it comes in (scenario files,
+# command-line options), so that no input asks for more memory or time than a machine has.
+
+#: longest simulated flight, s (a scenario's ``duration``, ``campaign --duration``): a
+#: tethered flight at 15 m/s laps its circle every second and the paper's experiments
+#: last seconds; 600 s at the paper's 1 kHz control rate is 600,000 control steps
+MAX_FLIGHT_S = 600.0
+#: most control steps of one simulated flight (duration x control rate): each step records
+#: some 70 numbers (true and estimated state, nominal, thrusts, pose, status) and the log
+#: made of them, about 1 KiB a step, so 1,000,000 steps is about 1 GB of memory
+MAX_FLIGHT_STEPS = 1_000_000
+#: largest seed of the noise (``--seed``, a scenario's ``[sensing] seed``): numpy takes
+#: any non-negative integer; a TOML integer is 64-bit signed, so both sides share this
+MAX_SEED = 2**63 - 1
+#: most variants of one sweep (``--vary`` values multiplied, times ``--monte-carlo``):
+#: each is a whole table build (a second for a small grid, half a minute for the paper's)
+#: and a table on disk (up to a few MB), so 1000 variants are hours and gigabytes
+MAX_SWEEP_VARIANTS = 1000
+#: most parallel workers (``-j``): beyond the cores of any machine or cluster we run on,
+#: more only costs memory (-1: all cores)
+MAX_JOBS = 1024

@@ -1,21 +1,27 @@
-"""No bad input or fault gets past the front door (issue 12): tables, outputs, options.
+"""No bad input or fault gets past the front door (issues 12, 38): tables, outputs,
+options, and every text file (configs, scenarios, channel maps).
 
 The contract: one line ``gainsched: error: FILE: KEY: ...`` naming the file and
 the key, dataset, column or option; exit code 2; no traceback; the old outputs
-intact. (Config and flight-log checks: tests/test_config.py, tests/analysis/test_logs.py.)
+intact; and (issue 38) refused before any work is done or printed, nothing written.
+(Config and flight-log checks: tests/test_config.py, tests/analysis/test_logs.py.)
 """
 
 from __future__ import annotations
 
 import errno
 import os
+import signal
 import struct
+import subprocess
+import sys
 
 import h5py
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
+import gainsched.native.reproducible
 import gainsched.schedule.grid
 from gainsched.cli import cli
 from gainsched.errors import InputError
@@ -27,6 +33,7 @@ from support import PAPER_TOML as PAPER
 from support import REPO, paper_config_text, small_config_text
 
 FLIGHT = REPO / "examples" / "flights" / "v9.csv"
+FLIGHTS = sorted((REPO / "examples" / "flights").glob("*.csv"))
 
 
 def _run(*args):
@@ -202,8 +209,8 @@ def test_output_under_a_regular_file(regular_file, command):
         "export-c": (["export-c", TABLE, "-o", bad, "--no-code-size"], "-o"),
         "inspect": (["inspect", TABLE, "--out", bad], "--out"),
         "compare": (["compare", PAPER, FLIGHT, "-o", bad], "-o"),
-        "diagnose": (["diagnose", PAPER, FLIGHT, "--report", bad], "--report"),
-        "apply": (["diagnose", PAPER, FLIGHT, "--apply", "-o", bad / "new.toml"], "-o"),
+        "diagnose": (["diagnose", PAPER, *FLIGHTS, "--report", bad], "--report"),
+        "apply": (["diagnose", PAPER, *FLIGHTS, "--apply", "-o", bad / "new.toml"], "-o"),
         "sweep": (["sweep", PAPER, "--vary", "vehicle.mass=0.5", "-o", bad], "-o"),
         "nominal": (["nominal", PAPER, "--speed", "9", "--csv", bad / "n.csv"], "--csv"),
         "simulate": (["simulate", PAPER, "--tables", TABLE, "--scenario", "horizontal",
@@ -323,3 +330,173 @@ def test_a_forged_journal_moves_nothing_outside_the_folder(tmp_path):
     recover(out)
     assert victim.read_bytes() == b"keep" and (out / "t.h5").read_bytes() == b"old"
     assert sorted(os.listdir(out)) == ["t.h5"]
+
+
+# ------------------------------------------------------------------ hostile input (issue 38)
+
+#: a scenario that flies (one second on the paper's circle); the cases below spoil one key
+SCENARIO = 'name = "s"\nspeed = 8.0\nduration = 1.0\n'
+DEEP = "a = " + "[" * 100_000 + "]" * 100_000 + "\n"  # RecursionError in tomllib, unbounded
+DEEP_DOTTED = "a" + ".a" * 40 + " = 1\n"  # parses without recursion, 41 tables deep
+LATIN1 = SCENARIO.encode() + '# café\n'.encode("latin-1")  # a bad byte on line 4
+#: a channel map that passes (the shipped px4 map's text)
+PX4_MAP = (REPO / "gainsched" / "analysis" / "maps" / "px4.toml").read_text()
+
+
+def _scenario(text) -> dict:
+    return {"scenario.toml": text}
+
+
+def _simulate(scenario="scenario.toml", config=PAPER, table=TABLE):
+    return ["simulate", config, "--tables", table, "--scenario", scenario, "-o", "out"]
+
+
+#: id -> (input files to write, command line, words the one line must hold)
+HOSTILE = {
+    # one reader of every text file: size, encoding, nesting, numbers
+    "scenario-latin1": (_scenario(LATIN1), _simulate(), ["scenario.toml", "not UTF-8",
+                                                         "line 4"]),
+    "scenario-utf16": (_scenario(SCENARIO.encode("utf-16")), _simulate(), ["UTF-16"]),
+    "scenario-dev-zero": ({}, _simulate("/dev/zero"), ["/dev/zero", "at most 1 MiB"]),
+    "scenario-deep": (_scenario(SCENARIO + DEEP), _simulate(), ["scenario.toml",
+                                                                "nested deeper than 32"]),
+    "scenario-deep-dotted": (_scenario(SCENARIO + DEEP_DOTTED), _simulate(),
+                             ["nested deeper than 32", "a.a.a"]),
+    "scenario-huge-integer": (_scenario(SCENARIO + "tilt_deg = 1" + "0" * 5000 + "\n"),
+                              _simulate(), ["scenario.toml", "not valid TOML"]),
+    "scenario-integer-beyond-floats": (_scenario(SCENARIO + "tilt_deg = 1" + "0" * 400 + "\n"),
+                                       _simulate(), ["tilt_deg", "finite"]),
+    "config-latin1": ({"c.toml": paper_config_text().encode() + b"# caf\xe9\n"},
+                      ["validate", "c.toml"], ["c.toml", "not UTF-8"]),
+    "config-dev-zero": ({}, ["validate", "/dev/zero"], ["/dev/zero", "at most 1 MiB"]),
+    "config-deep": ({"c.toml": paper_config_text() + DEEP}, ["validate", "c.toml"],
+                    ["c.toml", "nested deeper than 32"]),
+    "config-deep-dotted": ({"c.toml": paper_config_text() + DEEP_DOTTED},
+                           ["validate", "c.toml"], ["c.toml", "nested deeper than 32"]),
+    "map-latin1": ({"m.toml": PX4_MAP.encode() + b"# caf\xe9\n"},
+                   ["compare", PAPER, FLIGHT, "--map", "m.toml"], ["m.toml", "not UTF-8"]),
+    "map-deep": ({"m.toml": PX4_MAP + DEEP}, ["compare", PAPER, FLIGHT, "--map", "m.toml"],
+                 ["m.toml", "nested deeper than 32"]),
+    # seeds: non-negative integers
+    "scenario-seed-negative": (_scenario(SCENARIO + "[sensing]\nseed = -1\n"), _simulate(),
+                               ["sensing.seed", "integer in [0, "]),
+    "scenario-seed-fraction": (_scenario(SCENARIO + "[sensing]\nseed = 1.5\n"), _simulate(),
+                               ["sensing.seed", "got 1.5"]),
+    "campaign-seed-negative": ({}, ["campaign", PAPER, "--tables", TABLE, "--seed", "-1",
+                                    "-o", "out"], ["command line", "--seed"]),
+    "sweep-seed-negative": ({}, ["sweep", PAPER, "--monte-carlo", "2", "--sigma",
+                                 "vehicle.mass=0.1", "--seed", "-1", "-o", "out"], ["--seed"]),
+    # counts and durations
+    "scenario-duration": (_scenario(SCENARIO.replace("1.0", "1e9")), _simulate(),
+                          ["duration", "(0, 600] s"]),
+    "scenario-steps": ({"scenario.toml": SCENARIO.replace("1.0", "600"),
+                        "fast.toml": small_config_text(name="fast", control__rate_hz=5000)},
+                       _simulate(config="fast.toml"), ["scenario.toml", "duration",
+                                                       "at most 1,000,000"]),
+    "scenario-latency": (_scenario(SCENARIO + "[sensing]\nlatency = 1e9\n"), _simulate(),
+                         ["sensing.latency", "[0, 1] s"]),
+    "scenario-maneuvers": (_scenario(SCENARIO + "maneuvers = ["
+                                     + ", ".join(["{t_start = 0.5, speed = 9, a = 1}"] * 101)
+                                     + "]\n"), _simulate(), ["maneuvers", "at most 100"]),
+    "campaign-duration": ({}, ["campaign", PAPER, "--tables", TABLE, "--duration", "1e9",
+                               "-o", "out"], ["--duration", "[1, 600] s"]),
+    "sweep-monte-carlo": ({}, ["sweep", PAPER, "--monte-carlo", "1000000000", "--sigma",
+                               "vehicle.mass=0.1", "-o", "out"], ["--monte-carlo", "1000"]),
+    "sweep-vary-product": ({}, ["sweep", PAPER, "--vary", "vehicle.mass=" + ",".join(
+        f"0.{i:02d}5" for i in range(40, 80)), "--vary", "vehicle.arm_length=" + ",".join(
+        f"0.1{i:02d}" for i in range(30)), "-o", "out"], ["--vary", "1,200 variants"]),
+    # a speed that divides by zero
+    "scenario-speed-zero": (_scenario(SCENARIO.replace("8.0", "0.0")), _simulate(),
+                            ["scenario.toml", "speed", "non-zero"]),
+    "scenario-maneuver-speed-zero": (
+        _scenario(SCENARIO + "maneuvers = [{t_start = 0.5, speed = 0.0, a = 5}]\n"),
+        _simulate(), ["maneuvers[0].speed", "non-zero"]),
+    # refused before the work and its printing (item 2)
+    "diagnose-one-flight": ({}, ["diagnose", PAPER, FLIGHT], ["LOG", "two flights"]),
+    "diagnose-same-flight-twice": ({}, ["diagnose", PAPER, FLIGHT, FLIGHT], ["LOG"]),
+    "diagnose-unknown-candidate": ({}, ["diagnose", PAPER, *FLIGHTS, "--candidate", "nosuch"],
+                                   ["--candidate", "'nosuch'"]),
+    "compare-before-missing": ({}, ["compare", PAPER, FLIGHT, "--before", "nosuch.toml"],
+                               ["nosuch.toml", "cannot read"]),
+    "nominal-csv-under-a-file": ({"afile": "a file\n"}, ["nominal", PAPER, "--speed", "9",
+                                                         "--csv", "afile/n.csv"],
+                                 ["--csv", "regular file"]),
+    # nonsense arguments (item 3)
+    "build-empty-out": ({}, ["build", PAPER, "-o", ""], ["'--out'", "empty"]),
+    "simulate-empty-out": ({}, _simulate("horizontal")[:-1] + [""], ["'--out'", "empty"]),
+    "build-jobs-negative": ({}, ["build", PAPER, "-j", "-1000", "-o", "out"], ["--jobs"]),
+    "build-jobs-zero": ({}, ["build", PAPER, "-j", "0", "-o", "out"], ["--jobs"]),
+    "build-connect-timeout-nan": ({}, ["build", PAPER, "--connect-timeout", "nan", "-o", "out"],
+                                  ["--connect-timeout"]),
+    "diagnose-out-without-apply": ({}, ["diagnose", PAPER, *FLIGHTS, "-o", "new.toml"],
+                                   ["-o", "--apply"]),
+    "scenario-sensing-rate": (_scenario(SCENARIO + "[sensing]\nrate_hz = 1e-9\n"), _simulate(),
+                              ["sensing.rate_hz", "[1, 100000] Hz"]),
+    "scenario-initial-error-5": (_scenario(SCENARIO + "initial_error = [0, 0, 0, 0, 0.1]\n"),
+                                 _simulate(), ["initial_error", "got 5"]),
+}
+
+
+def _files(folder):
+    return {p.relative_to(folder): p.read_bytes() for p in folder.rglob("*") if p.is_file()} | {
+        p.relative_to(folder): None for p in folder.rglob("*") if p.is_dir()}
+
+
+@pytest.mark.parametrize("case", list(HOSTILE))
+def test_hostile_input_is_refused_at_the_door(case, tmp_path, monkeypatch):
+    """Each hostile input: one line naming the file and the key or option, exit code 2, no
+    traceback, nothing printed before it (no work done) and nothing written."""
+    files, args, needles = HOSTILE[case]
+    for name, data in files.items():
+        (tmp_path / name).write_bytes(data if isinstance(data, bytes) else data.encode())
+    monkeypatch.chdir(tmp_path)
+    before = _files(tmp_path)
+    res = _run(*args)
+    one_line_error(res, *needles)
+    assert res.stdout == "", res.stdout
+    assert _files(tmp_path) == before
+
+
+def test_shipped_scenarios_pass_the_bounds():
+    from gainsched.sim.loop import SCENARIO_DIR, load_scenario
+
+    for path in SCENARIO_DIR.glob("*.toml"):
+        assert load_scenario(path).duration > 0
+
+
+# ------------------------------------------------------------------ Ctrl-C from the start
+
+
+def test_interrupt_before_the_command_line_is_ready(monkeypatch, capsys):
+    """A KeyboardInterrupt during the entry point's first imports (here: pinning the
+    numerics, before numpy and click): ``gainsched: interrupted``, exit 130."""
+    from gainsched.__main__ import main
+
+    def ctrl_c():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(gainsched.native.reproducible, "pin_environ", ctrl_c)
+    monkeypatch.setattr(signal, "signal", lambda *a: None)  # keep the test's own handler
+    try:
+        main()
+    except SystemExit as exc:
+        code = exc.code
+    except KeyboardInterrupt:
+        pytest.fail("the Ctrl-C escaped main(): a traceback and exit code -2")
+    assert code == 130
+    assert capsys.readouterr().err == "gainsched: interrupted\n"
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="SIGINT to a child process")
+def test_ctrl_c_during_the_heavy_imports(tmp_path):
+    """A real SIGINT 20 ms into main(): the command is still importing numpy, click and
+    the config module (a quarter of a second); the same one line and 130."""
+    code = ("import os, signal, sys, threading\n"
+            "from gainsched.__main__ import main\n"
+            "threading.Timer(0.02, os.kill, (os.getpid(), signal.SIGINT)).start()\n"
+            f"sys.argv = ['gainsched', 'validate', {str(PAPER)!r}]\n"
+            "main()\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120, cwd=tmp_path)
+    assert p.returncode == 130, p.stderr
+    assert p.stderr == "gainsched: interrupted\n" and p.stdout == ""

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -28,6 +27,7 @@ import numpy as np
 
 from ..actuators import PX4_MOTOR_ORDER
 from ..errors import InputError
+from ..textinput import parse_toml, read_text
 
 __all__ = [
     "MAP_SCHEMA",
@@ -162,12 +162,8 @@ def load_channel_map(path) -> ChannelMap:
     p = Path(path)
     if not p.exists() and len(p.parts) == 1 and not p.suffix and str(p) in shipped_maps():
         p = _maps_folder() / f"{p}.toml"
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        why = exc.strerror if isinstance(exc, OSError) else "not UTF-8"
-        hint = f"; the shipped maps are {', '.join(shipped_maps())}" if not p.suffix else ""
-        raise InputError(p, "", f"cannot read ({why}){hint}") from None
+    hint = f"; the shipped maps are {', '.join(shipped_maps())}" if not p.suffix else ""
+    text = read_text(p, what="channel map", hint=hint)
     return channel_map_from_text(text, str(p), default_name=p.stem)
 
 
@@ -240,10 +236,7 @@ def _channel(src, data: dict, name: str, n_fields: int | None, required: bool):
 def channel_map_from_text(text: str, source: str = "<map>", default_name: str = "map"
                           ) -> ChannelMap:
     """Parse and validate channel-map TOML held in a string (see :func:`load_channel_map`)."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(source, "", f"not TOML ({exc})") from None
+    data = parse_toml(text, source)
     for key in data:
         if key not in _SECTIONS:
             raise InputError(source, key, f"unknown key (known: {', '.join(_SECTIONS)})")

@@ -45,6 +45,7 @@ import numpy as np
 
 from ..config import Config, config_from_text
 from ..configedit import set_values
+from ..constants import MAX_SEED, MAX_SWEEP_VARIANTS
 from ..errors import InputError
 
 __all__ = [
@@ -279,12 +280,18 @@ def make_sweep(base: Config, vary: Sequence[tuple[str, Sequence[float]]] = (), *
         raise InputError(_SRC, "--vary", "give --vary KEY=v1,v2,... and/or --monte-carlo N")
     if monte_carlo < 0:
         raise InputError(_SRC, "--monte-carlo", f"must be >= 0, got {monte_carlo}")
+    # counted before any variant is made (a product of --vary lists can be astronomical)
+    n_variants = math.prod(len(v) for _, v in vary) * max(monte_carlo, 1)
+    if n_variants > MAX_SWEEP_VARIANTS:
+        option = "--monte-carlo" if monte_carlo > MAX_SWEEP_VARIANTS or not vary else "--vary"
+        raise InputError(_SRC, option, f"{n_variants:,} variants (tables); a sweep may have at "
+                         f"most {MAX_SWEEP_VARIANTS:,} (each is a whole table build)")
     if monte_carlo and not sigma:
         raise InputError(_SRC, "--monte-carlo", "needs at least one --sigma KEY=rel")
     if sigma and not monte_carlo:
         raise InputError(_SRC, "--sigma", "is only used with --monte-carlo N")
-    if seed < 0:
-        raise InputError(_SRC, "--seed", f"must be >= 0, got {seed}")
+    if not 0 <= seed <= MAX_SEED:
+        raise InputError(_SRC, "--seed", f"must be an integer in [0, {MAX_SEED}], got {seed}")
     keys: list[str] = []
     for option, key in [("--vary", k) for k, _ in vary] + [("--sigma", k) for k, _ in sigma]:
         canon = _resolve(base, key, option)

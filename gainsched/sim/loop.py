@@ -16,15 +16,14 @@ with the 11-entry LQR state x (xi error wrapped to [-pi, pi)), the nominal
 from __future__ import annotations
 
 import math
-import tomllib
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..config import N_STATE, Config, Section
-from ..constants import INTEGRATORS
+from ..config import MAX_SPEED, N_STATE, Config, Section
+from ..constants import INTEGRATORS, MAX_FLIGHT_S, MAX_FLIGHT_STEPS, MAX_SEED
 from ..errors import GainschedWarning, InputError
 from ..firmware.feedforward import FeedForward, feedforward
 from ..firmware.runtime import BAD_ARG, CLAMPED_SPEED, NO_GAINS, UNUSABLE, status_text
@@ -40,6 +39,7 @@ from ..model.rotations import (
 )
 from ..schedule.nominal import circle_offsets, nominal_from_path
 from ..schedule.path import AzimuthPath, maneuver_path
+from ..textinput import load_toml
 from .fastplant import SUPPORTED_EFFECTS, fast_plant
 
 #: the lookup's status bits (SimResult.status) among the firmware controller's
@@ -53,6 +53,7 @@ __all__ = [
     "SCENARIO_DIR",
     "load_scenario",
     "scenario_from_dict",
+    "check_flight_steps",
     "profile_path",
     "simulate",
     "metrics",
@@ -150,43 +151,87 @@ class Scenario:
     initial_error: tuple[float, ...] = ()
 
 
+#: most speed changes of one scenario (each is evaluated over the whole flight)
+MAX_MANEUVERS = 100
+#: motion-capture rates, Hz: a pose a second is the least a flight of seconds can use;
+#: above the fastest control rate a config may set no sample is ever used
+SENSING_RATE_HZ = (1.0, 1.0e5)
+#: motion-capture latency, s: real systems have milliseconds; a second is far past any
+MAX_LATENCY_S = 1.0
+#: lengths of ``initial_error``: whole groups of the reduced state (positions, their
+#: rates, the attitude, the body rates), never a group cut in two
+INITIAL_ERROR_SIZES = (2, 4, 7, 10)
+
+
+def _speed(sec: Section, k: str) -> float:
+    v = sec.number(k)
+    if v == 0 or abs(v) > MAX_SPEED:
+        raise sec.error(k, f"must be a non-zero speed with |speed| <= {MAX_SPEED:g} m/s "
+                        f"(negative: reversed), got {v:g}")
+    return v
+
+
+def check_flight_steps(duration: float, rate_hz: float, source, where: str) -> int:
+    """The number of control steps of a flight, ``round(duration * rate_hz) + 1``; raises
+    InputError naming ``source`` and ``where`` above :data:`MAX_FLIGHT_STEPS`."""
+    n = int(round(duration * rate_hz)) + 1
+    if n > MAX_FLIGHT_STEPS:
+        raise InputError(source, where, f"{duration:g} s at the {rate_hz:g} Hz control rate is "
+                         f"{n:,} steps; a flight may have at most {MAX_FLIGHT_STEPS:,} (about "
+                         f"1 GB of history): at most {(MAX_FLIGHT_STEPS - 1) / rate_hz:g} s")
+    return n
+
+
 def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
-    """Validate a scenario table (see ``gainsched/sim/scenarios/*.toml``)."""
+    """Validate a scenario table (see ``gainsched/sim/scenarios/*.toml``): every key's type,
+    unit and range (the limits above), in one pass, before anything flies."""
     top = Section(str(source), "", d)
     name = top.string("name", Path(str(source)).stem)
     tilt_deg = top.number("tilt_deg", 0.0)
     if not -90 < tilt_deg < 90:
         raise top.error("tilt_deg", "must be in (-90, 90)")
-    speed = top.number("speed")
-    duration = top.number("duration", positive=True)
+    speed = _speed(top, "speed")
+    duration = top.bounded("duration", lo=0.0, lo_open=True, hi=MAX_FLIGHT_S, unit="s")
     gamma = np.deg2rad(top.number("gamma_deg", 0.0))
     raw = top.get("maneuvers", [])
     if not isinstance(raw, list):
         raise top.error("maneuvers", "must be a list of tables")
+    if len(raw) > MAX_MANEUVERS:
+        raise top.error("maneuvers", f"at most {MAX_MANEUVERS} manoeuvres, got {len(raw)}")
     mans = []
     t_free = 0.0  # end of the previous manoeuvre
     for i in range(len(raw)):
         sec = Section(str(source), f"maneuvers[{i}]", raw[i])
-        man = Maneuver(sec.number("t_start"), sec.number("speed"), sec.number("a", positive=True))
+        man = Maneuver(sec.bounded("t_start", lo=0.0, hi=MAX_FLIGHT_S, unit="s"),
+                       _speed(sec, "speed"),
+                       sec.number("a", positive=True))
         sec.done()
         if man.t_start < t_free:
             raise sec.error("t_start", "manoeuvres must not overlap")
         t_free = man.t_start + abs(man.speed - (mans[-1].speed if mans else speed)) / man.a
         mans.append(man)
     sens = top.sub("sensing", {})
+    lo, hi = SENSING_RATE_HZ
     sensing = Sensing(
         sens.boolean("ideal", True),
-        sens.number("rate_hz", 200.0, positive=True),
+        sens.bounded("rate_hz", 200.0, lo=lo, hi=hi, unit="Hz"),
         sens.number("position_noise", 0.0, nonneg=True),
         np.deg2rad(sens.number("attitude_noise_deg", 0.0, nonneg=True)),
         sens.number("gyro_noise", 0.0, nonneg=True),
-        sens.number("latency", 0.0, nonneg=True),
-        int(sens.number("seed", 0)),
+        sens.bounded("latency", 0.0, lo=0.0, hi=MAX_LATENCY_S, unit="s"),
+        sens.integer("seed", 0, lo=0, hi=MAX_SEED),
         sens.number("accel_noise", 0.0, nonneg=True),
         sens.boolean("latency_compensation", True),
     )
     sens.done()
-    init = tuple(top.array("initial_error", [])) if "initial_error" in d else ()
+    init = ()
+    if "initial_error" in d:
+        a = top.array("initial_error")
+        if a.ndim != 1 or a.size not in INITIAL_ERROR_SIZES:
+            raise top.error("initial_error", "must be a list of 2 (delta, xi), 4 (+ delta', "
+                            "xi'), 7 (+ phi, theta, chi) or 10 (+ omega_x, omega_y, omega_z) "
+                            f"numbers, rad and rad/s; got {'x'.join(map(str, a.shape))}")
+        init = tuple(float(x) for x in a)
     top.done()
     return Scenario(name, np.deg2rad(tilt_deg), speed, duration, tuple(mans), gamma, sensing, init)
 
@@ -213,8 +258,9 @@ def load_scenario(path) -> Scenario:
     Raises
     ------
     InputError
-        The file cannot be read, is not TOML, or a key is bad (the message names the file
-        and the key).
+        The file cannot be read, is larger than 1 MiB, is not UTF-8 TOML (nested at most
+        32 deep: :mod:`gainsched.textinput`), or a key is bad or out of its range (the
+        message names the file and the key).
 
     Examples
     --------
@@ -225,13 +271,7 @@ def load_scenario(path) -> Scenario:
     p = Path(path)
     if p.suffix != ".toml" and not p.exists():
         p = SCENARIO_DIR / f"{p}.toml"
-    try:
-        d = tomllib.loads(p.read_text())
-    except OSError as exc:
-        raise InputError(p, "", f"cannot read ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(p, "", f"not valid TOML ({exc})") from None
-    return scenario_from_dict(d, p)
+    return scenario_from_dict(load_toml(p, what="scenario"), p)
 
 
 def profile_path(scn: Scenario, r: float, t) -> AzimuthPath:
