@@ -772,9 +772,11 @@ def motor_order_fits(model: Model, measured) -> dict[str, tuple[np.ndarray, np.n
     thrusts ``T``; another order ``P`` changes the predicted body angular acceleration
     by ``J^-1 A (T[:, P] - T)`` (``A``: the torque rows of ``model.alloc``), put through
     the filter the measured one went through (:func:`_gyro_operator` with a gyro, the
-    smoothing without). This is exact for the library's effects: thrust modifiers and
-    motor lag act on each motor alike, and the effects' torques and the tether's
-    tension see the motors only through their summed thrust.
+    smoothing without). This is exact for the library's effects that act on each motor
+    alike (the thrust modifiers but ``motor_efficiency``, motor lag), whose torques and
+    the tether's tension see the motors only through their summed thrust; unequal
+    motor efficiencies make it approximate (to their spread, a few per cent: far below
+    the factor a wrong order shows).
 
     Parameters
     ----------

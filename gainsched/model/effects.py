@@ -38,6 +38,7 @@ __all__ = [
     "RotorDrag",
     "ThrustScale",
     "MotorEfficiency",
+    "ThrustTime",
     "ThrustPolynomial",
     "ThrustMomentum",
     "MotorLag",
@@ -188,6 +189,9 @@ class Effect:
     #: an empirical law (no physical model behind it): diagnose fits it only when no
     #: physical candidate explains the residual, and reports its law (:meth:`law`)
     empirical: ClassVar[bool] = False
+    #: the effect changes with flight time (its states are not the motion's): a table,
+    #: which is periodic in the azimuth, cannot hold it (the build refuses it)
+    time_varying: ClassVar[bool] = False
 
     @classmethod
     def refits(cls) -> tuple[Refit, ...]:
@@ -388,6 +392,44 @@ class MotorEfficiency(Effect):
         others = ", ".join(f"motor {k + 1} {eta[k] - 1:+.1%}" for k in range(4) if k != i)
         return (f"motor {i + 1} gives {eta[i] - 1:+.1%} thrust and reaction torque "
                 f"({others})")
+
+
+class ThrustTime(Effect):
+    """Thrust that declines with flight time: ``T *= 1 - rate t`` (the battery sagging
+    while it discharges: the commands are mapped to thrust at a fresh battery's voltage).
+
+    The flight time is the effect's one state (``t' = 1``, from 0 at the start of a
+    simulated flight). In a flight log it is the log's time axis (``t`` of
+    ``gainsched-flightlog/1``): start the log when the battery is connected, or when it
+    was charged. The thrust changes with time, so a table cannot hold it: simulate and
+    diagnose with it, build tables without it (or with a battery of a known state).
+    """
+
+    kind = "thrust_time"
+    params = (Param("rate", "1/s", 0.0, -0.05, 0.05, "relative thrust loss per second",
+                    fit=(-0.02, 0.02)),)
+    n_states = 1
+    time_varying = True
+    fits = (Refit("thrust_time", ("rate",), "thrust that declines with flight time "
+                  "(battery sag)"),)
+
+    def modify_thrust(self, T, kin, x):
+        return T * (1.0 - self.rate * x[..., 0:1])
+
+    def state_derivative(self, x, u, kin):
+        return np.ones_like(x)
+
+    def steady_states(self, T_actual, T_actual_dot):
+        return np.zeros((*np.shape(T_actual)[:-1], 1)), T_actual  # at t = 0: no loss
+
+    def states_from_held_commands(self, t, T_cmd):
+        return np.asarray(t, dtype=float)[:, None]
+
+    def mirror(self):
+        return np.eye(1)
+
+    def law(self) -> str:
+        return f"thrust {-self.rate:+.2%} per second of flight ({-60 * self.rate:+.1%} per minute)"
 
 
 class ThrustPolynomial(Effect):
@@ -632,7 +674,7 @@ class ThrustAzimuth(Effect):
 
 EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
-    for cls in (Drag, RotorDrag, ThrustScale, MotorEfficiency, ThrustPolynomial,
+    for cls in (Drag, RotorDrag, ThrustScale, MotorEfficiency, ThrustTime, ThrustPolynomial,
                 ThrustMomentum, MotorLag, ThrustAzimuth)
 }
 

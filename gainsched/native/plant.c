@@ -76,7 +76,8 @@ enum {
     FX_THRUST_POLY = 4,  /* ThrustPolynomial: a = c1, b = c2 */
     FX_MOTOR_LAG = 5,    /* MotorLag: a = tau, 4 states */
     FX_THRUST_MOMENTUM = 6, /* ThrustMomentum: a = disk_area, b = rho_air (eq. 29) */
-    FX_MOTOR_EFFICIENCY = 7 /* MotorEfficiency: a..d = eta1..eta4 */
+    FX_MOTOR_EFFICIENCY = 7, /* MotorEfficiency: a..d = eta1..eta4 */
+    FX_THRUST_TIME = 8 /* ThrustTime: a = rate, 1 state (the flight time) */
 };
 
 /* exported (ctypes, gainsched/sim/fastplant.py) */
@@ -235,6 +236,11 @@ static double effect_thrust(const double *p, const double *z, const double *u,
         } else if (kind == FX_MOTOR_EFFICIENCY) {
             for (j = 0; j < 4; ++j) {
                 T[j] = T[j] * ef[1 + j];
+            }
+        } else if (kind == FX_THRUST_TIME) { /* T *= 1 - rate t */
+            const double f = 1.0 - ef[1] * z[(int)ef[EFF_STATE]];
+            for (j = 0; j < 4; ++j) {
+                T[j] = T[j] * f;
             }
         } else if (kind == FX_THRUST_POLY) {
             const double sp = speed_of(v, speed);
@@ -416,6 +422,8 @@ int gs_plant_eval(const double *p, const double *z, const double *u, double alph
             for (j = 0; j < 4; ++j) {
                 z_dot[s0 + j] = (u[j] - z[s0 + j]) / ef[1];
             }
+        } else if ((int)ef[0] == FX_THRUST_TIME) { /* t' = 1 */
+            z_dot[(int)ef[EFF_STATE]] = 1.0;
         }
     }
     *tension = sol[5];

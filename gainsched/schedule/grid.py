@@ -69,6 +69,11 @@ def check_effect_symmetries(config) -> None:
     (:func:`~gainsched.model.symmetry.effect_symmetry_errors`).
     """
     for eff in Model(config).effects:
+        if eff.time_varying:
+            raise InputError(config.source, f"effects.{eff.kind}",
+                             "changes with flight time, which a table (periodic in the "
+                             "azimuth) cannot hold: simulate and diagnose with it, build "
+                             "tables without it")
         for name, err in effect_symmetry_errors(eff).items():
             if not err <= SYMMETRY_TOL:
                 what = "tilt-sign" if name == "S1" else "direction"

@@ -118,6 +118,10 @@ HIDDEN: dict[str, HiddenEffect] = {
         HiddenEffect("motor_efficiency", "motor 3 gives 8 % less thrust (eta3 = 0.92: a worn "
                      "propeller)", (("effects.motor_efficiency", None, (("eta3", 0.92),)),),
                      truth=("motor_efficiency", "eta3", 0.92)),
+        HiddenEffect("thrust_time", "thrust declining with flight time by 1.6% per second "
+                     "(a sagging battery, sped up to show in flights of seconds)",
+                     (("effects.thrust_time", None, (("rate", 0.016),)),),
+                     truth=("thrust_time", "rate", 0.016)),
         HiddenEffect("mass", "mass 0.55 kg instead of 0.5 kg", (("vehicle", "mass", 0.55),),
                      truth=("mass", "mass", 0.55)),
         HiddenEffect("attachment_offset", "attachment offset L_e = 0.12 m instead of 0.10 m",

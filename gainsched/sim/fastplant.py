@@ -26,6 +26,7 @@ import numpy as np
 
 from ..config import N_STATE, Config
 from ..model.effects import (
+    EFFECTS,
     Drag,
     MotorEfficiency,
     MotorLag,
@@ -33,6 +34,7 @@ from ..model.effects import (
     ThrustMomentum,
     ThrustPolynomial,
     ThrustScale,
+    ThrustTime,
 )
 from ..model.maximal import N_MAXIMAL, MaximalModel
 from ..model.reduced import Model
@@ -52,6 +54,7 @@ _CODES = {
     MotorLag: (5, ("tau",)),
     ThrustMomentum: (6, ("disk_area", "rho_air")),
     MotorEfficiency: (7, ("eta1", "eta2", "eta3", "eta4")),
+    ThrustTime: (8, ("rate",)),
 }
 #: config effect names the compiled plant implements
 SUPPORTED_EFFECTS = frozenset(cls.kind for cls in _CODES)
@@ -65,8 +68,8 @@ def fast_plant_supported(config: Config) -> bool:
     """
     link = config.tether.link
     names = {s.name for s in config.effects}
-    if link == "spring-damper":
-        return names <= SUPPORTED_EFFECTS - {MotorLag.kind}
+    if link == "spring-damper":  # the maximal model carries no effect states
+        return names <= {k for k in SUPPORTED_EFFECTS if EFFECTS[k].n_states == 0}
     return link == "rigid" and names <= SUPPORTED_EFFECTS
 
 

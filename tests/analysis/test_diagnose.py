@@ -108,6 +108,19 @@ def test_two_effects_of_similar_size_are_both_found_and_applied(paper_config, di
     assert any(s.name == "thrust_azimuth" for s in new.effects)
 
 
+def test_thrust_declining_with_time_is_found(diagnosed):
+    """Issue 37: a thrust that declines with flight time (1.6 % per second: a battery
+    sag sped up to show in flights of seconds) is accepted as thrust_time, not as a
+    thrust scale: the rate within 10 %, the held-out residual above noise falling
+    >= 80 %."""
+    d = diagnosed("thrust_time")
+    a = d.accepted
+    assert a is not None and a.name == "thrust_time", d.verdict
+    assert a.values["rate"] == pytest.approx(0.016, rel=0.10)
+    assert _excess_rms_fall(a) >= 0.8, a.excess_explained
+    assert "per second of flight" in d.verdict
+
+
 @pytest.mark.slow
 def test_a_thrust_scale_is_not_told_as_four_motors(diagnosed):
     """thrust_scale is motor_efficiency with four equal efficiencies (``contains``): a

@@ -147,6 +147,16 @@ def test_build_refuses_an_effect_that_breaks_the_symmetries():
             build_grid(cfg)
 
 
+def test_build_refuses_an_effect_of_flight_time():
+    """thrust_time carries the flight time as its state: no periodic table can hold it,
+    and the build says so in one line before any work."""
+    text = set_section(PAPER_TOML.read_text(), "effects.thrust_time", [("rate", 0.001, None)])
+    cfg = config_from_text(text, "sag.toml")
+    with pytest.raises(InputError, match=r"^sag.toml: effects.thrust_time: changes with "
+                                         r"flight time"):
+        build_grid(cfg)
+
+
 class _RollTorque(Effect):
     """A constant roll torque: keeps S1, breaks the direction mirror S2."""
 

@@ -59,14 +59,16 @@ EFFECT_PARAMS = {
     "motor_lag": {"tau": 0.03},
     "thrust_momentum": {"disk_area": 0.006},
     "motor_efficiency": {"eta1": 1.04, "eta2": 0.97, "eta3": 0.92, "eta4": 1.01},
+    "thrust_time": {"rate": 0.013},
 }
-#: every combination of the first six, and the per-motor one after a lag, before and
-#: after the airspeed modifiers
+#: every combination of the first six, the per-motor one after a lag, before and after
+#: the airspeed modifiers, and the flight-time one (a second stateful effect) beside a lag
 COMBOS = [
     c for r in range(7) for c in itertools.combinations(list(EFFECT_PARAMS)[:6], r)
 ] + [("thrust_airspeed", "thrust_scale", "drag"),  # modifiers in the other order
      ("motor_efficiency",), ("motor_lag", "motor_efficiency", "thrust_momentum"),
-     ("thrust_airspeed", "motor_efficiency", "rotor_drag")]
+     ("thrust_airspeed", "motor_efficiency", "rotor_drag"), ("thrust_time",),
+     ("thrust_time", "motor_lag", "drag"), ("motor_lag", "thrust_scale", "thrust_time")]
 
 
 def with_effects(paper_text: str, names) -> object:
@@ -184,7 +186,7 @@ def test_fallback_for_unsupported_configs(paper_config):
 
 
 # ----------------------------------------------------------- maximal model, spring-damper
-STATELESS = [c for c in COMBOS if "motor_lag" not in c]
+STATELESS = [c for c in COMBOS if "motor_lag" not in c and "thrust_time" not in c]
 
 
 def spring_damper(paper_text: str, names, stiffness: float, damping: float):
