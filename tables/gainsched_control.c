@@ -150,6 +150,27 @@ void gs_reduced_from_kinematics(const float p_I[3], const float v_I[3], const fl
     z[9] = omega_B[2];
 }
 
+/* the output fields: motor_slot a permutation of 0..3; normalized 0 or 1; with
+ * normalized, thr_mdl_fac in 0..1 and thrust_full >= thrust_max, > 0 */
+static int gs_c_outputs_ok(const gs_ctrl_params *pr)
+{
+    uint32_t seen = 0u;
+    unsigned i;
+    for (i = 0u; i < 4u; ++i) {
+        if (pr->motor_slot[i] > 3u) {
+            return 0;
+        }
+        seen |= 1u << pr->motor_slot[i];
+    }
+    if (seen != 0xFu || pr->normalized > 1u) {
+        return 0;
+    }
+    return pr->normalized == 0u ||
+           ((pr->thr_mdl_fac >= 0.0f) && (pr->thr_mdl_fac <= 1.0f) &&
+            (pr->thrust_full > 0.0f) && (pr->thrust_full >= pr->thrust_max) &&
+            !gs_c_nonfinite(pr->thrust_full));
+}
+
 int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params)
 {
     const gs_ctrl_params *pr = params;
@@ -167,6 +188,9 @@ int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params
         if (pr->int_of[i] > 1u) {
             return GS_BAD_ARG;
         }
+    }
+    if (!gs_c_outputs_ok(pr)) {
+        return GS_BAD_ARG;
     }
     delay = pr->pose_delay / pr->dt + 0.5f;
     timeout = pr->pose_timeout / pr->dt + 0.5f;
@@ -580,12 +604,34 @@ static uint32_t gs_c_control(gs_ctrl *c, const gs_ctrl_ref *ref, uint32_t st, in
     return st;
 }
 
-int gs_ctrl_update(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl_ref *ref, float thrust[4])
+void gs_ctrl_commands(const gs_ctrl_params *p, const float thrust[4], float out[4])
+{
+    const float a = 1.0f - p->thr_mdl_fac;
+    unsigned i;
+    for (i = 0u; i < 4u; ++i) {
+        float u = thrust[i];
+        if (p->normalized != 0u) {
+            const float y = thrust[i] / p->thrust_full;
+            if (!(y > 0.0f)) { /* also NaN: motor off */
+                u = 0.0f;
+            } else if (y >= 1.0f) {
+                u = 1.0f;
+            } else {
+                u = 2.0f * y / (a + gs_sqrtf(a * a + 4.0f * p->thr_mdl_fac * y));
+            }
+        }
+        out[p->motor_slot[i] & 3u] = u;
+    }
+}
+
+int gs_ctrl_update(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl_ref *ref, float out[4])
 {
     const gs_ctrl_params *pr;
     uint32_t st = 0u;
     int gyro_bad = 0;
-    if (c == NULL || in == NULL || ref == NULL || thrust == NULL || c->params == NULL ||
+    float thrust[4];
+    int status;
+    if (c == NULL || in == NULL || ref == NULL || out == NULL || c->params == NULL ||
         c->table == NULL) {
         return GS_BAD_ARG;
     }
@@ -617,5 +663,7 @@ int gs_ctrl_update(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl_ref *ref, 
         gs_reduced_from_kinematics(c->hist_p[c->head], c->v, c->hist_q[c->head], c->gyro,
                                    ref->alpha, ref->gamma, pr->rho, pr->L_e, c->z);
     }
-    return (int)gs_c_control(c, ref, st, gyro_bad, thrust);
+    status = (int)gs_c_control(c, ref, st, gyro_bad, thrust);
+    gs_ctrl_commands(pr, thrust, out);
+    return status;
 }

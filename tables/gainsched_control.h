@@ -1,6 +1,6 @@
 /*
  * gainsched controller: from a motion-capture pose, a gyro and an accelerometer to
- * four motor thrusts, for flight firmware (C99).
+ * four motor outputs (thrusts, or PX4's normalised commands), for flight firmware (C99).
  *
  * Hand-written, shipped with the gainsched package and copied next to each generated
  * table header with the runtime (`gainsched export-c TABLE`). It sits on the runtime
@@ -31,6 +31,9 @@
  *     the idle thrusts (GS_CTRL_IDLE); a bad or stale pose and a bad IMU sample
  *     degrade the feedback (below). The thrusts are always finite and within
  *     [thrust_min, thrust_max].
+ *  5. Outputs (gs_ctrl_commands): the thrusts in the flight stack's motor numbering
+ *     and unit (gs_ctrl_params motor_slot, normalized; docs/runtime.md, "PX4"): by
+ *     default T1..T4 in N.
  */
 #ifndef GAINSCHED_CONTROL_H
 #define GAINSCHED_CONTROL_H
@@ -43,7 +46,7 @@
 extern "C" {
 #endif
 
-#define GS_CONTROL_VERSION 1
+#define GS_CONTROL_VERSION 2
 
 /* the largest LQR state a gs_ctrl holds (its last good gains), and the longest pose
  * delay its history buffers, in control steps */
@@ -90,6 +93,13 @@ typedef struct gs_ctrl_params {
     float k_vel;          /* velocity correction per pose: v += k_vel e_p / T_pose */
     float k_att;          /* attitude correction per pose: fraction of the angle error */
     float pose_period;    /* s: T_pose, the interval between poses */
+    /* outputs (gs_ctrl_commands) */
+    uint32_t motor_slot[4]; /* output slot of the motors T1..T4: {0, 1, 2, 3} the tool's
+                             * numbering, {2, 1, 3, 0} PX4's quad-X */
+    uint32_t normalized;    /* 0: thrusts in N; 1: commands in 0..1 through the thrust
+                             * curve T / thrust_full = (1 - f) u + f u^2 */
+    float thr_mdl_fac;      /* f, 0..1 (PX4's THR_MDL_FAC) */
+    float thrust_full;      /* N at command 1 (>= thrust_max when normalized) */
 } gs_ctrl_params;
 
 /* One step's measurements. */
@@ -148,12 +158,32 @@ int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params
 int gs_ctrl_reset(gs_ctrl *c, const float p_I[3], const float v_I[3], const float q_IB[4]);
 
 /*
- * One control step: the measurements `in`, the reference `ref` -> thrust[4] (N,
- * motors T1..T4, always finite, within [thrust_min, thrust_max]). Returns the
- * lookup's status bits (gs_lookup_nominal) with the GS_CTRL_* bits.
+ * One control step: the measurements `in`, the reference `ref` -> out[4], the motor
+ * outputs of gs_ctrl_commands: thrusts within [thrust_min, thrust_max] (by default N,
+ * motors T1..T4), always finite. Returns the lookup's status bits (gs_lookup_nominal)
+ * with the GS_CTRL_* bits.
+ *
+ * @param c    the controller (gs_ctrl_init)
+ * @param in   this step's measurements
+ * @param ref  the reference
+ * @param out  [out] four motor outputs, in slot order
  */
 int gs_ctrl_update(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl_ref *ref,
-                   float thrust[4]);
+                   float out[4]);
+
+/*
+ * The motor outputs of four thrusts: out[motor_slot[i]] is thrust[i] (N), or with
+ * `normalized` its command u in 0..1, the inverse of the thrust curve
+ *     u = 2 y / ((1 - f) + sqrt((1 - f)^2 + 4 f y)),   y = thrust[i] / thrust_full
+ * (relative error <= 1e-6 against double precision for f in 0..1). A thrust at or below
+ * 0 gives command 0, at or above thrust_full command 1, NaN command 0 (motor off).
+ *
+ * @param p       the output fields: motor_slot, normalized, thr_mdl_fac, thrust_full
+ *                (checked by gs_ctrl_init)
+ * @param thrust  thrusts of the motors T1..T4, N
+ * @param out     [out] the outputs in slot order (may not alias thrust)
+ */
+void gs_ctrl_commands(const gs_ctrl_params *p, const float thrust[4], float out[4]);
 
 /*
  * The reduced state (delta, xi, delta', xi', phi, theta, chi, omega_B) of a COG

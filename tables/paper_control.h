@@ -9,7 +9,9 @@
  *     static gs_ctrl ctrl;                        (the controller's state)
  *     if (paper_verify() != GS_OK || paper_ctrl_init(&ctrl) != GS_OK) { refuse to arm }
  *     every 1 ms (PAPER_RATE_HZ):
- *         int status = gs_ctrl_update(&ctrl, &in, &ref, thrust);
+ *         int status = gs_ctrl_update(&ctrl, &in, &ref, out);
+ * Outputs (out[4]): gainsched order (T1 -> out[0], T2 -> out[1], T3 -> out[2], T4 ->
+ * out[3]), thrusts in N.
  * From the config: the control step, the tether, the motors' range, the integral
  * states. Sensing fields (pose delay, timeout, ranges, estimator gains): defaults,
  * set them for your motion capture, radio link and IMU.
@@ -19,6 +21,9 @@
 
 #include "paper_gains.h"
 #include "gainsched_control.h"
+
+#define PAPER_MOTOR_ORDER "gainsched" /* the numbering of out[] ([firmware] motor_order) */
+#define PAPER_COMMAND "thrust" /* thrust: N; normalized: 0..1 ([firmware] command) */
 
 static const gs_ctrl_params paper_ctrl_params = {
     0.001f, /* dt: control step, s */
@@ -39,6 +44,10 @@ static const gs_ctrl_params paper_ctrl_params = {
     0.04f, /* k_vel: estimator: velocity per pose */
     0.15f, /* k_att: estimator: attitude per pose */
     0.005f, /* pose_period: s between poses */
+    {0u, 1u, 2u, 3u}, /* motor_slot: output slot of T1..T4 */
+    0u, /* normalized: 1: commands 0..1, 0: N */
+    0.0f, /* thr_mdl_fac: thrust curve (PX4 THR_MDL_FAC) */
+    3.5f, /* thrust_full: N at command 1 */
 };
 
 /* Prepare `c` for this table with paper_ctrl_params: GS_OK or GS_BAD_ARG. */

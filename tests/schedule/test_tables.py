@@ -227,6 +227,22 @@ def test_committed_table_values_match_rebuild(paper_rebuild):
             assert dict(new[name].attrs) == dict(old[name].attrs), name
 
 
+def test_committed_c_outputs_match_what_the_build_writes():
+    """tables/'s C header, controller parameters, runtime and controller are the files a
+    build of the committed table writes now (`make tables` leaves `git status` clean):
+    a change to the shipped C sources or the templates must be rebuilt and committed."""
+    from gainsched.firmware.codegen import c_files
+    from gainsched.firmware.controller import controller_params
+    from gainsched.firmware.outputs import firmware_form, table_config
+
+    t = load_table(PAPER_H5)
+    cfg = table_config(t)
+    form, _ = firmware_form(cfg, t)
+    for name, data in c_files(form, controller_params(cfg)).items():
+        assert (PAPER_H5.parent / name).read_bytes() == data, (
+            f"tables/{name} is stale: run `make tables` and commit it")
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not native_available(), reason="numpy fallback: values checked to 1e-10")
 def test_committed_table_bytes_match_rebuild(paper_rebuild):
