@@ -39,7 +39,9 @@ One control step (``gs_ctrl_update``; docs/runtime.md, "The controller"):
    the idle thrusts (``CTRL_IDLE``); a rejected pose (``CTRL_BAD_POSE``) is skipped; no
    pose for ``pose_timeout`` (``CTRL_STALE_POSE``) drops the position and velocity
    feedback and freezes the integrators; a bad gyro sample (``CTRL_BAD_IMU``) keeps
-   the last good one and drops the rate feedback.
+   the last good one and drops the rate feedback; an integral state at its bound
+   ``int_limit`` sets ``CTRL_INT_LIMIT`` (the error it integrates is more than it can
+   hold: the model misses something, or the bound is too tight).
 
 5. **Outputs** (:meth:`ControllerParams.commands_from_thrust`): the thrusts, renumbered
    to the flight stack's motors and, for PX4, as normalised commands through its thrust
@@ -81,6 +83,7 @@ __all__ = [
     "CTRL_STALE_POSE",
     "CTRL_BAD_IMU",
     "CTRL_IDLE",
+    "CTRL_INT_LIMIT",
     "CTRL_STATUS_NAMES",
     "FLAG_POSE",
     "FLAG_ACCEL",
@@ -104,6 +107,7 @@ CTRL_BAD_POSE = 0x0400
 CTRL_STALE_POSE = 0x0800
 CTRL_BAD_IMU = 0x1000
 CTRL_IDLE = 0x2000
+CTRL_INT_LIMIT = 0x4000
 CTRL_STATUS_NAMES = {
     CTRL_HELD: "HELD",
     CTRL_SATURATED: "SATURATED",
@@ -111,6 +115,7 @@ CTRL_STATUS_NAMES = {
     CTRL_STALE_POSE: "STALE_POSE",
     CTRL_BAD_IMU: "BAD_IMU",
     CTRL_IDLE: "IDLE",
+    CTRL_INT_LIMIT: "INT_LIMIT",
 }
 
 # input flags
@@ -722,6 +727,8 @@ class Controller:
             for i, j in enumerate(pr.int_of):
                 self.integ[i] = min(max(self.integ[i] + pr.dt * e[j], -pr.int_limit),
                                     pr.int_limit)
+        if any(abs(v) >= pr.int_limit for v in self.integ[:m]):
+            st |= CTRL_INT_LIMIT
         return u, st, self.z.copy()
 
     def run(self, rows):

@@ -17,6 +17,7 @@ from gainsched.firmware.controller import (
     CTRL_BAD_POSE,
     CTRL_HELD,
     CTRL_IDLE,
+    CTRL_INT_LIMIT,
     CTRL_STALE_POSE,
     FLAG_ACCEL,
     FLAG_POSE,
@@ -259,6 +260,30 @@ def test_an_unusable_lookup_holds_the_last_good_gains(paper_config, paper_table,
     assert not np.any(S[:50] & CTRL_HELD) and np.all(S[50:] & CTRL_HELD)
     assert not np.any(S & CTRL_IDLE)
     assert np.abs(T - Tp).max() < TOL_THRUST
+
+
+def test_an_integrator_at_its_bound_says_so(paper_config, paper_table, tmp_path):
+    """Issue 38: the poses 3 cm off the circle's plane (a constant out-of-plane error the
+    delta integrator integrates) with int_limit 0.005 rad s (the honest flight's integral
+    stays below 0.0015): the integral reaches its bound and GS_CTRL_INT_LIMIT is set from
+    then on, at the same steps in C and in the Python reference, and never before;
+    without the offset it is never set."""
+    res = simulate(paper_config, runtime_scheduler(paper_table, "python"),
+                   dataclasses.replace(load_scenario("horizontal"), duration=0.6))
+    rows = recorded_rows(res)
+    shifted = rows.copy()
+    shifted[:, 3] += 0.03 * (rows[:, 0] != 0)  # p_I z: out of the level circle's plane
+    for r, expect in ((rows, False), (shifted, True)):
+        c, py = _pair(paper_config, paper_table, tmp_path, pose_delay=0.012,
+                      int_limit=0.005)
+        _start(c, res), _start(py, res)
+        on = (c.run(r)[1] & CTRL_INT_LIMIT) != 0
+        np.testing.assert_array_equal(on, (py.run(r)[1] & CTRL_INT_LIMIT) != 0)
+        assert on.any() == expect
+        if expect:
+            first = int(np.argmax(on))
+            assert first > 20 and on[first:].all(), (first, on.sum())
+    assert ctrl_status_text(CTRL_INT_LIMIT) == "INT_LIMIT"
 
 
 def test_the_generated_parameters_are_the_configs(paper_config, paper_table, tmp_path):

@@ -601,6 +601,11 @@ static uint32_t gs_c_control(gs_ctrl *c, const gs_ctrl_ref *ref, uint32_t st, in
             c->integ[i] = s;
         }
     }
+    for (i = 0u; i < pr->n_int; ++i) {
+        if (c->integ[i] >= pr->int_limit || c->integ[i] <= -pr->int_limit) {
+            st |= GS_CTRL_INT_LIMIT;
+        }
+    }
     return st;
 }
 

@@ -64,6 +64,8 @@ extern "C" {
 #define GS_CTRL_BAD_IMU 0x1000u    /* gyro or accelerometer NaN or beyond its range */
 #define GS_CTRL_IDLE 0x2000u       /* outputs are the idle thrusts: no state estimate,
                                     * no good gains yet, or a bad reference */
+#define GS_CTRL_INT_LIMIT 0x4000u  /* an integral state is at its bound int_limit: the
+                                    * error it integrates is more than it can hold */
 
 /* ---- input flags (gs_ctrl_input.flags) --------------------------------------- */
 #define GS_CTRL_POSE 0x1u       /* p_I, q_IB hold a pose taken pose_delay ago */
