@@ -53,6 +53,10 @@ C_CIRCLE = 2e-2
 C_POINT = 5e-6
 #: the paper's control rate: above it, the rate (not the slowest speed) is blamed for steps
 REF_RATE_HZ = 1000.0
+#: the paper's circle radius rho + L_e (m) and slowest speed (m/s): a radius further above
+#: it than the rate and the slowness blames tether.length for the steps
+REF_RADIUS = 1.6
+REF_SPEED_MIN = 1.3
 #: the paper grid (speeds, tilts, azimuth samples): the axis furthest above it is blamed
 REF_GRID = {"grid.speeds": 18, "grid.tilts_deg": 6, "grid.azimuth_samples": 36}
 
@@ -136,11 +140,17 @@ def estimate_build(config: Config) -> BuildEstimate:
     cpu = sum(cpu_terms.values())
     v_min = float(speeds.min())
     step_key = "control.rate_hz" if rate > REF_RATE_HZ else "grid.speeds"
-    step_text = (
-        f"control.rate_hz {rate:g} Hz: {steps_max:.2g} steps per period at {v_min:g} m/s"
-        if step_key == "control.rate_hz"
-        else f"grid.speeds down to {v_min:g} m/s: {steps_max:.2g} steps per period at {rate:g} Hz"
-    )
+    if r / REF_RADIUS > max(rate / REF_RATE_HZ, REF_SPEED_MIN / v_min, 1.0):
+        step_key = "tether.length"  # the circle is long, not the speed slow nor the rate high
+    step_text = {
+        "control.rate_hz":
+            f"control.rate_hz {rate:g} Hz: {steps_max:.2g} steps per period at {v_min:g} m/s",
+        "grid.speeds":
+            f"grid.speeds down to {v_min:g} m/s: {steps_max:.2g} steps per period at {rate:g} Hz",
+        "tether.length":
+            f"tether.length {config.tether.length:g} m: a {r:g} m circle, {steps_max:.2g} steps "
+            f"per period at {v_min:g} m/s and {rate:g} Hz",
+    }[step_key]
     shape = f"{n_t} tilts x {n_v} speeds x {n_xi} azimuth samples"
     axes = {"grid.speeds": n_v, "grid.tilts_deg": n_t, "grid.azimuth_samples": n_xi}
     if worker >= 2 * table:

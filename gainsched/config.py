@@ -10,9 +10,10 @@ Besides types and ranges, the checks refuse what would only fail late in a
 build: a name that is not a safe file name (:func:`check_name`), grid axes that
 collapse in the tables' float32 (:func:`check_float32_axis`), a weight Q that
 leaves the azimuth undetectable, a physically absurd vehicle, a control rate
-that undersamples the fastest circle (:func:`check_rate`), and a build that
+that undersamples the fastest circle (:func:`check_rate`), a build that
 would need more memory or CPU time than ``[limits]`` allows
-(:func:`gainsched.budget.check_budget`).
+(:func:`gainsched.budget.check_budget`), and a config no build could fly
+(:mod:`gainsched.plausible`: gravity, lengths, hover, a flyable circle).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import numpy as np
 from .actuators import MOTOR_ORDERS
 from .constants import INTEGRATORS, MAX_XI, N_INPUT, N_STATE, REDUCED_NAMES, XI_DOT_LIMIT
 from .errors import InputError
+from .plausible import G_RANGE, check_circles, check_hover, check_lengths
 from .resources import config_path, reference_configs
 from .textinput import parse_toml, read_text
 
@@ -1097,10 +1099,12 @@ def _config(text: str, source: str, check_default_name: bool) -> Config:
             check_name(source, name, from_file=True)
     vehicle = _vehicle(top.sub("vehicle"))
     tether = _tether(top.sub("tether"))
+    check_lengths(source, vehicle.arm_length, tether.length)
     effects = _effects(top.sub("effects", {}))
     env = top.sub("environment")
-    g = env.number("g", positive=True)
+    g = env.bounded("g", lo=G_RANGE[0], hi=G_RANGE[1], unit="m/s^2")
     env.done()
+    check_hover(source, vehicle.mass, vehicle.thrust_max, g)
     control = _control(top.sub("control"))
     radius = tether.length + tether.attachment_offset
     grid = _grid(top.sub("grid"), radius)
@@ -1116,6 +1120,7 @@ def _config(text: str, source: str, check_default_name: bool) -> Config:
     cfg = Config(name, vehicle, tether, effects, g, control, grid, feas, source, text,
                  analysis=analysis, limits=limits, firmware=firmware)
     check_budget(cfg, source)
+    check_circles(cfg, source)  # after the budget: the grid is of a size a build takes
     return cfg
 
 

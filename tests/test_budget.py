@@ -83,6 +83,8 @@ def test_effect_states_count(paper_text):
          "control.rate_hz",
          "GiB per worker (control.rate_hz 100000 Hz: 2e+06 steps per period at 0.5 m/s); "
          "limit limits.max_memory_gib = 8"),
+        ("900 m tether", lambda t: _set(t, {"tether.length": 900.0}), "tether.length",
+         "GiB per worker (tether.length 900 m: a 900.1 m circle, 4.4e+06 steps per period"),
         ("1 mm/s", lambda t: _set(t, {"grid.speeds": [0.001, 15]}), "grid.speeds",
          "GiB per worker (grid.speeds down to 0.001 m/s: 1e+07 steps per period at 1000 Hz)"),
         ("10000 speeds", lambda t: _sub(t, "speeds", _floats(np.linspace(2, 15, 10000))),

@@ -164,9 +164,10 @@ BAD = [
     ("speeds-overflow", lambda t: set_key(t, "grid", "speeds", "[2, 1e300]"), "grid.speeds"),
     ("speeds-above-100", lambda t: set_key(t, "grid", "speeds", "[2, 101]"), "grid.speeds"),
     (
-        "xi-dot-above-limit",  # 15 m/s on a 1 cm tether (two lines: the offset must be < length)
-        lambda t: set_key(set_key(t, "tether", "attachment_offset", "0"), "tether", "length",
-                          "0.01"),
+        "xi-dot-above-limit",  # 15 m/s on a 1 cm tether (the offset must be < length, the
+        # arms shorter than the tether)
+        lambda t: set_key(set_key(set_key(t, "tether", "attachment_offset", "0"), "tether",
+                                  "length", "0.01"), "vehicle", "arm_length", "0.005"),
         "grid.speeds",
     ),
     (

@@ -145,8 +145,12 @@ def test_table_with_three_states_is_refused(table_copy):
     one_line_error(_run("inspect", table_copy), table_copy, "gains/K_tilt0", "state columns")
 
 
-def test_inspect_all_infeasible_table(tmp_path):
-    """A table gainsched built itself with no feasible circle (too slow: slack)."""
+def test_inspect_all_infeasible_table(tmp_path, monkeypatch):
+    """A table gainsched built itself with no feasible circle (too slow: slack). The config
+    check refuses such a grid now (gainsched.plausible); a table built before it passes."""
+    import gainsched.config
+
+    monkeypatch.setattr(gainsched.config, "check_circles", lambda *a: None)
     cfg = tmp_path / "slow.toml"
     cfg.write_text(paper_config_text(name="slow", grid__speeds=[0.5, 1.0]))
     res = _run("build", cfg, "-o", tmp_path / "out")
@@ -351,7 +355,34 @@ def _simulate(scenario="scenario.toml", config=PAPER, table=TABLE):
     return ["simulate", config, "--tables", table, "--scenario", scenario, "-o", "out"]
 
 
-#: id -> (input files to write, command line, words the one line must hold)
+def _export(table):
+    return ["export-c", table, "-o", "out", "--no-code-size"]
+
+
+def _edited_table(attrs=None, text=None, sha=False) -> bytes:
+    """The bytes of tables/paper.h5 edited by hand, every checksum recomputed: root
+    ``attrs`` set, ``config_text`` replaced by ``text`` (``sha``: config_sha256 too)."""
+    import hashlib
+    import io
+
+    buf = io.BytesIO(TABLE.read_bytes())
+    with h5py.File(buf, "r+") as f:
+        for k, v in (attrs or {}).items():
+            f.attrs[k] = v
+        if text is not None:
+            del f["config_text"]
+            f["config_text"] = text
+            if sha:
+                f.attrs["config_sha256"] = hashlib.sha256(text.encode()).hexdigest()
+        digests = {}
+        for name, ds in _datasets(f).items():
+            digests[name] = ds.attrs["sha256"] = _dataset_sha256(ds[()])
+        f.attrs["data_sha256"] = _root_sha256(dict(f.attrs), digests)
+    return buf.getvalue()
+
+
+#: id -> (input files to write (bytes, text, or a function that makes them), command line,
+#: words the one line must hold)
 HOSTILE = {
     # one reader of every text file: size, encoding, nesting, numbers
     "scenario-latin1": (_scenario(LATIN1), _simulate(), ["scenario.toml", "not UTF-8",
@@ -434,6 +465,48 @@ HOSTILE = {
                               ["sensing.rate_hz", "[1, 100000] Hz"]),
     "scenario-initial-error-5": (_scenario(SCENARIO + "initial_error = [0, 0, 0, 0, 0.1]\n"),
                                  _simulate(), ["initial_error", "got 5"]),
+    # physical plausibility of a config (slice 2, item A): refused by validate and build
+    "config-cannot-hover": ({"c.toml": paper_config_text(vehicle__mass=500)},
+                            ["validate", "c.toml"], ["c.toml", "vehicle.mass", "4905 N",
+                                                     "vehicle.thrust_max", "14 N"]),
+    "build-cannot-hover": ({"c.toml": paper_config_text(vehicle__mass=500)},
+                           ["build", "c.toml", "-o", "out"], ["c.toml", "vehicle.mass"]),
+    "config-g-9810": ({"c.toml": paper_config_text(environment__g=9810)},
+                      ["validate", "c.toml"], ["environment.g", "[0.1, 100] m/s^2", "9810"]),
+    "config-g-tiny": ({"c.toml": paper_config_text(environment__g=1e-3)},
+                      ["validate", "c.toml"], ["environment.g", "0.001"]),
+    "config-arm-1e6": ({"c.toml": paper_config_text(vehicle__arm_length=1e6)},
+                       ["validate", "c.toml"], ["vehicle.arm_length", "tether.length = 1.5"]),
+    "config-thrust-1e12": ({"c.toml": paper_config_text(vehicle__thrust_max=1e12)},
+                           ["validate", "c.toml"], ["vehicle.thrust_max", "times the weight"]),
+    "config-no-taut-circle": ({"c.toml": paper_config_text(grid__speeds=[0.5, 1.0])},
+                              ["build", "c.toml", "-o", "out"],
+                              ["grid.speeds", "taut", "1.26 m/s"]),
+    "config-no-thrust-for-any-circle": (
+        {"c.toml": small_config_text(vehicle__mass=1.42, feasibility__thrust_margin=0.05)},
+        ["validate", "c.toml"], ["vehicle.thrust_max", "13.8 N"]),
+    # refusals that name the right thing (item B)
+    "config-tether-1e6": ({"c.toml": paper_config_text(tether__length=1e6)},
+                          ["validate", "c.toml"], ["tether.length", "<= 1000 m"]),
+    # tables edited by hand with their checksums recomputed (item C)
+    "table-rate-zero": ({"t.h5": lambda: _edited_table(attrs={"rate_hz": 0.0})},
+                        _export("t.h5"), ["t.h5", "rate_hz", "(0, 100000] Hz"]),
+    "table-radius-negative": ({"t.h5": lambda: _edited_table(attrs={"radius_m": -1.6})},
+                              _export("t.h5"), ["t.h5", "radius_m", "got -1.6"]),
+    "table-radius-not-the-axes": ({"t.h5": lambda: _edited_table(attrs={"radius_m": 1.7})},
+                                  _export("t.h5"), ["t.h5", "radius_m", "axes/xi_dot"]),
+    "table-config-text-not-toml": (
+        {"t.h5": lambda: _edited_table(text="this is [not TOML", sha=True)},
+        _export("t.h5"), ["t.h5", "config_text", "not valid TOML"]),
+    "table-other-config-old-sha": (
+        {"t.h5": lambda: _edited_table(text=paper_config_text(vehicle__mass=0.55))},
+        _export("t.h5"), ["t.h5", "config_sha256", "not the SHA-256 of config_text"]),
+    "table-other-tether-new-sha": (
+        {"t.h5": lambda: _edited_table(text=paper_config_text(tether__length=2.0), sha=True)},
+        _export("t.h5"), ["t.h5", "radius_m", "tether.length + attachment_offset is 2.1"]),
+    "table-config-invalid": (
+        {"t.h5": lambda: _edited_table(text=paper_config_text(vehicle__mass=-0.5), sha=True)},
+        _export("t.h5"), ["t.h5:config_text", "vehicle.mass", "must be > 0"]),
 }
 
 
@@ -448,6 +521,7 @@ def test_hostile_input_is_refused_at_the_door(case, tmp_path, monkeypatch):
     traceback, nothing printed before it (no work done) and nothing written."""
     files, args, needles = HOSTILE[case]
     for name, data in files.items():
+        data = data() if callable(data) else data
         (tmp_path / name).write_bytes(data if isinstance(data, bytes) else data.encode())
     monkeypatch.chdir(tmp_path)
     before = _files(tmp_path)
@@ -455,6 +529,26 @@ def test_hostile_input_is_refused_at_the_door(case, tmp_path, monkeypatch):
     one_line_error(res, *needles)
     assert res.stdout == "", res.stdout
     assert _files(tmp_path) == before
+
+
+def test_a_flight_without_gains_names_the_scenario_file(tmp_path, monkeypatch):
+    """A circle the table has no gains for (refused when the flight starts, not at the
+    door): the one line names the scenario's file, not ``scenario NAME``."""
+    (tmp_path / "scenario.toml").write_text(SCENARIO.replace("8.0", "1.3") + "tilt_deg = 40\n")
+    monkeypatch.chdir(tmp_path)
+    line = one_line_error(_run(*_simulate()), "scenario.toml: speed", "no usable gains")
+    assert "scenario s:" not in line
+
+
+def test_flight_log_bad_byte_in_a_comment_names_the_line(tmp_path):
+    """A latin-1 byte in a CSV flight log's comment (line 3): the line and column."""
+    from gainsched.analysis.logs import read_log
+
+    lines = FLIGHT.read_bytes().split(b"\n")
+    bad = tmp_path / "f.csv"
+    bad.write_bytes(b"\n".join(lines[:2] + [b"# caf\xe9"] + lines[2:]))
+    with pytest.raises(InputError, match=r"not UTF-8 text \(byte 0xe9 at line 3, column 6"):
+        read_log(bad)
 
 
 def test_shipped_scenarios_pass_the_bounds():

@@ -67,6 +67,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import GainschedWarning, InputError
+from ..textinput import decode_text
 
 __all__ = [
     "SCHEMA",
@@ -287,11 +288,10 @@ def _format(path) -> str:
 def _read_csv(path: Path):
     """-> (meta, columns {name: list[str]}, rows (N,) line numbers)."""
     try:
-        text = path.read_bytes().decode("utf-8-sig")
+        data = path.read_bytes()
     except OSError as exc:
         raise InputError(path, "", f"cannot read the file ({exc.strerror or exc})") from None
-    except UnicodeDecodeError as exc:
-        raise InputError(path, "", f"not UTF-8 text ({exc.reason})") from None
+    text = decode_text(path, data)  # UTF-8 or refused with the line of the first bad byte
     lines = text.splitlines()
     meta: dict[str, str] = {}
     header = None

@@ -375,16 +375,16 @@ def write_c_outputs(table_path, out_dir=None) -> list[Path]:
     """Header, controller parameters, runtime and controller for the table file
     ``table_path`` into ``out_dir`` (default: the table's folder), published together
     (:func:`gainsched.publish.publish`). Returns the written paths, header first."""
-    from ..config import config_from_text
     from ..schedule.tables import load_table
     from .controller import controller_params
+    from .runtime import loadable_config
 
     table = load_table(table_path)
     out_dir = Path(table_path).parent if out_dir is None else Path(out_dir)
-    try:  # the controller's parameters come from the table's config, when it loads here
-        params = controller_params(config_from_text(table.config_text, str(table_path)))
-    except InputError:
-        params = None
+    # the controller's parameters come from the table's config, unless it names an effect
+    # registered elsewhere; an embedded config that does not load is refused
+    cfg = loadable_config(table)
+    params = None if cfg is None else controller_params(cfg)
     return publish(out_dir, c_files(table, params))
 
 

@@ -23,7 +23,7 @@ from .check import MidpointCheck, midpoint_check
 from .codegen import c_files
 from .compact import CompactData, CompactInterpolator, compact_data
 from .controller import controller_params
-from .runtime import RuntimeData, runtime_data
+from .runtime import RuntimeData, loadable_config, runtime_data
 
 __all__ = ["OutputSet", "output_set", "output_files", "firmware_form", "certificate_lines",
            "table_config", "write_outputs"]
@@ -100,14 +100,14 @@ def table_config(table, fmt: str = "config"):
     """The config a table was built from (its embedded text), with ``[firmware] format``
     set to ``fmt`` unless ``fmt`` is ``"config"``; None when this process cannot load it
     (an effect registered elsewhere) and ``fmt`` is not ``"compact"``: the dense header
-    needs no config. Raises InputError when ``"compact"`` needs the unloadable config."""
-    from ..config import config_from_text
-
-    try:
-        cfg = config_from_text(table.config_text, f"{table.source}:config_text")
-    except InputError:
+    needs no config. Raises InputError when ``"compact"`` needs the unloadable config,
+    and for any other fault of the embedded config (:func:`~.runtime.loadable_config`)."""
+    cfg = loadable_config(table)
+    if cfg is None:
         if fmt == "compact":
-            raise
+            from ..config import config_from_text
+
+            config_from_text(table.config_text, f"{table.source}:config_text")  # raises
         return None
     if fmt not in ("config", cfg.firmware.format):
         cfg = cfg.with_values({"firmware.format": fmt})

@@ -289,6 +289,23 @@ def c_identifier(name: str) -> str:
     return out if not out[0].isdigit() else f"t{out}"
 
 
+def loadable_config(table):
+    """The table's embedded config (:func:`gainsched.config_from_text`), or None when it
+    names an effect this process does not know (one registered elsewhere: the dense
+    header needs no config). Any other fault of the embedded config (not TOML, a key
+    out of range) raises its InputError, naming ``TABLE:config_text`` and the key: a
+    table is never exported half (without its controller) for a config that does not
+    load."""
+    from ..config import config_from_text
+
+    try:
+        return config_from_text(table.config_text, f"{table.source}:config_text")
+    except InputError as exc:
+        if exc.where.startswith("effects.") and exc.message.startswith("unknown effect"):
+            return None
+        raise
+
+
 def _table_config(table):
     """``(config, None)`` of the table's config text, or ``(None, error)`` when this
     process cannot load it (a config naming an effect registered elsewhere)."""

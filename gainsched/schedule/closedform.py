@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import N_STATE
+from ..plausible import balance
 from .path import AzimuthPath
 
 __all__ = ["state_from_roll", "state_from_attitude", "closed_form"]
@@ -104,12 +105,11 @@ def closed_form(model, path: AzimuthPath, alpha: float, D):
     sa, ca = np.sin(alpha), np.cos(alpha)
     v, vd, vdd = r * xd, r * xdd, r * xddd
     Dv, D1, D2 = D(v)
-    # tangential balance T_C sin(phi) = -m N, normal T_C cos(phi) = m Dn
-    N = r * xdd + g * sa * np.cos(xi) + Dv / m
+    # tangential balance T_C sin(phi) = -m N, normal T_C cos(phi) = m Dn (shared with the
+    # config's plausibility check, gainsched.plausible.balance)
+    N, Dn, H, tension = balance(m, g, r, sa, ca, xi, xd, xdd, Dv)
     N1 = r * xddd - g * sa * np.sin(xi) * xd + D1 * vd / m
     N2 = r * xdddd - g * sa * (np.cos(xi) * xd**2 + np.sin(xi) * xdd) + (D2 * vd**2 + D1 * vdd) / m
-    Dn = g * ca
-    H = Dn**2 + N**2
     phi = np.arctan2(-N, Dn)
     dphi = -Dn * N1 / H
     ddphi = -Dn * (N2 * H - 2 * N * N1**2) / H**2
@@ -119,5 +119,4 @@ def closed_form(model, path: AzimuthPath, alpha: float, D):
     tau = wd @ J.T + np.cross(w, w @ J.T)  # tether torque is zero on the nominal (x_B || e)
     T_C = m * np.sqrt(H)
     u = np.concatenate([T_C[:, None], tau], -1) @ model.alloc_inv.T
-    tension = m * r * xd**2 - m * g * sa * np.sin(xi)  # eq. 18
     return s, sdot, u, tension

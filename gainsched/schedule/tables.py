@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,10 +25,12 @@ import h5py
 import numpy as np
 
 from .. import __version__
-from ..config import N_STATE
+from ..config import MAX_RATE_HZ, N_STATE, TERMINAL_COSTS, check_name
 from ..constants import CONTROL_LAW, REASONS
 from ..errors import InputError
+from ..plausible import MAX_TETHER_LENGTH
 from ..publish import write_atomic
+from ..textinput import parse_toml
 from .linearize import INPUT_NAMES, lqr_state_names
 
 __all__ = ["SCHEMA", "Table", "table_bytes", "write_table", "load_table", "table_from_bytes"]
@@ -514,6 +517,7 @@ def _read(f, path) -> Table:
         if not isinstance(grid_auto, dict) or not isinstance(grid_auto.get("bound"), float):
             raise InputError(path, "grid_auto", "must be a JSON object with a bound")
     _verify(f, path)  # after the structure, so that a missing dataset is named as such
+    _check_meaning(path, attrs, d)
     _check_feasible_finite(path, d, tilt, speed, xi)
     return Table(
         xi, speed, d["axes/xi_dot"], tilt, K0, K, d["nominal/u_d"], d["nominal/phi_d"],
@@ -522,6 +526,73 @@ def _read(f, path) -> Table:
         str(d["config_text"]), str(attrs.get("config_sha256", "")), attrs, str(path),
         offsets, **modes, grid_auto=grid_auto,
     )
+
+
+def _number_attr(path, attrs, key, lo, hi, unit) -> float:
+    """A root attribute that must be a finite number in ``(lo, hi]``, as the config key."""
+    v = attrs[key]
+    if isinstance(v, bool | str | bytes) or np.ndim(v) != 0:
+        raise InputError(path, key, f"must be a number, got {v!r:.40}")
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        raise InputError(path, key, f"must be a number, got {v!r:.40}") from None
+    if not (math.isfinite(x) and lo < x <= hi):
+        raise InputError(path, key, f"must be in ({lo:g}, {hi:g}] {unit}, got {x:g}")
+    return x
+
+
+def _check_meaning(path, attrs, d) -> None:
+    """What the checksums cannot vouch for (a hand edit with the checksums recomputed):
+    the root attributes range-checked as the config keys they come from, ``config_sha256``
+    the SHA-256 of ``config_text``, the text TOML, and the attributes it determines
+    (``rate_hz``, ``radius_m``, ``terminal``, ``config_name``) equal to its values."""
+    rate = _number_attr(path, attrs, "rate_hz", 0.0, MAX_RATE_HZ, "Hz")
+    radius = _number_attr(path, attrs, "radius_m", 0.0, 2 * MAX_TETHER_LENGTH, "m")
+    terminal = str(attrs["terminal"])
+    if terminal not in TERMINAL_COSTS:
+        raise InputError(path, "terminal", f"must be one of {', '.join(TERMINAL_COSTS)}; got "
+                         f"{terminal!r:.40}")
+    check_name(path, str(attrs["config_name"]))
+    if not np.allclose(d["axes/xi_dot"], d["axes/speed"] / radius, rtol=1e-12, atol=0):
+        raise InputError(path, "radius_m", f"{radius:g} m is not the radius of the axes "
+                         "(axes/xi_dot = axes/speed / radius_m)")
+    dt = d["closed_loop/dt"]
+    if not np.all(np.isfinite(dt) & (dt > 0)):
+        raise InputError(path, "closed_loop/dt", "must be finite and > 0")
+    text = d["config_text"]
+    text = text.decode("utf-8", "replace") if isinstance(text, bytes) else str(text)
+    want = hashlib.sha256(text.encode()).hexdigest()
+    if str(attrs["config_sha256"]) != want:
+        raise InputError(path, "config_sha256", f"{str(attrs['config_sha256'])[:12]}... is not "
+                         f"the SHA-256 of config_text ({want[:12]}...): the embedded config "
+                         "is not the one the table was built from; rebuild the table")
+    try:
+        cfg = parse_toml(text, path)
+    except InputError as exc:
+        raise InputError(path, "config_text", f"the embedded config {exc.message}") from None
+    # the attributes the embedded config determines (its full validation: table_config)
+    tether, control = cfg.get("tether"), cfg.get("control")
+    if isinstance(control, dict) and _is_number(control.get("rate_hz")):
+        if float(control["rate_hz"]) != rate:
+            raise InputError(path, "rate_hz", f"{rate:g} Hz, but the embedded config's "
+                             f"control.rate_hz is {float(control['rate_hz']):g}")
+    if isinstance(control, dict) and control.get("terminal", "periodic") != terminal:
+        raise InputError(path, "terminal", f"{terminal!r}, but the embedded config's "
+                         f"control.terminal is {control.get('terminal', 'periodic')!r:.40}")
+    if (isinstance(tether, dict) and _is_number(tether.get("length"))
+            and _is_number(tether.get("attachment_offset"))):
+        r = float(tether["length"]) + float(tether["attachment_offset"])
+        if r != radius:
+            raise InputError(path, "radius_m", f"{radius:g} m, but the embedded config's "
+                             f"tether.length + attachment_offset is {r:g} m")
+    if "name" in cfg and cfg["name"] != str(attrs["config_name"]):
+        raise InputError(path, "config_name", f"{str(attrs['config_name'])!r}, but the "
+                         f"embedded config's name is {cfg['name']!r:.70}")
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
 
 
 def _check_feasible_finite(path, d, tilt, speed, xi) -> None:

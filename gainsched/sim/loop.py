@@ -128,6 +128,9 @@ class Scenario:
         Offset of the initial state from the nominal, on the first entries of the reduced
         state (delta, xi, delta', xi', phi, theta, chi, omega_x, omega_y, omega_z), rad and
         rad/s; empty: the flight starts on the nominal.
+    source : str
+        The file the scenario was read from (``""`` when built in Python): errors about
+        the scenario name it (:attr:`origin`).
 
     Examples
     --------
@@ -149,6 +152,12 @@ class Scenario:
     gamma: float = 0.0
     sensing: Sensing = field(default_factory=Sensing)
     initial_error: tuple[float, ...] = ()
+    source: str = field(default="", compare=False, repr=False)
+
+    @property
+    def origin(self) -> str:
+        """What an error about the scenario names: its file, else ``scenario NAME``."""
+        return self.source or f"scenario {self.name}"
 
 
 #: most speed changes of one scenario (each is evaluated over the whole flight)
@@ -233,7 +242,8 @@ def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
                             f"numbers, rad and rad/s; got {'x'.join(map(str, a.shape))}")
         init = tuple(float(x) for x in a)
     top.done()
-    return Scenario(name, np.deg2rad(tilt_deg), speed, duration, tuple(mans), gamma, sensing, init)
+    return Scenario(name, np.deg2rad(tilt_deg), speed, duration, tuple(mans), gamma, sensing, init,
+                    source=str(source))
 
 
 #: The shipped scenarios (package data): horizontal, tilted40, speedup, braking, staircase.
@@ -688,7 +698,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         if status & UNUSABLE:  # the firmware policy: hold the last good gains
             if K_good is None:
                 raise InputError(
-                    f"scenario {scenario.name}", "speed",
+                    scenario.origin, "speed",
                     f"the table has no usable gains where the flight starts ({status_text(status)}"
                     f" at speed {xi_dot_ref[k] * dmodel.r:.3g} m/s, tilt "
                     f"{math.degrees(alpha):.3g} deg): a firmware would refuse to engage")
@@ -825,7 +835,7 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
         thrust = out if newtons else params.thrust_from_commands(out)  # mixer and motors
         if k == 0 and status & NO_GAINS:
             raise InputError(
-                f"scenario {scenario.name}", "speed",
+                scenario.origin, "speed",
                 f"the table has no usable gains where the flight starts ({status_text(status)}"
                 f" at speed {path.d[0][0] * design.radius:.3g} m/s, tilt "
                 f"{math.degrees(alpha):.3g} deg): a firmware would refuse to engage")
