@@ -937,6 +937,9 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path):
 @_LOGS
 @click.option("--candidate", "candidates", multiple=True,
               help="Only these candidates (repeatable; default: the whole library).")
+@click.option("--exclude", "exclude", multiple=True, metavar="NAME",
+              help="Leave out this candidate or effect (repeatable): the library told "
+                   "the effect is not there.")
 @click.option("--joint", is_flag=True,
               help="Also fit the best candidates in pairs and triples when a single one "
                    "passes (they are fitted when none does); a joint fit wins when its "
@@ -949,12 +952,13 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path):
               help="Report folder: diagnose.json/.md, ranking.png, before/after.")
 @_MAP
 @user_errors
-def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir, map_path):
+def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, report_dir,
+             map_path):
     """Which physical effect is missing: fit every candidate effect the model lacks to
     the residual on LOGS, score on held-out flights (leave one flight out), rank, check
     identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
     from .analysis.compare import compare as run
-    from .analysis.diagnose import apply_candidate, candidate_library
+    from .analysis.diagnose import apply_candidate, select_candidates
     from .analysis.diagnose import diagnose as run_diagnose
     from .analysis.reports import (
         before_after_lines,
@@ -975,11 +979,7 @@ def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir, 
     if len({p.resolve() for p in logs}) < 2:
         raise InputError("command line", "LOG", "diagnose needs at least two flights (log "
                          "files) for held-out scores")
-    library = candidate_library()
-    for n in candidates:
-        if n not in library:
-            raise InputError("command line", "--candidate",
-                             f"unknown candidate {n!r} (known: {', '.join(library)})")
+    select_candidates(candidates or None, exclude)  # checked before any work
     cfg = _load_for_compare(config)
     cmap = _channel_map(map_path)
     if new_config is not None:
@@ -990,7 +990,8 @@ def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir, 
     for line in compare_lines(base):
         click.echo(line)
     click.echo("")
-    d = run_diagnose(cfg, logs, candidates=candidates or None, comparison=base, joint=joint)
+    d = run_diagnose(cfg, logs, candidates=candidates or None, comparison=base, joint=joint,
+                     exclude=exclude)
     for line in diagnose_lines(d):
         click.echo(line)
     after = None

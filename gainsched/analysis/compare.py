@@ -1260,7 +1260,7 @@ class Comparison:
         ``max_along_track_m`` (m), ``final_azimuth_error_rad`` (rad), ``lap_slips``.
     structure : list of Finding
         Significant binned structure of the residual (averaged over revolutions, in
-        azimuth, airspeed or thrust bins), strongest first
+        azimuth, airspeed, thrust or time bins), strongest first
         (:func:`gainsched.analysis.structure.findings`; ``f.sentence()`` says it).
     structure_tables : dict of str to dict
         Its tables, ``{variable: {axis: BinnedMean}}``.

@@ -22,8 +22,14 @@ flight, predict it):
   pinned to its edge) and fold stability (how far the fold fits move the
   prediction, linearised at the estimate, relative to the effect itself).
 
-A candidate is accepted when it clears every threshold of :data:`THRESHOLDS`;
-the first such in the ranking (by held-out RMS reduction) is the verdict.
+A candidate is accepted when it clears every threshold of :data:`THRESHOLDS`, leaves
+no significant binned structure (:mod:`gainsched.analysis.structure`: azimuth, airspeed,
+thrust or flight time, every axis) in its held-out residual (a right model leaves noise;
+a wrong one that correlates with the truth leaves what it cannot follow) and is
+physically possible (:meth:`~gainsched.model.effects.Effect.implausible`); the first such
+in the ranking (by held-out RMS reduction) is the verdict. When none is, forward
+selection adds effects while they explain clearly more or remove the structure left
+(:func:`_forward`).
 **Identifiability gate**: two candidates whose fitted contributions to the
 residual are nearly collinear (``|cos| >= 0.95``, i.e. VIF >= 10) and whose
 held-out fits explain nearly as much (within 10 points of the residual power
@@ -53,18 +59,19 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from ..config import Config, EffectSpec, Tether, config_from_text
+from ..config import NAME_RE, Config, EffectSpec, Tether, config_from_text
 from ..configedit import remove_key, set_section, set_value
 from ..model.effects import EFFECTS, Effect, Param, Refit
 from ..model.reduced import Model
 from .compare import (
     AT_NOISE_FLOOR,
+    UNITS,
     Comparison,
     compare,
     measure,
     residual_axes,
 )
-from .structure import binned_means
+from .structure import Finding, binned_means, findings
 
 __all__ = [
     "FitParam",
@@ -78,6 +85,7 @@ __all__ = [
     "apply_candidate",
     "separating_flight",
     "single_parameter_set_candidates",
+    "select_candidates",
 ]
 
 #: Acceptance thresholds (held-out where it says so).
@@ -507,8 +515,9 @@ def separating_flight(a: str, b: str) -> str:
 class _Problem:
     """The logs, the base config, the weights; evaluates variants on every flight."""
 
-    def __init__(self, config: Config, measured, segs, noise: dict):
+    def __init__(self, config: Config, measured, segs, noise: dict, residuals):
         self.config = config
+        self.residuals = residuals  # the base comparison's, for their binning variables
         self.segs = segs
         self._meas = {config.tether.attachment_offset: measured}
         self.axes = tuple(a for a in noise if np.isfinite(noise[a]) and noise[a] > 0)
@@ -520,7 +529,8 @@ class _Problem:
         self.flight_names = [measured[g[0]].name.split("#")[0] for g in self.flights]
         self.window = max(m.window for m in measured)
         self.n_evals = 0
-        self.residuals = None
+        speeds = np.concatenate([r.variables["airspeed"] for r in residuals])
+        self.airspeed_range = (float(speeds.min()), float(speeds.max()))
         self.structure_keys: list[tuple[str, str]] = []
         self._base: list[dict] | None = None
         self._p_before: tuple | None = None
@@ -528,7 +538,6 @@ class _Problem:
     def track_structure(self, comparison: Comparison) -> None:
         """Score fits also on the binned structure that ``comparison`` found (its
         findings' axes and binning variables): :meth:`structure_power`."""
-        self.residuals = comparison.residuals
         keys = [(f.axis, f.variable) for f in comparison.structure if f.axis in self.axes]
         self.structure_keys = list(dict.fromkeys(keys))
         self._p_before = None
@@ -540,15 +549,7 @@ class _Problem:
         are tracked."""
         if not self.structure_keys:
             return None
-        segs = []
-        for g, f in zip(self.flights, vecs, strict=True):
-            off = 0
-            for i in g:
-                r = self.residuals[i]
-                n = r.t.size
-                segs.append(SimpleNamespace(t=r.t, variables=r.variables,
-                                            residual={a: f[a][off:off + n] for a in f}))
-                off += n
+        segs = self._segments(vecs)
         total = 0.0
         for axis, var in self.structure_keys:
             bm = binned_means(segs, [axis], var)[axis]
@@ -556,6 +557,29 @@ class _Problem:
             total += float(np.sum(bm.n_blocks[ok] * np.maximum(bm.mean[ok] ** 2
                                                                - bm.se[ok] ** 2, 0.0)))
         return total
+
+    def _segments(self, vecs, scale=None) -> list:
+        """Residual segments (what :func:`binned_means` takes) of the weighted residuals
+        ``vecs`` (list over flights of {axis: (n,)}), each axis times ``scale[axis]``."""
+        segs = []
+        for g, f in zip(self.flights, vecs, strict=True):
+            off = 0
+            for i in g:
+                r = self.residuals[i]
+                n = r.t.size
+                segs.append(SimpleNamespace(t=r.t, variables=r.variables, residual={
+                    a: f[a][off:off + n] * (1.0 if scale is None else scale[a]) for a in f}))
+                off += n
+        return segs
+
+    def structure_left(self, vecs) -> list[Finding]:
+        """Significant binned structure of the weighted residuals ``vecs`` (list over
+        flights of {axis: (n,)}) in bins of every variable of
+        :data:`~gainsched.analysis.structure.STRUCTURE_BINS`
+        (:func:`~gainsched.analysis.structure.findings`, in the axes' units): what a fit
+        leaves that a right model would not."""
+        noise = {a: 1.0 / w for a, w in self.weights.items()}
+        return findings(self._segments(vecs, noise), noise, units=UNITS)[0]
 
     def base_structure_power(self) -> float | None:
         """:meth:`structure_power` of the base model's residual (computed once; its
@@ -704,6 +728,8 @@ class CandidateResult:
     empirical: bool = False
     law: str = ""
     candidate: Candidate | None = field(default=None, repr=False)
+    structure_left: tuple = ()
+    implausible: tuple = ()
 
     @property
     def below_noise(self) -> bool:
@@ -738,8 +764,11 @@ class CandidateResult:
                            f"(< {t['min_excess_explained']:.0%})")
         if not self.below_noise and not self.delta_bic <= t["max_delta_bic"]:
             out.append(f"delta-BIC {self.delta_bic:.1f} > {t['max_delta_bic']:g}")
+        if self.structure_left and not self.below_noise:
+            out.append(f"leaves structure a right model would remove: {self.structure_left[0]}")
         if not self.plausible:
             out.append("estimate implausible (at the edge of its range)")
+        out += [f"implausible: {why}" for why in self.implausible]
         if not self.stable:
             out.append(f"unstable across folds (spread {self.fold_spread:.2f})")
         return out
@@ -767,6 +796,8 @@ class CandidateResult:
             "heldout_structure_reduction": _num(self.structure_reduction),
             "empirical": self.empirical,
             "law": self.law,
+            "structure_left": list(self.structure_left),
+            "implausible": list(self.implausible),
             "passes": self.passes,
             "failed": self.failed(),
             "notes": list(self.notes),
@@ -1174,19 +1205,23 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
     if p_before:
         structure = 1 - math.sqrt(prob.structure_power(held_vecs) / p_before)
     empirical = bool(getattr(cand, "empirical", False))
+    # what a right model would not leave: significant binned structure (in azimuth,
+    # airspeed, thrust or time) on any axis of the held-out residual
+    left = tuple(f.sentence() for f in prob.structure_left(held_vecs))
     # an empirical law, or a physical effect's own words (the weak motor), of the
-    # candidate or of the parts of a joint one
+    # candidate or of the parts of a joint one; and what no such effect could be
     kinds = [k for k in (getattr(c, "kind", None) for c in getattr(cand, "parts", (cand,)))
-             if k is not None and (EFFECTS[k].empirical or EFFECTS[k].law is not Effect.law)]
-    law = ""
-    if kinds:
-        effects = Model(cand.variant(cfg, theta).config).effects
-        law = "; ".join(e.law() for k in kinds for e in effects if e.kind == k)
+             if k is not None]
+    effects = [e for e in Model(cand.variant(cfg, theta).config).effects if e.kind in kinds]
+    law = "; ".join(e.law() for e in effects
+                    if EFFECTS[e.kind].empirical or EFFECTS[e.kind].law is not Effect.law)
+    implausible = tuple(why for e in effects
+                        for why in [e.implausible(prob.airspeed_range)] if why)
     return CandidateResult(
         cand.name, cand.doc, cand.params, theta, ci, folds, start, cand.report_values(theta),
         float(red), float(exc), float(dbic), bool(plausible), float(spread), bool(stable), corr,
         held_fit, n_eff, rb, ra, float(1 - math.sqrt(sse_fit / sse_base)), tuple(notes), contrib,
-        structure, empirical, law, cand,
+        structure, empirical, law, cand, left, implausible,
     )
 
 
@@ -1195,7 +1230,7 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
 
 def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | None = None,
              progress=None, joint: bool = False, forward: bool = True,
-             channel_map=None) -> Diagnosis:
+             channel_map=None, exclude=()) -> Diagnosis:
     """Find which physical effect the model misses: fit candidates, score them held out.
 
     The whole of ``gainsched diagnose`` (docs/model-vs-measurement.md, the module
@@ -1237,6 +1272,11 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
         more; False: the single and joint fits only.
     channel_map : ChannelMap, str or path-like, optional
         For PX4 ULogs and ROS 2 bags among ``logs`` (:func:`compare`).
+    exclude : sequence of str
+        Candidates or effect kinds to leave out (:func:`select_candidates`): the library
+        told that an effect is not there. When no other effect explains what it would
+        have, the verdict says that no library effect explains it and fits an empirical
+        term.
 
     Returns
     -------
@@ -1274,17 +1314,12 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     base = comparison or compare(config, logs, channel_map=channel_map)
     meas = base.measured
     segs = base.segs
-    prob = _Problem(config, meas, segs, base.noise)
+    prob = _Problem(config, meas, segs, base.noise, base.residuals)
     if len(prob.flights) < 2:
         raise InputError("command line", "LOG", "diagnose needs at least two flights (log "
                          "files) for held-out scores")
     library = candidate_library()
-    names = list(library) if candidates is None else list(candidates)
-    for n in names:
-        if n not in library:
-            known = ", ".join(library)
-            raise InputError("command line", "--candidate",
-                             f"unknown candidate {n!r} (known: {known})")
+    names = select_candidates(candidates, exclude, library)
     at_floor = all(s.rms_over_noise < AT_NOISE_FLOOR for s in base.stats.values())
     if at_floor:
         prob.track_structure(base)
@@ -1352,6 +1387,50 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
                      prob.flight_names, int(round(prob.n_evals)), similarity)
 
 
+def select_candidates(candidates=None, exclude=(), library=None) -> list[str]:
+    """The names of the candidates a diagnosis fits: ``candidates`` (default the whole
+    library) without ``exclude``, checked.
+
+    Parameters
+    ----------
+    candidates : sequence of str, optional
+        Candidate names (:func:`candidate_library`).
+    exclude : sequence of str
+        Candidate names or effect kinds to leave out (an effect kind drops every candidate
+        that fits it: ``"motor_efficiency"``, ``"thrust_time"``): the library told that
+        an effect is not there, or a check that nothing else is taken for it.
+    library : dict, optional
+        Default :func:`candidate_library`.
+
+    Raises
+    ------
+    InputError
+        An unknown name, naming ``--candidate`` or ``--exclude``.
+
+    Examples
+    --------
+    >>> names = select_candidates(exclude=["thrust_time"])
+    >>> "thrust_time" in names, "thrust_scale" in names
+    (False, True)
+    """
+    from ..errors import InputError
+
+    library = candidate_library() if library is None else library
+    names = list(library) if candidates is None else list(candidates)
+    for n in names:
+        if n not in library:
+            raise InputError("command line", "--candidate",
+                             f"unknown candidate {n!r} (known: {', '.join(library)})")
+    kinds = {getattr(c, "kind", None) for c in library.values()} - {None}
+    for n in exclude:
+        if n not in library and n not in kinds:
+            raise InputError("command line", "--exclude",
+                             f"unknown candidate or effect {n!r} (known: "
+                             f"{', '.join(library)})")
+    out = set(exclude)
+    return [n for n in names if n not in out and getattr(library[n], "kind", None) not in out]
+
+
 def _fit_joint(prob, library, results, base_sq, base_vecs, progress):
     """When no single candidate passes: the :data:`JOINT_TOP` best singles (held-out RMS
     reduction, distinct effects) fitted in pairs, and the best pair with each of the
@@ -1412,37 +1491,57 @@ def _joint_fit(prob, parts, base_sq, base_vecs, progress) -> CandidateResult:
 
 def _forward(prob, library, results, start, base_sq, base_vecs, progress):
     """Forward selection from the fit ``start`` (the accepted one, or the best single
-    when none passes): add the best-ranked single of another effect (held-out RMS
-    reduction > 0; the tether's elasticity and empirical terms included), all fitted
-    together, while the addition passes, lowers delta-BIC by
+    when none passes): add a single of another effect (held-out RMS reduction > 0; the
+    tether's elasticity and empirical terms included; those whose fitted contribution
+    projects most on what the current fit leaves tried first), all fitted
+    together, while the fit leaves something (more than ``forward_excess_gain`` of the
+    residual above noise, or binned structure) and the addition lowers delta-BIC by
     ``THRESHOLDS["nested_bic_gain"]`` and explains ``THRESHOLDS["forward_excess_gain"]``
-    more of the residual above noise; at most :data:`FORWARD_PARTS` parts, the best
-    :data:`JOINT_TOP` tried at each step. Appends its fits to ``results`` and returns the
-    last accepted fit (None when ``start`` did not pass and no extension does)."""
+    more of the residual above noise or removes the structure left; at most
+    :data:`FORWARD_PARTS` parts, the best :data:`JOINT_TOP` tried at each step, a passing
+    addition preferred. Appends its fits to ``results`` and returns the last passing fit
+    (None when ``start`` did not pass and no extension does)."""
     current = start
     accepted = start if start.passes else None
     gain = THRESHOLDS["forward_excess_gain"]
-    while current.name.count(" + ") + 1 < FORWARD_PARTS and current.excess_explained < 1 - gain:
+
+    def better(t):  # explains clearly more, or removes the structure the current one left
+        return (t.excess_explained >= current.excess_explained + gain
+                or (bool(current.structure_left) and not t.structure_left))
+
+    base = np.concatenate([np.concatenate(list(bv.values())) for bv in base_vecs])
+
+    def leftover_explained(r, left):
+        # the share of what the current fit leaves that the single's own fitted
+        # contribution could take (its projection on it): matching pursuit's choice
+        c = r.contribution.astype(float)
+        cc = float(c @ c)
+        return float(c @ left) ** 2 / cc if cc > 0 else 0.0
+
+    while current.name.count(" + ") + 1 < FORWARD_PARTS and (
+            current.excess_explained < 1 - gain or current.structure_left):
         names = current.name.split(" + ")
-        pool = []
-        for r in results:  # ranked
-            if (" + " in r.name or r.name in names or r.rms_reduction <= 0
-                    or r.candidate is None
-                    or any(_same_effect(library, r.name, n) for n in names)
-                    or any(_nested(library, r, t) or _nested(library, t, r)
-                           for t in results if t.name in names)):
-                continue
-            pool.append(r)
-            if len(pool) == JOINT_TOP:
-                break
-        tries = [_joint_fit(prob, [current, r], base_sq, base_vecs, progress) for r in pool]
-        results.extend(tries)
-        ok = [t for t in tries if t.passes
-              and t.delta_bic < current.delta_bic - THRESHOLDS["nested_bic_gain"]
-              and t.excess_explained >= current.excess_explained + gain]
+        left = base - current.contribution.astype(float)
+        eligible = [r for r in results
+                    if not (" + " in r.name or r.name in names or r.rms_reduction <= 0
+                            or r.candidate is None or r.contribution is None
+                            or any(_same_effect(library, r.name, n) for n in names)
+                            or any(_nested(library, r, t) or _nested(library, t, r)
+                                   for t in results if t.name in names))]
+        pool = sorted(eligible, key=lambda r: -leftover_explained(r, left))[:JOINT_TOP]
+        fitted = {frozenset(r.name.split(" + ")): r for r in results}
+        tries = [fitted.get(frozenset([*names, r.name]))
+                 or _joint_fit(prob, [current, r], base_sq, base_vecs, progress) for r in pool]
+        known = {id(r) for r in results}
+        results.extend(t for t in tries if id(t) not in known)
+        ok = [t for t in tries if better(t)
+              and t.delta_bic < current.delta_bic - THRESHOLDS["nested_bic_gain"]]
         if not ok:
             break
-        current = accepted = min(ok, key=lambda t: t.delta_bic)
+        # a passing extension first; one that does not pass yet may still lead to one
+        current = min([t for t in ok if t.passes] or ok, key=lambda t: t.delta_bic)
+        if current.passes:
+            accepted = current
     results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
     return accepted
 
@@ -1513,11 +1612,11 @@ def _verdict(base, results, accepted, twins, at_floor) -> str:
         return (f"residual correlated in time: {', '.join(grey)} not white at the 99% "
                 f"level (see the autocorrelation plot), although every axis is within "
                 f"{AT_NOISE_FLOOR:g}x its noise floor with no significant structure in "
-                f"azimuth, airspeed or thrust bins.{tail}")
+                f"azimuth, airspeed, thrust or time bins.{tail}")
     if at_floor and accepted is None:
         return (f"no effect needed: every residual axis is within {AT_NOISE_FLOOR:g}x its "
                 "noise floor, and white, with no significant structure in azimuth, "
-                "airspeed or thrust bins")
+                "airspeed, thrust or time bins")
     if accepted is None:
         best = results[0] if results else None
         tail = ""
@@ -1526,7 +1625,7 @@ def _verdict(base, results, accepted, twins, at_floor) -> str:
                     f"held-out RMS but fails: {'; '.join(best.failed())}.")
         if base.structure:
             tail += f" Averaged over the revolutions: {base.structure[0].sentence()}."
-        return (f"no candidate explains the residual: {base.where['sentence']}.{tail}")
+        return (f"no library effect explains it: {base.where['sentence']}.{tail}")
     if accepted.below_noise:
         score = (f"held-out binned structure -{accepted.structure_reduction:.0%}, held-out "
                  f"RMS -{accepted.rms_reduction:.1%}")
@@ -1603,8 +1702,10 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
     result : CandidateResult
         A fitted candidate: ``Diagnosis.accepted`` or any of ``Diagnosis.results``.
     name : str, optional
-        The new config's ``name``; default ``"<config name>_<candidate>"`` (replaced
-        only when the text has a ``name`` key).
+        The new config's ``name``; default ``"<config name>_<candidate>"`` with the
+        fitted effects the name does not hold yet, or the name unchanged when that would
+        exceed the 64 characters a name may have (replaced only when the text has a
+        ``name`` key).
 
     Returns
     -------
@@ -1662,7 +1763,12 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
         header += f"; not identified, not written: {', '.join(why)}"
     text = cand.apply_text(config.text, config, theta, comments, header,
                            keep=frozenset(why))
-    new_name = name or f"{config.name}_{result.name.replace(' + ', '_')}"
+    # the fitted effects not named yet; the name unchanged when it would grow too long
+    added = [n for n in result.name.split(" + ") if n not in config.name.split("_")
+             and f"_{n}" not in config.name]
+    new_name = name or "_".join([config.name, *added])
+    if name is None and not NAME_RE.fullmatch(new_name):
+        new_name = config.name
     if get_value(text, "", "name") is not None:
         text = set_value(text, "", "name", new_name)
     cfg = config_from_text(text, "<diagnose --apply>")  # raises if the edit is invalid

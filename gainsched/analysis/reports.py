@@ -121,7 +121,7 @@ def compare_lines(cmp: Comparison, paper: PaperFits | None = None) -> list[str]:
     for f in cmp.structure[:3]:
         out.append(f"structure: {f.sentence()}")
     if not cmp.structure:
-        out.append("structure: no significant residual in azimuth, airspeed or thrust bins "
+        out.append("structure: no significant residual in azimuth, airspeed, thrust or time bins "
                    "(block means over revolutions)")
     for tr in cmp.tracking:
         out.append(f"tracking {tr['segment']}: RMS along-track {tr['rms_along_track_m']:.4f} m, "
@@ -367,7 +367,7 @@ def write_compare(cmp: Comparison, out_dir, paper: PaperFits | None = None,
            f"![residual by regime]({pics['where'].name})", "",
            "## Structure averaged over revolutions", "",
            *([f"- {f.sentence()}" for f in cmp.structure]
-             or ["No significant residual in azimuth, airspeed or thrust bins."]), "",
+             or ["No significant residual in azimuth, airspeed, thrust or time bins."]), "",
            f"![structure]({pics['structure'].name})", "",
            f"![residuals]({pics['residuals'].name})", "",
            "## Whiteness and input correlation", "",
@@ -544,6 +544,9 @@ def write_diagnose(d: Diagnosis, out_dir) -> list[Path]:
 
     Examples
     --------
+    Two flights and two candidates (the example flights' motor lag left out: the
+    momentum-theory fit leaves its structure, so none is accepted):
+
     >>> import tempfile
     >>> cfg = gs.load_config("configs/paper.toml")
     >>> logs = ["examples/flights/v9.csv", "examples/flights/v15.csv"]
@@ -557,7 +560,7 @@ def write_diagnose(d: Diagnosis, out_dir) -> list[Path]:
     <BLANKLINE>
     Flights: sim-v9, sim-v15.
     <BLANKLINE>
-    **Verdict:** missing effect: thrust_momentum ...
+    **Verdict:** no library effect explains it: ...
     """
     from ..publish import write_atomic
 

@@ -2,8 +2,8 @@
 
 An overall RMS hides a small systematic effect: a thrust dip over 30 deg of azimuth
 that is 1.7x the noise floor there is 1.1x overall. Here every residual axis is
-averaged in bins of the azimuth over all revolutions (and in bins of airspeed and
-commanded thrust), with a standard error from the spread between *blocks*: one block
+averaged in bins of the azimuth over all revolutions (and in bins of airspeed,
+commanded thrust and flight time), with a standard error from the spread between *blocks*: one block
 per revolution for the azimuth, one per ``BLOCK_S`` seconds of a segment for the
 others. A block mean averages out the measurement noise and keeps what repeats, and
 the spread of the block means is an honest error bar for it (it contains the noise,
@@ -39,8 +39,9 @@ __all__ = ["ALPHA", "BLOCK_S", "STRUCTURE_BINS", "BinnedMean", "Finding", "binne
 ALPHA = 0.01
 #: block length (s) for the variables other than the azimuth
 BLOCK_S = 0.5
-#: bins per variable: the azimuth in 15 deg sectors, the others in quantile bins
-STRUCTURE_BINS = {"azimuth": 24, "airspeed": 8, "thrust": 8}
+#: bins per variable: the azimuth in 15 deg sectors, the others in quantile bins (the
+#: flight time too: a drift, such as a battery's sag, is structure in time)
+STRUCTURE_BINS = {"azimuth": 24, "airspeed": 8, "thrust": 8, "time": 8}
 #: fewest blocks a bin needs to be tested
 MIN_BLOCKS = 3
 #: a significant bin is reported only when its mean is at least this many noise floors
@@ -176,7 +177,7 @@ def binned_means(res, axes, variable: str, n_bins: int | None = None,
     res : list of Residual
         Residual segments (:func:`gainsched.analysis.compare.residuals`).
     axes : sequence of str
-    variable : {"azimuth", "airspeed", "thrust"}
+    variable : {"azimuth", "airspeed", "thrust", "time"}
     n_bins : int, optional
         Default :data:`STRUCTURE_BINS`.
     units : dict, optional
@@ -236,7 +237,7 @@ def _sector(bm: BinnedMean, sig: np.ndarray, k: int) -> list[int]:
 
 
 def findings(res, noise: dict, *, units=None,
-             variables=tuple(STRUCTURE_BINS)) -> tuple[list[Finding], dict]:
+             variables=None) -> tuple[list[Finding], dict]:
     """Significant binned structure of every residual axis.
 
     Parameters
@@ -246,8 +247,9 @@ def findings(res, noise: dict, *, units=None,
         Noise floor (RMS) per axis, axis unit.
     units : dict, optional
         Unit per axis.
-    variables : sequence of str
-        Binning variables (keys of :data:`STRUCTURE_BINS`).
+    variables : sequence of str, optional
+        Binning variables (keys of :data:`STRUCTURE_BINS`); default: every one the
+        segments have.
 
     Returns
     -------
@@ -257,6 +259,8 @@ def findings(res, noise: dict, *, units=None,
         ``{variable: {axis: BinnedMean}}``.
     """
     axes = [a for a in res[0].residual if all(a in r.residual for r in res)]
+    if variables is None:
+        variables = [v for v in STRUCTURE_BINS if all(v in r.variables for r in res)]
     tables = {v: binned_means(res, axes, v, units=units) for v in variables}
     m = sum(int(np.count_nonzero(np.isfinite(bm.p))) for tab in tables.values()
             for bm in tab.values())

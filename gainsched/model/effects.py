@@ -43,6 +43,10 @@ __all__ = [
     "ThrustMomentum",
     "MotorLag",
     "ThrustAzimuth",
+    "ThrustTimeSeries",
+    "ThrustMotorCurve",
+    "TIME_ORDER",
+    "TIME_UNIT_S",
     "fundamental_azimuth",
     "AZIMUTH_HARMONICS",
     "EFFECTS",
@@ -283,6 +287,12 @@ class Effect:
         """The effect's law in words with its numbers (reports of empirical effects)."""
         return repr(self)
 
+    def implausible(self, airspeed_range) -> str:
+        """Why no real vehicle has the effect at these parameters over the flown
+        ``airspeed_range`` (``(lo, hi)``, m/s), in words; empty when it may. Diagnose
+        refuses a fit that is implausible whatever its score."""
+        return ""
+
     def drag_coefficients(self):
         """``(mu1, mu2)`` when the effect is a pure COG-velocity drag
         ``F = -(mu1 + mu2 |v|) v`` (N s/m, N s^2/m^2), else None.
@@ -394,33 +404,20 @@ class MotorEfficiency(Effect):
                 f"({others})")
 
 
-class ThrustTime(Effect):
-    """Thrust that declines with flight time: ``T *= 1 - rate t`` (the battery sagging
-    while it discharges: the commands are mapped to thrust at a fresh battery's voltage).
+class _FlightTime(Effect):
+    """An effect whose one state is the flight time (``t' = 1``, from 0 at the start of a
+    simulated flight; in a flight log the log's time axis, ``t`` of
+    ``gainsched-flightlog/1``). The thrust then changes with time, so a table cannot
+    hold it (``time_varying``: the build refuses it)."""
 
-    The flight time is the effect's one state (``t' = 1``, from 0 at the start of a
-    simulated flight). In a flight log it is the log's time axis (``t`` of
-    ``gainsched-flightlog/1``): start the log when the battery is connected, or when it
-    was charged. The thrust changes with time, so a table cannot hold it: simulate and
-    diagnose with it, build tables without it (or with a battery of a known state).
-    """
-
-    kind = "thrust_time"
-    params = (Param("rate", "1/s", 0.0, -0.05, 0.05, "relative thrust loss per second",
-                    fit=(-0.02, 0.02)),)
     n_states = 1
     time_varying = True
-    fits = (Refit("thrust_time", ("rate",), "thrust that declines with flight time "
-                  "(battery sag)"),)
-
-    def modify_thrust(self, T, kin, x):
-        return T * (1.0 - self.rate * x[..., 0:1])
 
     def state_derivative(self, x, u, kin):
         return np.ones_like(x)
 
     def steady_states(self, T_actual, T_actual_dot):
-        return np.zeros((*np.shape(T_actual)[:-1], 1)), T_actual  # at t = 0: no loss
+        return np.zeros((*np.shape(T_actual)[:-1], 1)), T_actual  # at t = 0: no change
 
     def states_from_held_commands(self, t, T_cmd):
         return np.asarray(t, dtype=float)[:, None]
@@ -428,8 +425,33 @@ class ThrustTime(Effect):
     def mirror(self):
         return np.eye(1)
 
+
+class ThrustTime(_FlightTime):
+    """Thrust that declines with flight time: ``T *= 1 - rate t`` (the battery sagging
+    while it discharges: the commands are mapped to thrust at a fresh battery's voltage).
+
+    The flight time is the effect's one state (:class:`_FlightTime`): start the log when
+    the battery is connected, or when it was charged. The thrust changes with time, so a
+    table cannot hold it: simulate and diagnose with it, build tables without it (or with
+    a battery of a known state).
+    """
+
+    kind = "thrust_time"
+    params = (Param("rate", "1/s", 0.0, -0.05, 0.05, "relative thrust loss per second",
+                    fit=(-0.02, 0.02)),)
+    fits = (Refit("thrust_time", ("rate",), "thrust that declines with flight time "
+                  "(battery sag)"),)
+
+    def modify_thrust(self, T, kin, x):
+        return T * (1.0 - self.rate * x[..., 0:1])
+
     def law(self) -> str:
         return f"thrust {-self.rate:+.2%} per second of flight ({-60 * self.rate:+.1%} per minute)"
+
+
+#: how far a thrust curve of :class:`ThrustPolynomial` may turn back inside the flown
+#: airspeeds (relative thrust) before it is no rotor's
+NONMONOTONE_TOL = 0.02
 
 
 class ThrustPolynomial(Effect):
@@ -446,6 +468,26 @@ class ThrustPolynomial(Effect):
     def modify_thrust(self, T, kin, x):
         v = norm(kin.v_C)
         return T * (1 + self.c1 * v + self.c2 * v * v)[..., None]
+
+    def implausible(self, airspeed_range) -> str:
+        # A rotor's thrust at a fixed command changes monotonically with the airspeed
+        # over a flight's range (momentum theory, paper eq. 29: the induced velocity
+        # falls as the inflow grows); a curve that falls and rises again by more than
+        # NONMONOTONE_TOL inside the flown range is a fit to something else.
+        lo, hi = airspeed_range
+        if self.c2 == 0.0:
+            return ""
+        v0 = -self.c1 / (2.0 * self.c2)
+        if not lo < v0 < hi:
+            return ""
+        f = 1.0 + self.c1 * np.array([lo, v0, hi]) + self.c2 * np.array([lo, v0, hi]) ** 2
+        back = min(abs(f[0] - f[1]), abs(f[2] - f[1]))
+        if back <= NONMONOTONE_TOL:
+            return ""
+        turn = "falls" if self.c2 > 0 else "rises"
+        return (f"thrust_airspeed {turn} to {f[1] - 1:+.1%} at {v0:.1f} m/s and turns back by "
+                f"{back:.1%} inside the flown {lo:.1f}-{hi:.1f} m/s (no rotor's thrust "
+                "curve turns)")
 
 
 class ThrustMomentum(Effect):
@@ -672,10 +714,92 @@ class ThrustAzimuth(Effect):
                 f"{d[hi]:+.1%} at {np.rad2deg(xi[hi]):.0f} deg, mean {self.a0:+.1%}")
 
 
+#: highest power of the flight time in :class:`ThrustTimeSeries`
+TIME_ORDER = 3
+#: the time unit of its terms, s (coefficients read as relative change per minute)
+TIME_UNIT_S = 60.0
+
+
+class ThrustTimeSeries(_FlightTime):
+    """Empirical thrust factor in flight time: every motor's thrust times
+    ``1 + sum_k c_k (t / 60 s)^k``, k = 1..3, with t the flight time (the state of
+    :class:`_FlightTime`).
+
+    No physical model behind it: a power series for a residual that drifts with time
+    when no effect of the library explains it (a battery whose sag is not linear, a
+    motor warming up, a draft that builds up). Diagnose chooses its order held out. A
+    table cannot hold it (it changes with time): simulate and diagnose with it.
+    """
+
+    kind = "thrust_time_series"
+    params = tuple(Param(f"c{k}", "-", 0.0, -2.0, 2.0,
+                         f"coefficient of (t / {TIME_UNIT_S:g} s)^{k}")
+                   for k in range(1, TIME_ORDER + 1))
+    empirical = True
+    fits = (Refit("thrust_time_series", tuple(p.name for p in params),
+                  "empirical thrust factor, a power series in flight time",
+                  orders=tuple(range(1, TIME_ORDER + 1))),)
+
+    def factor(self, t):
+        """The thrust factor at flight time ``t`` (s), shape of ``t``."""
+        u = np.asarray(t) / TIME_UNIT_S
+        f, uk = 1.0 + 0 * u, 1.0
+        for k in range(1, TIME_ORDER + 1):
+            uk = uk * u
+            f = f + self.values[f"c{k}"] * uk
+        return f
+
+    def modify_thrust(self, T, kin, x):
+        return T * self.factor(x[..., 0])[..., None]
+
+    def law(self) -> str:
+        used = [k for k in range(1, TIME_ORDER + 1) if self.values[f"c{k}"]]
+        terms = " ".join(f"{self.values[f'c{k}']:+.3g} (t/min)" + (f"^{k}" if k > 1 else "")
+                         for k in used)
+        return (f"thrust x (1 {terms}): {self.c1 / TIME_UNIT_S:+.2%} per second at the start "
+                f"of a flight, {self.factor(10.0) - 1:+.1%} after 10 s")
+
+
+class ThrustMotorCurve(Effect):
+    """Empirical thrust curve per motor: motor ``i`` gives ``1 + a_i + b_i T_i`` times
+    its commanded thrust ``T_i`` (N), and its reaction torque with it.
+
+    No physical model behind it: each motor's static-test map corrected by a line in its
+    own thrust, for a body-torque residual that follows one motor when no effect of the
+    library explains it. Its first order (``a_i`` only) is one constant factor per
+    motor. Unequal motors break the direction mirror S2 (docs/symmetry.md): the build
+    refuses it; simulate and diagnose with it.
+    """
+
+    kind = "thrust_motor"
+    params = (*(Param(f"a{i}", "-", 0.0, -0.5, 0.5, f"motor {i}: relative thrust change")
+                for i in range(1, 5)),
+              *(Param(f"b{i}", "1/N", 0.0, -0.1, 0.1,
+                      f"motor {i}: relative thrust change per N of its thrust")
+                for i in range(1, 5)))
+    empirical = True
+    fits = (Refit("thrust_motor", tuple(p.name for p in params),
+                  "empirical thrust curve per motor, 1 + a_i + b_i T_i", orders=(4, 8)),)
+
+    def modify_thrust(self, T, kin, x):
+        a = np.array([self.values[f"a{i}"] for i in range(1, 5)])
+        b = np.array([self.values[f"b{i}"] for i in range(1, 5)])
+        return T * (1.0 + a + b * T)
+
+    def law(self) -> str:
+        a = np.array([self.values[f"a{i}"] for i in range(1, 5)])
+        b = np.array([self.values[f"b{i}"] for i in range(1, 5)])
+        i = int(np.argmax(np.abs(a - np.median(a))))
+        others = ", ".join(f"motor {k + 1} {a[k]:+.1%}" for k in range(4) if k != i)
+        slope = (f"; per N of its thrust: {', '.join(f'{v:+.2%}' for v in b)}"
+                 if np.any(b) else "")
+        return f"motor {i + 1} thrust {a[i]:+.1%} ({others}){slope}"
+
+
 EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
     for cls in (Drag, RotorDrag, ThrustScale, MotorEfficiency, ThrustTime, ThrustPolynomial,
-                ThrustMomentum, MotorLag, ThrustAzimuth)
+                ThrustMomentum, MotorLag, ThrustAzimuth, ThrustTimeSeries, ThrustMotorCurve)
 }
 
 

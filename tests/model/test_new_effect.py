@@ -181,3 +181,44 @@ def test_every_library_effect_keeps_both_symmetries(kind):
     eff = cls(**{p.name: p.lower + 0.3 * (p.upper - p.lower) for p in cls.params})
     err = effect_symmetry_errors(eff)
     assert err["S1"] <= 1e-12 and err["S2"] <= 1e-12, (eff, err)
+
+
+@pytest.mark.parametrize("kind, values, what", [
+    ("thrust_time_series", [("c1", -0.1, None)], "changes with flight time"),
+    ("thrust_motor", [("a3", -0.08, None)], "breaks the direction symmetry S2"),
+])
+def test_build_refuses_the_empirical_terms_a_table_cannot_hold(kind, values, what):
+    """Issue 37: the empirical terms in flight time and per motor are for simulate and
+    diagnose; the build refuses each in one line before any work (one in time, the other
+    by the mirror symmetry it breaks)."""
+    cfg = config_from_text(set_section(PAPER_TOML.read_text(), f"effects.{kind}", values),
+                           "fit.toml")
+    with pytest.raises(InputError, match=rf"^fit.toml: effects.{kind}: {what}"):
+        build_grid(cfg)
+
+
+def test_the_time_series_of_order_one_is_the_linear_sag():
+    """A second formulation: thrust_time_series with c1 alone is thrust_time with
+    rate = -c1 / 60 s, at every flight time (the same state)."""
+    from gainsched.model.effects import ThrustTime, ThrustTimeSeries
+
+    T = np.array([[2.0, 3.0, 4.0, 5.0]])
+    for t in (0.0, 1.5, 40.0, 600.0):
+        x = np.array([[t]])
+        a = ThrustTimeSeries(c1=-0.3).modify_thrust(T, None, x)
+        b = ThrustTime(rate=0.3 / 60.0).modify_thrust(T, None, x)
+        np.testing.assert_allclose(a, b, rtol=1e-15)
+
+
+def test_a_thrust_curve_that_turns_back_is_implausible():
+    """Issue 37: 1 - 0.060 v + 0.0034 v^2 (the fit to a weak motor) falls 26 % to
+    8.8 m/s and rises again by 11.5 % (towards 3 m/s) and 13 % (towards 15 m/s): no
+    rotor's curve; a monotone loss, or a turn outside the flown range, is plausible."""
+    from gainsched.model.effects import ThrustPolynomial
+
+    why = ThrustPolynomial(c1=-0.060, c2=0.0034).implausible((3.0, 15.0))
+    assert why.startswith("thrust_airspeed falls to -26.5% at 8.8 m/s and turns back by "
+                          "11.5% inside the flown 3.0-15.0 m/s"), why
+    assert ThrustPolynomial(c1=-0.010, c2=0.0).implausible((3.0, 15.0)) == ""
+    assert ThrustPolynomial(c1=-0.060, c2=0.0034).implausible((10.0, 15.0)) == ""
+    assert ThrustPolynomial(c1=-0.002, c2=0.0001).implausible((3.0, 15.0)) == ""  # 0.9 %
