@@ -124,7 +124,10 @@ class Scenario:
         ``rate_hz`` (Hz) with ``position_noise`` (m), ``attitude_noise`` (rad),
         ``gyro_noise`` (rad/s) and ``latency`` (s), fused with a model prediction (paper
         Sec. V.A); ``accel_noise`` (m/s^2) is that of the logged accelerometer
-        (:func:`log_from_result`) only; ``seed`` seeds the noise.
+        (:func:`log_from_result`) and of the firmware controller's; ``seed`` seeds the
+        noise. In firmware mode ``latency_compensation = false`` leaves the controller's
+        ``pose_delay`` at 0 (with a warning when the poses are late) and
+        ``accelerometer = false`` flies it without its accelerometer.
     initial_error : tuple of float
         Offset of the initial state from the nominal, on the first entries of the reduced
         state (delta, xi, delta', xi', phi, theta, chi, omega_x, omega_y, omega_z), rad and
