@@ -346,11 +346,14 @@ static uint32_t gs_c_imu(gs_ctrl *c, const gs_ctrl_input *in, int *gyro_bad)
  * p + dt v + dt^2 / 2 a_I and v + dt a_I. Without an accelerometer w_I = theta n, the
  * circle's turn about its normal n: a constant-speed circle is then propagated exactly
  * (the velocity keeps its magnitude; integrating -r xi'^2 at the step's start instead
- * grows |v| by v theta^2 / 2 per step). With t2 = |w_I|^2, S = sin(th) / th,
- * Cc = (1 - cos th) / th^2 and Ss = (1 - S) / th^2 (series, |w_I| <= GS_C_MAX_TURN):
- *   Rot(w) v      = v + S (w x v) - Cc (t2 v - (w . v) w)
- *   int Rot v ds  = dt (v + Cc (w x v) - Ss (t2 v - (w . v) w))
- * Inputs finite in normal use; a non-finite estimate is caught by gs_c_estimate.
+ * grows |v| by v theta^2 / 2 per step). With th = |w_I|, S = sin(th) / th,
+ * Cc = (1 - cos th) / th^2 and Ss = (1 - S) / th^2 (series in th^2, exact to float32 for
+ * th <= GS_C_MAX_TURN, which gs_c_acceleration ensures):
+ *   Rot(w) v      = v + S (w x v) - Cc (th^2 v - (w . v) w)
+ *   int Rot v ds  = dt (v + Cc (w x v) - Ss (th^2 v - (w . v) w))
+ * w_I = 0 (also |w_I|^2 below the smallest float) takes the straight step. Inputs are
+ * finite in normal use; a non-finite estimate it produces is caught by gs_c_estimate,
+ * which starts again from the next pose.
  */
 static void gs_c_propagate(gs_ctrl *c, const float a_I[3], const float w_I[3])
 {
@@ -368,34 +371,42 @@ static void gs_c_propagate(gs_ctrl *c, const float a_I[3], const float w_I[3])
     const float tt = t0 * t0 + t1 * t1 + t2 * t2;
     const float dw = 1.0f - 0.125f * tt, ds = 0.5f - tt * (1.0f / 48.0f);
     const float dx = ds * t0, dy = ds * t1, dz = ds * t2;
-    /* the velocity's turn: sin, 1 - cos and th - sin of th = |w_I| over powers of th */
     const float w2 = (w_I[0] * w_I[0] + w_I[1] * w_I[1]) + w_I[2] * w_I[2];
-    const float S = 1.0f - (w2 * (1.0f / 6.0f)) *
-                               (1.0f - (w2 * (1.0f / 20.0f)) * (1.0f - w2 * (1.0f / 42.0f)));
-    const float Cc = 0.5f * (1.0f - (w2 * (1.0f / 12.0f)) *
-                                        (1.0f - (w2 * (1.0f / 30.0f)) *
-                                                    (1.0f - w2 * (1.0f / 56.0f))));
-    const float Ss = (1.0f / 6.0f) * (1.0f - (w2 * (1.0f / 20.0f)) *
-                                                 (1.0f - (w2 * (1.0f / 42.0f)) *
-                                                             (1.0f - w2 * (1.0f / 72.0f))));
-    const float wv = (w_I[0] * c->v[0] + w_I[1] * c->v[1]) + w_I[2] * c->v[2];
-    float wxv[3], perp[3];
     unsigned j;
-    wxv[0] = w_I[1] * c->v[2] - w_I[2] * c->v[1];
-    wxv[1] = w_I[2] * c->v[0] - w_I[0] * c->v[2];
-    wxv[2] = w_I[0] * c->v[1] - w_I[1] * c->v[0];
-    for (j = 0u; j < 3u; ++j) {
-        perp[j] = w2 * c->v[j] - wv * w_I[j]; /* th^2 times v's part across w */
-    }
     qn[0] = ((q[0] * dw - q[1] * dx) - q[2] * dy) - q[3] * dz;
     qn[1] = ((q[0] * dx + q[1] * dw) + q[2] * dz) - q[3] * dy;
     qn[2] = ((q[0] * dy - q[1] * dz) + q[2] * dw) + q[3] * dx;
     qn[3] = ((q[0] * dz + q[1] * dy) - q[2] * dx) + q[3] * dw;
     gs_c_renorm(qn);
-    for (j = 0u; j < 3u; ++j) {
-        const float mean_v = (c->v[j] + Cc * wxv[j]) - Ss * perp[j];
-        pn[j] = (p[j] + dt * mean_v) + (0.5f * dt * dt) * a_I[j];
-        c->v[j] = ((c->v[j] + S * wxv[j]) - Cc * perp[j]) + dt * a_I[j];
+    if (w2 > 0.0f) {
+        /* the velocity's turn: sin th / th, (1 - cos th) / th^2 and (1 - sin th / th) / th^2
+         * as series in th^2 = |w_I|^2 */
+        const float S = 1.0f - (w2 * (1.0f / 6.0f)) *
+                                   (1.0f - (w2 * (1.0f / 20.0f)) * (1.0f - w2 * (1.0f / 42.0f)));
+        const float Cc = 0.5f * (1.0f - (w2 * (1.0f / 12.0f)) *
+                                            (1.0f - (w2 * (1.0f / 30.0f)) *
+                                                        (1.0f - w2 * (1.0f / 56.0f))));
+        const float Ss = (1.0f / 6.0f) * (1.0f - (w2 * (1.0f / 20.0f)) *
+                                                     (1.0f - (w2 * (1.0f / 42.0f)) *
+                                                                 (1.0f - w2 * (1.0f / 72.0f))));
+        const float wv = (w_I[0] * c->v[0] + w_I[1] * c->v[1]) + w_I[2] * c->v[2];
+        float wxv[3], perp[3];
+        wxv[0] = w_I[1] * c->v[2] - w_I[2] * c->v[1];
+        wxv[1] = w_I[2] * c->v[0] - w_I[0] * c->v[2];
+        wxv[2] = w_I[0] * c->v[1] - w_I[1] * c->v[0];
+        for (j = 0u; j < 3u; ++j) {
+            perp[j] = w2 * c->v[j] - wv * w_I[j]; /* th^2 times v's part across w */
+        }
+        for (j = 0u; j < 3u; ++j) {
+            const float mean_v = (c->v[j] + Cc * wxv[j]) - Ss * perp[j];
+            pn[j] = (p[j] + dt * mean_v) + (0.5f * dt * dt) * a_I[j];
+            c->v[j] = ((c->v[j] + S * wxv[j]) - Cc * perp[j]) + dt * a_I[j];
+        }
+    } else {
+        for (j = 0u; j < 3u; ++j) {
+            pn[j] = (p[j] + dt * c->v[j]) + (0.5f * dt * dt) * a_I[j];
+            c->v[j] = c->v[j] + dt * a_I[j];
+        }
     }
     c->head = next;
 }
