@@ -12,7 +12,9 @@
  * One control step (gs_ctrl_update), every 1/rate s (docs/runtime.md, "The
  * controller"):
  *  1. Estimator (gs_ctrl_estimate): propagate the COG position p_I, velocity v_I and
- *     attitude q_IB with the gyro and the accelerometer (strapdown, one step); when a
+ *     attitude q_IB with the gyro and the accelerometer (strapdown, one step), or
+ *     without an accelerometer with the circle's turn (the velocity rotated about the
+ *     circle's normal by xi' dt: exact on a constant-speed circle); when a
  *     pose arrives, compare it with the estimate of the time it was taken (the pose
  *     delay, a ring buffer of past estimates) and correct the estimate and that
  *     history by a fixed fraction of the innovation (the latency compensation of
@@ -86,11 +88,13 @@ typedef struct gs_ctrl_params {
     uint32_t n_int;    /* integral states in the LQR state after the 10 reduced ones */
     uint32_t int_of[2]; /* the reduced state each integrates: 0 delta, 1 xi */
     /* sensing and estimator */
-    float pose_delay;     /* s: age of a pose when it arrives (rounded to steps) */
+    float pose_delay;     /* s: age of a pose when it arrives (rounded to steps); 0 with
+                           * late poses: the estimate lags, and no status says so */
     float pose_timeout;   /* s: no pose for longer -> GS_CTRL_STALE_POSE */
     float quat_tolerance; /* a pose with | |q|^2 - 1 | above it is rejected */
     float gyro_range;     /* rad/s: a gyro axis beyond it is saturated (GS_CTRL_BAD_IMU) */
-    float accel_range;    /* m/s^2: the accelerometer's range */
+    float accel_range;    /* m/s^2: the accelerometer's range (the generated default:
+                           * 1.5x the largest specific force of the table's circles) */
     float k_pos;          /* position correction per pose: p += k_pos e_p */
     float k_vel;          /* velocity correction per pose: v += k_vel e_p / T_pose */
     float k_att;          /* attitude correction per pose: fraction of the angle error */

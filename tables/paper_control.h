@@ -35,11 +35,11 @@ static const gs_ctrl_params paper_ctrl_params = {
     0.5f, /* int_limit: integral state bound, rad s */
     1u, /* n_int: integral states */
     {0u, 0u}, /* int_of: the reduced state each integrates (0 delta, 1 xi) */
-    0.0f, /* pose_delay: s: set to your link's latency */
+    0.0f, /* pose_delay: s: SET it to your poses' latency (0: a lead that no status shows) */
     0.05f, /* pose_timeout: s */
     0.01f, /* quat_tolerance: | |q|^2 - 1 | of a usable pose */
     34.9f, /* gyro_range: rad/s */
-    156.9f, /* accel_range: m/s^2 */
+    225.55295f, /* accel_range: m/s^2 = 23 g, 1.5x the table's largest specific force */
     0.3f, /* k_pos: estimator: position per pose */
     0.04f, /* k_vel: estimator: velocity per pose */
     0.15f, /* k_att: estimator: attitude per pose */

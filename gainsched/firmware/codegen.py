@@ -309,7 +309,8 @@ _PARAM_COMMENTS = {
     "thrust_max": "motor range, N", "thrust_idle": "idle thrust (GS_CTRL_IDLE), N",
     "int_limit": "integral state bound, rad s", "n_int": "integral states",
     "int_of": "the reduced state each integrates (0 delta, 1 xi)",
-    "pose_delay": "s: set to your link's latency", "pose_timeout": "s",
+    "pose_delay": "s: SET it to your poses' latency (0: a lead that no status shows)",
+    "pose_timeout": "s",
     "quat_tolerance": "| |q|^2 - 1 | of a usable pose", "gyro_range": "rad/s",
     "accel_range": "m/s^2", "k_pos": "estimator: position per pose",
     "k_vel": "estimator: velocity per pose", "k_att": "estimator: attitude per pose",
@@ -326,12 +327,17 @@ def control_header_name(data) -> str:
 def render_control_header(data, params) -> str:
     """The text of ``<name>_control.h``: ``<name>_ctrl_params`` (the ``gs_ctrl_params`` of
     :class:`~gainsched.firmware.controller.ControllerParams`) and ``<name>_ctrl_init``."""
+    from .controller import ACCEL_MARGIN, G0
+
     data = data.base if isinstance(data, CompactData) else data
     lines = []
     for key, ctype, v in params.c_fields():
         text = (c_decimal(v) if ctype == "float" else _c_uint(v) if ctype == "uint32_t" else
                 f"{{{', '.join(_c_uint(i) for i in v)}}}")
-        lines.append(f"    {text}, /* {key}: {_PARAM_COMMENTS[key]} */")
+        note = _PARAM_COMMENTS[key]
+        if key == "accel_range":
+            note = f"m/s^2 = {v / G0:.3g} g, {ACCEL_MARGIN:g}x the table's largest specific force"
+        lines.append(f"    {text}, /* {key}: {note} */")
     return render("control.in.h", name=data.name, NAME=data.name.upper(),
                   config_name=data.meta.get("config_name", data.name),
                   config_sha256=data.config_sha256 or "unknown",

@@ -11,8 +11,14 @@ One control step (``gs_ctrl_update``; docs/runtime.md, "The controller"):
        a_I = R_IB f_B - g e_z
        p <- p + dt v + dt^2 / 2 a_I,   v <- v + dt a_I
 
-   Without an accelerometer the acceleration is the circle's kinematics at the last
-   estimate, ``-r xi'^2`` towards the centre and ``r xi''_ref`` along the circle. A pose
+   Without an accelerometer the motion is the circle's at the last estimate: the
+   velocity turns by ``theta = (xi' + xi''_ref dt / 2) dt`` about the circle's normal
+   ``n`` (the centripetal acceleration, integrated exactly: a constant-speed circle stays
+   one, at its speed) and ``a_I = r xi''_ref`` along the circle::
+
+       v <- Rot(theta n) v + dt a_I,   p <- p + int_0^dt Rot(theta n s / dt) v ds + dt^2 / 2 a_I
+
+   A pose
    arrives ``D = round(pose_delay / dt)`` steps after it was taken; it is compared with
    the estimate of that time (a ring buffer of the last ``D + 1`` estimates), and that
    estimate, every later one and the current one are corrected (paper Sec. V.A: the
@@ -95,6 +101,8 @@ __all__ = [
     "MAX_STATE",
     "ControllerParams",
     "controller_params",
+    "largest_specific_force",
+    "accel_range_for",
     "reduced_from_kinematics",
     "Controller",
     "ctrl_status_text",
@@ -130,6 +138,9 @@ N_INPUT = sum(INPUT_COLUMNS.values())
 MAX_DELAY = 32  # GS_CTRL_MAX_DELAY
 MAX_STATE = 24  # GS_CTRL_MAX_STATE
 POSE_LIMIT = 1.0e3  # m, m/s: a pose component beyond it is rejected (GS_CTRL_POSE_LIMIT)
+#: rad: without an accelerometer a turn of the velocity beyond it in one step (an estimate
+#: far off any circle) is dropped (GS_C_MAX_TURN)
+MAX_TURN = 0.5
 
 
 def _columns():
@@ -183,7 +194,9 @@ class ControllerParams:
     gyro_range : float, rad/s
         A gyro axis beyond it is saturated.
     accel_range : float, m/s^2
-        The accelerometer's range.
+        The accelerometer's range: an axis beyond it is a bad sample (``CTRL_BAD_IMU``).
+        :func:`controller_params` sizes it from the config's grid
+        (:func:`accel_range_for`); the 16 g here is the floor.
     k_pos, k_vel, k_att : float
         The estimator's corrections per pose: position ``k_pos e_p``, velocity
         ``k_vel e_p / pose_period``, attitude ``k_att e_theta``.
@@ -310,11 +323,52 @@ class ControllerParams:
         return c
 
 
+#: standard gravity, m/s^2: the unit of accelerometer ranges ("16 g")
+G0 = 9.80665
+#: the default accelerometer range over the largest specific force of the table's circles
+ACCEL_MARGIN = 1.5
+#: the least default accelerometer range, in g (a common MEMS range)
+ACCEL_RANGE_MIN_G = 16
+
+
+def largest_specific_force(config) -> float:
+    """The largest specific force (m/s^2) an accelerometer at the COG senses on the
+    nominal circles of the config's grid (the table's): ``f = a - g`` with the
+    centripetal ``a = v^2 / r`` at the fastest speed, largest where the tilted circle's
+    gravity adds to it, ``|f| = sqrt(a^2 + g^2 + 2 a g sin(alpha))`` at the largest tilt.
+
+    Examples
+    --------
+    >>> round(largest_specific_force(gs.load_config("configs/paper.toml")), 1)  # 15 m/s, 40 deg
+    147.1
+    """
+    v = float(np.max(np.abs(config.grid.speeds)))
+    a = v * v / config.radius
+    g = float(config.g)
+    s = math.sin(float(np.max(np.abs(config.grid.tilts))))
+    return math.sqrt(a * a + g * g + 2.0 * a * g * s)
+
+
+def accel_range_for(config) -> float:
+    """The default accelerometer range (m/s^2) of a config's controller: the largest
+    specific force of its table's circles (:func:`largest_specific_force`) times
+    :data:`ACCEL_MARGIN`, rounded up to whole g, at least :data:`ACCEL_RANGE_MIN_G` g.
+
+    Examples
+    --------
+    >>> round(accel_range_for(gs.load_config("configs/paper.toml")) / G0)  # 147 m/s^2 x 1.5
+    23
+    """
+    n = math.ceil(ACCEL_MARGIN * largest_specific_force(config) / G0 - 1e-9)
+    return G0 * max(ACCEL_RANGE_MIN_G, n)
+
+
 def controller_params(config, **sensing) -> ControllerParams:
     """The controller's parameters from a config: the loop, the vehicle and the motors,
     the outputs (``[firmware] motor_order``, ``command``, ``thr_mdl_fac``,
-    ``thrust_max_N``), plus the sensing fields (defaults of :class:`ControllerParams`, or
-    ``sensing``).
+    ``thrust_max_N``), the accelerometer range sized from the grid
+    (:func:`accel_range_for`), plus the sensing fields (defaults of
+    :class:`ControllerParams`, or ``sensing``).
 
     Parameters
     ----------
@@ -335,6 +389,7 @@ def controller_params(config, **sensing) -> ControllerParams:
     base = dict(dt=config.control.dt, rho=t.length, L_e=t.attachment_offset,
                 thrust_min=v.thrust_min, thrust_max=v.thrust_max, thrust_idle=v.thrust_min,
                 int_limit=0.5, int_of=tuple(INTEGRATORS[n] for n in config.control.integrators),
+                accel_range=accel_range_for(config),
                 motor_slot=slots_from_order(MOTOR_ORDERS[fw.motor_order]),
                 normalized=fw.command == "normalized", thr_mdl_fac=fw.thr_mdl_fac,
                 thrust_full=v.thrust_max if fw.thrust_full is None else fw.thrust_full)
@@ -544,13 +599,18 @@ class Controller:
         return st, gyro_bad
 
     def _acceleration(self, flags, ref, alpha, gamma):
+        """The step's acceleration ``a_I`` and the velocity's turn ``w_I`` (rad, I): with
+        the accelerometer the measured one and no turn; without one the circle's turn
+        ``(xi' + xi''_ref dt / 2) dt`` about its normal (the centripetal acceleration,
+        exactly) and ``r xi''_ref`` along the circle (``gs_c_acceleration``)."""
         if flags & FLAG_ACCEL:
             m = 0.5 * (self.accel_prev + self.accel)
             t = 0.25 * self.params.dt * (self.gyro_prev + self.gyro)  # half the step's turn
             f = m + np.cross(t, m)  # in the step's middle attitude
             a = matrix_from_quaternion(self.hist_q[self.head]) @ f
             a[2] -= self.g
-            return a
+            return a, np.zeros(3)
+        dt = self.params.dt
         r = self.params.rho + self.params.L_e
         xd = self.z[3]
         xdd = ref[2] if _within(ref[2], XI_DERIV_LIMIT) else 0.0
@@ -558,26 +618,40 @@ class Controller:
         gamma = gamma if _within(gamma, XI_LIMIT) else 0.0
         sx, cx = math.sin(self.z[1]), math.cos(self.z[1])
         sa, ca, sg, cg = math.sin(alpha), math.cos(alpha), math.sin(gamma), math.cos(gamma)
-        a0 = -r * (xd * xd * cx + xdd * sx)
-        a1 = r * (xdd * cx - xd * xd * sx)
-        return np.array([cg * a0 - sg * ca * a1, sg * a0 + cg * ca * a1, sa * a1])
+        a0, a1 = -r * xdd * sx, r * xdd * cx
+        a = np.array([cg * a0 - sg * ca * a1, sg * a0 + cg * ca * a1, sa * a1])
+        th = (xd + 0.5 * dt * xdd) * dt
+        if not _within(th, MAX_TURN):
+            th = 0.0
+        return a, th * np.array([sg * sa, -cg * sa, ca])
 
-    def _propagate(self, a):
+    def _propagate(self, a, w):
         dt = self.params.dt
         p, q = self.hist_p[self.head], self.hist_q[self.head]
         t = 0.5 * (self.gyro_prev + self.gyro) * dt
         tt = float(t @ t)
         dw, ds = 1 - tt / 8, 0.5 - tt / 48
         d = np.array([dw, *(ds * t)])
-        w, x, y, z = q
-        qn = np.array([w * d[0] - x * d[1] - y * d[2] - z * d[3],
-                       w * d[1] + x * d[0] + y * d[3] - z * d[2],
-                       w * d[2] - x * d[3] + y * d[0] + z * d[1],
-                       w * d[3] + x * d[2] - y * d[1] + z * d[0]])
+        w_, x, y, z = q
+        qn = np.array([w_ * d[0] - x * d[1] - y * d[2] - z * d[3],
+                       w_ * d[1] + x * d[0] + y * d[3] - z * d[2],
+                       w_ * d[2] - x * d[3] + y * d[0] + z * d[1],
+                       w_ * d[3] + x * d[2] - y * d[1] + z * d[0]])
         nxt = (self.head + 1) % (MAX_DELAY + 1)
         self.hist_q[nxt] = qn / np.linalg.norm(qn)
-        self.hist_p[nxt] = p + dt * self.v + 0.5 * dt * dt * a
-        self.v = self.v + dt * a
+        # the velocity turned by w exactly (a constant-speed circle stays one):
+        # Rot(w) v = v + S w x v - Cc perp, int_0^dt Rot v = dt (v + Cc w x v - Ss perp)
+        th2 = float(w @ w)
+        th = math.sqrt(th2)
+        if th > 0.0:
+            S, Cc, Ss = (math.sin(th) / th, 2 * math.sin(th / 2) ** 2 / th2,
+                         (th - math.sin(th)) / (th2 * th))
+        else:
+            S, Cc, Ss = 1.0, 0.5, 1.0 / 6.0
+        wxv = np.cross(w, self.v)
+        perp = th2 * self.v - float(w @ self.v) * w
+        self.hist_p[nxt] = p + dt * (self.v + Cc * wxv - Ss * perp) + 0.5 * dt * dt * a
+        self.v = self.v + S * wxv - Cc * perp + dt * a
         self.head = nxt
 
     def _correct(self, p_m, q_m):
@@ -610,7 +684,7 @@ class Controller:
             if not pose_ok:
                 st |= CTRL_BAD_POSE
         if self.have_fix and not self.fresh:
-            self._propagate(self._acceleration(flags, ref, alpha, gamma))
+            self._propagate(*self._acceleration(flags, ref, alpha, gamma))
         self.fresh = False
         if pose_ok:
             q = row[_COL["q_IB"]].astype(float)

@@ -88,6 +88,7 @@ class Sensing:
     seed: int = 0
     accel_noise: float = 0.0  # m/s^2, the accelerometer's (the log's; the firmware's)
     latency_compensation: bool = True  # the firmware controller knows the latency
+    accelerometer: bool = True  # the firmware controller is given the accelerometer
 
 
 @dataclass(frozen=True)
@@ -123,7 +124,10 @@ class Scenario:
         ``rate_hz`` (Hz) with ``position_noise`` (m), ``attitude_noise`` (rad),
         ``gyro_noise`` (rad/s) and ``latency`` (s), fused with a model prediction (paper
         Sec. V.A); ``accel_noise`` (m/s^2) is that of the logged accelerometer
-        (:func:`log_from_result`) only; ``seed`` seeds the noise.
+        (:func:`log_from_result`) and of the firmware controller's; ``seed`` seeds the
+        noise. In firmware mode ``latency_compensation = false`` leaves the controller's
+        ``pose_delay`` at 0 (with a warning when the poses are late) and
+        ``accelerometer = false`` flies it without its accelerometer.
     initial_error : tuple of float
         Offset of the initial state from the nominal, on the first entries of the reduced
         state (delta, xi, delta', xi', phi, theta, chi, omega_x, omega_y, omega_z), rad and
@@ -231,6 +235,7 @@ def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
         sens.integer("seed", 0, lo=0, hi=MAX_SEED),
         sens.number("accel_noise", 0.0, nonneg=True),
         sens.boolean("latency_compensation", True),
+        sens.boolean("accelerometer", True),
     )
     sens.done()
     init = ()
@@ -730,6 +735,20 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
                       plant)
 
 
+def uncompensated_latency_text(origin, latency: float, speed: float, radius: float) -> str:
+    """The warning of a firmware flight whose poses arrive ``latency`` s late while the
+    controller's ``pose_delay`` is 0: the estimate settles onto the delayed poses, so it
+    lags the vehicle by about ``speed * latency`` (m) along the circle and the controller
+    flies that far ahead; nothing in the controller's own signals shows it (docs/runtime.md,
+    "Accuracy by sensor configuration")."""
+    lead = abs(speed) * latency / radius
+    return (f"{origin}: sensing.latency_compensation: the controller's pose_delay is 0 with "
+            f"poses {1000 * latency:g} ms late: its estimate lags the vehicle by about "
+            f"{lead:.2g} rad along the circle at {abs(speed):g} m/s, which it flies ahead "
+            f"(and the out-of-plane error grows); a firmware sets pose_delay to its poses' "
+            f"latency")
+
+
 def _firmware_controller(scheduler, params):
     """The scheduler's firmware controller with ``params``: the C controller (software in
     the loop) or its Python reference."""
@@ -772,6 +791,10 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
     delay = int(round(sens.latency / dt))
     params = controller_params(design, pose_period=every * dt,
                                pose_delay=delay * dt if sens.latency_compensation else 0.0)
+    if not sens.ideal and delay > 0 and params.pose_delay == 0:
+        warnings.warn(uncompensated_latency_text(scenario.origin, sens.latency, scenario.speed,
+                                                 design.radius),
+                      GainschedWarning, stacklevel=3)
     ctl = _firmware_controller(scheduler, params)
     reference = isinstance(ctl, Controller)
     if reference:  # the Python reference takes each step's nominal (gs_lookup_nominal)
@@ -818,7 +841,7 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
                 rot = sens.attitude_noise * rng.standard_normal(3)
                 R_m = matrix_from_quaternion(q_IB) @ matrix_from_euler_zyx_scalar(*rot)
                 pending.append((k + delay, p_m, quaternion_from_matrix_scalar(R_m)))
-            flags = FLAG_ACCEL
+            flags = FLAG_ACCEL if sens.accelerometer else 0
             if pending and pending[0][0] <= k:
                 _, p_m, q_m = pending.pop(0)
                 flags |= FLAG_POSE

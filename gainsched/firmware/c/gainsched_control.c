@@ -331,9 +331,31 @@ static uint32_t gs_c_imu(gs_ctrl *c, const gs_ctrl_input *in, int *gyro_bad)
     return st;
 }
 
-/* One strapdown step of dt with the gyro and the acceleration a_I (m/s^2, gravity
- * included): q <- q (x) dq(omega dt), p <- p + dt v + dt^2 / 2 a_I, v <- v + dt a_I. */
-static void gs_c_propagate(gs_ctrl *c, const float a_I[3])
+/* The largest turn of the velocity over one step without an accelerometer, rad: beyond
+ * it the estimate is far off any circle (|xi'| > 500 rad/s at 1 kHz) and is propagated
+ * straight; within it the series below are exact to float32 (next terms < 1e-8). */
+#define GS_C_MAX_TURN 0.5f
+
+/*
+ * One strapdown step of dt with the gyro, the acceleration a_I (m/s^2, gravity
+ * included) and the turn w_I (rad, in I) of the velocity over the step:
+ *   q <- q (x) dq(omega dt)
+ *   v <- Rot(w_I) v + dt a_I
+ *   p <- p + int_0^dt Rot(w_I s / dt) v ds + dt^2 / 2 a_I
+ * With w_I = 0 (the accelerometer's a_I carries the whole acceleration) this is
+ * p + dt v + dt^2 / 2 a_I and v + dt a_I. Without an accelerometer w_I = theta n, the
+ * circle's turn about its normal n: a constant-speed circle is then propagated exactly
+ * (the velocity keeps its magnitude; integrating -r xi'^2 at the step's start instead
+ * grows |v| by v theta^2 / 2 per step). With th = |w_I|, S = sin(th) / th,
+ * Cc = (1 - cos th) / th^2 and Ss = (1 - S) / th^2 (series in th^2, exact to float32 for
+ * th <= GS_C_MAX_TURN, which gs_c_acceleration ensures):
+ *   Rot(w) v      = v + S (w x v) - Cc (th^2 v - (w . v) w)
+ *   int Rot v ds  = dt (v + Cc (w x v) - Ss (th^2 v - (w . v) w))
+ * w_I = 0 (also |w_I|^2 below the smallest float) takes the straight step. Inputs are
+ * finite in normal use; a non-finite estimate it produces is caught by gs_c_estimate,
+ * which starts again from the next pose.
+ */
+static void gs_c_propagate(gs_ctrl *c, const float a_I[3], const float w_I[3])
 {
     const float dt = c->params->dt;
     const uint32_t n = GS_CTRL_MAX_DELAY + 1u;
@@ -349,24 +371,57 @@ static void gs_c_propagate(gs_ctrl *c, const float a_I[3])
     const float tt = t0 * t0 + t1 * t1 + t2 * t2;
     const float dw = 1.0f - 0.125f * tt, ds = 0.5f - tt * (1.0f / 48.0f);
     const float dx = ds * t0, dy = ds * t1, dz = ds * t2;
+    const float w2 = (w_I[0] * w_I[0] + w_I[1] * w_I[1]) + w_I[2] * w_I[2];
     unsigned j;
     qn[0] = ((q[0] * dw - q[1] * dx) - q[2] * dy) - q[3] * dz;
     qn[1] = ((q[0] * dx + q[1] * dw) + q[2] * dz) - q[3] * dy;
     qn[2] = ((q[0] * dy - q[1] * dz) + q[2] * dw) + q[3] * dx;
     qn[3] = ((q[0] * dz + q[1] * dy) - q[2] * dx) + q[3] * dw;
     gs_c_renorm(qn);
-    for (j = 0u; j < 3u; ++j) {
-        pn[j] = (p[j] + dt * c->v[j]) + (0.5f * dt * dt) * a_I[j];
-        c->v[j] = c->v[j] + dt * a_I[j];
+    if (w2 > 0.0f) {
+        /* the velocity's turn: sin th / th, (1 - cos th) / th^2 and (1 - sin th / th) / th^2
+         * as series in th^2 = |w_I|^2 */
+        const float S = 1.0f - (w2 * (1.0f / 6.0f)) *
+                                   (1.0f - (w2 * (1.0f / 20.0f)) * (1.0f - w2 * (1.0f / 42.0f)));
+        const float Cc = 0.5f * (1.0f - (w2 * (1.0f / 12.0f)) *
+                                            (1.0f - (w2 * (1.0f / 30.0f)) *
+                                                        (1.0f - w2 * (1.0f / 56.0f))));
+        const float Ss = (1.0f / 6.0f) * (1.0f - (w2 * (1.0f / 20.0f)) *
+                                                     (1.0f - (w2 * (1.0f / 42.0f)) *
+                                                                 (1.0f - w2 * (1.0f / 72.0f))));
+        const float wv = (w_I[0] * c->v[0] + w_I[1] * c->v[1]) + w_I[2] * c->v[2];
+        float wxv[3], perp[3];
+        wxv[0] = w_I[1] * c->v[2] - w_I[2] * c->v[1];
+        wxv[1] = w_I[2] * c->v[0] - w_I[0] * c->v[2];
+        wxv[2] = w_I[0] * c->v[1] - w_I[1] * c->v[0];
+        for (j = 0u; j < 3u; ++j) {
+            perp[j] = w2 * c->v[j] - wv * w_I[j]; /* th^2 times v's part across w */
+        }
+        for (j = 0u; j < 3u; ++j) {
+            const float mean_v = (c->v[j] + Cc * wxv[j]) - Ss * perp[j];
+            pn[j] = (p[j] + dt * mean_v) + (0.5f * dt * dt) * a_I[j];
+            c->v[j] = ((c->v[j] + S * wxv[j]) - Cc * perp[j]) + dt * a_I[j];
+        }
+    } else {
+        for (j = 0u; j < 3u; ++j) {
+            pn[j] = (p[j] + dt * c->v[j]) + (0.5f * dt * dt) * a_I[j];
+            c->v[j] = c->v[j] + dt * a_I[j];
+        }
     }
     c->head = next;
 }
 
-/* The estimate's acceleration in I: R_IB f_B - g e_z with the accelerometer; without
- * one, the circle's kinematics at the last estimate: the COG radius r = rho + L_e,
- * -r xi'^2 towards the centre plus r xi''_ref along the circle, in C, rotated to I. */
+/*
+ * The estimate's motion over the step: a_I (m/s^2) and the velocity's turn w_I (rad, I)
+ * for gs_c_propagate. With the accelerometer: a_I = R_IB f_B - g e_z, w_I = 0. Without
+ * one, the circle's kinematics at the last estimate (COG radius r = rho + L_e): the turn
+ * w_I = (xi' + xi''_ref dt / 2) dt n about the circle's normal n = R_IC e_z (the
+ * centripetal acceleration, exactly), and a_I = r xi''_ref along the circle (in C,
+ * rotated to I). A non-finite or out-of-limit xi''_ref, alpha or gamma counts as 0; a
+ * turn beyond GS_C_MAX_TURN is dropped (w_I = 0).
+ */
 static void gs_c_acceleration(const gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl_ref *ref,
-                              float a_I[3])
+                              float a_I[3], float w_I[3])
 {
     const float g = c->table->vehicle->g;
     if ((in->flags & GS_CTRL_ACCEL) != 0u) {
@@ -377,6 +432,7 @@ static void gs_c_acceleration(const gs_ctrl *c, const gs_ctrl_input *in, const g
         for (i = 0u; i < 3u; ++i) {
             m[i] = 0.5f * (c->accel_prev[i] + c->accel[i]);
             t[i] = (c->gyro_prev[i] + c->gyro[i]) * hdt; /* half the step's rotation */
+            w_I[i] = 0.0f;
         }
         /* the mean specific force in the step's middle attitude: m + t x m, rotated by
          * the attitude at the step's start */
@@ -389,20 +445,28 @@ static void gs_c_acceleration(const gs_ctrl *c, const gs_ctrl_input *in, const g
         }
         a_I[2] -= g;
     } else {
+        const float dt = c->params->dt;
         const float r = c->params->rho + c->params->L_e;
-        float sx, cx, sa, ca, sg, cg, a_C[3];
+        float sx, cx, sa, ca, sg, cg, a_C[2], th;
         const float xd = c->z[3];
         const float xdd = gs_c_within(ref->xi[2], GS_XI_DERIV_LIMIT) ? ref->xi[2] : 0.0f;
         gs_sincosf(c->z[1], &sx, &cx);
         gs_sincosf(gs_c_within(ref->alpha, GS_TILT_LIMIT) ? ref->alpha : 0.0f, &sa, &ca);
         gs_sincosf(gs_c_within(ref->gamma, GS_XI_LIMIT) ? ref->gamma : 0.0f, &sg, &cg);
-        a_C[0] = -r * (xd * xd * cx + xdd * sx);
-        a_C[1] = r * (xdd * cx - xd * xd * sx);
-        a_C[2] = 0.0f;
+        a_C[0] = -r * (xdd * sx);
+        a_C[1] = r * (xdd * cx);
         /* R_IC a_C, R_IC = Rz(gamma) Rx(alpha); gravity is carried by the tether */
         a_I[0] = cg * a_C[0] - sg * ca * a_C[1];
         a_I[1] = sg * a_C[0] + cg * ca * a_C[1];
         a_I[2] = sa * a_C[1];
+        th = (xd + (0.5f * dt) * xdd) * dt;
+        if (!gs_c_within(th, GS_C_MAX_TURN)) {
+            th = 0.0f;
+        }
+        /* n = R_IC e_z = (sin gamma sin alpha, -cos gamma sin alpha, cos alpha) */
+        w_I[0] = th * (sg * sa);
+        w_I[1] = th * (-cg * sa);
+        w_I[2] = th * ca;
     }
 }
 
@@ -461,9 +525,9 @@ static uint32_t gs_c_estimate(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl
         }
     }
     if (c->have_fix && !c->fresh) {
-        float a_I[3];
-        gs_c_acceleration(c, in, ref, a_I);
-        gs_c_propagate(c, a_I);
+        float a_I[3], w_I[3];
+        gs_c_acceleration(c, in, ref, a_I, w_I);
+        gs_c_propagate(c, a_I, w_I);
     }
     c->fresh = 0u;
     if (pose_ok) {
