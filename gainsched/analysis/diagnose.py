@@ -1195,7 +1195,7 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
 
 def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | None = None,
              progress=None, joint: bool = False, forward: bool = True,
-             channel_map=None) -> Diagnosis:
+             channel_map=None, trust=()) -> Diagnosis:
     """Find which physical effect the model misses: fit candidates, score them held out.
 
     The whole of ``gainsched diagnose`` (docs/model-vs-measurement.md, the module
@@ -1237,6 +1237,8 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
         more; False: the single and joint fits only.
     channel_map : ChannelMap, str or path-like, optional
         For PX4 ULogs and ROS 2 bags among ``logs`` (:func:`compare`).
+    trust : iterable of str, optional
+        Consistency checks of the log files to skip (:func:`compare`).
 
     Returns
     -------
@@ -1271,7 +1273,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     """
     from ..errors import InputError
 
-    base = comparison or compare(config, logs, channel_map=channel_map)
+    base = comparison or compare(config, logs, channel_map=channel_map, trust=trust)
     meas = base.measured
     segs = base.segs
     prob = _Problem(config, meas, segs, base.noise)

@@ -418,10 +418,12 @@ def _check_meta(path, meta: dict[str, str]) -> None:
             raise InputError(path, f"metadata {key}", f"must be a finite number, got {meta[key]!r}")
 
 
-def _canonical(path, cols: dict[str, np.ndarray], rows, label):
+def _canonical(path, cols: dict[str, np.ndarray], rows, label, deferred=None):
     """Check the numeric bad-data rules and build the arrays -> dict of arrays.
 
-    ``cols`` holds float arrays by column name (all columns the same length).
+    ``cols`` holds float arrays by column name (all columns the same length). With a
+    list ``deferred``, the range error of a thrust column is appended to it instead of
+    raised (the reader first asks whether the thrust is in other units).
     """
     for name in REQUIRED_COLUMNS:
         if name not in cols:
@@ -450,12 +452,16 @@ def _canonical(path, cols: dict[str, np.ndarray], rows, label):
                 bad = np.flatnonzero(np.abs(cols[name]) > limit)  # NaN (optional) passes
             if bad.size:
                 k = bad[0]
-                raise InputError(
+                err = InputError(
                     path,
                     f"column {name}, {label} {rows[k]}",
                     f"{float(cols[name][k])!r} {unit} is not plausible (|{name}| <= {limit:g} "
                     f"{unit})",
                 )
+                if deferred is None or name[0] != "T" or not np.all(np.isfinite(cols[name])):
+                    raise err
+                if not deferred:
+                    deferred.append(err)
     t = cols["t"]
     dt = np.diff(t)
     bad = np.flatnonzero(dt <= 0)
@@ -577,6 +583,7 @@ def _make(arrays, optional, extra, meta, source, sl, **kw) -> FlightLog:
 def read_log(
     path, *, channel_map=None, thrust_max: float | None = None,
     min_samples: int = DEFAULT_MIN_SAMPLES, gap_factor: float = GAP_FACTOR,
+    config=None, trust=(),
 ) -> list[FlightLog]:
     """Read a flight log file into its gap-free segments, checked against the spec.
 
@@ -606,6 +613,15 @@ def read_log(
     gap_factor : float, default 1.5
         A sample interval more than ``gap_factor`` times the file's median interval is a
         gap: the log is split there.
+    config : Config, optional
+        The config of the analysis: its vehicle (mass, g, thrust scale) is what the
+        commanded thrust and the load cell are checked against
+        (:mod:`gainsched.analysis.logchecks`); without it those two checks are skipped.
+    trust : iterable of str, default ()
+        Consistency checks to skip, by name (:data:`~gainsched.analysis.logchecks.
+        CHECKS`: ``plane``, ``quaternion``, ``gyro``, ``thrust``, ``tension``,
+        ``xi_ref``), where the user knows the log is right; the log's metadata ``trust``
+        adds to them.
 
     Returns
     -------
@@ -646,7 +662,7 @@ def read_log(
     foreign = _foreign(path, channel_map, thrust_max)
     if foreign is not None:
         return _segments(path, foreign.meta, foreign.columns, foreign.rows, foreign.label,
-                         min_samples, gap_factor)
+                         min_samples, gap_factor, config=config, trust=trust)
     fmt = _format(path)
     if fmt == "csv":
         meta, raw, rows, label = _read_csv(path)
@@ -660,7 +676,8 @@ def read_log(
         cols = {name: _parse_column(path, name, s, rows, label) for name, s in raw.items()}
     else:
         cols = raw
-    return _segments(path, meta, cols, rows, label, min_samples, gap_factor)
+    return _segments(path, meta, cols, rows, label, min_samples, gap_factor, config=config,
+                     trust=trust)
 
 
 def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None
@@ -729,9 +746,18 @@ def _foreign(path: Path, channel_map, thrust_max):
     return dataclasses.replace(conv, meta=meta, report=(*conv.report, line))
 
 
-def _segments(path, meta, cols, rows, label, min_samples, gap_factor) -> list[FlightLog]:
-    """The common half of reading: the numeric rules, the plane, the split at gaps."""
-    arrays, optional, extra = _canonical(path, cols, rows, label)
+def _segments(path, meta, cols, rows, label, min_samples, gap_factor, *, config=None,
+              trust=()) -> list[FlightLog]:
+    """The common half of reading: the numeric rules, the plane, the channels' consistency
+    (:mod:`.logchecks`), the split at gaps."""
+    from .logchecks import check_log, thrust_units
+
+    deferred: list[InputError] = []
+    arrays, optional, extra = _canonical(path, cols, rows, label, deferred)
+    if deferred:  # thrust out of range: in other units? (else the range error as such)
+        thrust_units(path, arrays, optional, meta, config=config, trust=trust,
+                     gap_factor=gap_factor)
+        raise deferred[0]
     t = arrays["t"]
     n = t.shape[0]
     if n == 0:
@@ -743,6 +769,8 @@ def _segments(path, meta, cols, rows, label, min_samples, gap_factor) -> list[Fl
             f"{n} samples, fewer than the differentiation window ({min_samples})",
         )
     _check_plane(path, meta, arrays["p_I"])
+    check_log(path, t, arrays["p_I"], arrays["q"], arrays["T_cmd"], optional, meta,
+              config=config, trust=trust, gap_factor=gap_factor)
     dt = np.diff(t)
     med = float(np.median(dt)) if dt.size else 0.0
     cuts = np.flatnonzero(dt > gap_factor * med) + 1
