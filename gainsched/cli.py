@@ -16,8 +16,8 @@ import click
 import numpy as np
 
 from . import __version__
-from .constants import MAX_FLIGHT_S, MAX_JOBS, MAX_SEED, MAX_SWEEP_VARIANTS
 from .analysis.logchecks import CHECKS as LOG_CHECKS
+from .constants import MAX_FLIGHT_S, MAX_JOBS, MAX_SEED, MAX_SWEEP_VARIANTS
 from .errors import GainschedWarning, InputError
 
 __all__ = ["main", "cli"]

@@ -30,7 +30,8 @@ ratio is far from 1, naming the file, the column and the likely cause:
     The commanded thrust against the force the motion needs, across the plane of the
     tether and the velocity where neither the tether nor the drag pulls:
     ``sum T_i (z_B . n) = m (a - g) . n``, ``n = e x v / |e x v|``, with the config's
-    mass (and thrust scale, if the config has one). Grams-force read as newtons give
+    mass (and thrust scale, if the config has one), over the samples with every motor
+    on. Grams-force read as newtons give
     102x, mN 1000x, another vehicle what it weighs against this one.
 ``tension``
     The load cell against the radial equation, the tension the motion needs along the
@@ -80,6 +81,9 @@ MOVING_RATE = 0.5
 MIN_ARC = 1.0
 #: the force checks need the motion to ask for this much force on average, N
 MIN_FORCE = 0.5
+#: the figures are means over a flight: a long log is thinned to about this many
+#: samples (windows) per figure, evenly spread, so a check costs the same on any log
+MAX_SAMPLES = 20_000
 #: windows of the differences, s (rates; accelerations)
 RATE_WINDOW_S = 0.02
 ACCEL_WINDOW_S = 0.04
@@ -161,6 +165,11 @@ def _windows(t: np.ndarray, m: int, gap_factor: float) -> tuple[np.ndarray, np.n
     return k, t[k + m] - t[k]
 
 
+def _thin(k: np.ndarray) -> np.ndarray:
+    """Every s-th of the indices ``k``: at most about MAX_SAMPLES of them."""
+    return k[:: max(1, -(-k.shape[0] // MAX_SAMPLES))]
+
+
 def _lag(t: np.ndarray, seconds: float) -> int:
     dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 1.0
     return max(1, int(round(seconds / dt)))
@@ -171,6 +180,7 @@ def _accelerations(t, p, gap_factor):
     about ACCEL_WINDOW_S, and the velocities there (central differences)."""
     m = _lag(t, ACCEL_WINDOW_S / 2)
     k, _ = _windows(t, 2 * m, gap_factor)
+    k = _thin(k)
     if k.size == 0:
         return k, np.zeros((0, 3)), np.zeros((0, 3))
     c = k + m
@@ -203,7 +213,9 @@ def figures(t, p_I, q, T_cmd, optional: dict, meta: dict, *, mass: float | None 
     out: dict = {}
     if n < 3:
         return Figures()
-    R = _rotations(np.asarray(q, float))
+    q = np.asarray(q, float)
+    sel = _thin(np.arange(n))
+    R = _rotations(q[sel])
     x_B, z_B = R[:, :, 0], R[:, :, 2]
     alpha = math.radians(float(meta["alpha_c_deg"]))
     gamma = math.radians(float(meta["gamma_c_deg"]))
@@ -211,10 +223,10 @@ def figures(t, p_I, q, T_cmd, optional: dict, meta: dict, *, mass: float | None 
                        math.cos(alpha)])
     out["plane_up"] = float(np.mean(z_B @ normal))
 
-    radius = np.linalg.norm(p, axis=-1)
+    radius = np.linalg.norm(p[sel], axis=-1)
     far = radius > 0.5 * float(np.median(radius))
     if np.count_nonzero(far) >= 3:
-        e = p[far] / radius[far, None]
+        e = p[sel][far] / radius[far, None]
         out["x_along"] = float(np.mean(np.einsum("ki,ki->k", x_B[far], e)))
 
     # gyro against the rates of the attitude: R_k^T R_{k+m} over RATE_WINDOW_S
@@ -231,10 +243,11 @@ def figures(t, p_I, q, T_cmd, optional: dict, meta: dict, *, mass: float | None 
                 0.5 * (wz[1:] + wz[:-1]) * np.diff(t)[:, None], 0)])
             nbad = np.concatenate([[0], np.cumsum(bad)])
             ok = (nbad[k + m + 1] - nbad[k]) == 0
-            k, h = k[ok], h[ok]
+            k, h = _thin(k[ok]), h[ok]
+            h = t[k + m] - t[k]
             if k.size > 10:
                 mean_w = (cum[k + m] - cum[k]) / h[:, None]
-                dR = np.einsum("kji,kjl->kil", R[k], R[k + m])
+                dR = np.einsum("kji,kjl->kil", _rotations(q[k]), _rotations(q[k + m]))
                 vee = np.stack([dR[:, 2, 1] - dR[:, 1, 2], dR[:, 0, 2] - dR[:, 2, 0],
                                 dR[:, 1, 0] - dR[:, 0, 1]], -1) / 2
                 s = np.linalg.norm(vee, axis=-1)
@@ -262,22 +275,26 @@ def figures(t, p_I, q, T_cmd, optional: dict, meta: dict, *, mass: float | None 
         c, a, v = _accelerations(t, p, gap_factor)
         if c.size > 10:
             e = _unit(p[c])
-            thrust = thrust_scale * np.sum(np.asarray(T_cmd, float)[c], -1)
+            z_c = _rotations(q[c])[:, :, 2]
+            T_c = np.asarray(T_cmd, float)[c]
+            thrust = thrust_scale * np.sum(T_c, -1)
             hold = a - np.array([0.0, 0.0, -g])  # what thrust and tether must supply, /m
             nrm = np.cross(e, v)
-            good = np.linalg.norm(nrm, axis=-1) > 0.5  # moving across the tether, m/s
+            # moving across the tether (m/s), every motor on (a motor at exactly zero is
+            # off: the reader's other rules, and compare, deal with those stretches)
+            good = (np.linalg.norm(nrm, axis=-1) > 0.5) & np.all(T_c != 0, -1)
             if np.count_nonzero(good) > 10:
                 nn = _unit(nrm[good])
                 nn *= np.where(nn[:, 2] < 0, -1.0, 1.0)[:, None]
                 need = mass * np.einsum("ki,ki->k", hold[good], nn)
-                have = thrust[good] * np.einsum("ki,ki->k", z_B[c][good], nn)
+                have = thrust[good] * np.einsum("ki,ki->k", z_c[good], nn)
                 if float(np.mean(need)) > MIN_FORCE:
                     out["thrust_ratio"] = float(np.sum(have) / np.sum(need))
             tension = optional.get("tension")
             if tension is not None:
                 f = np.asarray(tension, float)[c]
                 fin = np.isfinite(f)
-                f_need = (thrust * np.einsum("ki,ki->k", z_B[c], e)
+                f_need = (thrust * np.einsum("ki,ki->k", z_c, e)
                           - mass * np.einsum("ki,ki->k", hold, e))[fin]
                 if fin.sum() > 10 and float(np.mean(f_need)) > MIN_FORCE:
                     out["tension_ratio"] = float(np.sum(f[fin]) / np.sum(f_need))

@@ -52,6 +52,12 @@ plane the metadata declare, ``R_IC = Rz(gamma_C) Rx(alpha_C)``, normal
 ``R_IC (0, 0, 1)``, within ``PLANE_TOL_DEG`` (10 deg); otherwise the metadata
 ``alpha_c_deg`` (or ``gamma_c_deg`` when the tilts agree) is an error. Files
 only (:func:`read_log`); :func:`log_from_arrays` (simulations) is not checked.
+
+**Consistency of the channels.** Files only, every format: the gyro, the quaternion
+order, the commanded thrust, the load cell, the reference azimuth and the plane
+normal's sign are checked against the pose and the model
+(:mod:`gainsched.analysis.logchecks`; thrust and tension with the ``config`` given);
+``trust`` (or the metadata key ``trust``) skips a check by name.
 """
 
 from __future__ import annotations
@@ -637,8 +643,9 @@ def read_log(
         ``q`` without ``r``), a cell that is not a number, NaN or inf in a required
         column, a value outside the plausible range (:data:`PLAUSIBLE`), time that does not
         strictly increase, a quaternion norm off unit by more than 0.01, a declared
-        circle plane the positions do not lie in, fewer than ``min_samples`` samples, or
-        no segment left after splitting.
+        circle plane the positions do not lie in, channels that contradict each other
+        or the model (:func:`~gainsched.analysis.logchecks.check_log`), fewer than
+        ``min_samples`` samples, or no segment left after splitting.
 
     Warns
     -----
