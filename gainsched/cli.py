@@ -1033,9 +1033,11 @@ def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir, 
 @_MAP
 @click.option("--config", "config_path", type=FilePath(dir_okay=False, path_type=Path),
               help="A config whose vehicle.thrust_max is a motor's thrust at full command "
-                   "(normalised or PWM commands, when the map gives no thrust_max_N).")
+                   "(normalised or PWM commands, when the map gives no thrust_max_N); "
+                   "its vehicle is what the thrust and the load cell are checked against.")
+@_TRUST
 @user_errors
-def convert(log, out_path, map_path, config_path):
+def convert(log, out_path, map_path, config_path, trust):
     """Convert a PX4 ULog or a ROS 2 bag to the project's flight-log format
     (docs/flight-log.md) for inspection, and say what was mapped to what."""
     from .analysis.logs import convert_log
@@ -1043,9 +1045,11 @@ def convert(log, out_path, map_path, config_path):
     from .publish import check_out_dir
 
     cmap = _channel_map(map_path)
-    thrust_max = load_config(config_path).vehicle.thrust_max if config_path else None
+    cfg = load_config(config_path) if config_path else None
+    thrust_max = cfg.vehicle.thrust_max if cfg is not None else None
     check_out_dir(out_path.parent, "-o")
-    report, segs = convert_log(log, out_path, channel_map=cmap, thrust_max=thrust_max)
+    report, segs = convert_log(log, out_path, channel_map=cmap, thrust_max=thrust_max,
+                               config=cfg, trust=trust)
     for line in report:
         click.echo("  " + line)
     n = sum(len(s) for s in segs)

@@ -687,8 +687,8 @@ def read_log(
                      trust=trust)
 
 
-def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None
-                ) -> tuple[tuple[str, ...], list[FlightLog]]:
+def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None,
+                config=None, trust=()) -> tuple[tuple[str, ...], list[FlightLog]]:
     """Convert a PX4 ULog or a ROS 2 bag to ``gainsched-flightlog/1`` at ``out``.
 
     The whole converted log is written (gaps included, as the format allows), after it
@@ -700,8 +700,11 @@ def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None
         The ULog (``.ulg``) or bag (a rosbag2 folder, ``.mcap`` or ``.db3``).
     out : str or path-like
         ``.csv``, ``.h5`` or ``.hdf5``.
-    channel_map, thrust_max
+    channel_map, thrust_max, config
         As for :func:`read_log`.
+    trust : iterable of str, default ()
+        Consistency checks to skip (:func:`read_log`); written to the converted log's
+        metadata ``trust``, so that it is read as it was converted.
 
     Returns
     -------
@@ -715,9 +718,12 @@ def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None
     if conv is None:
         raise InputError(path, "", "not a PX4 ULog (.ulg) or a ROS 2 bag (.mcap, .db3, or a "
                          "rosbag2 folder): nothing to convert")
-    segs = _segments(path, conv.meta, conv.columns, conv.rows, conv.label,
-                     DEFAULT_MIN_SAMPLES, GAP_FACTOR)
-    write_log(out, conv.columns, conv.meta)
+    meta = dict(conv.meta)
+    if trust:
+        meta["trust"] = ", ".join(dict.fromkeys(trust))
+    segs = _segments(path, meta, conv.columns, conv.rows, conv.label,
+                     DEFAULT_MIN_SAMPLES, GAP_FACTOR, config=config, trust=trust)
+    write_log(out, conv.columns, meta)
     return conv.report, segs
 
 
