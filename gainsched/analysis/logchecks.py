@@ -140,6 +140,20 @@ def trusted(meta: dict, trust=()) -> frozenset[str]:
 # --------------------------------------------------------------------------- geometry
 
 
+def _plane_normal(alpha_deg: float, gamma_deg: float) -> np.ndarray:
+    """``R_IC (0, 0, 1)`` with ``R_IC = Rz(gamma_C) Rx(alpha_C)`` (docs/conventions.md)."""
+    a, g = math.radians(alpha_deg), math.radians(gamma_deg)
+    return np.array([math.sin(a) * math.sin(g), -math.sin(a) * math.cos(g), math.cos(a)])
+
+
+def _plane_angles(n) -> tuple[float, float]:
+    """``(alpha_c, gamma_c)`` in deg of a plane's unit normal ``n`` (``n[2] >= 0``): the
+    inverse of :func:`_plane_normal`; gamma_c 0 for a level plane."""
+    alpha = math.degrees(math.acos(min(1.0, float(n[2]))))
+    gamma = math.degrees(math.atan2(float(n[0]), -float(n[1]))) if alpha > 1e-9 else 0.0
+    return alpha, gamma
+
+
 def _rotations(q: np.ndarray) -> np.ndarray:
     """R_IB (N, 3, 3) of unit quaternions (w, x, y, z)."""
     w, x, y, z = q.T
@@ -313,7 +327,7 @@ def figures(t, p_I, q, T_cmd, optional: dict, meta: dict, *, mass: float | None 
         dxi = (np.diff(xi)[k] + np.pi) % (2 * np.pi) - np.pi
         if xi_ref is not None:
             r = np.asarray(xi_ref, float)
-            dr = np.diff(r)[k]
+            dr = (np.diff(r)[k] + np.pi) % (2 * np.pi) - np.pi  # a wrapped xi_ref too
             fin = np.isfinite(dr)
             arc = float(np.sum(dxi[fin]))
             if abs(arc) > MIN_ARC:
@@ -388,8 +402,6 @@ def check_log(path, t, p_I, q, T_cmd, optional: dict, meta: dict, *, config=None
              f"{fig.x_along:.2f} (x_B points outward along the tether): are they (w, x, y, "
              "z), Hamilton, body -> inertial?")
     if "plane" not in skip and fig.plane_up < PLANE_UP_MIN:
-        from .logs import _plane_angles, _plane_normal
-
         alpha, gamma = float(meta["alpha_c_deg"]), float(meta["gamma_c_deg"])
         a2, g2 = _plane_angles(-_plane_normal(alpha, gamma))
         same = f"alpha_c_deg = {a2:.6g}" + (f", gamma_c_deg = {g2:.6g}" if a2 > 1e-6 else

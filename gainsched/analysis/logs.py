@@ -74,6 +74,7 @@ import numpy as np
 
 from ..errors import GainschedWarning, InputError
 from ..textinput import decode_text
+from .logchecks import _plane_angles, _plane_normal, check_log, thrust_units
 
 __all__ = [
     "SCHEMA",
@@ -530,20 +531,6 @@ def fitted_plane(p_I) -> tuple[np.ndarray, np.ndarray]:
     return n, s
 
 
-def _plane_normal(alpha_deg: float, gamma_deg: float) -> np.ndarray:
-    """``R_IC (0, 0, 1)`` with ``R_IC = Rz(gamma_C) Rx(alpha_C)`` (docs/conventions.md)."""
-    a, g = math.radians(alpha_deg), math.radians(gamma_deg)
-    return np.array([math.sin(a) * math.sin(g), -math.sin(a) * math.cos(g), math.cos(a)])
-
-
-def _plane_angles(n) -> tuple[float, float]:
-    """``(alpha_c, gamma_c)`` in deg of a plane's unit normal ``n`` (``n[2] >= 0``): the
-    inverse of :func:`_plane_normal`; gamma_c 0 for a level plane."""
-    alpha = math.degrees(math.acos(min(1.0, float(n[2]))))
-    gamma = math.degrees(math.atan2(float(n[0]), -float(n[1]))) if alpha > 1e-9 else 0.0
-    return alpha, gamma
-
-
 def _check_plane(path, meta: dict[str, str], p_I: np.ndarray) -> None:
     """The positions' plane must be the declared circle plane (module docstring)."""
     if p_I.shape[0] < 3:
@@ -763,8 +750,6 @@ def _segments(path, meta, cols, rows, label, min_samples, gap_factor, *, config=
               trust=()) -> list[FlightLog]:
     """The common half of reading: the numeric rules, the plane, the channels' consistency
     (:mod:`.logchecks`), the split at gaps."""
-    from .logchecks import check_log, thrust_units
-
     deferred: list[InputError] = []
     arrays, optional, extra = _canonical(path, cols, rows, label, deferred)
     if deferred:  # thrust out of range: in other units? (else the range error as such)

@@ -183,6 +183,20 @@ def test_unknown_trust_in_the_metadata(tmp_path):
                               f"{', '.join(CHECKS)})")
 
 
+def test_wrapped_reference_azimuth_is_the_same_reference(tmp_path, paper_config):
+    """xi_ref wrapped to [-pi, pi) (a controller may log it so; compare unwraps it) is
+    accepted; wrapped to [-180, 180) degrees it is still degrees."""
+    cols, meta = _flight("v15")
+    wrapped = (cols["xi_ref"] + np.pi) % (2 * np.pi) - np.pi
+    assert np.ptp(np.diff(wrapped)) > 6  # it does wrap in this flight
+    path = tmp_path / "wrapped.csv"
+    write_log(path, {**cols, "xi_ref": wrapped}, meta)
+    assert len(read_log(path, config=paper_config)) == 1
+    write_log(path, {**cols, "xi_ref": np.rad2deg(wrapped)}, meta)
+    with pytest.raises(InputError, match=r"^.*: column xi_ref: looks like degrees: 5\d\.\dx"):
+        read_log(path, config=paper_config)
+
+
 def test_force_checks_need_the_config(tmp_path):
     """Without a config (no mass) the thrust and tension checks do not run; the
     kinematic ones do."""
