@@ -404,6 +404,7 @@ def check_log(path, t, p_I, q, T_cmd, optional: dict, meta: dict, *, config=None
     if "plane" not in skip and fig.plane_up < PLANE_UP_MIN:
         alpha, gamma = float(meta["alpha_c_deg"]), float(meta["gamma_c_deg"])
         a2, g2 = _plane_angles(-_plane_normal(alpha, gamma))
+        g2 += 0.0  # no "-0"
         same = f"alpha_c_deg = {a2:.6g}" + (f", gamma_c_deg = {g2:.6g}" if a2 > 1e-6 else
                                             ", gamma_c_deg = 0")
         fail("plane", "metadata alpha_c_deg",
@@ -423,9 +424,12 @@ def check_log(path, t, p_I, q, T_cmd, optional: dict, meta: dict, *, config=None
                      "rate from the pose): sign flipped (FRD body axes read as FLU?)")
     if "thrust" not in skip and _off(fig.thrust_ratio):
         cause = _cause("thrust", fig.thrust_ratio)
+        if fig.thrust_ratio < 0:
+            cause = "negated (thrust along -z_B, NED/FRD?)"
         m = config.vehicle.mass
         fail("thrust", "columns T1, T2, T3, T4",
-             (f"look like {cause}: " if cause else "")
+             (f"look {cause}: " if fig.thrust_ratio < 0 else
+              f"look like {cause}: " if cause else "")
              + f"{_x(fig.thrust_ratio)} the thrust the motion needs with vehicle.mass = "
              f"{m:g} kg of {config.source}"
              + ("" if cause else ": a log of another vehicle, or thrust in other units?"))

@@ -66,6 +66,9 @@ MISTAKES = [
     ("another-vehicle-3x", "tilt40-v7", lambda c, m: (_scaled(c, THRUSTS, 3.0), m),
      "columns T1, T2, T3, T4", "2.80x the thrust the motion needs with vehicle.mass = 0.5 kg "
      f"of {PAPER_TOML}: a log of another vehicle, or thrust in other units?", "thrust"),
+    ("thrust-negated", "v3", lambda c, m: (_scaled(c, THRUSTS, -1.0), m),
+     "columns T1, T2, T3, T4", "look negated (thrust along -z_B, NED/FRD?): -0.99x the "
+     f"thrust the motion needs with vehicle.mass = 0.5 kg of {PAPER_TOML}", "thrust"),
     ("quaternion-scalar-last", "v9",
      lambda c, m: ({**c, "qw": c["qx"], "qx": c["qy"], "qy": c["qz"], "qz": c["qw"]}, m),
      "columns qw, qx, qy, qz", "look scalar-last (x, y, z, w): read so, the body x axis "
