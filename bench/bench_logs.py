@@ -2,8 +2,8 @@
 
     python -m bench.bench_logs [--minutes 10]
 
-A steady level circle of the paper's vehicle (9 m/s, the attitude that carries its
-specific force, the body rates of the turn, constant commands) is written for
+A steady level circle of the paper's vehicle (9 m/s, the attitude of a tethered circle,
+the body rates of the turn, constant commands) is written for
 ``--minutes`` as a PX4 ULog in PX4's conventions and rates (position 100 Hz,
 attitude 250 Hz, gyro and accelerometer 1 kHz, ``actuator_motors`` 400 Hz; pyulog's
 writer, through the test support's ``write_ulog``) and as the project's CSV at the
@@ -28,23 +28,23 @@ import numpy as np
 
 REPO = Path(__file__).parents[1]
 G = 9.80665
-TMAX = 6.0  # N, a motor at full command (the circle needs 4.1 N per motor)
+TMAX = 6.0  # N, a motor at full command (the circle needs 1.2 N per motor)
 
 
 def steady_circle(minutes: float, rate: float = 1000.0):
     """t (s), p_I (m), R_IB, omega_B (rad/s), f_B (m/s^2) of a steady level circle at
-    1 kHz: radius 2.6 m, 9 m/s, the thrust axis along the specific force."""
+    1 kHz: radius 2.6 m, 9 m/s, the attitude of a tethered circle (docs/conventions.md:
+    x_B outward along the tether, the thrust axis up holding the weight, the tether
+    pulling the vehicle round), as the reader's consistency checks expect."""
     t = np.arange(0.0, 60.0 * minutes, 1.0 / rate)
     r, v = 2.6, 9.0
     w = v / r
     xi = w * t
     p = np.stack([r * np.cos(xi), r * np.sin(xi), np.zeros_like(t)], -1)
     a = -w * w * p
-    f_I = a - np.array([0.0, 0.0, -G])  # specific force in I
-    z_B = f_I / np.linalg.norm(f_I, axis=-1, keepdims=True)
-    x_B = np.stack([-np.sin(xi), np.cos(xi), np.zeros_like(t)], -1)  # along the path
-    x_B = x_B - np.sum(x_B * z_B, -1, keepdims=True) * z_B
-    x_B /= np.linalg.norm(x_B, axis=-1, keepdims=True)
+    f_I = a - np.array([0.0, 0.0, -G])  # specific force in I: thrust and tether, per kg
+    x_B = p / r  # outward along the tether
+    z_B = np.broadcast_to([0.0, 0.0, 1.0], p.shape)
     R = np.stack([x_B, np.cross(z_B, x_B), z_B], -1)  # columns: body axes in I
     omega_B = np.einsum("kji,j->ki", R, [0.0, 0.0, w])
     f_B = np.einsum("kji,kj->ki", R, f_I)
@@ -65,7 +65,7 @@ def write_logs(folder: Path, minutes: float) -> tuple[Path, Path]:
     ip, ia = slice(0, None, 10), slice(0, None, 4)
     p_ned, q = p @ ned.T, quaternion_from_matrix(ned @ R @ frd)
     tm = np.arange(0.0, t[-1], 0.0025)
-    thrust = 0.25 * 0.5 * np.linalg.norm(f[0])  # N per motor: m |f| / 4
+    thrust = 0.25 * 0.5 * G  # N per motor: the weight m g / 4 (the tether pulls it round)
     ulg = folder / "circle.ulg"
     write_ulog(ulg, {
         "vehicle_local_position": {"timestamp": us[ip], **{a: p_ned[ip, j]

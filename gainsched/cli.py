@@ -16,6 +16,7 @@ import click
 import numpy as np
 
 from . import __version__
+from .analysis.logchecks import CHECKS as LOG_CHECKS
 from .constants import MAX_FLIGHT_S, MAX_JOBS, MAX_SEED, MAX_SWEEP_VARIANTS
 from .errors import GainschedWarning, InputError
 
@@ -869,6 +870,12 @@ _MAP = click.option("--map", "map_path", help="Channel map of PX4 ULogs and ROS 
                     "for a ULog: px4 (docs/flight-log.md).")
 
 
+_TRUST = click.option("--trust", "trust", multiple=True, type=click.Choice(LOG_CHECKS),
+                      help="Skip a consistency check of the logs where you know the log is "
+                      "right (repeatable; docs/flight-log.md, \"Channels that contradict "
+                      "each other\").")
+
+
 def _channel_map(map_path):
     """The validated channel map of --map, or None (checked before any work)."""
     if map_path is None:
@@ -893,8 +900,9 @@ def _load_for_compare(config):
               help="An earlier config: its residual beside CONFIG's (before/after).")
 @click.option("--no-paper", is_flag=True, help="Skip the paper's thrust/drag analyses.")
 @_MAP
+@_TRUST
 @user_errors
-def compare(config, logs, out_dir, before_path, no_paper, map_path):
+def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
     """Compare the model of CONFIG with flight LOGS (CSV, HDF5, PX4 ULog or ROS 2 bag
     through a channel map): residual per axis
     (path frame m/s^2, body rad/s^2, tether stretch m), RMS, bias, fit %, whiteness,
@@ -914,13 +922,13 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path):
     cmap = _channel_map(map_path)
     if out_dir is not None:
         check_out_dir(out_dir)
-    cmp = run(cfg, logs, channel_map=cmap)
+    cmp = run(cfg, logs, channel_map=cmap, trust=trust)
     paper = None if no_paper else paper_fits(cfg, cmp.measured)
     for line in compare_lines(cmp, paper):
         click.echo(line)
     before = None
     if before_path is not None:
-        before = run(before_cfg, logs, channel_map=cmap)
+        before = run(before_cfg, logs, channel_map=cmap, trust=trust)
         click.echo("")
         for line in before_after_lines(before, cmp):
             click.echo(line)
@@ -951,9 +959,10 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path):
 @click.option("--report", "report_dir", type=FilePath(file_okay=False, path_type=Path),
               help="Report folder: diagnose.json/.md, ranking.png, before/after.")
 @_MAP
+@_TRUST
 @user_errors
 def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, report_dir,
-             map_path):
+             map_path, trust):
     """Which physical effect is missing: fit every candidate effect the model lacks to
     the residual on LOGS, score on held-out flights (leave one flight out), rank, check
     identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
@@ -986,7 +995,7 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
         check_out_dir(new_config.parent, "-o")
     if report_dir is not None:
         check_out_dir(report_dir, "--report")
-    base = run(cfg, logs, channel_map=cmap)
+    base = run(cfg, logs, channel_map=cmap, trust=trust)
     for line in compare_lines(base):
         click.echo(line)
     click.echo("")
@@ -1003,7 +1012,8 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
             write_atomic(new_config, text.encode(), where="-o")
             click.echo(f"wrote {new_config} ({d.accepted.name}); rebuild the tables with "
                        f"`gainsched build {new_config}`")
-            after = run(config_from_text(text, str(new_config)), logs, channel_map=cmap)
+            after = run(config_from_text(text, str(new_config)), logs, channel_map=cmap,
+                        trust=trust)
             click.echo("")
             for line in before_after_lines(base, after):
                 click.echo(line)
@@ -1023,9 +1033,11 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
 @_MAP
 @click.option("--config", "config_path", type=FilePath(dir_okay=False, path_type=Path),
               help="A config whose vehicle.thrust_max is a motor's thrust at full command "
-                   "(normalised or PWM commands, when the map gives no thrust_max_N).")
+                   "(normalised or PWM commands, when the map gives no thrust_max_N); "
+                   "its vehicle is what the thrust and the load cell are checked against.")
+@_TRUST
 @user_errors
-def convert(log, out_path, map_path, config_path):
+def convert(log, out_path, map_path, config_path, trust):
     """Convert a PX4 ULog or a ROS 2 bag to the project's flight-log format
     (docs/flight-log.md) for inspection, and say what was mapped to what."""
     from .analysis.logs import convert_log
@@ -1033,9 +1045,11 @@ def convert(log, out_path, map_path, config_path):
     from .publish import check_out_dir
 
     cmap = _channel_map(map_path)
-    thrust_max = load_config(config_path).vehicle.thrust_max if config_path else None
+    cfg = load_config(config_path) if config_path else None
+    thrust_max = cfg.vehicle.thrust_max if cfg is not None else None
     check_out_dir(out_path.parent, "-o")
-    report, segs = convert_log(log, out_path, channel_map=cmap, thrust_max=thrust_max)
+    report, segs = convert_log(log, out_path, channel_map=cmap, thrust_max=thrust_max,
+                               config=cfg, trust=trust)
     for line in report:
         click.echo("  " + line)
     n = sum(len(s) for s in segs)

@@ -877,14 +877,16 @@ def check_motor_order(model: Model, measured, segs=None,
 # --------------------------------------------------------------------------- loading
 
 
-def load_segments(config: Config, logs, channel_map=None
+def load_segments(config: Config, logs, channel_map=None, trust=()
                   ) -> tuple[list[Measured], list[FlightLog], list[str]]:
     """Read log files (or take :class:`FlightLog` objects) and differentiate every segment.
 
     ``channel_map``: for PX4 ULogs and ROS 2 bags (:func:`read_log`); their normalised or
     PWM commands reach newtons through the config's ``vehicle.thrust_max`` unless the
-    map gives a thrust. Returns (measured segments, the log segments, warnings as text:
-    gaps, dropped pieces).
+    map gives a thrust. The files are checked against the config's vehicle
+    (:mod:`gainsched.analysis.logchecks`) except for the checks named in ``trust``.
+    Returns (measured segments, the log segments, warnings as text: gaps, dropped
+    pieces).
     """
     segs: list[FlightLog] = []
     notes: list[str] = []
@@ -895,7 +897,8 @@ def load_segments(config: Config, logs, channel_map=None
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", LogWarning)
             segs.extend(read_log(item, channel_map=channel_map,
-                                 thrust_max=config.vehicle.thrust_max))
+                                 thrust_max=config.vehicle.thrust_max, config=config,
+                                 trust=trust))
         notes.extend(str(w.message) for w in caught if issubclass(w.category, LogWarning))
     if not segs:
         raise InputError("command line", "LOG", "no flight log given")
@@ -1349,7 +1352,7 @@ class Comparison:
 
 
 def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
-            notes=None, channel_map=None) -> Comparison:
+            notes=None, channel_map=None, trust=()) -> Comparison:
     """Compare the model with flight logs: the residual per axis against its noise floor.
 
     The whole of ``gainsched compare`` (docs/model-vs-measurement.md): per gap-free log
@@ -1385,6 +1388,10 @@ def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
         How PX4 ULogs and ROS 2 bags among ``logs`` hold the channels
         (:func:`~gainsched.analysis.logs.read_log`; default for a ULog: the shipped
         ``px4`` map).
+    trust : iterable of str, optional
+        Consistency checks of the log files to skip (:func:`~gainsched.analysis.logs.
+        read_log`, docs/flight-log.md): ``plane``, ``quaternion``, ``gyro``, ``thrust``,
+        ``tension``, ``xi_ref``.
 
     Returns
     -------
@@ -1421,7 +1428,7 @@ def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
     'roll residual concentrates at tension 26-34.1 N (RMS 5.74 rad/s^2, ...)'
     """
     if measured is None:
-        measured, segs, notes = load_segments(config, logs, channel_map)
+        measured, segs, notes = load_segments(config, logs, channel_map, trust)
     model = Model(config, effects)
     check_motor_order(model, measured, segs)
     res = residuals(config, measured, effects=effects, model=model)

@@ -1230,7 +1230,7 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
 
 def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | None = None,
              progress=None, joint: bool = False, forward: bool = True,
-             channel_map=None, exclude=()) -> Diagnosis:
+             channel_map=None, exclude=(), trust=()) -> Diagnosis:
     """Find which physical effect the model misses: fit candidates, score them held out.
 
     The whole of ``gainsched diagnose`` (docs/model-vs-measurement.md, the module
@@ -1277,6 +1277,8 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
         told that an effect is not there. When no other effect explains what it would
         have, the verdict says that no library effect explains it and fits an empirical
         term.
+    trust : iterable of str, optional
+        Consistency checks of the log files to skip (:func:`compare`).
 
     Returns
     -------
@@ -1311,7 +1313,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     """
     from ..errors import InputError
 
-    base = comparison or compare(config, logs, channel_map=channel_map)
+    base = comparison or compare(config, logs, channel_map=channel_map, trust=trust)
     meas = base.measured
     segs = base.segs
     prob = _Problem(config, meas, segs, base.noise, base.residuals)

@@ -52,6 +52,12 @@ plane the metadata declare, ``R_IC = Rz(gamma_C) Rx(alpha_C)``, normal
 ``R_IC (0, 0, 1)``, within ``PLANE_TOL_DEG`` (10 deg); otherwise the metadata
 ``alpha_c_deg`` (or ``gamma_c_deg`` when the tilts agree) is an error. Files
 only (:func:`read_log`); :func:`log_from_arrays` (simulations) is not checked.
+
+**Consistency of the channels.** Files only, every format: the gyro, the quaternion
+order, the commanded thrust, the load cell, the reference azimuth and the plane
+normal's sign are checked against the pose and the model
+(:mod:`gainsched.analysis.logchecks`; thrust and tension with the ``config`` given);
+``trust`` (or the metadata key ``trust``) skips a check by name.
 """
 
 from __future__ import annotations
@@ -68,6 +74,7 @@ import numpy as np
 
 from ..errors import GainschedWarning, InputError
 from ..textinput import decode_text
+from .logchecks import _plane_angles, _plane_normal, check_log, thrust_units
 
 __all__ = [
     "SCHEMA",
@@ -418,10 +425,12 @@ def _check_meta(path, meta: dict[str, str]) -> None:
             raise InputError(path, f"metadata {key}", f"must be a finite number, got {meta[key]!r}")
 
 
-def _canonical(path, cols: dict[str, np.ndarray], rows, label):
+def _canonical(path, cols: dict[str, np.ndarray], rows, label, deferred=None):
     """Check the numeric bad-data rules and build the arrays -> dict of arrays.
 
-    ``cols`` holds float arrays by column name (all columns the same length).
+    ``cols`` holds float arrays by column name (all columns the same length). With a
+    list ``deferred``, the range error of a thrust column is appended to it instead of
+    raised (the reader first asks whether the thrust is in other units).
     """
     for name in REQUIRED_COLUMNS:
         if name not in cols:
@@ -450,12 +459,16 @@ def _canonical(path, cols: dict[str, np.ndarray], rows, label):
                 bad = np.flatnonzero(np.abs(cols[name]) > limit)  # NaN (optional) passes
             if bad.size:
                 k = bad[0]
-                raise InputError(
+                err = InputError(
                     path,
                     f"column {name}, {label} {rows[k]}",
                     f"{float(cols[name][k])!r} {unit} is not plausible (|{name}| <= {limit:g} "
                     f"{unit})",
                 )
+                if deferred is None or name[0] != "T" or not np.all(np.isfinite(cols[name])):
+                    raise err
+                if not deferred:
+                    deferred.append(err)
     t = cols["t"]
     dt = np.diff(t)
     bad = np.flatnonzero(dt <= 0)
@@ -518,20 +531,6 @@ def fitted_plane(p_I) -> tuple[np.ndarray, np.ndarray]:
     return n, s
 
 
-def _plane_normal(alpha_deg: float, gamma_deg: float) -> np.ndarray:
-    """``R_IC (0, 0, 1)`` with ``R_IC = Rz(gamma_C) Rx(alpha_C)`` (docs/conventions.md)."""
-    a, g = math.radians(alpha_deg), math.radians(gamma_deg)
-    return np.array([math.sin(a) * math.sin(g), -math.sin(a) * math.cos(g), math.cos(a)])
-
-
-def _plane_angles(n) -> tuple[float, float]:
-    """``(alpha_c, gamma_c)`` in deg of a plane's unit normal ``n`` (``n[2] >= 0``): the
-    inverse of :func:`_plane_normal`; gamma_c 0 for a level plane."""
-    alpha = math.degrees(math.acos(min(1.0, float(n[2]))))
-    gamma = math.degrees(math.atan2(float(n[0]), -float(n[1]))) if alpha > 1e-9 else 0.0
-    return alpha, gamma
-
-
 def _check_plane(path, meta: dict[str, str], p_I: np.ndarray) -> None:
     """The positions' plane must be the declared circle plane (module docstring)."""
     if p_I.shape[0] < 3:
@@ -577,6 +576,7 @@ def _make(arrays, optional, extra, meta, source, sl, **kw) -> FlightLog:
 def read_log(
     path, *, channel_map=None, thrust_max: float | None = None,
     min_samples: int = DEFAULT_MIN_SAMPLES, gap_factor: float = GAP_FACTOR,
+    config=None, trust=(),
 ) -> list[FlightLog]:
     """Read a flight log file into its gap-free segments, checked against the spec.
 
@@ -606,6 +606,15 @@ def read_log(
     gap_factor : float, default 1.5
         A sample interval more than ``gap_factor`` times the file's median interval is a
         gap: the log is split there.
+    config : Config, optional
+        The config of the analysis: its vehicle (mass, g, thrust scale) is what the
+        commanded thrust and the load cell are checked against
+        (:mod:`gainsched.analysis.logchecks`); without it those two checks are skipped.
+    trust : iterable of str, default ()
+        Consistency checks to skip, by name (:data:`~gainsched.analysis.logchecks.
+        CHECKS`: ``plane``, ``quaternion``, ``gyro``, ``thrust``, ``tension``,
+        ``xi_ref``), where the user knows the log is right; the log's metadata ``trust``
+        adds to them.
 
     Returns
     -------
@@ -621,8 +630,9 @@ def read_log(
         ``q`` without ``r``), a cell that is not a number, NaN or inf in a required
         column, a value outside the plausible range (:data:`PLAUSIBLE`), time that does not
         strictly increase, a quaternion norm off unit by more than 0.01, a declared
-        circle plane the positions do not lie in, fewer than ``min_samples`` samples, or
-        no segment left after splitting.
+        circle plane the positions do not lie in, channels that contradict each other
+        or the model (:func:`~gainsched.analysis.logchecks.check_log`), fewer than
+        ``min_samples`` samples, or no segment left after splitting.
 
     Warns
     -----
@@ -646,7 +656,7 @@ def read_log(
     foreign = _foreign(path, channel_map, thrust_max)
     if foreign is not None:
         return _segments(path, foreign.meta, foreign.columns, foreign.rows, foreign.label,
-                         min_samples, gap_factor)
+                         min_samples, gap_factor, config=config, trust=trust)
     fmt = _format(path)
     if fmt == "csv":
         meta, raw, rows, label = _read_csv(path)
@@ -660,11 +670,12 @@ def read_log(
         cols = {name: _parse_column(path, name, s, rows, label) for name, s in raw.items()}
     else:
         cols = raw
-    return _segments(path, meta, cols, rows, label, min_samples, gap_factor)
+    return _segments(path, meta, cols, rows, label, min_samples, gap_factor, config=config,
+                     trust=trust)
 
 
-def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None
-                ) -> tuple[tuple[str, ...], list[FlightLog]]:
+def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None,
+                config=None, trust=()) -> tuple[tuple[str, ...], list[FlightLog]]:
     """Convert a PX4 ULog or a ROS 2 bag to ``gainsched-flightlog/1`` at ``out``.
 
     The whole converted log is written (gaps included, as the format allows), after it
@@ -676,8 +687,11 @@ def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None
         The ULog (``.ulg``) or bag (a rosbag2 folder, ``.mcap`` or ``.db3``).
     out : str or path-like
         ``.csv``, ``.h5`` or ``.hdf5``.
-    channel_map, thrust_max
+    channel_map, thrust_max, config
         As for :func:`read_log`.
+    trust : iterable of str, default ()
+        Consistency checks to skip (:func:`read_log`); written to the converted log's
+        metadata ``trust``, so that it is read as it was converted.
 
     Returns
     -------
@@ -691,9 +705,12 @@ def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None
     if conv is None:
         raise InputError(path, "", "not a PX4 ULog (.ulg) or a ROS 2 bag (.mcap, .db3, or a "
                          "rosbag2 folder): nothing to convert")
-    segs = _segments(path, conv.meta, conv.columns, conv.rows, conv.label,
-                     DEFAULT_MIN_SAMPLES, GAP_FACTOR)
-    write_log(out, conv.columns, conv.meta)
+    meta = dict(conv.meta)
+    if trust:
+        meta["trust"] = ", ".join(dict.fromkeys(trust))
+    segs = _segments(path, meta, conv.columns, conv.rows, conv.label,
+                     DEFAULT_MIN_SAMPLES, GAP_FACTOR, config=config, trust=trust)
+    write_log(out, conv.columns, meta)
     return conv.report, segs
 
 
@@ -729,9 +746,16 @@ def _foreign(path: Path, channel_map, thrust_max):
     return dataclasses.replace(conv, meta=meta, report=(*conv.report, line))
 
 
-def _segments(path, meta, cols, rows, label, min_samples, gap_factor) -> list[FlightLog]:
-    """The common half of reading: the numeric rules, the plane, the split at gaps."""
-    arrays, optional, extra = _canonical(path, cols, rows, label)
+def _segments(path, meta, cols, rows, label, min_samples, gap_factor, *, config=None,
+              trust=()) -> list[FlightLog]:
+    """The common half of reading: the numeric rules, the plane, the channels' consistency
+    (:mod:`.logchecks`), the split at gaps."""
+    deferred: list[InputError] = []
+    arrays, optional, extra = _canonical(path, cols, rows, label, deferred)
+    if deferred:  # thrust out of range: in other units? (else the range error as such)
+        thrust_units(path, arrays, optional, meta, config=config, trust=trust,
+                     gap_factor=gap_factor)
+        raise deferred[0]
     t = arrays["t"]
     n = t.shape[0]
     if n == 0:
@@ -743,6 +767,8 @@ def _segments(path, meta, cols, rows, label, min_samples, gap_factor) -> list[Fl
             f"{n} samples, fewer than the differentiation window ({min_samples})",
         )
     _check_plane(path, meta, arrays["p_I"])
+    check_log(path, t, arrays["p_I"], arrays["q"], arrays["T_cmd"], optional, meta,
+              config=config, trust=trust, gap_factor=gap_factor)
     dt = np.diff(t)
     med = float(np.median(dt)) if dt.size else 0.0
     cuts = np.flatnonzero(dt > gap_factor * med) + 1

@@ -303,6 +303,37 @@ def test_cli_convert_writes_the_log_and_says_what_it_mapped(paper_config, flight
     assert not (tmp_path / "g.csv").exists() and not (tmp_path / "f.txt").exists()
 
 
+def test_convert_checks_the_load_cell_against_the_config_and_trust_travels(
+        paper_config, flight, tmp_path):
+    """A map that leaves the load cell in grams-force (its scale forgotten): ``convert
+    --config`` refuses it naming the column and the unit (issue 38; the checks of
+    gainsched/analysis/logchecks.py); ``--trust tension`` converts it and writes the trust
+    into the log's metadata, so the CSV reads as the ULog did."""
+    from click.testing import CliRunner
+
+    from gainsched.cli import cli
+
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max)
+    ulg = tmp_path / "f.ulg"
+    write_ulog(ulg, topics, params)
+    mp = tmp_path / "grams.toml"
+    mp.write_text(set_values(open(load_channel_map("px4").source).read(), {
+        "frames.anchor_m": ANCHOR_NED.tolist(), "tension.topic": "tether_load",
+        "tension.fields": ["force"], "tension.scale": 1.0}))
+    out = tmp_path / "f.csv"
+    args = ["convert", str(ulg), "-o", str(out), "--map", str(mp), "--config", "paper"]
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code == 2, r.output
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.output
+    assert re.search(rf"^gainsched: error: {re.escape(str(ulg))}: column tension: looks like "
+                     r"grams-force \(gf\): 10\dx the tension the radial equation gives", r.stderr)
+    assert not out.exists()
+    r = CliRunner().invoke(cli, [*args, "--trust", "tension"])
+    assert r.exit_code == 0, r.output
+    (back,) = read_log(out, config=paper_config)
+    assert back.meta["trust"] == "tension"
+
+
 # --------------------------------------------------------------------------- ROS 2 bags
 ANCHOR_ENU = np.array([-0.4, 2.2, 0.3])  # the anchor in the motion capture's frame, m
 

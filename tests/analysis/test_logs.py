@@ -28,6 +28,17 @@ N_META = 4  # metadata lines written before the header by _csv_text
 REQUIRED = ["t", "x", "y", "z", "qw", "qx", "qy", "qz", "T1", "T2", "T3", "T4"]
 
 
+def _attitude(R_IC, xi, rng):
+    """Quaternions (N, 4) of ``R_IB = R_IC Rz(xi)`` tilted by a small random rotation:
+    x_B outward along the tether, z_B along the plane's normal (docs/conventions.md), as
+    the reader's consistency checks (gainsched/analysis/logchecks.py) expect of a flight."""
+    from scipy.spatial.transform import Rotation
+
+    tilt = Rotation.from_rotvec(rng.normal(0, 0.02, 3))
+    R = Rotation.from_matrix(R_IC) * Rotation.from_rotvec(xi[:, None] * [0.0, 0.0, 1.0]) * tilt
+    return np.roll(R.as_quat(), 1, axis=1)  # scalar first
+
+
 def _columns(n=60, seed=0, dt=0.005):
     """A plausible, smooth flight: full-precision random floats, unit quaternions."""
     rng = np.random.default_rng(seed)
@@ -39,11 +50,8 @@ def _columns(n=60, seed=0, dt=0.005):
         "y": 1.6 * np.sin(xi) * math.cos(0.35) + rng.normal(0, 1e-3, n),
         "z": 1.6 * np.sin(xi) * math.sin(0.35) + rng.normal(0, 1e-3, n),
     }
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    half = 0.1 + 0.5 * xi[:, None]
-    q = np.concatenate([np.cos(half), np.sin(half) * axis], axis=1)
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    c, s = math.cos(0.35), math.sin(0.35)
+    q = _attitude(np.array([[1, 0, 0], [0, c, -s], [0, s, c]]), xi, rng)
     for j, name in enumerate(("qw", "qx", "qy", "qz")):
         cols[name] = q[:, j]
     for j in range(4):
@@ -54,8 +62,13 @@ def _columns(n=60, seed=0, dt=0.005):
 def _full_columns(n=60, seed=1):
     cols = _columns(n, seed)
     rng = np.random.default_rng(seed + 100)
-    for name in ("p", "q", "r", "ax", "ay", "az", "tension", "vbat", "xi_ref", "xi_dot_ref"):
+    for name in ("ax", "ay", "az", "tension", "vbat"):
         cols[name] = rng.normal(size=n) * 10 ** rng.uniform(-3, 3)
+    # the gyro and the reference azimuth agree with the pose (the reader checks them)
+    for name, rate in (("p", 0.0), ("q", 0.0), ("r", 5.0)):
+        cols[name] = rate + rng.normal(size=n) * 10 ** rng.uniform(-3, -1)
+    cols["xi_ref"] = 5.0 * cols["t"] + rng.normal(size=n) * 1e-3
+    cols["xi_dot_ref"] = 5.0 + rng.normal(size=n) * 1e-3
     cols["vbat"][3] = np.nan  # a missing sensor sample is allowed in optional columns
     cols["zz_mode"] = rng.integers(0, 4, n).astype(float)
     cols["aa_debug"] = rng.normal(size=n) * 1e-200
@@ -613,6 +626,7 @@ def _plane_columns(alpha_deg, gamma_deg=0.0, n=200, arc=3.0, noise=1e-3, seed=4)
     p = 1.6 * np.stack([np.cos(xi), np.sin(xi), 0 * xi], 1) @ (Rz @ Rx).T
     p += rng.normal(0, noise, p.shape)
     cols.update(zip("xyz", p.T, strict=True))
+    cols.update(zip(("qw", "qx", "qy", "qz"), _attitude(Rz @ Rx, xi, rng).T, strict=True))
     return cols
 
 
