@@ -557,9 +557,9 @@ def _tether_stretch(config: Config, f_t, dt):
 
 
 @dataclass(frozen=True)
-@dataclass(frozen=True)
 class _Kin(Kinematics):
-    """Kinematics with the body-frame (ground) velocity computed once per segment."""
+    """Kinematics with the body-frame (ground) velocity computed once per segment (still
+    air; :func:`predict` builds a plain one in a model's wind)."""
 
     vB: np.ndarray | None = None
 
@@ -620,7 +620,11 @@ def predict(model: Model, meas: Measured, *, latency: float | None = None,
     T_raw = _delayed(meas.t, meas.T_cmd, lat)
     u = centred_commands(T_raw)
     z = meas.z
-    kin = _kinematics(meas).with_air(model.wind_I)  # the flight's heading in the model's wind
+    if model.wind_I is None:
+        kin = _kinematics(meas)
+    else:  # the flight's heading turns the model's wind into its circle frame
+        kin = Kinematics(meas.R, meas.v, meas.z[:, 7:10], meas.p, meas.alpha, meas.gamma,
+                         model.wind_I)
     if model.n_extra:
         parts = [z]
 
