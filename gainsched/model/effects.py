@@ -21,7 +21,6 @@ All hooks broadcast over leading batch dimensions and are complex-step safe.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import ClassVar
@@ -216,14 +215,6 @@ class Kinematics:
         if self.wind_I is None:
             return self.v_B
         return mtv(self.R_CB, self.v_air_C)
-
-    def with_air(self, wind_I, gamma=None) -> Kinematics:
-        """The same kinematics in the air velocity ``wind_I`` (3,), m/s in I (None: still
-        air), optionally at the heading ``gamma`` (rad); ``self`` when nothing changes."""
-        if wind_I is None and (gamma is None or self.wind_I is None):
-            return self if self.wind_I is None else dataclasses.replace(self, wind_I=None)
-        g = self.gamma if gamma is None else gamma
-        return dataclasses.replace(self, wind_I=wind_I, gamma=g)
 
     @property
     def up_C(self):

@@ -65,8 +65,8 @@ def check_effect_symmetries(config) -> None:
     The table stores ``alpha >= 0, xi' > 0`` and the runtime maps every other query
     there (S1, S2; docs/symmetry.md); an effect tied to an inertial heading or azimuth
     would make those maps wrong without a sign. An effect whose class gives a
-    ``table_refusal`` (flight time, a wind) is refused with that reason. Raises :class:`InputError` naming the
-    config file and ``effects.<kind>``
+    ``table_refusal`` (flight time, a wind) is refused with that reason. Raises
+    :class:`InputError` naming the config file and ``effects.<kind>``
     (:func:`~gainsched.model.symmetry.effect_symmetry_errors`).
     """
     for eff in Model(config).effects:

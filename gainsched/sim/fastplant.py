@@ -11,8 +11,9 @@ kernel through ctypes with preallocated buffers.
 Supported: the rigid link with the state-only effects ``drag`` (eq. 10),
 ``rotor_drag``, ``thrust_scale``, ``motor_efficiency``, ``thrust_airspeed``,
 ``thrust_momentum`` (eq. 29), ``wind`` (the circle's heading gamma is then an argument of
-every call), ``thrust_time`` (1 extra state) and ``motor_lag`` (4 extra states) (:class:`FastPlant`); the spring-damper link with
-the same effects but the stateful ``motor_lag`` (:class:`FastMaximal`, the
+every call), ``thrust_time`` (1 extra state) and ``motor_lag`` (4 extra states)
+(:class:`FastPlant`); the spring-damper link with the same effects but the stateful
+``motor_lag`` and ``thrust_time`` (:class:`FastMaximal`, the
 maximal-coordinate model of :mod:`gainsched.model.maximal`, which has no stateful
 effects either). Anything else (other effects, the SLS and lumped-mass links) uses the
 numpy model: :func:`fast_plant` returns None and the caller falls back, as it does when

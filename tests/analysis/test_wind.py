@@ -205,3 +205,28 @@ def test_diagnose_finds_the_wind(diagnosed):
     assert abs(a.values["north"] - WIND[1]) <= 0.1 * speed, a.values
     assert _excess_rms_fall(a) >= 0.8, a.excess_explained
     assert "from 307 deg" in d.verdict, d.verdict
+
+
+@pytest.mark.slow
+def test_diagnose_apply_writes_the_wind_and_says_no_table_holds_it(fly, tmp_path):
+    """``gainsched diagnose --apply`` on the wind campaign writes ``[effects.wind]`` with the
+    fitted components and says that no table can hold it (instead of "rebuild the
+    tables"); the written config flies, compares at the noise floor, and the build
+    refuses it."""
+    from gainsched.config import load_config
+    from gainsched.sim.campaign import write_campaign
+
+    logs = write_campaign(tmp_path / "flights", fly("wind"))
+    out = tmp_path / "windy.toml"
+    res = CliRunner().invoke(cli, ["diagnose", str(PAPER_TOML), *map(str, logs),
+                                   "--apply", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "verdict: missing effect: wind" in res.output, res.output
+    assert "no table can hold effects.wind" in res.output, res.output
+    assert "rebuild the tables" not in res.output
+    cfg = load_config(out)
+    w = dict(next(s for s in cfg.effects if s.name == "wind").params)
+    assert math.hypot(w["east"] - WIND[0], w["north"] - WIND[1]) <= 0.1 * math.hypot(*WIND)
+    assert compare(cfg, logs).normalized_rms() <= 1.2
+    with pytest.raises(InputError, match=r"effects.wind: blows from an inertial direction"):
+        build_grid(cfg)
