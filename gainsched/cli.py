@@ -1003,8 +1003,8 @@ def diagnose(config, logs, candidates, joint, do_apply, new_config, report_dir, 
             text = apply_candidate(cfg, d.accepted)
             write_atomic(new_config, text.encode(), where="-o")
             new_cfg = config_from_text(text, str(new_config))
-            held = [(s.name, EFFECTS[s.name].table_refusal) for s in new_cfg.effects
-                    if EFFECTS[s.name].table_refusal]
+            held = [(s.name, EFFECTS[s.name].refusal()) for s in new_cfg.effects
+                    if EFFECTS[s.name].refusal()]
             if held:  # a wind, a thrust of flight time: the build would refuse the config
                 click.echo(f"wrote {new_config} ({d.accepted.name}); no table can hold "
                            f"effects.{held[0][0]} ({held[0][1]}): simulate and compare with "

@@ -62,6 +62,10 @@ __all__ = [
 _EPS2 = 1e-24  # keeps sqrt differentiable at exactly zero speed; changes values by < 1e-12 m/s
 
 
+#: the build's reason for refusing an effect of flight time (``Effect.time_varying``)
+_TIME_REFUSAL = "changes with flight time, which a table (periodic in the azimuth) cannot hold"
+
+
 def norm(v):
     """Euclidean norm over the last axis, complex-step safe (no ``abs``)."""
     return np.sqrt(dot(v, v) + _EPS2)
@@ -245,8 +249,16 @@ class Effect:
     time_varying: ClassVar[bool] = False
     #: why a gain table cannot hold the effect (it breaks what the table relies on: the
     #: periodicity in azimuth, the symmetries S1 and S2, no heading axis), one clause for
-    #: the build's refusal; empty: a table can hold it
+    #: the build's refusal; empty: a table can hold it (:meth:`refusal`)
     table_refusal: ClassVar[str] = ""
+
+    @classmethod
+    def refusal(cls) -> str:
+        """Why no table can hold this effect (``table_refusal``; for an effect that is
+        only marked ``time_varying``, the flight-time reason), or "" when one can."""
+        if cls.table_refusal or not cls.time_varying:
+            return cls.table_refusal
+        return _TIME_REFUSAL
 
     @classmethod
     def refits(cls) -> tuple[Refit, ...]:
@@ -515,8 +527,7 @@ class ThrustTime(Effect):
                     fit=(-0.02, 0.02)),)
     n_states = 1
     time_varying = True
-    table_refusal = ("changes with flight time, which a table (periodic in the azimuth) "
-                     "cannot hold")
+    table_refusal = _TIME_REFUSAL
     fits = (Refit("thrust_time", ("rate",), "thrust that declines with flight time "
                   "(battery sag)"),)
 

@@ -70,9 +70,9 @@ def check_effect_symmetries(config) -> None:
     (:func:`~gainsched.model.symmetry.effect_symmetry_errors`).
     """
     for eff in Model(config).effects:
-        if eff.table_refusal:  # an effect that says so itself (flight time, wind)
+        if eff.refusal():  # an effect that says so itself (flight time, wind)
             raise InputError(config.source, f"effects.{eff.kind}",
-                             f"{eff.table_refusal}: simulate and diagnose with it, build "
+                             f"{eff.refusal()}: simulate and diagnose with it, build "
                              "tables without it")
         for name, err in effect_symmetry_errors(eff).items():
             if not err <= SYMMETRY_TOL:

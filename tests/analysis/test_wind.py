@@ -172,6 +172,28 @@ def test_build_refuses_a_wind_in_one_line(tmp_path):
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
 
 
+def test_the_refusal_flag_generalises_time_varying():
+    """``table_refusal`` says why; an effect only marked ``time_varying`` (the older flag,
+    e.g. a user's registered effect) keeps being refused, with the flight-time reason."""
+    from gainsched.model.effects import EFFECTS, Effect, Param, registered_effect
+
+    assert {k for k, c in EFFECTS.items() if c.refusal()} == {"thrust_time", "wind"}
+    assert "heading axis" in Wind.refusal()
+
+    class Aging(Effect):
+        kind = "aging"
+        params = (Param("rate", "1/s", 0.0, -1.0, 1.0),)
+        time_varying = True
+
+    assert Aging.refusal().startswith("changes with flight time")
+    text = set_section(PAPER_TOML.read_text(), "effects.aging", [("rate", 0.001, None)])
+    with registered_effect(Aging):
+        cfg = config_from_text(text, "aging.toml")
+        with pytest.raises(InputError, match=r"^aging.toml: effects.aging: changes with "
+                                             r"flight time"):
+            build_grid(cfg)
+
+
 # --------------------------------------------------------------------------- flight logs
 
 
