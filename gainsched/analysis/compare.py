@@ -558,7 +558,8 @@ def _tether_stretch(config: Config, f_t, dt):
 
 @dataclass(frozen=True)
 class _Kin(Kinematics):
-    """Kinematics with the body-frame velocity computed once per segment."""
+    """Kinematics with the body-frame (ground) velocity computed once per segment (still
+    air; :func:`predict` builds a plain one in a model's wind)."""
 
     vB: np.ndarray | None = None
 
@@ -570,7 +571,7 @@ class _Kin(Kinematics):
 def _kinematics(meas: Measured) -> Kinematics:
     def make():
         vB = np.einsum("nji,nj->ni", meas.R, meas.v)
-        return _Kin(meas.R, meas.v, meas.z[:, 7:10], meas.p, meas.alpha, vB)
+        return _Kin(meas.R, meas.v, meas.z[:, 7:10], meas.p, meas.alpha, meas.gamma, vB=vB)
 
     return meas.derived("kin", make)
 
@@ -619,12 +620,17 @@ def predict(model: Model, meas: Measured, *, latency: float | None = None,
     T_raw = _delayed(meas.t, meas.T_cmd, lat)
     u = centred_commands(T_raw)
     z = meas.z
-    kin = _kinematics(meas)
+    if model.wind_I is None:
+        kin = _kinematics(meas)
+    else:  # the flight's heading turns the model's wind into its circle frame
+        kin = Kinematics(meas.R, meas.v, meas.z[:, 7:10], meas.p, meas.alpha, meas.gamma,
+                         model.wind_I)
     if model.n_extra:
         parts = [z]
 
         def kin_at(k):
-            return Kinematics(meas.R[k], meas.v[k], z[k, 7:10], meas.p[k], meas.alpha)
+            return Kinematics(meas.R[k], meas.v[k], z[k, 7:10], meas.p[k], meas.alpha,
+                              meas.gamma, model.wind_I)
 
         for eff in model.effects:
             if eff.n_states:

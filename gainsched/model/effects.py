@@ -9,7 +9,9 @@ of them at once. An effect may
   with airspeed, the output of a motor-lag filter),
 - add a force at the COG (in C) and a torque (in B) (``wrench``: body drag,
   rotor drag),
-- carry extra states (``n_states``, ``state_derivative``: motor lag).
+- carry extra states (``n_states``, ``state_derivative``: motor lag),
+- move the air (``air_velocity``: a steady wind); every airspeed-dependent effect
+  sees the COG velocity relative to the air, :attr:`Kinematics.v_air_C`.
 
 Evaluation order inside the model: commanded thrust -> stateful effects ->
 thrust modifiers (config order) -> wrench effects, which see the final thrust.
@@ -47,6 +49,8 @@ __all__ = [
     "ThrustMotorCurve",
     "TIME_ORDER",
     "TIME_UNIT_S",
+    "Wind",
+    "wind_in_circle_frame",
     "fundamental_azimuth",
     "AZIMUTH_HARMONICS",
     "EFFECTS",
@@ -55,10 +59,15 @@ __all__ = [
     "registered_effects_context",
     "BUILTIN_KINDS",
     "effects_from_specs",
+    "air_velocity",
     "norm",
 ]
 
 _EPS2 = 1e-24  # keeps sqrt differentiable at exactly zero speed; changes values by < 1e-12 m/s
+
+
+#: the build's reason for refusing an effect of flight time (``Effect.time_varying``)
+_TIME_REFUSAL = "changes with flight time, which a table (periodic in the azimuth) cannot hold"
 
 
 def norm(v):
@@ -139,6 +148,21 @@ class Refit:
     contains: tuple[str, ...] = ()
 
 
+def wind_in_circle_frame(wind_I, alpha, gamma=0.0):
+    """The air velocity ``wind_I`` (..., 3), m/s, in I expressed in C:
+    ``R_IC^T wind_I`` with ``R_IC = Rz(gamma) Rx(alpha)`` (docs/conventions.md), shape
+    broadcast of ``wind_I`` (..., 3) and ``alpha``, ``gamma`` (...) + (3,), m/s.
+
+    Complex-step safe (``wind_I`` may be complex; the angles are taken as given)."""
+    w = np.asarray(wind_I)
+    a, g = np.asarray(alpha), np.asarray(gamma)
+    ca, sa, cg, sg = np.cos(a), np.sin(a), np.cos(g), np.sin(g)
+    wx, wy, wz = w[..., 0], w[..., 1], w[..., 2]
+    u0 = cg * wx + sg * wy  # Rz(gamma)^T w
+    u1 = cg * wy - sg * wx
+    return np.stack(np.broadcast_arrays(u0, ca * u1 + sa * wz, ca * wz - sa * u1), -1)
+
+
 @dataclass(frozen=True)
 class Kinematics:
     """What an effect may look at (all batched over leading dimensions).
@@ -148,14 +172,21 @@ class Kinematics:
     R_CB : ndarray, shape (..., 3, 3)
         Body-to-circle rotation.
     v_C : ndarray, shape (..., 3), m/s
-        COG velocity in C (equal to the airspeed: no wind).
+        COG velocity in C relative to the ground (the anchor). Effects of the airspeed
+        use :attr:`v_air_C`, which equals it when there is no wind.
     omega_B : ndarray, shape (..., 3), rad/s
         Body rates.
     p_C : ndarray, shape (..., 3), m
         COG position in C (the tether anchor at the origin).
     alpha : float or ndarray, shape (...), rad
         Tilt of the circle plane: C is turned by ``alpha`` about the inertial x axis
-        (paper eq. 1; the heading ``gamma`` of the plane does not enter the physics).
+        (paper eq. 1).
+    gamma : float or ndarray, shape (...), rad
+        Heading of the circle plane, ``R_IC = Rz(gamma) Rx(alpha)`` (docs/conventions.md).
+        It enters the physics through the wind only (an inertial direction).
+    wind_I : ndarray, shape (3,) or (..., 3), m/s, or None
+        Velocity of the air in I (x east, y north, z up), from the model's effects
+        (:meth:`Effect.air_velocity`); None: still air.
     """
 
     R_CB: np.ndarray
@@ -163,11 +194,35 @@ class Kinematics:
     omega_B: np.ndarray
     p_C: np.ndarray
     alpha: float | np.ndarray
+    gamma: float | np.ndarray = 0.0
+    wind_I: np.ndarray | None = None
 
     @property
     def v_B(self):
-        """COG velocity in B, shape (..., 3), m/s."""
+        """COG velocity in B relative to the ground, shape (..., 3), m/s."""
         return mtv(self.R_CB, self.v_C)
+
+    @property
+    def wind_C(self):
+        """The air velocity in C, ``R_IC^T wind_I``, shape (..., 3), m/s (zeros: still air)."""
+        if self.wind_I is None:
+            return np.zeros(3)
+        return wind_in_circle_frame(self.wind_I, self.alpha, self.gamma)
+
+    @property
+    def v_air_C(self):
+        """COG velocity relative to the air in C, ``v_C - wind_C``, shape (..., 3), m/s:
+        what every airspeed-dependent effect sees. Still air: ``v_C`` itself (bit for bit)."""
+        if self.wind_I is None:
+            return self.v_C
+        return self.v_C - self.wind_C
+
+    @property
+    def v_air_B(self):
+        """COG velocity relative to the air in B, shape (..., 3), m/s (still air: :attr:`v_B`)."""
+        if self.wind_I is None:
+            return self.v_B
+        return mtv(self.R_CB, self.v_air_C)
 
     @property
     def up_C(self):
@@ -196,6 +251,18 @@ class Effect:
     #: the effect changes with flight time (its states are not the motion's): a table,
     #: which is periodic in the azimuth, cannot hold it (the build refuses it)
     time_varying: ClassVar[bool] = False
+    #: why a gain table cannot hold the effect (it breaks what the table relies on: the
+    #: periodicity in azimuth, the symmetries S1 and S2, no heading axis), one clause for
+    #: the build's refusal; empty: a table can hold it (:meth:`refusal`)
+    table_refusal: ClassVar[str] = ""
+
+    @classmethod
+    def refusal(cls) -> str:
+        """Why no table can hold this effect (``table_refusal``; for an effect that is
+        only marked ``time_varying``, the flight-time reason), or "" when one can."""
+        if cls.table_refusal or not cls.time_varying:
+            return cls.table_refusal
+        return _TIME_REFUSAL
 
     @classmethod
     def refits(cls) -> tuple[Refit, ...]:
@@ -259,6 +326,11 @@ class Effect:
 
     def wrench(self, T, kin: Kinematics):
         """(force at the COG in C, shape (..., 3), N; torque in B, shape (..., 3), N m) or None."""
+        return None
+
+    def air_velocity(self):
+        """The velocity of the air in I this effect sets, shape (3,), m/s, or None (the
+        model sums them into :attr:`Kinematics.wind_I`)."""
         return None
 
     def state_derivative(self, x, u, kin: Kinematics):
@@ -335,8 +407,9 @@ class Drag(Effect):
     )
 
     def wrench(self, T, kin):
-        speed = norm(kin.v_C)
-        F = -(self.mu1 + self.mu2 * speed)[..., None] * kin.v_C
+        v = kin.v_air_C
+        speed = norm(v)
+        F = -(self.mu1 + self.mu2 * speed)[..., None] * v
         return F, np.zeros_like(F)
 
     def drag_coefficients(self):
@@ -354,7 +427,7 @@ class RotorDrag(Effect):
 
     def wrench(self, T, kin):
         T_C = T.sum(-1)
-        v_B = kin.v_B
+        v_B = kin.v_air_B
         F_B = -self.k_rd * T_C[..., None] * (v_B * np.array([1.0, 1.0, 0.0]))
         F_C = mv(kin.R_CB, F_B)
         return F_C, np.zeros_like(F_C)
@@ -404,6 +477,50 @@ class MotorEfficiency(Effect):
                 f"({others})")
 
 
+class Wind(Effect):
+    """A steady, uniform wind: the air moves at ``(east, north, 0)`` m/s in I (ENU, the
+    axes of docs/conventions.md and the flight logs), and every airspeed-dependent effect
+    (``drag``, ``rotor_drag``, ``thrust_airspeed``, ``thrust_momentum``) sees the COG
+    velocity relative to the air, ``v_C - R_IC^T wind_I`` (:attr:`Kinematics.v_air_C`),
+    instead of the ground velocity.
+
+    The wind has no force of its own: alone (no drag in the model) it changes nothing.
+    It is tied to an inertial direction, so the circle's heading ``gamma_C`` matters,
+    the tilt-sign and direction symmetries of the table (S1, S2; docs/symmetry.md) do
+    not hold, and the table has no heading axis: simulate and diagnose with it, build
+    tables without it. A flight log's ``gamma_c_deg`` (docs/flight-log.md) turns the
+    wind into each flight's circle frame. The paper's drag (eq. 10) and thrust change
+    (eq. 29) are laws of the airspeed, which its indoor flights equate with the ground
+    speed; M. Tognon and A. Franchi, "Theory and Applications for Control of Aerial
+    Robots in Physical Interaction Through Tethers", Springer, 2021, sec. 3.3.1, name
+    strong wind as where drag and blade flapping must be considered.
+    """
+
+    kind = "wind"
+    params = (
+        Param("east", "m/s", 0.0, -15.0, 15.0, "wind velocity towards east (x of I)",
+              fit=(-10.0, 10.0)),
+        Param("north", "m/s", 0.0, -15.0, 15.0, "wind velocity towards north (y of I)",
+              fit=(-10.0, 10.0)),
+    )
+    table_refusal = ("blows from an inertial direction, which breaks the tilt-sign and "
+                     "direction symmetries (S1, S2) the table's query maps rely on, and a "
+                     "table has no heading axis")
+    fits = (Refit("wind", ("east", "north"), "steady wind: the airspeed is the ground "
+                  "velocity minus the wind (needs drag or another airspeed effect)",
+                  affine=False),)
+
+    def air_velocity(self):
+        return np.array([self.east, self.north, 0.0])
+
+    def law(self) -> str:
+        speed = math.hypot(self.east, self.north)
+        # the direction the wind comes from, clockwise from north (meteorological)
+        frm = math.degrees(math.atan2(-self.east, -self.north)) % 360.0
+        return (f"wind {speed:.3g} m/s from {frm:.0f} deg (east {self.east:+.3g}, "
+                f"north {self.north:+.3g} m/s)")
+
+
 class _FlightTime(Effect):
     """An effect whose one state is the flight time (``t' = 1``, from 0 at the start of a
     simulated flight; in a flight log the log's time axis, ``t`` of
@@ -412,6 +529,7 @@ class _FlightTime(Effect):
 
     n_states = 1
     time_varying = True
+    table_refusal = _TIME_REFUSAL
 
     def state_derivative(self, x, u, kin):
         return np.ones_like(x)
@@ -466,7 +584,7 @@ class ThrustPolynomial(Effect):
                   "thrust change with airspeed, polynomial 1 + c1 v + c2 v^2"),)
 
     def modify_thrust(self, T, kin, x):
-        v = norm(kin.v_C)
+        v = norm(kin.v_air_C)
         return T * (1 + self.c1 * v + self.c2 * v * v)[..., None]
 
     def implausible(self, airspeed_range) -> str:
@@ -495,7 +613,8 @@ class ThrustMomentum(Effect):
 
     A rotor run at the power of its static test (thrust ``T_h`` = the commanded
     thrust, hover induced velocity ``v_h = sqrt(T_h / (2 rho_air A))``) that moves
-    through the air with the COG velocity ``v_B`` produces
+    through the air with the COG velocity ``v_B`` (relative to the air:
+    :attr:`Kinematics.v_air_B`) produces
 
         T / T_h = v_h / (v_i + v_z),   v_i^2 ((v_i + v_z)^2 + v_xy^2) = v_h^4
 
@@ -537,7 +656,7 @@ class ThrustMomentum(Effect):
         return vh / lam
 
     def modify_thrust(self, T, kin, x):
-        return T * self.ratio(T, kin.v_B)
+        return T * self.ratio(T, kin.v_air_B)
 
 
 def _newton_bisect(v, lo, hi, vh2, vz, vxy2):
@@ -799,7 +918,8 @@ class ThrustMotorCurve(Effect):
 EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
     for cls in (Drag, RotorDrag, ThrustScale, MotorEfficiency, ThrustTime, ThrustPolynomial,
-                ThrustMomentum, MotorLag, ThrustAzimuth, ThrustTimeSeries, ThrustMotorCurve)
+                ThrustMomentum, MotorLag, ThrustAzimuth, ThrustTimeSeries, ThrustMotorCurve,
+                Wind)
 }
 
 
@@ -847,6 +967,18 @@ def registered_effect(cls: type[Effect]):
     finally:
         if not had:
             EFFECTS.pop(cls.kind, None)
+
+
+def air_velocity(effects):
+    """The velocity of the air in I, shape (3,), m/s, that ``effects`` set together (the sum
+    of their :meth:`Effect.air_velocity`), or None when none of them moves the air (still
+    air: every effect then sees the ground velocity, bit for bit)."""
+    parts = [w for w in (e.air_velocity() for e in effects) if w is not None]
+    if not parts:
+        return None
+    w = np.sum(parts, axis=0).astype(float)
+    w.setflags(write=False)
+    return w
 
 
 def effects_from_specs(specs) -> tuple[Effect, ...]:

@@ -110,7 +110,7 @@ class MaximalModel:
         self._S = skew(model.p_e)  # [p_e x]
 
     # ------------------------------------------------------------------ dynamics
-    def evaluate(self, x, u, alpha):
+    def evaluate(self, x, u, alpha, gamma=0.0):
         """State derivative and tension.
 
         Parameters
@@ -120,7 +120,9 @@ class MaximalModel:
         u : ndarray, shape (..., 4), N
             Commanded motor thrusts.
         alpha : float or ndarray, rad
-            Tilt of the circle plane (enters through gravity only).
+            Tilt of the circle plane (enters through gravity, and the wind's direction).
+        gamma : float or ndarray, rad
+            Heading of the circle plane (enters through the wind's direction only).
 
         Returns
         -------
@@ -129,9 +131,9 @@ class MaximalModel:
             ``f_t``; the force on the vehicle is ``-f_t p_t / |p_t|`` at the attachment point
             (chain: ``f_t`` along the last segment). Elastic links: >= 0, see :meth:`slack`.
         """
-        return self._evaluate(x, u, alpha)[:2]
+        return self._evaluate(x, u, alpha, gamma)[:2]
 
-    def _evaluate(self, x, u, alpha):
+    def _evaluate(self, x, u, alpha, gamma=0.0):
         md = self.model
         x = np.asarray(x, dtype=float)
         u = np.asarray(u, dtype=float)
@@ -139,7 +141,7 @@ class MaximalModel:
         p, v, q, w = x[..., 0:3], x[..., 3:6], x[..., 6:10], x[..., 10:13]
         qn = q / np.sqrt(dot(q, q))[..., None]
         R = matrix_from_quaternion(qn)
-        kin = Kinematics(R, v, w, p, alpha)
+        kin = Kinematics(R, v, w, p, alpha, gamma, md.wind_I)
         # thrust after the (stateless) thrust modifiers; everything but the tether
         T = md.thrust(np.zeros(x.shape[:-1] + (N_STATE,)), u, kin)
         F0, tau0 = md.body_wrench(T, kin, alpha)
@@ -187,22 +189,22 @@ class MaximalModel:
         w_dot = (tau0 - f_t[..., None] * lever) @ self.J_inv.T
         return a_q, w_dot, f_t
 
-    def f(self, x, u, alpha):
+    def f(self, x, u, alpha, gamma=0.0):
         """State derivative, shape (..., n_x). See :meth:`evaluate`."""
-        return self.evaluate(x, u, alpha)[0]
+        return self.evaluate(x, u, alpha, gamma)[0]
 
-    def tension(self, x, u, alpha):
+    def tension(self, x, u, alpha, gamma=0.0):
         """Tether tension f_t, shape (...), N (0 when an elastic link is slack)."""
-        return self.evaluate(x, u, alpha)[1]
+        return self.evaluate(x, u, alpha, gamma)[1]
 
-    def slack(self, x, u, alpha):
+    def slack(self, x, u, alpha, gamma=0.0):
         """Whether the tether is slack, shape (...), bool.
 
         Rigid link: the multiplier came out negative (the constraint would push).
         Elastic links: some part of the link carries no tension (force law <= 0;
         for the chain, any segment).
         """
-        _, f_t, link = self._evaluate(x, u, alpha)
+        _, f_t, link = self._evaluate(x, u, alpha, gamma)
         return f_t < 0 if link is None else link.slack
 
     def link_output(self, x, alpha) -> LinkOutput:
@@ -246,7 +248,7 @@ class MaximalModel:
         return self.link_model.power_loss(p_t, v_t, x[..., N_MAXIMAL:], self.model.g_C(alpha))
 
     # ------------------------------------------------------------------ simulation
-    def from_reduced(self, z, tension=None, u=None, alpha=0.0):
+    def from_reduced(self, z, tension=None, u=None, alpha=0.0, gamma=0.0):
         """Maximal state (..., n_x) from the reduced state z (..., >= 10), link in equilibrium.
 
         The elastic link starts stretched to the static elongation of ``tension`` (N)
@@ -262,7 +264,7 @@ class MaximalModel:
         if tension is None:
             md = self.model
             u = np.full(4, md.m * md.g / 4) if u is None else u
-            tension = np.maximum(md.evaluate(z[..., :N_STATE], u, alpha).tension, 0.0)
+            tension = np.maximum(md.evaluate(z[..., :N_STATE], u, alpha, gamma).tension, 0.0)
         x = maximal_from_reduced(self.model, z, stretch=self.link_model.stretch(tension))
         p_t, v_t = self._attachment(x)
         return np.concatenate([x, self.link_model.initial(p_t, v_t, tension)], -1)
@@ -282,7 +284,7 @@ class MaximalModel:
         rate = self.link_model.max_rate(self.model.m)
         return max(1, int(np.ceil(dt * rate / RK4_REACH)))
 
-    def step(self, x, u, alpha, dt):
+    def step(self, x, u, alpha, dt, gamma=0.0):
         """Advance x by ``dt`` s with the input u held: RK4 with :meth:`substeps` substeps.
 
         Returns ``(x_next (..., n_x), signed tension at x (...) N)``, like the
@@ -295,12 +297,12 @@ class MaximalModel:
         h = dt / n
         ten = None
         for _ in range(n):
-            k1, t1, link = self._evaluate(x, u, alpha)
+            k1, t1, link = self._evaluate(x, u, alpha, gamma)
             if ten is None:
                 ten = t1 if link is None else np.where(link.slack, link.margin, t1)
-            k2 = self.f(x + 0.5 * h * k1, u, alpha)
-            k3 = self.f(x + 0.5 * h * k2, u, alpha)
-            k4 = self.f(x + h * k3, u, alpha)
+            k2 = self.f(x + 0.5 * h * k1, u, alpha, gamma)
+            k3 = self.f(x + 0.5 * h * k2, u, alpha, gamma)
+            k4 = self.f(x + h * k3, u, alpha, gamma)
             x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         return x, ten
 

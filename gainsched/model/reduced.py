@@ -26,7 +26,7 @@ import numpy as np
 
 from ..constants import N_STATE
 from ._vec import broadcast, cross, mtv, mv
-from .effects import Effect, Kinematics, effects_from_specs, polynomial_drag
+from .effects import Effect, Kinematics, air_velocity, effects_from_specs, polynomial_drag
 from .geometry import cog_from_attachment, pose_from_reduced, tether_direction
 from .rotations import (
     euler_zyx_rates_from_body_rates,
@@ -87,6 +87,13 @@ class Model:
     config : Config
     effects : sequence of Effect, optional
         Overrides the config's effects (used by fits and by the simulator's plant).
+
+    Attributes
+    ----------
+    wind_I : ndarray, shape (3,), m/s, or None
+        The velocity of the air in I the effects set (:func:`~gainsched.model.effects.
+        air_velocity`, e.g. ``[effects.wind]``); None: still air. With a wind the circle's
+        heading ``gamma`` matters: :meth:`evaluate` takes it.
     """
 
     def __init__(self, config: Config, effects: tuple[Effect, ...] | None = None):
@@ -103,6 +110,7 @@ class Model:
         self.alloc = allocation_matrix(v.arm_length, v.kappa)
         self.alloc_inv = np.linalg.inv(self.alloc)
         self.effects = tuple(effects_from_specs(config.effects) if effects is None else effects)
+        self.wind_I = air_velocity(self.effects)
         self.n_extra = sum(e.n_states for e in self.effects)
         self.n_z = N_STATE + self.n_extra
         self._skew_pe = skew(self.p_e)
@@ -158,14 +166,16 @@ class Model:
         v_q = self.rho * d.rate(dd, dx) - mv(R, w_x_pe)
         return R, d, v_q, w_x_pe
 
-    def effect_kinematics(self, s, alpha):
+    def effect_kinematics(self, s, alpha, gamma=0.0):
         """The :class:`~gainsched.model.effects.Kinematics` effects see at states ``s``
-        (..., >= 10) on a circle of tilt ``alpha`` (rad)."""
+        (..., >= 10) on a circle of tilt ``alpha`` and heading ``gamma`` (rad), in the
+        model's wind (:attr:`wind_I`)."""
         R, d, v_q, _ = self.kinematics(s)
-        return self._effect_kinematics(R, d, v_q, s[..., 7:10], alpha)
+        return self._effect_kinematics(R, d, v_q, s[..., 7:10], alpha, gamma)
 
-    def _effect_kinematics(self, R, d, v_q, w, alpha):
-        return Kinematics(R, v_q, w, cog_from_attachment(self.rho * d.e, R, self.p_e), alpha)
+    def _effect_kinematics(self, R, d, v_q, w, alpha, gamma=0.0):
+        return Kinematics(R, v_q, w, cog_from_attachment(self.rho * d.e, R, self.p_e), alpha,
+                          gamma, self.wind_I)
 
     def thrust(self, z, u, kin):
         """Actual motor thrusts (N) after stateful effects and thrust modifiers."""
@@ -229,7 +239,7 @@ class Model:
         return n_B @ self._skew_pe.T
 
     # ------------------------------------------------------------------ dynamics
-    def evaluate(self, z, u, alpha) -> Evaluation:
+    def evaluate(self, z, u, alpha, gamma=0.0) -> Evaluation:
         """Full-state derivative and tether tension.
 
         Parameters
@@ -240,6 +250,9 @@ class Model:
             Commanded motor thrusts.
         alpha : float or ndarray broadcastable to z.shape[:-1], rad
             Tilt of the circle plane.
+        gamma : float or ndarray broadcastable to z.shape[:-1], rad
+            Heading of the circle plane (``R_IC = Rz(gamma) Rx(alpha)``); it matters only
+            with a wind (:attr:`wind_I`).
         """
         z = np.asarray(z)
         u = np.asarray(u)
@@ -248,7 +261,7 @@ class Model:
         phi, theta, w = z[..., 4], z[..., 5], z[..., 7:10]
         R, d, v_q, w_x_pe = self.kinematics(z)
         e = d.e
-        kin = self._effect_kinematics(R, d, v_q, w, alpha)
+        kin = self._effect_kinematics(R, d, v_q, w, alpha, gamma)
         T = self.thrust(z, u, kin)
         F0, rhs_tau = self.body_wrench(T, kin, alpha)
 
@@ -285,9 +298,9 @@ class Model:
         z_dot = np.concatenate([broadcast(p, shape + p.shape[-1:]) for p in parts], -1)
         return Evaluation(z_dot, sol[..., 5], T)
 
-    def f(self, z, u, alpha):
+    def f(self, z, u, alpha, gamma=0.0):
         """State derivative only, shape (..., n_z). See :meth:`evaluate`."""
-        return self.evaluate(z, u, alpha).z_dot
+        return self.evaluate(z, u, alpha, gamma).z_dot
 
     # ------------------------------------------------------------------ outputs
     def cog_acceleration(self, z, z_dot):

@@ -13,7 +13,9 @@
  * together to 1e-12) and the fallback (gainsched/sim/fastplant.py).
  *
  * State z = (delta, xi, delta', xi', phi, theta, chi, wx, wy, wz, effect states)
- * (rad, rad/s, N), input u = commanded motor thrusts (N), alpha = circle tilt (rad).
+ * (rad, rad/s, N), input u = commanded motor thrusts (N), alpha = circle tilt (rad),
+ * gamma = circle heading (rad; R_IC = Rz(gamma) Rx(alpha), it matters through the wind
+ * only: the airspeed effects see v_air = v - R_IC^T wind_I, effects.Kinematics.v_air_C).
  * With p_q = p_t - R p_e and the corrected paper equations
  *
  *   m p_q''  = R (0,0,T_C) + m g_C - f_t e + F_eff                  (eq. 3)
@@ -44,7 +46,7 @@
 #include <math.h>
 #include <stddef.h>
 
-#define GS_PLANT_LAYOUT 3
+#define GS_PLANT_LAYOUT 4
 #define N_BASE 10
 #define MAX_Z 64 /* largest state the RK4 scratch holds (10 + effect states) */
 #define EPS2 1e-24 /* effects.norm: keeps sqrt differentiable at zero speed */
@@ -77,20 +79,21 @@ enum {
     FX_MOTOR_LAG = 5,    /* MotorLag: a = tau, 4 states */
     FX_THRUST_MOMENTUM = 6, /* ThrustMomentum: a = disk_area, b = rho_air (eq. 29) */
     FX_MOTOR_EFFICIENCY = 7, /* MotorEfficiency: a..d = eta1..eta4 */
-    FX_THRUST_TIME = 8 /* ThrustTime: a = rate, 1 state (the flight time) */
+    FX_THRUST_TIME = 8, /* ThrustTime: a = rate, 1 state (the flight time) */
+    FX_WIND = 9 /* Wind: a = east, b = north (m/s, the air's velocity in I, ENU) */
 };
 
 /* exported (ctypes, gainsched/sim/fastplant.py) */
 int gs_plant_layout(void);
 int gs_plant_max_states(void);
 int gs_plant_eval(const double *p, const double *z, const double *u, double alpha,
-                  double *z_dot, double *tension, double *T_out);
-int gs_plant_rk4(const double *p, const double *x, const double *u, double alpha, double dt,
-                 double *x_next, double *tension);
+                  double gamma, double *z_dot, double *tension, double *T_out);
+int gs_plant_rk4(const double *p, const double *x, const double *u, double alpha,
+                 double gamma, double dt, double *x_next, double *tension);
 int gs_maximal_eval(const double *p, const double *x, const double *u, double alpha,
-                    double *x_dot, double *tension);
-int gs_maximal_rk4(const double *p, const double *x, const double *u, double alpha, double dt,
-                   int substeps, double *x_next, double *tension);
+                    double gamma, double *x_dot, double *tension);
+int gs_maximal_rk4(const double *p, const double *x, const double *u, double alpha,
+                   double gamma, double dt, int substeps, double *x_next, double *tension);
 
 int gs_plant_layout(void) { return GS_PLANT_LAYOUT; }
 
@@ -147,6 +150,41 @@ static int solve6(double A[6][6], double b[6], double x[6])
         x[i] = s / A[i][i];
     }
     return 0;
+}
+
+/* The COG velocity relative to the air, v_air (3, m/s, in C), from the ground velocity v
+ * (m/s, in C): v - R_IC^T wind_I with R_IC = Rz(gamma) Rx(alpha) and wind_I the sum of
+ * the Wind effects' (east, north, 0) (effects.air_velocity, wind_in_circle_frame).
+ * Returns 0 and copies v when there is no Wind effect (still air, bit for bit). */
+static int air_velocity(const double *p, double alpha, double gamma, const double v[3],
+                        double v_air[3])
+{
+    const int n_eff = (int)p[P_NEFF];
+    double wx = 0.0, wy = 0.0;
+    int k, found = 0;
+    for (k = 0; k < n_eff; ++k) {
+        const double *ef = p + P_EFF + EFF_STRIDE * k;
+        if ((int)ef[0] == FX_WIND) {
+            wx = found ? wx + ef[1] : ef[1];
+            wy = found ? wy + ef[2] : ef[2];
+            found = 1;
+        }
+    }
+    if (!found) {
+        v_air[0] = v[0];
+        v_air[1] = v[1];
+        v_air[2] = v[2];
+        return 0;
+    }
+    {
+        const double ca = cos(alpha), sa = sin(alpha), cg = cos(gamma), sg = sin(gamma);
+        const double wz = 0.0;
+        const double u0 = cg * wx + sg * wy, u1 = cg * wy - sg * wx; /* Rz(gamma)^T w */
+        v_air[0] = v[0] - u0;
+        v_air[1] = v[1] - (ca * u1 + sa * wz);
+        v_air[2] = v[2] - (ca * wz - sa * u1);
+    }
+    return 1;
 }
 
 /* |v| as effects.norm computes it, once per evaluation (*speed < 0: not yet) */
@@ -211,8 +249,8 @@ static double momentum_ratio(double T, const double v_B[3], double disk_area, do
 
 /* Actual motor thrusts T (4, N) from the command u (4, N) after the effects, in model
  * order (motor lag: its states in z, which may be NULL without one; thrust scale;
- * thrust polynomial in |v|; momentum theory in v_B = R^T v); v is the COG velocity in C
- * (m/s), R = R_CB. Returns T_C = sum T (N). Model.thrust. */
+ * thrust polynomial in |v|; momentum theory in v_B = R^T v); v is the COG velocity
+ * relative to the air in C (m/s, air_velocity), R = R_CB. Returns T_C = sum T (N). Model.thrust. */
 static double effect_thrust(const double *p, const double *z, const double *u,
                             double R[3][3], const double v[3], double *speed, double T[4])
 {
@@ -262,7 +300,8 @@ static double effect_thrust(const double *p, const double *z, const double *u,
 }
 
 /* The effects' force at the COG F (3, N, in C; accumulated onto F) for the actual
- * collective thrust T_C (N), body rotation R = R_CB and COG velocity v (m/s, in C).
+ * collective thrust T_C (N), body rotation R = R_CB and COG velocity relative to the air v
+ * (m/s, in C).
  * None of the supported effects has a torque. Model.effect_wrench. */
 static void effect_force(const double *p, double T_C, double R[3][3], const double v[3],
                          double *speed, double F[3])
@@ -297,7 +336,7 @@ static void effect_force(const double *p, double T_C, double R[3][3], const doub
  * 6x6 system is singular (outputs undefined). Model.evaluate, one state.
  */
 int gs_plant_eval(const double *p, const double *z, const double *u, double alpha,
-                  double *z_dot, double *tension, double *T_out)
+                  double gamma, double *z_dot, double *tension, double *T_out)
 {
     const double m = p[P_M], rho = p[P_RHO], L_e = p[P_LE], g = p[P_G];
     const double *J = p + P_J, *Al = p + P_ALLOC;
@@ -307,10 +346,11 @@ int gs_plant_eval(const double *p, const double *z, const double *u, double alph
     const double w[3] = {z[7], z[8], z[9]};
     const double p_e[3] = {-L_e, 0.0, 0.0};
     double R[3][3], e[3], e_d[3], e_x[3], e_dx[3], e_xx[3], c2[3];
-    double w_x_pe[3], w_w_pe[3], R_wxpe[3], R_wwpe[3], v[3], T[4], F[3] = {0, 0, 0};
+    double w_x_pe[3], w_w_pe[3], R_wxpe[3], R_wwpe[3], v[3], v_air[3], T[4];
+    double F[3] = {0, 0, 0};
     /* effect torque in B: none of the supported effects has one (kept for the form) */
     double tau[3] = {0, 0, 0}, Jw[3], wJw[3], rhs[6], A[6][6], sol[6], RT_e[3], pe_RTe[3];
-    double speed = -1.0; /* |v| (effects.norm), computed once when an effect needs it */
+    double speed = -1.0; /* |v_air| (effects.norm), computed once when an effect needs it */
     int i, j, k;
 
     /* kinematics: R_CB = Rz(chi + xi) Ry(theta) Rx(phi) (paper eq. 2) */
@@ -340,14 +380,15 @@ int gs_plant_eval(const double *p, const double *z, const double *u, double alph
     for (i = 0; i < 3; ++i) {
         R_wxpe[i] = R[i][0] * w_x_pe[0] + R[i][1] * w_x_pe[1] + R[i][2] * w_x_pe[2];
     }
-    /* COG velocity in C (= airspeed, no wind) */
+    /* COG velocity in C, and relative to the air (the airspeed effects see it) */
     for (i = 0; i < 3; ++i) {
         v[i] = rho * (e_d[i] * dd + e_x[i] * dx) - R_wxpe[i];
     }
+    (void)air_velocity(p, alpha, gamma, v, v_air);
 
     /* thrust: command -> effects in model order; then the effects' force (see T) */
-    const double T_C = effect_thrust(p, z, u, R, v, &speed, T);
-    effect_force(p, T_C, R, v, &speed, F);
+    const double T_C = effect_thrust(p, z, u, R, v_air, &speed, T);
+    effect_force(p, T_C, R, v_air, &speed, F);
 
     /* p_t'' = rho (e_d delta'' + e_x xi'' + c2) */
     for (i = 0; i < 3; ++i) {
@@ -441,8 +482,8 @@ int gs_plant_eval(const double *p, const double *z, const double *u, double alph
  * gainsched.sim.loop._rk4. *tension receives f_t at the start of the step (x). Returns 0,
  * 1 if a model evaluation was singular, 2 if n_z exceeds MAX_Z.
  */
-int gs_plant_rk4(const double *p, const double *x, const double *u, double alpha, double dt,
-                 double *x_next, double *tension)
+int gs_plant_rk4(const double *p, const double *x, const double *u, double alpha,
+                 double gamma, double dt, double *x_next, double *tension)
 {
     const int n = (int)p[P_NZ];
     double k1[MAX_Z], k2[MAX_Z], k3[MAX_Z], k4[MAX_Z], xs[MAX_Z], ten;
@@ -451,25 +492,25 @@ int gs_plant_rk4(const double *p, const double *x, const double *u, double alpha
     if (n > MAX_Z || n < N_BASE) {
         return 2;
     }
-    if (gs_plant_eval(p, x, u, alpha, k1, tension, NULL)) {
+    if (gs_plant_eval(p, x, u, alpha, gamma, k1, tension, NULL)) {
         return 1;
     }
     for (i = 0; i < n; ++i) {
         xs[i] = x[i] + h2 * k1[i];
     }
-    if (gs_plant_eval(p, xs, u, alpha, k2, &ten, NULL)) {
+    if (gs_plant_eval(p, xs, u, alpha, gamma, k2, &ten, NULL)) {
         return 1;
     }
     for (i = 0; i < n; ++i) {
         xs[i] = x[i] + h2 * k2[i];
     }
-    if (gs_plant_eval(p, xs, u, alpha, k3, &ten, NULL)) {
+    if (gs_plant_eval(p, xs, u, alpha, gamma, k3, &ten, NULL)) {
         return 1;
     }
     for (i = 0; i < n; ++i) {
         xs[i] = x[i] + dt * k3[i];
     }
-    if (gs_plant_eval(p, xs, u, alpha, k4, &ten, NULL)) {
+    if (gs_plant_eval(p, xs, u, alpha, gamma, k4, &ten, NULL)) {
         return 1;
     }
     for (i = 0; i < n; ++i) {
@@ -486,7 +527,7 @@ int gs_plant_rk4(const double *p, const double *x, const double *u, double alpha
  * MaximalModel.step reports it. MaximalModel.evaluate, one state. Returns 0.
  */
 int gs_maximal_eval(const double *p, const double *x, const double *u, double alpha,
-                    double *x_dot, double *tension)
+                    double gamma, double *x_dot, double *tension)
 {
     const double m = p[P_M], rho = p[P_RHO], L_e = p[P_LE], g = p[P_G];
     const double k_link = p[P_LINK_K], c_link = p[P_LINK_C];
@@ -494,7 +535,7 @@ int gs_maximal_eval(const double *p, const double *x, const double *u, double al
     const double *pq = x, *v = x + 3, *q = x + 6, *w = x + 10;
     const double p_e[3] = {-L_e, 0.0, 0.0};
     double R[3][3], T[4], F[3] = {0, 0, 0}, w_pe[3], p_t[3], v_t[3], n[3], f_link[3];
-    double F_B[3], pe_FB[3], Jw[3], wJw[3], tau[3], speed = -1.0;
+    double F_B[3], pe_FB[3], Jw[3], wJw[3], tau[3], v_air[3], speed = -1.0;
     int i;
 
     {   /* R_CB of the normalised quaternion (rotations.matrix_from_quaternion) */
@@ -510,9 +551,10 @@ int gs_maximal_eval(const double *p, const double *x, const double *u, double al
         R[2][1] = 2 * (qy * qz + qw * qx);
         R[2][2] = 1 - 2 * (qx * qx + qy * qy);
     }
-    /* everything but the tether (Model.body_wrench) */
-    const double T_C = effect_thrust(p, NULL, u, R, v, &speed, T);
-    effect_force(p, T_C, R, v, &speed, F);
+    /* everything but the tether (Model.body_wrench), the effects in the air's frame */
+    (void)air_velocity(p, alpha, gamma, v, v_air);
+    const double T_C = effect_thrust(p, NULL, u, R, v_air, &speed, T);
+    effect_force(p, T_C, R, v_air, &speed, F);
     for (i = 0; i < 3; ++i) {
         Jw[i] = J[3 * i] * w[0] + J[3 * i + 1] * w[1] + J[3 * i + 2] * w[2];
     }
@@ -570,8 +612,8 @@ int gs_maximal_eval(const double *p, const double *x, const double *u, double al
  * dt / substeps (MaximalModel.step). *tension receives the force law at x (N, negative:
  * slack). Returns 0, or 2 if substeps < 1.
  */
-int gs_maximal_rk4(const double *p, const double *x, const double *u, double alpha, double dt,
-                   int substeps, double *x_next, double *tension)
+int gs_maximal_rk4(const double *p, const double *x, const double *u, double alpha,
+                   double gamma, double dt, int substeps, double *x_next, double *tension)
 {
     double k1[13], k2[13], k3[13], k4[13], xs[13], xc[13], ten;
     const double h = dt / substeps;
@@ -583,19 +625,19 @@ int gs_maximal_rk4(const double *p, const double *x, const double *u, double alp
         xc[i] = x[i];
     }
     for (s = 0; s < substeps; ++s) {
-        (void)gs_maximal_eval(p, xc, u, alpha, k1, s == 0 ? tension : &ten);
+        (void)gs_maximal_eval(p, xc, u, alpha, gamma, k1, s == 0 ? tension : &ten);
         for (i = 0; i < 13; ++i) {
             xs[i] = xc[i] + 0.5 * h * k1[i];
         }
-        (void)gs_maximal_eval(p, xs, u, alpha, k2, &ten);
+        (void)gs_maximal_eval(p, xs, u, alpha, gamma, k2, &ten);
         for (i = 0; i < 13; ++i) {
             xs[i] = xc[i] + 0.5 * h * k2[i];
         }
-        (void)gs_maximal_eval(p, xs, u, alpha, k3, &ten);
+        (void)gs_maximal_eval(p, xs, u, alpha, gamma, k3, &ten);
         for (i = 0; i < 13; ++i) {
             xs[i] = xc[i] + h * k3[i];
         }
-        (void)gs_maximal_eval(p, xs, u, alpha, k4, &ten);
+        (void)gs_maximal_eval(p, xs, u, alpha, gamma, k4, &ten);
         for (i = 0; i < 13; ++i) {
             xc[i] = xc[i] + h / 6 * (((k1[i] + 2 * k2[i]) + 2 * k3[i]) + k4[i]);
         }

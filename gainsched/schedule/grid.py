@@ -64,15 +64,15 @@ def check_effect_symmetries(config) -> None:
 
     The table stores ``alpha >= 0, xi' > 0`` and the runtime maps every other query
     there (S1, S2; docs/symmetry.md); an effect tied to an inertial heading or azimuth
-    would make those maps wrong without a sign. Raises :class:`InputError` naming the
-    config file and ``effects.<kind>``
+    would make those maps wrong without a sign. An effect whose class gives a
+    ``table_refusal`` (flight time, a wind) is refused with that reason. Raises
+    :class:`InputError` naming the config file and ``effects.<kind>``
     (:func:`~gainsched.model.symmetry.effect_symmetry_errors`).
     """
     for eff in Model(config).effects:
-        if eff.time_varying:
+        if eff.refusal():  # an effect that says so itself (flight time, wind)
             raise InputError(config.source, f"effects.{eff.kind}",
-                             "changes with flight time, which a table (periodic in the "
-                             "azimuth) cannot hold: simulate and diagnose with it, build "
+                             f"{eff.refusal()}: simulate and diagnose with it, build "
                              "tables without it")
         for name, err in effect_symmetry_errors(eff).items():
             if not err <= SYMMETRY_TOL:

@@ -122,6 +122,11 @@ HIDDEN: dict[str, HiddenEffect] = {
                      "(a sagging battery, sped up to show in flights of seconds)",
                      (("effects.thrust_time", None, (("rate", 0.016),)),),
                      truth=("thrust_time", "rate", 0.016)),
+        HiddenEffect("wind", "steady wind of 3 m/s from 307 deg (north-west): east 2.4, "
+                     "north -1.8 m/s; every flight's heading gamma_C = 0, so the level "
+                     "circles see it in their plane and the tilted ones partly across it",
+                     (("effects.wind", None, (("east", 2.4), ("north", -1.8))),),
+                     truth=("wind", "east", 2.4)),
         HiddenEffect("mass", "mass 0.55 kg instead of 0.5 kg", (("vehicle", "mass", 0.55),),
                      truth=("mass", "mass", 0.55)),
         HiddenEffect("attachment_offset", "attachment offset L_e = 0.12 m instead of 0.10 m",

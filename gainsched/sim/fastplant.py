@@ -9,9 +9,11 @@ packs a :class:`~gainsched.model.reduced.Model` into the C parameter array and c
 kernel through ctypes with preallocated buffers.
 
 Supported: the rigid link with the state-only effects ``drag`` (eq. 10),
-``rotor_drag``, ``thrust_scale``, ``thrust_airspeed``, ``thrust_momentum`` (eq. 29)
-and ``motor_lag`` (4 extra states) (:class:`FastPlant`); the spring-damper link with
-the same effects but the stateful ``motor_lag`` (:class:`FastMaximal`, the
+``rotor_drag``, ``thrust_scale``, ``motor_efficiency``, ``thrust_airspeed``,
+``thrust_momentum`` (eq. 29), ``wind`` (the circle's heading gamma is then an argument of
+every call), ``thrust_time`` (1 extra state) and ``motor_lag`` (4 extra states)
+(:class:`FastPlant`); the spring-damper link with the same effects but the stateful
+``motor_lag`` and ``thrust_time`` (:class:`FastMaximal`, the
 maximal-coordinate model of :mod:`gainsched.model.maximal`, which has no stateful
 effects either). Anything else (other effects, the SLS and lumped-mass links) uses the
 numpy model: :func:`fast_plant` returns None and the caller falls back, as it does when
@@ -35,6 +37,7 @@ from ..model.effects import (
     ThrustPolynomial,
     ThrustScale,
     ThrustTime,
+    Wind,
 )
 from ..model.maximal import N_MAXIMAL, MaximalModel
 from ..model.reduced import Model
@@ -43,7 +46,7 @@ from ..native import load
 __all__ = ["FastPlant", "FastMaximal", "fast_plant", "fast_plant_supported",
            "SUPPORTED_EFFECTS"]
 
-_LAYOUT = 3  # GS_PLANT_LAYOUT in plant.c
+_LAYOUT = 4  # GS_PLANT_LAYOUT in plant.c
 _EFF_STRIDE = 6  # kind, params a..d, first state index (EFF_STRIDE in plant.c)
 #: effect class -> (kind code in plant.c, names of the parameters a, b)
 _CODES = {
@@ -55,6 +58,7 @@ _CODES = {
     ThrustMomentum: (6, ("disk_area", "rho_air")),
     MotorEfficiency: (7, ("eta1", "eta2", "eta3", "eta4")),
     ThrustTime: (8, ("rate",)),
+    Wind: (9, ("east", "north")),
 }
 #: config effect names the compiled plant implements
 SUPPORTED_EFFECTS = frozenset(cls.kind for cls in _CODES)
@@ -143,22 +147,23 @@ class FastPlant:
         # private function objects: the argtypes are ours, not shared with other users
         vp, dbl = ctypes.c_void_p, ctypes.c_double
         self._eval = lib["gs_plant_eval"]
-        self._eval.argtypes = [vp, vp, vp, dbl, vp, vp, vp]
+        self._eval.argtypes = [vp, vp, vp, dbl, dbl, vp, vp, vp]
         self._eval.restype = ctypes.c_int
         self._rk4 = lib["gs_plant_rk4"]
-        self._rk4.argtypes = [vp, vp, vp, dbl, dbl, vp, vp]
+        self._rk4.argtypes = [vp, vp, vp, dbl, dbl, dbl, vp, vp]
         self._rk4.restype = ctypes.c_int
         self._lib = lib
 
-    def evaluate(self, z, u, alpha):
+    def evaluate(self, z, u, alpha, gamma=0.0):
         """``(z_dot (n_z,), tension N, T (4,) N)`` at one state, as ``Model.evaluate``."""
         self._x[:] = z
         self._u[:] = u
-        if self._eval(self._pp, self._px, self._pu, alpha, self._pout, self._pten, self._pT):
+        if self._eval(self._pp, self._px, self._pu, alpha, gamma, self._pout, self._pten,
+                      self._pT):
             raise np.linalg.LinAlgError("singular model matrix")
         return self._out.copy(), float(self._ten[0]), self._T.copy()
 
-    def f(self, x, u, alpha):
+    def f(self, x, u, alpha, gamma=0.0):
         """State derivative (n_z,) and tether tension (float, N) at one state.
 
         Parameters
@@ -166,21 +171,24 @@ class FastPlant:
         x : array (n_z,) reduced state (rad, rad/s) and effect states
         u : array (4,) commanded motor thrusts, N
         alpha : float, rad, tilt of the circle plane
+        gamma : float, rad, heading of the circle plane (matters with a wind only)
         """
         self._x[:] = x
         self._u[:] = u
-        if self._eval(self._pp, self._px, self._pu, alpha, self._pout, self._pten, None):
+        if self._eval(self._pp, self._px, self._pu, alpha, gamma, self._pout, self._pten,
+                      None):
             raise np.linalg.LinAlgError("singular model matrix")
         return self._out.copy(), float(self._ten[0])
 
-    def rk4_step(self, x, u, alpha, dt):
+    def rk4_step(self, x, u, alpha, dt, gamma=0.0):
         """One RK4 step of ``dt`` s with ``u`` held: ``(x_next (n_z,), tension at x, N)``.
 
-        Same operations as ``gainsched.sim.loop._rk4`` with the numpy model.
+        Same operations as ``gainsched.sim.loop._rk4`` with the numpy model; ``gamma``
+        (rad) is the circle's heading (matters with a wind only).
         """
         self._x[:] = x
         self._u[:] = u
-        rc = self._rk4(self._pp, self._px, self._pu, alpha, dt, self._pout, self._pten)
+        rc = self._rk4(self._pp, self._px, self._pu, alpha, gamma, dt, self._pout, self._pten)
         if rc:
             raise np.linalg.LinAlgError("singular model matrix")
         return self._out.copy(), float(self._ten[0])
@@ -218,23 +226,23 @@ class FastMaximal:
         self._pp, self._px, self._pu, self._pout, self._pten = (a.ctypes.data for a in bufs)
         vp, dbl = ctypes.c_void_p, ctypes.c_double
         self._eval = lib["gs_maximal_eval"]
-        self._eval.argtypes = [vp, vp, vp, dbl, vp, vp]
+        self._eval.argtypes = [vp, vp, vp, dbl, dbl, vp, vp]
         self._eval.restype = ctypes.c_int
         self._rk4 = lib["gs_maximal_rk4"]
-        self._rk4.argtypes = [vp, vp, vp, dbl, dbl, ctypes.c_int, vp, vp]
+        self._rk4.argtypes = [vp, vp, vp, dbl, dbl, dbl, ctypes.c_int, vp, vp]
         self._rk4.restype = ctypes.c_int
         self._substeps: dict[float, int] = {}
         self._lib = lib
 
-    def f(self, x, u, alpha):
+    def f(self, x, u, alpha, gamma=0.0):
         """State derivative (13,) and tether tension (float, N, >= 0) at one state, as
         ``MaximalModel.f`` and ``MaximalModel.tension``."""
         self._x[:] = x
         self._u[:] = u
-        self._eval(self._pp, self._px, self._pu, alpha, self._pout, self._pten)
+        self._eval(self._pp, self._px, self._pu, alpha, gamma, self._pout, self._pten)
         return self._out.copy(), max(0.0, float(self._ten[0]))
 
-    def rk4_step(self, x, u, alpha, dt):
+    def rk4_step(self, x, u, alpha, dt, gamma=0.0):
         """Advance by ``dt`` s with ``u`` held, as ``MaximalModel.step``: ``(x_next (13,),
         signed tension at x, N)`` (negative: slack, the push the link would need)."""
         n = self._substeps.get(dt)
@@ -242,7 +250,7 @@ class FastMaximal:
             n = self._substeps[dt] = self.maximal.substeps(dt)
         self._x[:] = x
         self._u[:] = u
-        self._rk4(self._pp, self._px, self._pu, alpha, dt, n, self._pout, self._pten)
+        self._rk4(self._pp, self._px, self._pu, alpha, gamma, dt, n, self._pout, self._pten)
         return self._out.copy(), float(self._ten[0])
 
 

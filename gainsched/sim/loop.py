@@ -413,12 +413,14 @@ class _Plant:
     The rigid and the spring-damper links run on the compiled plants
     (:mod:`gainsched.sim.fastplant`) when they support the config and a compiler is
     available, else on the numpy models (the reference). The SLS and lumped-mass links
-    keep their own path: set ``self.maximal`` (an object with ``f(x, u, alpha)`` and
-    ``tension(x, u, alpha)``) and ``self.fast = None``.
+    keep their own path: set ``self.maximal`` (an object with ``f(x, u, alpha, gamma)``
+    and ``tension(x, u, alpha, gamma)``) and ``self.fast = None``. ``gamma`` (rad) is the
+    circle's heading: with a wind (``[effects.wind]``) it sets the wind's direction in C.
     """
 
-    def __init__(self, cfg: Config):
+    def __init__(self, cfg: Config, gamma: float = 0.0):
         self.model = Model(cfg)
+        self.gamma = float(gamma)  # the circle's heading, rad: the wind's direction in C
         self.maximal = None if cfg.tether.link == "rigid" else MaximalModel(self.model)
         # compiled RK4 of the reduced or the spring-damper maximal model; None: numpy model
         self.fast = fast_plant(cfg)
@@ -436,20 +438,21 @@ class _Plant:
 
     def f(self, x, u, alpha):
         """State derivative and tether tension (N) at one state."""
+        g = self.gamma
         if self.fast is not None:
-            return self.fast.f(x, u, alpha)
+            return self.fast.f(x, u, alpha, g)
         if self.maximal is None:
-            ev = self.model.evaluate(x, u, alpha)
+            ev = self.model.evaluate(x, u, alpha, g)
             return ev.z_dot, ev.tension
-        return self.maximal.f(x, u, alpha), self.maximal.tension(x, u, alpha)
+        return self.maximal.f(x, u, alpha, g), self.maximal.tension(x, u, alpha, g)
 
     def step(self, x, u, alpha, dt):
         """One RK4 step of ``dt`` s with ``u`` held: ``(x_next, tension at x in N)``
         (elastic links: RK4 substeps, and a negative tension when slack)."""
         if self.fast is not None:
-            return self.fast.rk4_step(x, u, alpha, dt)
+            return self.fast.rk4_step(x, u, alpha, dt, self.gamma)
         if self.maximal is not None:
-            return self.maximal.step(x, u, alpha, dt)
+            return self.maximal.step(x, u, alpha, dt, self.gamma)
         return _rk4(self.f, x, u, alpha, dt)
 
     def reduced(self, x, xi_ref):
@@ -637,7 +640,7 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     '37 mm'
     """
     plant = design if plant is None else plant
-    P = _Plant(plant)
+    P = _Plant(plant, scenario.gamma)
     dmodel = Model(design)
     dt = design.control.dt
     n_steps = int(round(scenario.duration / dt)) + 1
@@ -925,7 +928,8 @@ class _Estimator:
         fast = None
         if not sens.ideal and model.n_z == N_STATE and model.config.tether.link == "rigid":
             fast = fast_plant(model.config)
-        self._f = (lambda z, u, a: fast.f(z, u, a)[0]) if fast is not None else model.f
+        self._f = ((lambda z, u, a: fast.f(z, u, a, gamma)[0]) if fast is not None
+                   else (lambda z, u, a: model.f(z, u, a, gamma)))
 
     def estimate(self, k, x, z_true):
         if self.sens.ideal:

@@ -221,3 +221,53 @@ def test_rigid_energy_conserved(model_nodrag):
     E = mx.energy(xs, 0.3)
     assert np.abs(E - E[0]).max() / abs(E[0]) <= 1e-6
     np.testing.assert_allclose(E[0], md.energy(z0, 0.3), rtol=1e-14)
+
+
+def test_rigid_link_matches_reduced_accelerations_in_a_wind(paper_config):
+    """Issue 37: both formulations in a wind (drag, rotor drag, momentum theory beside it)
+    at random headings: the same tension, COG acceleration and omega' (the reduced model's
+    acceleration through its exact Jacobian-free identity: maximal state rate at z')."""
+    from gainsched.config import config_from_text
+    from gainsched.configedit import set_values
+    from gainsched.model.reduced import Model
+
+    text = set_values(paper_config.text, {"effects.wind.east": 3.0, "effects.wind.north": -2.0,
+                                          "effects.rotor_drag.k_rd": 0.02,
+                                          "effects.thrust_momentum.disk_area": 0.006})
+    model = Model(config_from_text(text, "windy.toml"))
+    assert model.wind_I is not None
+    rng = np.random.default_rng(17)
+    z = random_states(rng, 40)
+    u = rng.uniform(0.2, 3.0, (40, 4))
+    alpha, gamma = rng.uniform(-0.7, 0.7, 40), rng.uniform(-np.pi, np.pi, 40)
+    mx = MaximalModel(model, "rigid")
+    ev = model.evaluate(z, u, alpha, gamma)
+    x = maximal_from_reduced(model, z)
+    x_dot, f_t = mx.evaluate(x, u, alpha, gamma)
+    np.testing.assert_allclose(f_t, ev.tension, rtol=0, atol=1e-9 * np.abs(ev.tension).max())
+    h = 1e-6
+    a_fd = (maximal_from_reduced(model, z + h * ev.z_dot)[:, 3:6]
+            - maximal_from_reduced(model, z - h * ev.z_dot)[:, 3:6]) / (2 * h)
+    np.testing.assert_allclose(x_dot[:, 3:6], a_fd, rtol=0, atol=1e-7 * np.abs(a_fd).max())
+    np.testing.assert_allclose(x_dot[:, 10:13], ev.z_dot[:, 7:10], rtol=0, atol=1e-9)
+    calm = mx.evaluate(x, u, alpha, gamma + 1.0)[0]  # another heading, another wind in C
+    assert np.abs(calm[:, 3:6] - x_dot[:, 3:6]).max() > 1e-2
+
+
+def test_wind_model_is_complex_step_safe(paper_config):
+    """The model in a wind takes complex-step Jacobians (as the linearisation does): they
+    equal central differences."""
+    from gainsched.config import config_from_text
+    from gainsched.configedit import set_values
+    from gainsched.model.reduced import Model
+
+    text = set_values(paper_config.text, {"effects.wind.east": 3.0, "effects.wind.north": 1.0})
+    model = Model(config_from_text(text, "windy.toml"))
+    rng = np.random.default_rng(3)
+    z, u = random_states(rng, 1)[0], rng.uniform(0.5, 2.5, 4)
+    for j in range(10):
+        dz = np.zeros(10)
+        dz[j] = 1.0
+        cs = np.imag(model.f(z + 1e-30j * dz, u, 0.3, 0.8)) / 1e-30
+        fd = (model.f(z + 1e-6 * dz, u, 0.3, 0.8) - model.f(z - 1e-6 * dz, u, 0.3, 0.8)) / 2e-6
+        np.testing.assert_allclose(cs, fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())

@@ -10,6 +10,10 @@
   ``MaximalModel``: derivative and tension at random states (taut and slack, every
   combination of the stateless effects), and a step with its RK4 substeps (a stiff link).
 - A closed-loop flight with the compiled plants equals the numpy-plant flight.
+- A wind (issue 37): derivative, tension and thrusts of both plants, reduced and
+  maximal, equal the numpy models at random tilts *and headings* gamma (the wind's
+  direction in C), with every airspeed effect beside it; an RK4 step too; and a
+  closed-loop flight at a heading in a wind equals the numpy-plant flight.
 - The numpy model is used with ``GAINSCHED_NATIVE=0`` and for configs the kernel
   does not implement.
 - The simulator's single-query interpolator path gives the vectorised reference's
@@ -60,6 +64,7 @@ EFFECT_PARAMS = {
     "thrust_momentum": {"disk_area": 0.006},
     "motor_efficiency": {"eta1": 1.04, "eta2": 0.97, "eta3": 0.92, "eta4": 1.01},
     "thrust_time": {"rate": 0.013},
+    "wind": {"east": 2.4, "north": -1.8},
 }
 #: every combination of the first six, the per-motor one after a lag, before and after
 #: the airspeed modifiers, and the flight-time one (a second stateful effect) beside a lag
@@ -113,6 +118,67 @@ def test_derivative_and_tension_equal_numpy_model(paper_text, names):
         assert ten2 == ten
 
 
+#: the wind with each airspeed effect, all of them, and before / after the others
+WIND_COMBOS = [("drag", "wind"), ("wind", "rotor_drag"), ("thrust_airspeed", "wind"),
+               ("wind", "thrust_momentum", "drag"),
+               ("motor_lag", "wind", "drag", "rotor_drag", "thrust_airspeed", "thrust_momentum"),
+               ("wind",)]
+
+
+@pytest.mark.parametrize("names", WIND_COMBOS, ids=lambda c: "+".join(c))
+def test_wind_derivative_and_tension_equal_numpy_model(paper_text, names):
+    """The compiled plant turns the wind into C with the heading it is given, as the
+    numpy model does: 1e-12 of the largest entry at random tilts and headings."""
+    cfg = with_effects(paper_text, names)
+    assert fast_plant_supported(cfg)
+    model, fp = Model(cfg), fast_plant(cfg)
+    assert isinstance(fp, FastPlant) and model.wind_I is not None
+    z, u, alpha = random_states(model, 48, seed=len(names) * 11 + 5)
+    gamma = np.random.default_rng(len(names)).uniform(-np.pi, np.pi, alpha.size)
+    ref = model.evaluate(z, u, alpha, gamma)  # batched numpy, a heading per state
+    still = Model(cfg, effects=tuple(e for e in model.effects if e.kind != "wind"))
+    moved = np.abs(ref.z_dot - still.evaluate(z, u, alpha, gamma).z_dot).max()
+    assert moved > (1e-3 if any(n != "wind" for n in names) else -1)  # the wind acts...
+    if names == ("wind",):  # ...through the airspeed effects only
+        np.testing.assert_array_equal(ref.z_dot, still.evaluate(z, u, alpha).z_dot)
+    for i in range(z.shape[0]):
+        z_dot, ten, T = fp.evaluate(z[i], u[i], alpha[i], gamma[i])
+        scale = np.abs(ref.z_dot[i]).max()
+        assert np.abs(z_dot - ref.z_dot[i]).max() <= 1e-12 * scale
+        assert abs(ten - ref.tension[i]) <= 1e-12 * max(abs(ref.tension[i]), 1.0)
+        assert np.abs(T - ref.T[i]).max() <= 1e-12 * np.abs(ref.T[i]).max()
+        z_dot2, ten2 = fp.f(z[i], u[i], alpha[i], gamma[i])
+        np.testing.assert_array_equal(z_dot2, z_dot)
+        x_ref, ten_ref = _rk4(lambda x, v, a, g=gamma[i]: (model.f(x, v, a, g),
+                                                            model.evaluate(x, v, a, g).tension),
+                              z[i], u[i], alpha[i], 1e-3)
+        x_next, ten3 = fp.rk4_step(z[i], u[i], alpha[i], 1e-3, gamma[i])
+        assert np.abs(x_next - x_ref).max() <= 1e-12 * np.abs(x_ref).max()
+        assert ten3 == ten
+
+
+@pytest.mark.parametrize("names", [("drag", "wind"), ("wind", "rotor_drag", "thrust_momentum")],
+                         ids=lambda c: "+".join(c))
+def test_wind_maximal_equals_numpy_model(paper_text, names):
+    """The spring-damper plant in a wind, at random headings: derivative, tension and a
+    step with substeps within 1e-12 of ``MaximalModel``."""
+    cfg = spring_damper(paper_text, names, 2e5, 20.0)
+    fm, mm = fast_plant(cfg), MaximalModel(Model(cfg))
+    assert isinstance(fm, FastMaximal)
+    x, u, alpha = maximal_states(mm, 24, seed=len(names) + 40)
+    gamma = np.random.default_rng(3).uniform(-np.pi, np.pi, alpha.size)
+    ref, ten_ref = mm.f(x, u, alpha, gamma), mm.tension(x, u, alpha, gamma)
+    assert np.abs(ref - mm.f(x, u, alpha)).max() > 1e-3  # the heading matters
+    for i in range(x.shape[0]):
+        x_dot, ten = fm.f(x[i], u[i], alpha[i], gamma[i])
+        assert np.abs(x_dot - ref[i]).max() <= 1e-12 * np.abs(ref[i]).max()
+        assert abs(ten - ten_ref[i]) <= 1e-12 * max(ten_ref[i], 1.0)
+        x_ref, t_ref = mm.step(x[i], u[i], alpha[i], 1e-3, gamma[i])
+        x_next, t_next = fm.rk4_step(x[i], u[i], alpha[i], 1e-3, gamma[i])
+        assert np.abs(x_next - x_ref).max() <= 1e-12 * np.abs(x_ref).max()
+        assert abs(t_next - t_ref) <= 1e-12 * max(abs(t_ref), 1.0)
+
+
 @pytest.mark.parametrize("names", [("drag",), tuple(EFFECT_PARAMS)], ids=["drag", "all"])
 def test_rk4_step_equals_numpy(paper_text, names):
     cfg = with_effects(paper_text, names)
@@ -129,6 +195,25 @@ def test_rk4_step_equals_numpy(paper_text, names):
         assert np.abs(x_next - x_ref).max() <= 1e-12 * np.abs(x_ref).max()
         assert ten == fp.f(z[i], u[i], alpha[i])[1]
         assert abs(ten - ten_ref) <= 1e-12 * max(abs(ten_ref), 1.0)
+
+
+@pytest.mark.slow
+def test_closed_loop_in_a_wind_equals_numpy_plant(paper_config, paper_text, monkeypatch):
+    """0.5 s tilted flight at heading 70 deg in a wind: the compiled and the numpy flights
+    agree to 1e-9 m, and the wind (its direction in C set by the heading) moved the
+    vehicle against the same flight in still air."""
+    sched = table_scheduler(load_table(PAPER_H5))
+    truth = with_effects(paper_text, ("drag", "wind"))
+    scn = Scenario("wind", np.deg2rad(20), 9.0, 0.5, gamma=np.deg2rad(70))
+    assert _Plant(truth).fast is not None
+    fast = simulate(paper_config, sched, scn, truth)
+    calm = simulate(paper_config, sched, dataclasses.replace(scn, gamma=0.0), truth)
+    assert np.abs(fast.z - calm.z).max() > 1e-4
+    monkeypatch.setenv("GAINSCHED_NATIVE", "0")
+    assert _Plant(truth).fast is None
+    slow = simulate(paper_config, sched, scn, truth)
+    assert np.abs(fast.p_I - slow.p_I).max() <= 1e-9
+    assert np.abs(fast.z - slow.z).max() <= 1e-9
 
 
 @pytest.mark.slow
@@ -187,6 +272,7 @@ def test_fallback_for_unsupported_configs(paper_config):
 
 # ----------------------------------------------------------- maximal model, spring-damper
 STATELESS = [c for c in COMBOS if "motor_lag" not in c and "thrust_time" not in c]
+# (the wind's own maximal test is test_wind_maximal_equals_numpy_model)
 
 
 def spring_damper(paper_text: str, names, stiffness: float, damping: float):
