@@ -590,7 +590,10 @@ def test_ctrl_c_during_the_heavy_imports(tmp_path):
             "threading.Timer(0.02, os.kill, (os.getpid(), signal.SIGINT)).start()\n"
             f"sys.argv = ['gainsched', 'validate', {str(PAPER)!r}]\n"
             "main()\n")
+    # Ctrl-C as a terminal delivers it: a runner that started the suite in the
+    # background (CI) hands its children SIGINT ignored, which Python then keeps
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                       timeout=120, cwd=tmp_path)
+                       timeout=120, cwd=tmp_path,
+                       preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert p.returncode == 130, p.stderr
     assert p.stderr == "gainsched: interrupted\n" and p.stdout == ""
