@@ -1008,17 +1008,16 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
         if d.accepted is None:
             click.echo("nothing applied: no candidate cleared the thresholds")
         else:
-            from .model.effects import EFFECTS
+            from .schedule.grid import check_effect_symmetries
 
             text = apply_candidate(cfg, d.accepted)
             write_atomic(new_config, text.encode(), where="-o")
             new_cfg = config_from_text(text, str(new_config))
-            held = [(s.name, EFFECTS[s.name].refusal()) for s in new_cfg.effects
-                    if EFFECTS[s.name].refusal()]
-            if held:  # a wind, a thrust of flight time: the build would refuse the config
+            try:  # the build's own check: a wind, flight time, unequal motors
+                check_effect_symmetries(new_cfg)
+            except InputError as held:
                 click.echo(f"wrote {new_config} ({d.accepted.name}); no table can hold "
-                           f"effects.{held[0][0]} ({held[0][1]}): simulate and compare with "
-                           "it, build tables from a config without it")
+                           f"{held.where}: {held.message}")
             else:
                 click.echo(f"wrote {new_config} ({d.accepted.name}); rebuild the tables with "
                            f"`gainsched build {new_config}`")

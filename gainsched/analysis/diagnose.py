@@ -1206,8 +1206,10 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
         structure = 1 - math.sqrt(prob.structure_power(held_vecs) / p_before)
     empirical = bool(getattr(cand, "empirical", False))
     # what a right model would not leave: significant binned structure (in azimuth,
-    # airspeed, thrust or time) on any axis of the held-out residual
-    left = tuple(f.sentence() for f in prob.structure_left(held_vecs))
+    # airspeed, thrust or time) on any axis of the held-out residual (at the noise floor
+    # the structure removed judges instead: CandidateResult.failed)
+    left = () if structure is not None else tuple(
+        f.sentence() for f in prob.structure_left(held_vecs))
     # an empirical law, or a physical effect's own words (the weak motor), of the
     # candidate or of the parts of a joint one; and what no such effect could be
     kinds = [k for k in (getattr(c, "kind", None) for c in getattr(cand, "parts", (cand,)))
