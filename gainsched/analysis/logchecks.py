@@ -60,6 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..model.rotations import matrix_from_quaternion
 
 __all__ = ["CHECKS", "RATIO_TOL", "QUAT_ALONG_MIN", "Figures", "figures", "check_log",
            "thrust_units", "trusted"]
@@ -154,16 +155,6 @@ def _plane_angles(n) -> tuple[float, float]:
     return alpha, gamma
 
 
-def _rotations(q: np.ndarray) -> np.ndarray:
-    """R_IB (N, 3, 3) of unit quaternions (w, x, y, z)."""
-    w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
-
-
 def _unit(v: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n > 0, n, 1.0)
@@ -231,7 +222,7 @@ def figures(t, p_I, q, T_cmd, optional: dict, meta: dict, *, mass: float | None 
         return Figures()
     q = np.asarray(q, float)
     sel = _thin(np.arange(n))
-    R = _rotations(q[sel])
+    R = matrix_from_quaternion(q[sel])
     x_B, z_B = R[:, :, 0], R[:, :, 2]
     alpha = math.radians(float(meta["alpha_c_deg"]))
     gamma = math.radians(float(meta["gamma_c_deg"]))
@@ -263,7 +254,8 @@ def figures(t, p_I, q, T_cmd, optional: dict, meta: dict, *, mass: float | None 
             h = t[k + m] - t[k]
             if k.size > 10:
                 mean_w = (cum[k + m] - cum[k]) / h[:, None]
-                dR = np.einsum("kji,kjl->kil", _rotations(q[k]), _rotations(q[k + m]))
+                dR = np.einsum("kji,kjl->kil", matrix_from_quaternion(q[k]),
+                               matrix_from_quaternion(q[k + m]))
                 vee = np.stack([dR[:, 2, 1] - dR[:, 1, 2], dR[:, 0, 2] - dR[:, 2, 0],
                                 dR[:, 1, 0] - dR[:, 0, 1]], -1) / 2
                 s = np.linalg.norm(vee, axis=-1)
@@ -291,7 +283,7 @@ def figures(t, p_I, q, T_cmd, optional: dict, meta: dict, *, mass: float | None 
         c, a, v = _accelerations(t, p, gap_factor)
         if c.size > 10:
             e = _unit(p[c])
-            z_c = _rotations(q[c])[:, :, 2]
+            z_c = matrix_from_quaternion(q[c])[:, :, 2]
             T_c = np.asarray(T_cmd, float)[c]
             thrust = thrust_scale * np.sum(T_c, -1)
             hold = a - np.array([0.0, 0.0, -g])  # what thrust and tether must supply, /m
