@@ -63,6 +63,7 @@ from ..config import NAME_RE, Config, EffectSpec, Tether, config_from_text
 from ..configedit import remove_key, set_section, set_value
 from ..model.effects import EFFECTS, Effect, Param, Refit
 from ..model.reduced import Model
+from ..model.symmetry import table_refusal
 from .compare import (
     AT_NOISE_FLOOR,
     UNITS,
@@ -1592,6 +1593,18 @@ def _fmt_values(r: CandidateResult) -> str:
     return ", ".join(parts)
 
 
+def _table_refusal(result: CandidateResult) -> str:
+    """Why no table can hold the effect ``result`` fitted, at its values (the build's
+    check, :func:`~gainsched.model.symmetry.table_refusal`); "" when one can or when the
+    candidate is not one effect's."""
+    kind = getattr(result.candidate, "kind", None)
+    if kind not in EFFECTS:
+        return ""
+    cls = EFFECTS[kind]
+    names = {p.name for p in cls.params}
+    return table_refusal(cls(**{k: v for k, v in result.values.items() if k in names}))
+
+
 def _verdict(base, results, accepted, twins, at_floor) -> str:
     if at_floor and accepted is None and base.structure:
         # the overall RMS hides it; averaging over revolutions (or airspeed, thrust bins)
@@ -1639,11 +1652,13 @@ def _verdict(base, results, accepted, twins, at_floor) -> str:
     if accepted.empirical:
         what = (base.structure[0].sentence() if base.structure
                 else base.where["sentence"])
+        refusal = _table_refusal(accepted)
+        where = (f"; no table can hold it: it {refusal}" if refusal
+                 else " (and, by the table's symmetries, their mirror images)")
         return (f"no physical effect of the library explains the residual ({what}); "
                 f"empirical correction: {accepted.name}, {accepted.law}; "
                 f"{score}, delta-BIC {accepted.delta_bic:.0f}. It is a fit, not a model: "
-                "it holds on the circles flown (and, by the table's symmetries, their "
-                "mirror images)")
+                f"it holds on the circles flown{where}")
     parts = getattr(accepted.candidate, "parts", ())
     what = "missing effects, fitted together" if parts else "missing effect"
     law = f" ({accepted.law})" if accepted.law else ""

@@ -50,7 +50,10 @@ __all__ = [
     "TIME_ORDER",
     "TIME_UNIT_S",
     "Wind",
+    "ForceHorizontal",
+    "FORCE_SPEED_UNIT",
     "wind_in_circle_frame",
+    "circle_to_inertial",
     "fundamental_azimuth",
     "AZIMUTH_HARMONICS",
     "EFFECTS",
@@ -161,6 +164,19 @@ def wind_in_circle_frame(wind_I, alpha, gamma=0.0):
     u0 = cg * wx + sg * wy  # Rz(gamma)^T w
     u1 = cg * wy - sg * wx
     return np.stack(np.broadcast_arrays(u0, ca * u1 + sa * wz, ca * wz - sa * u1), -1)
+
+
+def circle_to_inertial(v_C, alpha, gamma=0.0):
+    """``R_IC v_C`` with ``R_IC = Rz(gamma) Rx(alpha)`` (docs/conventions.md): a vector
+    ``v_C`` (..., 3) of C expressed in I, shape the broadcast with ``alpha``, ``gamma``
+    (...) + (3,); the inverse of :func:`wind_in_circle_frame`. Complex-step safe."""
+    v = np.asarray(v_C)
+    a, g = np.asarray(alpha), np.asarray(gamma)
+    ca, sa, cg, sg = np.cos(a), np.sin(a), np.cos(g), np.sin(g)
+    t1 = ca * v[..., 1] - sa * v[..., 2]  # Rx(alpha) v
+    t2 = sa * v[..., 1] + ca * v[..., 2]
+    return np.stack(np.broadcast_arrays(cg * v[..., 0] - sg * t1, sg * v[..., 0] + cg * t1,
+                                        t2), -1)
 
 
 @dataclass(frozen=True)
@@ -915,11 +931,88 @@ class ThrustMotorCurve(Effect):
         return f"motor {i + 1} thrust {a[i]:+.1%} ({others}){slope}"
 
 
+#: the airspeed unit of :class:`ForceHorizontal`'s speed terms, m/s (the coefficients
+#: read as newtons at that airspeed)
+FORCE_SPEED_UNIT = 10.0
+
+
+_EN = {"e": "east", "n": "north"}
+
+
+class ForceHorizontal(Effect):
+    """Empirical horizontal force at the COG fixed in I:
+    ``F_I = (e0 + e1 s, n0 + n1 s, 0) + s (u . (e2, n2, 0)) u`` N, (east, north, up),
+    with ``s = |v_air| / 10 m/s`` the airspeed in units of 10 m/s and ``u`` the unit
+    vector of the air velocity, turned into each flight's circle frame by
+    ``R_IC = Rz(gamma) Rx(alpha)`` (docs/conventions.md).
+
+    No physical model behind it: a push from one inertial direction that may grow with
+    speed, for a residual locked to the inertial azimuth when no effect of the library
+    explains it (a wind, a draft in the hall, a tether that drags sideways). On a level
+    circle it is the first harmonic of the along-track and radial residual in the
+    inertial azimuth; on tilted circles it has the direction the flights share. Diagnose
+    chooses its order held out: a constant force, one growing with speed, and one along
+    the velocity that grows with its component along ``(e2, n2)`` (what a drag
+    quadratic in the airspeed adds in a wind, to first order in the wind). Like
+    the wind it comes from an inertial direction, so no table can hold it (no heading
+    axis; the symmetries S1 and S2 break): simulate and diagnose with it.
+    """
+
+    kind = "force_horizontal"
+    params = (
+        Param("e0", "N", 0.0, -20.0, 20.0, "force towards east"),
+        Param("n0", "N", 0.0, -20.0, 20.0, "force towards north"),
+        Param("e1", "N", 0.0, -20.0, 20.0,
+              f"force towards east per {FORCE_SPEED_UNIT:g} m/s of airspeed"),
+        Param("n1", "N", 0.0, -20.0, 20.0,
+              f"force towards north per {FORCE_SPEED_UNIT:g} m/s of airspeed"),
+        Param("e2", "N", 0.0, -20.0, 20.0, f"force along the velocity per "
+              f"{FORCE_SPEED_UNIT:g} m/s of airspeed, per unit of its east component"),
+        Param("n2", "N", 0.0, -20.0, 20.0, f"force along the velocity per "
+              f"{FORCE_SPEED_UNIT:g} m/s of airspeed, per unit of its north component"),
+        Param("d0", "N", 0.0, -20.0, 20.0, "force against the air velocity, whatever its "
+              "direction"),
+        *(Param(f"q{a}{b}", "N", 0.0, -20.0, 20.0, f"force towards {_EN[a]} per unit of the "
+                f"air velocity's {_EN[b]} direction component") for a in "en" for b in "en"),
+    )
+    empirical = True
+    table_refusal = ("comes from an inertial direction, which breaks the tilt-sign and "
+                     "direction symmetries (S1, S2) the table's query maps rely on, and a "
+                     "table has no heading axis")
+    fits = (Refit("force_horizontal", tuple(p.name for p in params),
+                  "empirical horizontal force from a fixed inertial direction",
+                  orders=(2, 4, 6, 7, 11)),)
+
+    def force_I(self, kin: Kinematics):
+        """The force in I, shape (..., 3), N."""
+        v = kin.v_air_C
+        speed = norm(v)
+        s = speed / FORCE_SPEED_UNIT
+        u = circle_to_inertial(v / speed[..., None], kin.alpha, kin.gamma)  # direction in I
+        ue, un = u[..., 0], u[..., 1]
+        along = s * (self.e2 * ue + self.n2 * un) - self.d0
+        east = self.e0 + self.e1 * s + self.qee * ue + self.qen * un + along * ue
+        north = self.n0 + self.n1 * s + self.qne * ue + self.qnn * un + along * un
+        return np.stack(np.broadcast_arrays(east, north, along * u[..., 2]), -1)
+
+    def wrench(self, T, kin):
+        F = wind_in_circle_frame(self.force_I(kin), kin.alpha, kin.gamma)
+        return F, np.zeros_like(F)
+
+    def law(self) -> str:
+        def towards(e, n):
+            return (f"{math.hypot(e, n):.3g} N towards "
+                    f"{math.degrees(math.atan2(e, n)) % 360.0:.0f} deg")
+        grow = (f", growing by {towards(self.e1, self.n1)} per {FORCE_SPEED_UNIT:g} m/s"
+                if self.e1 or self.n1 else "")
+        return f"horizontal force {towards(self.e0, self.n0)} (from north, clockwise){grow}"
+
+
 EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
     for cls in (Drag, RotorDrag, ThrustScale, MotorEfficiency, ThrustTime, ThrustPolynomial,
                 ThrustMomentum, MotorLag, ThrustAzimuth, ThrustTimeSeries, ThrustMotorCurve,
-                Wind)
+                Wind, ForceHorizontal)
 }
 
 

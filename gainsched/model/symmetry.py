@@ -36,7 +36,13 @@ __all__ = [
     "fundamental_from_query",
     "effect_symmetry_errors",
     "azimuth_invariance_error",
+    "table_refusal",
+    "SYMMETRY_TOL",
 ]
+
+#: relative error of :func:`effect_symmetry_errors` up to which an effect keeps a
+#: symmetry (round-off of its hooks)
+SYMMETRY_TOL = 1e-9
 
 P_U = np.eye(4)[[3, 2, 1, 0]]
 #: signs of the 10 reduced-state errors under S2
@@ -158,6 +164,25 @@ def effect_symmetry_errors(effect, n: int = 64, seed: int = 0) -> dict[str, floa
                                   effect.state_derivative(x, T, kin) @ P_s.T))
         out[name] = max(errs)
     return out
+
+
+def table_refusal(effect) -> str:
+    """Why no gain table can hold ``effect`` at its parameters, one clause; "" when one can.
+
+    The effect's own reason when it gives one (:meth:`Effect.refusal`: flight time, an
+    inertial direction), else the first symmetry it breaks beyond :data:`SYMMETRY_TOL`
+    (:func:`effect_symmetry_errors`): the build refuses such an effect, and diagnose says
+    so of a term it fits.
+    """
+    reason = effect.refusal()
+    if reason:
+        return reason
+    for name, err in effect_symmetry_errors(effect).items():
+        if not err <= SYMMETRY_TOL:
+            what = "tilt-sign" if name == "S1" else "direction"
+            return (f"breaks the {what} symmetry {name} that the table's query maps rely on "
+                    f"(relative error {err:.1e} > {SYMMETRY_TOL:g}; docs/symmetry.md)")
+    return ""
 
 
 def azimuth_invariance_error(effect, n: int = 64, seed: int = 0) -> float:

@@ -28,7 +28,7 @@ from ..constants import N_STATE, TILT_BATCH, Reason
 from ..errors import InputError
 from ..model.effects import registered_effects, registered_effects_context
 from ..model.reduced import Model
-from ..model.symmetry import azimuth_invariance_error, effect_symmetry_errors
+from ..model.symmetry import SYMMETRY_TOL, azimuth_invariance_error, table_refusal
 from ..native.reproducible import (
     blas_single_thread,
     children_ignore_sigint,
@@ -55,8 +55,6 @@ __all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "bound_
 
 #: relative accuracy demanded of the interpolated linearisation (see discrete_system)
 LIN_TOL = 1e-10
-#: largest relative S1/S2 violation of an effect the table's symmetry maps accept
-SYMMETRY_TOL = 1e-9
 
 
 def check_effect_symmetries(config) -> None:
@@ -67,21 +65,13 @@ def check_effect_symmetries(config) -> None:
     would make those maps wrong without a sign. An effect whose class gives a
     ``table_refusal`` (flight time, a wind) is refused with that reason. Raises
     :class:`InputError` naming the config file and ``effects.<kind>``
-    (:func:`~gainsched.model.symmetry.effect_symmetry_errors`).
+    (:func:`~gainsched.model.symmetry.table_refusal`).
     """
     for eff in Model(config).effects:
-        if eff.refusal():  # an effect that says so itself (flight time, wind)
+        reason = table_refusal(eff)
+        if reason:
             raise InputError(config.source, f"effects.{eff.kind}",
-                             f"{eff.refusal()}: simulate and diagnose with it, build "
-                             "tables without it")
-        for name, err in effect_symmetry_errors(eff).items():
-            if not err <= SYMMETRY_TOL:
-                what = "tilt-sign" if name == "S1" else "direction"
-                raise InputError(config.source, f"effects.{eff.kind}",
-                                 f"breaks the {what} symmetry {name} that the table's "
-                                 f"query maps rely on (relative error {err:.1e} > "
-                                 f"{SYMMETRY_TOL:g}; docs/symmetry.md): simulate and diagnose "
-                                 "with it, build tables without it")
+                             f"{reason}: simulate and diagnose with it, build tables without it")
 
 
 def check_gain_cap(config, grid) -> None:
