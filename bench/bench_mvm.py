@@ -45,7 +45,8 @@ def make_logs(out: Path, minutes: float, hidden: str) -> list[Path]:
 
 #: the candidates issue 37 added to the library
 ISSUE37_CANDIDATES = frozenset({"motor_efficiency", "thrust_time", "thrust_time_series",
-                                "thrust_motor", "wind", "force_horizontal"})
+                                "thrust_motor", "wind", "force_horizontal",
+                                "force_airspeed"})
 
 
 def base_candidates() -> list[str]:

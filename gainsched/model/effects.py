@@ -51,7 +51,9 @@ __all__ = [
     "TIME_UNIT_S",
     "Wind",
     "ForceHorizontal",
+    "ForceAirspeed",
     "FORCE_SPEED_UNIT",
+    "AIRSPEED_ORDER",
     "wind_in_circle_frame",
     "circle_to_inertial",
     "fundamental_azimuth",
@@ -931,9 +933,57 @@ class ThrustMotorCurve(Effect):
         return f"motor {i + 1} thrust {a[i]:+.1%} ({others}){slope}"
 
 
-#: the airspeed unit of :class:`ForceHorizontal`'s speed terms, m/s (the coefficients
-#: read as newtons at that airspeed)
+#: the airspeed unit of the empirical forces' speed terms (:class:`ForceAirspeed`,
+#: :class:`ForceHorizontal`), m/s (the coefficients read as newtons at that airspeed)
 FORCE_SPEED_UNIT = 10.0
+#: highest power of the airspeed in :class:`ForceAirspeed`
+AIRSPEED_ORDER = 3
+
+
+class ForceAirspeed(Effect):
+    """Empirical force against the air velocity: ``F = -(sum_k f_k s^k) u``, k = 0..3, N,
+    with ``s = |v_air| / 10 m/s`` and ``u`` the unit vector of the air velocity.
+
+    No physical model behind it: a power series in the airspeed for a residual along the
+    track that grows with speed when no effect of the library explains it (a body whose
+    drag is not the paper's law, eq. 10, a fairing, a payload). Its terms k = 1, 2 are
+    the paper's drag, ``f1 = 10 m/s mu1``, ``f2 = (10 m/s)^2 mu2``. Diagnose chooses its
+    order held out. It depends on the airspeed alone, so it keeps the table's symmetries
+    and a table can hold it.
+    """
+
+    kind = "force_airspeed"
+    params = tuple(Param(f"f{k}", "N", 0.0, -20.0, 20.0,
+                         f"force against the air velocity per (airspeed / "
+                         f"{FORCE_SPEED_UNIT:g} m/s)^{k}")
+                   for k in range(AIRSPEED_ORDER + 1))
+    empirical = True
+    fits = (Refit("force_airspeed", tuple(p.name for p in params),
+                  "empirical force against the air velocity, a power series in airspeed",
+                  orders=tuple(range(1, AIRSPEED_ORDER + 2))),)
+
+    def magnitude(self, speed):
+        """The force's size at airspeed ``speed`` (m/s), N, shape of ``speed``."""
+        s = np.asarray(speed) / FORCE_SPEED_UNIT
+        f, sk = self.f0 + 0 * s, 1.0
+        for k in range(1, AIRSPEED_ORDER + 1):
+            sk = sk * s
+            f = f + self.values[f"f{k}"] * sk
+        return f
+
+    def wrench(self, T, kin):
+        v = kin.v_air_C
+        speed = norm(v)
+        F = -(self.magnitude(speed) / speed)[..., None] * v
+        return F, np.zeros_like(F)
+
+    def law(self) -> str:
+        used = [k for k in range(AIRSPEED_ORDER + 1) if self.values[f"f{k}"]]
+        terms = " ".join(f"{self.values[f'f{k}']:+.3g}" + ("" if k == 0 else " s" if k == 1
+                                                           else f" s^{k}") for k in used)
+        return (f"force against the air velocity ({terms}) N, s = airspeed / "
+                f"{FORCE_SPEED_UNIT:g} m/s: {self.magnitude(5.0):.3g} N at 5 m/s, "
+                f"{self.magnitude(15.0):.3g} N at 15 m/s")
 
 
 _EN = {"e": "east", "n": "north"}
@@ -1012,7 +1062,7 @@ EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
     for cls in (Drag, RotorDrag, ThrustScale, MotorEfficiency, ThrustTime, ThrustPolynomial,
                 ThrustMomentum, MotorLag, ThrustAzimuth, ThrustTimeSeries, ThrustMotorCurve,
-                Wind, ForceHorizontal)
+                Wind, ForceAirspeed, ForceHorizontal)
 }
 
 

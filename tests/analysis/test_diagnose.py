@@ -581,9 +581,10 @@ def test_no_effect_needed_only_when_white():
     assert "roll" not in v
 
 
-def _left_out(paper_config, fly, hidden):
-    """diagnose of the campaign with ``hidden`` and that effect left out of the library."""
-    return diagnose(paper_config, fly(hidden), exclude=[hidden])
+def _left_out(paper_config, fly, hidden, exclude=None):
+    """diagnose of the campaign with ``hidden`` and that effect (or ``exclude``) left out
+    of the library."""
+    return diagnose(paper_config, fly(hidden), exclude=exclude or [hidden])
 
 
 @pytest.mark.slow
@@ -617,6 +618,22 @@ def test_a_weak_motor_with_its_effect_left_out_is_no_library_effect(paper_config
     assert a is not None and a.name == "thrust_motor", d.verdict
     assert a.values["a3"] == pytest.approx(-0.08, rel=0.10)
     assert "motor 3 thrust -8" in d.verdict, d.verdict
+    assert _excess_rms_fall(a) >= 0.8, a.excess_explained
+
+
+@pytest.mark.slow
+def test_a_drag_with_its_effect_left_out_gets_the_empirical_airspeed_force(paper_config, fly):
+    """Issue 37: the quadratic drag three times the config's (mu2 0.0075 instead of
+    0.0025) with every drag candidate left out: no physical candidate passes, and the
+    empirical force against the air velocity, a power series in the airspeed, is
+    accepted with its square term the missing drag, (10 m/s)^2 x 0.005 = 0.5 N, within
+    10 %, the held-out residual above noise falling >= 80 %."""
+    d = _left_out(paper_config, fly, "drag_quadratic", exclude=["drag"])
+    assert not any(r.passes and not r.empirical for r in d.results), d.verdict
+    a = d.accepted
+    assert a is not None and a.name == "force_airspeed", d.verdict
+    assert d.verdict.startswith("no physical effect of the library explains"), d.verdict
+    assert a.values["f2"] == pytest.approx(100.0 * (0.0075 - 0.0025), rel=0.10)
     assert _excess_rms_fall(a) >= 0.8, a.excess_explained
 
 

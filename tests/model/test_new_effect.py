@@ -5,6 +5,7 @@ the table's symmetries is refused by the build."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import warnings
@@ -201,6 +202,26 @@ def test_build_refuses_the_empirical_terms_a_table_cannot_hold(kind, values, wha
                            "fit.toml")
     with pytest.raises(InputError, match=rf"^fit.toml: effects.{kind}: {what}"):
         build_grid(cfg)
+
+
+def test_the_airspeed_series_of_orders_one_and_two_is_the_papers_drag():
+    """A second formulation: force_airspeed with f1 = 10 m/s mu1 and f2 = (10 m/s)^2 mu2
+    is the paper's drag (eq. 10), in still air and in a wind, to 1e-12; it keeps both
+    symmetries, so a table can hold it (no refusal)."""
+    from gainsched.model.effects import Drag, ForceAirspeed, Kinematics, Wind
+    from gainsched.model.symmetry import table_refusal
+
+    rng = np.random.default_rng(2)
+    n = 200
+    kin = Kinematics(np.broadcast_to(np.eye(3), (n, 3, 3)), rng.normal(0, 8, (n, 3)),
+                     rng.normal(0, 1, (n, 3)), rng.normal(0, 2, (n, 3)),
+                     rng.uniform(-0.8, 0.8, n), rng.uniform(-3, 3, n))
+    windy = dataclasses.replace(kin, wind_I=Wind(east=2.0, north=-1.0).air_velocity())
+    for k in (kin, windy):
+        want = Drag(mu1=0.172, mu2=0.0025).wrench(None, k)[0]
+        got = ForceAirspeed(f1=1.72, f2=0.25).wrench(None, k)[0]
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-14)
+    assert table_refusal(ForceAirspeed(f0=0.1, f1=1.0, f2=0.3, f3=-0.05)) == ""
 
 
 def test_the_time_series_of_order_one_is_the_linear_sag():
