@@ -58,7 +58,7 @@ from scipy.signal import correlate, lfilter, savgol_coeffs, savgol_filter
 from ..config import Config
 from ..constants import BIN_VARIABLES
 from ..errors import InputError
-from ..model.effects import Effect, Kinematics
+from ..model.effects import Effect, Kinematics, wind_in_circle_frame
 from ..model.geometry import (
     attachment_from_cog,
     cog_from_attachment,
@@ -734,7 +734,10 @@ def _residual(model: Model, meas: Measured, pred: Prediction) -> Residual:
     measured["stretch"] = meas.d[c] - model.rho
     predicted["stretch"] = pred.stretch[c]
     residual = {k: measured[k] - predicted[k] for k in measured}
-    speed = np.linalg.norm(meas.v[c], axis=-1)
+    v_air = meas.v[c]
+    if model.wind_I is not None:  # the model's wind: the speed relative to the air
+        v_air = v_air - wind_in_circle_frame(model.wind_I, meas.alpha, meas.gamma)
+    speed = np.linalg.norm(v_air, axis=-1)
     variables = {
         "airspeed": speed,
         "tilt": np.full(speed.shape, np.rad2deg(meas.alpha)),

@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from gainsched.analysis.compare import compare
+from gainsched.analysis.compare import compare, load_segments
 from gainsched.cli import cli
 from gainsched.config import config_from_text
 from gainsched.configedit import set_section
@@ -270,6 +270,17 @@ def test_the_log_heading_reaches_the_model(paper_config, paper_table):
     right, calm = compare(truth, logs), compare(paper_config, logs)
     assert right.normalized_rms() <= 1.3, right.normalized_rms()
     assert calm.normalized_rms() >= 2 * right.normalized_rms(), calm.normalized_rms()
+    # the airspeed the residual is binned by is the model's: relative to its wind
+    r_right, r_calm = right.residuals[0], calm.residuals[0]
+    ground = r_calm.variables["airspeed"]
+    R_IC = R_IC_from_tilt(logs[0].alpha_c, logs[0].gamma_c)
+    seg = load_segments(truth, logs)[0][0]
+    v_C = seg.v[seg.core]
+    np.testing.assert_allclose(ground, np.linalg.norm(v_C, axis=1), rtol=1e-12)
+    air = v_C - R_IC.T @ np.array([*WIND, 0.0])
+    np.testing.assert_allclose(r_right.variables["airspeed"], np.linalg.norm(air, axis=1),
+                               rtol=1e-12)
+    assert np.abs(r_right.variables["airspeed"] - ground).max() > 1.0
 
 
 @pytest.mark.slow
