@@ -108,6 +108,9 @@ THRESHOLDS = {
     # more of the residual power above the noise floor (and lowers delta-BIC by
     # nested_bic_gain)
     "forward_excess_gain": 0.1,
+    # ... or this share of the residual power above the noise floor that the current fit
+    # leaves (near the end of a selection, when little is left to gain in absolute terms)
+    "forward_left_share": 0.25,
 }
 
 
@@ -407,7 +410,7 @@ JOINT_TOP = 4
 #: the link model); forward selection (:func:`_forward`) adds them
 _NOT_JOINT = frozenset({"tether_elasticity"})
 #: the most candidates forward selection fits together
-FORWARD_PARTS = 3
+FORWARD_PARTS = 4
 
 
 def candidate_library() -> dict[str, Candidate]:
@@ -1360,8 +1363,8 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
                                      < 1 - THRESHOLDS["forward_excess_gain"]):
         if empirical and not any(r.empirical for r in results):
             fit(empirical)  # what no effect of the library named may be the rest
-        start = accepted or next((r for r in results if " + " not in r.name
-                                  and r.rms_reduction > 0), None)
+        start = accepted or next((r for r in _physical_first(
+            [r for r in results if " + " not in r.name], library) if r.rms_reduction > 0), None)
         if start is not None:
             accepted = _forward(prob, library, results, start, base_sq, base_vecs, progress)
     twins = []
@@ -1510,8 +1513,12 @@ def _forward(prob, library, results, start, base_sq, base_vecs, progress):
     accepted = start if start.passes else None
     gain = THRESHOLDS["forward_excess_gain"]
 
-    def better(t):  # explains clearly more, or removes the structure the current one left
+    def better(t):  # explains clearly more (of the whole, or of what is left), or
+        # removes the structure the current one left
+        left = 1.0 - current.excess_explained
         return (t.excess_explained >= current.excess_explained + gain
+                or t.excess_explained >= current.excess_explained
+                + THRESHOLDS["forward_left_share"] * left
                 or (bool(current.structure_left) and not t.structure_left))
 
     base = np.concatenate([np.concatenate(list(bv.values())) for bv in base_vecs])
@@ -1533,7 +1540,8 @@ def _forward(prob, library, results, start, base_sq, base_vecs, progress):
                             or any(_same_effect(library, r.name, n) for n in names)
                             or any(_nested(library, r, t) or _nested(library, t, r)
                                    for t in results if t.name in names))]
-        pool = sorted(eligible, key=lambda r: -leftover_explained(r, left))[:JOINT_TOP]
+        pool = sorted(_physical_first(eligible, library),
+                      key=lambda r: -leftover_explained(r, left))[:JOINT_TOP]
         fitted = {frozenset(r.name.split(" + ")): r for r in results}
         tries = [fitted.get(frozenset([*names, r.name]))
                  or _joint_fit(prob, [current, r], base_sq, base_vecs, progress) for r in pool]
@@ -1569,6 +1577,19 @@ def _nested(library, small: CandidateResult, big: CandidateResult) -> bool:
         return True
     refit = getattr(library.get(big.name), "refit", None)
     return refit is not None and small.name in refit.contains
+
+
+def _physical_first(singles: list[CandidateResult], library) -> list[CandidateResult]:
+    """``singles`` without the empirical candidates that contain a physical one of them
+    (:func:`_nested`: ``thrust_motor`` holds every ``motor_efficiency``) which fits about as
+    well (delta-BIC within ``THRESHOLDS["nested_bic_gain"]``): forward selection then
+    builds on the effect with a physical story, as the parsimony of nested fits does for
+    the single candidates (:func:`_parsimonious`)."""
+    gain = THRESHOLDS["nested_bic_gain"]
+    return [r for r in singles
+            if not (r.empirical and any(not q.empirical and _nested(library, q, r)
+                                        and r.delta_bic > q.delta_bic - gain
+                                        for q in singles))]
 
 
 def _parsimonious(passing: list[CandidateResult], library) -> CandidateResult | None:

@@ -916,7 +916,8 @@ class ThrustMotorCurve(Effect):
                 for i in range(1, 5)))
     empirical = True
     fits = (Refit("thrust_motor", tuple(p.name for p in params),
-                  "empirical thrust curve per motor, 1 + a_i + b_i T_i", orders=(4, 8)),)
+                  "empirical thrust curve per motor, 1 + a_i + b_i T_i", orders=(4, 8),
+                  contains=("motor_efficiency", "thrust_scale")),)
 
     def modify_thrust(self, T, kin, x):
         a = np.array([self.values[f"a{i}"] for i in range(1, 5)])

@@ -144,6 +144,14 @@ HIDDEN: dict[str, HiddenEffect] = {
                       ("effects.motor_lag", None, (("tau", 0.035),)),
                       ("effects.drag", "mu2", 0.0045)),
                      truth=("motor_lag", "tau", 0.035)),
+        HiddenEffect("four_effects", "thrust loss with airspeed (c1 = -0.01), a 35 ms motor "
+                     "lag, quadratic drag mu2 = 0.0045 instead of 0.0025 and motor 3 giving "
+                     "8 % less thrust (eta3 = 0.92), at once",
+                     (("effects.thrust_airspeed", None, (("c1", -0.01), ("c2", 0.0))),
+                      ("effects.motor_lag", None, (("tau", 0.035),)),
+                      ("effects.drag", "mu2", 0.0045),
+                      ("effects.motor_efficiency", None, (("eta3", 0.92),))),
+                     truth=("motor_lag", "tau", 0.035)),
         HiddenEffect("three_small", "three effects of similar size: thrust loss with "
                      "airspeed c1 = -0.005, quadratic drag mu2 = 0.0055, rotor drag k_rd = "
                      "0.010 (the best single fit, quadratic drag, absorbs the others)",

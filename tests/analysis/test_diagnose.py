@@ -497,6 +497,26 @@ def test_three_simultaneous_effects_in_three_rounds(paper_config, fly):
 
 
 @pytest.mark.slow
+def test_four_simultaneous_effects_in_one_round(paper_config, fly):
+    """Issue 37: four effects at once (the three of ``three_effects`` and motor 3 giving
+    8 % less thrust): forward selection finds all four together in one round, each within
+    10 %, the weak motor as the physical ``motor_efficiency`` (not the empirical per-motor
+    curve that contains it), the held-out residual above noise falling >= 80 %. Before,
+    selection stopped at three parts and nothing was accepted."""
+    d = diagnose(paper_config, fly("four_effects"))
+    a = d.accepted
+    assert a is not None, d.verdict
+    assert set(a.name.split(" + ")) == {"motor_efficiency", "motor_lag", "drag",
+                                        "thrust_airspeed"}, a.name
+    assert a.values["eta3"] == pytest.approx(0.92, rel=0.1 * 0.08)
+    assert a.values["tau"] == pytest.approx(0.035, rel=0.1)
+    assert a.values["mu2"] == pytest.approx(0.0045, rel=0.1)
+    assert a.values["c1"] == pytest.approx(-0.01, rel=0.1)
+    assert d.verdict.startswith("missing effects, fitted together"), d.verdict
+    assert _excess_rms_fall(a) >= 0.8, a.excess_explained
+
+
+@pytest.mark.slow
 def test_joint_fit_of_effects_of_similar_size(paper_config, fly):
     """Three effects of similar size: the best single fit (quadratic drag) absorbs the
     others (mu2 about twice the truth) and leaves structure they would remove, so since
