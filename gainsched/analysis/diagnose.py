@@ -59,7 +59,7 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from ..config import NAME_RE, Config, EffectSpec, Tether, config_from_text
+from ..config import Config, EffectSpec, Tether, config_from_text
 from ..configedit import remove_key, set_section, set_value
 from ..model.effects import EFFECTS, Effect, Param, Refit
 from ..model.reduced import Model
@@ -1742,9 +1742,10 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
     result : CandidateResult
         A fitted candidate: ``Diagnosis.accepted`` or any of ``Diagnosis.results``.
     name : str, optional
-        The new config's ``name``; default ``"<config name>_<candidate>"`` with the
-        fitted effects the name does not hold yet, or the name unchanged when that would
-        exceed the 64 characters a name may have (replaced only when the text has a
+        A new ``name`` for the config; default: the config's own, so that the tables
+        rebuilt from it keep their header and C symbol names (``<name>_gains.h``,
+        ``<name>_...``) and firmware built on them keeps compiling through the loop
+        compare -> diagnose -> apply -> build (replaced only when the text has a
         ``name`` key).
 
     Returns
@@ -1803,14 +1804,8 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
         header += f"; not identified, not written: {', '.join(why)}"
     text = cand.apply_text(config.text, config, theta, comments, header,
                            keep=frozenset(why))
-    # the fitted effects not named yet; the name unchanged when it would grow too long
-    added = [n for n in result.name.split(" + ") if n not in config.name.split("_")
-             and f"_{n}" not in config.name]
-    new_name = name or "_".join([config.name, *added])
-    if name is None and not NAME_RE.fullmatch(new_name):
-        new_name = config.name
-    if get_value(text, "", "name") is not None:
-        text = set_value(text, "", "name", new_name)
+    if name is not None and get_value(text, "", "name") is not None:
+        text = set_value(text, "", "name", name)
     cfg = config_from_text(text, "<diagnose --apply>")  # raises if the edit is invalid
     del cfg
     return text

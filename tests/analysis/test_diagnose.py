@@ -204,7 +204,9 @@ def test_apply_writes_config_and_error_falls(paper_config, fly, diagnosed, tmp_p
     assert "[effects.rotor_drag]" in text and "95% CI" in text
     assert "mu1 = 0.172" in text  # the rest of the file is kept
     new = config_from_text(text, "new.toml")
-    assert new.name == "paper_rotor_drag"
+    assert new.name == "paper"  # issue 39: the name (header, C symbols) survives the loop
+    renamed = config_from_text(apply_candidate(paper_config, d.accepted, name="paper_rd"))
+    assert renamed.name == "paper_rd"
     k = dict(next(s for s in new.effects if s.name == "rotor_drag").params)["k_rd"]
     assert k == pytest.approx(0.015, rel=0.05)
     logs = fly("rotor_drag")
