@@ -32,11 +32,11 @@ from scipy.optimize import minimize
 from .path import AzimuthPath, circle_path, period
 from .trim import (
     TrimError,
-    _collocation_jacobian,
     _fourier_operators,
     _initial_guess,
     _local_jacobians,
     _newton,
+    _newton_step,
 )
 
 __all__ = [
@@ -216,15 +216,13 @@ def _solve(model, speed, alpha, bound, harmonics, n_nodes, lo, hi):
             xd = nodes.d[0]
             # node values and time derivatives of the offsets per coefficient (n, nb)
             trip = (dB[0], xd[:, None] * dB[1], xd[:, None] ** 2 * dB[2])
-            Rp = np.zeros((5 * n_nodes, 2 * nb))
-            for i in range(5):
-                rows = slice(i * n_nodes, (i + 1) * n_nodes)
-                for a in range(2):
-                    Rp[rows, a * nb:(a + 1) * nb] = sum(
-                        Jl[:, i, 7 + 3 * a + j, None] * trip[j] for j in range(3))
-            dy = -np.linalg.solve(_collocation_jacobian(Jl, D1, D2), Rp)
+            Rp = np.zeros((n_nodes, 5, 2 * nb))
+            for a in range(2):
+                Rp[:, :, a * nb:(a + 1) * nb] = sum(
+                    Jl[:, :, 7 + 3 * a + j, None] * trip[j][:, None] for j in range(3))
+            dT = -_newton_step(Jl, D1, D2, Rp)[1]  # (n, 4, 2 nb)
             cache.clear()
-            cache[key] = (T, dy[n_nodes:] * _DEG)
+            cache[key] = (T, dT.transpose(1, 0, 2).reshape(4 * n_nodes, 2 * nb) * _DEG)
         return cache[key]
 
     G = B.T @ B / n_nodes  # mean square of a series over the nodes: c^T G c

@@ -56,3 +56,29 @@ def test_trim_satisfies_the_model(model):
     z, z_dot, u, _ = trim_path(model, path, alpha, periodic=True)
     f = model.f(z, u, alpha)
     assert np.abs(f - z_dot).max() < 1e-8
+
+
+@pytest.mark.parametrize("k", [None, 3])
+def test_the_eliminated_newton_step_is_the_dense_solve(k):
+    """Issue 39: the Newton step with the thrusts eliminated node by node equals the dense
+    (5n, 5n) solve of the collocation Jacobian (a second formulation, to 1e-9 relative),
+    for one right-hand side and for several (the offsets' sensitivities)."""
+    from gainsched.schedule.trim import (
+        _collocation_jacobian,
+        _fourier_operators,
+        _newton_step,
+    )
+
+    rng = np.random.default_rng(0)
+    n = 32
+    D1, D2 = _fourier_operators(n, 0.7)
+    Jl = rng.normal(size=(n, 5, 7))
+    Jl[:, :, 0] += 5.0  # a well-posed system, as the trim's
+    res = rng.normal(size=(n, 5) if k is None else (n, 5, k))
+    d_phi, d_T = _newton_step(Jl, D1, D2, res)
+    dense = np.linalg.solve(_collocation_jacobian(Jl, D1, D2),
+                            res.transpose(1, 0, *range(2, res.ndim)).reshape(5 * n, -1))
+    scale = np.abs(dense).max()
+    np.testing.assert_allclose(d_phi.reshape(n, -1), dense[:n], rtol=0, atol=1e-9 * scale)
+    np.testing.assert_allclose(d_T.reshape(n, 4, -1).transpose(1, 0, 2).reshape(4 * n, -1),
+                               dense[n:], rtol=0, atol=1e-9 * scale)
