@@ -178,7 +178,7 @@ def test_the_refusal_flag_generalises_time_varying():
     from gainsched.model.effects import EFFECTS, Effect, Param, registered_effect
 
     assert {k for k, c in EFFECTS.items() if c.refusal()} == {"thrust_time", "thrust_time_series",
-                                                               "wind"}
+                                                               "thrust_voltage", "wind"}
     assert "heading axis" in Wind.refusal()
 
     class Aging(Effect):
