@@ -53,16 +53,19 @@ _SECTIONS = {
     "motors": ("topic", "fields", "order", "unit", "thrust_max_N", "thr_mdl_fac", "pwm_min",
                "pwm_max"),
     "tension": ("topic", "fields", "scale"),
+    "battery": ("topic", "fields", "scale", "optional"),
 }
 
 
 @dataclass(frozen=True)
 class Channel:
-    """Where one channel is: a topic and its fields (``"q[0]"``, ``"pose.position.x"``)."""
+    """Where one channel is: a topic and its fields (``"q[0]"``, ``"pose.position.x"``);
+    ``optional``: a log may lack the topic (the channel is then left out)."""
 
     topic: str
     fields: tuple[str, ...]
     scale: float = 1.0
+    optional: bool = False
 
 
 @dataclass(frozen=True)
@@ -93,6 +96,10 @@ class ChannelMap:
     gyro, accelerometer, tension : Channel or None
         Optional: body rates (rad/s), specific force (m/s^2), load cell (N, times
         ``scale``).
+    battery : Channel or None
+        Optional: the battery voltage (V, times ``scale``), the column ``vbat``; with
+        ``optional = true`` a log without its topic converts without it (PX4's
+        ``battery_status``, sensor_msgs/BatteryState).
     motors : Channel
         The commands of the log's motors (at least the four ``motor_order`` names).
     motor_order : tuple of int
@@ -132,12 +139,13 @@ class ChannelMap:
     pwm_min: float | str
     pwm_max: float | str
     tension: Channel | None
+    battery: Channel | None = None
 
     def channels(self) -> dict[str, Channel]:
         """The channels the map names, by channel name."""
         named = {"position": self.position, "attitude": self.attitude, "gyro": self.gyro,
                  "accelerometer": self.accelerometer, "motors": self.motors,
-                 "tension": self.tension}
+                 "tension": self.tension, "battery": self.battery}
         return {k: v for k, v in named.items() if v is not None}
 
 
@@ -230,7 +238,10 @@ def _channel(src, data: dict, name: str, n_fields: int | None, required: bool):
     scale = _get(src, sec, name, "scale", float, False, 1.0) if "scale" in _SECTIONS[name] else 1.0
     if scale == 0:
         raise InputError(src, f"{name}.scale", "must not be 0")
-    return Channel(topic, tuple(fields), scale)
+    optional = sec.get("optional", False)
+    if not isinstance(optional, bool):
+        raise InputError(src, f"{name}.optional", f"must be true or false, got {optional!r}")
+    return Channel(topic, tuple(fields), scale, optional)
 
 
 def channel_map_from_text(text: str, source: str = "<map>", default_name: str = "map"
@@ -303,4 +314,5 @@ def channel_map_from_text(text: str, source: str = "<map>", default_name: str = 
         pwm_min=pwm[0],
         pwm_max=pwm[1],
         tension=_channel(source, data, "tension", 1, False),
+        battery=_channel(source, data, "battery", 1, False),
     )

@@ -196,6 +196,10 @@ class Measured:
         one and ``analysis.use_accelerometer`` is on.
     gravity_C : (3,) m/s^2
         Gravity in C (what the accelerometer does not sense).
+    vbat : (N,) V or None
+        The logged battery voltage (on-board time, like the commands; NaN where a sample
+        is missing), when the log has one: the state of effects whose ``log_channel`` is
+        ``"vbat"`` (:class:`~gainsched.model.effects.ThrustVoltage`).
     """
 
     name: str
@@ -226,6 +230,7 @@ class Measured:
     gyro_dot: np.ndarray | None = None
     accel: np.ndarray | None = None
     gravity_C: np.ndarray | None = None
+    vbat: np.ndarray | None = None
 
     def acc_measured(self, latency: float) -> np.ndarray:
         """The measured COG acceleration on the path axes (``axes``: tangential, normal,
@@ -376,6 +381,7 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
     tension = log.optional.get("tension")
     if tension is not None and not np.all(np.isfinite(tension)):
         tension = None  # a load cell with missing samples is not used (radial equation instead)
+    vbat = log.optional.get("vbat")
     base = name or (log.meta.get("flight_id") or Path(log.source).stem or "log")
     if log.n_segments > 1:
         base = f"{base}#{log.segment + 1}"
@@ -386,6 +392,7 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
         None if tension is None else np.asarray(tension, float), sigma, L_e,
         gyro=gyro, gyro_dot=gyro_dot, accel=accel,
         gravity_C=-config.g * up_C_from_tilt(log.alpha_c),
+        vbat=None if vbat is None else np.asarray(vbat, float),
     )
 
 
@@ -464,7 +471,8 @@ def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None,
     return Measured(meas.name, meas.source, meas.alpha, meas.gamma, meas.t, meas.t_flight,
                     meas.window, meas.order, z, acc, ch[0], ch1[0], p, v, a, R, w_dot, e, axes,
                     meas.T_cmd, meas.tension, meas.raw_sigma, meas.L_e, gyro=gyro,
-                    gyro_dot=gyro_dot, accel=accel, gravity_C=meas.gravity_C)
+                    gyro_dot=gyro_dot, accel=accel, gravity_C=meas.gravity_C,
+                    vbat=meas.vbat)
 
 
 # --------------------------------------------------------------------------- prediction
@@ -505,6 +513,53 @@ def effect_states(eff: Effect, t, T_cmd, kin_fn=None) -> np.ndarray:
             xk = xk + h * eff.state_derivative(xk, T_cmd[k], kin)
         x[k] = xk
     return x
+
+
+def has_channel(meas: Measured, channel: str) -> bool:
+    """Whether the segment logged ``channel`` (an effect's ``log_channel``, e.g.
+    ``"vbat"``) on every sample: what an effect that takes its states from it needs."""
+    x = getattr(meas, channel, None)
+    return x is not None and bool(np.all(np.isfinite(x)))
+
+
+def logged_channel(meas: Measured, eff: Effect, latency: float) -> np.ndarray:
+    """The samples of ``eff.log_channel`` (on board, like the commands: delayed by
+    ``latency`` s onto the pose's clock), shape (N, ...). Raises InputError naming the
+    log and the column when the segment lacks it or misses a sample
+    (:func:`check_logged_channels` says so before any prediction)."""
+    ch = eff.log_channel
+    x = getattr(meas, ch, None)
+    if not has_channel(meas, ch):
+        what = ("has no such column" if x is None else
+                f"misses sample {int(np.flatnonzero(~np.isfinite(x))[0]) + 1} of {x.size}")
+        raise InputError(meas.source, f"column {ch}", f"the model's {eff.kind} takes its "
+                         f"state from the logged {ch}, and segment {meas.name} {what}")
+    x = np.asarray(x, float)
+    return _delayed(meas.t, x.reshape(x.shape[0], -1), latency).reshape(x.shape)
+
+
+def check_logged_channels(model: Model, measured, segs=None) -> None:
+    """Every segment has the log columns the model's effects take their states from
+    (``Effect.log_channel``: ``vbat`` for ``thrust_voltage``), on every sample; else
+    InputError naming the file, the column and the first missing row."""
+    for eff in model.effects:
+        ch = eff.log_channel
+        if not ch:
+            continue
+        for i, meas in enumerate(measured):
+            if has_channel(meas, ch):
+                continue
+            x = getattr(meas, ch, None)
+            seg = segs[i] if segs is not None and i < len(segs) else None
+            if x is None:
+                raise InputError(meas.source, f"column {ch}", f"missing: the model's "
+                                 f"[effects.{eff.kind}] takes its state from the logged "
+                                 f"{ch} (docs/flight-log.md)")
+            k = int(np.flatnonzero(~np.isfinite(x))[0])
+            row = f", {seg.where(k)}" if seg is not None else f", sample {k + 1}"
+            raise InputError(meas.source, f"column {ch}{row}", f"missing sample: the model's "
+                             f"[effects.{eff.kind}] takes its state from the logged {ch} "
+                             "on every sample")
 
 
 @dataclass(frozen=True, eq=False)
@@ -633,7 +688,9 @@ def predict(model: Model, meas: Measured, *, latency: float | None = None,
                               meas.gamma, model.wind_I)
 
         for eff in model.effects:
-            if eff.n_states:
+            if eff.n_states and eff.log_channel:  # the log holds the states (vbat)
+                parts.append(eff.states_from_log(logged_channel(meas, eff, lat)))
+            elif eff.n_states:
                 parts.append(effect_states(eff, meas.t, T_raw, kin_at))
         z = np.concatenate(parts, -1)
     T = model.thrust(z, u, kin)
@@ -1439,6 +1496,7 @@ def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
     if measured is None:
         measured, segs, notes = load_segments(config, logs, channel_map, trust)
     model = Model(config, effects)
+    check_logged_channels(model, measured, segs)
     check_motor_order(model, measured, segs)
     res = residuals(config, measured, effects=effects, model=model)
     noise, pose_noise = noise_floor(config, measured, segs, effects=effects)

@@ -69,6 +69,7 @@ from .compare import (
     UNITS,
     Comparison,
     compare,
+    has_channel,
     measure,
     residual_axes,
 )
@@ -1328,6 +1329,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
                          "files) for held-out scores")
     library = candidate_library()
     names = select_candidates(candidates, exclude, library)
+    names = _logged(names, library, meas, asked=candidates is not None)
     at_floor = all(s.rms_over_noise < AT_NOISE_FLOOR for s in base.stats.values())
     if at_floor:
         prob.track_structure(base)
@@ -1437,6 +1439,27 @@ def select_candidates(candidates=None, exclude=(), library=None) -> list[str]:
                              f"{', '.join(library)})")
     out = set(exclude)
     return [n for n in names if n not in out and getattr(library[n], "kind", None) not in out]
+
+
+def _logged(names, library, measured, asked: bool) -> list[str]:
+    """``names`` without the candidates of effects that take their states from a log
+    column (``Effect.log_channel``: ``vbat`` for ``thrust_voltage``) that a segment lacks
+    or misses a sample of: not offered; asked for by name (``asked``), InputError
+    naming the candidate and the log."""
+    from ..errors import InputError
+
+    out = []
+    for n in names:
+        cls = EFFECTS.get(getattr(library[n], "kind", None) or "")
+        ch = getattr(cls, "log_channel", "")
+        bad = next((m for m in measured if ch and not has_channel(m, ch)), None)
+        if bad is None:
+            out.append(n)
+        elif asked:
+            raise InputError("command line", "--candidate", f"{n} takes its state from the "
+                             f"logged {ch} on every sample, which {bad.source} lacks "
+                             "(docs/flight-log.md)")
+    return out
 
 
 def _fit_joint(prob, library, results, base_sq, base_vecs, progress):

@@ -22,7 +22,8 @@ What the conversion does, and nothing else:
 * **Gyro and accelerometer** are averaged over the pose interval centred on each pose
   sample, both ends included (NaN where no sample fell in it), as the simulator's logs
   define them; the
-  load cell is its last sample at or before each pose sample.
+  load cell and the battery voltage are their last sample at or before each pose
+  sample (a voltage of 0 or less, PX4's "unknown", is a missing sample: NaN).
 * **Frames.** Positions become the tool's inertial frame: minus the map's anchor, NED
   turned to ENU (x east, y north, z up); the attitude ``R_world,body`` becomes ``R_IB``
   of the tool's FLU body; body-axis sensors FRD -> FLU; quaternions scalar first; the
@@ -103,6 +104,13 @@ def _wanted(cmap: ChannelMap) -> dict[str, set[str]]:
     return topics
 
 
+def _optional(cmap: ChannelMap) -> frozenset[str]:
+    """The topics a log may lack: those of optional channels only."""
+    chans = cmap.channels().values()
+    return frozenset(c.topic for c in chans if c.optional) - {
+        c.topic for c in chans if not c.optional}
+
+
 def read_topics(path, cmap: ChannelMap) -> tuple[dict[str, Topic], dict[str, float]]:
     """The topics and fields a map names, from a ULog or a rosbag2, and the ULog's
     parameters (empty for a bag).
@@ -114,8 +122,8 @@ def read_topics(path, cmap: ChannelMap) -> tuple[dict[str, Topic], dict[str, flo
         in it (listing what the log has).
     """
     if foreign_format(path) == "ulog":
-        return _ulog_topics(Path(path), _wanted(cmap))
-    return _bag_topics(Path(path), _wanted(cmap), cmap.stamp), {}
+        return _ulog_topics(Path(path), _wanted(cmap), _optional(cmap))
+    return _bag_topics(Path(path), _wanted(cmap), cmap.stamp, _optional(cmap)), {}
 
 
 def _missing_topic(path, topic, have) -> InputError:
@@ -128,7 +136,7 @@ def _missing_field(path, topic, field, have) -> InputError:
                       f"not in the topic (it has: {', '.join(sorted(have))})")
 
 
-def _ulog_topics(path: Path, wanted: dict[str, set[str]]
+def _ulog_topics(path: Path, wanted: dict[str, set[str]], optional=frozenset()
                  ) -> tuple[dict[str, Topic], dict[str, float]]:
     from pyulog import ULog
 
@@ -139,6 +147,8 @@ def _ulog_topics(path: Path, wanted: dict[str, set[str]]
     have = {d.name: d for d in ulog.data_list if d.multi_id == 0}
     out = {}
     for topic, fields in wanted.items():
+        if topic not in have and topic in optional:
+            continue  # an optional channel the log lacks (convert_topics reports it)
         if topic not in have:
             raise _missing_topic(path, topic, set(ulog.message_formats))
         data = have[topic].data
@@ -161,7 +171,8 @@ def _field_of(msg, path: str):
     return float(v)
 
 
-def _bag_topics(path: Path, wanted: dict[str, set[str]], stamp: str) -> dict[str, Topic]:
+def _bag_topics(path: Path, wanted: dict[str, set[str]], stamp: str,
+                optional=frozenset()) -> dict[str, Topic]:
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
@@ -176,6 +187,7 @@ def _bag_topics(path: Path, wanted: dict[str, set[str]], stamp: str) -> dict[str
                          f"{exc})") from None
     try:
         have = {c.topic for c in reader.connections}
+        wanted = {t: f for t, f in wanted.items() if t in have or t not in optional}
         for topic in wanted:
             if topic not in have:
                 raise _missing_topic(path, topic, have)
@@ -388,6 +400,18 @@ def convert_topics(path, topics: dict[str, Topic], params: dict[str, float],
         cols["tension"] = _held(src.t, x, t)
         report.append(f"tension: {cmap.tension.topic} {cmap.tension.fields[0]} x "
                       f"{cmap.tension.scale:g} (held)")
+    bat = cmap.battery
+    if bat is not None and bat.topic not in topics:
+        report.append(f"battery: {bat.topic} not in the log (optional): no vbat column")
+    elif bat is not None:
+        src = topics[bat.topic]
+        x = src.fields[bat.fields[0]] * bat.scale
+        unknown = ~(x > 0)  # PX4: 0 if unknown
+        x = np.where(unknown, np.nan, x)
+        cols["vbat"] = _held(src.t, x, t)
+        report.append(f"battery: {bat.topic} {bat.fields[0]} x {bat.scale:g} as vbat (held"
+                      + (f"; {int(np.count_nonzero(unknown))} samples of 0 or less, unknown, "
+                         "left out" if unknown.any() else "") + ")")
     meta = {"schema": "gainsched-flightlog/1", "flight_id": Path(path).stem,
             "source_format": foreign_format(path) or "", "channel_map": cmap.name,
             "motors_order": str(list(cmap.motor_order))}

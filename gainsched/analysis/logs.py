@@ -40,7 +40,7 @@ Python's ``float`` would accept, are refused.
 
 Values must be physically plausible (:data:`PLAUSIBLE`): ``|x|, |y|, |z| <=
 1e3 m``, ``|T1..T4| <= 1e3 N``, ``|t| <= 1e10 s``, gyro ``<= 1e3 rad/s``,
-accelerometer ``<= 1e4 m/s^2``, tension ``<= 1e4 N``, ``vbat <= 1e3 V``,
+accelerometer ``<= 1e4 m/s^2``, tension ``<= 1e4 N``, ``0 < vbat <= 1e3 V``,
 ``|xi_ref| <= 1e7 rad``, ``|xi_dot_ref| <= 1e3 rad/s``; a finite absurd value
 (``x = 1e308``) would otherwise overflow later in the analysis. Unknown columns
 are not bounded (the analysis ignores them).
@@ -83,6 +83,7 @@ __all__ = [
     "REQUIRED_META",
     "QUAT_NORM_TOL",
     "PLAUSIBLE",
+    "POSITIVE",
     "PLANE_TOL_DEG",
     "DEFAULT_MIN_SAMPLES",
     "LogWarning",
@@ -128,6 +129,9 @@ PLAUSIBLE = {
     "xi_ref": (1e7, "rad"),
     "xi_dot_ref": (1e3, "rad/s"),
 }
+#: known columns whose values must be positive (NaN, a missing sample, passes): a battery
+#: voltage of 0 or less is no measurement (PX4 writes 0 when it does not know it)
+POSITIVE = ("vbat",)
 #: largest angle between the declared circle plane and the plane of the positions, deg.
 #: Not 3: a closed-loop flight on a plant the model misses really leaves its plane (the
 #: example flights by up to 6.3 deg, simulated campaigns with a hidden effect up to 7.1 deg,
@@ -469,6 +473,19 @@ def _canonical(path, cols: dict[str, np.ndarray], rows, label, deferred=None):
                     raise err
                 if not deferred:
                     deferred.append(err)
+    for name in POSITIVE:
+        if name in cols:
+            with np.errstate(invalid="ignore"):
+                bad = np.flatnonzero(cols[name] <= 0)  # NaN (a missing sample) passes
+            if bad.size:
+                k = bad[0]
+                limit, unit = PLAUSIBLE[name]
+                raise InputError(
+                    path,
+                    f"column {name}, {label} {rows[k]}",
+                    f"{float(cols[name][k])!r} {unit} is not plausible (0 < {name} <= "
+                    f"{limit:g} {unit})",
+                )
     t = cols["t"]
     dt = np.diff(t)
     bad = np.flatnonzero(dt <= 0)

@@ -11,7 +11,10 @@ of them at once. An effect may
   rotor drag),
 - carry extra states (``n_states``, ``state_derivative``: motor lag),
 - move the air (``air_velocity``: a steady wind); every airspeed-dependent effect
-  sees the COG velocity relative to the air, :attr:`Kinematics.v_air_C`.
+  sees the COG velocity relative to the air, :attr:`Kinematics.v_air_C`,
+- take its states from a flight log's column (``log_channel``, ``states_from_log``:
+  the battery voltage ``vbat`` of :class:`ThrustVoltage`) where a simulation integrates
+  them.
 
 Evaluation order inside the model: commanded thrust -> stateful effects ->
 thrust modifiers (config order) -> wrench effects, which see the final thrust.
@@ -41,6 +44,7 @@ __all__ = [
     "ThrustScale",
     "MotorEfficiency",
     "ThrustTime",
+    "ThrustVoltage",
     "ThrustPolynomial",
     "ThrustMomentum",
     "MotorLag",
@@ -273,6 +277,12 @@ class Effect:
     #: periodicity in azimuth, the symmetries S1 and S2, no heading axis), one clause for
     #: the build's refusal; empty: a table can hold it (:meth:`refusal`)
     table_refusal: ClassVar[str] = ""
+    #: the flight-log column (a key of ``FlightLog.optional``, e.g. ``"vbat"``) whose
+    #: samples give the effect's states in a log (:meth:`states_from_log`) instead of an
+    #: integration of :meth:`state_derivative` from the commands; empty: none. A log
+    #: without it cannot be compared with a model that has the effect, and diagnose does
+    #: not offer the effect's candidates for it
+    log_channel: ClassVar[str] = ""
 
     @classmethod
     def refusal(cls) -> str:
@@ -368,6 +378,11 @@ class Effect:
         (N, n_states), or None when the effect has no exact form (the caller then
         integrates :meth:`state_derivative`)."""
         return None
+
+    def states_from_log(self, values):
+        """The effect's states along a log from the samples ``values`` (N, ...) of its
+        ``log_channel``: shape (N, n_states). Only for effects with a ``log_channel``."""
+        raise NotImplementedError
 
     def mirror(self):
         """How the effect's states map under the direction mirror S2, shape (n_states, n_states)."""
@@ -583,6 +598,124 @@ class ThrustTime(_FlightTime):
 
     def law(self) -> str:
         return f"thrust {-self.rate:+.2%} per second of flight ({-60 * self.rate:+.1%} per minute)"
+
+
+class ThrustVoltage(Effect):
+    """Thrust that follows the battery voltage: ``T *= (vbat / v_ref)^exponent``.
+
+    The firmware maps a commanded thrust to a throttle (the ESC's duty cycle) with a map
+    measured at the battery voltage ``v_ref``. At a fixed duty cycle the motor sees
+    ``duty x vbat``, its speed follows that voltage (a DC motor's speed is proportional to
+    its voltage less the resistive drop), and a rotor's thrust goes with the square of
+    its speed (``T = c_T rho n^2 D^4``): so the thrust at a fixed command scales as
+    ``(vbat / v_ref)^2`` for an ESC without voltage compensation, and less (exponent
+    towards 0) where the firmware scales the throttle with the voltage. References: J. G.
+    Leishman, "Principles of Helicopter Aerodynamics", 2nd ed., Cambridge University
+    Press, 2006, ch. 2 (the thrust coefficient: thrust ~ the square of the rotor speed);
+    R. W. Beard and T. W. McLain, "Small Unmanned Aircraft: Theory and Practice",
+    Princeton University Press, 2012 (the propeller and DC-motor model: thrust from the
+    motor's speed, which its voltage sets); M. Tognon and A. Franchi, "Theory and
+    Applications for Control of Aerial Robots in Physical Interaction Through Tethers",
+    Springer, 2021 (the thruster model of the tethered vehicle, thrust ~ the square of
+    the rotor speed).
+
+    The effect's states are the battery's (2 states, V): its open-circuit voltage and
+    the voltage dropped inside it under load; the terminal voltage ``vbat`` is their
+    difference. In a flight log they are the logged ``vbat`` column (``log_channel``:
+    states ``(vbat, 0)``, latency-delayed like the commands): a log without it cannot be
+    compared with a model that has the effect, and diagnose offers the candidate only
+    for logs that have it. In simulation a battery model produces them (the other
+    parameters; a log's vbat replaces them): the open-circuit voltage falls linearly
+    from ``v_full`` to ``v_empty`` over the charge ``capacity``, and the drop follows
+    ``resistance x current`` with the time constant ``tau`` (a Thevenin equivalent
+    circuit with one RC branch that lumps the ohmic and the fast polarisation drop: G.
+    L. Plett, "Battery Management Systems, Vol. I: Battery Modeling", Artech House,
+    2015, ch. 2), with a current stated linear in the commanded thrust (``current`` A
+    per N; the electrical power of a rotor grows as ``T^1.5`` by momentum theory, close
+    to linear over a flight's narrow range of thrust):
+
+        q_oc' = -current sum(T_cmd) (v_full - v_empty) / capacity
+        drop' = (resistance current sum(T_cmd) - drop) / tau,   vbat = q_oc - drop
+
+    The voltage changes with the battery's charge and load, not with the motion: a
+    table cannot hold it (the build refuses it); simulate and diagnose with it.
+    """
+
+    kind = "thrust_voltage"
+    params = (
+        Param("v_ref", "V", 11.1, 1.0, 100.0, "battery voltage at which the thrust map "
+              "(command -> throttle) was measured", fit=(3.0, 60.0)),
+        Param("exponent", "-", 2.0, -1.0, 4.0, "thrust ~ voltage^exponent at a fixed "
+              "command (2: an ESC without voltage compensation; 0: full compensation)",
+              fit=(0.0, 4.0)),
+        Param("v_full", "V", 12.6, 1.0, 100.0, "simulation: open-circuit voltage at the "
+              "start of a flight (3S LiPo full: 12.6 V)"),
+        Param("v_empty", "V", 10.5, 0.5, 100.0, "simulation: open-circuit voltage with the "
+              "capacity used (linear in between)"),
+        Param("capacity", "A h", 1.3, 1e-4, 100.0, "simulation: charge from v_full to "
+              "v_empty"),
+        Param("resistance", "ohm", 0.05, 0.0, 2.0, "simulation: internal resistance"),
+        Param("current", "A/N", 1.2, 0.0, 50.0, "simulation: battery current per newton "
+              "of commanded collective thrust"),
+        Param("tau", "s", 0.05, 1e-3, 10.0, "simulation: time constant of the drop under "
+              "load"),
+    )
+    n_states = 2
+    time_varying = True
+    table_refusal = ("changes with the battery's charge and load (its states are the "
+                     "battery's, not the motion's), which a table cannot hold")
+    log_channel = "vbat"
+    fits = (Refit("thrust_voltage", ("exponent", "v_ref"), "thrust that follows the logged "
+                  "battery voltage, (vbat / v_ref)^exponent", affine=False),)
+
+    def factor(self, vbat):
+        """The thrust factor ``(vbat / v_ref)^exponent`` at the battery voltage ``vbat``
+        (V), shape of ``vbat``; 0 at a voltage of 0 or less (a dead battery gives no
+        thrust). Complex-step safe (decided on the real part)."""
+        v = np.asarray(vbat)
+        up = np.real(v) > 0
+        return np.where(up, (np.where(up, v, self.v_ref) / self.v_ref) ** self.exponent, 0.0)
+
+    @staticmethod
+    def voltage(x):
+        """The battery's terminal voltage (V) of the states ``x`` (..., 2), shape (...)."""
+        return x[..., 0] - x[..., 1]
+
+    def coefficients(self) -> tuple[float, float]:
+        """``(drain, load)``: the open-circuit voltage's fall per second per newton of
+        commanded thrust, V/(N s), and the drop per newton, V/N, of the battery model."""
+        drain = self.current * (self.v_full - self.v_empty) / (3600.0 * self.capacity)
+        return drain, self.resistance * self.current
+
+    def modify_thrust(self, T, kin, x):
+        return T * self.factor(self.voltage(x))[..., None]
+
+    def state_derivative(self, x, u, kin):
+        drain, load = self.coefficients()
+        s = np.sum(u, -1)
+        return np.stack(np.broadcast_arrays(-drain * s, (load * s - x[..., 1]) / self.tau), -1)
+
+    def steady_states(self, T_actual, T_actual_dot):
+        # a full battery, its drop settled at the command that gives T_actual
+        _, load = self.coefficients()
+        T = np.asarray(T_actual, dtype=float)
+        u = T
+        for _ in range(20):  # u = T / factor(v_full - load sum(u)): a contraction
+            drop = load * np.sum(u, -1)
+            u = T / self.factor(self.v_full - drop)[..., None]
+        drop = load * np.sum(u, -1)
+        return np.stack(np.broadcast_arrays(self.v_full + 0 * drop, drop), -1), u
+
+    def states_from_log(self, values):
+        v = np.asarray(values, dtype=float)
+        return np.stack([v, np.zeros_like(v)], -1)
+
+    def mirror(self):
+        return np.eye(2)
+
+    def law(self) -> str:
+        return (f"thrust x (vbat / {self.v_ref:.3g} V)^{self.exponent:.2f}: "
+                f"{self.factor(0.95 * self.v_ref) - 1:+.1%} at 5 % below {self.v_ref:.3g} V")
 
 
 #: how far a thrust curve of :class:`ThrustPolynomial` may turn back inside the flown
@@ -1061,9 +1194,9 @@ class ForceHorizontal(Effect):
 
 EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
-    for cls in (Drag, RotorDrag, ThrustScale, MotorEfficiency, ThrustTime, ThrustPolynomial,
-                ThrustMomentum, MotorLag, ThrustAzimuth, ThrustTimeSeries, ThrustMotorCurve,
-                Wind, ForceAirspeed, ForceHorizontal)
+    for cls in (Drag, RotorDrag, ThrustScale, MotorEfficiency, ThrustTime, ThrustVoltage,
+                ThrustPolynomial, ThrustMomentum, MotorLag, ThrustAzimuth, ThrustTimeSeries,
+                ThrustMotorCurve, Wind, ForceAirspeed, ForceHorizontal)
 }
 
 

@@ -46,7 +46,7 @@
 #include <math.h>
 #include <stddef.h>
 
-#define GS_PLANT_LAYOUT 4
+#define GS_PLANT_LAYOUT 5
 #define N_BASE 10
 #define MAX_Z 64 /* largest state the RK4 scratch holds (10 + effect states) */
 #define EPS2 1e-24 /* effects.norm: keeps sqrt differentiable at zero speed */
@@ -67,8 +67,8 @@ enum {
     P_NEFF = P_JINV + 9, /* number of effects */
     P_EFF,        /* effects in model order, EFF_STRIDE doubles each */
 };
-#define EFF_STRIDE 6 /* kind, params a, b, c, d, first state index */
-#define EFF_STATE 5  /* where in an effect's entry its first state index is */
+#define EFF_STRIDE 8 /* kind, params a, b, c, d, e, f, first state index */
+#define EFF_STATE 7  /* where in an effect's entry its first state index is */
 
 /* effect kinds (gainsched.model.effects) */
 enum {
@@ -80,7 +80,10 @@ enum {
     FX_THRUST_MOMENTUM = 6, /* ThrustMomentum: a = disk_area, b = rho_air (eq. 29) */
     FX_MOTOR_EFFICIENCY = 7, /* MotorEfficiency: a..d = eta1..eta4 */
     FX_THRUST_TIME = 8, /* ThrustTime: a = rate, 1 state (the flight time) */
-    FX_WIND = 9 /* Wind: a = east, b = north (m/s, the air's velocity in I, ENU) */
+    FX_WIND = 9, /* Wind: a = east, b = north (m/s, the air's velocity in I, ENU) */
+    /* ThrustVoltage: a = v_ref (V), b = exponent, c = drain (V/(N s)), d = load (V/N),
+     * e = tau (s); 2 states: the open-circuit voltage and the drop under load (V) */
+    FX_THRUST_VOLTAGE = 10
 };
 
 /* exported (ctypes, gainsched/sim/fastplant.py) */
@@ -280,6 +283,13 @@ static double effect_thrust(const double *p, const double *z, const double *u,
             for (j = 0; j < 4; ++j) {
                 T[j] = T[j] * f;
             }
+        } else if (kind == FX_THRUST_VOLTAGE) { /* T *= (vbat / v_ref)^exponent, 0 if dead */
+            const int s0 = (int)ef[EFF_STATE];
+            const double vb = z[s0] - z[s0 + 1];
+            const double f = vb > 0.0 ? pow(vb / ef[1], ef[2]) : 0.0;
+            for (j = 0; j < 4; ++j) {
+                T[j] = T[j] * f;
+            }
         } else if (kind == FX_THRUST_POLY) {
             const double sp = speed_of(v, speed);
             const double f = 1.0 + ef[1] * sp + ef[2] * sp * sp;
@@ -465,6 +475,11 @@ int gs_plant_eval(const double *p, const double *z, const double *u, double alph
             }
         } else if ((int)ef[0] == FX_THRUST_TIME) { /* t' = 1 */
             z_dot[(int)ef[EFF_STATE]] = 1.0;
+        } else if ((int)ef[0] == FX_THRUST_VOLTAGE) { /* the battery (ThrustVoltage) */
+            const int s0 = (int)ef[EFF_STATE];
+            const double s = ((u[0] + u[1]) + u[2]) + u[3];
+            z_dot[s0] = -ef[3] * s;
+            z_dot[s0 + 1] = (ef[4] * s - z[s0 + 1]) / ef[5];
         }
     }
     *tension = sol[5];

@@ -122,6 +122,15 @@ HIDDEN: dict[str, HiddenEffect] = {
                      "(a sagging battery, sped up to show in flights of seconds)",
                      (("effects.thrust_time", None, (("rate", 0.016),)),),
                      truth=("thrust_time", "rate", 0.016)),
+        HiddenEffect("battery", "thrust following a sagging battery, (vbat / 11.9 V)^2: a "
+                     "3S pack of 40 mAh (a 1.3 Ah pack's sag sped up about 30x to show in "
+                     "flights of seconds), 0.1 ohm, 1.2 A per N of thrust; the logs carry "
+                     "vbat",
+                     (("effects.thrust_voltage", None,
+                       (("v_ref", 11.9), ("exponent", 2.0), ("v_full", 12.6),
+                        ("v_empty", 10.5), ("capacity", 0.04), ("resistance", 0.1),
+                        ("current", 1.2), ("tau", 0.05))),),
+                     truth=("thrust_voltage", "exponent", 2.0)),
         HiddenEffect("wind", "steady wind of 3 m/s from 307 deg (north-west): east 2.4, "
                      "north -1.8 m/s; every flight's heading gamma_C = 0, so the level "
                      "circles see it in their plane and the tilted ones partly across it",

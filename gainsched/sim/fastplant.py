@@ -11,9 +11,10 @@ kernel through ctypes with preallocated buffers.
 Supported: the rigid link with the state-only effects ``drag`` (eq. 10),
 ``rotor_drag``, ``thrust_scale``, ``motor_efficiency``, ``thrust_airspeed``,
 ``thrust_momentum`` (eq. 29), ``wind`` (the circle's heading gamma is then an argument of
-every call), ``thrust_time`` (1 extra state) and ``motor_lag`` (4 extra states)
-(:class:`FastPlant`); the spring-damper link with the same effects but the stateful
-``motor_lag`` and ``thrust_time`` (:class:`FastMaximal`, the
+every call), ``thrust_time`` (1 extra state), ``thrust_voltage`` (2 extra states: the
+battery model) and ``motor_lag`` (4 extra states) (:class:`FastPlant`); the
+spring-damper link with the same effects but the stateful ``motor_lag``,
+``thrust_time`` and ``thrust_voltage`` (:class:`FastMaximal`, the
 maximal-coordinate model of :mod:`gainsched.model.maximal`, which has no stateful
 effects either). Anything else (other effects, the SLS and lumped-mass links) uses the
 numpy model: :func:`fast_plant` returns None and the caller falls back, as it does when
@@ -37,6 +38,7 @@ from ..model.effects import (
     ThrustPolynomial,
     ThrustScale,
     ThrustTime,
+    ThrustVoltage,
     Wind,
 )
 from ..model.maximal import N_MAXIMAL, MaximalModel
@@ -46,9 +48,10 @@ from ..native import load
 __all__ = ["FastPlant", "FastMaximal", "fast_plant", "fast_plant_supported",
            "SUPPORTED_EFFECTS"]
 
-_LAYOUT = 4  # GS_PLANT_LAYOUT in plant.c
-_EFF_STRIDE = 6  # kind, params a..d, first state index (EFF_STRIDE in plant.c)
-#: effect class -> (kind code in plant.c, names of the parameters a, b)
+_LAYOUT = 5  # GS_PLANT_LAYOUT in plant.c
+_EFF_STRIDE = 8  # kind, params a..f, first state index (EFF_STRIDE in plant.c)
+#: effect class -> (kind code in plant.c, names of the parameters a, b, ..., or a function
+#: of the effect giving their values)
 _CODES = {
     Drag: (1, ("mu1", "mu2")),
     RotorDrag: (2, ("k_rd",)),
@@ -59,6 +62,8 @@ _CODES = {
     MotorEfficiency: (7, ("eta1", "eta2", "eta3", "eta4")),
     ThrustTime: (8, ("rate",)),
     Wind: (9, ("east", "north")),
+    # v_ref, exponent, the battery's drain V/(N s) and load drop V/N, tau
+    ThrustVoltage: (10, lambda e: [e.v_ref, e.exponent, *e.coefficients(), e.tau]),
 }
 #: config effect names the compiled plant implements
 SUPPORTED_EFFECTS = frozenset(cls.kind for cls in _CODES)
@@ -89,7 +94,9 @@ def _params(model: Model, maximal: MaximalModel | None = None) -> np.ndarray:
     i = N_STATE
     for e in model.effects:
         code, names = _CODES[type(e)]
-        vals = [float(e.values[n]) for n in names] + [0.0] * (_EFF_STRIDE - 2 - len(names))
+        vals = ([float(v) for v in names(e)] if callable(names)
+                else [float(e.values[n]) for n in names])
+        vals += [0.0] * (_EFF_STRIDE - 2 - len(vals))
         eff.append([code, *vals, i])
         i += e.n_states
     p = np.concatenate(

@@ -365,6 +365,9 @@ class SimResult:
         ``controller="firmware"``: the controller's whole status, the lookup's bits with
         the ``CTRL_*`` bits of :mod:`gainsched.firmware.controller` (``HELD``,
         ``SATURATED``, ``BAD_POSE``, ``STALE_POSE``, ``BAD_IMU``, ``IDLE``); else None.
+    vbat : ndarray, shape (N,), or None
+        The battery's terminal voltage, V, when the plant has a battery (an effect whose
+        ``log_channel`` is ``"vbat"``: ``[effects.thrust_voltage]``, rigid link); else None.
     """
 
     t: np.ndarray
@@ -388,6 +391,7 @@ class SimResult:
     min_tension: float = 0.0
     f_B: np.ndarray | None = None
     controller_status: np.ndarray | None = None
+    vbat: np.ndarray | None = None
 
 
 _FALLBACKS_SEEN: set[str] = set()
@@ -494,6 +498,19 @@ class _Plant:
         return (R_IC @ p_C, R_IC @ v_C, quaternion_from_matrix_scalar(R_IC @ R_CB),
                 np.array(w), f_B)
 
+    def battery_voltage(self, X):
+        """The battery's terminal voltage (N,), V, along plant states X (N, n_x), or None
+        without a battery (an effect whose ``log_channel`` is ``"vbat"``; the maximal
+        model carries no effect states)."""
+        if self.maximal is not None:
+            return None
+        i = N_STATE
+        for e in self.model.effects:
+            if e.log_channel == "vbat":
+                return e.voltage(X[:, i:i + e.n_states])
+            i += e.n_states
+        return None
+
     def poses(self, X, alpha, gamma):
         """COG positions in I (N, 3), m, and quaternions q_IB (N, 4) of states X (N, n_x)."""
         p_I, R_IB = self.pose(X, alpha, gamma)
@@ -540,7 +557,8 @@ class _Record:
                          scenario, r, plant.vehicle.mass, plant.g, self.HELD[sl],
                          tension_d[sl], design.feasibility.min_tension,
                          specific_force(PI, QI, dt, plant.g),
-                         None if self.CTRL is None else self.CTRL[sl])
+                         None if self.CTRL is None else self.CTRL[sl],
+                         self.P.battery_voltage(self.X[sl]))
 
 
 def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None = None,
@@ -1282,7 +1300,8 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
     previous sample), the gyro (the mean body rate over the interval centred on the
     sample, with the scenario's gyro noise), the accelerometer (the mean specific force
     at the COG over the same interval, with the scenario's accelerometer noise), the
-    load-cell tension and the reference azimuth and its rate.
+    load-cell tension and the reference azimuth and its rate; the battery voltage when the
+    plant has a battery (the mean over the interval centred on the sample, no noise).
 
     Parameters
     ----------
@@ -1301,7 +1320,8 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
         One segment, ``source`` ``"simulation NAME"``, metadata ``alpha_c_deg``,
         ``gamma_c_deg``, ``flight_id`` ``"sim-NAME"`` and ``notes``; the optional columns
         ``omega_B`` (rad/s), ``f_B`` (m/s^2), ``tension`` (N), ``xi_ref`` (rad),
-        ``xi_dot_ref`` (rad/s). ``gainsched.analysis.logs.write_log`` writes it.
+        ``xi_dot_ref`` (rad/s), and ``vbat`` (V) with a battery.
+        ``gainsched.analysis.logs.write_log`` writes it.
 
     Examples
     --------
@@ -1357,6 +1377,9 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
         f_B = (fsum[hi] - fsum[lo]) / (hi - lo)[:, None]
         extra["f_B"] = f_B + sens.accel_noise * np.random.default_rng(
             (sens.seed + 1000 if seed is None else seed) + 7919).standard_normal((idx.size, 3))
+    if res.vbat is not None:  # the battery voltage, averaged over the same interval
+        vsum = np.concatenate([[0.0], np.cumsum(res.vbat)])
+        extra["vbat"] = (vsum[hi] - vsum[lo]) / (hi - lo)
     return log_from_arrays(
         res.t[idx], p, q, T, meta, source=f"simulation {res.scenario.name}",
         omega_B=gyro, tension=res.tension[idx],

@@ -704,3 +704,82 @@ def test_the_cache_can_be_turned_off(cache, ulog_file, monkeypatch):
     monkeypatch.setenv("GAINSCHED_LOG_CACHE", "0")
     _read_cached(ulog_file), _read_cached(ulog_file)
     assert len(cache) == 2
+
+
+# --------------------------------------------------------------------------- battery
+def _battery(t):
+    """A sagging battery sampled at 100 Hz over the flight: 12.3 V falling 0.2 V/s, V."""
+    t_bat = np.arange(-0.05, t[-1] + 0.01, 0.01)
+    return t_bat, 12.3 - 0.2 * t_bat
+
+
+def test_px4_battery_status_gives_vbat(paper_config, flight, tmp_path):
+    """Issue 37: PX4's battery_status.voltage_v (msg/BatteryStatus.msg: "Battery voltage
+    in volts, 0 if unknown") through the shipped px4 map becomes the column vbat, its
+    last sample at or before each pose sample (float32 in the ULog: to 1e-5 V); the
+    samples of 0 (unknown) at the start are missing samples, NaN, and the conversion
+    says how many. A ULog without battery_status converts without vbat (the map's
+    battery channel is optional) and says so."""
+    thrust_max = paper_config.vehicle.thrust_max
+    topics, params = px4_topics(flight, thrust_max)
+    t_bat, v = _battery(flight.t)
+    v[:10] = 0.0  # not known yet
+    topics["battery_status"] = {"timestamp": np.round((t_bat + BOOT) * 1e6).astype(np.uint64),
+                                "voltage_v": v}
+    ulg = tmp_path / "bat.ulg"
+    write_ulog(ulg, topics, params)
+    cmap = px4_map()
+    conv = foreign.convert_topics(ulg, *foreign.read_topics(ulg, cmap), cmap,
+                                  thrust_max=thrust_max)
+    assert ("battery: battery_status voltage_v x 1 as vbat (held; 10 samples of 0 or less, "
+            "unknown, left out)") in conv.report
+    (log,) = read_log(ulg, channel_map=cmap, thrust_max=thrust_max)
+    tp = log.t - BOOT
+    i = np.searchsorted(t_bat, tp + 1e-7, side="right") - 1
+    known = i >= 10
+    assert known.sum() > 0.9 * tp.size and (~known).sum() > 0
+    np.testing.assert_allclose(log.optional["vbat"][known], 12.3 - 0.2 * t_bat[i[known]],
+                               atol=1e-5)
+    assert np.all(np.isnan(log.optional["vbat"][~known]))
+    del topics["battery_status"]
+    write_ulog(ulg, topics, params)
+    conv = foreign.convert_topics(ulg, *foreign.read_topics(ulg, cmap), cmap,
+                                  thrust_max=thrust_max)
+    assert "vbat" not in conv.columns
+    assert "battery: battery_status not in the log (optional): no vbat column" in conv.report
+    with pytest.raises(InputError, match=r"battery.optional: must be true or false"):
+        px4_map(**{"battery.optional": "yes"})
+    # not optional: a log without the topic is refused, naming it
+    with pytest.raises(InputError, match=r"bat.ulg: topic battery_status: not in the log"):
+        read_log(ulg, channel_map=px4_map(**{"battery.optional": False}), thrust_max=thrust_max)
+
+
+def test_ros2_battery_state_gives_vbat(paper_config, flight, tmp_path):
+    """sensor_msgs/BatteryState ``voltage`` on /battery (the shipped ros2 template's
+    battery channel), written by rosbags' writer: the column vbat, held, exact (float32
+    values); a bag without the topic converts without it."""
+    types = ros_types()
+    T = types.types
+    msgs = ros2_messages(flight, types)
+    t_bat, v = _battery(flight.t)
+    v = v.astype(np.float32)
+    bat = []
+    for t, x in zip(t_bat, v, strict=True):
+        ns = int(round((t + BOOT) * 1e9))
+        header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](
+            sec=ns // 10**9, nanosec=ns % 10**9), frame_id="battery")
+        bat.append((ns, T["sensor_msgs/msg/BatteryState"](
+            header=header, voltage=float(x), temperature=float("nan"), current=-7.0,
+            charge=float("nan"), capacity=float("nan"), design_capacity=1.3,
+            percentage=float("nan"), power_supply_status=2, power_supply_health=1,
+            power_supply_technology=3, present=True,
+            cell_voltage=np.array([], dtype=np.float32),
+            cell_temperature=np.array([], dtype=np.float32), location="", serial_number="")))
+    write_bag(tmp_path / "bag", {**msgs, "/battery": ("sensor_msgs/msg/BatteryState", bat)})
+    (log,) = read_log(tmp_path / "bag", channel_map=ros2_map())
+    tp = log.t - BOOT
+    i = np.searchsorted(t_bat, tp + 1e-7, side="right") - 1
+    np.testing.assert_array_equal(log.optional["vbat"], v[i].astype(float))
+    write_bag(tmp_path / "nobat", msgs)
+    (log,) = read_log(tmp_path / "nobat", channel_map=ros2_map())
+    assert "vbat" not in log.optional

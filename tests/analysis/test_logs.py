@@ -62,8 +62,9 @@ def _columns(n=60, seed=0, dt=0.005):
 def _full_columns(n=60, seed=1):
     cols = _columns(n, seed)
     rng = np.random.default_rng(seed + 100)
-    for name in ("ax", "ay", "az", "tension", "vbat"):
+    for name in ("ax", "ay", "az", "tension"):
         cols[name] = rng.normal(size=n) * 10 ** rng.uniform(-3, 3)
+    cols["vbat"] = 12.6 - rng.uniform(0.0, 2.0, n)  # a battery voltage is positive
     # the gyro and the reference azimuth agree with the pose (the reader checks them)
     for name, rate in (("p", 0.0), ("q", 0.0), ("r", 5.0)):
         cols[name] = rate + rng.normal(size=n) * 10 ** rng.uniform(-3, -1)
@@ -590,6 +591,10 @@ def test_csv_digit_separators_and_non_ascii_refused(tmp_path, column, cell):
         ("tension", np.inf, "N is not plausible (|tension| <= 10000 N)"),
         ("p", -1e5, "rad/s is not plausible (|p| <= 1000 rad/s)"),
         ("xi_dot_ref", 5e3, "rad/s is not plausible"),
+        ("vbat", 12600.0, "V is not plausible (|vbat| <= 1000 V)"),  # millivolts
+        ("vbat", np.inf, "V is not plausible (|vbat| <= 1000 V)"),
+        ("vbat", 0.0, "V is not plausible (0 < vbat <= 1000 V)"),  # PX4: unknown
+        ("vbat", -11.1, "V is not plausible (0 < vbat <= 1000 V)"),
     ],
 )
 @pytest.mark.parametrize("ext", [".csv", ".h5"])

@@ -236,7 +236,7 @@ def test_the_refusal_flag_generalises_time_varying():
     from gainsched.model.effects import EFFECTS, Effect, Param, registered_effect
 
     assert {k for k, c in EFFECTS.items() if c.refusal()} == {
-        "thrust_time", "thrust_time_series", "wind", "force_horizontal"}
+        "thrust_time", "thrust_time_series", "thrust_voltage", "wind", "force_horizontal"}
     assert "heading axis" in Wind.refusal()
 
     class Aging(Effect):

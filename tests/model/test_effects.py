@@ -138,3 +138,44 @@ def test_simulator_says_once_when_the_compiled_plant_cannot_run_it(tmp_path):
     lines = [ln for ln in res.stderr.splitlines() if ln.startswith("gainsched: warning:")]
     assert len(lines) == 1 and "thrust_azimuth" in lines[0] and "numpy model" in lines[0]
     assert "Warning:" not in res.stderr  # no Python-style warning text
+
+
+def test_thrust_voltage_law_and_battery_model():
+    """Issue 37, ThrustVoltage: at a fixed command the thrust goes as (vbat / v_ref)^2
+    (rotor speed ~ voltage, thrust ~ speed^2): 10 % more voltage gives 21 % more thrust,
+    v_ref none; a dead battery none at all. The battery model (an independent second
+    formulation: the open-circuit voltage from the charge drawn, coulomb counting, and
+    the drop settling to R I) integrated by RK4 under a held command; in a log the
+    states are (vbat, 0), so the terminal voltage is the logged one."""
+    from gainsched.model.effects import ThrustVoltage
+
+    eff = ThrustVoltage(v_ref=11.1, exponent=2.0, v_full=12.6, v_empty=10.5, capacity=0.5,
+                        resistance=0.08, current=1.5, tau=0.05)
+    T = np.array([1.0, 2.0, 3.0, 4.0])
+    x = eff.states_from_log(np.array([11.1, 12.21, 0.0]))
+    np.testing.assert_array_equal(x[:, 1], 0.0)
+    np.testing.assert_allclose(eff.modify_thrust(T, None, x), [T, 1.21 * T, 0 * T],
+                               rtol=1e-14)
+    assert eff.refusal().startswith("changes with the battery's charge and load")
+    assert eff.time_varying and eff.log_channel == "vbat" and eff.n_states == 2
+    np.testing.assert_array_equal(eff.mirror(), np.eye(2))
+    # the battery under a held command of 5 N for 20 s
+    u = np.full(4, 1.25)
+    I = 1.5 * 5.0  # A  # noqa: E741
+    x = np.array([12.6, 0.0])  # just connected, at rest
+    h, n = 1e-3, 20000
+    for k in range(n):
+        if k == 100:  # 0.1 s: the drop rises as R I (1 - exp(-t / tau))
+            assert x[1] == pytest.approx(0.08 * I * (1 - np.exp(-0.1 / 0.05)), rel=1e-9)
+        f = lambda y: eff.state_derivative(y, u, None)  # noqa: E731
+        k1 = f(x)
+        k2 = f(x + h / 2 * k1)
+        k3 = f(x + h / 2 * k2)
+        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + f(x + h * k3))
+    drawn = I * h * n / 3600.0  # A h
+    ocv = 12.6 - (12.6 - 10.5) * drawn / 0.5
+    assert eff.voltage(x) == pytest.approx(ocv - 0.08 * I, abs=1e-9)
+    # complex-step safe: d/dv (v / v_ref)^2 = 2 v / v_ref^2
+    v = 11.7
+    d = eff.factor(np.array(v + 1e-30j)).imag / 1e-30
+    assert d == pytest.approx(2 * v / 11.1**2, rel=1e-12)

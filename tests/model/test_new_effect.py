@@ -158,6 +158,18 @@ def test_build_refuses_an_effect_of_flight_time():
         build_grid(cfg)
 
 
+def test_build_refuses_a_thrust_of_the_battery_voltage():
+    """Issue 37: thrust_voltage carries the battery's voltage as its states (the logged
+    vbat, or a battery model in simulation), not the motion's: the build refuses it in
+    one line before any work."""
+    text = set_section(PAPER_TOML.read_text(), "effects.thrust_voltage",
+                       [("exponent", 2.0, None)])
+    cfg = config_from_text(text, "battery.toml")
+    with pytest.raises(InputError, match=r"^battery.toml: effects.thrust_voltage: changes "
+                                         r"with the battery's charge and load"):
+        build_grid(cfg)
+
+
 class _RollTorque(Effect):
     """A constant roll torque: keeps S1, breaks the direction mirror S2."""
 

@@ -65,6 +65,8 @@ EFFECT_PARAMS = {
     "motor_efficiency": {"eta1": 1.04, "eta2": 0.97, "eta3": 0.92, "eta4": 1.01},
     "thrust_time": {"rate": 0.013},
     "wind": {"east": 2.4, "north": -1.8},
+    "thrust_voltage": {"v_ref": 11.9, "exponent": 1.8, "capacity": 0.04, "resistance": 0.1,
+                       "current": 1.3, "tau": 0.04},
 }
 #: every combination of the first six, the per-motor one after a lag, before and after
 #: the airspeed modifiers, and the flight-time one (a second stateful effect) beside a lag
@@ -73,7 +75,9 @@ COMBOS = [
 ] + [("thrust_airspeed", "thrust_scale", "drag"),  # modifiers in the other order
      ("motor_efficiency",), ("motor_lag", "motor_efficiency", "thrust_momentum"),
      ("thrust_airspeed", "motor_efficiency", "rotor_drag"), ("thrust_time",),
-     ("thrust_time", "motor_lag", "drag"), ("motor_lag", "thrust_scale", "thrust_time")]
+     ("thrust_time", "motor_lag", "drag"), ("motor_lag", "thrust_scale", "thrust_time"),
+     ("thrust_voltage",), ("thrust_voltage", "motor_lag", "drag"),
+     ("motor_lag", "thrust_time", "thrust_voltage", "motor_efficiency")]
 
 
 def with_effects(paper_text: str, names) -> object:
@@ -95,6 +99,12 @@ def random_states(model: Model, n: int, seed: int):
     z[:, 4:7] = rng.normal(0, 0.4, (n, 3))
     z[:, 7:10] = rng.normal(0, 3.0, (n, 3))
     z[:, N_STATE:] = rng.uniform(0.1, 3.5, (n, model.n_z - N_STATE))
+    i = N_STATE
+    for e in model.effects:  # a battery's states: open-circuit voltage and drop, V
+        if e.kind == "thrust_voltage":
+            z[:, i] = rng.uniform(10.5, 12.6, n)
+            z[:, i + 1] = rng.uniform(0.0, 1.0, n)
+        i += e.n_states
     return z, rng.uniform(0.1, 3.5, (n, 4)), rng.uniform(-0.8, 0.8, n)
 
 
@@ -216,6 +226,40 @@ def test_closed_loop_in_a_wind_equals_numpy_plant(paper_config, paper_text, monk
     assert np.abs(fast.z - slow.z).max() <= 1e-9
 
 
+def test_closed_loop_with_a_battery_equals_numpy_plant(paper_config, paper_text, monkeypatch):
+    """Issue 37: 0.5 s level 9 m/s flight on a plant with a battery (thrust_voltage, its
+    2 states integrated by plant.c): the compiled and the numpy flights agree to 1e-9 m,
+    their battery voltages to 1e-9 V; the voltage sags under load (below the open-circuit
+    voltage by the drop, falling with the charge drawn) and the log carries it."""
+    from gainsched.sim.loop import log_from_result
+
+    sched = table_scheduler(load_table(PAPER_H5))
+    truth = with_effects(paper_text, ("drag", "thrust_voltage"))
+    scn = Scenario("battery", 0.0, 9.0, 0.5)
+    assert _Plant(truth).fast is not None
+    fast = simulate(paper_config, sched, scn, truth)
+    monkeypatch.setenv("GAINSCHED_NATIVE", "0")
+    assert _Plant(truth).fast is None
+    slow = simulate(paper_config, sched, scn, truth)
+    assert np.abs(fast.p_I - slow.p_I).max() <= 1e-9
+    assert np.abs(fast.z - slow.z).max() <= 1e-9
+    assert np.abs(fast.vbat - slow.vbat).max() <= 1e-9
+    eff = next(e for e in Model(truth).effects if e.kind == "thrust_voltage")
+    drain, load = eff.coefficients()
+    T_C = fast.u.sum(1)
+    # the flight starts with a full battery, its drop settled at the command that gives
+    # the nominal thrust at that voltage
+    x0, u0 = eff.steady_states(fast.u_d[0], np.zeros(4))
+    np.testing.assert_allclose(u0 * eff.factor(eff.voltage(x0)), fast.u_d[0], rtol=1e-12)
+    assert x0[0] == eff.v_full and x0[1] == pytest.approx(load * u0.sum(), rel=1e-12)
+    assert fast.vbat[0] == pytest.approx(eff.voltage(x0), rel=1e-12)
+    # the open-circuit voltage fell by the charge drawn (held commands, Euler sum exact)
+    fall = drain * np.sum(T_C[:-1]) * (fast.t[1] - fast.t[0])
+    assert eff.v_full - fast.vbat[-1] == pytest.approx(fall + load * T_C[-1], abs=0.01)
+    log = log_from_result(fast)
+    assert "vbat" in log.optional and log.optional["vbat"].size == len(log)
+
+
 @pytest.mark.slow
 def test_closed_loop_equals_numpy_plant(paper_config, paper_text, monkeypatch):
     """1 s tilted flight, motion-capture sensing (the estimator's prediction model is
@@ -271,7 +315,7 @@ def test_fallback_for_unsupported_configs(paper_config):
 
 
 # ----------------------------------------------------------- maximal model, spring-damper
-STATELESS = [c for c in COMBOS if "motor_lag" not in c and "thrust_time" not in c]
+STATELESS = [c for c in COMBOS if not {"motor_lag", "thrust_time", "thrust_voltage"} & set(c)]
 # (the wind's own maximal test is test_wind_maximal_equals_numpy_model)
 
 
