@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -30,8 +31,8 @@ def user_errors(fn):
     def wrapper(*args, **kwargs):
         try:
             return fn(*args, **kwargs)
-        except InputError as exc:
-            click.echo(f"gainsched: error: {exc}", err=True)
+        except InputError as exc:  # one line, whatever a library's message held
+            click.echo(f"gainsched: error: {' '.join(str(exc).split())}", err=True)
             sys.exit(2)
 
     return wrapper
@@ -126,6 +127,53 @@ class Jobs(click.ParamType):
         return n
 
 
+class Name(click.ParamType):
+    """A name or a path given as text (``--scenario``, ``--map``, ``--hidden``,
+    ``--candidate``): refuses an empty one (``--scenario ""`` would read the current
+    folder)."""
+
+    name = "TEXT"
+
+    def convert(self, value, param, ctx):
+        if not isinstance(value, str) or not value.strip():
+            self.fail("an empty name", param, ctx)
+        return value
+
+
+def _same_file(a, b) -> bool:
+    """Whether two spellings name one file: ``a.csv`` and ``./a.csv``, a path through a
+    symbolic link, or (both existing) a hard link; compared resolved, not as text."""
+    a, b = Path(a), Path(b)
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+        return a.resolve() == b.resolve()
+    except (OSError, RuntimeError):  # a link loop: not a file to compare
+        return False
+
+
+def _distinct(what: str, paths) -> None:
+    """Refuse one file given twice among ``paths`` (the argument ``what``), however spelled."""
+    for i, b in enumerate(paths):
+        for a in paths[:i]:
+            if _same_file(a, b):
+                same = "given twice" if str(a) == str(b) else f"is {a}"
+                raise InputError("command line", what, f"{b} {same}: each file once")
+
+
+def _not_an_input(out, option: str, **inputs) -> None:
+    """Refuse an output file ``out`` (of ``option``) that is one of the ``inputs`` (label:
+    path, list of paths or None), however spelled: an input is never overwritten."""
+    for label, paths in inputs.items():
+        paths = [] if paths is None else paths if isinstance(paths, (list, tuple)) else [paths]
+        for path in paths:
+            if Path(path).exists() and _same_file(out, path):
+                shown = "" if str(path) == str(out) else f" ({path})"
+                raise InputError("command line", option, f"{out} is the input "
+                                 f"{label}{shown}: give a new file (an input is never "
+                                 "overwritten)")
+
+
 CONFIG = click.argument("config", type=FilePath(dir_okay=False, path_type=Path))
 #: seeds of the noise: non-negative integers (numpy refuses negative ones)
 SEED = click.IntRange(0, MAX_SEED)
@@ -211,16 +259,19 @@ def nominal(config, speed, tilt, samples, csv_path):
     thrusts (N), tether tension (N), centripetal g-load, feasibility."""
     from .config import load_config
     from .model.reduced import Model
-    from .publish import check_out_dir, write_atomic
+    from .publish import check_out_file, write_atomic
+    from .resources import config_path
     from .schedule.nominal import REASONS, circle_nominal, min_taut_speed
 
+    if csv_path is not None:
+        _not_an_input(csv_path, "--csv", CONFIG=config_path(config))
     cfg = load_config(config)
     if speed == 0 or not np.isfinite(speed):
         raise InputError("command line", "--speed", "must be a finite non-zero speed in m/s")
     if not -90 < tilt < 90:
         raise InputError("command line", "--tilt", "must be in (-90, 90) deg")
     if csv_path is not None:
-        check_out_dir(csv_path.parent, "--csv")  # a bad --csv fails before anything prints
+        check_out_file(csv_path, "--csv")  # a bad --csv fails before anything prints
     model = Model(cfg)
     nom = circle_nominal(model, speed, np.deg2rad(tilt), samples)
     g_load = speed**2 / model.r / cfg.g
@@ -646,6 +697,10 @@ def check(table, speed_stride, max_error, azimuth_error):
     from .schedule.tables import load_table
 
     t = load_table(table)
+    n_mid = max(t.speed.size - 1, 1)
+    if speed_stride > n_mid:  # a stride past the last midpoint checks only the first
+        raise InputError("command line", "--speed-stride", f"{speed_stride}: {table} has "
+                         f"{n_mid} speed midpoint{'s' if n_mid > 1 else ''}: give 1..{n_mid}")
     t0 = time.perf_counter()
     lookup = None
     from .firmware.outputs import table_config
@@ -733,7 +788,7 @@ _RUNTIME = click.option(
 @CONFIG
 @click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
               required=True, help="Gain table (HDF5) built from CONFIG.")
-@click.option("--scenario", required=True,
+@click.option("--scenario", type=Name(), required=True,
               help="Scenario file, or the name of a shipped scenario (horizontal, tilted40, "
               "speedup, braking, staircase).")
 @click.option("--plant", "plant_path", type=FilePath(dir_okay=False, path_type=Path),
@@ -865,9 +920,9 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
 
 _LOGS = click.argument("logs", nargs=-1, required=True,
                        type=FilePath(exists=True, path_type=Path))
-_MAP = click.option("--map", "map_path", help="Channel map of PX4 ULogs and ROS 2 bags among "
-                    "the logs: a TOML file or a shipped map (px4, px4_legacy, ros2); default "
-                    "for a ULog: px4 (docs/flight-log.md).")
+_MAP = click.option("--map", "map_path", type=Name(), help="Channel map of PX4 ULogs and "
+                    "ROS 2 bags among the logs: a TOML file or a shipped map (px4, "
+                    "px4_legacy, ros2); default for a ULog: px4 (docs/flight-log.md).")
 
 
 _TRUST = click.option("--trust", "trust", multiple=True, type=click.Choice(LOG_CHECKS),
@@ -916,7 +971,13 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
         write_compare,
     )
     from .publish import check_out_dir, staged
+    from .resources import config_path
 
+    _distinct("LOG", list(logs))
+    if before_path is not None and _same_file(config_path(before_path), config_path(config)):
+        shown = "" if str(before_path) == str(config) else f" ({config})"
+        raise InputError("command line", "--before", f"{before_path} is CONFIG{shown}: give "
+                         "the earlier config")
     cfg = _load_for_compare(config)
     before_cfg = None if before_path is None else _load_for_compare(before_path)
     cmap = _channel_map(map_path)
@@ -943,9 +1004,9 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
 @cli.command()
 @CONFIG
 @_LOGS
-@click.option("--candidate", "candidates", multiple=True,
+@click.option("--candidate", "candidates", type=Name(), multiple=True,
               help="Only these candidates (repeatable; default: the whole library).")
-@click.option("--exclude", "exclude", multiple=True, metavar="NAME",
+@click.option("--exclude", "exclude", type=Name(), multiple=True, metavar="NAME",
               help="Leave out this candidate or effect (repeatable): the library told "
                    "the effect is not there.")
 @click.option("--joint", is_flag=True,
@@ -978,21 +1039,27 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
         write_diagnose,
     )
     from .config import config_from_text
-    from .publish import check_out_dir, staged, write_atomic
+    from .publish import check_out_dir, check_out_file, staged, write_atomic
 
     if do_apply and new_config is None:
         raise InputError("command line", "--apply", "needs -o NEWCONFIG")
     if new_config is not None and not do_apply:
         raise InputError("command line", "-o", "is the new config of --apply: give --apply "
                          "too (or --report DIR for a report)")
-    if len({p.resolve() for p in logs}) < 2:
+    _distinct("LOG", list(logs))
+    if len(logs) < 2:
         raise InputError("command line", "LOG", "diagnose needs at least two flights (log "
                          "files) for held-out scores")
+    if new_config is not None:
+        from .resources import config_path
+
+        _not_an_input(new_config, "-o", CONFIG=config_path(config), LOG=list(logs),
+                      **{"--map": map_path})
     select_candidates(candidates or None, exclude)  # checked before any work
     cfg = _load_for_compare(config)
     cmap = _channel_map(map_path)
     if new_config is not None:
-        check_out_dir(new_config.parent, "-o")
+        check_out_file(new_config, "-o")
     if report_dir is not None:
         check_out_dir(report_dir, "--report")
     base = run(cfg, logs, channel_map=cmap, trust=trust)
@@ -1050,12 +1117,15 @@ def convert(log, out_path, map_path, config_path, trust):
     (docs/flight-log.md) for inspection, and say what was mapped to what."""
     from .analysis.logs import convert_log
     from .config import load_config
-    from .publish import check_out_dir
+    from .publish import check_out_file
+    from .resources import config_path as shipped
 
+    _not_an_input(out_path, "-o", LOG=log, **{"--config": config_path and
+                                               shipped(config_path), "--map": map_path})
     cmap = _channel_map(map_path)
     cfg = load_config(config_path) if config_path else None
     thrust_max = cfg.vehicle.thrust_max if cfg is not None else None
-    check_out_dir(out_path.parent, "-o")
+    check_out_file(out_path, "-o")
     report, segs = convert_log(log, out_path, channel_map=cmap, thrust_max=thrust_max,
                                config=cfg, trust=trust)
     for line in report:
@@ -1073,7 +1143,7 @@ def convert(log, out_path, map_path, config_path, trust):
 @CONFIG
 @click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
               required=True, help="Gain table (HDF5) built from CONFIG.")
-@click.option("--hidden", default="none", show_default=True,
+@click.option("--hidden", type=Name(), default="none", show_default=True,
               help="Hidden effect of the plant (gainsched.sim.campaign.HIDDEN).")
 @click.option("--duration", type=FiniteFloat(1.0, MAX_FLIGHT_S, unit="s"), default=3.0,
               show_default=True, help=f"Seconds per flight (1..{MAX_FLIGHT_S:g}).")

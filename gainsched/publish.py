@@ -34,7 +34,7 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["write_atomic", "publish", "staged", "recover", "check_out_dir"]
+__all__ = ["write_atomic", "publish", "staged", "recover", "check_out_dir", "check_out_file"]
 
 JOURNAL = ".gainsched-publish.json"
 _STAGE = ".gainsched-stage-"
@@ -65,21 +65,78 @@ def _why(exc: OSError) -> str:
     return names.get(exc.errno, exc.strerror or type(exc).__name__)
 
 
+def _missing_folders(out_dir: Path) -> list[Path]:
+    """The folders of ``out_dir`` (itself first, then its parents) that do not exist yet."""
+    missing = []
+    p = Path(os.path.abspath(out_dir))
+    while not os.path.lexists(p) and p != p.parent:
+        missing.append(p)
+        p = p.parent
+    return missing
+
+
 def check_out_dir(out_dir, where: str = "-o") -> Path:
-    """Create ``out_dir`` if needed and check that files can be written into it.
+    """Check that ``out_dir`` is (or can be made) a folder files can be written into,
+    creating nothing: the folder is made when its outputs are published.
 
     Call it before long work so that a bad ``-o`` fails in a second, not after the
-    build. Raises InputError naming the folder and ``where`` (the option or key).
+    build, and a refused command leaves no folder behind (issue 38). The write test is
+    a temp file made and removed in the folder, or in its nearest existing parent when
+    the folder does not exist yet. Raises InputError naming the folder and ``where``
+    (the option or key).
     """
     out_dir = Path(out_dir)
+    missing = _missing_folders(out_dir)
+    base = missing[-1].parent if missing else Path(os.path.abspath(out_dir))
     try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(dir=out_dir, prefix=_STAGE + "probe-")
+        if not base.is_dir():  # a regular file (or a broken link) where a folder must be
+            raise OSError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(base))
+        fd, probe = tempfile.mkstemp(dir=base, prefix=_STAGE + "probe-")
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:
         raise InputError(out_dir, where, f"cannot write there: {_why(exc)}") from None
     return out_dir
+
+
+def _not_a_file(path: Path, where: str) -> None:
+    """Refuse to replace anything but a regular file: the rename of an atomic write would
+    put a file in the place of ``/dev/null``, a FIFO or a socket (or of the link
+    ``/dev/stdout``), not write into it."""
+    if os.path.lexists(path) and not path.is_file():
+        what = "a folder" if path.is_dir() else "not a regular file (a device, FIFO or socket)"
+        raise InputError(path, where, f"{what}: give a file name to write")
+
+
+def check_out_file(path, where: str = "-o") -> Path:
+    """Check that the file ``path`` can be written (atomically) before the work: its
+    folder as :func:`check_out_dir` checks it, and ``path`` itself new or a regular
+    file. Creates nothing. Raises InputError naming the file and ``where``."""
+    path = Path(path)
+    _not_a_file(path, where)
+    check_out_dir(path.parent, where)
+    return path
+
+
+def _make_out_dir(out_dir: Path, where: str) -> list[Path]:
+    """Create ``out_dir`` (checked first); return the folders made, deepest first, for
+    :func:`_unmake` to remove when nothing gets published."""
+    check_out_dir(out_dir, where)
+    missing = _missing_folders(out_dir)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(out_dir, where, f"cannot write there: {_why(exc)}") from None
+    return missing
+
+
+def _unmake(folders: list[Path]) -> None:
+    """Remove the folders a refused or failed publish made (when still empty)."""
+    for p in folders:
+        try:
+            p.rmdir()
+        except OSError:
+            return
 
 
 def write_atomic(path, data: bytes, *, where: str = "") -> None:
@@ -90,6 +147,7 @@ def write_atomic(path, data: bytes, *, where: str = "") -> None:
     ``where`` (the option or key that named it).
     """
     path = Path(path)
+    _not_a_file(path, where)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -214,7 +272,8 @@ def staged(out_dir, *, where: str = "-o") -> Iterator[Path]:
     ...     (out / "summary.json").write_text("{}")
     ...     fig.savefig(out / "plot.png")
     """
-    out_dir = check_out_dir(out_dir, where)
+    out_dir = Path(out_dir)
+    made = _make_out_dir(out_dir, where)
     with _locked(out_dir):
         _settle(out_dir)  # a killed run's committed set comes first
         try:
@@ -234,6 +293,7 @@ def staged(out_dir, *, where: str = "-o") -> Iterator[Path]:
             os.replace(tmp, out_dir / JOURNAL)  # the commit point
         except BaseException as exc:
             _clean(out_dir)  # before the commit point: the old outputs stay
+            _unmake(made)  # and a folder this run made goes again
             if isinstance(exc, OSError):
                 raise InputError(out_dir, where, f"cannot write there: {_why(exc)}") from None
             raise

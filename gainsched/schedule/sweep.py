@@ -225,7 +225,11 @@ def _number(text: str, where: str) -> float:
 def parse_vary(spec: str) -> tuple[str, tuple[float, ...]]:
     """``"vehicle.mass=0.45,0.5,0.55"`` -> ``("vehicle.mass", (0.45, 0.5, 0.55))``."""
     key, rest = _split(spec, "--vary")
-    return key, tuple(_number(t, f"--vary {key}") for t in rest.split(","))
+    values = tuple(_number(t, f"--vary {key}") for t in rest.split(","))
+    for i, v in enumerate(values):
+        if v in values[:i]:  # two variants alike: the same table built twice
+            raise InputError(_SRC, f"--vary {key}", f"{v:g} given twice: each value once")
+    return key, values
 
 
 def parse_sigma(spec: str) -> tuple[str, float]:
