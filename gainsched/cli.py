@@ -325,6 +325,14 @@ def _cluster_options(fn):
     return fn
 
 
+def _build_names(cfg) -> list[str]:
+    """The files ``build`` writes into its folder (firmware.outputs.output_files)."""
+    from .firmware.codegen import CONTROL_FILES, RUNTIME_FILES
+
+    return [f"{cfg.name}.h5", f"{cfg.name}_gains.h", f"{cfg.name}_control.h", *RUNTIME_FILES,
+            *CONTROL_FILES]
+
+
 def _nanmax(a) -> str:
     a = np.asarray(a)
     return f"{np.nanmax(a):.4f}" if np.any(np.isfinite(a)) else "n/a (no feasible circle)"
@@ -353,7 +361,7 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
 
     check_options(backend, scheduler)
     cfg = load_config(config)
-    check_out_dir(out_dir)  # a bad -o fails now, not after the build
+    check_out_dir(out_dir, names=_build_names(cfg))  # a bad -o fails now, not after the build
     recover(out_dir)  # finish or clean up after a killed earlier run
     t0 = time.perf_counter()
     choice = None
@@ -480,7 +488,7 @@ def inspect(table, out_dir, as_json):
     from .schedule.viewer import mode_lines, table_summary
 
     if out_dir is not None:
-        check_out_dir(out_dir, "--out")
+        check_out_dir(out_dir, "--out", names=_ENVELOPE)
     t = load_table(table)
     if as_json:
         click.echo(json.dumps(table_summary(t, source=str(table)), indent=2, sort_keys=True))
@@ -528,6 +536,9 @@ def inspect(table, out_dir, as_json):
         _write_envelope(t, table, out_dir)
 
 
+_ENVELOPE = ["envelope.png", "envelope.json"]
+
+
 def _write_envelope(t, table, out_dir, quiet=False) -> None:
     """envelope.png and envelope.json of the loaded table ``t`` into ``out_dir`` (one set)."""
     from .publish import publish
@@ -564,7 +575,7 @@ def plot(table, out_dir, with_check, as_json):
     from .schedule.tables import load_table
     from .schedule.viewer import schedule_plots
 
-    check_out_dir(out_dir, "--out")
+    check_out_dir(out_dir, "--out", names=["plots.json"])
     t = load_table(table)
     midpoints = None
     if with_check:
@@ -621,7 +632,7 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     footprint."""
     from tqdm import tqdm
 
-    from .firmware.codegen import c_files, flash_summary
+    from .firmware.codegen import CONTROL_FILES, RUNTIME_FILES, c_files, flash_summary
     from .firmware.controller import controller_params
     from .firmware.outputs import certificate_lines, firmware_form, table_config
     from .publish import check_out_dir, publish
@@ -641,7 +652,8 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     if outputs:
         cfg = cfg.with_values(outputs, source=f"{table} (export-c options)")
     fmt = "dense" if cfg is None else cfg.firmware.format
-    check_out_dir(out_dir)  # a bad -o fails before the certification
+    # a bad -o fails before the certification
+    check_out_dir(out_dir, names=[*RUNTIME_FILES, *CONTROL_FILES])
     n_mid = max(t.speed.size - 1, 1) if fmt == "compact" else 0
     with tqdm(total=n_mid, unit="speed", desc="certify compact table",
               disable=None if n_mid else True) as bar:
@@ -824,7 +836,7 @@ def simulate(config, table_path, scenario, plant_path, speed, runtime, controlle
     if speed is not None:
         scn = dataclasses.replace(scn, speed=speed)
     n = check_flight_steps(scn.duration, cfg.control.rate_hz, scenario, "duration")
-    check_out_dir(out_dir)
+    check_out_dir(out_dir, names=["metrics.json"])
     if table.config_sha256 != cfg.sha256:  # once every input passed
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     with tqdm(total=n, unit="step", desc=f"simulate {scn.name}", disable=None) as bar:
@@ -899,7 +911,8 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
 
     cfg = load_config(config)
     plant = load_config(plant_path) if plant_path else None
-    check_out_dir(out_dir)  # before a first use builds the table (half a minute)
+    # before a first use builds the table (half a minute)
+    check_out_dir(out_dir, names=["report.md", "report.json"])
     if table_path is None:
         table, table_path = _table_of(cfg)
     else:
@@ -982,7 +995,7 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
     before_cfg = None if before_path is None else _load_for_compare(before_path)
     cmap = _channel_map(map_path)
     if out_dir is not None:
-        check_out_dir(out_dir)
+        check_out_dir(out_dir, names=["compare.json", "compare.md"])
     cmp = run(cfg, logs, channel_map=cmap, trust=trust)
     paper = None if no_paper else paper_fits(cfg, cmp.measured)
     for line in compare_lines(cmp, paper):
@@ -1061,7 +1074,7 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
     if new_config is not None:
         check_out_file(new_config, "-o")
     if report_dir is not None:
-        check_out_dir(report_dir, "--report")
+        check_out_dir(report_dir, "--report", names=["diagnose.json", "diagnose.md"])
     base = run(cfg, logs, channel_map=cmap, trust=trust)
     for line in compare_lines(base):
         click.echo(line)

@@ -75,7 +75,22 @@ def _missing_folders(out_dir: Path) -> list[Path]:
     return missing
 
 
-def check_out_dir(out_dir, where: str = "-o") -> Path:
+def _blocked(out_dir: Path, names) -> tuple[Path, str] | None:
+    """The first output of ``names`` (relative paths) that cannot take the place its name
+    gives in ``out_dir``: a folder where a file goes, or a file where a folder goes. A
+    rename would fail there, half-way through publishing the set."""
+    for name in names:
+        dst = out_dir / name
+        for parent in reversed(dst.relative_to(out_dir).parents[:-1]):
+            p = out_dir / parent
+            if os.path.lexists(p) and not p.is_dir():
+                return p, "a file where a folder of the outputs goes: move it away"
+        if dst.is_dir() and not dst.is_symlink():
+            return dst, "a folder where an output file goes: move it away"
+    return None
+
+
+def check_out_dir(out_dir, where: str = "-o", names=()) -> Path:
     """Check that ``out_dir`` is (or can be made) a folder files can be written into,
     creating nothing: the folder is made when its outputs are published.
 
@@ -83,7 +98,8 @@ def check_out_dir(out_dir, where: str = "-o") -> Path:
     build, and a refused command leaves no folder behind (issue 38). The write test is
     a temp file made and removed in the folder, or in its nearest existing parent when
     the folder does not exist yet. Raises InputError naming the folder and ``where``
-    (the option or key).
+    (the option or key); ``names``: the files the command will write there, when known
+    before the work, are checked to have their places free of folders.
     """
     out_dir = Path(out_dir)
     missing = _missing_folders(out_dir)
@@ -96,6 +112,8 @@ def check_out_dir(out_dir, where: str = "-o") -> Path:
         os.unlink(probe)
     except OSError as exc:
         raise InputError(out_dir, where, f"cannot write there: {_why(exc)}") from None
+    if not missing and (bad := _blocked(out_dir, names)):
+        raise InputError(bad[0], where, bad[1])
     return out_dir
 
 
@@ -212,8 +230,12 @@ def _roll_forward(out_dir: Path) -> None:
         for name in names:
             src, dst = stage / name, out_dir / name
             if src.exists():  # renamed already if a previous roll-forward was cut short
-                dst.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(src, dst)
+                try:
+                    dst.parent.mkdir(parents=True, exist_ok=True)
+                    os.replace(src, dst)
+                except OSError as exc:  # the journal stays: the next run tries again
+                    raise InputError(dst, "", "cannot complete the output set a killed run "
+                                     f"committed ({JOURNAL}): {_why(exc)}") from None
         _fsync(out_dir)
         journal.unlink()
         _fsync(out_dir)
@@ -281,6 +303,8 @@ def staged(out_dir, *, where: str = "-o") -> Iterator[Path]:
             yield stage
             names = sorted(p.relative_to(stage).as_posix() for p in stage.rglob("*")
                            if p.is_file())
+            if bad := _blocked(out_dir, names):  # before the commit point: nothing half done
+                raise InputError(bad[0], where, bad[1])
             for name in names:
                 _fsync(stage / name)
             _fsync(stage)

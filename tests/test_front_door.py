@@ -570,6 +570,12 @@ HOSTILE = {
          "midpoints"]),
     "sweep-vary-value-twice": ({}, ["sweep", PAPER, "--vary", "vehicle.mass=0.5,0.5", "-o",
                                     "out"], ["--vary vehicle.mass", "0.5 given twice"]),
+    "build-output-name-is-a-folder": ({"s.toml": small_config_text(name="s"), "out/s.h5/x": ""},
+                                      ["build", "s.toml", "-o", "out"],
+                                      ["out/s.h5: -o: a folder where an output file goes"]),
+    "compare-output-name-is-a-folder": (
+        {"out/compare.json/x": ""}, ["compare", PAPER, FLIGHT, "-o", "out", "--no-paper"],
+        ["out/compare.json: -o: a folder where an output file goes"]),
     "log-hdf5-folder": ({"d.h5/x": ""}, ["compare", PAPER, "d.h5"],
                         ["d.h5", "cannot read the file (Is a directory)"]),
 }
@@ -605,6 +611,39 @@ def test_a_refused_publish_removes_the_folders_it_made(tmp_path):
             (stage / "r.json").write_bytes(b"half")
             raise RuntimeError("refused half-way")
     assert os.listdir(tmp_path) == []
+
+
+def test_a_set_with_a_folder_in_the_place_of_a_file_is_refused_before_the_commit(tmp_path):
+    """An output whose name is a folder in the output folder: refused before the commit
+    point (the rename failed half-way through the set, and the journal it left failed
+    every later run in the folder); the old set and the folder stay as they were."""
+    out = tmp_path / "out"
+    publish(out, {"a.h5": b"old", "a.h": b"old"})
+    (out / "b.json").mkdir()
+    with pytest.raises(InputError, match=r"b.json: -o: a folder where an output file goes"):
+        publish(out, {"a.h5": b"new", "a.h": b"new", "b.json": b"new"})
+    assert sorted(os.listdir(out)) == ["a.h", "a.h5", "b.json"]
+    assert (out / "a.h5").read_bytes() == (out / "a.h").read_bytes() == b"old"
+    with pytest.raises(InputError, match=r"a.h5: -o: a file where a folder of the outputs"):
+        with staged(out) as stage:
+            (stage / "a.h5").mkdir()
+            (stage / "a.h5" / "x.png").write_bytes(b"png")
+    assert sorted(os.listdir(out)) == ["a.h", "a.h5", "b.json"]
+
+
+def test_a_committed_set_that_cannot_be_completed_is_named(tmp_path):
+    """A journal whose file cannot take its place (a folder made there since): one line
+    naming the file (was an IsADirectoryError traceback on every later run)."""
+    out = tmp_path / "out"
+    stage = out / ".gainsched-stage-x1"
+    stage.mkdir(parents=True)
+    (stage / "t.h5").write_bytes(b"new")
+    (out / "t.h5").mkdir()
+    (out / JOURNAL).write_text('{"stage": ".gainsched-stage-x1", "files": ["t.h5"]}')
+    with pytest.raises(InputError, match=r"t.h5: cannot complete the output set a killed run "
+                       r"committed \(\.gainsched-publish\.json\): Is a directory"):
+        recover(out)
+    assert (out / JOURNAL).exists() and (stage / "t.h5").read_bytes() == b"new"
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/null"), reason="needs /dev/null")
