@@ -576,6 +576,8 @@ HOSTILE = {
     "compare-output-name-is-a-folder": (
         {"out/compare.json/x": ""}, ["compare", PAPER, FLIGHT, "-o", "out", "--no-paper"],
         ["out/compare.json: -o: a folder where an output file goes"]),
+    "log-a-plain-folder": ({"d/x": ""}, ["compare", PAPER, "d"],
+                           ["d: a folder, not a log", "metadata.yaml"]),
     "log-hdf5-folder": ({"d.h5/x": ""}, ["compare", PAPER, "d.h5"],
                         ["d.h5", "cannot read the file (Is a directory)"]),
 }

@@ -680,6 +680,9 @@ def read_log(
     if foreign is not None:
         return _segments(path, foreign.meta, foreign.columns, foreign.rows, foreign.label,
                          min_samples, gap_factor, config=config, trust=trust)
+    if path.is_dir() and path.suffix.lower() not in _EXTENSIONS:
+        raise InputError(path, "", "a folder, not a log: give a log file (.csv, .h5, .ulg) "
+                         "or a ROS 2 bag folder (with its metadata.yaml)")
     fmt = _format(path)
     if fmt == "csv":
         meta, raw, rows, label = _read_csv(path)
