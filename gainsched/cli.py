@@ -1068,7 +1068,12 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
 
         _not_an_input(new_config, "-o", CONFIG=config_path(config), LOG=list(logs),
                       **{"--map": map_path})
-    select_candidates(candidates or None, exclude)  # checked before any work
+    for option, names in (("--candidate", candidates), ("--exclude", exclude)):
+        if dup := next((n for i, n in enumerate(names) if n in names[:i]), None):
+            raise InputError("command line", option, f"{dup!r} given twice: each name once")
+    if not select_candidates(candidates or None, exclude):  # checked before any work
+        raise InputError("command line", "--exclude", f"leaves out every candidate "
+                         f"({', '.join(exclude)}): nothing to fit")
     cfg = _load_for_compare(config)
     cmap = _channel_map(map_path)
     if new_config is not None:

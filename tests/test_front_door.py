@@ -576,6 +576,12 @@ HOSTILE = {
     "compare-output-name-is-a-folder": (
         {"out/compare.json/x": ""}, ["compare", PAPER, FLIGHT, "-o", "out", "--no-paper"],
         ["out/compare.json: -o: a folder where an output file goes"]),
+    "diagnose-candidate-twice": ({}, ["diagnose", PAPER, *FLIGHTS[:2], "--candidate", "mass",
+                                      "--candidate", "mass"],
+                                 ["--candidate", "'mass' given twice"]),
+    "diagnose-exclude-every-candidate": ({}, ["diagnose", PAPER, *FLIGHTS[:2], "--candidate",
+                                              "mass", "--exclude", "mass"],
+                                         ["--exclude", "leaves out every candidate (mass)"]),
     "log-a-plain-folder": ({"d/x": ""}, ["compare", PAPER, "d"],
                            ["d: a folder, not a log", "metadata.yaml"]),
     "log-hdf5-folder": ({"d.h5/x": ""}, ["compare", PAPER, "d.h5"],
