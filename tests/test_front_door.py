@@ -582,6 +582,9 @@ HOSTILE = {
     "diagnose-exclude-every-candidate": ({}, ["diagnose", PAPER, *FLIGHTS[:2], "--candidate",
                                               "mass", "--exclude", "mass"],
                                          ["--exclude", "leaves out every candidate (mass)"]),
+    "sweep-variant-refused-names-the-option": (
+        {}, ["sweep", PAPER, "--vary", "vehicle.mass=0.5,-1", "-o", "out"],
+        ["command line: --vary: variant paper-v001 (vehicle.mass=-1): vehicle.mass: must be > 0"]),
     "log-a-plain-folder": ({"d/x": ""}, ["compare", PAPER, "d"],
                            ["d: a folder, not a log", "metadata.yaml"]),
     "log-hdf5-folder": ({"d.h5/x": ""}, ["compare", PAPER, "d.h5"],

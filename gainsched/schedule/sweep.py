@@ -322,9 +322,13 @@ def make_sweep(base: Config, vary: Sequence[tuple[str, Sequence[float]]] = (), *
         text = variant_text(base, name, params)
         try:
             cfg = config_from_text(text, f"sweep variant {name}")
-        except InputError as exc:
+        except InputError as exc:  # named by the options that made the variant
             vals = ", ".join(f"{k}={v:g}" for k, v in params)
-            raise InputError(exc.source, exc.where, f"{exc.message} ({vals})") from None
+            opts = " and ".join(o for o, given in (("--vary", vary), ("--sigma", sigma))
+                                if given)
+            where = f"{exc.where}: " if exc.where else ""
+            raise InputError(_SRC, opts, f"variant {name} ({vals}): {where}"
+                             f"{exc.message}") from None
         out.append(Variant(name, params, cfg))
     vary_c = tuple(
         (k, tuple(float(x) for x in v)) for k, (_, v) in zip(vary_keys, vary, strict=True)
