@@ -75,6 +75,24 @@ def _missing_folders(out_dir: Path) -> list[Path]:
     return missing
 
 
+#: bytes a temp file's name adds to the name it stands for (``.NAME.XXXXXXXX.tmp``)
+_TMP_EXTRA = len("..") + 8 + len(".tmp")
+
+
+def _too_long(base: Path, names, extra: int = 0) -> str | None:
+    """Why one of ``names`` (names of files or folders to make in ``base``, or under it)
+    cannot be made: longer than the file system allows (checked before the work: the
+    write would fail only at the end)."""
+    try:
+        most = os.pathconf(base, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        most = 255
+    for name in names:
+        if len(os.fsencode(name)) + extra > most:
+            return f"a name longer than {most - extra} bytes: {name[:16]}...{name[-8:]}"
+    return None
+
+
 def _blocked(out_dir: Path, names) -> tuple[Path, str] | None:
     """The first output of ``names`` (relative paths) that cannot take the place its name
     gives in ``out_dir``: a folder where a file goes, or a file where a folder goes. A
@@ -107,6 +125,8 @@ def check_out_dir(out_dir, where: str = "-o", names=()) -> Path:
     try:
         if not base.is_dir():  # a regular file (or a broken link) where a folder must be
             raise OSError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(base))
+        if why := _too_long(base, [p.name for p in missing]):
+            raise InputError(out_dir, where, f"cannot write there: {why}")
         fd, probe = tempfile.mkstemp(dir=base, prefix=_STAGE + "probe-")
         os.close(fd)
         os.unlink(probe)
@@ -133,6 +153,10 @@ def check_out_file(path, where: str = "-o") -> Path:
     path = Path(path)
     _not_a_file(path, where)
     check_out_dir(path.parent, where)
+    missing = _missing_folders(path.parent)
+    base = missing[-1].parent if missing else path.parent
+    if why := _too_long(base, [path.name], _TMP_EXTRA):
+        raise InputError(path, where, f"cannot write: {why}")
     return path
 
 

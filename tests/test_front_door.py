@@ -585,6 +585,11 @@ HOSTILE = {
     "sweep-variant-refused-names-the-option": (
         {}, ["sweep", PAPER, "--vary", "vehicle.mass=0.5,-1", "-o", "out"],
         ["command line: --vary: variant paper-v001 (vehicle.mass=-1): vehicle.mass: must be > 0"]),
+    "inspect-out-name-too-long": ({}, ["inspect", TABLE, "-o", "new/" + "a" * 300],
+                                  ["--out: cannot write there: a name longer than"]),
+    "nominal-csv-name-too-long": ({}, ["nominal", PAPER, "--speed", "9", "--csv",
+                                       "new/" + "a" * 250 + ".csv"],
+                                  ["--csv: cannot write: a name longer than"]),
     "log-a-plain-folder": ({"d/x": ""}, ["compare", PAPER, "d"],
                            ["d: a folder, not a log", "metadata.yaml"]),
     "log-hdf5-folder": ({"d.h5/x": ""}, ["compare", PAPER, "d.h5"],
