@@ -93,6 +93,17 @@ def _too_long(base: Path, names, extra: int = 0) -> str | None:
     return None
 
 
+#: bytes a path in an output folder adds to the folder's: a stage and a file name
+_PATH_ROOM = 256
+
+
+def _path_max(base: Path) -> int:
+    try:
+        return os.pathconf(base, "PC_PATH_MAX")
+    except (OSError, ValueError):
+        return 4096
+
+
 def _blocked(out_dir: Path, names) -> tuple[Path, str] | None:
     """The first output of ``names`` (relative paths) that cannot take the place its name
     gives in ``out_dir``: a folder where a file goes, or a file where a folder goes. A
@@ -127,6 +138,10 @@ def check_out_dir(out_dir, where: str = "-o", names=()) -> Path:
             raise OSError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(base))
         if why := _too_long(base, [p.name for p in missing]):
             raise InputError(out_dir, where, f"cannot write there: {why}")
+        longest = _path_max(base) - _PATH_ROOM  # room for a stage and a file name in it
+        if len(os.fsencode(str(out_dir))) > longest:
+            raise InputError(out_dir, where, f"cannot write there: a path longer than "
+                             f"{longest} bytes")
         fd, probe = tempfile.mkstemp(dir=base, prefix=_STAGE + "probe-")
         os.close(fd)
         os.unlink(probe)

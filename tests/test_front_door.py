@@ -590,6 +590,8 @@ HOSTILE = {
     "nominal-csv-name-too-long": ({}, ["nominal", PAPER, "--speed", "9", "--csv",
                                        "new/" + "a" * 250 + ".csv"],
                                   ["--csv: cannot write: a name longer than"]),
+    "inspect-out-path-too-long": ({}, ["inspect", TABLE, "-o", "/".join(["d" * 200] * 21)],
+                                  ["--out: cannot write there: a path longer than"]),
     "log-a-plain-folder": ({"d/x": ""}, ["compare", PAPER, "d"],
                            ["d: a folder, not a log", "metadata.yaml"]),
     "log-hdf5-folder": ({"d.h5/x": ""}, ["compare", PAPER, "d.h5"],
