@@ -1190,6 +1190,8 @@ def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_
     check_flight_steps(duration, cfg.control.rate_hz, "command line", "--duration")
     table = load_table(table_path)
     check_out_dir(out_dir)
+    if table.config_sha256 != cfg.sha256:  # as simulate and paper say it, before the work
+        click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     logs = fly(cfg, table_scheduler(table), hidden, duration=duration,
                load_cell=not no_load_cell, seed=seed)
     with staged(out_dir) as stage:

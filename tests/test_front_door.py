@@ -699,6 +699,18 @@ def test_a_csv_log_past_the_size_bound_is_refused(monkeypatch):
                    "too large for a CSV flight log")
 
 
+def test_campaign_with_another_configs_table_says_so(tmp_path, monkeypatch):
+    """A table built from another config (here the paper's with another mass): campaign
+    says so before it flies, as simulate and paper do (it flew in silence)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "t.h5").write_bytes(_edited_table(text=paper_config_text(vehicle__mass=0.55),
+                                                  sha=True))
+    res = _run("campaign", PAPER, "--tables", "t.h5", "--duration", "1", "-o", "out")
+    assert res.exit_code == 0, res.output
+    assert res.stderr.splitlines()[0] == ("gainsched: warning: t.h5 was built from another "
+                                          "config"), res.stderr
+
+
 def test_a_flight_without_gains_names_the_scenario_file(tmp_path, monkeypatch):
     """A circle the table has no gains for (refused when the flight starts, not at the
     door): the one line names the scenario's file, not ``scenario NAME``."""
