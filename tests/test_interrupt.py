@@ -174,8 +174,10 @@ def test_kill_9_of_the_whole_group_leaves_nothing_after_the_next_run(tmp_path):
     os.killpg(p.pid, signal.SIGKILL)
     p.wait(timeout=60)
     assert p.returncode == -signal.SIGKILL, "the build ended before the kill: a larger grid"
-    while _group(p.pid):
+    deadline = time.monotonic() + 30
+    while _group(p.pid) and time.monotonic() < deadline:
         time.sleep(0.05)
+    assert not _group(p.pid), f"processes left {_group(p.pid)}"
     assert any(e.startswith("sem.loky-") for e in _theirs(pids)), sorted(_theirs(pids))
     _next_run_leaves_nothing(cfg, tmp_path / "next", pids)
 
