@@ -443,7 +443,8 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
     base = load_config(config)
     plan = make_sweep(base, [parse_vary(v) for v in vary], monte_carlo=monte_carlo, seed=seed,
                       sigma=[parse_sigma(s) for s in sigma])
-    check_out_dir(out_dir)  # once every option passed: a refused sweep creates nothing
+    # once every option passed: a refused sweep creates nothing
+    check_out_dir(out_dir, names=["sweep.csv", "sweep.json"])
     t0 = time.perf_counter()
     # a grid the build chooses counts circles, of a number known only at the end
     total = None if base.grid.auto else len(plan.variants) * base.grid.speeds.size
@@ -836,7 +837,7 @@ def simulate(config, table_path, scenario, plant_path, speed, runtime, controlle
     if speed is not None:
         scn = dataclasses.replace(scn, speed=speed)
     n = check_flight_steps(scn.duration, cfg.control.rate_hz, scenario, "duration")
-    check_out_dir(out_dir, names=["metrics.json"])
+    check_out_dir(out_dir, names=["log.csv", "log.h5", "metrics.json"])
     if table.config_sha256 != cfg.sha256:  # once every input passed
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     with tqdm(total=n, unit="step", desc=f"simulate {scn.name}", disable=None) as bar:
