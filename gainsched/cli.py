@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -30,8 +31,8 @@ def user_errors(fn):
     def wrapper(*args, **kwargs):
         try:
             return fn(*args, **kwargs)
-        except InputError as exc:
-            click.echo(f"gainsched: error: {exc}", err=True)
+        except InputError as exc:  # one line, whatever a library's message held
+            click.echo(f"gainsched: error: {' '.join(str(exc).split())}", err=True)
             sys.exit(2)
 
     return wrapper
@@ -126,6 +127,53 @@ class Jobs(click.ParamType):
         return n
 
 
+class Name(click.ParamType):
+    """A name or a path given as text (``--scenario``, ``--map``, ``--hidden``,
+    ``--candidate``): refuses an empty one (``--scenario ""`` would read the current
+    folder)."""
+
+    name = "TEXT"
+
+    def convert(self, value, param, ctx):
+        if not isinstance(value, str) or not value.strip():
+            self.fail("an empty name", param, ctx)
+        return value
+
+
+def _same_file(a, b) -> bool:
+    """Whether two spellings name one file: ``a.csv`` and ``./a.csv``, a path through a
+    symbolic link, or (both existing) a hard link; compared resolved, not as text."""
+    a, b = Path(a), Path(b)
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+        return a.resolve() == b.resolve()
+    except (OSError, RuntimeError):  # a link loop: not a file to compare
+        return False
+
+
+def _distinct(what: str, paths) -> None:
+    """Refuse one file given twice among ``paths`` (the argument ``what``), however spelled."""
+    for i, b in enumerate(paths):
+        for a in paths[:i]:
+            if _same_file(a, b):
+                same = "given twice" if str(a) == str(b) else f"is {a}"
+                raise InputError("command line", what, f"{b} {same}: each file once")
+
+
+def _not_an_input(out, option: str, **inputs) -> None:
+    """Refuse an output file ``out`` (of ``option``) that is one of the ``inputs`` (label:
+    path, list of paths or None), however spelled: an input is never overwritten."""
+    for label, paths in inputs.items():
+        paths = [] if paths is None else paths if isinstance(paths, (list, tuple)) else [paths]
+        for path in paths:
+            if Path(path).exists() and _same_file(out, path):
+                shown = "" if str(path) == str(out) else f" ({path})"
+                raise InputError("command line", option, f"{out} is the input "
+                                 f"{label}{shown}: give a new file (an input is never "
+                                 "overwritten)")
+
+
 CONFIG = click.argument("config", type=FilePath(dir_okay=False, path_type=Path))
 #: seeds of the noise: non-negative integers (numpy refuses negative ones)
 SEED = click.IntRange(0, MAX_SEED)
@@ -211,16 +259,19 @@ def nominal(config, speed, tilt, samples, csv_path):
     thrusts (N), tether tension (N), centripetal g-load, feasibility."""
     from .config import load_config
     from .model.reduced import Model
-    from .publish import check_out_dir, write_atomic
+    from .publish import check_out_file, write_atomic
+    from .resources import config_path
     from .schedule.nominal import REASONS, circle_nominal, min_taut_speed
 
+    if csv_path is not None:
+        _not_an_input(csv_path, "--csv", CONFIG=config_path(config))
     cfg = load_config(config)
     if speed == 0 or not np.isfinite(speed):
         raise InputError("command line", "--speed", "must be a finite non-zero speed in m/s")
     if not -90 < tilt < 90:
         raise InputError("command line", "--tilt", "must be in (-90, 90) deg")
     if csv_path is not None:
-        check_out_dir(csv_path.parent, "--csv")  # a bad --csv fails before anything prints
+        check_out_file(csv_path, "--csv")  # a bad --csv fails before anything prints
     model = Model(cfg)
     nom = circle_nominal(model, speed, np.deg2rad(tilt), samples)
     g_load = speed**2 / model.r / cfg.g
@@ -274,6 +325,14 @@ def _cluster_options(fn):
     return fn
 
 
+def _build_names(cfg) -> list[str]:
+    """The files ``build`` writes into its folder (firmware.outputs.output_files)."""
+    from .firmware.codegen import CONTROL_FILES, RUNTIME_FILES
+
+    return [f"{cfg.name}.h5", f"{cfg.name}_gains.h", f"{cfg.name}_control.h", *RUNTIME_FILES,
+            *CONTROL_FILES]
+
+
 def _nanmax(a) -> str:
     a = np.asarray(a)
     return f"{np.nanmax(a):.4f}" if np.any(np.isfinite(a)) else "n/a (no feasible circle)"
@@ -302,7 +361,7 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
 
     check_options(backend, scheduler)
     cfg = load_config(config)
-    check_out_dir(out_dir)  # a bad -o fails now, not after the build
+    check_out_dir(out_dir, names=_build_names(cfg))  # a bad -o fails now, not after the build
     recover(out_dir)  # finish or clean up after a killed earlier run
     t0 = time.perf_counter()
     choice = None
@@ -384,7 +443,8 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
     base = load_config(config)
     plan = make_sweep(base, [parse_vary(v) for v in vary], monte_carlo=monte_carlo, seed=seed,
                       sigma=[parse_sigma(s) for s in sigma])
-    check_out_dir(out_dir)  # once every option passed: a refused sweep creates nothing
+    # once every option passed: a refused sweep creates nothing
+    check_out_dir(out_dir, names=["sweep.csv", "sweep.json"])
     t0 = time.perf_counter()
     # a grid the build chooses counts circles, of a number known only at the end
     total = None if base.grid.auto else len(plan.variants) * base.grid.speeds.size
@@ -429,7 +489,7 @@ def inspect(table, out_dir, as_json):
     from .schedule.viewer import mode_lines, table_summary
 
     if out_dir is not None:
-        check_out_dir(out_dir, "--out")
+        check_out_dir(out_dir, "--out", names=_ENVELOPE)
     t = load_table(table)
     if as_json:
         click.echo(json.dumps(table_summary(t, source=str(table)), indent=2, sort_keys=True))
@@ -477,6 +537,9 @@ def inspect(table, out_dir, as_json):
         _write_envelope(t, table, out_dir)
 
 
+_ENVELOPE = ["envelope.png", "envelope.json"]
+
+
 def _write_envelope(t, table, out_dir, quiet=False) -> None:
     """envelope.png and envelope.json of the loaded table ``t`` into ``out_dir`` (one set)."""
     from .publish import publish
@@ -513,7 +576,7 @@ def plot(table, out_dir, with_check, as_json):
     from .schedule.tables import load_table
     from .schedule.viewer import schedule_plots
 
-    check_out_dir(out_dir, "--out")
+    check_out_dir(out_dir, "--out", names=["plots.json"])
     t = load_table(table)
     midpoints = None
     if with_check:
@@ -570,7 +633,7 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     footprint."""
     from tqdm import tqdm
 
-    from .firmware.codegen import c_files, flash_summary
+    from .firmware.codegen import CONTROL_FILES, RUNTIME_FILES, c_files, flash_summary
     from .firmware.controller import controller_params
     from .firmware.outputs import certificate_lines, firmware_form, table_config
     from .publish import check_out_dir, publish
@@ -590,7 +653,8 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     if outputs:
         cfg = cfg.with_values(outputs, source=f"{table} (export-c options)")
     fmt = "dense" if cfg is None else cfg.firmware.format
-    check_out_dir(out_dir)  # a bad -o fails before the certification
+    # a bad -o fails before the certification
+    check_out_dir(out_dir, names=[*RUNTIME_FILES, *CONTROL_FILES])
     n_mid = max(t.speed.size - 1, 1) if fmt == "compact" else 0
     with tqdm(total=n_mid, unit="speed", desc="certify compact table",
               disable=None if n_mid else True) as bar:
@@ -646,6 +710,10 @@ def check(table, speed_stride, max_error, azimuth_error):
     from .schedule.tables import load_table
 
     t = load_table(table)
+    n_mid = max(t.speed.size - 1, 1)
+    if speed_stride > n_mid:  # a stride past the last midpoint checks only the first
+        raise InputError("command line", "--speed-stride", f"{speed_stride}: {table} has "
+                         f"{n_mid} speed midpoint{'s' if n_mid > 1 else ''}: give 1..{n_mid}")
     t0 = time.perf_counter()
     lookup = None
     from .firmware.outputs import table_config
@@ -733,7 +801,7 @@ _RUNTIME = click.option(
 @CONFIG
 @click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
               required=True, help="Gain table (HDF5) built from CONFIG.")
-@click.option("--scenario", required=True,
+@click.option("--scenario", type=Name(), required=True,
               help="Scenario file, or the name of a shipped scenario (horizontal, tilted40, "
               "speedup, braking, staircase).")
 @click.option("--plant", "plant_path", type=FilePath(dir_okay=False, path_type=Path),
@@ -769,7 +837,7 @@ def simulate(config, table_path, scenario, plant_path, speed, runtime, controlle
     if speed is not None:
         scn = dataclasses.replace(scn, speed=speed)
     n = check_flight_steps(scn.duration, cfg.control.rate_hz, scenario, "duration")
-    check_out_dir(out_dir)
+    check_out_dir(out_dir, names=["log.csv", "log.h5", "metrics.json"])
     if table.config_sha256 != cfg.sha256:  # once every input passed
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     with tqdm(total=n, unit="step", desc=f"simulate {scn.name}", disable=None) as bar:
@@ -844,7 +912,8 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
 
     cfg = load_config(config)
     plant = load_config(plant_path) if plant_path else None
-    check_out_dir(out_dir)  # before a first use builds the table (half a minute)
+    # before a first use builds the table (half a minute)
+    check_out_dir(out_dir, names=["report.md", "report.json"])
     if table_path is None:
         table, table_path = _table_of(cfg)
     else:
@@ -865,9 +934,9 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
 
 _LOGS = click.argument("logs", nargs=-1, required=True,
                        type=FilePath(exists=True, path_type=Path))
-_MAP = click.option("--map", "map_path", help="Channel map of PX4 ULogs and ROS 2 bags among "
-                    "the logs: a TOML file or a shipped map (px4, px4_legacy, ros2); default "
-                    "for a ULog: px4 (docs/flight-log.md).")
+_MAP = click.option("--map", "map_path", type=Name(), help="Channel map of PX4 ULogs and "
+                    "ROS 2 bags among the logs: a TOML file or a shipped map (px4, "
+                    "px4_legacy, ros2); default for a ULog: px4 (docs/flight-log.md).")
 
 
 _TRUST = click.option("--trust", "trust", multiple=True, type=click.Choice(LOG_CHECKS),
@@ -916,12 +985,18 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
         write_compare,
     )
     from .publish import check_out_dir, staged
+    from .resources import config_path
 
+    _distinct("LOG", list(logs))
+    if before_path is not None and _same_file(config_path(before_path), config_path(config)):
+        shown = "" if str(before_path) == str(config) else f" ({config})"
+        raise InputError("command line", "--before", f"{before_path} is CONFIG{shown}: give "
+                         "the earlier config")
     cfg = _load_for_compare(config)
     before_cfg = None if before_path is None else _load_for_compare(before_path)
     cmap = _channel_map(map_path)
     if out_dir is not None:
-        check_out_dir(out_dir)
+        check_out_dir(out_dir, names=["compare.json", "compare.md"])
     cmp = run(cfg, logs, channel_map=cmap, trust=trust)
     paper = None if no_paper else paper_fits(cfg, cmp.measured)
     for line in compare_lines(cmp, paper):
@@ -943,9 +1018,9 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
 @cli.command()
 @CONFIG
 @_LOGS
-@click.option("--candidate", "candidates", multiple=True,
+@click.option("--candidate", "candidates", type=Name(), multiple=True,
               help="Only these candidates (repeatable; default: the whole library).")
-@click.option("--exclude", "exclude", multiple=True, metavar="NAME",
+@click.option("--exclude", "exclude", type=Name(), multiple=True, metavar="NAME",
               help="Leave out this candidate or effect (repeatable): the library told "
                    "the effect is not there.")
 @click.option("--joint", is_flag=True,
@@ -978,23 +1053,34 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
         write_diagnose,
     )
     from .config import config_from_text
-    from .publish import check_out_dir, staged, write_atomic
+    from .publish import check_out_dir, check_out_file, staged, write_atomic
 
     if do_apply and new_config is None:
         raise InputError("command line", "--apply", "needs -o NEWCONFIG")
     if new_config is not None and not do_apply:
         raise InputError("command line", "-o", "is the new config of --apply: give --apply "
                          "too (or --report DIR for a report)")
-    if len({p.resolve() for p in logs}) < 2:
+    _distinct("LOG", list(logs))
+    if len(logs) < 2:
         raise InputError("command line", "LOG", "diagnose needs at least two flights (log "
                          "files) for held-out scores")
-    select_candidates(candidates or None, exclude)  # checked before any work
+    if new_config is not None:
+        from .resources import config_path
+
+        _not_an_input(new_config, "-o", CONFIG=config_path(config), LOG=list(logs),
+                      **{"--map": map_path})
+    for option, names in (("--candidate", candidates), ("--exclude", exclude)):
+        if dup := next((n for i, n in enumerate(names) if n in names[:i]), None):
+            raise InputError("command line", option, f"{dup!r} given twice: each name once")
+    if not select_candidates(candidates or None, exclude):  # checked before any work
+        raise InputError("command line", "--exclude", f"leaves out every candidate "
+                         f"({', '.join(exclude)}): nothing to fit")
     cfg = _load_for_compare(config)
     cmap = _channel_map(map_path)
     if new_config is not None:
-        check_out_dir(new_config.parent, "-o")
+        check_out_file(new_config, "-o")
     if report_dir is not None:
-        check_out_dir(report_dir, "--report")
+        check_out_dir(report_dir, "--report", names=["diagnose.json", "diagnose.md"])
     base = run(cfg, logs, channel_map=cmap, trust=trust)
     for line in compare_lines(base):
         click.echo(line)
@@ -1050,12 +1136,15 @@ def convert(log, out_path, map_path, config_path, trust):
     (docs/flight-log.md) for inspection, and say what was mapped to what."""
     from .analysis.logs import convert_log
     from .config import load_config
-    from .publish import check_out_dir
+    from .publish import check_out_file
+    from .resources import config_path as shipped
 
+    _not_an_input(out_path, "-o", LOG=log, **{"--config": config_path and
+                                               shipped(config_path), "--map": map_path})
     cmap = _channel_map(map_path)
     cfg = load_config(config_path) if config_path else None
     thrust_max = cfg.vehicle.thrust_max if cfg is not None else None
-    check_out_dir(out_path.parent, "-o")
+    check_out_file(out_path, "-o")
     report, segs = convert_log(log, out_path, channel_map=cmap, thrust_max=thrust_max,
                                config=cfg, trust=trust)
     for line in report:
@@ -1073,7 +1162,7 @@ def convert(log, out_path, map_path, config_path, trust):
 @CONFIG
 @click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
               required=True, help="Gain table (HDF5) built from CONFIG.")
-@click.option("--hidden", default="none", show_default=True,
+@click.option("--hidden", type=Name(), default="none", show_default=True,
               help="Hidden effect of the plant (gainsched.sim.campaign.HIDDEN).")
 @click.option("--duration", type=FiniteFloat(1.0, MAX_FLIGHT_S, unit="s"), default=3.0,
               show_default=True, help=f"Seconds per flight (1..{MAX_FLIGHT_S:g}).")
@@ -1102,6 +1191,8 @@ def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_
     check_flight_steps(duration, cfg.control.rate_hz, "command line", "--duration")
     table = load_table(table_path)
     check_out_dir(out_dir)
+    if table.config_sha256 != cfg.sha256:  # as simulate and paper say it, before the work
+        click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     logs = fly(cfg, table_scheduler(table), hidden, duration=duration,
                load_cell=not no_load_cell, seed=seed)
     with staged(out_dir) as stage:

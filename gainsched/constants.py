@@ -28,6 +28,7 @@ __all__ = [
     "MAX_SEED",
     "MAX_SWEEP_VARIANTS",
     "MAX_JOBS",
+    "MAX_LOG_BYTES",
 ]
 
 #: reduced state (delta, xi, delta', xi', phi, theta, chi, omega_x, omega_y, omega_z)
@@ -117,3 +118,8 @@ MAX_SWEEP_VARIANTS = 1000
 #: most parallel workers (``-j``): beyond the cores of any machine or cluster we run on,
 #: more only costs memory (-1: all cores)
 MAX_JOBS = 1024
+#: largest CSV flight log, bytes: the reader holds the text and its fields (several
+#: times the size) in memory; a 600 s flight at 1 kHz is about 100 MB of CSV, and a
+#: longer one goes as HDF5 (read by column). Bounds a ``.csv`` that is a device or a
+#: link to one (``/dev/zero`` never ends)
+MAX_LOG_BYTES = 256 * 2**20

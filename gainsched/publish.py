@@ -34,7 +34,7 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["write_atomic", "publish", "staged", "recover", "check_out_dir"]
+__all__ = ["write_atomic", "publish", "staged", "recover", "check_out_dir", "check_out_file"]
 
 JOURNAL = ".gainsched-publish.json"
 _STAGE = ".gainsched-stage-"
@@ -65,21 +65,135 @@ def _why(exc: OSError) -> str:
     return names.get(exc.errno, exc.strerror or type(exc).__name__)
 
 
-def check_out_dir(out_dir, where: str = "-o") -> Path:
-    """Create ``out_dir`` if needed and check that files can be written into it.
+def _missing_folders(out_dir: Path) -> list[Path]:
+    """The folders of ``out_dir`` (itself first, then its parents) that do not exist yet."""
+    missing = []
+    p = Path(os.path.abspath(out_dir))
+    while not os.path.lexists(p) and p != p.parent:
+        missing.append(p)
+        p = p.parent
+    return missing
+
+
+#: bytes a temp file's name adds to the name it stands for (``.NAME.XXXXXXXX.tmp``)
+_TMP_EXTRA = len("..") + 8 + len(".tmp")
+
+
+def _too_long(base: Path, names, extra: int = 0) -> str | None:
+    """Why one of ``names`` (names of files or folders to make in ``base``, or under it)
+    cannot be made: longer than the file system allows (checked before the work: the
+    write would fail only at the end)."""
+    try:
+        most = os.pathconf(base, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        most = 255
+    for name in names:
+        if len(os.fsencode(name)) + extra > most:
+            return f"a name longer than {most - extra} bytes: {name[:16]}...{name[-8:]}"
+    return None
+
+
+#: bytes a path in an output folder adds to the folder's: a stage and a file name
+_PATH_ROOM = 256
+
+
+def _path_max(base: Path) -> int:
+    try:
+        return os.pathconf(base, "PC_PATH_MAX")
+    except (OSError, ValueError):
+        return 4096
+
+
+def _blocked(out_dir: Path, names) -> tuple[Path, str] | None:
+    """The first output of ``names`` (relative paths) that cannot take the place its name
+    gives in ``out_dir``: a folder where a file goes, or a file where a folder goes. A
+    rename would fail there, half-way through publishing the set."""
+    for name in names:
+        dst = out_dir / name
+        for parent in reversed(dst.relative_to(out_dir).parents[:-1]):
+            p = out_dir / parent
+            if os.path.lexists(p) and not p.is_dir():
+                return p, "a file where a folder of the outputs goes: move it away"
+        if dst.is_dir() and not dst.is_symlink():
+            return dst, "a folder where an output file goes: move it away"
+    return None
+
+
+def check_out_dir(out_dir, where: str = "-o", names=()) -> Path:
+    """Check that ``out_dir`` is (or can be made) a folder files can be written into,
+    creating nothing: the folder is made when its outputs are published.
 
     Call it before long work so that a bad ``-o`` fails in a second, not after the
-    build. Raises InputError naming the folder and ``where`` (the option or key).
+    build, and a refused command leaves no folder behind (issue 38). The write test is
+    a temp file made and removed in the folder, or in its nearest existing parent when
+    the folder does not exist yet. Raises InputError naming the folder and ``where``
+    (the option or key); ``names``: the files the command will write there, when known
+    before the work, are checked to have their places free of folders.
     """
     out_dir = Path(out_dir)
+    missing = _missing_folders(out_dir)
+    base = missing[-1].parent if missing else Path(os.path.abspath(out_dir))
     try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(dir=out_dir, prefix=_STAGE + "probe-")
+        if not base.is_dir():  # a regular file (or a broken link) where a folder must be
+            raise OSError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(base))
+        if why := _too_long(base, [p.name for p in missing]):
+            raise InputError(out_dir, where, f"cannot write there: {why}")
+        longest = _path_max(base) - _PATH_ROOM  # room for a stage and a file name in it
+        if len(os.fsencode(str(out_dir))) > longest:
+            raise InputError(out_dir, where, f"cannot write there: a path longer than "
+                             f"{longest} bytes")
+        fd, probe = tempfile.mkstemp(dir=base, prefix=_STAGE + "probe-")
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:
         raise InputError(out_dir, where, f"cannot write there: {_why(exc)}") from None
+    if not missing and (bad := _blocked(out_dir, names)):
+        raise InputError(bad[0], where, bad[1])
     return out_dir
+
+
+def _not_a_file(path: Path, where: str) -> None:
+    """Refuse to replace anything but a regular file: the rename of an atomic write would
+    put a file in the place of ``/dev/null``, a FIFO or a socket (or of the link
+    ``/dev/stdout``), not write into it."""
+    if os.path.lexists(path) and not path.is_file():
+        what = "a folder" if path.is_dir() else "not a regular file (a device, FIFO or socket)"
+        raise InputError(path, where, f"{what}: give a file name to write")
+
+
+def check_out_file(path, where: str = "-o") -> Path:
+    """Check that the file ``path`` can be written (atomically) before the work: its
+    folder as :func:`check_out_dir` checks it, and ``path`` itself new or a regular
+    file. Creates nothing. Raises InputError naming the file and ``where``."""
+    path = Path(path)
+    _not_a_file(path, where)
+    check_out_dir(path.parent, where)
+    missing = _missing_folders(path.parent)
+    base = missing[-1].parent if missing else path.parent
+    if why := _too_long(base, [path.name], _TMP_EXTRA):
+        raise InputError(path, where, f"cannot write: {why}")
+    return path
+
+
+def _make_out_dir(out_dir: Path, where: str) -> list[Path]:
+    """Create ``out_dir`` (checked first); return the folders made, deepest first, for
+    :func:`_unmake` to remove when nothing gets published."""
+    check_out_dir(out_dir, where)
+    missing = _missing_folders(out_dir)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(out_dir, where, f"cannot write there: {_why(exc)}") from None
+    return missing
+
+
+def _unmake(folders: list[Path]) -> None:
+    """Remove the folders a refused or failed publish made (when still empty)."""
+    for p in folders:
+        try:
+            p.rmdir()
+        except OSError:
+            return
 
 
 def write_atomic(path, data: bytes, *, where: str = "") -> None:
@@ -90,6 +204,7 @@ def write_atomic(path, data: bytes, *, where: str = "") -> None:
     ``where`` (the option or key that named it).
     """
     path = Path(path)
+    _not_a_file(path, where)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -154,8 +269,12 @@ def _roll_forward(out_dir: Path) -> None:
         for name in names:
             src, dst = stage / name, out_dir / name
             if src.exists():  # renamed already if a previous roll-forward was cut short
-                dst.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(src, dst)
+                try:
+                    dst.parent.mkdir(parents=True, exist_ok=True)
+                    os.replace(src, dst)
+                except OSError as exc:  # the journal stays: the next run tries again
+                    raise InputError(dst, "", "cannot complete the output set a killed run "
+                                     f"committed ({JOURNAL}): {_why(exc)}") from None
         _fsync(out_dir)
         journal.unlink()
         _fsync(out_dir)
@@ -214,7 +333,8 @@ def staged(out_dir, *, where: str = "-o") -> Iterator[Path]:
     ...     (out / "summary.json").write_text("{}")
     ...     fig.savefig(out / "plot.png")
     """
-    out_dir = check_out_dir(out_dir, where)
+    out_dir = Path(out_dir)
+    made = _make_out_dir(out_dir, where)
     with _locked(out_dir):
         _settle(out_dir)  # a killed run's committed set comes first
         try:
@@ -222,6 +342,8 @@ def staged(out_dir, *, where: str = "-o") -> Iterator[Path]:
             yield stage
             names = sorted(p.relative_to(stage).as_posix() for p in stage.rglob("*")
                            if p.is_file())
+            if bad := _blocked(out_dir, names):  # before the commit point: nothing half done
+                raise InputError(bad[0], where, bad[1])
             for name in names:
                 _fsync(stage / name)
             _fsync(stage)
@@ -234,6 +356,7 @@ def staged(out_dir, *, where: str = "-o") -> Iterator[Path]:
             os.replace(tmp, out_dir / JOURNAL)  # the commit point
         except BaseException as exc:
             _clean(out_dir)  # before the commit point: the old outputs stay
+            _unmake(made)  # and a folder this run made goes again
             if isinstance(exc, OSError):
                 raise InputError(out_dir, where, f"cannot write there: {_why(exc)}") from None
             raise

@@ -507,6 +507,95 @@ HOSTILE = {
     "table-config-invalid": (
         {"t.h5": lambda: _edited_table(text=paper_config_text(vehicle__mass=-0.5), sha=True)},
         _export("t.h5"), ["t.h5:config_text", "vehicle.mass", "must be > 0"]),
+    # a command refused after its output check made nothing (issue 38, remaining item 3):
+    # the output folder (or a new file's folder) is made when the outputs are published
+    "compare-bad-log-makes-no-folder": ({"afile": "x\n"}, ["compare", PAPER, "afile", "-o",
+                                                          "new/out"], ["afile", "log format"]),
+    "diagnose-report-bad-log-makes-no-folder": (
+        {"afile": "x\n"}, ["diagnose", PAPER, FLIGHT, "afile", "--report", "out"],
+        ["afile", "log format"]),
+    "diagnose-apply-bad-log-makes-no-folder": (
+        {"afile": "x\n"}, ["diagnose", PAPER, FLIGHT, "afile", "--apply", "-o", "new/c.toml"],
+        ["afile", "log format"]),
+    "inspect-bad-table-makes-no-folder": ({"afile": "x\n"}, ["inspect", "afile", "-o", "out"],
+                                          ["afile", "not a readable HDF5 table"]),
+    "plot-bad-table-makes-no-folder": ({"afile": "x\n"}, ["plot", "afile", "-o", "out"],
+                                       ["afile", "not a readable HDF5 table"]),
+    "paper-bad-table-makes-no-folder": ({"afile": "x\n"}, ["paper", "--quick", "--tables",
+                                                          "afile", "-o", "out"],
+                                        ["afile", "not a readable HDF5 table"]),
+    "convert-nothing-to-convert-makes-no-folder": ({}, ["convert", FLIGHT, "-o", "new/x.csv"],
+                                                   ["nothing to convert"]),
+    "simulate-no-gains-makes-no-folder": (
+        _scenario(SCENARIO.replace("8.0", "1.3") + "tilt_deg = 40\n"), _simulate(),
+        ["scenario.toml: speed", "no usable gains"]),
+    "build-scheduler-unreachable-makes-no-folder": (
+        {}, ["build", PAPER, "-o", "out", "--backend", "dask", "--scheduler",
+             "tcp://127.0.0.1:1", "--connect-timeout", "0.5"], ["--scheduler", "cannot reach"]),
+    # one file under two spellings is one file (item 4): logs, --before, outputs
+    "compare-one-log-two-spellings": ({"a.csv": FLIGHT.read_bytes(), "sub/x": ""},
+                                      ["compare", PAPER, "a.csv", "sub/../a.csv"],
+                                      ["LOG", "sub/../a.csv is a.csv"]),
+    "compare-one-log-twice": ({"a.csv": FLIGHT.read_bytes()},
+                              ["compare", PAPER, "a.csv", "./a.csv"],
+                              ["LOG", "a.csv given twice"]),
+    "diagnose-one-log-two-spellings-among-three": (
+        {"a.csv": FLIGHT.read_bytes(), "b.csv": FLIGHTS[0].read_bytes(), "sub/x": ""},
+        ["diagnose", PAPER, "a.csv", "b.csv", "sub/../a.csv"], ["LOG", "sub/../a.csv is a.csv"]),
+    "compare-before-is-config": ({"c.toml": paper_config_text(), "sub/x": ""},
+                                 ["compare", "c.toml", FLIGHT, "--before", "sub/../c.toml"],
+                                 ["--before", "sub/../c.toml is CONFIG (c.toml)"]),
+    "nominal-csv-onto-the-config": ({"c.toml": paper_config_text()},
+                                    ["nominal", "c.toml", "--speed", "9", "--csv", "./c.toml"],
+                                    ["--csv", "c.toml is the input CONFIG"]),
+    "diagnose-apply-onto-the-config": (
+        {"c.toml": paper_config_text(), "sub/x": ""},
+        ["diagnose", "c.toml", FLIGHT, FLIGHTS[0], "--candidate", "mass", "--apply", "-o",
+         "sub/../c.toml"], ["-o", "sub/../c.toml is the input CONFIG (c.toml)"]),
+    "diagnose-apply-onto-a-log": (
+        {"a.csv": FLIGHT.read_bytes()},
+        ["diagnose", PAPER, "a.csv", FLIGHTS[0], "--candidate", "mass", "--apply", "-o",
+         "./a.csv"], ["-o", "a.csv is the input LOG"]),
+    "convert-onto-the-log": ({"a.csv": FLIGHT.read_bytes()},
+                             ["convert", "a.csv", "-o", "./a.csv"],
+                             ["-o", "a.csv is the input LOG"]),
+    # the audit (item 5): empty names, bounds known once the table is read, repeats
+    "scenario-empty-name": ({}, _simulate(""), ["'--scenario'", "an empty name"]),
+    "map-empty-name": ({}, ["compare", PAPER, FLIGHT, "--map", ""], ["'--map'", "an empty name"]),
+    "hidden-empty-name": ({}, ["campaign", PAPER, "--tables", TABLE, "--hidden", "", "-o",
+                               "out"], ["'--hidden'", "an empty name"]),
+    "check-speed-stride-past-the-midpoints": (
+        {}, ["check", TABLE, "--speed-stride", "1000"],
+        ["--speed-stride", f"1000: {TABLE} has {load_table(TABLE).speed.size - 1} speed "
+         "midpoints"]),
+    "sweep-vary-value-twice": ({}, ["sweep", PAPER, "--vary", "vehicle.mass=0.5,0.5", "-o",
+                                    "out"], ["--vary vehicle.mass", "0.5 given twice"]),
+    "build-output-name-is-a-folder": ({"s.toml": small_config_text(name="s"), "out/s.h5/x": ""},
+                                      ["build", "s.toml", "-o", "out"],
+                                      ["out/s.h5: -o: a folder where an output file goes"]),
+    "compare-output-name-is-a-folder": (
+        {"out/compare.json/x": ""}, ["compare", PAPER, FLIGHT, "-o", "out", "--no-paper"],
+        ["out/compare.json: -o: a folder where an output file goes"]),
+    "diagnose-candidate-twice": ({}, ["diagnose", PAPER, *FLIGHTS[:2], "--candidate", "mass",
+                                      "--candidate", "mass"],
+                                 ["--candidate", "'mass' given twice"]),
+    "diagnose-exclude-every-candidate": ({}, ["diagnose", PAPER, *FLIGHTS[:2], "--candidate",
+                                              "mass", "--exclude", "mass"],
+                                         ["--exclude", "leaves out every candidate (mass)"]),
+    "sweep-variant-refused-names-the-option": (
+        {}, ["sweep", PAPER, "--vary", "vehicle.mass=0.5,-1", "-o", "out"],
+        ["command line: --vary: variant paper-v001 (vehicle.mass=-1): vehicle.mass: must be > 0"]),
+    "inspect-out-name-too-long": ({}, ["inspect", TABLE, "-o", "new/" + "a" * 300],
+                                  ["--out: cannot write there: a name longer than"]),
+    "nominal-csv-name-too-long": ({}, ["nominal", PAPER, "--speed", "9", "--csv",
+                                       "new/" + "a" * 250 + ".csv"],
+                                  ["--csv: cannot write: a name longer than"]),
+    "inspect-out-path-too-long": ({}, ["inspect", TABLE, "-o", "/".join(["d" * 200] * 21)],
+                                  ["--out: cannot write there: a path longer than"]),
+    "log-a-plain-folder": ({"d/x": ""}, ["compare", PAPER, "d"],
+                           ["d: a folder, not a log", "metadata.yaml"]),
+    "log-hdf5-folder": ({"d.h5/x": ""}, ["compare", PAPER, "d.h5"],
+                        ["d.h5", "cannot read the file (Is a directory)"]),
 }
 
 
@@ -522,6 +611,7 @@ def test_hostile_input_is_refused_at_the_door(case, tmp_path, monkeypatch):
     files, args, needles = HOSTILE[case]
     for name, data in files.items():
         data = data() if callable(data) else data
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / name).write_bytes(data if isinstance(data, bytes) else data.encode())
     monkeypatch.chdir(tmp_path)
     before = _files(tmp_path)
@@ -529,6 +619,96 @@ def test_hostile_input_is_refused_at_the_door(case, tmp_path, monkeypatch):
     one_line_error(res, *needles)
     assert res.stdout == "", res.stdout
     assert _files(tmp_path) == before
+
+
+def test_a_refused_publish_removes_the_folders_it_made(tmp_path):
+    """A staged set whose block raises (a flight refused half-way through ``paper``, a
+    variant of a ``sweep``) leaves no output folder it made, nor its parents."""
+    with pytest.raises(RuntimeError):
+        with staged(tmp_path / "new" / "out") as stage:
+            (stage / "r.json").write_bytes(b"half")
+            raise RuntimeError("refused half-way")
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_set_with_a_folder_in_the_place_of_a_file_is_refused_before_the_commit(tmp_path):
+    """An output whose name is a folder in the output folder: refused before the commit
+    point (the rename failed half-way through the set, and the journal it left failed
+    every later run in the folder); the old set and the folder stay as they were."""
+    out = tmp_path / "out"
+    publish(out, {"a.h5": b"old", "a.h": b"old"})
+    (out / "b.json").mkdir()
+    with pytest.raises(InputError, match=r"b.json: -o: a folder where an output file goes"):
+        publish(out, {"a.h5": b"new", "a.h": b"new", "b.json": b"new"})
+    assert sorted(os.listdir(out)) == ["a.h", "a.h5", "b.json"]
+    assert (out / "a.h5").read_bytes() == (out / "a.h").read_bytes() == b"old"
+    with pytest.raises(InputError, match=r"a.h5: -o: a file where a folder of the outputs"):
+        with staged(out) as stage:
+            (stage / "a.h5").mkdir()
+            (stage / "a.h5" / "x.png").write_bytes(b"png")
+    assert sorted(os.listdir(out)) == ["a.h", "a.h5", "b.json"]
+
+
+def test_a_committed_set_that_cannot_be_completed_is_named(tmp_path):
+    """A journal whose file cannot take its place (a folder made there since): one line
+    naming the file (was an IsADirectoryError traceback on every later run)."""
+    out = tmp_path / "out"
+    stage = out / ".gainsched-stage-x1"
+    stage.mkdir(parents=True)
+    (stage / "t.h5").write_bytes(b"new")
+    (out / "t.h5").mkdir()
+    (out / JOURNAL).write_text('{"stage": ".gainsched-stage-x1", "files": ["t.h5"]}')
+    with pytest.raises(InputError, match=r"t.h5: cannot complete the output set a killed run "
+                       r"committed \(\.gainsched-publish\.json\): Is a directory"):
+        recover(out)
+    assert (out / JOURNAL).exists() and (stage / "t.h5").read_bytes() == b"new"
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/null"), reason="needs /dev/null")
+def test_an_output_onto_a_device_is_refused(tmp_path, monkeypatch):
+    """``--csv`` naming a device (here a link to /dev/null, so that an old build that
+    renames over it replaces only the link): an atomic write would put a regular file in
+    the device's place, so it is refused before any work, like a folder."""
+    from gainsched.publish import write_atomic
+
+    monkeypatch.chdir(tmp_path)
+    os.symlink("/dev/null", "null.csv")
+    res = _run("nominal", PAPER, "--speed", "9", "--csv", "null.csv")
+    one_line_error(res, "null.csv: --csv: not a regular file (a device, FIFO or socket)")
+    assert res.stdout == "" and os.path.islink("null.csv")
+    with pytest.raises(InputError, match="not a regular file"):
+        write_atomic("null.csv", b"x", where="--csv")
+    assert os.readlink("null.csv") == "/dev/null"
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/zero"), reason="needs /dev/zero")
+@pytest.mark.parametrize("name", ["z.csv", "z.ulg"])
+def test_a_log_that_is_a_device_is_refused(tmp_path, monkeypatch, name):
+    """A log named .csv or .ulg that is a link to /dev/zero: read to the end, it never
+    ends (the CSV reader ran out of memory, the ULog reader ran forever)."""
+    monkeypatch.chdir(tmp_path)
+    os.symlink("/dev/zero", name)
+    one_line_error(_run("compare", PAPER, name), f"{name}: a device, not a log file")
+
+
+def test_a_csv_log_past_the_size_bound_is_refused(monkeypatch):
+    import gainsched.analysis.logs
+
+    monkeypatch.setattr(gainsched.analysis.logs, "MAX_LOG_BYTES", 2**16)
+    one_line_error(_run("compare", PAPER, FLIGHT), FLIGHT, "larger than 64 KiB",
+                   "too large for a CSV flight log")
+
+
+def test_campaign_with_another_configs_table_says_so(tmp_path, monkeypatch):
+    """A table built from another config (here the paper's with another mass): campaign
+    says so before it flies, as simulate and paper do (it flew in silence)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "t.h5").write_bytes(_edited_table(text=paper_config_text(vehicle__mass=0.55),
+                                                  sha=True))
+    res = _run("campaign", PAPER, "--tables", "t.h5", "--duration", "1", "-o", "out")
+    assert res.exit_code == 0, res.output
+    assert res.stderr.splitlines()[0] == ("gainsched: warning: t.h5 was built from another "
+                                          "config"), res.stderr
 
 
 def test_a_flight_without_gains_names_the_scenario_file(tmp_path, monkeypatch):

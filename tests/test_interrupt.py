@@ -2,11 +2,13 @@
 
 Each trial starts ``gainsched build`` (two worker processes) over a folder that
 holds a complete older output set, and signals it at a random moment: SIGINT
-to its process group (Ctrl-C in a terminal) or SIGKILL to the command alone
-(``kill -9``, the OOM killer). Then:
+to its process group (Ctrl-C in a terminal), SIGKILL to the command alone
+(``kill -9``, the OOM killer) or SIGKILL to the whole process group (a closed
+terminal, a cancelled CI job: loky's resource tracker dies too, issue 38). Then:
 
 - no process of the build is left (the workers die with the command);
-- no shared-memory file is left in ``/dev/shm``;
+- no shared-memory file of a killed build (named after one of its processes) is
+  left in ``/dev/shm`` once the next build has run (:mod:`gainsched.native.shm`);
 - the folder holds the old set or the new set, never a mix, once the next run
   has started (:func:`gainsched.publish.recover` is what it does first), and no
   temp file or stage.
@@ -17,6 +19,7 @@ to its process group (Ctrl-C in a terminal) or SIGKILL to the command alone
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -90,7 +93,7 @@ def test_random_sigint_and_sigkill_leave_old_or_new_set(tmp_path):
     assert sorted(old) == sorted(new) == sorted(SET) and old != new
 
     shm_before = _shm()
-    pids = []  # the killed commands: what they left in /dev/shm is named after them
+    pids = set()  # the killed builds' processes: what they left in /dev/shm is named after them
     rng = np.random.default_rng(2026)
     outcomes = {"old": 0, "new": 0, "rolled forward": 0}
     for trial in range(TRIALS):
@@ -98,13 +101,15 @@ def test_random_sigint_and_sigkill_leave_old_or_new_set(tmp_path):
         out.mkdir()
         for name, data in old.items():
             (out / name).write_bytes(data)
-        sig = signal.SIGKILL if trial % 2 == 0 else signal.SIGINT
+        # SIGKILL to the command, SIGINT to the group, SIGKILL to the group, in turn
+        sig, group = KINDS[trial % len(KINDS)]
         p = _build(new_cfg, out)
-        pids.append(p.pid)
-        # the first quarter is imports; every third trial aims at the end (writing)
-        late = trial % 3 == 2
+        pids.add(p.pid)
+        # the first quarter is imports; every fourth trial aims at the end (writing)
+        late = trial % 4 == 3
         time.sleep(duration * (rng.uniform(0.85, 1.1) if late else rng.uniform(0.25, 1.0)))
-        if sig == signal.SIGINT:
+        pids.update(_group(p.pid))
+        if group:
             os.killpg(p.pid, sig)
         else:
             os.kill(p.pid, sig)
@@ -114,19 +119,134 @@ def test_random_sigint_and_sigkill_leave_old_or_new_set(tmp_path):
         deadline = time.monotonic() + 20
         while _group(p.pid) and time.monotonic() < deadline:
             time.sleep(0.1)
-        assert not _group(p.pid), f"trial {trial} ({sig.name}): processes left {_group(p.pid)}"
+        how = f"trial {trial} ({sig.name} to the {'group' if group else 'command'})"
+        assert not _group(p.pid), f"{how}: processes left {_group(p.pid)}"
         pending = (out / ".gainsched-publish.json").exists()
         recover(out)  # what the next run in the folder does first
         got = _contents(out)
-        assert got in (old, new), f"trial {trial} ({sig.name}): a mixed or partial set"
+        assert got in (old, new), f"{how}: a mixed or partial set"
         outcomes["rolled forward" if pending else ("new" if got == new else "old")] += 1
-    # loky names its semaphores and joblib its memmap folders after the creating process;
-    # other entries (this test process's own pools, other programs) are not the builds'.
-    # A dead build's resource tracker unlinks them when its last worker is gone: wait.
-    ours = re.compile(r"[-_](" + "|".join(map(str, pids)) + r")[-_]")
+    _next_run_leaves_nothing(new_cfg, tmp_path / "next", pids, shm_before)
+    print(f"{TRIALS} trials: {outcomes}")
+
+
+#: (signal, to the whole process group) of the trials, in turn
+KINDS = ((signal.SIGKILL, False), (signal.SIGINT, True), (signal.SIGKILL, True))
+
+
+def _theirs(pids, before=frozenset()) -> set[str]:
+    """Entries of /dev/shm named after one of ``pids`` (loky's ``sem.loky-PID-*``, joblib's
+    ``joblib_memmapping_folder_PID_*``, gainsched's ``gainsched-run-PID.json``); other
+    entries (this test process's pools, other programs, other agents' builds) are not
+    the killed builds'."""
+    ours = re.compile(r"[-_](" + "|".join(map(str, pids)) + r")[-_.]")
+    return {e for e in _shm() - before if ours.search(e)}
+
+
+def _next_run_leaves_nothing(cfg, out, pids, before=frozenset()):
+    """The next build (two workers) runs to its end; then nothing the killed builds
+    ``pids`` made is left in /dev/shm. A dead build whose command alone was killed has
+    its entries removed by its own resource tracker once its last worker is gone: wait
+    for that a little."""
+    p = _build(cfg, out)
+    assert p.wait(timeout=300) == 0, p.stderr.read().decode()
     deadline = time.monotonic() + 15
-    while (left := {e for e in _shm() - shm_before if ours.search(e)}) and \
-            time.monotonic() < deadline:
+    while (left := _theirs(pids, before)) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert not left, f"shared memory left in /dev/shm by killed builds: {sorted(left)}"
-    print(f"{TRIALS} trials: {outcomes}")
+
+
+@pytest.mark.skipif(sys.platform != "linux" or not os.path.isdir("/dev/shm"),
+                    reason="process groups, /proc and /dev/shm: Linux")
+def test_kill_9_of_the_whole_group_leaves_nothing_after_the_next_run(tmp_path):
+    """``kill -9`` of a whole ``build -j 2`` process group (its resource tracker dies too)
+    while the pool runs leaves loky's semaphores in /dev/shm; the next build removes them
+    (issue 38)."""
+    cfg = tmp_path / "trial.toml"
+    cfg.write_text(small_config_text(name="trial", grid__speeds=[4, 6, 9, 12, 15],
+                                     grid__tilts_deg=[0, 10, 20, 30, 40],
+                                     grid__azimuth_samples=12))
+    p = _build(cfg, tmp_path / "killed")
+    deadline = time.monotonic() + 120  # until the pool runs: its semaphores are there
+    while not _theirs({p.pid}) and p.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    pids = {p.pid, *_group(p.pid)}
+    os.killpg(p.pid, signal.SIGKILL)
+    p.wait(timeout=60)
+    assert p.returncode == -signal.SIGKILL, "the build ended before the kill: a larger grid"
+    deadline = time.monotonic() + 30
+    while _group(p.pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _group(p.pid), f"processes left {_group(p.pid)}"
+    assert any(e.startswith("sem.loky-") for e in _theirs(pids)), sorted(_theirs(pids))
+    _next_run_leaves_nothing(cfg, tmp_path / "next", pids)
+
+
+@pytest.fixture()
+def fake_shm(tmp_path, monkeypatch):
+    from gainsched.native import shm
+
+    monkeypatch.setattr(shm, "SHM", tmp_path)
+    monkeypatch.setattr(shm, "_claimed", None)
+    return tmp_path
+
+
+def _names(pid) -> set[str]:
+    return {f"gainsched-run-{pid}.json", f"sem.loky-{pid}-a1b2c3d4", f"sem.loky-{pid}-e5f6g7h8",
+            f"joblib_memmapping_folder_{pid}_0123abcd"}
+
+
+def _mark(folder, pid, **entry):
+    from gainsched.native import shm
+
+    entry = {"pid": pid, "start": shm._start_time(pid), **shm._here(), **entry}
+    (folder / f"gainsched-run-{pid}.json").write_text(json.dumps(entry))
+    for name in (f"sem.loky-{pid}-a1b2c3d4", f"sem.loky-{pid}-e5f6g7h8"):
+        (folder / name).write_bytes(b"\0" * 32)
+    (folder / f"joblib_memmapping_folder_{pid}_0123abcd").mkdir()
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="/proc: Linux")
+def test_sweep_removes_only_what_dead_runs_left(fake_shm):
+    """A dead run's semaphores, memmaps and mark go; a live run's (a concurrent build),
+    another pid namespace's, a pid reused by a later process (its start time differs:
+    the run that marked it is gone) and every entry no mark names stay or go as due."""
+    from gainsched.native import shm
+
+    dead = subprocess.Popen(["true"])  # a pid that was a process and is gone
+    dead.wait()
+    live = subprocess.Popen(["sleep", "60"])
+    try:
+        _mark(fake_shm, dead.pid, start="12345")
+        _mark(fake_shm, live.pid)  # a concurrent build
+        foreign = max(dead.pid, live.pid) + 1
+        _mark(fake_shm, foreign, start="1", ns="pid:[1]")  # another container's build
+        reused = os.getpid()  # a pid now held by a later process than the marked one
+        _mark(fake_shm, reused, start="1")
+        others = {"sem.mp-abcdefgh", "sem.loky-4194303-unmarked", "joblib_memmapping_x"}
+        for name in others:
+            (fake_shm / name).write_bytes(b"")
+        removed = shm.sweep()
+        left = set(os.listdir(fake_shm))
+        assert left == _names(live.pid) | _names(foreign) | others, left
+        assert {p.name for p in removed} == _names(dead.pid) | _names(reused)
+    finally:
+        live.kill()
+        live.wait()
+    shm.sweep()  # the concurrent build has ended (killed): now its entries go
+    assert set(os.listdir(fake_shm)) == _names(foreign) | others
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="/proc: Linux")
+def test_claim_marks_this_process_once(fake_shm):
+    from gainsched.native import shm
+
+    shm.claim()
+    shm.claim()
+    mark = fake_shm / f"gainsched-run-{os.getpid()}.json"
+    entry = json.loads(mark.read_text())
+    assert entry["pid"] == os.getpid() and entry["start"] == shm._start_time(os.getpid())
+    shm.sweep()  # this process is alive: its mark stays
+    assert mark.exists()
+    shm._release(os.getpid())
+    assert not mark.exists()

@@ -66,14 +66,16 @@ import dataclasses
 import io
 import math
 import re
+import stat
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..constants import MAX_LOG_BYTES
 from ..errors import GainschedWarning, InputError
-from ..textinput import decode_text
+from ..textinput import _size, decode_text
 from .logchecks import _plane_angles, _plane_normal, check_log, thrust_units
 
 __all__ = [
@@ -285,6 +287,20 @@ class FlightLog:
 # reading
 
 
+def _check_file(path: Path) -> None:
+    """A log is a regular file or a folder (a rosbag2): a device, FIFO or socket (or a
+    link to one, named ``.csv`` or ``.ulg``) is refused before it is read, as it may
+    never end (``/dev/zero``) or block (a FIFO without a writer)."""
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return  # missing or unreadable: the reader says so, naming the file
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        kind = ("a FIFO" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode)
+                else "a device")
+        raise InputError(path, "", f"{kind}, not a log file: give a file")
+
+
 def _format(path) -> str:
     fmt = _EXTENSIONS.get(Path(path).suffix.lower())
     if fmt is None:
@@ -299,9 +315,13 @@ def _format(path) -> str:
 def _read_csv(path: Path):
     """-> (meta, columns {name: list[str]}, rows (N,) line numbers)."""
     try:
-        data = path.read_bytes()
+        with open(path, "rb") as f:
+            data = f.read(MAX_LOG_BYTES + 1)
     except OSError as exc:
         raise InputError(path, "", f"cannot read the file ({exc.strerror or exc})") from None
+    if len(data) > MAX_LOG_BYTES:
+        raise InputError(path, "", f"larger than {_size(MAX_LOG_BYTES)}: too large for a CSV "
+                         "flight log (write a longer flight as HDF5, .h5)")
     text = decode_text(path, data)  # UTF-8 or refused with the line of the first bad byte
     lines = text.splitlines()
     meta: dict[str, str] = {}
@@ -386,6 +406,8 @@ def _attr_str(v) -> str:
 def _read_hdf5(path: Path):
     import h5py
 
+    if path.is_dir():
+        raise InputError(path, "", "cannot read the file (Is a directory)")
     try:
         f = h5py.File(path, "r")
     except FileNotFoundError:
@@ -670,10 +692,14 @@ def read_log(
     mean COG speed 8.9 m/s, tension 25 N
     """
     path = Path(path)
+    _check_file(path)
     foreign = _foreign(path, channel_map, thrust_max)
     if foreign is not None:
         return _segments(path, foreign.meta, foreign.columns, foreign.rows, foreign.label,
                          min_samples, gap_factor, config=config, trust=trust)
+    if path.is_dir() and path.suffix.lower() not in _EXTENSIONS:
+        raise InputError(path, "", "a folder, not a log: give a log file (.csv, .h5, .ulg) "
+                         "or a ROS 2 bag folder (with its metadata.yaml)")
     fmt = _format(path)
     if fmt == "csv":
         meta, raw, rows, label = _read_csv(path)
@@ -718,6 +744,7 @@ def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None,
     """
     path, out = Path(path), Path(out)
     _format(out)  # a bad output name fails before any reading
+    _check_file(path)
     conv = _foreign(path, channel_map, thrust_max)
     if conv is None:
         raise InputError(path, "", "not a PX4 ULog (.ulg) or a ROS 2 bag (.mcap, .db3, or a "

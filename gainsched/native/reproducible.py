@@ -168,10 +168,14 @@ def pinned_executor(n_workers: int):
     it) and one BLAS thread.
 
     Workers are reused across calls (loky's reusable executor); they end with
-    this process (see :func:`_worker_init`).
+    this process (see :func:`_worker_init`). What the pool leaves in ``/dev/shm`` when
+    the whole process group is killed goes with the next run (:mod:`.shm`).
     """
     from joblib.externals.loky import get_reusable_executor
 
+    from . import shm
+
+    shm.claim()  # before the pool makes its semaphores: a later run removes them if killed
     env = dict(PINNED_ENV if pin_available() else {}, OPENBLAS_NUM_THREADS="1",
                OMP_NUM_THREADS="1")
     return get_reusable_executor(max_workers=n_workers, env=env, initializer=_worker_init)

@@ -35,7 +35,7 @@ from pathlib import Path
 from urllib.parse import urlsplit
 
 from ..errors import InputError
-from ..native import reproducible
+from ..native import reproducible, shm
 
 __all__ = [
     "BACKENDS",
@@ -279,6 +279,7 @@ def executor(backend: str = "local", scheduler: str | None = None, n_jobs: int =
         raise InputError(_SRC, "--jobs", "must be -1 (all cores) or a non-zero worker count")
     if not connect_timeout > 0:
         raise InputError(_SRC, "--connect-timeout", f"must be > 0 s, got {connect_timeout:g}")
+    shm.sweep()  # what killed builds left in /dev/shm (gainsched.native.shm)
     if backend != "dask":
         name = "loky" if backend == "local" else backend
         jobs = 1 if name == "sequential" else n_jobs

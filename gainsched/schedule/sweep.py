@@ -225,7 +225,11 @@ def _number(text: str, where: str) -> float:
 def parse_vary(spec: str) -> tuple[str, tuple[float, ...]]:
     """``"vehicle.mass=0.45,0.5,0.55"`` -> ``("vehicle.mass", (0.45, 0.5, 0.55))``."""
     key, rest = _split(spec, "--vary")
-    return key, tuple(_number(t, f"--vary {key}") for t in rest.split(","))
+    values = tuple(_number(t, f"--vary {key}") for t in rest.split(","))
+    for i, v in enumerate(values):
+        if v in values[:i]:  # two variants alike: the same table built twice
+            raise InputError(_SRC, f"--vary {key}", f"{v:g} given twice: each value once")
+    return key, values
 
 
 def parse_sigma(spec: str) -> tuple[str, float]:
@@ -318,9 +322,13 @@ def make_sweep(base: Config, vary: Sequence[tuple[str, Sequence[float]]] = (), *
         text = variant_text(base, name, params)
         try:
             cfg = config_from_text(text, f"sweep variant {name}")
-        except InputError as exc:
+        except InputError as exc:  # named by the options that made the variant
             vals = ", ".join(f"{k}={v:g}" for k, v in params)
-            raise InputError(exc.source, exc.where, f"{exc.message} ({vals})") from None
+            opts = " and ".join(o for o, given in (("--vary", vary), ("--sigma", sigma))
+                                if given)
+            where = f"{exc.where}: " if exc.where else ""
+            raise InputError(_SRC, opts, f"variant {name} ({vals}): {where}"
+                             f"{exc.message}") from None
         out.append(Variant(name, params, cfg))
     vary_c = tuple(
         (k, tuple(float(x) for x in v)) for k, (_, v) in zip(vary_keys, vary, strict=True)
