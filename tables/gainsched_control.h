@@ -169,7 +169,7 @@ typedef struct gs_ctrl {
  * among them n_int > GS_CTRL_MAX_INT, an int_of beyond 1, an int_limit[i] (i < n_int)
  * that is NaN, infinite or <= 0).
  *
- * @param c       [out] the controller to prepare (zeroed here)
+ * @param c       [out] the controller to prepare (zeroed and filled on GS_OK)
  * @param table   the table, verified (gs_verify)
  * @param params  the controller's parameters (e.g. the generated <name>_ctrl_params)
  */
