@@ -102,6 +102,7 @@ __all__ = [
     "MAX_INT",
     "MAX_STATE",
     "INT_RANGE_FRACTION",
+    "INT_LIMIT_NO_GAINS",
     "ControllerParams",
     "controller_params",
     "int_limits_for",
@@ -145,6 +146,10 @@ MAX_INT = 2  # GS_CTRL_MAX_INT: integral states a gs_ctrl holds
 #: the share of a motor's range (thrust_max - thrust_min) one integral term may command
 #: at its bound, at the table's largest gain (:func:`int_limits_for`)
 INT_RANGE_FRACTION = 1.0
+#: rad s: the bound of an integral state the rule cannot size, no gain of it at any
+#: feasible point (a table without one: its controller never engages), where the bound
+#: does not act on the command (the former single default, :func:`int_limits_for`)
+INT_LIMIT_NO_GAINS = 0.5
 POSE_LIMIT = 1.0e3  # m, m/s: a pose component beyond it is rejected (GS_CTRL_POSE_LIMIT)
 #: rad: without an accelerometer a turn of the velocity beyond it in one step (an estimate
 #: far off any circle) is dropped (GS_C_MAX_TURN)
@@ -430,7 +435,10 @@ def int_limits_for(table, thrust_min: float, thrust_max: float, n_int: int,
 
     The gains are the runtime's float32 data (the same bits in C), the bounds rounded
     to float32, as ``gs_ctrl_params`` holds them: a table, its RuntimeData and its
-    CompactData give the same bounds.
+    CompactData give the same bounds. An integral state with no gain at any feasible
+    point (in a table without a feasible point, whose controller never engages: every
+    lookup is ``NO_GAINS``) gets :data:`INT_LIMIT_NO_GAINS`: its bound does not act on
+    the command.
 
     Parameters
     ----------
@@ -451,8 +459,7 @@ def int_limits_for(table, thrust_min: float, thrust_max: float, n_int: int,
     Raises
     ------
     InputError
-        The table has no feasible point, or an integral state has no gain at any (its
-        bound would be infinite).
+        The table's LQR state has no room for ``n_int`` integral states.
 
     Examples
     --------
@@ -469,21 +476,14 @@ def int_limits_for(table, thrust_min: float, thrust_max: float, n_int: int,
     if N_STATE + n_int > n:
         raise InputError(d.name, "n_state", f"{n} states hold no {n_int} integral states")
     ok = d.mask == 0  # feasible, with gains (n_a, n_v, n_xi)
-    if not ok.any():
-        raise InputError(d.name, "mask", "no feasible point: no gains to size the "
-                         "integral states' bounds from")
     K = np.empty((n_a, n_v, n_xi, 4, n))
     K[0] = np.asarray(d.K_tilt0, dtype=float).reshape(n_v, d.n_xi_tilt0, 4, n)
     K[1:] = np.asarray(d.K, dtype=float)
     span = fraction * (float(thrust_max) - float(thrust_min))
     out = []
     for i in range(n_int):
-        k = float(np.max(np.abs(K[..., N_STATE + i][ok])))
-        if not k > 0.0:
-            raise InputError(d.name, "K", f"integral state {i} has no gain at any "
-                             "feasible point (its bound would be infinite): set "
-                             "[control] int_limit")
-        out.append(float(np.float32(span / k)))
+        k = float(np.max(np.abs(K[..., N_STATE + i][ok]), initial=0.0))
+        out.append(float(np.float32(span / k if k > 0.0 else INT_LIMIT_NO_GAINS)))
     return tuple(out)
 
 
@@ -654,8 +654,8 @@ class Controller:
     >>> ctl = Controller(params, Interpolator(runtime_data(table)))
     >>> row = np.zeros(N_INPUT)  # nothing measured yet: idle
     >>> thrust, status, _ = ctl.step(row, ctl.nominal_row(0.0, 5.0, 0, 0, 0, 0.0))
-    >>> thrust.tolist(), ctrl_status_text(status)
-    ([0.0, 0.0, 0.0, 0.0], 'IDLE')
+    >>> thrust.tolist(), ctrl_status_text(status)  # thrust_idle = thrust_min
+    ([0.1, 0.1, 0.1, 0.1], 'IDLE')
     """
 
     def __init__(self, params: ControllerParams, lookup):

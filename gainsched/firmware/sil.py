@@ -119,8 +119,8 @@ class CController:
     >>> table = gs.load_table("tables/paper.h5")
     >>> ctl = CController(table, controller_params(gs.load_config("configs/paper.toml"), table))
     >>> thrust, status, z = ctl.step(np.zeros(N_INPUT))  # nothing measured: idle
-    >>> thrust.tolist(), hex(status)
-    ([0.0, 0.0, 0.0, 0.0], '0x2000')
+    >>> thrust.tolist(), hex(status)  # the idle thrust, thrust_min in float32
+    ([0.10000000149011612, 0.10000000149011612, 0.10000000149011612, 0.10000000149011612], '0x2081')
     """
 
     def __init__(self, table, params: ControllerParams, build_dir=None, lib_path=None):

@@ -242,6 +242,9 @@ def test_the_integral_bounds_are_sized_from_the_tables_gains(recommended_level, 
     rt = runtime_data(table)
     assert controller_params(design, rt).int_limit == p.int_limit
     assert int_limits_for(compact_data(rt), 0.1, 3.5, 2) == p.int_limit
+    # no feasible point (a table whose controller never engages): the fallback
+    none = dataclasses.replace(rt, mask=np.ones_like(rt.mask))
+    assert int_limits_for(none, 0.1, 3.5, 2) == (fc.INT_LIMIT_NO_GAINS,) * 2
     text = render_control_header(rt, p)
     assert (f"{{{c_decimal(p.int_limit[0])}, {c_decimal(p.int_limit[1])}}}, /* int_limit: "
             "rad s, bound of int_delta, int_xi: motor range / largest gain (sized from "
