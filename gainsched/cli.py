@@ -659,7 +659,7 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     with tqdm(total=n_mid, unit="speed", desc="certify compact table",
               disable=None if n_mid else True) as bar:
         form, cert = firmware_form(cfg, t, progress=bar.update)
-    params = None if cfg is None else controller_params(cfg)
+    params = None if cfg is None else controller_params(cfg, t)
     paths = publish(out_dir, c_files(form, params))
     for p in paths:
         click.echo(f"wrote {p}")

@@ -151,6 +151,11 @@ class Control:
     #: the largest gain magnitude a build may produce, N per state unit (None: no cap;
     #: :func:`gainsched.schedule.grid.check_gain_cap`)
     max_gain: float | None = None
+    #: rad s; the firmware controller's bound on each integral state, one per entry of
+    #: :attr:`integrators` (``int_limit`` in the file: one number for all of them, or a
+    #: list); None: sized from the table's gains
+    #: (:func:`gainsched.firmware.controller.int_limits_for`). The LQR does not use it.
+    int_limit: tuple[float, ...] | None = None
 
     @property
     def integrators(self) -> tuple[str, ...]:
@@ -390,7 +395,9 @@ class Config:
         ``Q`` (n, n) over the LQR state (n = 10 + integral states, 11 for
         configs/paper.toml; paper eq. 24) and ``R`` (4, 4) over the motor thrusts, the
         integral states (``integrator``: delta, paper Sec. IV.B; ``azimuth_integral``:
-        xi) and the terminal cost (``"periodic"`` or ``"single-period"``).
+        xi), the terminal cost (``"periodic"`` or ``"single-period"``) and the firmware's
+        bounds on the integral states (``int_limit``, rad s; default: sized from the
+        table's gains).
     grid : Grid
         ``[grid]``: the schedule's axes: tangential COG speeds ``speeds`` (n_v,) m/s,
         circle tilts ``tilts`` (n_a,) rad (``tilts_deg`` in the file, starting at 0), and
@@ -811,10 +818,28 @@ def _control(sec: Section) -> Control:
     max_gain = None
     if "max_gain" in sec.data:
         max_gain = sec.number("max_gain", positive=True)
+    int_limit = _int_limit(sec, integrators) if "int_limit" in sec.data else None
     sec.done()
     Q.setflags(write=False)
     R.setflags(write=False)
-    return Control(rate, Q, R, integ, term, az_integ, tau_max, max_gain)
+    return Control(rate, Q, R, integ, term, az_integ, tau_max, max_gain, int_limit)
+
+
+def _int_limit(sec: Section, integrators: tuple[str, ...]) -> tuple[float, ...]:
+    """``control.int_limit``: one positive number (rad s) for every integral state, or a
+    list of one per integral state in their order."""
+    if not integrators:
+        raise sec.error("int_limit", "there is no integral state to bound (integrator = "
+                        "false, azimuth_integral = false)")
+    if isinstance(sec.data["int_limit"], list):
+        a = sec.array("int_limit")
+        if a.shape != (len(integrators),):
+            raise sec.error("int_limit", f"must be one number or {len(integrators)} "
+                            f"({', '.join(integrators)}), got {a.size}")
+        if np.any(a <= 0):
+            raise sec.error("int_limit", "entries must be > 0")
+        return tuple(float(v) for v in a)
+    return (sec.number("int_limit", positive=True),) * len(integrators)
 
 
 #: most breakpoints an automatic axis may be given (``max_count``)

@@ -32,7 +32,7 @@ static const gs_ctrl_params paper_ctrl_params = {
     0.1f, /* thrust_min: motor range, N */
     3.5f, /* thrust_max: motor range, N */
     0.1f, /* thrust_idle: idle thrust (GS_CTRL_IDLE), N */
-    0.5f, /* int_limit: integral state bound, rad s */
+    {4.1545033f, 0.0f}, /* int_limit: rad s, bound of int_delta: motor range / largest gain (sized from the table) */
     1u, /* n_int: integral states */
     {0u, 0u}, /* int_of: the reduced state each integrates (0 delta, 1 xi) */
     0.0f, /* pose_delay: s: SET it to your poses' latency (0: a lead that no status shows) */

@@ -307,7 +307,7 @@ _PARAM_COMMENTS = {
     "dt": "control step, s", "rho": "tether length, m",
     "L_e": "attachment offset behind the COG, m", "thrust_min": "motor range, N",
     "thrust_max": "motor range, N", "thrust_idle": "idle thrust (GS_CTRL_IDLE), N",
-    "int_limit": "integral state bound, rad s", "n_int": "integral states",
+    "int_limit": "rad s, each integral state's bound", "n_int": "integral states",
     "int_of": "the reduced state each integrates (0 delta, 1 xi)",
     "pose_delay": "s: SET it to your poses' latency (0: a lead that no status shows)",
     "pose_timeout": "s",
@@ -327,16 +327,22 @@ def control_header_name(data) -> str:
 def render_control_header(data, params) -> str:
     """The text of ``<name>_control.h``: ``<name>_ctrl_params`` (the ``gs_ctrl_params`` of
     :class:`~gainsched.firmware.controller.ControllerParams`) and ``<name>_ctrl_init``."""
+    from ..constants import INTEGRATORS
     from .controller import ACCEL_MARGIN, G0
 
     data = data.base if isinstance(data, CompactData) else data
     lines = []
     for key, ctype, v in params.c_fields():
         text = (c_decimal(v) if ctype == "float" else _c_uint(v) if ctype == "uint32_t" else
+                f"{{{', '.join(c_decimal(i) for i in v)}}}" if ctype.startswith("float") else
                 f"{{{', '.join(_c_uint(i) for i in v)}}}")
         note = _PARAM_COMMENTS[key]
         if key == "accel_range":
             note = f"m/s^2 = {v / G0:.3g} g, {ACCEL_MARGIN:g}x the table's largest specific force"
+        elif key == "int_limit":
+            by_state = {j: name for name, j in INTEGRATORS.items()}
+            names = ", ".join(by_state[j] for j in params.int_of) or "none"
+            note = f"rad s, bound of {names}: {_int_limit_source(data, params)}"
         lines.append(f"    {text}, /* {key}: {note} */")
     return render("control.in.h", name=data.name, NAME=data.name.upper(),
                   config_name=data.meta.get("config_name", data.name),
@@ -344,6 +350,22 @@ def render_control_header(data, params) -> str:
                   tool_version=data.meta.get("tool_version", "?"),
                   dt_ms=f"{1000 * params.dt:g}",
                   fields="\n".join(lines), **_output_values(params))
+
+
+def _int_limit_source(data, params) -> str:
+    """Where the integral bounds of ``params`` come from, for the control header."""
+    from .controller import INT_RANGE_FRACTION, int_limits_for
+
+    if not params.int_of:
+        return "unused"
+    try:
+        sized = int_limits_for(data, params.thrust_min, params.thrust_max, len(params.int_of))
+    except (InputError, ValueError):
+        sized = None
+    if sized == tuple(params.int_limit):
+        share = "" if INT_RANGE_FRACTION == 1 else f"{INT_RANGE_FRACTION:g}x "
+        return f"{share}motor range / largest gain (sized from the table)"
+    return "set, not sized from the table"
 
 
 def _output_values(params) -> dict:
@@ -390,7 +412,7 @@ def write_c_outputs(table_path, out_dir=None) -> list[Path]:
     # the controller's parameters come from the table's config, unless it names an effect
     # registered elsewhere; an embedded config that does not load is refused
     cfg = loadable_config(table)
-    params = None if cfg is None else controller_params(cfg)
+    params = None if cfg is None else controller_params(cfg, table)
     return publish(out_dir, c_files(table, params))
 
 

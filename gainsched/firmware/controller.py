@@ -37,8 +37,9 @@ One control step (``gs_ctrl_update``; docs/runtime.md, "The controller"):
    ``x_d``, ``u_d``: :func:`~gainsched.firmware.feedforward.feedforward`), the errors
    ``x - x_d`` with the azimuth error unwrapped from the previous step's,
    ``u = u_d - K (x - x_d)``, the clip to ``[thrust_min, thrust_max]``, and the integral
-   states integrating their errors unless a motor is clipped (anti-windup), within
-   ``int_limit``.
+   states integrating their errors unless a motor is clipped (anti-windup), each within
+   its own bound ``int_limit[i]`` (sized from the table's gains by default:
+   :func:`int_limits_for`).
 
 4. **Status policy** (bits ``CTRL_*`` above the runtime's): an unusable lookup flies the
    last good gains (``CTRL_HELD``); no good gains yet, a bad reference or no estimate:
@@ -46,7 +47,7 @@ One control step (``gs_ctrl_update``; docs/runtime.md, "The controller"):
    pose for ``pose_timeout`` (``CTRL_STALE_POSE``) drops the position and velocity
    feedback and freezes the integrators; a bad gyro sample (``CTRL_BAD_IMU``) keeps
    the last good one and drops the rate feedback; an integral state at its bound
-   ``int_limit`` sets ``CTRL_INT_LIMIT`` (the error it integrates is more than it can
+   ``int_limit[i]`` sets ``CTRL_INT_LIMIT`` (the error it integrates is more than it can
    hold: the model misses something, or the bound is too tight).
 
 5. **Outputs** (:meth:`ControllerParams.commands_from_thrust`): the thrusts, renumbered
@@ -98,9 +99,13 @@ __all__ = [
     "INPUT_SLICES",
     "N_INPUT",
     "MAX_DELAY",
+    "MAX_INT",
     "MAX_STATE",
+    "INT_RANGE_FRACTION",
+    "INT_LIMIT_NO_GAINS",
     "ControllerParams",
     "controller_params",
+    "int_limits_for",
     "largest_specific_force",
     "accel_range_for",
     "reduced_from_kinematics",
@@ -137,6 +142,14 @@ INPUT_COLUMNS = {"flags": 1, "p_I": 3, "q_IB": 4, "v_I": 3, "gyro": 3, "accel": 
 N_INPUT = sum(INPUT_COLUMNS.values())
 MAX_DELAY = 32  # GS_CTRL_MAX_DELAY
 MAX_STATE = 24  # GS_CTRL_MAX_STATE
+MAX_INT = 2  # GS_CTRL_MAX_INT: integral states a gs_ctrl holds
+#: the share of a motor's range (thrust_max - thrust_min) one integral term may command
+#: at its bound, at the table's largest gain (:func:`int_limits_for`)
+INT_RANGE_FRACTION = 1.0
+#: rad s: the bound of an integral state the rule cannot size, no gain of it at any
+#: feasible point (a table without one: its controller never engages), where the bound
+#: does not act on the command (the former single default, :func:`int_limits_for`)
+INT_LIMIT_NO_GAINS = 0.5
 POSE_LIMIT = 1.0e3  # m, m/s: a pose component beyond it is rejected (GS_CTRL_POSE_LIMIT)
 #: rad: without an accelerometer a turn of the velocity beyond it in one step (an estimate
 #: far off any circle) is dropped (GS_C_MAX_TURN)
@@ -180,8 +193,12 @@ class ControllerParams:
         Each motor's range: the clip.
     thrust_idle : float, N
         Each motor's thrust while the controller is idle (``CTRL_IDLE``).
-    int_limit : float, rad s
-        Bound on each integral state (anti-windup).
+    int_limit : tuple of float, rad s
+        The bound on each integral state (anti-windup), one per entry of ``int_of``
+        (``gs_ctrl_params.int_limit[GS_CTRL_MAX_INT]``), rounded to float32 as C holds
+        them; each finite and > 0 (the controllers refuse others). A single number is
+        taken for every integral state. :func:`controller_params` sizes them
+        from the table's gains (:func:`int_limits_for`).
     int_of : tuple of int
         The reduced state each integral state integrates (0: delta, 1: xi), in the LQR
         state's order.
@@ -219,7 +236,7 @@ class ControllerParams:
     thrust_min: float
     thrust_max: float
     thrust_idle: float
-    int_limit: float
+    int_limit: tuple[float, ...]
     int_of: tuple[int, ...]
     pose_delay: float = 0.0
     pose_timeout: float = 0.05
@@ -234,6 +251,15 @@ class ControllerParams:
     normalized: bool = False
     thr_mdl_fac: float = 0.0
     thrust_full: float = 0.0
+
+    def __post_init__(self):
+        lim = self.int_limit
+        lim = (lim,) * len(self.int_of) if np.ndim(lim) == 0 else tuple(lim)
+        if len(self.int_of) > MAX_INT or len(lim) != len(self.int_of):
+            raise ValueError(f"int_limit: {len(lim)} bounds for {len(self.int_of)} integral "
+                             f"states (at most {MAX_INT})")
+        # float32, as gs_ctrl_params holds them: the same clamp and status in C and here
+        object.__setattr__(self, "int_limit", tuple(float(np.float32(v)) for v in lim))
 
     @property
     def delay_steps(self) -> int:
@@ -253,14 +279,18 @@ class ControllerParams:
 
     def c_fields(self) -> list[tuple[str, str, float | int | tuple[int, ...]]]:
         """The ``gs_ctrl_params`` fields in its order: ``(name, C type, value)``, the type
-        ``"float"``, ``"uint32_t"`` or ``"uint32_t[n]"`` (``int_of`` is ``n_int`` and the
-        array padded to 2)."""
+        ``"float"``, ``"float[n]"``, ``"uint32_t"`` or ``"uint32_t[n]"`` (``int_limit`` is
+        padded to ``MAX_INT`` with 0, ``int_of`` is ``n_int`` and the array padded to
+        ``MAX_INT``)."""
         out = []
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name == "int_of":
+            if f.name == "int_limit":
+                out.append(("int_limit", f"float[{MAX_INT}]",
+                            tuple(float(x) for x in v) + (0.0,) * (MAX_INT - len(v))))
+            elif f.name == "int_of":
                 out += [("n_int", "uint32_t", len(v)),
-                        ("int_of", "uint32_t[2]", tuple(v) + (0,) * (2 - len(v)))]
+                        ("int_of", f"uint32_t[{MAX_INT}]", tuple(v) + (0,) * (MAX_INT - len(v)))]
             elif f.type == "float":
                 out.append((f.name, "float", float(v)))
             elif f.type == "bool":
@@ -285,7 +315,8 @@ class ControllerParams:
 
         Examples
         --------
-        >>> p = dataclasses.replace(controller_params(gs.load_config("paper")),
+        >>> p = dataclasses.replace(controller_params(gs.load_config("paper"),
+        ...                                           gs.load_table("tables/paper.h5")),
         ...                         motor_slot=(2, 1, 3, 0))
         >>> p.commands_from_thrust([1.0, 2.0, 3.0, 4.0]).tolist()
         [4.0, 2.0, 1.0, 3.0]
@@ -312,7 +343,8 @@ class ControllerParams:
 
         Examples
         --------
-        >>> p = dataclasses.replace(controller_params(gs.load_config("paper")),
+        >>> p = dataclasses.replace(controller_params(gs.load_config("paper"),
+        ...                                           gs.load_table("tables/paper.h5")),
         ...                         motor_slot=(2, 1, 3, 0))
         >>> p.thrust_from_commands([4.0, 2.0, 1.0, 3.0]).tolist()
         [1.0, 2.0, 3.0, 4.0]
@@ -363,42 +395,155 @@ def accel_range_for(config) -> float:
     return G0 * max(ACCEL_RANGE_MIN_G, n)
 
 
-def controller_params(config, **sensing) -> ControllerParams:
-    """The controller's parameters from a config: the loop, the vehicle and the motors,
-    the outputs (``[firmware] motor_order``, ``command``, ``thr_mdl_fac``,
-    ``thrust_max_N``), the accelerometer range sized from the grid
-    (:func:`accel_range_for`), plus the sensing fields (defaults of
-    :class:`ControllerParams`, or ``sensing``).
+def _dense_data(table):
+    """The dense float32 form (RuntimeData) of a table, a RuntimeData, a CompactData (the
+    dense form it was made from) or a lookup holding one (``.data``)."""
+    from .compact import CompactData
+    from .runtime import RuntimeData, runtime_data
+
+    if isinstance(table, CompactData):
+        return table.base
+    if isinstance(table, RuntimeData):
+        return table
+    if hasattr(table, "data"):  # an Interpolator, a CompactInterpolator, a scheduler
+        return _dense_data(table.data)
+    return runtime_data(table)
+
+
+def int_limits_for(table, thrust_min: float, thrust_max: float, n_int: int,
+                   fraction: float = INT_RANGE_FRACTION) -> tuple[float, ...]:
+    """The default bound of each integral state (rad s), sized from the table's gains:
+    at its bound, the integral term ``K[j, 10 + i] x_i`` alone commands at most
+    ``fraction`` of a motor's range, on every motor j at every operating point of the
+    table (integrator clamping to the actuator range, with the scheduled gains)::
+
+        k_i     = max over the feasible points and the motors of |K[:, 10 + i]|   (N / rad s)
+        limit_i = fraction * (thrust_max - thrust_min) / k_i                       (rad s)
+
+    With the default ``fraction = 1`` an integral at its bound asks, by its own term, for
+    a whole motor range where its gain is largest (less elsewhere): beyond that it cannot
+    be holding a model error the motors can follow, it is winding up, and
+    ``CTRL_INT_LIMIT`` says so. Two integral states whose gains differ 20x get bounds
+    that differ 20x: each one's largest command is the same share of the motors. (The
+    integral's command is not the thrust it moves: in a steady state the proportional
+    terms balance most of it. On configs/recommended.toml's level table at 12 m/s, a
+    plant with rotor drag and motor lag holds int_delta at 0.069 rad s, a 1.3 N command,
+    with no motor clipped: a bound sized from the thrust reserve above the
+    nominal, 0.5 x 1.88 N / 35 N per rad s = 0.027 rad s, would hold it at its bound, 6
+    cm out of the circle's plane.) The conditional integration (no integration while a
+    motor is clipped) stays the anti-windup; this bound is what the integral may hold.
+
+    The gains are the runtime's float32 data (the same bits in C), the bounds rounded
+    to float32, as ``gs_ctrl_params`` holds them: a table, its RuntimeData and its
+    CompactData give the same bounds. An integral state with no gain at any feasible
+    point (in a table without a feasible point, whose controller never engages: every
+    lookup is ``NO_GAINS``) gets :data:`INT_LIMIT_NO_GAINS`: its bound does not act on
+    the command.
+
+    Parameters
+    ----------
+    table : Table, RuntimeData, CompactData or Interpolator
+        The table the controller flies.
+    thrust_min, thrust_max : float, N
+        Each motor's range (the controller's clip: ``vehicle.thrust_min``, ``thrust_max``).
+    n_int : int
+        The integral states (the table's LQR state has them after the 10 reduced ones).
+    fraction : float
+        The share of the motor range an integral term may command, in (0, 1].
+
+    Returns
+    -------
+    tuple of float, rad s
+        One bound per integral state, in the LQR state's order.
+
+    Raises
+    ------
+    InputError
+        The table's LQR state has no room for ``n_int`` integral states.
+
+    Examples
+    --------
+    >>> lim = int_limits_for(gs.load_table("tables/paper.h5"), 0.1, 3.5, 1)  # int_delta
+    >>> [round(v, 2) for v in lim]   # 3.4 N / 0.818 N per rad s
+    [4.15]
+    """
+    if not 0.0 < fraction <= 1.0:
+        raise ValueError(f"fraction must be in (0, 1], got {fraction!r}")
+    if not thrust_max > thrust_min:
+        raise ValueError(f"no motor range: thrust_min {thrust_min!r}, thrust_max {thrust_max!r}")
+    d = _dense_data(table)
+    n_a, n_v, n_xi, n = d.dims
+    if N_STATE + n_int > n:
+        raise InputError(d.name, "n_state", f"{n} states hold no {n_int} integral states")
+    ok = d.mask == 0  # feasible, with gains (n_a, n_v, n_xi)
+    K = np.empty((n_a, n_v, n_xi, 4, n))
+    K[0] = np.asarray(d.K_tilt0, dtype=float).reshape(n_v, d.n_xi_tilt0, 4, n)
+    K[1:] = np.asarray(d.K, dtype=float)
+    span = fraction * (float(thrust_max) - float(thrust_min))
+    out = []
+    for i in range(n_int):
+        k = float(np.max(np.abs(K[..., N_STATE + i][ok]), initial=0.0))
+        out.append(float(np.float32(span / k if k > 0.0 else INT_LIMIT_NO_GAINS)))
+    return tuple(out)
+
+
+def controller_params(config, table=None, **sensing) -> ControllerParams:
+    """The controller's parameters from a config and the table it flies: the loop, the
+    vehicle and the motors, the outputs (``[firmware] motor_order``, ``command``,
+    ``thr_mdl_fac``, ``thrust_max_N``), the accelerometer range sized from the grid
+    (:func:`accel_range_for`), the integral states' bounds (``[control] int_limit``,
+    else sized from the table's gains: :func:`int_limits_for`), plus the sensing fields
+    (defaults of :class:`ControllerParams`, or ``sensing``).
 
     Parameters
     ----------
     config : Config
         The design config the table was built from.
+    table : Table, RuntimeData, CompactData or Interpolator, optional
+        The table the controller flies: the integral bounds are sized from its gains.
+        Needed unless the bounds are given (``[control] int_limit``, or ``int_limit``
+        here) or the config has no integral state.
     **sensing
         ``pose_delay``, ``pose_timeout``, ``quat_tolerance``, ``gyro_range``,
         ``accel_range``, ``k_pos``, ``k_vel``, ``k_att``, ``pose_period``,
-        ``thrust_idle``, ``int_limit``.
+        ``thrust_idle``, ``int_limit`` (rad s: one number for every integral state, or
+        one per state).
+
+    Raises
+    ------
+    TypeError
+        An unknown field, or no table to size the integral bounds from.
 
     Examples
     --------
-    >>> p = controller_params(gs.load_config("configs/paper.toml"), pose_delay=0.012)
-    >>> p.dt, p.rho, p.int_of, p.delay_steps
-    (0.001, 1.5, (0,), 12)
+    >>> p = controller_params(gs.load_config("configs/paper.toml"),
+    ...                       gs.load_table("tables/paper.h5"), pose_delay=0.012)
+    >>> p.dt, p.rho, p.int_of, p.delay_steps, [round(v, 2) for v in p.int_limit]
+    (0.001, 1.5, (0,), 12, [4.15])
     """
     v, t, fw = config.vehicle, config.tether, config.firmware
-    base = dict(dt=config.control.dt, rho=t.length, L_e=t.attachment_offset,
-                thrust_min=v.thrust_min, thrust_max=v.thrust_max, thrust_idle=v.thrust_min,
-                int_limit=0.5, int_of=tuple(INTEGRATORS[n] for n in config.control.integrators),
-                accel_range=accel_range_for(config),
-                motor_slot=slots_from_order(MOTOR_ORDERS[fw.motor_order]),
-                normalized=fw.command == "normalized", thr_mdl_fac=fw.thr_mdl_fac,
-                thrust_full=v.thrust_max if fw.thrust_full is None else fw.thrust_full)
+    int_of = tuple(INTEGRATORS[n] for n in config.control.integrators)
     names = {f.name for f in fields(ControllerParams)} - {
         "dt", "rho", "L_e", "thrust_min", "thrust_max", "int_of", "motor_slot", "normalized",
         "thr_mdl_fac", "thrust_full"}
     for k in sensing:
         if k not in names:
             raise TypeError(f"controller_params() got an unexpected field {k!r}")
+    limit = config.control.int_limit
+    if "int_limit" in sensing:
+        limit = sensing.pop("int_limit")
+    if limit is None and int_of:
+        if table is None:
+            raise TypeError("controller_params() needs the table: the integral states' "
+                            "bounds are sized from its gains (or set [control] int_limit)")
+        limit = int_limits_for(table, v.thrust_min, v.thrust_max, len(int_of))
+    base = dict(dt=config.control.dt, rho=t.length, L_e=t.attachment_offset,
+                thrust_min=v.thrust_min, thrust_max=v.thrust_max, thrust_idle=v.thrust_min,
+                int_limit=() if limit is None else limit, int_of=int_of,
+                accel_range=accel_range_for(config),
+                motor_slot=slots_from_order(MOTOR_ORDERS[fw.motor_order]),
+                normalized=fw.command == "normalized", thr_mdl_fac=fw.thr_mdl_fac,
+                thrust_full=v.thrust_max if fw.thrust_full is None else fw.thrust_full)
     return ControllerParams(**{**base, **sensing})
 
 
@@ -505,12 +650,12 @@ class Controller:
     --------
     >>> from gainsched.firmware.runtime import Interpolator, runtime_data
     >>> table = gs.load_table("tables/paper.h5")
-    >>> params = controller_params(gs.load_config("configs/paper.toml"))
+    >>> params = controller_params(gs.load_config("configs/paper.toml"), table)
     >>> ctl = Controller(params, Interpolator(runtime_data(table)))
     >>> row = np.zeros(N_INPUT)  # nothing measured yet: idle
     >>> thrust, status, _ = ctl.step(row, ctl.nominal_row(0.0, 5.0, 0, 0, 0, 0.0))
-    >>> thrust.tolist(), ctrl_status_text(status)
-    ([0.0, 0.0, 0.0, 0.0], 'IDLE')
+    >>> thrust.tolist(), ctrl_status_text(status)  # thrust_idle = thrust_min
+    ([0.1, 0.1, 0.1, 0.1], 'IDLE')
     """
 
     def __init__(self, params: ControllerParams, lookup):
@@ -522,6 +667,9 @@ class Controller:
         if n > MAX_STATE or N_STATE + len(params.int_of) > n:
             raise InputError(d.name, "n_state", f"{n} states: the controller holds "
                              f"{N_STATE + len(params.int_of)} to {MAX_STATE}")
+        if not all(math.isfinite(v) and v > 0.0 for v in params.int_limit):
+            raise InputError("controller", "int_limit", f"{params.int_limit}: each bound "
+                             "must be finite and > 0 (gs_ctrl_init: GS_BAD_ARG)")
         if params.delay_steps > MAX_DELAY:
             raise InputError("controller", "pose_delay", f"{params.pose_delay} s is more "
                              f"than {MAX_DELAY} control steps")
@@ -799,9 +947,9 @@ class Controller:
             st |= CTRL_SATURATED
         elif not st & CTRL_STALE_POSE:
             for i, j in enumerate(pr.int_of):
-                self.integ[i] = min(max(self.integ[i] + pr.dt * e[j], -pr.int_limit),
-                                    pr.int_limit)
-        if any(abs(v) >= pr.int_limit for v in self.integ[:m]):
+                lim = pr.int_limit[i]
+                self.integ[i] = min(max(self.integ[i] + pr.dt * e[j], -lim), lim)
+        if any(abs(v) >= lim for v, lim in zip(self.integ[:m], pr.int_limit, strict=True)):
             st |= CTRL_INT_LIMIT
         return u, st, self.z.copy()
 

@@ -165,7 +165,7 @@ def output_set(config, grid, out_dir=".", progress=None, grid_auto=None) -> Outp
     data = table_bytes(config, grid, Model(config), grid_auto)
     table = table_from_bytes(data, Path(out_dir) / name)
     form, cert = firmware_form(config, table, progress)
-    return OutputSet({name: data, **c_files(form, controller_params(config))}, form, cert)
+    return OutputSet({name: data, **c_files(form, controller_params(config, table))}, form, cert)
 
 
 def output_files(config, grid, out_dir=".", grid_auto=None) -> dict[str, bytes]:

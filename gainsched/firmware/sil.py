@@ -29,7 +29,7 @@ from .codegen import (
     render_control_header,
     write_header,
 )
-from .controller import N_INPUT, ControllerParams
+from .controller import MAX_INT, N_INPUT, ControllerParams
 from .runtime import BAD_ARG
 
 __all__ = ["N_OUTPUT", "write_controller", "driver_values", "build_controller",
@@ -61,11 +61,11 @@ def driver_values(data, params: ControllerParams) -> dict:
     for name, ctype, value in params.c_fields():
         lvalues = ([f"p->{name}"] if ctype in ("float", "uint32_t") else
                    [f"p->{name}[{j}]" for j in range(len(value))])
+        real = ctype.startswith("float")  # "float" or "float[n]"
         for lv in lvalues:
             i = len(setup)
-            setup.append(f"    {lv} = pv[{i}];" if ctype == "float" else
-                         f"    {lv} = (uint32_t)pv[{i}];")
-            getters.append(lv if ctype == "float" else f"(float){lv}")
+            setup.append(f"    {lv} = pv[{i}];" if real else f"    {lv} = (uint32_t)pv[{i}];")
+            getters.append(lv if real else f"(float){lv}")
     return dict(name=data.name, tool_version=data.meta.get("tool_version", "?"),
                 n_params=str(len(setup)), setup="\n".join(setup),
                 getters=",\n        ".join(getters))
@@ -116,11 +116,11 @@ class CController:
     Examples
     --------
     >>> from gainsched.firmware.controller import N_INPUT, controller_params
-    >>> ctl = CController(gs.load_table("tables/paper.h5"),
-    ...                   controller_params(gs.load_config("configs/paper.toml")))
+    >>> table = gs.load_table("tables/paper.h5")
+    >>> ctl = CController(table, controller_params(gs.load_config("configs/paper.toml"), table))
     >>> thrust, status, z = ctl.step(np.zeros(N_INPUT))  # nothing measured: idle
-    >>> thrust.tolist(), hex(status)
-    ([0.0, 0.0, 0.0, 0.0], '0x2000')
+    >>> thrust.tolist(), hex(status)  # the idle thrust, thrust_min in float32
+    ([0.10000000149011612, 0.10000000149011612, 0.10000000149011612, 0.10000000149011612], '0x2081')
     """
 
     def __init__(self, table, params: ControllerParams, build_dir=None, lib_path=None):
@@ -146,12 +146,21 @@ class CController:
         self._run.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p,
                               ctypes.c_void_p]
         self._run.restype = None
+        self._integ = getattr(lib, f"{nm}_sil_integ")
+        self._integ.argtypes, self._integ.restype = [ctypes.c_void_p, fp], None
         pv = params.c_array()  # the driver copies it into the gs_ctrl_params in _mem
         if setup(self._mem, pv.ctypes.data_as(fp)) & BAD_ARG:
             raise RuntimeError(f"gs_ctrl_init refused the parameters {params}")
         self._row = np.zeros(N_INPUT, dtype=np.float32)
         self._out = np.zeros(N_OUTPUT, dtype=np.float32)
         self._row_p, self._out_p = self._row.ctypes.data, self._out.ctypes.data
+
+    @property
+    def integ(self) -> np.ndarray:
+        """The integral states now (``gs_ctrl.integ``, rad s), one per ``params.int_of``."""
+        out = np.zeros(MAX_INT, dtype=np.float32)
+        self._integ(self._mem, out.ctypes.data_as(ctypes.POINTER(ctypes.c_float)))
+        return out[:len(self.params.int_of)].copy()
 
     def reset(self, p_I, v_I, q_IB) -> int:
         """Start the estimator at a known state (``gs_ctrl_reset``): GS_OK or GS_BAD_ARG."""

@@ -810,7 +810,7 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
     z_d[:, 1] = path.xi  # continuous, as the path controller's
     every = max(1, int(round(1.0 / (sens.rate_hz * dt))))
     delay = int(round(sens.latency / dt))
-    params = controller_params(design, pose_period=every * dt,
+    params = controller_params(design, getattr(scheduler, "data", None), pose_period=every * dt,
                                pose_delay=delay * dt if sens.latency_compensation else 0.0)
     if not sens.ideal and delay > 0 and params.pose_delay == 0:
         warnings.warn(uncompensated_latency_text(scenario.origin, sens.latency, scenario.speed,
@@ -1151,6 +1151,7 @@ def table_scheduler(table):
     lookup.feedforward = lambda path, alpha: feedforward(interp, path, alpha)
     # the firmware's whole loop (simulate(controller="firmware")): the Python reference
     lookup.controller = lambda params: Controller(params, interp)
+    lookup.data = interp.data  # the table it flies (controller_params sizes from it)
     return lookup
 
 
@@ -1222,6 +1223,7 @@ def c_runtime_scheduler(table, build_dir=None):
         return CController(data, params, lib_path=built["lib"])
 
     lookup.controller = controller
+    lookup.data = data  # the table it flies (controller_params sizes from it)
     lookup.runtime = rt  # keeps the library (and the temporary directory) alive
     lookup.build_dir = tmp
     return lookup

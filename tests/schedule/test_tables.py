@@ -238,7 +238,7 @@ def test_committed_c_outputs_match_what_the_build_writes():
     t = load_table(PAPER_H5)
     cfg = table_config(t)
     form, _ = firmware_form(cfg, t)
-    for name, data in c_files(form, controller_params(cfg)).items():
+    for name, data in c_files(form, controller_params(cfg, t)).items():
         assert (PAPER_H5.parent / name).read_bytes() == data, (
             f"tables/{name} is stale: run `make tables` and commit it")
 

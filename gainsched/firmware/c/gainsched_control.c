@@ -177,7 +177,7 @@ int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params
     float delay, timeout;
     unsigned i;
     if (c == NULL || table == NULL || params == NULL || table->vehicle == NULL ||
-        table->n_state > GS_CTRL_MAX_STATE || pr->n_int > 2u ||
+        table->n_state > GS_CTRL_MAX_STATE || pr->n_int > GS_CTRL_MAX_INT ||
         10u + pr->n_int > table->n_state || !(pr->dt > 0.0f) ||
         !(pr->thrust_max >= pr->thrust_min) || !(pr->pose_period > 0.0f) ||
         !(pr->pose_delay >= 0.0f) || !(pr->pose_timeout >= 0.0f) || gs_c_nonfinite(pr->dt) ||
@@ -185,7 +185,10 @@ int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params
         return GS_BAD_ARG;
     }
     for (i = 0u; i < pr->n_int; ++i) {
-        if (pr->int_of[i] > 1u) {
+        /* each bound finite and > 0 (NaN fails the comparison): a bound of 0 would hold
+         * the integral at it, and GS_CTRL_INT_LIMIT, for ever */
+        if (pr->int_of[i] > 1u || !(pr->int_limit[i] > 0.0f) ||
+            gs_c_nonfinite(pr->int_limit[i])) {
             return GS_BAD_ARG;
         }
     }
@@ -660,13 +663,14 @@ static uint32_t gs_c_control(gs_ctrl *c, const gs_ctrl_ref *ref, uint32_t st, in
         st |= GS_CTRL_SATURATED;
     } else if ((st & GS_CTRL_STALE_POSE) == 0u) {
         for (i = 0u; i < pr->n_int; ++i) {
+            const float lim = pr->int_limit[i]; /* its own bound (gs_ctrl_init: > 0) */
             float s = c->integ[i] + pr->dt * e[pr->int_of[i]];
-            s = s > pr->int_limit ? pr->int_limit : s < -pr->int_limit ? -pr->int_limit : s;
+            s = s > lim ? lim : s < -lim ? -lim : s;
             c->integ[i] = s;
         }
     }
     for (i = 0u; i < pr->n_int; ++i) {
-        if (c->integ[i] >= pr->int_limit || c->integ[i] <= -pr->int_limit) {
+        if (c->integ[i] >= pr->int_limit[i] || c->integ[i] <= -pr->int_limit[i]) {
             st |= GS_CTRL_INT_LIMIT;
         }
     }

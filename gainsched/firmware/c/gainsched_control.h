@@ -26,8 +26,9 @@
  *  3. Control (gs_ctrl_control): gs_lookup_nominal at the reference -> K, x_d, u_d;
  *     errors x - x_d with the azimuth error unwrapped step to step (a lag of 4 rad
  *     stays a lag); u = u_d - K (x - x_d); clip to the motors' range; the integral
- *     states integrate their errors unless a motor is clipped (anti-windup) and stay
- *     within int_limit.
+ *     states integrate their errors unless a motor is clipped (anti-windup), each
+ *     within its own bound int_limit[i] (the generated default: sized from the table's
+ *     gains, docs/runtime.md "Integral bounds").
  *  4. Status policy: an unusable lookup flies the last good gains (GS_CTRL_HELD);
  *     with no good gains yet, a bad reference or no state estimate the outputs are
  *     the idle thrusts (GS_CTRL_IDLE); a bad or stale pose and a bad IMU sample
@@ -48,12 +49,15 @@
 extern "C" {
 #endif
 
-#define GS_CONTROL_VERSION 2
+/* 3: gs_ctrl_params.int_limit is an array, one bound per integral state */
+#define GS_CONTROL_VERSION 3
 
 /* the largest LQR state a gs_ctrl holds (its last good gains), and the longest pose
  * delay its history buffers, in control steps */
 #define GS_CTRL_MAX_STATE 24u
 #define GS_CTRL_MAX_DELAY 32u
+/* the most integral states a gs_ctrl holds (int_delta, int_xi) */
+#define GS_CTRL_MAX_INT 2u
 /* a position (m) or velocity (m/s) component beyond this is rejected as a bad pose */
 #define GS_CTRL_POSE_LIMIT 1.0e3f
 
@@ -66,8 +70,8 @@ extern "C" {
 #define GS_CTRL_BAD_IMU 0x1000u    /* gyro or accelerometer NaN or beyond its range */
 #define GS_CTRL_IDLE 0x2000u       /* outputs are the idle thrusts: no state estimate,
                                     * no good gains yet, or a bad reference */
-#define GS_CTRL_INT_LIMIT 0x4000u  /* an integral state is at its bound int_limit: the
-                                    * error it integrates is more than it can hold */
+#define GS_CTRL_INT_LIMIT 0x4000u  /* an integral state i is at its bound int_limit[i]:
+                                    * the error it integrates is more than it can hold */
 
 /* ---- input flags (gs_ctrl_input.flags) --------------------------------------- */
 #define GS_CTRL_POSE 0x1u       /* p_I, q_IB hold a pose taken pose_delay ago */
@@ -84,9 +88,15 @@ typedef struct gs_ctrl_params {
     float thrust_min;  /* N: the clip, per motor */
     float thrust_max;  /* N */
     float thrust_idle; /* N: the outputs with GS_CTRL_IDLE */
-    float int_limit;   /* |integral state| bound, rad s (anti-windup) */
-    uint32_t n_int;    /* integral states in the LQR state after the 10 reduced ones */
-    uint32_t int_of[2]; /* the reduced state each integrates: 0 delta, 1 xi */
+    float int_limit[GS_CTRL_MAX_INT]; /* rad s: |integral state i| <= int_limit[i]
+                                       * (anti-windup); each of the first n_int finite
+                                       * and > 0 (else gs_ctrl_init: GS_BAD_ARG), the
+                                       * rest unused. The generated default: the motor
+                                       * range over the state's largest gain in the
+                                       * table (docs/runtime.md) */
+    uint32_t n_int;    /* integral states in the LQR state after the 10 reduced ones,
+                        * 0..GS_CTRL_MAX_INT */
+    uint32_t int_of[GS_CTRL_MAX_INT]; /* the reduced state each integrates: 0 delta, 1 xi */
     /* sensing and estimator */
     float pose_delay;     /* s: age of a pose when it arrives (rounded to steps); 0 with
                            * late poses: the estimate lags, and no status says so */
@@ -145,7 +155,7 @@ typedef struct gs_ctrl {
     float gyro[3], accel[3];                     /* the last good IMU samples */
     float gyro_prev[3], accel_prev[3];           /* and the previous step's */
     float az_err;                                /* the previous azimuth error, rad */
-    float integ[2];                              /* the integral states, rad s */
+    float integ[GS_CTRL_MAX_INT];                /* the integral states, rad s */
     float z[10];                                 /* the last reduced state estimate */
     float K[2][4u * GS_CTRL_MAX_STATE];          /* the last good gains, K[good], and
                                                   * the other buffer the lookup fills */
@@ -155,12 +165,25 @@ typedef struct gs_ctrl {
  * Prepare a controller for `table` (verified with gs_verify first) with `params`
  * (both must outlive it). No state estimate yet: give a pose, or gs_ctrl_reset.
  * Returns GS_OK, or GS_BAD_ARG (NULL, a table without vehicle constants, a state
- * too large for GS_CTRL_MAX_STATE, a delay beyond GS_CTRL_MAX_DELAY, bad params).
+ * too large for GS_CTRL_MAX_STATE, a delay beyond GS_CTRL_MAX_DELAY, bad params:
+ * among them n_int > GS_CTRL_MAX_INT, an int_of beyond 1, an int_limit[i] (i < n_int)
+ * that is NaN, infinite or <= 0).
+ *
+ * @param c       [out] the controller to prepare (zeroed and filled on GS_OK)
+ * @param table   the table, verified (gs_verify)
+ * @param params  the controller's parameters (e.g. the generated <name>_ctrl_params)
  */
 int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params);
 
 /* Start the estimator at a known state: COG position p_I (m), velocity v_I (m/s),
- * attitude q_IB (normalised here). GS_BAD_ARG for NULL or non-finite values. */
+ * attitude q_IB (normalised here). GS_BAD_ARG for NULL or non-finite values, or
+ * |q_IB|^2 outside (0.25, 4).
+ *
+ * @param c     the controller (gs_ctrl_init)
+ * @param p_I   COG position in I, m
+ * @param v_I   COG velocity in I, m/s
+ * @param q_IB  attitude quaternion, Hamilton, scalar first, body -> I
+ */
 int gs_ctrl_reset(gs_ctrl *c, const float p_I[3], const float v_I[3], const float q_IB[4]);
 
 /*
@@ -196,6 +219,16 @@ void gs_ctrl_commands(const gs_ctrl_params *p, const float thrust[4], float out[
  * position p_I (m), velocity v_I (m/s), attitude q_IB (unit) and body rates omega_B
  * (rad/s) on the circle of tilt alpha and heading gamma (rad), for a tether of
  * length rho attached L_e behind the COG (m). xi in [-pi, pi], chi in [-pi, pi].
+ *
+ * @param p_I      COG position in I, m
+ * @param v_I      COG velocity in I, m/s
+ * @param q_IB     unit attitude quaternion (body -> I)
+ * @param omega_B  body rates, rad/s
+ * @param alpha    circle tilt, rad
+ * @param gamma    circle heading, rad
+ * @param rho      tether length, m (unused: the attachment point's own distance is)
+ * @param L_e      attachment offset behind the COG, m
+ * @param z        [out] the reduced state
  */
 void gs_reduced_from_kinematics(const float p_I[3], const float v_I[3], const float q_IB[4],
                                 const float omega_B[3], float alpha, float gamma, float rho,

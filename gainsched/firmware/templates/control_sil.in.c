@@ -47,6 +47,14 @@ void ${name}_sil_params(float *pv)
     memcpy(pv, v, sizeof v);
 }
 
+/* the integral states of the controller in mem, rad s: GS_CTRL_MAX_INT floats */
+void ${name}_sil_integ(const void *mem, float *integ);
+void ${name}_sil_integ(const void *mem, float *integ)
+{
+    const gs_ctrl *c = (const gs_ctrl *)mem;
+    memcpy(integ, c->integ, sizeof c->integ);
+}
+
 int ${name}_sil_reset(void *mem, const float *pvq);
 int ${name}_sil_reset(void *mem, const float *pvq)
 {
