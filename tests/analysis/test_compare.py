@@ -223,8 +223,10 @@ def test_cli_compare_writes_report(paper_config, fly, tmp_path):
     paths = write_campaign(tmp_path / "logs", logs[:4])
     paths += write_campaign(tmp_path / "logs", logs[4:], "h5")
     out = tmp_path / "rep"
+    before = tmp_path / "before.toml"  # an earlier config: the drag of the paper halved
+    before.write_text(paper_config_text(**{"effects.drag.mu2": 0.00125}))
     res = CliRunner().invoke(cli, ["compare", str(PAPER), *map(str, paths), "-o", str(out),
-                                   "--before", str(PAPER)])
+                                   "--before", str(before)])
     assert res.exit_code == 0, res.output
     assert "where it fails: tangential residual grows with" in res.output
     assert "Fig. 6: drag fit" in res.output
