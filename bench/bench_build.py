@@ -453,6 +453,36 @@ def bench_build(cfg):
     return out
 
 
+#: library effects that leave the closed form (their nominal is the numerical trim), with
+#: the parameters of the hidden-effect campaigns (gainsched.sim.campaign.HIDDEN)
+TRIM_EFFECTS = {
+    "rotor_drag": {"k_rd": 0.015},
+    "motor_lag": {"tau": 0.035},
+    "thrust_momentum": {"disk_area": 0.006},
+    "thrust_airspeed": {"c1": -0.01, "c2": 0.0},
+}
+
+
+def bench_effect_builds(cfg):
+    """Issue 39: a build whose effects leave the closed form (the numerical trim at every
+    circle) against the drag-only build of the same grid, both on one worker in this run:
+    the paper's grid cut to 5 speeds x 3 tilts."""
+    from gainsched.configedit import set_section
+
+    text = _variant(PAPER.read_text(), speeds=[3, 6, 9, 12, 15], tilts=[0, 20, 40])
+    t0, g0 = best_of(lambda: build_grid(config_from_text(text, "cut.toml"), n_jobs=1), 2)
+    out = {"drag_only_s": t0}
+    print(f"  build of the paper grid cut to 5 speeds x 3 tilts ({g0.spectral_radius.size} "
+          f"circles), drag only (closed form): {t0:.2f} s")
+    for kind, values in TRIM_EFFECTS.items():
+        eff = set_section(text, f"effects.{kind}", [(k, v, None) for k, v in values.items()])
+        cfg_e = config_from_text(eff, f"{kind}.toml")
+        t, _ = best_of(lambda c=cfg_e: build_grid(c, n_jobs=1), 2)
+        print(f"    + {kind}: {t:.2f} s, x{t / t0:.2f} the drag-only build")
+        out[f"{kind}_s"], out[f"{kind}_ratio"] = t, t / t0
+    return out
+
+
 def plot(results, out_dir):
     """Scaling curves (PNG) next to bench/results.json."""
     import matplotlib
@@ -504,6 +534,7 @@ def main():
         {
             "linearization": bench_linearization(cfg),
             "build": bench_build(cfg),
+            "effect_builds": bench_effect_builds(cfg),
         }
     )
     if "compiled_2t_ratio_vs_loop" in r:
