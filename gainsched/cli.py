@@ -1085,8 +1085,15 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
     for line in compare_lines(base):
         click.echo(line)
     click.echo("")
-    d = run_diagnose(cfg, logs, candidates=candidates or None, comparison=base, joint=joint,
-                     exclude=exclude)
+    from tqdm import tqdm
+
+    with tqdm(unit="fit", desc="diagnose", disable=None) as bar:
+        def fitted(name):  # the candidate about to be fitted, on a terminal
+            bar.set_postfix_str(name, refresh=False)
+            bar.update()
+
+        d = run_diagnose(cfg, logs, candidates=candidates or None, comparison=base,
+                         joint=joint, exclude=exclude, progress=fitted)
     for line in diagnose_lines(d):
         click.echo(line)
     after = None
