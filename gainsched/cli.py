@@ -838,7 +838,7 @@ def simulate(config, table_path, scenario, plant_path, speed, runtime, controlle
         scn = dataclasses.replace(scn, speed=speed)
     n = check_flight_steps(scn.duration, cfg.control.rate_hz, scenario, "duration")
     check_out_dir(out_dir, names=["log.csv", "log.h5", "metrics.json"])
-    if table.config_sha256 != cfg.sha256:  # once every input passed
+    if not table.built_from(cfg):  # once every input passed
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     with tqdm(total=n, unit="step", desc=f"simulate {scn.name}", disable=None) as bar:
         res = run(cfg, runtime_scheduler(table, runtime), scn, plant, progress=bar.update,
@@ -870,7 +870,7 @@ def _table_of(cfg):
     local = _REPO / "tables" / f"{cfg.name}.h5"
     if local.is_file():
         table = load_table(local)
-        if table.config_sha256 == cfg.sha256:
+        if table.built_from(cfg):
             return table, local
     path = cached_table_path(cfg)
     total = None if cfg.grid.auto else cfg.grid.speeds.size
@@ -918,7 +918,7 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
         table, table_path = _table_of(cfg)
     else:
         table = load_table(table_path)
-    if table.config_sha256 != cfg.sha256:
+    if not table.built_from(cfg):
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     n = len(experiments(quick=quick))
     meta = {"table": str(table_path), "table_config_sha256": table.config_sha256}
@@ -1198,7 +1198,7 @@ def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_
     check_flight_steps(duration, cfg.control.rate_hz, "command line", "--duration")
     table = load_table(table_path)
     check_out_dir(out_dir)
-    if table.config_sha256 != cfg.sha256:  # as simulate and paper say it, before the work
+    if not table.built_from(cfg):  # as simulate and paper say it, before the work
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     logs = fly(cfg, table_scheduler(table), hidden, duration=duration,
                load_cell=not no_load_cell, seed=seed)

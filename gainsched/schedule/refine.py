@@ -230,6 +230,10 @@ class GridChoice:
     centres, centres_final : int
         Centre circles solved (the certificate); of them, the chosen grid's usable
         cells (the others belong to cells split later).
+    source_sha256 : str
+        SHA-256 of the config the build was given (with its ranges): the table's
+        ``config_sha256`` is the chosen config's, so this says which config the user
+        built it from (:meth:`~gainsched.schedule.tables.Table.built_from`).
     """
 
     config: object
@@ -253,6 +257,7 @@ class GridChoice:
     reused: int
     centres: int
     centres_final: int
+    source_sha256: str = ""
 
     @property
     def max_error(self) -> float:
@@ -285,6 +290,7 @@ class GridChoice:
             "reused": self.reused,
             "centres": self.centres,
             "centres_final": self.centres_final,
+            "source_config_sha256": self.source_sha256,
         }
 
     def lines(self) -> list[str]:
@@ -665,7 +671,7 @@ class _Refiner:
 
         worst = max(live, key=lambda x: (x[1].error, x[0]))[0] if live else (math.nan,) * 4
         return GridChoice(
-            config=chosen, grid=grid, bound=self.bound,
+            config=chosen, grid=grid, bound=self.bound, source_sha256=self.config.sha256,
             speeds_spec=self.speeds.auto.spec() if self.speeds.auto else None,
             tilts_spec=self.tilts.auto.spec() if self.tilts.auto else None,
             azimuth_spec=self.azimuth.spec() if self.azimuth else None,

@@ -167,6 +167,13 @@ class Table:
     def name(self) -> str:
         return str(self.attrs["config_name"])
 
+    def built_from(self, config) -> bool:
+        """Whether the table was built from ``config``: the config it embeds, or, for a
+        grid the build chose (``grid_auto``), the config with the ranges it was given
+        (``source_config_sha256``; the embedded one holds the chosen breakpoints)."""
+        return config.sha256 in (self.config_sha256,
+                                 (self.grid_auto or {}).get("source_config_sha256"))
+
     @property
     def state_names(self) -> tuple[str, ...]:
         """The LQR states in K's column order (``attrs["state_names"]``)."""

@@ -226,6 +226,18 @@ def test_build_inspect_check_report_the_choice(tmp_path):
     res = run(cli, ["inspect", str(table), "--json"])
     record = json.loads(res.output)["grid_auto"]
     assert record["bound"] == 0.03 and record["tilts_deg"].startswith("{min = 0.0")
+    # issue 39: the config with the ranges built it (the table embeds the chosen one), so
+    # no "built from another config" warning; another config still gets it
+    from gainsched.config import load_config
+    from gainsched.schedule.tables import load_table
+
+    t = load_table(table)
+    assert record["source_config_sha256"] == load_config(path).sha256 != t.config_sha256
+    assert t.built_from(load_config(path)) and t.built_from(config_from_text(t.config_text))
+    assert not t.built_from(config_from_text(auto_text().replace("mass = 0.5", "mass = 0.55")))
+    res = run(cli, ["campaign", str(path), "--tables", str(table), "--duration", "1", "-o",
+                    str(tmp_path / "flights")])
+    assert res.exit_code == 0 and "built from another config" not in res.output, res.output
     res = run(cli, ["check", str(table)])
     assert res.exit_code == 0, res.output
     assert "PASS: gain, thrust and roll error <= 3%" in res.output
