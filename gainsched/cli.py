@@ -853,6 +853,28 @@ def simulate(config, table_path, scenario, plant_path, speed, runtime, controlle
         f"max tension {m['max_tension_N']:.1f} N, "
         f"saturation {100 * m['saturation_fraction']:.1f}%, slack events {m['slack_events']}"
     )
+    for line in _left_the_table(m, table_path):
+        click.echo(line)
+
+
+def _left_the_table(m: dict, table_path) -> list[str]:
+    """What a flight's metrics say about leaving the table (docs/runtime.md, the policy
+    the simulator flies): time on gains clamped to the table's speed range, on held gains,
+    or with the nominal's tension below ``feasibility.min_tension``; none when it stayed
+    inside."""
+    out = []
+    if m["clamped_speed_s"] > 0:
+        out.append(f"  left the table: {m['clamped_speed_s']:.2f} s at speeds outside "
+                   f"{table_path}'s range, flown on the gains of its nearest speed "
+                   "(clamped_speed_s)")
+    if m["held_gains_s"] > 0:
+        out.append(f"  left the table: {m['held_gains_s']:.2f} s on held gains (no usable "
+                   "gains at the lookup; held_gains_s)")
+    if m["below_tension_margin_s"] > 0:
+        out.append(f"  left the table: {m['below_tension_margin_s']:.2f} s with the nominal's "
+                   f"tension below min_tension (lowest {m['min_nominal_tension_N']:.2f} N; "
+                   "below_tension_margin_s)")
+    return out
 
 
 _REPO = Path(__file__).resolve().parents[1]
@@ -1165,12 +1187,24 @@ def convert(log, out_path, map_path, config_path, trust):
                f"gamma_c {gamma:.2f} deg")
 
 
+class _HiddenOption(click.Option):
+    """``--hidden``: its help lists the hidden effects of
+    :data:`gainsched.sim.campaign.HIDDEN`, read when help is asked for (the simulator is
+    not imported to start a command)."""
+
+    def get_help_record(self, ctx):
+        from .sim.campaign import HIDDEN
+
+        self.help = f"Hidden effect of the plant: {', '.join(HIDDEN)}."
+        return super().get_help_record(ctx)
+
+
 @cli.command()
 @CONFIG
 @click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
               required=True, help="Gain table (HDF5) built from CONFIG.")
 @click.option("--hidden", type=Name(), default="none", show_default=True,
-              help="Hidden effect of the plant (gainsched.sim.campaign.HIDDEN).")
+              cls=_HiddenOption, help="Hidden effect of the plant.")
 @click.option("--duration", type=FiniteFloat(1.0, MAX_FLIGHT_S, unit="s"), default=3.0,
               show_default=True, help=f"Seconds per flight (1..{MAX_FLIGHT_S:g}).")
 @click.option("--no-load-cell", is_flag=True, help="Drop the tether tension column.")
@@ -1186,7 +1220,7 @@ def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_
     braking; motion-capture noise) on a plant with a HIDDEN effect and write the logs."""
     from .publish import check_out_dir, staged
     from .schedule.tables import load_table
-    from .sim.campaign import HIDDEN, write_campaign
+    from .sim.campaign import HIDDEN, default_flights, outside_table, write_campaign
     from .sim.campaign import campaign as fly
     from .sim.loop import check_flight_steps, table_scheduler
 
@@ -1200,7 +1234,13 @@ def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_
     check_out_dir(out_dir)
     if not table.built_from(cfg):  # as simulate and paper say it, before the work
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
-    logs = fly(cfg, table_scheduler(table), hidden, duration=duration,
+    flights = default_flights(duration, seed)
+    if outside := outside_table(flights, table):
+        click.echo(f"gainsched: warning: {table_path} covers speeds "
+                   f"{table.speed.min():.3g}-{table.speed.max():.3g} m/s, tilts up to "
+                   f"{np.rad2deg(table.tilt.max()):.0f} deg: {', '.join(outside)} fly outside "
+                   "it, on the gains of its nearest circle", err=True)
+    logs = fly(cfg, table_scheduler(table), hidden, scenarios=flights, duration=duration,
                load_cell=not no_load_cell, seed=seed)
     with staged(out_dir) as stage:
         paths = write_campaign(stage, logs, fmt)

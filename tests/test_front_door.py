@@ -777,3 +777,48 @@ def test_ctrl_c_during_the_heavy_imports(tmp_path):
                        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert p.returncode == 130, p.stderr
     assert p.stderr == "gainsched: interrupted\n" and p.stdout == ""
+
+
+def test_simulate_says_when_the_flight_left_the_table(tmp_path, monkeypatch):
+    """Issue 39: a flight faster than the table's fastest circle (15.5 m/s against 15):
+    simulate's summary says how long it flew on clamped gains (the metric it already
+    wrote to metrics.json); a flight inside says nothing of it."""
+    import json
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "scenario.toml").write_text(SCENARIO.replace("8.0", "15.5"))
+    res = _run(*_simulate())
+    assert res.exit_code == 0, res.output
+    m = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert m["clamped_speed_s"] > 0.5
+    assert (f"  left the table: {m['clamped_speed_s']:.2f} s at speeds outside {TABLE}'s "
+            "range") in res.output, res.output
+    (tmp_path / "scenario.toml").write_text(SCENARIO)
+    res = _run(*_simulate()[:-1], "out2")
+    assert res.exit_code == 0 and "left the table" not in res.output, res.output
+
+
+def test_campaign_says_which_flights_leave_the_table(tmp_path, monkeypatch):
+    """Issue 39: campaign flies 3-15 m/s and tilts to 40 deg whatever the table covers;
+    with a table of 6-9 m/s and tilts to 20 deg it names the flights outside it before it
+    flies (outside_table, checked against a synthetic grid too); --hidden's help lists the
+    hidden effects."""
+    from gainsched.sim.campaign import HIDDEN, default_flights, outside_table
+
+    from support import small_config_text, synthetic_table
+
+    flights = default_flights(1.0)
+    assert outside_table(flights, synthetic_table(n_v=7)) == []  # 2-15 m/s, tilts to 40 deg
+    assert outside_table(flights, synthetic_table(n_v=4)) == [  # 2-7 m/s
+        "v9", "v15", "tilt20-v8", "speedup", "braking"]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "small.toml").write_text(small_config_text())
+    assert _run("build", "small.toml", "-o", "t").exit_code == 0
+    res = _run("campaign", "small.toml", "--tables", "t/small.h5", "--duration", "1", "-o",
+               "out")
+    assert res.exit_code == 0, res.output
+    assert res.stderr.splitlines()[0] == (
+        "gainsched: warning: t/small.h5 covers speeds 6-9 m/s, tilts up to 20 deg: v3, v15, "
+        "tilt40-v7, speedup, braking fly outside it, on the gains of its nearest circle")
+    help_text = " ".join(_run("campaign", "--help").output.split())
+    assert "Hidden effect of the plant: " + ", ".join(HIDDEN) in help_text

@@ -28,6 +28,7 @@ from .loop import Maneuver, Scenario, Sensing, log_from_result, simulate
 __all__ = [
     "HiddenEffect",
     "HIDDEN",
+    "outside_table",
     "AzimuthThrustLoss",
     "default_flights",
     "plant_config",
@@ -206,6 +207,19 @@ def default_flights(duration: float = 3.0, seed: int = 1) -> tuple[Scenario, ...
                  sensing=dataclasses.replace(sens, seed=seed + i))
         for i, (nm, tilt, v, man) in enumerate(spec)
     )
+
+
+def outside_table(scenarios, table) -> list[str]:
+    """Names of the ``scenarios`` that fly outside ``table``'s speeds or tilts at some
+    moment (their initial speed, a manoeuvre's target speed, their tilt): on a table's
+    edge the runtime clamps the lookup, and the flight tests the clamped gains, not the
+    table."""
+    lo, hi = float(np.min(table.speed)), float(np.max(table.speed))
+    tilt = float(np.max(np.abs(table.tilt)))
+    return [s.name for s in scenarios
+            if any(not lo - 1e-9 <= abs(v) <= hi + 1e-9
+                   for v in (s.speed, *(m.speed for m in s.maneuvers)))
+            or abs(s.tilt) > tilt + 1e-9]
 
 
 def plant_config(design: Config, hidden: HiddenEffect | str) -> Config:
