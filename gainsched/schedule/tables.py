@@ -136,6 +136,8 @@ class Table:
      'omega_z', 'int_delta')
     >>> float(table.attrs["radius_m"]), round(float(table.xi_dot[-1]), 4)  # m, rad/s
     (1.6, 9.375)
+    >>> repr(table)[:59], len(repr(table)) < 200  # one line: no arrays printed
+    ("Table('paper', 7 tilts 0-40 deg x 19 speeds 1.3-15 m/s x 36", True)
     """
 
     xi: np.ndarray
@@ -166,6 +168,15 @@ class Table:
     @property
     def name(self) -> str:
         return str(self.attrs["config_name"])
+
+    def __repr__(self) -> str:
+        """One line (the arrays are megabytes: a notebook cell would print them all)."""
+        tilts = np.rad2deg(self.tilt)
+        feasible = np.count_nonzero(self.reasons == 0) / max(self.reasons.size, 1)
+        return (f"Table({self.name!r}, {tilts.size} tilts {tilts.min():g}-{tilts.max():g} deg x "
+                f"{self.speed.size} speeds {self.speed.min():g}-{self.speed.max():g} m/s x "
+                f"{self.xi.size} azimuths, {len(self.state_names)} states, "
+                f"{feasible:.1%} feasible, source={self.source!r})")
 
     def built_from(self, config) -> bool:
         """Whether the table was built from ``config``: the config it embeds, or, for a
