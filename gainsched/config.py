@@ -18,6 +18,7 @@ would need more memory or CPU time than ``[limits]`` allows
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import math
 import re
@@ -507,6 +508,11 @@ def _numeric_list(v) -> bool:
     )
 
 
+#: how alike a written key and a known one must be to be named as its likely meaning
+#: (difflib's ratio: ``arm_lenght`` and ``arm_length`` 0.9, ``mass`` and ``max`` 0.57)
+_TYPO_CUTOFF = 0.8
+
+
 class Section:
     """A TOML table being consumed: tracks which keys were read, to reject unknown ones."""
 
@@ -526,6 +532,11 @@ class Section:
         self.used.add(k)
         if k not in self.data:
             if default is ...:
+                # a misspelt key reads as a missing one: name the key that was written
+                typo = difflib.get_close_matches(k, [d for d in self.data if d not in self.used],
+                                                 n=1, cutoff=_TYPO_CUTOFF)
+                if typo:
+                    raise self.error(typo[0], f"unknown key (did you mean {k}?)")
                 raise self.error(k, "missing required key")
             return default
         return self.data[k]
@@ -596,7 +607,10 @@ class Section:
     def done(self):
         extra = sorted(set(self.data) - self.used)
         if extra:
-            raise self.error(extra[0], "unknown key")
+            near = difflib.get_close_matches(extra[0], sorted(self.used), n=1,
+                                             cutoff=_TYPO_CUTOFF)
+            raise self.error(extra[0], "unknown key" + (f" (did you mean {near[0]}?)"
+                                                        if near else ""))
 
 
 def check_square_weight(sec: Section, k: str, n: int, *, definite: bool,
