@@ -36,7 +36,7 @@ from .envelope import envelope_from_table, envelope_png
 from .modes import dominant_states
 
 __all__ = ["schedule_figures", "schedule_plots", "table_summary", "slowest_mode",
-           "mode_lines", "gain_file_name"]
+           "mode_lines", "gain_file_name", "gain_unit", "state_unit"]
 
 INPUT_NAMES = ("T1", "T2", "T3", "T4")
 
@@ -88,6 +88,25 @@ def _outer_labels(axes) -> None:
             ax.tick_params(labelleft=False)
 
 
+def state_unit(name: str) -> str:
+    """The unit of an LQR state by its name (``Table.state_names``): rad for the angles,
+    rad/s for their rates and the body rates, rad s for the integrals, N for an effect's
+    thrust states (motor lag)."""
+    if name.startswith("int_"):
+        return "rad s"
+    if name.endswith("_dot") or name.startswith("omega_"):
+        return "rad/s"
+    if name in ("delta", "xi", "phi", "theta", "chi"):
+        return "rad"
+    return "N"
+
+
+def gain_unit(name: str) -> str:
+    """The unit of a gain ``K[T_i, name]`` (a thrust in N per unit of the state)."""
+    unit = state_unit(name)
+    return "N/N" if unit == "N" else f"N/({unit})" if " " in unit or "/" in unit else f"N/{unit}"
+
+
 def _gain_figure(plt, table, i: int):
     K = table.K_full()[i]  # (n_v, n_xi, 4, n)
     ok = _feasible(table)[i]
@@ -101,9 +120,17 @@ def _gain_figure(plt, table, i: int):
             vals = np.where(ok, K[..., r, c], np.nan)
             fin = vals[np.isfinite(vals)]
             rng = f"{fin.min():.3g}..{fin.max():.3g}" if fin.size else "no gains"
+            # a diverging map centred on 0 for gains of both signs, a sequential one else
+            both = fin.size and fin.min() < 0 < fin.max()
             mesh = _map(axes[r, c], xi_deg, table.speed, vals,
-                        f"K[{INPUT_NAMES[r]}, {names[c]}]\n{rng}", cmap="coolwarm")
+                        f"K[{INPUT_NAMES[r]}, {names[c]}] {gain_unit(names[c])}\n{rng}",
+                        cmap="coolwarm" if both else "viridis")
+            if both:
+                top = float(np.abs(fin).max())
+                mesh.set_clim(-top, top)
             mesh.set_gid(f"K_{r}_{c}")
+            bar = plt.colorbar(mesh, ax=axes[r, c], pad=0.02, fraction=0.08)
+            bar.ax.tick_params(labelsize=5, length=1.5)
     _outer_labels(axes)
     tilt = np.rad2deg(table.tilt[i])
     fig.suptitle(f"{table.name}: gains K (u = u_d - K (x - x_d)) at tilt {tilt:g} deg, "

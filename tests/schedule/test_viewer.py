@@ -151,3 +151,35 @@ def test_inspect_json_is_the_table_at_a_glance(paper_table):
     assert js["worst_spectral_radius"] == np.nanmax(paper_table.spectral_radius)
     assert sum(js["reasons"].values()) >= np.count_nonzero(paper_table.reasons)
     assert js["config_sha256"] == paper_table.config_sha256
+
+
+def test_gain_maps_carry_units_colorbars_and_a_map_for_their_sign(paper_table):
+    """Issue 39: every gain map has its colorbar and its gain's unit (N per the state's
+    unit), a diverging map centred on 0 for gains of both signs and a sequential one for
+    one-signed gains."""
+    from gainsched.schedule.viewer import gain_unit
+
+    assert [gain_unit(n) for n in ("delta", "xi_dot", "omega_x", "int_delta", "motor_lag_0")] \
+        == ["N/rad", "N/(rad/s)", "N/(rad/s)", "N/(rad s)", "N/N"]
+    figs = schedule_figures(paper_table)
+    try:
+        fig = figs[gain_file_name(paper_table.tilt[3])]
+        ok = paper_table.reasons[3] == 0
+        K = paper_table.K_full()[3]
+        names = paper_table.state_names
+        for r in range(4):
+            for c in range(K.shape[-1]):
+                mesh = _mesh(fig, f"K_{r}_{c}")
+                assert mesh.colorbar is not None
+                assert gain_unit(names[c]) in mesh.axes.get_title()
+                fin = K[..., r, c][ok]
+                if fin.min() < 0 < fin.max():
+                    lo, hi = mesh.get_clim()
+                    assert mesh.get_cmap().name == "coolwarm" and lo == -hi
+                else:
+                    assert mesh.get_cmap().name == "viridis"
+    finally:
+        import matplotlib.pyplot as plt
+
+        for f in figs.values():
+            plt.close(f)
