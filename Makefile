@@ -67,6 +67,11 @@ distclean: clean
 # ---- firmware: C header + runtime (docs/runtime.md) ----------------------------
 FW_TABLE  ?= tables/paper.h5
 FW_DIR    ?= build/firmware
+# the C prefix of FW_TABLE's symbols (paper_table, PAPER_N_STATE): the examples are built
+# for any table (examples/firmware/any_table.h); read only by the firmware targets
+FW_NAME    = $(shell $(BIN)/gainsched inspect $(FW_TABLE) --json \
+	| $(BIN)/python -c "import json, sys; print(json.load(sys.stdin)['c_prefix'])")
+FW_NAMES   = -DGS_NAME=$(FW_NAME) -DGS_NAME_UC=$(shell echo $(FW_NAME) | tr a-z A-Z)
 FW_CFLAGS ?= -std=c99 -Wall -Wextra -Wpedantic -Werror -O2
 M4F_FLAGS  = -mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard -Os -ffunction-sections -fdata-sections
 FUZZ_RUNS    ?= 5000000
@@ -78,10 +83,10 @@ CLANG     ?= $(firstword $(foreach c,clang clang-19 clang-18 clang-17 clang-16 c
 # builds, run: the lookup loop (main.c) and the whole 1 kHz control loop (control_loop.c).
 firmware-example: $(STAMP)
 	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR)
-	$(CC) $(FW_CFLAGS) -I$(FW_DIR) examples/firmware/main.c $(FW_DIR)/gainsched_runtime.c \
+	$(CC) $(FW_CFLAGS) $(FW_NAMES) -I$(FW_DIR) examples/firmware/main.c $(FW_DIR)/gainsched_runtime.c \
 		-o $(FW_DIR)/firmware_example
 	$(FW_DIR)/firmware_example
-	$(CC) $(FW_CFLAGS) -I$(FW_DIR) examples/firmware/control_loop.c \
+	$(CC) $(FW_CFLAGS) $(FW_NAMES) -I$(FW_DIR) examples/firmware/control_loop.c \
 		$(FW_DIR)/gainsched_control.c $(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/control_loop
 	$(FW_DIR)/control_loop
 
@@ -101,7 +106,7 @@ firmware-size: $(STAMP)
 	for fmt in dense compact; do \
 		$$CC_SIZE -I$(FW_DIR)/$$fmt -c $(FW_DIR)/$$fmt/gainsched_runtime.c -o $(FW_DIR)/$$fmt/runtime.o; \
 		$$CC_SIZE -I$(FW_DIR)/$$fmt -c $(FW_DIR)/$$fmt/gainsched_control.c -o $(FW_DIR)/$$fmt/control.o; \
-		$$CC_SIZE -I$(FW_DIR)/$$fmt -c examples/firmware/size_probe.c -o $(FW_DIR)/$$fmt/table.o; \
+		$$CC_SIZE $(FW_NAMES) -I$(FW_DIR)/$$fmt -c examples/firmware/size_probe.c -o $(FW_DIR)/$$fmt/table.o; \
 		echo "$$fmt table, $$TARGET: code (runtime.o, control.o) + data (table.o .rodata), bytes"; \
 		$$SIZE -A $(FW_DIR)/$$fmt/runtime.o $(FW_DIR)/$$fmt/control.o $(FW_DIR)/$$fmt/table.o \
 			| grep -Ev '^\.(comment|ARM\.attributes|debug)|^ *$$' ; \
@@ -117,21 +122,21 @@ fuzz: $(STAMP)
 		| $(CLANG) -x c - -fsanitize=fuzzer -o $(FW_DIR)/.fuzzprobe >/dev/null 2>&1; then \
 		set -e; mkdir -p $(FW_DIR)/fuzz-corpus; \
 		echo "fuzz: libFuzzer ($(CLANG)), $(FUZZ_SECONDS) s"; \
-		$(CLANG) $(FW_CFLAGS) $(SAN_FLAGS) -fsanitize=fuzzer -DGS_LIBFUZZER -I$(FW_DIR) \
+		$(CLANG) $(FW_CFLAGS) $(FW_NAMES) $(SAN_FLAGS) -fsanitize=fuzzer -DGS_LIBFUZZER -I$(FW_DIR) \
 			examples/firmware/fuzz_lookup.c $(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/fuzz_lookup_libfuzzer; \
 		$(FW_DIR)/fuzz_lookup_libfuzzer -max_total_time=$(FUZZ_SECONDS) -max_len=12 $(FW_DIR)/fuzz-corpus; \
 		mkdir -p $(FW_DIR)/fuzz-corpus-control; \
-		$(CLANG) $(FW_CFLAGS) $(SAN_FLAGS) -fsanitize=fuzzer -DGS_LIBFUZZER -I$(FW_DIR) \
+		$(CLANG) $(FW_CFLAGS) $(FW_NAMES) $(SAN_FLAGS) -fsanitize=fuzzer -DGS_LIBFUZZER -I$(FW_DIR) \
 			examples/firmware/fuzz_control.c $(FW_DIR)/gainsched_control.c \
 			$(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/fuzz_control_libfuzzer; \
 		$(FW_DIR)/fuzz_control_libfuzzer -max_total_time=$(FUZZ_SECONDS) -max_len=4800 \
 			$(FW_DIR)/fuzz-corpus-control; \
 	else \
 		set -e; echo "fuzz: no clang with libFuzzer; bounded random drivers, $(FUZZ_RUNS) queries"; \
-		$(CC) $(FW_CFLAGS) $(SAN_FLAGS) -I$(FW_DIR) examples/firmware/fuzz_lookup.c \
+		$(CC) $(FW_CFLAGS) $(FW_NAMES) $(SAN_FLAGS) -I$(FW_DIR) examples/firmware/fuzz_lookup.c \
 			$(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/fuzz_lookup; \
 		$(FW_DIR)/fuzz_lookup $(FUZZ_RUNS) 1; \
-		$(CC) $(FW_CFLAGS) $(SAN_FLAGS) -I$(FW_DIR) examples/firmware/fuzz_control.c \
+		$(CC) $(FW_CFLAGS) $(FW_NAMES) $(SAN_FLAGS) -I$(FW_DIR) examples/firmware/fuzz_control.c \
 			$(FW_DIR)/gainsched_control.c $(FW_DIR)/gainsched_runtime.c -o $(FW_DIR)/fuzz_control; \
 		$(FW_DIR)/fuzz_control $(FUZZ_RUNS) 1; \
 	fi

@@ -492,7 +492,11 @@ def inspect(table, out_dir, as_json):
         check_out_dir(out_dir, "--out", names=_ENVELOPE)
     t = load_table(table)
     if as_json:
-        click.echo(json.dumps(table_summary(t, source=str(table)), indent=2, sort_keys=True))
+        from .firmware.runtime import c_identifier
+
+        # c_prefix: the prefix of the C symbols export-c writes (paper_table, PAPER_N_STATE)
+        summary = {**table_summary(t, source=str(table)), "c_prefix": c_identifier(t.name)}
+        click.echo(json.dumps(summary, indent=2, sort_keys=True))
         if out_dir is not None:
             _write_envelope(t, table, out_dir, quiet=True)
         return

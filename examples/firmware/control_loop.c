@@ -21,7 +21,8 @@
  */
 #include <stdio.h>
 
-#include "paper_control.h"
+#define GS_WITH_CONTROL
+#include "any_table.h"
 
 #define PI_F 3.14159265f
 #define DEG (PI_F / 180.0f)
@@ -69,17 +70,17 @@ static void rotate(const float q[4], const float v[3], float out[3])
  * R_IC Rz(xi + chi) Ry(theta) Rx(phi), body rates from the nominal */
 static void sensors_truth(float t, truth *out)
 {
-    const gs_ctrl_params *pr = &paper_ctrl_params;
+    const gs_ctrl_params *pr = &GS_SYM(_ctrl_params);
     const float r = pr->rho + pr->L_e;
     const float xi_dot = speed / r;
-    float ref[5] = {0.0f, 0.0f, 0.0f, 0.0f, 0.0f}, K[4][PAPER_N_STATE];
+    float ref[5] = {0.0f, 0.0f, 0.0f, 0.0f, 0.0f}, K[4][GS_MACRO(_N_STATE)];
     float qz[4], qy[4], qx[4], tmp[4], q_CB[4], q_IC[4], sx, cx, xB[3], p_C[3];
     gs_nominal nom;
     int i;
     ref[0] = xi_dot * t;
     ref[0] -= 2.0f * PI_F * (float)(int)(ref[0] / (2.0f * PI_F));
     ref[1] = xi_dot;
-    (void)paper_lookup_nominal(ref, alpha, K, &nom);
+    (void)GS_SYM(_lookup_nominal)(ref, alpha, K, &nom);
     quat_axis(2, ref[0] + nom.x_d[6], qz);
     quat_axis(1, nom.x_d[5], qy);
     quat_axis(0, nom.x_d[4], qx);
@@ -115,7 +116,7 @@ static void sensors_accel(float t, float dt, const truth *now, float f_B[3])
     for (i = 0; i < 3; ++i) {
         a_I[i] = (after.p_I[i] - 2.0f * now->p_I[i] + before.p_I[i]) / (dt * dt);
     }
-    a_I[2] += PAPER_G_MPS2;
+    a_I[2] += GS_MACRO(_G_MPS2);
     q_BI[0] = now->q_IB[0], q_BI[1] = -now->q_IB[1], q_BI[2] = -now->q_IB[2];
     q_BI[3] = -now->q_IB[3];
     rotate(q_BI, a_I, f_B);
@@ -127,22 +128,23 @@ int main(void)
 {
     static gs_ctrl ctrl;                    /* the controller's state */
     static truth delayed[POSE_DELAY + 1u];  /* the radio link: poses in flight */
-    gs_ctrl_params params = paper_ctrl_params;
+    gs_ctrl_params params = GS_SYM(_ctrl_params);
     const float dt = params.dt;
     const float r = params.rho + params.L_e;
-    const unsigned long rate = (unsigned long)(PAPER_RATE_HZ + 0.5f);
+    const unsigned long rate = (unsigned long)(GS_MACRO(_RATE_HZ) + 0.5f);
     unsigned long k, steps = SECONDS * rate, held = 0, idle = 0;
     float worst = 0.0f;
     int status, last = -1;
 
     params.pose_delay = (float)POSE_DELAY * dt; /* the link's latency, measured once */
     params.pose_period = (float)POSE_EVERY * dt;
-    if (paper_verify() != GS_OK || gs_ctrl_init(&ctrl, &paper_table, &params) != GS_OK) {
+    if (GS_SYM(_verify)() != GS_OK
+        || gs_ctrl_init(&ctrl, &GS_SYM(_table), &params) != GS_OK) {
         printf("refusing to arm: table or controller parameters rejected\n");
         return 1;
     }
-    printf("controller: table paper (CRC-32 0x%08lx), %g Hz, poses every %u ms arriving "
-           "%u ms late\n", (unsigned long)PAPER_CRC32, (double)(1.0f / dt), POSE_EVERY,
+    printf("controller: table " GS_STR(GS_NAME) " (CRC-32 0x%08lx), %g Hz, poses every %u ms "
+           "arriving %u ms late\n", (unsigned long)GS_MACRO(_CRC32), (double)(1.0f / dt), POSE_EVERY,
            POSE_DELAY);
     printf("%6s %8s  %s\n", "t_s", "status", "thrust T1..T4 (N)   u_d (N)");
     for (k = 0; k < steps; ++k) {
@@ -150,7 +152,7 @@ int main(void)
         gs_ctrl_input in;
         gs_ctrl_ref ref;
         truth now;
-        float thrust[4], K[4][PAPER_N_STATE];
+        float thrust[4], K[4][GS_MACRO(_N_STATE)];
         gs_nominal nom;
         int i;
 
@@ -190,7 +192,7 @@ int main(void)
         idle += (status & GS_CTRL_IDLE) != 0;
 
         /* (the example's check: on the nominal, the thrusts are the nominal's) */
-        (void)paper_lookup_nominal(ref.xi, alpha, K, &nom);
+        (void)GS_SYM(_lookup_nominal)(ref.xi, alpha, K, &nom);
         if (t > 1.0f) {
             for (i = 0; i < 4; ++i) {
                 const float d = thrust[i] > nom.u_d[i] ? thrust[i] - nom.u_d[i]

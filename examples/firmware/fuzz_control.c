@@ -24,7 +24,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "paper_control.h"
+#define GS_WITH_CONTROL
+#include "any_table.h"
 
 #define N_FLOATS 24u
 #define SENTINEL 123456.75f
@@ -72,7 +73,7 @@ static void one_step(const uint32_t *w)
     float f[N_FLOATS], out[4 + 4];
     gs_ctrl_input in;
     gs_ctrl_ref ref;
-    const gs_ctrl_params *p = &paper_ctrl_params;
+    const gs_ctrl_params *p = &GS_SYM(_ctrl_params);
     int status, i;
     for (i = 0; i < (int)N_FLOATS; ++i) {
         f[i] = value_of(w[i], plausible[i]);
@@ -106,8 +107,8 @@ static void one_step(const uint32_t *w)
 static void setup(void)
 {
     if (!ready) {
-        check(paper_verify() == GS_OK, "table");
-        check(paper_ctrl_init(&ctrl) == GS_OK, "init");
+        check(GS_SYM(_verify)() == GS_OK, "table");
+        check(GS_SYM(_ctrl_init)(&ctrl) == GS_OK, "init");
         ready = 1;
     }
 }

@@ -20,13 +20,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-#ifndef GS_FUZZ_HEADER
-#define GS_FUZZ_HEADER "paper_gains.h"
-#endif
-#ifndef GS_FUZZ_TABLE
-#define GS_FUZZ_TABLE paper_table
-#endif
+#ifdef GS_FUZZ_HEADER /* a header and table named by hand */
 #include GS_FUZZ_HEADER
+#else
+#include "any_table.h"
+#define GS_FUZZ_TABLE GS_SYM(_table)
+#endif
 
 #define MAX_K (4u * 255u)
 #define GUARD 16u

@@ -20,7 +20,7 @@
  */
 #include <stdio.h>
 
-#include "paper_gains.h"
+#include "any_table.h"
 
 #define RATE_HZ 1000
 #define PI_F 3.14159265f
@@ -39,20 +39,21 @@ static void print_row(const char *label, const float *v, unsigned n)
 int main(void)
 {
     const float dt = 1.0f / (float)RATE_HZ;
-    const float r = PAPER_RADIUS_M; /* COG radius, m */
+    const float r = GS_MACRO(_RADIUS_M); /* COG radius, m */
     const float v0 = 2.0f, v1 = 15.0f, accel = 1.5f; /* m/s, m/s, mean m/s^2 */
     const float alpha = 20.0f * DEG;
     const float duration = (v1 - v0) / accel; /* s */
-    float K[4][PAPER_N_STATE], ref[5];
+    float K[4][GS_MACRO(_N_STATE)], ref[5];
     gs_nominal nom;
     float xi = 0.0f, speed = v0;
     unsigned long counts[8] = {0, 0, 0, 0, 0, 0, 0, 0};
     unsigned long k, steps = (unsigned long)((duration + 1.0f) * (float)RATE_HZ);
     int status, bit, last = -1;
 
-    status = paper_verify();
-    printf("table paper: %u tilts x %u speeds x %u azimuths, n = %u, CRC-32 0x%08lx: %s\n",
-           PAPER_N_TILT, PAPER_N_SPEED, PAPER_N_XI, PAPER_N_STATE, (unsigned long)PAPER_CRC32,
+    status = GS_SYM(_verify)();
+    printf("table " GS_STR(GS_NAME) ": %u tilts x %u speeds x %u azimuths, n = %u, "
+           "CRC-32 0x%08lx: %s\n", GS_MACRO(_N_TILT), GS_MACRO(_N_SPEED), GS_MACRO(_N_XI),
+           GS_MACRO(_N_STATE), (unsigned long)GS_MACRO(_CRC32),
            status == GS_OK ? "verified" : "CORRUPT");
     if (status != GS_OK) {
         return 1;
@@ -72,7 +73,7 @@ int main(void)
         ref[2] = on * 6.0f * accel * s * (1.0f - s) / r;
         ref[3] = on * 6.0f * accel * (1.0f - 2.0f * s) / (duration * r);
         ref[4] = on * -12.0f * accel / (duration * duration * r);
-        status = paper_lookup_nominal(ref, alpha, K, &nom);
+        status = GS_SYM(_lookup_nominal)(ref, alpha, K, &nom);
         for (bit = 0; bit < 7; ++bit) {
             if (status & (1 << bit)) {
                 counts[bit] += 1u;
@@ -99,10 +100,10 @@ int main(void)
     }
     printf("final gains K (rows T1..T4; columns delta xi delta' xi' phi theta chi wx wy wz "
            "int):\n");
-    print_row("  T1", K[0], PAPER_N_STATE);
-    print_row("  T2", K[1], PAPER_N_STATE);
-    print_row("  T3", K[2], PAPER_N_STATE);
-    print_row("  T4", K[3], PAPER_N_STATE);
+    print_row("  T1", K[0], GS_MACRO(_N_STATE));
+    print_row("  T2", K[1], GS_MACRO(_N_STATE));
+    print_row("  T3", K[2], GS_MACRO(_N_STATE));
+    print_row("  T4", K[3], GS_MACRO(_N_STATE));
     printf("status counts: OK %lu, CLAMPED_SPEED %lu, CLAMPED_TILT %lu, INFEASIBLE %lu, "
            "NO_GAINS %lu, BAD_INPUT %lu\n",
            counts[7], counts[0], counts[1], counts[2], counts[3], counts[4]);

@@ -475,3 +475,41 @@ def test_paper_grid_interpolation_error_below_2_percent():
     res = midpoint_check(load_table(PAPER_H5))
     assert all(c[2] < 1 for c in res.circles if np.isfinite(c[2]))
     assert res.max_err < 0.02
+
+
+@pytest.mark.slow
+@pytest.mark.needs_cc
+def test_the_examples_build_for_any_table(tmp_path):
+    """Issue 39: the example firmware and the size probe build for a table that is not the
+    paper's (config ``my-quad``, C prefix ``my_quad``) with the prefix ``inspect --json``
+    gives (the Makefile's FW_NAME), and the example runs on it; the Makefile passes the
+    names to every example it compiles."""
+    import json
+
+    from click.testing import CliRunner
+
+    from gainsched.cli import cli
+
+    from support import REPO, small_config_text
+
+    (tmp_path / "my-quad.toml").write_text(small_config_text(name="my-quad"))
+    run = CliRunner().invoke
+    assert run(cli, ["build", str(tmp_path / "my-quad.toml"), "-o", str(tmp_path / "t")]
+               ).exit_code == 0
+    table = tmp_path / "t" / "my-quad.h5"
+    prefix = json.loads(run(cli, ["inspect", str(table), "--json"]).output)["c_prefix"]
+    assert prefix == "my_quad"
+    fw = tmp_path / "fw"
+    codegen.write_header(runtime_data(load_table(table)), fw)
+    rt = codegen.copy_runtime(fw)[1]
+    names = [f"-DGS_NAME={prefix}", f"-DGS_NAME_UC={prefix.upper()}", f"-I{fw}"]
+    exe = tmp_path / "example"
+    compile_c([*codegen.STRICT_CFLAGS, "-O2", *names, str(FIRMWARE_EXAMPLES / "main.c"),
+               str(rt), "-o", str(exe)])
+    res = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0 and res.stdout.startswith("table my_quad: 2 tilts x 2 speeds"), \
+        res.stdout + res.stderr
+    compile_c([*codegen.STRICT_CFLAGS, "-O2", *names, "-c",
+               str(FIRMWARE_EXAMPLES / "size_probe.c"), "-o", str(tmp_path / "probe.o")])
+    make = (REPO / "Makefile").read_text()
+    assert make.count("$(FW_NAMES)") == 7  # main, control loop, size probe, 2 fuzzers x 2
