@@ -353,11 +353,8 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     from tqdm import tqdm
 
     from .config import load_config
-    from .firmware.outputs import certificate_lines, output_set
     from .publish import check_out_dir, publish, recover
     from .schedule.distributed import check_options, executor
-    from .schedule.grid import bound_price, build_grid
-    from .schedule.refine import refine_grid
 
     check_options(backend, scheduler)
     cfg = load_config(config)
@@ -365,20 +362,26 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     recover(out_dir)  # finish or clean up after a killed earlier run
     t0 = time.perf_counter()
     choice = None
-    with executor(backend, scheduler, jobs, connect_timeout=connect_timeout) as ex:
+    # the progress line first: the solver's modules take a second or two to import
+    if cfg.grid.auto:  # the build chooses the breakpoints (docs/grid.md)
+        bar = tqdm(unit="circle", desc=f"choose the grid of {cfg.name}", disable=None)
+    else:
+        bar = tqdm(total=cfg.grid.speeds.size, unit="speed", desc=f"build {cfg.name}",
+                   disable=None)
+    with bar, executor(backend, scheduler, jobs, connect_timeout=connect_timeout) as ex:
+        from .schedule.grid import build_grid
+        from .schedule.refine import refine_grid
+
         if backend == "dask":
-            click.echo(f"build {cfg.name} on {ex.description}", err=True)
-        if cfg.grid.auto:  # the build chooses the breakpoints (docs/grid.md)
-            with tqdm(unit="circle", desc=f"choose the grid of {cfg.name}",
-                      disable=None) as bar:
-                choice = refine_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update,
-                                     backend=ex.backend)
+            bar.write(f"build {cfg.name} on {ex.description}", file=sys.stderr)
+        if cfg.grid.auto:
+            choice = refine_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update,
+                                 backend=ex.backend)
             cfg, grid = choice.config, choice.grid
         else:
-            with tqdm(total=cfg.grid.speeds.size, unit="speed", desc=f"build {cfg.name}",
-                      disable=None) as bar:
-                grid = build_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update,
-                                  backend=ex.backend)
+            grid = build_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update, backend=ex.backend)
+    from .firmware.outputs import certificate_lines, output_set
+    from .schedule.grid import bound_price
     n_v = cfg.grid.speeds.size
     n_mid = max(n_v - 1, 1) if cfg.firmware.format == "compact" else 0
     with tqdm(total=n_mid, unit="speed", desc="certify compact table",

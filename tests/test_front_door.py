@@ -822,3 +822,57 @@ def test_campaign_says_which_flights_leave_the_table(tmp_path, monkeypatch):
         "tilt40-v7, speedup, braking fly outside it, on the gains of its nearest circle")
     help_text = " ".join(_run("campaign", "--help").output.split())
     assert "Hidden effect of the plant: " + ", ".join(HIDDEN) in help_text
+
+
+def test_a_braking_runs_summary_names_its_clamped_and_low_tension_time(tmp_path, monkeypatch):
+    """Issue 39's must-show: the paper's braking (11.3 -> 1 m/s; the table starts at
+    1.3 m/s and the nominal's tension falls under the margin at the end): the summary
+    names both intervals with the figures of metrics.json."""
+    import json
+
+    monkeypatch.chdir(tmp_path)
+    res = _run(*_simulate("braking"))
+    assert res.exit_code == 0, res.output
+    m = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert m["clamped_speed_s"] > 0 and m["below_tension_margin_s"] > 0, m
+    assert f"{m['clamped_speed_s']:.2f} s at speeds outside" in res.output, res.output
+    assert f"{m['below_tension_margin_s']:.2f} s with the nominal's tension below " \
+           "min_tension" in res.output, res.output
+
+
+def test_build_shows_progress_on_a_terminal_within_two_seconds(tmp_path):
+    """Issue 39's must-show: a build in a pseudo-terminal shows its progress line (tqdm on
+    stderr) within 2 s of the command's start; piped, stderr has none."""
+    import fcntl
+    import os
+    import pty
+    import select
+    import struct
+    import subprocess
+    import sys
+    import termios
+    import time
+
+    (tmp_path / "small.toml").write_text(small_config_text())
+    args = [sys.executable, "-m", "gainsched", "build", "small.toml", "-o", "t"]
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
+    t0 = time.monotonic()
+    p = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=slave, cwd=tmp_path)
+    os.close(slave)
+    seen, first = b"", None
+    while first is None and time.monotonic() - t0 < 60:
+        if select.select([master], [], [], 0.05)[0]:
+            try:
+                seen += os.read(master, 4096)
+            except OSError:
+                break
+            if b"build small" in seen:
+                first = time.monotonic() - t0
+    p.wait(timeout=300)
+    os.close(master)
+    assert p.returncode == 0 and first is not None, seen
+    assert first <= 2.0, first
+    piped = subprocess.run(args[:-1] + ["t2"], capture_output=True, text=True, cwd=tmp_path,
+                           timeout=300)
+    assert piped.returncode == 0 and "build small" not in piped.stderr, piped.stderr
