@@ -464,6 +464,17 @@ class Config:
     limits: Limits = field(default_factory=Limits)
     firmware: Firmware = field(default_factory=Firmware)
 
+    def __repr__(self) -> str:
+        """One line: the name, the source, the vehicle and tether at a glance, the effects,
+        the grid and the text's hash (the full values: the attributes, or ``text``)."""
+        g = self.grid
+        grid = ("axes chosen by the build" if g.auto else
+                f"{g.speeds.size} speeds x {g.tilts.size} tilts x {g.azimuth_samples} azimuths")
+        effects = ", ".join(e.name for e in self.effects) or "none"
+        return (f"Config({self.name!r}, source={self.source!r}, mass {self.vehicle.mass:g} kg, "
+                f"tether {self.tether.length:g} m {self.tether.link}, effects {effects}, "
+                f"{grid}, sha256 {self.sha256[:12]})")
+
     @property
     def sha256(self) -> str:
         """SHA-256 of the config text (hex)."""

@@ -160,3 +160,22 @@ if __name__ == "__main__":
     os.chdir(REPO)
     API_PAGE.write_text(api_page())
     print(f"wrote {API_PAGE}")
+
+
+def test_reprs_are_one_short_line(paper_table):
+    """Issue 39: the objects a notebook shows (config, table, comparison, diagnosis, a
+    candidate's result) print as one line of at most 300 characters naming what they
+    are, not their arrays (repr(Table) was 213,033 characters)."""
+    import gainsched as gs
+
+    from support import PAPER_TOML, REPO
+
+    cfg = gs.load_config(PAPER_TOML)
+    logs = [REPO / "examples" / "flights" / f for f in ("v3.csv", "v9.csv")]
+    d = gs.diagnose(cfg, logs, candidates=["drag", "rotor_drag"])
+    for obj, start in ((cfg, "Config('paper', "), (paper_table, "Table('paper', "),
+                       (d.base, "Comparison('paper', 2 segments, normalised RMS "),
+                       (d, "Diagnosis('paper', 2 flights, "),
+                       (d.results[0], f"CandidateResult({d.results[0].name!r}, ")):
+        text = repr(obj)
+        assert text.startswith(start) and "\n" not in text and len(text) <= 300, text

@@ -1368,6 +1368,11 @@ class Comparison:
     #: sensors saved
     pose_noise: dict = field(default_factory=dict)
 
+
+    def __repr__(self) -> str:
+        """One line: the config, the segments and the normalised RMS (1: measurement noise)."""
+        return (f"Comparison({self.config.name!r}, {len(self.measured)} segments, "
+                f"normalised RMS {self.normalized_rms():.3g})")
     def sensor_lines(self) -> list[str]:
         """One sentence per axis measured with an on-board sensor: its noise floor with
         the sensor against the pose's alone."""

@@ -736,6 +736,14 @@ class CandidateResult:
     structure_left: tuple = ()
     implausible: tuple = ()
 
+    def __repr__(self) -> str:
+        """One line: the candidate, its parameters and its scores."""
+        vals = ", ".join(f"{k}={v:.4g}" for k, v in list(self.values.items())[:6])
+        more = ", ..." if len(self.values) > 6 else ""
+        return (f"CandidateResult({self.name!r}, {vals}{more}, held-out RMS "
+                f"{-self.rms_reduction:+.0%}, excess {self.excess_explained:.0%}, "
+                f"passes={self.passes})")
+
     @property
     def below_noise(self) -> bool:
         """Judged on the binned structure: every axis at its noise floor, but significant
@@ -865,6 +873,13 @@ class Diagnosis:
     flights: list
     evaluations: int
     similarity: dict = field(default_factory=dict)  # |cos| of each fit to the accepted one
+
+    def __repr__(self) -> str:
+        """One line: the config, the flights, the candidates fitted and the verdict's start."""
+        v = self.verdict if len(self.verdict) <= 100 else self.verdict[:97] + "..."
+        return (f"Diagnosis({self.config.name!r}, {len(self.flights)} flights, "
+                f"{len(self.results)} fits, accepted="
+                f"{None if self.accepted is None else self.accepted.name!r}, verdict={v!r})")
 
     def to_json(self) -> dict:
         return {

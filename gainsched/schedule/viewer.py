@@ -251,8 +251,8 @@ def schedule_figures(table, midpoints=None) -> dict:
     >>> sorted(figs)
     ['gains_tilt0.png', 'gains_tilt20.png', 'midpoint_error.png', 'nominal.png',
      'spectral_radius.png', 'time_constant.png']
-    >>> len(figs["gains_tilt20.png"].axes)              # 4 inputs x 11 states
-    44
+    >>> len(figs["gains_tilt20.png"].axes)        # 4 inputs x 11 states, a colorbar each
+    88
     >>> figs["spectral_radius.png"].savefig(f"{out}/spectral_radius.png")
     >>> import matplotlib.pyplot as plt
     >>> plt.close("all")
