@@ -18,7 +18,7 @@ import numpy as np
 from ..model.geometry import wrap_angle
 from ..model.rotations import R_IC_from_tilt
 
-__all__ = ["tracking_errors", "plot_result"]
+__all__ = ["tracking_errors", "plot_result", "left_table_intervals"]
 
 
 def tracking_errors(res) -> dict:
@@ -58,6 +58,33 @@ def tracking_errors(res) -> dict:
     }
 
 
+def left_table_intervals(res) -> dict:
+    """Where a flight left its table, as time intervals ``[(t0, t1), ...]`` (s) per cause:
+    ``"clamped speed"`` (the lookup's speed clamped to the table's range), ``"held
+    gains"`` (no usable gains: the last good ones flown) and ``"tension below margin"``
+    (the nominal's tension under ``feasibility.min_tension``); the same samples
+    :func:`~gainsched.sim.loop.metrics` counts, each interval closed at the next sample."""
+    from ..firmware.runtime import CLAMPED_SPEED
+
+    masks = {"clamped speed": (np.asarray(res.status) & CLAMPED_SPEED) != 0}
+    if res.held is not None:
+        masks["held gains"] = np.asarray(res.held, dtype=bool)
+    if res.tension_d is not None:
+        masks["tension below margin"] = np.asarray(res.tension_d) < res.min_tension
+    dt = float(res.t[1] - res.t[0]) if res.t.size > 1 else 0.0
+    out = {}
+    for cause, m in masks.items():
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], m.astype(np.int8), [0]])))
+        out[cause] = [(float(res.t[a]), float(res.t[b - 1]) + dt)
+                      for a, b in zip(edges[::2], edges[1::2], strict=True)]
+    return out
+
+
+#: shading of :func:`left_table_intervals` in the time plots
+_SHADES = {"clamped speed": "tab:orange", "held gains": "tab:red",
+           "tension below margin": "tab:purple"}
+
+
 def plot_result(res, out_dir) -> list[Path]:
     """Plot a simulated flight: speed, tracking errors and roll; the 3-D path.
 
@@ -65,7 +92,8 @@ def plot_result(res, out_dir) -> list[Path]:
 
     - ``speed_roll.png``: the speed (desired and simulated, m/s) with its error panel,
       the along-track error (cm; positive ahead of the reference) and the roll angle
-      (nominal and simulated, deg) over time, each error panel with its RMS;
+      (nominal and simulated, deg) over time, each error panel with its RMS; the times
+      the flight left its table shaded (:func:`left_table_intervals`);
     - ``path3d.png``: the COG path in the inertial frame at equal scale on every axis
       (m), beside the out-of-plane error (mm) over the azimuth (deg), where a flat
       circle shows as a flat line rather than a corkscrew.
@@ -124,6 +152,13 @@ def plot_result(res, out_dir) -> list[Path]:
     ax[3].set_xlabel("time (s)")
     ax[3].legend()
     ax[0].set_title(f"{name}: speed, along-track error (ahead of the reference: > 0) and roll")
+    for cause, spans in left_table_intervals(res).items():
+        for k, (t0, t1) in enumerate(spans):
+            for a in ax:
+                a.axvspan(t0, t1, color=_SHADES[cause], alpha=0.15, lw=0,
+                          label=f"{cause} (left the table)" if a is ax[0] and k == 0 else None)
+    if any(left_table_intervals(res).values()):
+        ax[0].legend(fontsize=7)
     fig.tight_layout()
     paths = [out_dir / "speed_roll.png"]
     fig.savefig(paths[-1], dpi=100)

@@ -41,3 +41,26 @@ def test_tracking_errors_and_the_flight_plots(tmp_path):
     assert [p.name for p in paths] == ["speed_roll.png", "path3d.png"]
     for p in paths:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_intervals_off_the_table_are_the_ones_metrics_counts(tmp_path):
+    """Issue 39: the paper's braking (11.3 -> 1 m/s; the table starts at 1.3 m/s): the
+    shaded intervals of clamped speed and of the nominal's tension under the margin add up
+    to the metrics' clamped_speed_s and below_tension_margin_s (to one sample), each lies
+    at the end of the flight, and a circle inside the table has none."""
+    from gainsched.sim.loop import load_scenario, metrics
+    from gainsched.sim.plots import left_table_intervals
+
+    cfg = load_config(PAPER_TOML)
+    sched = table_scheduler(load_table(PAPER_H5))
+    res = simulate(cfg, sched, load_scenario("braking"))
+    m, spans = metrics(res), left_table_intervals(res)
+    dt = float(res.t[1] - res.t[0])
+    for cause, key in (("clamped speed", "clamped_speed_s"),
+                       ("tension below margin", "below_tension_margin_s")):
+        total = sum(t1 - t0 for t0, t1 in spans[cause])
+        assert m[key] > 0 and abs(total - m[key]) <= dt + 1e-9, (cause, total, m[key])
+        assert spans[cause][-1][1] >= res.t[-1] - 0.5, spans[cause]
+    assert plot_result(res, tmp_path)[0].stat().st_size > 0
+    calm = simulate(cfg, sched, Scenario("c", 0.0, 8.0, 0.5, ()))
+    assert not any(left_table_intervals(calm).values())
