@@ -44,6 +44,8 @@ API = (
     ("Model versus measurement", "analysis.compare", ("compare", "Comparison")),
     ("Which effect is missing", "analysis.diagnose", ("diagnose", "Diagnosis",
                                                       "apply_candidate")),
+    ("The model loop in one call", "analysis.improve", ("improve", "Improvement",
+                                                        "write_improve")),
     ("Reports", "analysis.reports", ("write_compare", "write_diagnose")),
     ("Errors", "errors", ("InputError",)),
 )

@@ -1157,6 +1157,82 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
 
 
 @cli.command()
+@CONFIG
+@_LOGS
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
+              required=True, help="Output folder: NAME.toml (the improved config), "
+              "tables/ (rebuilt from it) and report/.")
+@click.option("--rounds", type=click.IntRange(1, 10), default=3, show_default=True,
+              help="The most diagnose rounds (1..10).")
+@click.option("--exclude", "exclude", type=Name(), multiple=True, metavar="NAME",
+              help="Leave out this candidate or effect (repeatable), as diagnose.")
+@click.option("--no-build", is_flag=True, help="Write the config and the report only.")
+@click.option("-j", "--jobs", type=Jobs(), default=-1, show_default=True,
+              help=f"Parallel workers of the build, 1..{MAX_JOBS} (-1 = all cores).")
+@_MAP
+@_TRUST
+@click.pass_context
+@user_errors
+def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, jobs, map_path, trust):
+    """The model loop in one command: compare CONFIG with LOGS, diagnose and apply in
+    rounds until no effect is missing, then rebuild the tables from the improved config
+    (its name kept: the same C symbols) and write the report of the error round by
+    round. Each step is what compare, diagnose --apply and build do."""
+    from tqdm import tqdm
+
+    from .analysis.diagnose import select_candidates
+    from .analysis.improve import improve as run
+    from .analysis.improve import write_improve
+    from .config import config_from_text
+    from .publish import check_out_dir, staged
+    from .schedule.distributed import DEFAULT_CONNECT_TIMEOUT
+
+    _distinct("LOG", list(logs))
+    if len(logs) < 2:
+        raise InputError("command line", "LOG", "improve needs at least two flights (log "
+                         "files) for held-out scores")
+    if not select_candidates(None, exclude):
+        raise InputError("command line", "--exclude", f"leaves out every candidate "
+                         f"({', '.join(exclude)}): nothing to fit")
+    cfg = _load_for_compare(config)
+    cmap = _channel_map(map_path)
+    check_out_dir(out_dir, names=[f"{cfg.name}.toml", "tables", "report"])
+    with tqdm(unit="fit", desc="improve", disable=None) as bar:
+        def fitted(name):
+            bar.set_postfix_str(name, refresh=False)
+            bar.update()
+
+        imp = run(cfg, logs, rounds=rounds, exclude=exclude, channel_map=cmap, trust=trust,
+                  progress=fitted)
+    for k, r in enumerate(imp.rounds):
+        verdict = "" if r.diagnosis is None else f": {r.diagnosis.verdict[:160]}"
+        click.echo(f"round {k}: normalised RMS {r.rms:.3g}{verdict}")
+    new = imp.config
+    with staged(out_dir) as stage:
+        path = stage / f"{new.name}.toml"
+        path.write_text(new.text)
+        report = stage / "report"
+        report.mkdir()
+        write_improve(imp, report)
+        refusal = None
+        if not no_build:
+            from .schedule.grid import check_effect_symmetries
+
+            try:
+                check_effect_symmetries(config_from_text(new.text, str(path)))
+            except InputError as held:
+                refusal = f"no table can hold {held.where}: {held.message}"
+            else:
+                ctx.invoke(build, config=path, out_dir=stage / "tables", jobs=jobs,
+                           backend="local", scheduler=None,
+                           connect_timeout=DEFAULT_CONNECT_TIMEOUT)
+    applied = ", ".join(imp.applied) or "nothing"
+    click.echo(f"{out_dir}: {new.name}.toml ({applied} applied), report/"
+               + (f"; tables not rebuilt: {refusal}" if refusal else
+                  "" if no_build else ", tables/"))
+
+
+@cli.command()
 @click.argument("log", type=FilePath(exists=True, path_type=Path))
 @click.option("-o", "--out", "out_path", type=FilePath(dir_okay=False, path_type=Path),
               required=True, help="The converted log: OUT.csv or OUT.h5.")
