@@ -847,17 +847,14 @@ def _induced_velocity(vh, vz, vxy2, tol=1e-12, max_iter=80):
     rvz, rvxy2 = np.real(vz), np.real(vxy2)
     v0 = np.where((rvz >= 0) | (8 * rvxy2 >= rvz * rvz), glauert, hi)
     if np.iscomplexobj(vh) or np.iscomplexobj(vz) or np.iscomplexobj(vxy2):
-        v = v0
-        active = np.ones(v.shape, dtype=bool)
-        for _ in range(max_iter):  # same per-sample stopping rule as the real branch
-            v_new, lo2, hi2 = _newton_bisect(v, lo, hi, vh2, vz, vxy2)
-            lo, hi = np.where(active, lo2, lo), np.where(active, hi2, hi)
-            moving = active & (np.abs(np.real(v_new - v)) > tol * np.real(vh))
-            v = np.where(active, v_new, v)
-            active = moving
-            if not active.any():
-                break
-        return v
+        # a complex step: the root of the real parts, then its first-order change by the
+        # implicit function theorem, Im v = -Im g(v_r; inputs) / g'(v_r) (exact to the
+        # step's O(h^2), as iterating in complex arithmetic would be, at one evaluation)
+        v = _induced_velocity(np.real(vh), np.real(vz), np.real(vxy2), tol, max_iter)
+        w = v + vz
+        g = v * v * (w * w + vxy2) - vh2 * vh2
+        dg = 2 * v * (w * w + vxy2) + 2 * v * v * w
+        return v - 1j * np.imag(g) / np.real(dg)
     shape = hi.shape
     v, lo, hi = v0.reshape(-1), lo.reshape(-1), hi.reshape(-1)
     a, b, c, h = vh2.reshape(-1), vz.reshape(-1), vxy2.reshape(-1), vh.reshape(-1)
@@ -984,6 +981,16 @@ class ThrustAzimuth(Effect):
                 f"{d[hi]:+.1%} at {np.rad2deg(xi[hi]):.0f} deg, mean {self.a0:+.1%}")
 
 
+def power_series(x, coefficients):
+    """``sum_k c_k x^k``, k = 0, 1, ..., shape of ``x`` (the empirical series in time and
+    airspeed); term by term with the powers built up (complex-step safe)."""
+    f, xk = coefficients[0] + 0 * x, 1.0
+    for c in coefficients[1:]:
+        xk = xk * x
+        f = f + c * xk
+    return f
+
+
 #: highest power of the flight time in :class:`ThrustTimeSeries`
 TIME_ORDER = 3
 #: the time unit of its terms, s (coefficients read as relative change per minute)
@@ -1012,12 +1019,8 @@ class ThrustTimeSeries(_FlightTime):
 
     def factor(self, t):
         """The thrust factor at flight time ``t`` (s), shape of ``t``."""
-        u = np.asarray(t) / TIME_UNIT_S
-        f, uk = 1.0 + 0 * u, 1.0
-        for k in range(1, TIME_ORDER + 1):
-            uk = uk * u
-            f = f + self.values[f"c{k}"] * uk
-        return f
+        return power_series(np.asarray(t) / TIME_UNIT_S,
+                            [1.0, *(self.values[f"c{k}"] for k in range(1, TIME_ORDER + 1))])
 
     def modify_thrust(self, T, kin, x):
         return T * self.factor(x[..., 0])[..., None]
@@ -1098,12 +1101,8 @@ class ForceAirspeed(Effect):
 
     def magnitude(self, speed):
         """The force's size at airspeed ``speed`` (m/s), N, shape of ``speed``."""
-        s = np.asarray(speed) / FORCE_SPEED_UNIT
-        f, sk = self.f0 + 0 * s, 1.0
-        for k in range(1, AIRSPEED_ORDER + 1):
-            sk = sk * s
-            f = f + self.values[f"f{k}"] * sk
-        return f
+        return power_series(np.asarray(speed) / FORCE_SPEED_UNIT,
+                            [self.values[f"f{k}"] for k in range(AIRSPEED_ORDER + 1)])
 
     def wrench(self, T, kin):
         v = kin.v_air_C
