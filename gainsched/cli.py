@@ -1222,10 +1222,16 @@ def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, jobs, map_pat
                 check_effect_symmetries(config_from_text(new.text, str(path)))
             except InputError as held:
                 refusal = f"no table can hold {held.where}: {held.message}"
-            else:
-                ctx.invoke(build, config=path, out_dir=stage / "tables", jobs=jobs,
-                           backend="local", scheduler=None,
-                           connect_timeout=DEFAULT_CONNECT_TIMEOUT)
+            else:  # the build command itself; its lines name the folder, not the stage
+                import contextlib
+                import io
+
+                said = io.StringIO()
+                with contextlib.redirect_stdout(said):
+                    ctx.invoke(build, config=path, out_dir=stage / "tables", jobs=jobs,
+                               backend="local", scheduler=None,
+                               connect_timeout=DEFAULT_CONNECT_TIMEOUT)
+                click.echo(said.getvalue().replace(str(stage), str(out_dir)), nl=False)
     applied = ", ".join(imp.applied) or "nothing"
     click.echo(f"{out_dir}: {new.name}.toml ({applied} applied), report/"
                + (f"; tables not rebuilt: {refusal}" if refusal else

@@ -45,6 +45,7 @@ def test_the_command_writes_config_tables_with_the_same_symbols_and_the_report(t
     assert res.exit_code == 0, res.output
     assert "imp: small.toml (thrust_momentum + motor_lag applied), report/, tables/" in \
         res.output
+    assert "imp/tables/small.h5: " in res.output and ".gainsched-stage" not in res.output
     cfg = gs.load_config(tmp_path / "imp" / "small.toml")
     assert cfg.name == "small" and {"thrust_momentum", "motor_lag"} <= {
         e.name for e in cfg.effects}
