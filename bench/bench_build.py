@@ -483,6 +483,19 @@ def bench_effect_builds(cfg):
     return out
 
 
+def build_stages():
+    """Issue 39: the paper build's time split by stage (bench/_stages.py: a process pinned
+    like the command, one worker, cProfile's cumulative times)."""
+    res = subprocess.run([sys.executable, "-m", "bench._stages", str(PAPER)], check=True,
+                         capture_output=True, text=True, cwd=PAPER.parents[1])
+    st = json.loads(res.stdout)
+    print(f"  paper build by stage (one worker, profiled: {st['total_s']:.2f} s): nominal "
+          f"{st['nominal_s']:.2f} s (of it attitude offsets {st['offsets_s']:.2f} s), "
+          f"linearisation {st['linearisation_s']:.2f} s, Riccati "
+          f"{st['riccati_s'] + st['riccati_tilt0_s']:.2f} s, outputs {st['outputs_s']:.2f} s")
+    return st
+
+
 def plot(results, out_dir):
     """Scaling curves (PNG) next to bench/results.json."""
     import matplotlib
@@ -535,6 +548,7 @@ def main():
             "linearization": bench_linearization(cfg),
             "build": bench_build(cfg),
             "effect_builds": bench_effect_builds(cfg),
+            "build_stages": build_stages(),
         }
     )
     if "compiled_2t_ratio_vs_loop" in r:
