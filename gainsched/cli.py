@@ -6,6 +6,7 @@ line ``gainsched: error: FILE: KEY: what is wrong`` with exit code 2.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import os
@@ -159,6 +160,38 @@ def _distinct(what: str, paths) -> None:
             if _same_file(a, b):
                 same = "given twice" if str(a) == str(b) else f"is {a}"
                 raise InputError("command line", what, f"{b} {same}: each file once")
+
+
+def _check_fit_arguments(command: str, logs, candidates, exclude) -> None:
+    """The checks diagnose and improve make of their arguments before any work: each log
+    once and at least two (held-out scores), each --candidate and --exclude name once,
+    and something left to fit."""
+    from .analysis.diagnose import select_candidates
+
+    _distinct("LOG", list(logs))
+    if len(logs) < 2:
+        raise InputError("command line", "LOG", f"{command} needs at least two flights (log "
+                         "files) for held-out scores")
+    for option, names in (("--candidate", candidates), ("--exclude", exclude)):
+        if dup := next((n for i, n in enumerate(names) if n in names[:i]), None):
+            raise InputError("command line", option, f"{dup!r} given twice: each name once")
+    if not select_candidates(candidates or None, exclude):
+        raise InputError("command line", "--exclude", f"leaves out every candidate "
+                         f"({', '.join(exclude)}): nothing to fit")
+
+
+@contextlib.contextmanager
+def _fit_progress(desc: str):
+    """A progress line of diagnose's fits on a terminal (tqdm on stderr): yields the
+    ``progress(name)`` callback that counts a fit and names its candidate."""
+    from tqdm import tqdm
+
+    with tqdm(unit="fit", desc=desc, disable=None) as bar:
+        def fitted(name):
+            bar.set_postfix_str(name, refresh=False)
+            bar.update()
+
+        yield fitted
 
 
 def _not_an_input(out, option: str, **inputs) -> None:
@@ -1071,7 +1104,7 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
     the residual on LOGS, score on held-out flights (leave one flight out), rank, check
     identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
     from .analysis.compare import compare as run
-    from .analysis.diagnose import apply_candidate, select_candidates
+    from .analysis.diagnose import apply_candidate
     from .analysis.diagnose import diagnose as run_diagnose
     from .analysis.reports import (
         before_after_lines,
@@ -1089,21 +1122,12 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
     if new_config is not None and not do_apply:
         raise InputError("command line", "-o", "is the new config of --apply: give --apply "
                          "too (or --report DIR for a report)")
-    _distinct("LOG", list(logs))
-    if len(logs) < 2:
-        raise InputError("command line", "LOG", "diagnose needs at least two flights (log "
-                         "files) for held-out scores")
+    _check_fit_arguments("diagnose", logs, candidates, exclude)
     if new_config is not None:
         from .resources import config_path
 
         _not_an_input(new_config, "-o", CONFIG=config_path(config), LOG=list(logs),
                       **{"--map": map_path})
-    for option, names in (("--candidate", candidates), ("--exclude", exclude)):
-        if dup := next((n for i, n in enumerate(names) if n in names[:i]), None):
-            raise InputError("command line", option, f"{dup!r} given twice: each name once")
-    if not select_candidates(candidates or None, exclude):  # checked before any work
-        raise InputError("command line", "--exclude", f"leaves out every candidate "
-                         f"({', '.join(exclude)}): nothing to fit")
     cfg = _load_for_compare(config)
     cmap = _channel_map(map_path)
     if new_config is not None:
@@ -1114,13 +1138,8 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
     for line in compare_lines(base):
         click.echo(line)
     click.echo("")
-    from tqdm import tqdm
 
-    with tqdm(unit="fit", desc="diagnose", disable=None) as bar:
-        def fitted(name):  # the candidate about to be fitted, on a terminal
-            bar.set_postfix_str(name, refresh=False)
-            bar.update()
-
+    with _fit_progress("diagnose") as fitted:
         d = run_diagnose(cfg, logs, candidates=candidates or None, comparison=base,
                          joint=joint, exclude=exclude, progress=fitted)
     for line in diagnose_lines(d):
@@ -1178,30 +1197,18 @@ def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, jobs, map_pat
     rounds until no effect is missing, then rebuild the tables from the improved config
     (its name kept: the same C symbols) and write the report of the error round by
     round. Each step is what compare, diagnose --apply and build do."""
-    from tqdm import tqdm
 
-    from .analysis.diagnose import select_candidates
     from .analysis.improve import improve as run
     from .analysis.improve import write_improve
     from .config import config_from_text
     from .publish import check_out_dir, staged
     from .schedule.distributed import DEFAULT_CONNECT_TIMEOUT
 
-    _distinct("LOG", list(logs))
-    if len(logs) < 2:
-        raise InputError("command line", "LOG", "improve needs at least two flights (log "
-                         "files) for held-out scores")
-    if not select_candidates(None, exclude):
-        raise InputError("command line", "--exclude", f"leaves out every candidate "
-                         f"({', '.join(exclude)}): nothing to fit")
+    _check_fit_arguments("improve", logs, (), exclude)
     cfg = _load_for_compare(config)
     cmap = _channel_map(map_path)
     check_out_dir(out_dir, names=[f"{cfg.name}.toml", "tables", "report"])
-    with tqdm(unit="fit", desc="improve", disable=None) as bar:
-        def fitted(name):
-            bar.set_postfix_str(name, refresh=False)
-            bar.update()
-
+    with _fit_progress("improve") as fitted:
         imp = run(cfg, logs, rounds=rounds, exclude=exclude, channel_map=cmap, trust=trust,
                   progress=fitted)
     for k, r in enumerate(imp.rounds):
@@ -1223,7 +1230,6 @@ def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, jobs, map_pat
             except InputError as held:
                 refusal = f"no table can hold {held.where}: {held.message}"
             else:  # the build command itself; its lines name the folder, not the stage
-                import contextlib
                 import io
 
                 said = io.StringIO()
