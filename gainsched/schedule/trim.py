@@ -147,24 +147,13 @@ def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets=None, *,
     return res.reshape(m, n, 5).transpose(1, 2, 0)
 
 
-def _collocation_jacobian(Jl, D1, D2):
-    """The (5n, 5n) Jacobian of all node residuals in (phi nodes, T1 nodes, ..., T4 nodes)
-    from the local partials ``Jl`` (n, 5, >= 7) and the differentiation operators."""
-    n = Jl.shape[0]
-    J = np.zeros((5 * n, 5 * n))
-    for i in range(5):
-        rows = slice(i * n, (i + 1) * n)
-        J[rows, :n] = np.diag(Jl[:, i, 0]) + Jl[:, i, 1, None] * D1 + Jl[:, i, 2, None] * D2
-        for j in range(4):
-            J[rows, n * (1 + j) : n * (2 + j)] = np.diag(Jl[:, i, 3 + j])
-    return J
-
-
 def _newton_step(Jl, D1, D2, res):
     """The solution ``(d phi (n, ...), d T (n, 4, ...))`` of the collocation system
-    ``J x = res`` (J of :func:`_collocation_jacobian` from the local partials ``Jl``
-    (n, 5, >= 7); ``res`` (n, 5) or (n, 5, k) for k right-hand sides) by eliminating the
-    thrusts.
+    ``J x = res`` by eliminating the thrusts. J is the (5n, 5n) Jacobian of all node
+    residuals in (phi nodes, T1 nodes, ..., T4 nodes) from the local partials ``Jl``
+    (n, 5, >= 7): equation i's rows are ``diag(Jl[:, i, 0]) + Jl[:, i, 1] D1 +
+    Jl[:, i, 2] D2`` in phi and ``diag(Jl[:, i, 3 + j])`` in T_j; ``res`` (n, 5) or
+    (n, 5, k) for k right-hand sides.
 
     The thrusts enter each node's five equations only at that node (a 5 x 4 block
     ``B_k``), so the vector ``q_k`` orthogonal to ``B_k``'s columns (the last column of
