@@ -18,8 +18,11 @@ nominal is exactly today's. The problem is an SLSQP over the ``2 (2 H + 1)``
 coefficients; each evaluation is the collocation trim of the roll and thrusts for
 those offsets, and the constraint gradients come from the implicit function
 theorem on that trim's Newton Jacobian (one extra linear solve), not from finite
-differences. scipy's SLSQP is the optimizer; the collocation and its sensitivities
-are ours because no library offers this trim (see :mod:`gainsched.schedule.trim`).
+differences. The bounds hold for the commanded thrusts (with a motor lag: ``T + tau
+T'``) at :data:`FINE` points per node of the collocation's interpolant, so that the
+nominal between the nodes keeps them too. scipy's SLSQP is the optimizer; the
+collocation and its sensitivities are ours because no library offers this trim (see
+:mod:`gainsched.schedule.trim`).
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from .path import AzimuthPath, circle_path, period
 from .trim import (
     TrimError,
     _fourier_operators,
+    _fourier_samples,
     _initial_guess,
     _local_jacobians,
     _newton,
@@ -51,11 +55,17 @@ __all__ = [
 #: highest harmonic of the azimuth in the offset series
 HARMONICS = 3
 #: collocation nodes of the optimisation (the nominal itself is then trimmed with the
-#: trim's own resolution)
-N_NODES = 64
-#: the thrust bounds are imposed at the nodes this much inside the config's (N), so that
-#: the nominal between the nodes keeps them too; doubled (up to 4 times) while a check
-#: on CHECK_SAMPLES samples of the circle finds a motor outside
+#: trim's own resolution); with the bounds at FINE points per node, 32 nodes give the
+#: offsets of 64 to 3e-6 deg on the paper grid (issue 39)
+N_NODES = 32
+#: the commanded thrusts are bounded at FINE points per node (the collocation's
+#: trigonometric interpolant), not at the nodes alone: a thrust bulges past its node
+#: values by several mN between 32 nodes
+FINE = 8
+#: the bounds are imposed this much inside the config's (N), for the difference between
+#: the optimisation's collocation and the nominal's; doubled (up to 4 times) while a check
+#: on CHECK_SAMPLES samples of the circle finds a motor outside (on the paper grid it
+#: never does: one SLSQP per circle)
 NODE_SAFETY_N = 2e-3
 CHECK_SAMPLES = 1024
 #: the optimisation variables are the coefficients in degrees (objective of order 1)
@@ -188,12 +198,27 @@ def solve_offsets(model, speed: float, alpha: float, *, bound: float,
     return None
 
 
+def _command_map(model, P, P1):
+    """The linear map from the node thrusts (n, 4) to the commanded thrusts at the fine
+    points, (f, n): the interpolant ``P`` itself, or with the one stateful effect the trim
+    supports (the motor lag, whose states are the actual thrusts) its command ``T + tau
+    T'`` (:meth:`~gainsched.model.effects.Effect.steady_states`, linear in the thrust
+    trajectory), ``P`` and ``P1`` the interpolant's value and rate."""
+    lag = [e for e in model.effects if e.n_states]
+    return P if not lag else lag[0].steady_states(P, P1)[1]
+
+
 def _solve(model, speed, alpha, bound, harmonics, n_nodes, lo, hi):
     """One SLSQP at node thrust bounds ``[lo, hi]`` (N); None if it fails."""
     Tp = period(speed, model.r)
     t = np.arange(n_nodes) * (Tp / n_nodes)
     nodes = circle_path(speed, model.r, t)
     D1, D2 = _fourier_operators(n_nodes, Tp)
+    # the commands between the nodes: the collocation's own trigonometric interpolant at
+    # FINE times the nodes (a smooth thrust bulges past its node values by about
+    # A k^2 h^2 / 8, several mN at 32 nodes, more than the safety)
+    P, P1, _ = _fourier_samples(np.eye(n_nodes), Tp, FINE * n_nodes)
+    command = _command_map(model, P, P1)
     B, _, _ = _basis(nodes.xi, harmonics)
     nb = B.shape[1]
     state = dict(zip(("phi", "T"), _initial_guess(model, nodes, alpha), strict=True))
@@ -222,7 +247,8 @@ def _solve(model, speed, alpha, bound, harmonics, n_nodes, lo, hi):
                     Jl[:, :, 7 + 3 * a + j, None] * trip[j][:, None] for j in range(3))
             dT = -_newton_step(Jl, D1, D2, Rp)[1]  # (n, 4, 2 nb)
             cache.clear()
-            cache[key] = (T, dT.transpose(1, 0, 2).reshape(4 * n_nodes, 2 * nb) * _DEG)
+            dU = np.einsum("fn,nmp->mfp", command, dT).reshape(-1, 2 * nb)
+            cache[key] = (command @ T, dU * _DEG)
         return cache[key]
 
     G = B.T @ B / n_nodes  # mean square of a series over the nodes: c^T G c

@@ -71,21 +71,44 @@ def _fourier_operators(n: int, T: float):
     return D1, D2
 
 
-def _fourier_eval(values, T: float, t):
-    """Evaluate the trigonometric interpolant of node values (..., n) and two derivatives at t."""
+def _fourier_coefficients(values, T: float):
+    """Coefficients ``c (..., m)`` and angular frequencies ``w (m,)`` rad/s of the
+    trigonometric interpolant of node values (..., n) of period T (s):
+    ``f(t) = Re sum_k c_k exp(i w_k t)``; for even n the Nyquist coefficient is split
+    between +n/2 and -n/2 so that the interpolant is real (m = n + 1)."""
     n = values.shape[-1]
     c = np.fft.fft(values, axis=-1) / n
     k = np.fft.fftfreq(n, d=1.0 / n)
-    if n % 2 == 0:  # split the Nyquist coefficient symmetrically so the interpolant is real
+    if n % 2 == 0:
         c = np.concatenate([c, c[..., n // 2 : n // 2 + 1] / 2], -1)
         c[..., n // 2] /= 2
         k = np.concatenate([k, [n / 2]])
-    w = 2 * np.pi * k / T
+    return c, 2 * np.pi * k / T, k.astype(int)
+
+
+def _fourier_eval(values, T: float, t):
+    """Evaluate the trigonometric interpolant of node values (..., n) and two derivatives at t."""
+    c, w, _ = _fourier_coefficients(values, T)
     E = np.exp(1j * np.outer(t, w))  # (len t, n)
     f = np.real(E @ c.T)
     f1 = np.real(E @ (1j * w * c).T)
     f2 = np.real(E @ (-(w**2) * c).T)
     return f, f1, f2
+
+
+def _fourier_samples(values, T: float, n_out: int):
+    """:func:`_fourier_eval` at the ``n_out`` equally spaced times ``j T / n_out`` of one
+    period, shapes (n_out, ...) like it, by one inverse FFT of length ``n_out``: at those
+    times ``exp(i w_k t_j)`` depends on ``k mod n_out`` alone, so the coefficients are
+    folded onto ``n_out`` frequencies (aliasing, exactly) and transformed, O(n_out log
+    n_out) where the general form spends a complex exponential per sample and node."""
+    c, w, k = _fourier_coefficients(values, T)
+    out = []
+    for coef in (c, 1j * w * c, -(w**2) * c):
+        folded = np.zeros((n_out,) + coef.shape[:-1], dtype=complex)
+        np.add.at(folded, k % n_out, np.moveaxis(coef, -1, 0))
+        out.append(np.real(np.fft.ifft(folded, axis=0)) * n_out)
+    return tuple(out)
 
 
 def _sub_path(path: AzimuthPath, idx) -> AzimuthPath:
@@ -253,7 +276,13 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
             off_n = None if offsets is None else offsets.along(nodes)
             cache[key] = _newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
         phi_n, T_n = cache[key]
-        f, f1, f2 = _fourier_eval(np.vstack([phi_n, T_n.T]), Tp, t - t[0])
+        tt = t - t[0]
+        if np.allclose(tt, np.arange(t.size) * (Tp / t.size), rtol=0.0, atol=1e-12 * Tp):
+            # one period in equal steps (to rounding: the steps' times come from the period
+            # the caller computed)
+            f, f1, f2 = _fourier_samples(np.vstack([phi_n, T_n.T]), Tp, t.size)
+        else:
+            f, f1, f2 = _fourier_eval(np.vstack([phi_n, T_n.T]), Tp, tt)
         phi, dphi, ddphi = f[:, 0], f1[:, 0], f2[:, 0]
         T_guess, T_dot = f[:, 1:], f1[:, 1:]
     else:

@@ -125,3 +125,15 @@ def test_small_vector_helpers_are_numpys_forms_bit_for_bit(dtype):
     np.testing.assert_allclose(_vec.mv(R, a[:4]), (R @ a[:4, :, None])[..., 0], rtol=1e-14)
     np.testing.assert_allclose(_vec.mtv(R, a[:4]),
                                (np.swapaxes(R, -1, -2) @ a[:4, :, None])[..., 0], rtol=1e-14)
+
+
+def test_batched_euler_matrix_is_the_scalar_form_and_the_product():
+    """Issue 39: the batched Z-Y-X matrix, written out, has the entries of the one-sample
+    scalar form bit for bit (one formula) and equals Rz Ry Rx as matrix products to
+    rounding."""
+    phi, theta, psi = ANGLES.T
+    R = rot.matrix_from_euler_zyx(phi, theta, psi)
+    for k in range(0, len(phi), 17):
+        np.testing.assert_array_equal(R[k], rot.matrix_from_euler_zyx_scalar(*ANGLES[k]))
+    np.testing.assert_allclose(R, rot.Rz(psi) @ rot.Ry(theta) @ rot.Rx(phi), rtol=0,
+                               atol=4e-16)

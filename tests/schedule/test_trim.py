@@ -92,3 +92,20 @@ def test_the_eliminated_newton_step_is_the_dense_solve(k):
     np.testing.assert_allclose(d_phi.reshape(n, -1), dense[:n], rtol=0, atol=1e-9 * scale)
     np.testing.assert_allclose(d_T.reshape(n, 4, -1).transpose(1, 0, 2).reshape(4 * n, -1),
                                dense[n:], rtol=0, atol=1e-9 * scale)
+
+
+@pytest.mark.parametrize("n_out", [7, 36, 128, 1024])
+def test_equal_step_samples_of_the_interpolant_are_its_general_evaluation(n_out):
+    """Issue 39: the interpolant at the equal steps of one period by one folded inverse FFT
+    (`_fourier_samples`, aliasing exactly where the steps are fewer than the nodes)
+    equals its evaluation as a sum of complex exponentials at those times, value and two
+    derivatives, to 1e-13 relative."""
+    from gainsched.schedule.trim import _fourier_eval, _fourier_samples
+
+    rng = np.random.default_rng(2)
+    T = 1.7
+    values = rng.normal(size=(5, 128))
+    ref = _fourier_eval(values, T, np.arange(n_out) * (T / n_out))
+    for got, want in zip(_fourier_samples(values, T, n_out), ref, strict=True):
+        assert got.shape == want.shape == (n_out, 5)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-13 * np.abs(want).max())
