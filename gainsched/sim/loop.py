@@ -683,7 +683,9 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     x = P.initial(z0, u_d[0])
     sens = scenario.sensing
     rng = np.random.default_rng(sens.seed)
-    est = _Estimator(dmodel, P, sens, dt, alpha, scenario.gamma, z0, rng)
+    # a design with effect states (motor lag) predicts them too, from the nominal's start
+    est = _Estimator(dmodel, P, sens, dt, alpha, scenario.gamma,
+                     np.concatenate([z0, nom.z[0, N_STATE:]]), rng)
 
     rec = _Record(n_steps, x, P)
     X, Z, Zh, U, TEN, SAT, STAT, HELD = (rec.X, rec.Z, rec.Zh, rec.U, rec.TEN, rec.SAT,
@@ -925,7 +927,9 @@ class _Estimator:
     """Ideal state, or motion-capture pose updates fused with a model prediction.
 
     Between pose samples the estimate is propagated with the design model and
-    the applied input. A pose sample (delayed by the latency) corrects the pose
+    the applied input; a design model with effect states (a motor lag) propagates them
+    too, from ``z0``'s (the nominal's), and the estimate handed to the controller is the
+    10 reduced states. A pose sample (delayed by the latency) corrects the pose
     states and, through the innovation divided by the sample interval, the
     rates (an alpha-beta correction on top of the model prediction); body rates
     come from the gyro. Delayed samples are compared with the estimate of their
@@ -966,7 +970,7 @@ class _Estimator:
             self.z[[2, 3]] += 0.5 * innov[[0, 1]] / T * 0.5
         if len(self.hist) > self.delay + 2:
             self.hist.pop(0)
-        z = self.z.copy()
+        z = self.z[:N_STATE].copy()
         z[7:10] = z_true[7:10] + self.sens.gyro_noise * self.rng.standard_normal(3)
         return z
 
