@@ -7,7 +7,8 @@ the accepted effect into it (:func:`~gainsched.analysis.diagnose.apply_candidate
 config's ``name`` kept, so tables rebuilt from it keep their C symbols) and compares
 again. It stops when nothing is accepted, when an accepted fit no longer lowers the
 residual, or after ``rounds`` rounds. ``gainsched improve`` adds the rebuild of the
-tables and the report (:func:`write_improve`).
+tables, the standard flights flown on the improved model with the old and the new table
+(:func:`gainsched.sim.oldnew.fly_old_new`) and the report (:func:`write_improve`).
 """
 
 from __future__ import annotations
@@ -139,8 +140,10 @@ def improve(config: Config, logs, *, rounds: int = 3, exclude=(), channel_map=No
 
 def write_improve(imp: Improvement, out_dir, flights=None, *,
                   not_flown: str | None = None) -> list[Path]:
-    """The report of an improvement: the error round by round and, when the rebuilt
-    tables were flown, the tracking of the standard flights with the old and the new table.
+    """The report of an improvement: the error round by round, the flights old and new.
+
+    The flights, when the rebuilt tables were flown: the tracking of the standard flights
+    with the old and with the new table.
 
     Parameters
     ----------
