@@ -115,10 +115,11 @@ USER_VEHICLE = {"name": "user", "vehicle.mass": 0.8, "vehicle.arm_length": 0.15,
                 "vehicle.inertia": [4e-3, 4e-3, 7e-3], "vehicle.thrust_max": 5.0,
                 "tether.length": 2.5, "grid.speeds": [3, 6, 9, 12], "grid.tilts_deg": [0, 20]}
 #: the most the rebuilt table's RMS tracking errors over the flights may be, as a share of
-#: the old table's, on the hidden-effect plant. Measured: along track 0.167 -> 0.00116 m
-#: (0.0069), out of the plane 0.175 -> 0.00060 m (0.0035); on the improved model 0.0060
-#: and 0.0023. The old controller's feed-forward lacks the thrust loss and the motor lag.
-#: (Flying the old table twice gives 1.0: the test fails.)
+#: the old table's, on the hidden-effect plant. Measured: along track 0.167 -> 0.00049 m
+#: (0.0029), out of the plane 0.175 -> 0.00072 m (0.0041); on the improved model 0.0024
+#: and 0.0029; per flight at most 0.2 (v3, where the old table's error is 1.4 mm). The
+#: old controller's feed-forward lacks the thrust loss and the motor lag. (Flying the old
+#: table twice gives 1.0: the test fails.)
 BETTER_BY = 0.05
 
 
