@@ -196,12 +196,15 @@ class OldNewFlights:
         w = 0.2
         bars = (("rms_along_track_m", "along-track", "tab:blue"),
                 ("rms_out_of_plane_m", "out-of-plane", "tab:orange"))
+        top = 1e-6
         for i, (key, label, color) in enumerate(bars):
             for j, side in enumerate(("old", "new")):
                 v = [max(1000 * abs(getattr(f, side)[key]), 1e-6) for f in self.flights]
+                top = max(top, *v)
                 ax.bar(x + (2 * i + j - 1.5) * w, v, w, color=color, alpha=0.4 if j == 0 else 1,
                        label=f"{label}, {side} table")
         ax.set_yscale("log")
+        ax.set_ylim(top=top * 30)  # room for the legend above the bars
         ax.set_xticks(x)
         ax.set_xticklabels(names, rotation=30, ha="right", fontsize=7)
         ax.set_ylabel("RMS tracking error, mm")
