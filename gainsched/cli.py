@@ -1185,18 +1185,28 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
               help="The most diagnose rounds (1..10).")
 @click.option("--exclude", "exclude", type=Name(), multiple=True, metavar="NAME",
               help="Leave out this candidate or effect (repeatable), as diagnose.")
-@click.option("--no-build", is_flag=True, help="Write the config and the report only.")
+@click.option("--no-build", is_flag=True,
+              help="Write the config and the report only (no tables, no flights).")
+@click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
+              help="The old table, built from CONFIG, for the flights [default: the "
+              "checkout's tables/NAME.h5 when it is CONFIG's, else CONFIG's table from the "
+              "cache, built there on first use].")
+@click.option("--duration", type=FiniteFloat(1.0, MAX_FLIGHT_S, unit="s"), default=3.0,
+              show_default=True, help=f"Seconds per standard flight (1..{MAX_FLIGHT_S:g}).")
 @click.option("-j", "--jobs", type=Jobs(), default=-1, show_default=True,
               help=f"Parallel workers of the build, 1..{MAX_JOBS} (-1 = all cores).")
 @_MAP
 @_TRUST
 @click.pass_context
 @user_errors
-def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, jobs, map_path, trust):
+def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, table_path, duration, jobs,
+            map_path, trust):
     """The model loop in one command: compare CONFIG with LOGS, diagnose and apply in
-    rounds until no effect is missing, then rebuild the tables from the improved config
-    (its name kept: the same C symbols) and write the report of the error round by
-    round. Each step is what compare, diagnose --apply and build do."""
+    rounds until no effect is missing, rebuild the tables from the improved config (its
+    name kept: the same C symbols), fly the standard flights on the improved model with
+    the old and the new table, and write the report: the error round by round and the
+    tracking old against new. Each step is what compare, diagnose --apply, build and
+    simulate do."""
 
     from .analysis.improve import improve as run
     from .analysis.improve import write_improve
@@ -1205,9 +1215,20 @@ def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, jobs, map_pat
     from .schedule.distributed import DEFAULT_CONNECT_TIMEOUT
 
     _check_fit_arguments("improve", logs, (), exclude)
+    if no_build and table_path is not None:
+        raise InputError("command line", "--tables", "is the old table of the flights, and "
+                         "--no-build flies none: give one of them")
     cfg = _load_for_compare(config)
     cmap = _channel_map(map_path)
     check_out_dir(out_dir, names=[f"{cfg.name}.toml", "tables", "report"])
+    old_table = None
+    if table_path is not None:
+        from .schedule.tables import load_table
+
+        old_table = load_table(table_path)
+        if not old_table.built_from(cfg):
+            raise InputError(table_path, "", f"was built from another config than {config}: "
+                             "the old table of the flights must be CONFIG's")
     with _fit_progress("improve") as fitted:
         imp = run(cfg, logs, rounds=rounds, exclude=exclude, channel_map=cmap, trust=trust,
                   progress=fitted)
@@ -1215,12 +1236,12 @@ def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, jobs, map_pat
         verdict = "" if r.diagnosis is None else f": {r.diagnosis.verdict[:160]}"
         click.echo(f"round {k}: normalised RMS {r.rms:.3g}{verdict}")
     new = imp.config
+    flights = None
     with staged(out_dir) as stage:
         path = stage / f"{new.name}.toml"
         path.write_text(new.text)
         report = stage / "report"
         report.mkdir()
-        write_improve(imp, report)
         refusal = None
         if not no_build:
             from .schedule.grid import check_effect_symmetries
@@ -1238,6 +1259,28 @@ def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, jobs, map_pat
                                backend="local", scheduler=None,
                                connect_timeout=DEFAULT_CONNECT_TIMEOUT)
                 click.echo(said.getvalue().replace(str(stage), str(out_dir)), nl=False)
+                # the standard flights on the improved model, old table and new (simulate's)
+                from tqdm import tqdm
+
+                from .schedule.tables import load_table
+                from .sim.oldnew import N_FLIGHTS, fly_old_new
+
+                if old_table is None:  # CONFIG's, as paper finds it
+                    old_table, table_path = _table_of(cfg)
+                new_table = load_table(stage / "tables" / f"{new.name}.h5")
+                meta = {"old_table": str(table_path),
+                        "old_table_config_sha256": old_table.config_sha256,
+                        "new_table": str(out_dir / "tables" / f"{new.name}.h5"),
+                        "new_table_config_sha256": new_table.config_sha256}
+                with tqdm(total=2 * N_FLIGHTS, unit="flight", desc="fly old and new tables",
+                          disable=None) as bar:
+                    flights = fly_old_new(cfg, old_table, new, new_table, duration=duration,
+                                          progress=bar.update, meta=meta)
+        write_improve(imp, report, flights, not_flown=(
+            "--no-build" if no_build else refusal and f"the tables were not rebuilt: {refusal}"))
+    if flights is not None:
+        for line in flights.lines():
+            click.echo(line)
     applied = ", ".join(imp.applied) or "nothing"
     click.echo(f"{out_dir}: {new.name}.toml ({applied} applied), report/"
                + (f"; tables not rebuilt: {refusal}" if refusal else

@@ -7,7 +7,8 @@ the accepted effect into it (:func:`~gainsched.analysis.diagnose.apply_candidate
 config's ``name`` kept, so tables rebuilt from it keep their C symbols) and compares
 again. It stops when nothing is accepted, when an accepted fit no longer lowers the
 residual, or after ``rounds`` rounds. ``gainsched improve`` adds the rebuild of the
-tables and the report (:func:`write_improve`).
+tables, the standard flights flown on the improved model with the old and the new table
+(:func:`gainsched.sim.oldnew.fly_old_new`) and the report (:func:`write_improve`).
 """
 
 from __future__ import annotations
@@ -137,8 +138,12 @@ def improve(config: Config, logs, *, rounds: int = 3, exclude=(), channel_map=No
     return Improvement(out)
 
 
-def write_improve(imp: Improvement, out_dir) -> list[Path]:
-    """The report of an improvement: the error round by round.
+def write_improve(imp: Improvement, out_dir, flights=None, *,
+                  not_flown: str | None = None) -> list[Path]:
+    """The report of an improvement: the error round by round, the flights old and new.
+
+    The flights, when the rebuilt tables were flown: the tracking of the standard flights
+    with the old and with the new table.
 
     Parameters
     ----------
@@ -146,13 +151,22 @@ def write_improve(imp: Improvement, out_dir) -> list[Path]:
         What :func:`improve` returned.
     out_dir : str or path-like
         An existing folder; files of the same names in it are replaced.
+    flights : OldNewFlights, optional
+        The standard flights flown with the old and the new table
+        (:func:`gainsched.sim.oldnew.fly_old_new`); None: not flown.
+    not_flown : str, optional
+        Why the flights were not flown (``--no-build``, a table that cannot be built),
+        said in the report when ``flights`` is None.
 
     Returns
     -------
     list of Path
-        ``improve.json`` (the rounds: normalised RMS, accepted candidate, verdict),
-        ``improve.md`` (the same as a table) and ``improve.png`` (the normalised RMS per
-        round, each round's added effect written beside it).
+        ``improve.json`` (the rounds: normalised RMS, accepted candidate, verdict; and
+        ``flights``: the flights' metrics old, new and their ratio, per flight and over
+        all flights, or None with ``flights_not_flown``), ``improve.md`` (the same as
+        tables) and ``improve.png`` (the normalised RMS per round, each round's added
+        effect written beside it; beside it, when flown, the RMS tracking errors of the
+        flights, old table against new).
 
     Examples
     --------
@@ -170,6 +184,9 @@ def write_improve(imp: Improvement, out_dir) -> list[Path]:
 
     out_dir = Path(out_dir)
     data = imp.to_json()
+    data["flights"] = None if flights is None else flights.to_json()
+    if flights is None:
+        data["flights_not_flown"] = not_flown or "not asked for"
     paths = [out_dir / "improve.json", out_dir / "improve.md", out_dir / "improve.png"]
     paths[0].write_text(json.dumps(data, indent=2) + "\n")
     lines = [f"# Model improvement of `{imp.config.name}`", "",
@@ -180,8 +197,14 @@ def write_improve(imp: Improvement, out_dir) -> list[Path]:
                      f"{verdict[:300]} |")
     lines += ["", f"Applied: {', '.join(imp.applied) or 'nothing'}. The normalised RMS is 1 at "
               "the measurement noise (docs/model-vs-measurement.md).", ""]
+    lines += _flight_lines(flights, data.get("flights_not_flown"))
     paths[1].write_text("\n".join(lines))
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    if flights is not None and flights.flights:
+        fig, (ax, ax_f) = plt.subplots(1, 2, figsize=(12, 4),
+                                       gridspec_kw={"width_ratios": [1, 1.4]})
+        flights.plot(ax_f)
+    else:
+        fig, ax = plt.subplots(figsize=(6, 3.5))
     rms = [r["normalized_rms"] for r in data["rounds"]]
     ax.plot(range(len(rms)), rms, "o-")
     for k, r in enumerate(data["rounds"]):
@@ -198,3 +221,29 @@ def write_improve(imp: Improvement, out_dir) -> list[Path]:
     fig.savefig(paths[2], dpi=100)
     plt.close(fig)
     return paths
+
+
+def _flight_lines(flights, not_flown) -> list[str]:
+    """The report's section on the standard flights (Markdown lines)."""
+    lines = ["## The standard flights, old table against new", ""]
+    if flights is None:
+        return lines + [f"Not flown: {not_flown}.", ""]
+    meta = flights.meta or {}
+    plant = (f"the improved model `{flights.plant}` (the best available stand-in for the "
+             "vehicle)" if flights.plant_is_new else f"`{flights.plant}`")
+    lines += [f"Plant: {plant}; "
+              f"old: the original config's nominal and table ({meta.get('old_table', '?')}); "
+              f"new: the improved config's nominal and the rebuilt table "
+              f"({meta.get('new_table', '?')}). Flights of {flights.duration:g} s with "
+              "motion-capture noise (the standard flights of `gainsched campaign`, the same "
+              "noise for both tables); the metrics are `gainsched simulate`'s "
+              "(metrics.json); **all**: the RMS over the flights of each RMS error and of the "
+              "final azimuth error, the largest saturation, the slack events in all.", ""]
+    if flights.flights:
+        lines += flights.markdown_lines() + [""]
+    else:
+        lines += ["No flight flown.", ""]
+    if flights.skipped:
+        lines += ["Not flown: " + "; ".join(f"{n} ({why})" for n, why in flights.skipped)
+                  + ".", ""]
+    return lines

@@ -567,7 +567,9 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
 
     The control law of paper Sec. IV, ``u = u_d - K(xi_d, xi_d', alpha) (x - x_d)``, at
     the design's control rate: ``x`` is the LQR state (the 10 reduced states, the azimuth
-    error from continuous azimuths, plus the integral states of ``[control]``),
+    error from continuous azimuths, plus the integral states of ``[control]`` and the
+    design model's effect states, a motor lag's thrusts, which no sensor measures: they
+    are predicted from the applied input with the design model, as a firmware can),
     ``(x_d, u_d)`` the nominal of the reference path and ``K`` the scheduled gains,
     looked up at the reference. The plant is integrated by fixed-step RK4 with the input
     held over each step (zero-order hold); the commands saturate at the plant's thrust
@@ -683,7 +685,9 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     x = P.initial(z0, u_d[0])
     sens = scenario.sensing
     rng = np.random.default_rng(sens.seed)
-    est = _Estimator(dmodel, P, sens, dt, alpha, scenario.gamma, z0, rng)
+    # a design with effect states (motor lag) predicts them too, from the nominal's start
+    est = _Estimator(dmodel, P, sens, dt, alpha, scenario.gamma,
+                     np.concatenate([z0, nom.z[0, N_STATE:]]), rng)
 
     rec = _Record(n_steps, x, P)
     X, Z, Zh, U, TEN, SAT, STAT, HELD = (rec.X, rec.Z, rec.Zh, rec.U, rec.TEN, rec.SAT,
@@ -699,6 +703,8 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     int_idx = [INTEGRATORS[name] for name in design.control.integrators]
     n_lqr = N_STATE + len(int_idx)
     xerr = np.zeros(n_lqr)
+    zx_d = nom.z[:, N_STATE:]  # the nominal's effect states (motor lag: its thrusts)
+    n_fx = zx_d.shape[1]
     integ = np.zeros(len(int_idx))
     xi_true = z0[1]  # the plant's azimuth, tracked continuously (elastic links)
     K_good = None  # the last usable gains (held through NO_GAINS / bad lookups)
@@ -732,10 +738,12 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         else:
             K_good = K
         n = K.shape[-1]
-        if n > xerr.size:  # design model with effect states: no estimate of them, zero error
+        if n > xerr.size:
             xerr = np.zeros(n)
         xerr[:N_STATE] = err
         xerr[N_STATE:n_lqr] = integ
+        if n_fx and n >= n_lqr + n_fx:  # the design's effect states: predicted - nominal
+            xerr[n_lqr:n_lqr + n_fx] = est.effect_states - zx_d[k]
         u_raw = u_d[k] - K @ xerr[:n]
         u = np.minimum(np.maximum(u_raw, u_min), u_max)  # np.clip, without its overhead
         SAT[k] = u != u_raw
@@ -925,7 +933,11 @@ class _Estimator:
     """Ideal state, or motion-capture pose updates fused with a model prediction.
 
     Between pose samples the estimate is propagated with the design model and
-    the applied input. A pose sample (delayed by the latency) corrects the pose
+    the applied input. The effect states of a design model (a motor lag's thrusts) are
+    never measured: they are predicted from ``z0``'s (the nominal's) with the design
+    model and the applied input, ideal sensing or not (what a firmware can run from its
+    own commands), and kept in ``effect_states``; :meth:`estimate` hands out the 10
+    reduced states. A pose sample (delayed by the latency) corrects the pose
     states and, through the innovation divided by the sample interval, the
     rates (an alpha-beta correction on top of the model prediction); body rates
     come from the gyro. Delayed samples are compared with the estimate of their
@@ -949,8 +961,14 @@ class _Estimator:
         self._f = ((lambda z, u, a: fast.f(z, u, a, gamma)[0]) if fast is not None
                    else (lambda z, u, a: model.f(z, u, a, gamma)))
 
+    @property
+    def effect_states(self) -> np.ndarray:
+        """The predicted effect states of the design model (none without one)."""
+        return self.z[N_STATE:]
+
     def estimate(self, k, x, z_true):
         if self.sens.ideal:
+            self.z[:N_STATE] = z_true  # the effect states stay predicted
             return z_true
         if k % self.every == 0:  # a pose sample taken now, arriving after the latency
             self.pending.append((k + self.delay, self._measure(x, self.z[1])))
@@ -966,7 +984,7 @@ class _Estimator:
             self.z[[2, 3]] += 0.5 * innov[[0, 1]] / T * 0.5
         if len(self.hist) > self.delay + 2:
             self.hist.pop(0)
-        z = self.z.copy()
+        z = self.z[:N_STATE].copy()
         z[7:10] = z_true[7:10] + self.sens.gyro_noise * self.rng.standard_normal(3)
         return z
 
@@ -987,7 +1005,7 @@ class _Estimator:
         return pose_angles_from_pose(R_CI @ p_I, R_CI @ R_IB, self.model.p_e, xi_near)[1]
 
     def predict(self, u):
-        if self.sens.ideal:
+        if self.sens.ideal and self.z.size == N_STATE:
             return
         self.z = self.z + self.dt * self._f(self.z, u, self.alpha)
 
