@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["cross", "dot", "mv", "mtv", "broadcast"]
+__all__ = ["cross", "dot", "mv", "mtv", "broadcast", "stack3"]
 
 
 def cross(a, b):
@@ -23,7 +23,16 @@ def cross(a, b):
     """
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], -1)
+    return stack3(a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
+
+
+def stack3(x, y, z):
+    """``np.stack([x, y, z], -1)`` of broadcastable arrays, assigned into one array
+    (``np.stack`` spends ~10 us a call in its Python wrapper; the same values)."""
+    shape = np.broadcast_shapes(np.shape(x), np.shape(y), np.shape(z))
+    out = np.empty(shape + (3,), dtype=np.result_type(x, y, z))
+    out[..., 0], out[..., 1], out[..., 2] = x, y, z
+    return out
 
 
 def dot(a, b):

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._vec import dot, mv
+from ._vec import dot, mv, stack3
 from .rotations import (
     euler_zyx_from_matrix,
     matrix_from_euler_zyx,
@@ -120,15 +120,12 @@ def tether_direction(delta, xi) -> TetherDirection:
             e_delta_xi=np.array([-cd * sx, cd * cx, 0.0]),
             e_xi_xi=np.array([-sd * cx, -sd * sx, 0.0]),
         )
-    shape = np.broadcast_shapes(np.shape(sd), np.shape(sx))
-    zero = np.zeros(shape, dtype=np.result_type(sd, sx))
-    cd_, sd_ = np.broadcast_to(cd, shape), np.broadcast_to(sd, shape)
     return TetherDirection(
-        e=np.stack([sd * cx, sd * sx, cd_], -1),
-        e_delta=np.stack([cd * cx, cd * sx, -sd_], -1),
-        e_xi=np.stack([-sd * sx, sd * cx, zero], -1),
-        e_delta_xi=np.stack([-cd * sx, cd * cx, zero], -1),
-        e_xi_xi=np.stack([-sd * cx, -sd * sx, zero], -1),
+        e=stack3(sd * cx, sd * sx, cd),
+        e_delta=stack3(cd * cx, cd * sx, -sd),
+        e_xi=stack3(-sd * sx, sd * cx, 0.0),
+        e_delta_xi=stack3(-cd * sx, cd * cx, 0.0),
+        e_xi_xi=stack3(-sd * cx, -sd * sx, 0.0),
     )
 
 

@@ -13,6 +13,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from ._vec import stack3
+
 __all__ = [
     "Rx",
     "Ry",
@@ -213,9 +215,7 @@ def euler_zyx_rates_from_body_rates(phi, theta, omega_B):
     wx, wy, wz = omega_B[..., 0], omega_B[..., 1], omega_B[..., 2]
     sp, cp = np.sin(phi), np.cos(phi)
     ct, tt = np.cos(theta), np.tan(theta)
-    return np.stack(
-        [wx + (sp * wy + cp * wz) * tt, cp * wy - sp * wz, (sp * wy + cp * wz) / ct], axis=-1
-    )
+    return stack3(wx + (sp * wy + cp * wz) * tt, cp * wy - sp * wz, (sp * wy + cp * wz) / ct)
 
 
 def up_C_from_tilt(alpha_C):

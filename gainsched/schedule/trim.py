@@ -34,7 +34,7 @@ from .path import AzimuthPath
 
 __all__ = ["trim_path", "TrimError"]
 
-N_FOURIER = 128
+N_FOURIER = 64
 N_SPLINE_MAX = 600
 
 #: the interpolated nominal is taken as it is when its node equations hold at every
