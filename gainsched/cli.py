@@ -221,6 +221,42 @@ def _fit_progress(desc: str):
         yield fitted
 
 
+def _inside(a, b) -> bool:
+    """Whether path ``a`` is inside folder ``b`` (at any depth), however spelled: through
+    ``..``, a symbolic link, or a hard-linked or bind-mounted folder."""
+    a, b = Path(a), Path(b)
+    try:
+        ra, rb = a.resolve(), b.resolve()
+        if rb in ra.parents:
+            return True
+        if not b.is_dir():
+            return False
+        parent = ra.parent  # the deepest folder of a that exists, compared as a file
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+        return any(os.path.samefile(p, b) for p in (parent, *parent.parents))
+    except (OSError, RuntimeError):  # a link loop: nothing to compare
+        return False
+
+
+def _outputs_apart(**outputs) -> None:
+    """Refuse the outputs of one command (option: path, or None when not given) that
+    overlap: two options naming one path, however spelled, or one output inside the
+    other's folder (a file written into a report folder, a folder under a new config's
+    name). Every command with several outputs calls it before any work."""
+    given = [(o, p) for o, p in outputs.items() if p is not None]
+    for i, (ob, b) in enumerate(given):
+        for oa, a in given[:i]:
+            if _same_file(a, b):
+                same = "" if str(a) == str(b) else f" ({b})"
+                raise InputError("command line", ob, f"{b} is {oa} {a}{same}: each output "
+                                 "its own path")
+            for (o1, p1), (o2, p2) in (((ob, b), (oa, a)), ((oa, a), (ob, b))):
+                if _inside(p1, p2):
+                    raise InputError("command line", o1, f"{p1} is inside {o2} {p2}: "
+                                     "each output its own path, none inside another")
+
+
 def _not_an_input(out, option: str, **inputs) -> None:
     """Refuse an output file ``out`` (of ``option``) that is one of the ``inputs`` (label:
     path, list of paths or None), however spelled: an input is never overwritten."""
@@ -1132,6 +1168,7 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
         raise InputError("command line", "-o", "is the new config of --apply: give --apply "
                          "too (or --report DIR for a report)")
     _check_fit_arguments("diagnose", logs, candidates, exclude)
+    _outputs_apart(**{"-o": new_config, "--report": report_dir})
     if new_config is not None:
         from .resources import config_path
 
