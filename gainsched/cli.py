@@ -1104,13 +1104,19 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
     cmap = _channel_map(map_path)
     if out_dir is not None:
         check_out_dir(out_dir, names=["compare.json", "compare.md"])
-    cmp = run(cfg, logs, channel_map=cmap, trust=trust)
-    paper = None if no_paper else paper_fits(cfg, cmp.measured)
+    # steps: each log read and the statistics, per config; the paper's fits
+    steps = (len(logs) + 1) * (1 if before_path is None else 2) + (0 if no_paper else 1)
+    with _progress(f"compare {cfg.name}", steps, "step") as bar:
+        cmp = run(cfg, logs, channel_map=cmap, trust=trust, progress=bar.update)
+        paper = None if no_paper else paper_fits(cfg, cmp.measured)
+        bar.update(0 if no_paper else 1)
+        before = None
+        if before_path is not None:
+            before = run(before_cfg, logs, channel_map=cmap, trust=trust,
+                         progress=bar.update)
     for line in compare_lines(cmp, paper):
         click.echo(line)
-    before = None
-    if before_path is not None:
-        before = run(before_cfg, logs, channel_map=cmap, trust=trust)
+    if before is not None:
         click.echo("")
         for line in before_after_lines(before, cmp):
             click.echo(line)

@@ -13,14 +13,18 @@ from click.testing import CliRunner
 
 from gainsched.cli import cli
 
-from support import PAPER_H5, PAPER_TOML, on_terminal, synthetic_table
+from support import PAPER_H5, PAPER_TOML, REPO, on_terminal, synthetic_table
 
 GAINSCHED = [sys.executable, "-m", "gainsched"]
+FLIGHTS = sorted((REPO / "examples" / "flights").glob("*.csv"))
 
 #: commands cheap enough to run three times: (arguments, what their progress line shows)
 COMMANDS = {
     "campaign": (["campaign", str(PAPER_TOML), "--tables", str(PAPER_H5), "--duration", "1",
                   "-o", "flights"], r"campaign none: 100%\|.*\| 7/7 .*flight/s"),
+    "compare": (["compare", str(PAPER_TOML), *map(str, FLIGHTS[:2]), "--before",
+                 str(PAPER_TOML.with_name("paper_hold.toml"))],
+                r"compare paper: 100%\|.*\| 7/7 .*step/s"),
     "check": (["check", str(PAPER_H5), "--speed-stride", "9"],
               r"check paper: 100%\|.*\| 2/2 .*speed/s"),
 }
