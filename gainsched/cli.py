@@ -223,18 +223,9 @@ def _fit_progress(desc: str):
 
 def _inside(a, b) -> bool:
     """Whether path ``a`` is inside folder ``b`` (at any depth), however spelled: through
-    ``..``, a symbolic link, or a hard-linked or bind-mounted folder."""
-    a, b = Path(a), Path(b)
+    ``..`` or a symbolic link (compared resolved, not as text)."""
     try:
-        ra, rb = a.resolve(), b.resolve()
-        if rb in ra.parents:
-            return True
-        if not b.is_dir():
-            return False
-        parent = ra.parent  # the deepest folder of a that exists, compared as a file
-        while not parent.exists() and parent != parent.parent:
-            parent = parent.parent
-        return any(os.path.samefile(p, b) for p in (parent, *parent.parents))
+        return Path(b).resolve() in Path(a).resolve().parents
     except (OSError, RuntimeError):  # a link loop: nothing to compare
         return False
 
