@@ -180,18 +180,72 @@ def _check_fit_arguments(command: str, logs, candidates, exclude) -> None:
                          f"({', '.join(exclude)}): nothing to fit")
 
 
-@contextlib.contextmanager
-def _fit_progress(desc: str):
-    """A progress line of diagnose's fits on a terminal (tqdm on stderr): yields the
-    ``progress(name)`` callback that counts a fit and names its candidate."""
+def _quiet() -> bool:
+    """Whether ``gainsched --quiet`` was given (read from the command line's root)."""
+    ctx = click.get_current_context(silent=True)
+    return ctx is not None and bool(ctx.find_root().params.get("quiet"))
+
+
+def _progress(desc: str, total=None, unit: str = "it", *, show: bool = True):
+    """The progress line of a command that can run for more than a few seconds, the one
+    place every command makes it: tqdm on stderr, drawn only when stderr is a terminal
+    (so never in a pipe, a file or a test's runner), never under ``gainsched --quiet``,
+    nor when ``show`` is false. ``total`` None counts without an ETA; the bar's
+    ``update`` is the ``progress`` callback the library functions take."""
     from tqdm import tqdm
 
-    with tqdm(unit="fit", desc=desc, disable=None) as bar:
+    return tqdm(total=total, unit=unit, desc=desc, file=sys.stderr,
+                disable=True if not show or _quiet() else None)
+
+
+def _note(text: str, bar=None) -> None:
+    """A line of chatter on stderr (what runs where, what was built on the way): not a
+    result, not a warning, so ``--quiet`` drops it; written above a live ``bar``."""
+    if _quiet():
+        return
+    if bar is not None:
+        bar.write(text, file=sys.stderr)
+    else:
+        click.echo(text, err=True)
+
+
+@contextlib.contextmanager
+def _fit_progress(desc: str):
+    """A progress line of diagnose's fits (:func:`_progress`): yields the
+    ``progress(name)`` callback that counts a fit and names its candidate."""
+    with _progress(desc, unit="fit") as bar:
         def fitted(name):
             bar.set_postfix_str(name, refresh=False)
             bar.update()
 
         yield fitted
+
+
+def _inside(a, b) -> bool:
+    """Whether path ``a`` is inside folder ``b`` (at any depth), however spelled: through
+    ``..`` or a symbolic link (compared resolved, not as text)."""
+    try:
+        return Path(b).resolve() in Path(a).resolve().parents
+    except (OSError, RuntimeError):  # a link loop: nothing to compare
+        return False
+
+
+def _outputs_apart(**outputs) -> None:
+    """Refuse the outputs of one command (option: path, or None when not given) that
+    overlap: two options naming one path, however spelled, or one output inside the
+    other's folder (a file written into a report folder, a folder under a new config's
+    name). Every command with several outputs calls it before any work."""
+    given = [(o, p) for o, p in outputs.items() if p is not None]
+    for i, (ob, b) in enumerate(given):
+        for oa, a in given[:i]:
+            if _same_file(a, b):
+                same = "" if str(a) == str(b) else f" ({b})"
+                raise InputError("command line", ob, f"{b} is {oa} {a}{same}: each output "
+                                 "its own path")
+            for (o1, p1), (o2, p2) in (((ob, b), (oa, a)), ((oa, a), (ob, b))):
+                if _inside(p1, p2):
+                    raise InputError("command line", o1, f"{p1} is inside {o2} {p2}: "
+                                     "each output its own path, none inside another")
 
 
 def _not_an_input(out, option: str, **inputs) -> None:
@@ -218,7 +272,10 @@ MAX_SPEED = 100.0
 
 @click.group(cls=_OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="gainsched")
-def cli():
+@click.option("-q", "--quiet", is_flag=True,
+              help="No progress lines and no notes on stderr (results, warnings and errors "
+              "stay). Progress shows only on a terminal anyway.")
+def cli(quiet):
     """Gain-scheduling compiler for a tethered quadcopter flying great circles.
 
     Units: SI everywhere (m, s, N, rad/s) except tilts, which are given in degrees.
@@ -383,8 +440,6 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     speeds run on a Dask cluster; the table is byte-identical to the local build."""
     import time
 
-    from tqdm import tqdm
-
     from .config import load_config
     from .publish import check_out_dir, publish, recover
     from .schedule.distributed import check_options, executor
@@ -397,16 +452,15 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     choice = None
     # the progress line first: the solver's modules take a second or two to import
     if cfg.grid.auto:  # the build chooses the breakpoints (docs/grid.md)
-        bar = tqdm(unit="circle", desc=f"choose the grid of {cfg.name}", disable=None)
+        bar = _progress(f"choose the grid of {cfg.name}", unit="circle")
     else:
-        bar = tqdm(total=cfg.grid.speeds.size, unit="speed", desc=f"build {cfg.name}",
-                   disable=None)
+        bar = _progress(f"build {cfg.name}", cfg.grid.speeds.size, "speed")
     with bar, executor(backend, scheduler, jobs, connect_timeout=connect_timeout) as ex:
         from .schedule.grid import build_grid
         from .schedule.refine import refine_grid
 
         if backend == "dask":
-            bar.write(f"build {cfg.name} on {ex.description}", file=sys.stderr)
+            _note(f"build {cfg.name} on {ex.description}", bar)
         if cfg.grid.auto:
             choice = refine_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update,
                                  backend=ex.backend)
@@ -417,8 +471,7 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     from .schedule.grid import bound_price
     n_v = cfg.grid.speeds.size
     n_mid = max(n_v - 1, 1) if cfg.firmware.format == "compact" else 0
-    with tqdm(total=n_mid, unit="speed", desc="certify compact table",
-              disable=None if n_mid else True) as bar:
+    with _progress("certify compact table", n_mid, "speed", show=n_mid > 0) as bar:
         outputs = output_set(cfg, grid, out_dir, progress=bar.update,
                              grid_auto=None if choice is None else choice.record())
     out, *c_paths = publish(out_dir, outputs.files)
@@ -468,8 +521,6 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
     max |K|, min tension margin (N) and table SHA-256 per variant."""
     import time
 
-    from tqdm import tqdm
-
     from .config import load_config
     from .publish import check_out_dir, staged
     from .schedule.distributed import check_options, executor
@@ -486,10 +537,9 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
     total = None if base.grid.auto else len(plan.variants) * base.grid.speeds.size
     with executor(backend, scheduler, jobs, connect_timeout=connect_timeout) as ex:
         if backend == "dask":
-            click.echo(f"sweep {base.name} on {ex.description}", err=True)
-        with tqdm(total=total, unit="circle" if total is None else "speed",
-                  desc=f"sweep {base.name} "
-                  f"({len(plan.variants)} variants)", disable=None) as bar:
+            _note(f"sweep {base.name} on {ex.description}")
+        with _progress(f"sweep {base.name} ({len(plan.variants)} variants)", total,
+                       "circle" if total is None else "speed") as bar:
             with staged(out_dir) as stage:  # every variant appears at once, or none
                 rows = run_sweep(plan, stage, n_jobs=ex.n_jobs, backend=ex.backend,
                                  progress=bar.update)
@@ -610,11 +660,9 @@ def plot(table, out_dir, with_check, as_json):
     marked), the feasibility envelope, nominal thrusts and roll, the closed-loop spectral
     radius per circle and, with --check, the midpoint interpolation error; plus a JSON
     summary (plots.json)."""
-    from tqdm import tqdm
-
     from .publish import check_out_dir, publish
     from .schedule.tables import load_table
-    from .schedule.viewer import schedule_plots
+    from .schedule.viewer import plot_count, schedule_plots
 
     check_out_dir(out_dir, "--out", names=["plots.json"])
     t = load_table(table)
@@ -622,11 +670,11 @@ def plot(table, out_dir, with_check, as_json):
     if with_check:
         from .firmware.check import midpoint_check
 
-        with tqdm(total=max(t.speed.size - 1, 0), unit="speed", desc=f"check {t.name}",
-                  disable=None) as bar:
+        with _progress(f"check {t.name}", max(t.speed.size - 1, 0), "speed") as bar:
             res = midpoint_check(t, progress=bar.update)
         midpoints = (res.speed, res.tilt, res.rel_err)
-    files = schedule_plots(t, midpoints, source=str(table))
+    with _progress(f"plot {t.name}", plot_count(t, midpoints is not None), "file") as bar:
+        files = schedule_plots(t, midpoints, source=str(table), progress=bar.update)
     paths = publish(out_dir, files, where="--out")
     if as_json:
         click.echo(files["plots.json"].decode(), nl=False)
@@ -671,8 +719,6 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     NAME_control.h (from the table's config) and copy the C runtime and controller
     (gainsched_runtime.c/.h, gainsched_control.c/.h) next to them; print the flash
     footprint."""
-    from tqdm import tqdm
-
     from .firmware.codegen import CONTROL_FILES, RUNTIME_FILES, c_files, flash_summary
     from .firmware.controller import controller_params
     from .firmware.outputs import certificate_lines, firmware_form, table_config
@@ -696,8 +742,7 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     # a bad -o fails before the certification
     check_out_dir(out_dir, names=[*RUNTIME_FILES, *CONTROL_FILES])
     n_mid = max(t.speed.size - 1, 1) if fmt == "compact" else 0
-    with tqdm(total=n_mid, unit="speed", desc="certify compact table",
-              disable=None if n_mid else True) as bar:
+    with _progress("certify compact table", n_mid, "speed", show=n_mid > 0) as bar:
         form, cert = firmware_form(cfg, t, progress=bar.update)
     params = None if cfg is None else controller_params(cfg, t)
     paths = publish(out_dir, c_files(form, params))
@@ -743,8 +788,6 @@ def check(table, speed_stride, max_error, azimuth_error):
     the table's compact form."""
     import time
 
-    from tqdm import tqdm
-
     from .firmware.check import midpoint_check
     from .schedule.refine import grid_auto_lines
     from .schedule.tables import load_table
@@ -775,7 +818,7 @@ def check(table, speed_stride, max_error, azimuth_error):
                    f"samples max {100 * np.nanmax(form.fit_error, initial=0):.2f}%")
         lookup = CompactInterpolator(form)
     n_v = len(range(0, max(t.speed.size - 1, 0), speed_stride))
-    with tqdm(total=n_v, unit="speed", desc=f"check {t.name}", disable=None) as bar:
+    with _progress(f"check {t.name}", n_v, "speed") as bar:
         res = midpoint_check(t, speed_stride=speed_stride, progress=bar.update, lookup=lookup)
     ok_pts = int(np.count_nonzero(np.isfinite(res.rel_err)))
     n_a = max(t.tilt.size - 1, 1)
@@ -862,8 +905,6 @@ def simulate(config, table_path, scenario, plant_path, speed, runtime, controlle
     """Fly a scenario in closed loop on the nonlinear plant with gains from the table."""
     import dataclasses
 
-    from tqdm import tqdm
-
     from .config import load_config
     from .publish import check_out_dir, staged
     from .schedule.tables import load_table
@@ -880,7 +921,7 @@ def simulate(config, table_path, scenario, plant_path, speed, runtime, controlle
     check_out_dir(out_dir, names=["log.csv", "log.h5", "metrics.json"])
     if not table.built_from(cfg):  # once every input passed
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
-    with tqdm(total=n, unit="step", desc=f"simulate {scn.name}", disable=None) as bar:
+    with _progress(f"simulate {scn.name}", n, "step") as bar:
         res = run(cfg, runtime_scheduler(table, runtime), scn, plant, progress=bar.update,
                   controller=controller)
     with staged(out_dir) as stage:
@@ -924,8 +965,6 @@ def _table_of(cfg):
     """``(table, path)`` of a config when no table is given: the checkout's
     ``tables/NAME.h5`` when it was built from this config, else the cached table
     (:mod:`gainsched.schedule.cached`), built there on first use."""
-    from tqdm import tqdm
-
     from .schedule.cached import cached_table, cached_table_path
     from .schedule.tables import load_table
 
@@ -936,12 +975,11 @@ def _table_of(cfg):
             return table, local
     path = cached_table_path(cfg)
     total = None if cfg.grid.auto else cfg.grid.speeds.size
-    with tqdm(total=total, unit="speed" if total else "circle", disable=None if not
-              path.is_file() else True, desc=f"build {cfg.name} (first use, kept in the cache)"
-              ) as bar:
+    with _progress(f"build {cfg.name} (first use, kept in the cache)", total,
+                   "speed" if total else "circle", show=not path.is_file()) as bar:
         table, built = cached_table(cfg, progress=bar.update)
     if built:
-        click.echo(f"built {path}", err=True)
+        _note(f"built {path}")
     return table, path
 
 
@@ -964,8 +1002,6 @@ def _table_of(cfg):
 def paper(out_dir, config, table_path, plant_path, quick, runtime):
     """Fly the paper's experiments (Sec. V.B, Figs. 3-4) in simulation and write a report:
     paper figure, paper value, simulated value."""
-    from tqdm import tqdm
-
     from .config import load_config
     from .publish import check_out_dir, staged
     from .schedule.tables import load_table
@@ -984,7 +1020,7 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
         click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
     n = len(experiments(quick=quick))
     meta = {"table": str(table_path), "table_config_sha256": table.config_sha256}
-    with tqdm(total=n, unit="flight", desc="paper", disable=None) as bar, \
+    with _progress("paper", n, "flight") as bar, \
             staged(out_dir) as stage:
         rep = run_paper(cfg, runtime_scheduler(table, runtime), stage, quick=quick, plant=plant,
                         progress=bar.update, meta=meta, table=table)
@@ -1059,13 +1095,19 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
     cmap = _channel_map(map_path)
     if out_dir is not None:
         check_out_dir(out_dir, names=["compare.json", "compare.md"])
-    cmp = run(cfg, logs, channel_map=cmap, trust=trust)
-    paper = None if no_paper else paper_fits(cfg, cmp.measured)
+    # steps: each log read and the statistics, per config; the paper's fits
+    steps = (len(logs) + 1) * (1 if before_path is None else 2) + (0 if no_paper else 1)
+    with _progress(f"compare {cfg.name}", steps, "step") as bar:
+        cmp = run(cfg, logs, channel_map=cmap, trust=trust, progress=bar.update)
+        paper = None if no_paper else paper_fits(cfg, cmp.measured)
+        bar.update(0 if no_paper else 1)
+        before = None
+        if before_path is not None:
+            before = run(before_cfg, logs, channel_map=cmap, trust=trust,
+                         progress=bar.update)
     for line in compare_lines(cmp, paper):
         click.echo(line)
-    before = None
-    if before_path is not None:
-        before = run(before_cfg, logs, channel_map=cmap, trust=trust)
+    if before is not None:
         click.echo("")
         for line in before_after_lines(before, cmp):
             click.echo(line)
@@ -1123,6 +1165,7 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
         raise InputError("command line", "-o", "is the new config of --apply: give --apply "
                          "too (or --report DIR for a report)")
     _check_fit_arguments("diagnose", logs, candidates, exclude)
+    _outputs_apart(**{"-o": new_config, "--report": report_dir})
     if new_config is not None:
         from .resources import config_path
 
@@ -1378,8 +1421,9 @@ def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_
                    f"{table.speed.min():.3g}-{table.speed.max():.3g} m/s, tilts up to "
                    f"{np.rad2deg(table.tilt.max()):.0f} deg: {', '.join(outside)} fly outside "
                    "it, on the gains of its nearest circle", err=True)
-    logs = fly(cfg, table_scheduler(table), hidden, scenarios=flights, duration=duration,
-               load_cell=not no_load_cell, seed=seed)
+    with _progress(f"campaign {hidden}", len(flights), "flight") as bar:
+        logs = fly(cfg, table_scheduler(table), hidden, scenarios=flights, duration=duration,
+                   load_cell=not no_load_cell, seed=seed, progress=bar.update)
     with staged(out_dir) as stage:
         paths = write_campaign(stage, logs, fmt)
     click.echo(f"{out_dir}: {len(paths)} flights, hidden effect: {HIDDEN[hidden].doc}")

@@ -363,3 +363,30 @@ def recorded_rows(res, *, every=5, delay=12, rng=None, bad=()):
     for k, col, value in bad:
         rows[k, col] = value
     return rows
+
+
+def on_terminal(args, cwd, *, columns: int = 100, timeout: float = 300) -> tuple[int, str]:
+    """Run ``args`` with stderr on a pseudo-terminal of ``columns`` columns (tqdm draws
+    nothing on a terminal of 0 columns, what a bare ``openpty`` reports) and stdout on a
+    pipe: ``(exit code, everything the terminal showed)``."""
+    import fcntl
+    import pty
+    import struct
+    import termios
+
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, columns, 0, 0))
+    p = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=slave, cwd=cwd)
+    os.close(slave)
+    chunks = []
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:  # the terminal closed with the process
+            break
+        if not chunk:
+            break
+        chunks.append(chunk)
+    p.wait(timeout=timeout)
+    os.close(master)
+    return p.returncode, b"".join(chunks).decode(errors="replace")

@@ -16,6 +16,7 @@ import struct
 import subprocess
 import sys
 
+import click
 import h5py
 import numpy as np
 import pytest
@@ -383,6 +384,11 @@ def _edited_table(attrs=None, text=None, sha=False) -> bytes:
 
 #: id -> (input files to write (bytes, text, or a function that makes them), command line,
 #: words the one line must hold)
+def _diagnose_apply(new_config, report_dir):
+    return ["diagnose", PAPER, FLIGHT, FLIGHTS[0], "--candidate", "mass", "--apply", "-o",
+            new_config, "--report", report_dir]
+
+
 HOSTILE = {
     # one reader of every text file: size, encoding, nesting, numbers
     "scenario-latin1": (_scenario(LATIN1), _simulate(), ["scenario.toml", "not UTF-8",
@@ -559,6 +565,20 @@ HOSTILE = {
     "convert-onto-the-log": ({"a.csv": FLIGHT.read_bytes()},
                              ["convert", "a.csv", "-o", "./a.csv"],
                              ["-o", "a.csv is the input LOG"]),
+    # outputs of one command that overlap (issue 38 leftover): one path twice, or one
+    # output inside another's folder, however spelled (a link: test_outputs_apart_...)
+    "diagnose-apply-into-the-report-folder": (
+        {}, _diagnose_apply("rep/diagnose.json", "rep"),
+        ["-o", "rep/diagnose.json is inside --report rep", "none inside another"]),
+    "diagnose-apply-deep-in-an-existing-report-folder": (
+        {"rep/x": ""}, _diagnose_apply("rep/new/c.toml", "rep"),
+        ["-o", "rep/new/c.toml is inside --report rep"]),
+    "diagnose-report-is-the-new-config": (
+        {"sub/x": ""}, _diagnose_apply("sub/../out", "out"),
+        ["--report", "out is -o sub/../out (out): each output its own path"]),
+    "diagnose-report-under-the-new-config": (
+        {}, _diagnose_apply("c.toml", "c.toml/rep"),
+        ["--report", "c.toml/rep is inside -o c.toml"]),
     # the audit (item 5): empty names, bounds known once the table is read, repeats
     "scenario-empty-name": ({}, _simulate(""), ["'--scenario'", "an empty name"]),
     "map-empty-name": ({}, ["compare", PAPER, FLIGHT, "--map", ""], ["'--map'", "an empty name"]),
@@ -619,6 +639,34 @@ def test_hostile_input_is_refused_at_the_door(case, tmp_path, monkeypatch):
     one_line_error(res, *needles)
     assert res.stdout == "", res.stdout
     assert _files(tmp_path) == before
+
+
+def test_outputs_apart_through_a_link_and_in_every_command_with_several(tmp_path,
+                                                                      monkeypatch):
+    """An output inside another's folder reached through a symbolic link is refused as
+    the plain spelling is; and every command with two or more output options checks
+    them apart (gainsched.cli._outputs_apart) before any work."""
+    import inspect as pyinspect
+
+    import gainsched.cli as cli_mod
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "real").mkdir()
+    (tmp_path / "link").symlink_to("real")
+    before = _files(tmp_path)
+    res = _run(*_diagnose_apply("link/c.toml", "real"))
+    one_line_error(res, "-o", "link/c.toml is inside --report real")
+    assert res.stdout == "" and _files(tmp_path) == before
+    several = []
+    for name, cmd in cli_mod.cli.commands.items():
+        outs = [p.opts for p in cmd.params if isinstance(p.type, click.Path)
+                and p.name in ("out_dir", "out_path", "new_config", "report_dir",
+                               "csv_path")]
+        if len(outs) > 1:
+            several.append(name)
+            src = pyinspect.getsource(cmd.callback.__wrapped__)
+            assert "_outputs_apart(" in src, (name, outs)
+    assert "diagnose" in several, several
 
 
 def test_a_refused_publish_removes_the_folders_it_made(tmp_path):

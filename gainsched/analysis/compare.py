@@ -943,7 +943,7 @@ def check_motor_order(model: Model, measured, segs=None,
 # --------------------------------------------------------------------------- loading
 
 
-def load_segments(config: Config, logs, channel_map=None, trust=()
+def load_segments(config: Config, logs, channel_map=None, trust=(), progress=None
                   ) -> tuple[list[Measured], list[FlightLog], list[str]]:
     """Read log files (or take :class:`FlightLog` objects) and differentiate every segment.
 
@@ -952,7 +952,7 @@ def load_segments(config: Config, logs, channel_map=None, trust=()
     map gives a thrust. The files are checked against the config's vehicle
     (:mod:`gainsched.analysis.logchecks`) except for the checks named in ``trust``.
     Returns (measured segments, the log segments, warnings as text: gaps, dropped
-    pieces).
+    pieces). ``progress(1)`` is called after each log read (a progress bar's increment).
     """
     segs: list[FlightLog] = []
     notes: list[str] = []
@@ -966,6 +966,8 @@ def load_segments(config: Config, logs, channel_map=None, trust=()
                                  thrust_max=config.vehicle.thrust_max, config=config,
                                  trust=trust))
         notes.extend(str(w.message) for w in caught if issubclass(w.category, LogWarning))
+        if progress is not None:
+            progress(1)
     if not segs:
         raise InputError("command line", "LOG", "no flight log given")
     names = [s.meta.get("flight_id") or Path(s.source).stem or "log" for s in segs]
@@ -1423,7 +1425,7 @@ class Comparison:
 
 
 def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
-            notes=None, channel_map=None, trust=()) -> Comparison:
+            notes=None, channel_map=None, trust=(), progress=None) -> Comparison:
     """Compare the model with flight logs: the residual per axis against its noise floor.
 
     The whole of ``gainsched compare`` (docs/model-vs-measurement.md): per gap-free log
@@ -1463,6 +1465,9 @@ def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
         Consistency checks of the log files to skip (:func:`~gainsched.analysis.logs.
         read_log`, docs/flight-log.md): ``plane``, ``quaternion``, ``gyro``, ``thrust``,
         ``tension``, ``xi_ref``.
+    progress : callable or None, default None
+        Called with 1 after each log read (none when ``measured`` is given) and once
+        more when the statistics are done (e.g. a progress bar's ``update``).
 
     Returns
     -------
@@ -1499,7 +1504,7 @@ def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
     'roll residual concentrates at tension 26-34.1 N (RMS 5.74 rad/s^2, ...)'
     """
     if measured is None:
-        measured, segs, notes = load_segments(config, logs, channel_map, trust)
+        measured, segs, notes = load_segments(config, logs, channel_map, trust, progress)
     model = Model(config, effects)
     check_logged_channels(model, measured, segs)
     check_motor_order(model, measured, segs)
@@ -1509,6 +1514,8 @@ def compare(config: Config, logs, *, effects=None, measured=None, segs=None,
     stats = {a: axis_stats(res, a, noise[a]) for a in axes}
     where = where_it_fails(res, noise)
     found, tables = findings(res, noise, units=UNITS)
+    if progress is not None:
+        progress(1)
     return Comparison(config, measured, res, stats, noise, where, list(notes or []), list(segs),
                       tracking_summary(config, measured, segs or []), found, tables, pose_noise)
 

@@ -26,6 +26,7 @@ resampling), so a test can read the values back from the figure.
 
 from __future__ import annotations
 
+import functools
 import io
 import json
 from collections import Counter
@@ -258,12 +259,21 @@ def schedule_figures(table, midpoints=None) -> dict:
     >>> plt.close("all")
     """
     plt = _pyplot()
-    figs = {gain_file_name(a): _gain_figure(plt, table, i) for i, a in enumerate(table.tilt)}
-    figs["nominal.png"] = _nominal_figure(plt, table)
+    return {name: make() for name, make in _figure_makers(plt, table, midpoints).items()}
+
+
+def _figure_makers(plt, table, midpoints) -> dict:
+    """File name -> a function that draws that figure of :func:`schedule_figures`: one
+    figure at a time (drawn, rendered and closed before the next, and counted by a
+    progress line)."""
+    makers = {gain_file_name(a): functools.partial(_gain_figure, plt, table, i)
+              for i, a in enumerate(table.tilt)}
+    makers["nominal.png"] = functools.partial(_nominal_figure, plt, table)
     rho = table.spectral_radius
     fin = rho[np.isfinite(rho)]
     worst = f"worst {fin.max():.5f}" if fin.size else "no feasible circle"
-    figs["spectral_radius.png"] = _speed_tilt_figure(
+    makers["spectral_radius.png"] = functools.partial(
+        _speed_tilt_figure,
         plt, table, rho, f"{table.name}: closed-loop monodromy spectral radius per circle "
         f"({worst}; < 1 is stable; blank: infeasible)", "spectral radius per period",
         "spectral_radius")
@@ -272,7 +282,8 @@ def schedule_figures(table, midpoints=None) -> dict:
         worst = (f"slowest {slow['time_constant_s']:.3g} s at {slow['speed_mps']:g} m/s, "
                  f"{slow['tilt_deg']:g} deg: {', '.join(slow['dominant_states'])}"
                  if slow else "no feasible circle")
-        figs["time_constant.png"] = _speed_tilt_figure(
+        makers["time_constant.png"] = functools.partial(
+            _speed_tilt_figure,
             plt, table, table.mode_tau[..., 0], f"{table.name}: slowest closed-loop time "
             f"constant per circle, s\n({worst}; blank: infeasible)",
             "tau = -T / ln|lambda| (s)", "time_constant")
@@ -280,11 +291,12 @@ def schedule_figures(table, midpoints=None) -> dict:
         vs, ts, grid = _midpoint_grid(midpoints)
         fin = grid[np.isfinite(grid)]
         worst = f"max {100 * fin.max():.2f} %" if fin.size else "nothing checked"
-        figs["midpoint_error.png"] = _speed_tilt_figure(
+        makers["midpoint_error.png"] = functools.partial(
+            _speed_tilt_figure,
             plt, table, 100 * grid, f"{table.name}: interpolation error at cell midpoints, "
             f"max over azimuth ({worst})", "|K_interp - K|_F / |K|_F (%)",
             "midpoint_error", speeds=vs, tilts=ts)
-    return figs
+    return makers
 
 
 def _png(fig) -> bytes:
@@ -471,7 +483,15 @@ def table_summary(table, *, source: str = "") -> dict:
     }
 
 
-def schedule_plots(table, midpoints=None, *, source: str = "") -> dict[str, bytes]:
+def plot_count(table, midpoints: bool = False) -> int:
+    """How many PNG files :func:`schedule_plots` renders for ``table`` (with the
+    midpoint-error figure when ``midpoints``): the length of its progress."""
+    return (table.tilt.size + 2 + (table.mode_tau is not None) + bool(midpoints)
+            + 1)  # + envelope.png
+
+
+def schedule_plots(table, midpoints=None, *, source: str = "",
+                   progress=None) -> dict[str, bytes]:
     """Render a gain table's figures to PNG files plus a JSON summary (plots.json), as bytes.
 
     The figures of :func:`schedule_figures` (at 90 dpi, without a timestamp) and
@@ -489,6 +509,9 @@ def schedule_plots(table, midpoints=None, *, source: str = "") -> dict[str, byte
         the JSON.
     source : str, default ""
         The file name the JSON reports as ``"table"`` (default: ``table.source``).
+    progress : callable or None, default None
+        Called with 1 after each file rendered (:func:`plot_count` of them; e.g. a
+        progress bar's ``update``).
 
     Returns
     -------
@@ -524,8 +547,14 @@ def schedule_plots(table, midpoints=None, *, source: str = "") -> dict[str, byte
     ([6.0, 9.0], [0.84, 0.952])
     >>> paths = publish(f"{out}/plots", files)
     """
-    files = {name: _png(fig) for name, fig in schedule_figures(table, midpoints).items()}
+    files = {}
+    for name, make in _figure_makers(_pyplot(), table, midpoints).items():
+        files[name] = _png(make())
+        if progress is not None:
+            progress(1)
     files["envelope.png"] = envelope_png(envelope_from_table(table))
+    if progress is not None:
+        progress(1)
     summary = table_summary(table, source=source)
     summary["files"] = sorted([*files, "plots.json"])
     if midpoints is not None:

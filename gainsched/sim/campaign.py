@@ -258,12 +258,13 @@ def _trim(log: FlightLog, t0: float, load_cell: bool, hidden: str) -> FlightLog:
 
 def fly(design: Config, scheduler, scenarios, plant: Config | None = None, *,
         latency: float = 0.0, load_cell: bool = True, trim_s: float = 0.25,
-        hidden: str = "none", custom=None) -> list[FlightLog]:
+        hidden: str = "none", custom=None, progress=None) -> list[FlightLog]:
     """Fly ``scenarios`` on ``plant`` with ``scheduler`` and return the flight logs.
 
     The first ``trim_s`` s (start-up transient) are dropped; ``latency`` delays the
     logged pose; ``load_cell=False`` drops the tension column. Flights that go slack are
-    kept up to the slack instant.
+    kept up to the slack instant. ``progress(1)`` is called after each flight (a
+    progress bar's increment).
     """
     ctx = registered_effect(custom) if custom else contextlib.nullcontext()
     logs = []
@@ -272,18 +273,21 @@ def fly(design: Config, scheduler, scenarios, plant: Config | None = None, *,
             res = simulate(design, scheduler, scn, plant)
             log = log_from_result(_delayed_result(res, latency))
             logs.append(_trim(log, trim_s, load_cell, hidden))
+            if progress is not None:
+                progress(1)
     return logs
 
 
 def campaign(design: Config, scheduler, hidden: str = "none", *, scenarios=None,
              duration: float = 3.0, load_cell: bool = True,
-             seed: int = 1) -> list[FlightLog]:
-    """Fly the default (or given) scenarios on the plant with the hidden effect ``hidden``."""
+             seed: int = 1, progress=None) -> list[FlightLog]:
+    """Fly the default (or given) scenarios on the plant with the hidden effect ``hidden``
+    (``progress(1)`` after each flight)."""
     h = HIDDEN[hidden]
     scenarios = default_flights(duration, seed) if scenarios is None else scenarios
     plant = plant_config(design, h)
     return fly(design, scheduler, scenarios, plant, latency=h.latency, load_cell=load_cell,
-               hidden=h.name, custom=h.custom)
+               hidden=h.name, custom=h.custom, progress=progress)
 
 
 def write_campaign(out_dir, logs, fmt: str = "csv") -> list[Path]:

@@ -27,7 +27,7 @@ from gainsched.sim.campaign import HIDDEN, campaign, default_flights, write_camp
 from gainsched.sim.loop import table_scheduler
 
 from support import CAMPAIGN_DURATION as DURATION
-from support import PAPER_H5, PAPER_TOML, REPO
+from support import PAPER_H5, PAPER_TOML, REPO, on_terminal
 
 
 def _excess_rms_fall(r) -> float:
@@ -754,35 +754,15 @@ def test_exclude_names_an_effect_or_a_candidate():
 def test_diagnose_shows_its_progress_on_a_terminal(tmp_path):
     """Issue 39: on a terminal diagnose counts its fits and names the candidate being
     fitted (tqdm on stderr); piped, stderr stays empty of it."""
-    import fcntl
-    import os
-    import pty
-    import struct
     import subprocess
     import sys
-    import termios
 
     flights = REPO / "examples" / "flights"
     args = [sys.executable, "-m", "gainsched", "diagnose", str(PAPER_TOML),
             str(flights / "v3.csv"), str(flights / "v9.csv"), "--candidate", "drag",
             "--candidate", "rotor_drag"]
-    master, slave = pty.openpty()
-    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # 100 columns
-    p = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=slave, cwd=tmp_path)
-    os.close(slave)
-    chunks = []
-    while True:
-        try:
-            chunk = os.read(master, 4096)
-        except OSError:  # the terminal closed with the process
-            break
-        if not chunk:
-            break
-        chunks.append(chunk)
-    p.wait(timeout=300)
-    os.close(master)
-    shown = b"".join(chunks).decode(errors="replace")
-    assert p.returncode == 0, shown
+    code, shown = on_terminal(args, tmp_path)
+    assert code == 0, shown
     assert re.search(r"diagnose: .*[12] *fit.*(drag|rotor_drag)", shown), shown
     piped = subprocess.run(args, capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert piped.returncode == 0 and "fit/s" not in piped.stderr and "diagnose:" not in \
