@@ -1264,6 +1264,9 @@ def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, table_path, d
     cfg = _load_for_compare(config)
     cmap = _channel_map(map_path)
     check_out_dir(out_dir, names=[f"{cfg.name}.toml", "tables", "report"])
+    # the improved config and the rebuilt table replace files of these names in DIR
+    _not_an_input(out_dir / f"{cfg.name}.toml", "-o", CONFIG=config, LOG=list(logs))
+    _not_an_input(out_dir / "tables" / f"{cfg.name}.h5", "-o", **{"--tables": table_path})
     old_table = None
     if table_path is not None:
         from .schedule.tables import load_table

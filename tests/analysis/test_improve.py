@@ -166,3 +166,18 @@ def test_rebuilt_tables_fly_the_hidden_effect_plant_better_than_the_old(tmp_path
         assert s[key]["ratio"] <= BETTER_BY, (key, s[key])
         assert all(f.new[key] < f.old[key] for f in fl.flights), (key, fl.flights)
     assert s["slack_events"]["new"] == 0
+
+
+def test_improve_never_writes_over_its_inputs(tmp_path, monkeypatch):
+    """The improved config keeps CONFIG's name, so `improve out/paper.toml LOGS -o out` would
+    replace its own input; refused in one line, before any work, the input untouched."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "out").mkdir()
+    cfg = tmp_path / "out" / "paper.toml"
+    cfg.write_text(PAPER_TOML.read_text())
+    res = CliRunner().invoke(cli, ["improve", "out/paper.toml", *map(str, FLIGHTS[:2]),
+                                   "-o", "out"])
+    assert res.exit_code == 2, res.output
+    assert res.output.strip() == ("gainsched: error: command line: -o: out/paper.toml is the input "
+                                  "CONFIG: give a new file (an input is never overwritten)")
+    assert cfg.read_text() == PAPER_TOML.read_text()
