@@ -22,6 +22,7 @@ import shutil
 import string
 import subprocess
 import textwrap
+from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 
@@ -44,6 +45,7 @@ __all__ = [
     "RUNTIME_FILES",
     "STRICT_CFLAGS",
     "c_float",
+    "c_floats",
     "render",
     "render_header",
     "firmware_data",
@@ -99,14 +101,57 @@ def _c_uint(x) -> str:
     return f"{int(x)}u"
 
 
+@lru_cache(maxsize=1)
+def _hex_tables():
+    """Text pieces of :func:`c_floats`: three hex digits of a 12-bit half of the mantissa,
+    with and without their trailing zeros, and ``p<exponent>f`` per biased exponent."""
+    full = np.array([f"{h:03x}" for h in range(4096)], dtype=object)
+    stripped = np.array([t.rstrip("0") for t in full.tolist()], dtype=object)
+    power = np.array([f"p{e - 127:+d}f" for e in range(256)], dtype=object)
+    return full, stripped, power
+
+
+def c_floats(values) -> list[str]:
+    """:func:`c_float` of every value of an array, the same text, ~10x faster (a table's
+    header has 10^5 to 10^6 values): a normal float32 is ``0x1.`` and its 23 mantissa
+    bits as six hex digits without their trailing zeros, then ``p`` and the unbiased
+    exponent (``float.hex``); the pieces come from tables indexed by the bits, joined
+    in numpy's object loops. Zeros are ``0.0f``; subnormals take :func:`c_float`."""
+    full, stripped, power = _hex_tables()
+    f = np.asarray(values, dtype=np.float32).ravel()
+    if not np.all(np.isfinite(f)):
+        c_float(f[~np.isfinite(f)][0])  # raises, naming the value
+    bits = f.view(np.uint32)
+    exp = (bits >> 23) & 0xFF
+    mant = (bits & 0x7FFFFF) << 1  # 24 bits: six hex digits
+    hi, lo = mant >> 12, mant & 0xFFF
+    digits = np.where(lo == 0, stripped[hi], full[hi] + stripped[lo])
+    head = np.where(bits >> 31 == 1, "-0x1", "0x1").astype(object)
+    text = head + np.where(digits == "", "", ".").astype(object) + digits + power[exp]
+    zero = (bits & 0x7FFFFFFF) == 0
+    text[zero] = np.where(bits[zero] >> 31 == 1, "-0.0f", "0.0f")
+    for i in np.flatnonzero((exp == 0) & ~zero).tolist():
+        text[i] = c_float(f[i])
+    return text.tolist()
+
+
 def _body(arr, fmt, indent=1, per_line=6) -> str:
-    """Brace-nested initializer contents of ``arr`` (without the outermost braces)."""
+    """Brace-nested initializer contents of ``arr`` (without the outermost braces), each
+    value written by ``fmt`` (:func:`c_float` in its vectorised form)."""
+    arr = np.asarray(arr)
+    flat = c_floats(arr) if fmt is c_float else [fmt(v) for v in arr.ravel()]
+    texts = np.empty(len(flat), dtype=object)
+    texts[:] = flat
+    return _nested(texts.reshape(arr.shape), indent, per_line)
+
+
+def _nested(texts, indent, per_line) -> str:
     pad = "    " * indent
-    if arr.ndim == 1:
-        vals = [fmt(v) for v in arr]
+    if texts.ndim == 1:
+        vals = texts.tolist()
         lines = [", ".join(vals[i : i + per_line]) for i in range(0, len(vals), per_line)]
         return ",\n".join(pad + line for line in lines)
-    parts = [f"{pad}{{\n{_body(sub, fmt, indent + 1, per_line)}\n{pad}}}" for sub in arr]
+    parts = [f"{pad}{{\n{_nested(sub, indent + 1, per_line)}\n{pad}}}" for sub in texts]
     return ",\n".join(parts)
 
 

@@ -53,6 +53,23 @@ def test_c_float_is_exact():
     assert codegen.c_float(1.5) == "0x1.8p+0f" and codegen.c_decimal(1.6) == "1.6f"
 
 
+def test_the_vectorised_literals_are_float_hex_text():
+    """Issue 39: ``c_floats`` (the header's values, from the float32 bits) writes the text
+    of ``c_float`` (``float.hex``) for every value: normal, zero of either sign,
+    subnormal, extreme, every mantissa length; and refuses what it refuses."""
+    rng = np.random.default_rng(1)
+    vals = np.r_[
+        rng.normal(size=5000) * 10.0 ** rng.integers(-40, 38, 5000),
+        np.zeros(50), -np.zeros(3), 2.0 ** np.arange(-149, 128),
+        [1e-40, -1e-45, 3.4028235e38, np.pi, 1 / 3, 1.5, 1.0009765625],
+    ].astype(np.float32)
+    assert codegen.c_floats(vals) == [codegen.c_float(v) for v in vals]
+    assert codegen.c_floats(vals[:21].reshape(3, 7)) == [codegen.c_float(v) for v in vals[:21]]
+    for bad in (np.nan, np.inf):
+        with pytest.raises(ValueError):
+            codegen.c_floats(np.array([1.0, bad]))
+
+
 def test_c_identifier():
     assert c_identifier("paper") == "paper"
     assert c_identifier("Paper-v2.1") == "paper_v2_1"
