@@ -16,8 +16,9 @@ the chain rule through the differentiation operators assembles the Jacobian.
 With stateful effects (motor lag) the free thrusts are the effect states (the
 actual thrusts) and the command follows from the effect's inverse.
 
-Dense linear algebra is fine: 128 periodic nodes (a few hundred spline nodes)
-give a 640 x 640 (a few thousand) system; no library offers this particular
+Dense linear algebra is fine: 64 periodic nodes (a few hundred spline nodes)
+give a 320 x 320 (a few thousand) system, and the Newton step eliminates the thrusts
+node by node; no library offers this particular
 collocation, hence the hand-written solver.
 """
 
@@ -34,6 +35,9 @@ from .path import AzimuthPath
 
 __all__ = ["trim_path", "TrimError"]
 
+#: nodes of the periodic collocation: the interpolated nominal of 64 meets the model to
+#: 1e-11 (relative) at 1024 samples per circle with rotor drag, motor lag or momentum
+#: theory, and its thrusts equal those of 128 nodes to 4e-12 N (issue 39)
 N_FOURIER = 64
 N_SPLINE_MAX = 600
 
