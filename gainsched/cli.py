@@ -438,16 +438,30 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     """Build the gain table OUT/NAME.h5 from CONFIG: nominal, linearisation and periodic
     LQR at every (speed m/s, tilt deg, azimuth) grid point. With --backend dask the
     speeds run on a Dask cluster; the table is byte-identical to the local build."""
-    import time
-
     from .config import load_config
-    from .publish import check_out_dir, publish, recover
-    from .schedule.distributed import check_options, executor
+    from .publish import check_out_dir, recover
+    from .schedule.distributed import check_options
 
     check_options(backend, scheduler)
     cfg = load_config(config)
     check_out_dir(out_dir, names=_build_names(cfg))  # a bad -o fails now, not after the build
     recover(out_dir)  # finish or clean up after a killed earlier run
+    _build_into(cfg, out_dir, jobs, backend, scheduler, connect_timeout)
+
+
+def _build_into(cfg, out_dir: Path, jobs, backend="local", scheduler=None,
+                connect_timeout=None, shown: Path | None = None) -> None:
+    """What ``build`` does once its arguments are checked: choose or solve the grid, write
+    the output set into ``out_dir`` and print the summary, naming ``shown`` for
+    ``out_dir`` (``improve`` builds into its stage and names its output folder)."""
+    import time
+
+    from .publish import publish
+    from .schedule.distributed import DEFAULT_CONNECT_TIMEOUT, executor
+
+    def name(p):
+        return p if shown is None else shown / Path(p).relative_to(out_dir)
+
     t0 = time.perf_counter()
     choice = None
     # the progress line first: the solver's modules take a second or two to import
@@ -455,7 +469,8 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
         bar = _progress(f"choose the grid of {cfg.name}", unit="circle")
     else:
         bar = _progress(f"build {cfg.name}", cfg.grid.speeds.size, "speed")
-    with bar, executor(backend, scheduler, jobs, connect_timeout=connect_timeout) as ex:
+    with bar, executor(backend, scheduler, jobs, connect_timeout=DEFAULT_CONNECT_TIMEOUT
+                       if connect_timeout is None else connect_timeout) as ex:
         from .schedule.grid import build_grid
         from .schedule.refine import refine_grid
 
@@ -478,7 +493,7 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     n_pts = grid.reasons.size
     feas = np.count_nonzero(grid.reasons == 0)
     click.echo(
-        f"{out}: {n_pts} points ({cfg.grid.tilts.size} tilts x {n_v} speeds x "
+        f"{name(out)}: {n_pts} points ({cfg.grid.tilts.size} tilts x {n_v} speeds x "
         f"{cfg.grid.azimuth_samples} azimuths), {100 * feas / n_pts:.1f}% feasible, "
         f"worst closed-loop spectral radius {_nanmax(grid.spectral_radius)}, "
         f"{time.perf_counter() - t0:.1f} s, {out.stat().st_size / 1024:.0f} KiB"
@@ -486,7 +501,7 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     if choice is not None:
         for line in choice.lines():
             click.echo("  " + line)
-    click.echo("  C: " + ", ".join(str(p) for p in c_paths))
+    click.echo("  C: " + ", ".join(str(name(p)) for p in c_paths))
     click.echo(f"  firmware table: {cfg.firmware.format}, {outputs.form.nbytes():,} bytes of data"
                + (f" (dense: {outputs.form.base.nbytes():,})" if outputs.certificate else ""))
     if outputs.certificate is not None:
@@ -1240,9 +1255,8 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
               help=f"Parallel workers of the build, 1..{MAX_JOBS} (-1 = all cores).")
 @_MAP
 @_TRUST
-@click.pass_context
 @user_errors
-def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, table_path, duration, jobs,
+def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, duration, jobs,
             map_path, trust):
     """The model loop in one command: compare CONFIG with LOGS, diagnose and apply in
     rounds until no effect is missing, rebuild the tables from the improved config (its
@@ -1255,7 +1269,6 @@ def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, table_path, d
     from .analysis.improve import write_improve
     from .config import config_from_text
     from .publish import check_out_dir, staged
-    from .schedule.distributed import DEFAULT_CONNECT_TIMEOUT
 
     _check_fit_arguments("improve", logs, (), exclude)
     if no_build and table_path is not None:
@@ -1296,18 +1309,11 @@ def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, table_path, d
                 check_effect_symmetries(config_from_text(new.text, str(path)))
             except InputError as held:
                 refusal = f"no table can hold {held.where}: {held.message}"
-            else:  # the build command itself; its lines name the folder, not the stage
-                import io
-
-                said = io.StringIO()
-                with contextlib.redirect_stdout(said):
-                    ctx.invoke(build, config=path, out_dir=stage / "tables", jobs=jobs,
-                               backend="local", scheduler=None,
-                               connect_timeout=DEFAULT_CONNECT_TIMEOUT)
-                click.echo(said.getvalue().replace(str(stage), str(out_dir)), nl=False)
+            else:  # what build does; its lines name the output folder, not the stage
+                (stage / "tables").mkdir()
+                _build_into(config_from_text(new.text, str(out_dir / path.name)),
+                            stage / "tables", jobs, shown=out_dir / "tables")
                 # the standard flights on the improved model, old table and new (simulate's)
-                from tqdm import tqdm
-
                 from .schedule.tables import load_table
                 from .sim.oldnew import N_FLIGHTS, fly_old_new
 
@@ -1318,8 +1324,7 @@ def improve(ctx, config, logs, out_dir, rounds, exclude, no_build, table_path, d
                         "old_table_config_sha256": old_table.config_sha256,
                         "new_table": str(out_dir / "tables" / f"{new.name}.h5"),
                         "new_table_config_sha256": new_table.config_sha256}
-                with tqdm(total=2 * N_FLIGHTS, unit="flight", desc="fly old and new tables",
-                          disable=None) as bar:
+                with _progress("fly old and new tables", 2 * N_FLIGHTS, "flight") as bar:
                     flights = fly_old_new(cfg, old_table, new, new_table, duration=duration,
                                           progress=bar.update, meta=meta)
         write_improve(imp, report, flights, not_flown=(

