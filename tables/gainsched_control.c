@@ -8,6 +8,7 @@
  * identical statuses, and hold host and emulated Cortex-M4F builds bit for bit.
  */
 #include "gainsched_control.h"
+#include "gainsched_trig.h"
 
 #include <stddef.h> /* only freestanding headers: no libc, no libm */
 
@@ -26,21 +27,11 @@
 #define GS_C_2PI_HI 6.28125f
 #define GS_C_2PI_LO 0x1.fb5444p-10f
 
-static int gs_c_nonfinite(float x)
-{
-    union {
-        float f;
-        uint32_t u;
-    } v;
-    v.f = x;
-    return (v.u & 0x7f800000u) == 0x7f800000u;
-}
-
 static int gs_c_any_nonfinite(const float *x, unsigned n)
 {
     unsigned i;
     for (i = 0u; i < n; ++i) {
-        if (gs_c_nonfinite(x[i])) {
+        if (gs_nonfinite(x[i])) {
             return 1;
         }
     }
@@ -50,7 +41,7 @@ static int gs_c_any_nonfinite(const float *x, unsigned n)
 /* 1 if x is finite and |x| <= limit */
 static int gs_c_within(float x, float limit)
 {
-    return !gs_c_nonfinite(x) && x <= limit && x >= -limit;
+    return !gs_nonfinite(x) && x <= limit && x >= -limit;
 }
 
 /* a (rad, |a| <= GS_XI_LIMIT) wrapped to [-pi, pi) */
@@ -168,7 +159,7 @@ static int gs_c_outputs_ok(const gs_ctrl_params *pr)
     return pr->normalized == 0u ||
            ((pr->thr_mdl_fac >= 0.0f) && (pr->thr_mdl_fac <= 1.0f) &&
             (pr->thrust_full > 0.0f) && (pr->thrust_full >= pr->thrust_max) &&
-            !gs_c_nonfinite(pr->thrust_full));
+            !gs_nonfinite(pr->thrust_full));
 }
 
 int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params)
@@ -180,15 +171,15 @@ int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params
         table->n_state > GS_CTRL_MAX_STATE || pr->n_int > GS_CTRL_MAX_INT ||
         10u + pr->n_int > table->n_state || !(pr->dt > 0.0f) ||
         !(pr->thrust_max >= pr->thrust_min) || !(pr->pose_period > 0.0f) ||
-        !(pr->pose_delay >= 0.0f) || !(pr->pose_timeout >= 0.0f) || gs_c_nonfinite(pr->dt) ||
-        gs_c_nonfinite(pr->pose_delay)) {
+        !(pr->pose_delay >= 0.0f) || !(pr->pose_timeout >= 0.0f) || gs_nonfinite(pr->dt) ||
+        gs_nonfinite(pr->pose_delay)) {
         return GS_BAD_ARG;
     }
     for (i = 0u; i < pr->n_int; ++i) {
         /* each bound finite and > 0 (NaN fails the comparison): a bound of 0 would hold
          * the integral at it, and GS_CTRL_INT_LIMIT, for ever */
         if (pr->int_of[i] > 1u || !(pr->int_limit[i] > 0.0f) ||
-            gs_c_nonfinite(pr->int_limit[i])) {
+            gs_nonfinite(pr->int_limit[i])) {
             return GS_BAD_ARG;
         }
     }
@@ -646,7 +637,7 @@ static uint32_t gs_c_control(gs_ctrl *c, const gs_ctrl_ref *ref, uint32_t st, in
         for (j = 0u; j < n; ++j) {
             u -= Ki[j] * e[j];
         }
-        if (gs_c_nonfinite(u)) {
+        if (gs_nonfinite(u)) {
             gs_c_idle(pr, thrust);
             return st | GS_CTRL_IDLE;
         }

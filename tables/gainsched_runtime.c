@@ -1,6 +1,7 @@
 /*
  * gainsched runtime: gain-table lookup for flight firmware (C99).
- * Contract and status bits: gainsched_runtime.h and docs/runtime.md.
+ * Contract and status bits: gainsched_runtime.h and docs/runtime.md. It also implements
+ * the trigonometry of gainsched_trig.h (the lookup's and the controller's).
  *
  * Every float operation that decides which cell a query falls in is spelled
  * out here in single precision, in the same order as the Python reference
@@ -8,6 +9,7 @@
  * same status for every query. Change one, change the other.
  */
 #include "gainsched_runtime.h"
+#include "gainsched_trig.h"
 
 #include <stddef.h> /* only freestanding headers: no libc, no libm */
 
@@ -38,12 +40,6 @@ static uint32_t gs_bits(float x)
     } v;
     v.f = x;
     return v.u;
-}
-
-/* 1 if the float is NaN or +-inf (bit test: immune to -ffinite-math-only). */
-static int gs_nonfinite(float x)
-{
-    return (gs_bits(x) & 0x7f800000u) == 0x7f800000u;
 }
 
 /* Largest i in [0, n-2] with ax[i] <= v, for ax[0] <= v <= ax[n-1], n >= 2.
@@ -120,12 +116,12 @@ static inline int gs_table_usable(const gs_table *t)
                        t->mask != NULL &&
                        (t->offsets == NULL || t->n_offset_harmonics <= GS_MAX_OFFSET_HARMONICS);
     if (t->format == GS_FORMAT_COMPACT) {
-        return common && t->harmonics != NULL && t->coef_start != NULL &&
-               (t->coef != NULL || t->n_coef == 0u) && t->n_harmonics <= GS_MAX_HARMONICS;
+        return common && t->compact.harmonics != NULL && t->compact.coef_start != NULL &&
+               (t->compact.coef != NULL || t->compact.n_coef == 0u) && t->compact.n_harmonics <= GS_MAX_HARMONICS;
     }
-    return common && t->format == GS_FORMAT_DENSE && t->K_tilt0 != NULL &&
-           (t->K != NULL || t->n_tilt == 1u) && t->u_d != NULL && t->phi_d != NULL &&
-           (t->n_xi_tilt0 <= 1u || t->n_xi_tilt0 == t->n_xi);
+    return common && t->format == GS_FORMAT_DENSE && t->dense.K_tilt0 != NULL &&
+           (t->dense.K != NULL || t->n_tilt == 1u) && t->dense.u_d != NULL && t->dense.phi_d != NULL &&
+           (t->dense.n_xi_tilt0 <= 1u || t->dense.n_xi_tilt0 == t->n_xi);
 }
 
 /* x < 0 read from the sign bit: a negative subnormal is negative with flush-to-zero
@@ -139,7 +135,7 @@ static int gs_negative(float x)
 /* the tilt-0 gain block of speed iv and azimuth ix */
 static inline const float *gs_k_tilt0(const gs_table *t, size_t iv, size_t ix, size_t nK)
 {
-    return t->n_xi_tilt0 > 1u ? t->K_tilt0 + (iv * t->n_xi + ix) * nK : t->K_tilt0 + iv * nK;
+    return t->dense.n_xi_tilt0 > 1u ? t->dense.K_tilt0 + (iv * t->n_xi + ix) * nK : t->dense.K_tilt0 + iv * nK;
 }
 
 /* where a query fell: corner indices and fractions per axis, and the symmetry maps */
@@ -225,10 +221,10 @@ static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *res
             pk[2] = gs_k_tilt0(t, iv[1], ix[0], nK);
             pk[3] = gs_k_tilt0(t, iv[1], ix[1], nK);
         } else {
-            pk[0] = t->K + (P[0] - n_vx) * nK;
-            pk[1] = t->K + (P[1] - n_vx) * nK;
-            pk[2] = t->K + (P[2] - n_vx) * nK;
-            pk[3] = t->K + (P[3] - n_vx) * nK;
+            pk[0] = t->dense.K + (P[0] - n_vx) * nK;
+            pk[1] = t->dense.K + (P[1] - n_vx) * nK;
+            pk[2] = t->dense.K + (P[2] - n_vx) * nK;
+            pk[3] = t->dense.K + (P[3] - n_vx) * nK;
         }
         if (ia[1] == 0u) { /* only with a single tilt */
             pk[4] = gs_k_tilt0(t, iv[0], ix[0], nK);
@@ -236,10 +232,10 @@ static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *res
             pk[6] = gs_k_tilt0(t, iv[1], ix[0], nK);
             pk[7] = gs_k_tilt0(t, iv[1], ix[1], nK);
         } else {
-            pk[4] = t->K + (P[4] - n_vx) * nK;
-            pk[5] = t->K + (P[5] - n_vx) * nK;
-            pk[6] = t->K + (P[6] - n_vx) * nK;
-            pk[7] = t->K + (P[7] - n_vx) * nK;
+            pk[4] = t->dense.K + (P[4] - n_vx) * nK;
+            pk[5] = t->dense.K + (P[5] - n_vx) * nK;
+            pk[6] = t->dense.K + (P[6] - n_vx) * nK;
+            pk[7] = t->dense.K + (P[7] - n_vx) * nK;
         }
     }
     /* feasibility of the corners that contribute (all of them unless the query
@@ -272,7 +268,7 @@ static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *res
         const float *const p4 = pk[4], *const p5 = pk[5], *const p6 = pk[6], *const p7 = pk[7];
         const float w0 = w[0], w1 = w[1], w2 = w[2], w3 = w[3];
         const float w4 = w[4], w5 = w[5], w6 = w[6], w7 = w[7];
-        const float *const ud = t->u_d, *const ph = t->phi_d;
+        const float *const ud = t->dense.u_d, *const ph = t->dense.phi_d;
         float o[4];
         unsigned l;
         /* four elements per pass (nK is a multiple of 4), written out: the 8 corner
@@ -377,7 +373,7 @@ static int gs_compact(const gs_table *t, float xi, const gs_cell *cell, float *K
     ck[0] = 1.0f;
     sk[0] = 0.0f;
     gs_sincosf(xi, &sk[1], &ck[1]);
-    for (j = 2u; j <= t->n_harmonics; ++j) {
+    for (j = 2u; j <= t->compact.n_harmonics; ++j) {
         ck[j] = ck[j - 1u] * ck[1] - sk[j - 1u] * sk[1];
         sk[j] = sk[j - 1u] * ck[1] + ck[j - 1u] * sk[1];
     }
@@ -387,10 +383,10 @@ static int gs_compact(const gs_table *t, float xi, const gs_cell *cell, float *K
         if (wq[c] == 0.0f) {
             continue;
         }
-        H = t->harmonics + q[c] * n_value;
-        cf = t->coef + t->coef_start[q[c]];
+        H = t->compact.harmonics + q[c] * n_value;
+        cf = t->compact.coef + t->compact.coef_start[q[c]];
         g[0] = wq[c]; /* the corner's weight times each harmonic */
-        for (j = 1u; j <= t->n_harmonics; ++j) {
+        for (j = 1u; j <= t->compact.n_harmonics; ++j) {
             g[2u * j - 1u] = wq[c] * ck[j];
             g[2u * j] = wq[c] * sk[j];
         }
@@ -893,10 +889,10 @@ uint32_t gs_table_crc32(const gs_table *t)
     crc = gs_crc_u32(crc, gs_bits(t->xi_scale));
     if (compact) { /* the format and its sizes (dense tables keep their CRC) */
         crc = gs_crc_u32(crc, t->format);
-        crc = gs_crc_u32(crc, t->n_harmonics);
-        crc = gs_crc_u32(crc, t->n_coef);
-    } else if (t->n_xi_tilt0 > 1u) { /* only then: tables without it keep their CRC */
-        crc = gs_crc_u32(crc, t->n_xi_tilt0);
+        crc = gs_crc_u32(crc, t->compact.n_harmonics);
+        crc = gs_crc_u32(crc, t->compact.n_coef);
+    } else if (t->dense.n_xi_tilt0 > 1u) { /* only then: tables without it keep their CRC */
+        crc = gs_crc_u32(crc, t->dense.n_xi_tilt0);
     }
     crc = gs_crc_floats(crc, t->xi, t->n_xi);
     crc = gs_crc_floats(crc, t->speed, t->n_speed);
@@ -907,20 +903,20 @@ uint32_t gs_table_crc32(const gs_table *t)
         crc = gs_crc_floats(crc, t->state_sign, n);
         crc = gs_crc_bytes(crc, t->state_perm, n);
         crc = gs_crc_bytes(crc, t->mask, n_circles);
-        crc = gs_crc_bytes(crc, t->harmonics, n_circles * (4u * n + 5u));
+        crc = gs_crc_bytes(crc, t->compact.harmonics, n_circles * (4u * n + 5u));
         for (i = 0; i < n_circles; ++i) {
-            crc = gs_crc_u32(crc, t->coef_start[i]);
+            crc = gs_crc_u32(crc, t->compact.coef_start[i]);
         }
-        crc = gs_crc_floats(crc, t->coef, t->n_coef);
+        crc = gs_crc_floats(crc, t->compact.coef, t->compact.n_coef);
     } else {
-        crc = gs_crc_floats(crc, t->K_tilt0,
-                            (size_t)t->n_speed * (t->n_xi_tilt0 > 1u ? t->n_xi : 1u) * 4u * n);
+        crc = gs_crc_floats(crc, t->dense.K_tilt0,
+                            (size_t)t->n_speed * (t->dense.n_xi_tilt0 > 1u ? t->n_xi : 1u) * 4u * n);
         if (t->n_tilt > 1u) {
-            crc = gs_crc_floats(crc, t->K,
+            crc = gs_crc_floats(crc, t->dense.K,
                                 (size_t)(t->n_tilt - 1u) * t->n_speed * t->n_xi * 4u * n);
         }
-        crc = gs_crc_floats(crc, t->u_d, n_pts * 4u);
-        crc = gs_crc_floats(crc, t->phi_d, n_pts);
+        crc = gs_crc_floats(crc, t->dense.u_d, n_pts * 4u);
+        crc = gs_crc_floats(crc, t->dense.phi_d, n_pts);
         crc = gs_crc_floats(crc, t->state_sign, n);
         crc = gs_crc_bytes(crc, t->state_perm, n);
         crc = gs_crc_bytes(crc, t->mask, n_pts);
@@ -987,12 +983,12 @@ int gs_verify(const gs_table *t)
         const size_t n_circles = (size_t)t->n_tilt * t->n_speed;
         size_t c, e, next = 0;
         for (c = 0; c < n_circles; ++c) {
-            const uint8_t *H = t->harmonics + c * n_value;
-            if (t->coef_start[c] != next) {
+            const uint8_t *H = t->compact.harmonics + c * n_value;
+            if (t->compact.coef_start[c] != next) {
                 return GS_BAD_TABLE;
             }
             for (e = 0; e < n_value; ++e) {
-                if (H[e] > t->n_harmonics ||
+                if (H[e] > t->compact.n_harmonics ||
                     ((t->mask[c] & GS_MASK_NO_GAINS) != 0u && H[e] != 0u)) {
                     return GS_BAD_TABLE;
                 }
@@ -1001,7 +997,7 @@ int gs_verify(const gs_table *t)
                 }
             }
         }
-        if (next != t->n_coef) {
+        if (next != t->compact.n_coef) {
             return GS_BAD_TABLE;
         }
     }

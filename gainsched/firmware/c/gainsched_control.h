@@ -4,7 +4,7 @@
  *
  * Hand-written, shipped with the gainsched package and copied next to each generated
  * table header with the runtime (`gainsched export-c TABLE`). It sits on the runtime
- * (gainsched_runtime.h: gs_lookup_nominal, gs_sincosf, gs_atan2f, gs_sqrtf) and keeps
+ * (gainsched_runtime.h: gs_lookup_nominal; gainsched_trig.h: gs_sincosf, gs_atan2f, gs_sqrtf, gs_nonfinite) and keeps
  * its rules: no malloc, no recursion, no global mutable state (the state lives in a
  * gs_ctrl the firmware owns), static stack, freestanding (<stdint.h> only), no libm,
  * floating-point contraction off, so that host and target compute the same bits.

@@ -93,6 +93,7 @@ ${state_perm}
 ${value_arrays}
 ${vehicle_data}${offsets_data}
 static const gs_table ${name}_table = {
+    ${NAME}_FORMAT,
     ${NAME}_N_TILT,
     ${NAME}_N_SPEED,
     ${NAME}_N_XI,
@@ -102,16 +103,19 @@ static const gs_table ${name}_table = {
     ${name}_speed,
     ${name}_xi_dot,
     ${name}_tilt,
-${value_refs},
     ${name}_state_sign,
     ${name}_state_perm,
     ${mask_ref},
+    { /* dense part */
+${dense_part}
+    },
+    { /* compact part */
+${compact_part}
+    },
     ${vehicle_ref},
     ${NAME}_OFFSET_HARMONICS,
     ${offsets_ref},
     ${NAME}_CRC32,
-    ${NAME}_N_XI_TILT0,
-${format_fields},
 };
 
 /* Gains at (xi rad, xi_dot rad/s, alpha rad): returns GS_* status bits. */
