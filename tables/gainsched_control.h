@@ -149,11 +149,15 @@ typedef struct gs_ctrl {
     uint32_t good;         /* 0 or 1 */
     uint32_t have_az;      /* az_err holds the previous azimuth error */
     uint32_t fresh;        /* the estimate is of this step already: no propagation */
-    float p[3], v[3], q[4];                      /* the current estimate, I */
+    float p[3];                                  /* the current estimate, I */
+    float v[3];
+    float q[4];
     float hist_p[GS_CTRL_MAX_DELAY + 1u][3];     /* estimates of the last steps */
     float hist_q[GS_CTRL_MAX_DELAY + 1u][4];
-    float gyro[3], accel[3];                     /* the last good IMU samples */
-    float gyro_prev[3], accel_prev[3];           /* and the previous step's */
+    float gyro[3];                               /* the last good IMU samples */
+    float accel[3];
+    float gyro_prev[3];                          /* and the previous step's */
+    float accel_prev[3];
     float az_err;                                /* the previous azimuth error, rad */
     float integ[GS_CTRL_MAX_INT];                /* the integral states, rad s */
     float z[10];                                 /* the last reduced state estimate */

@@ -16,6 +16,7 @@
 #ifndef GAINSCHED_TRIG_H
 #define GAINSCHED_TRIG_H
 
+#include <stdbool.h>
 #include <stdint.h>
 
 #ifdef __cplusplus
@@ -60,21 +61,21 @@ float gs_atan2f(float y, float x);
 float gs_sqrtf(float x);
 
 /*
- * 1 if x is NaN or +-inf, else 0: a test of the exponent bits, so that
+ * Whether x is NaN or +-inf: a test of the exponent bits, so that
  * -ffinite-math-only (or any fast-math flag of the firmware) cannot remove it. Defined
  * here (static inline): the lookup and the controller inline the one definition.
  *
  * @param x  any float
- * @return   1 (not finite) or 0 (finite, subnormals and zeros included)
+ * @return   true (NaN or infinite) or false (finite, subnormals and zeros included)
  */
-static inline int gs_nonfinite(float x)
+static inline bool gs_nonfinite(float x)
 {
     union { /* the bits of the float: type punning through a union is defined in C99 */
         float f;
         uint32_t u;
     } v;
     v.f = x;
-    return ((v.u & 0x7f800000u) == 0x7f800000u) ? 1 : 0;
+    return (v.u & 0x7f800000u) == 0x7f800000u;
 }
 
 #ifdef __cplusplus
