@@ -182,6 +182,22 @@ typedef struct gs_table {
  * u_d[4] nominal motor thrusts (N), *phi_d nominal roll (rad).
  * Returns a bit set of GS_* status flags (GS_OK == 0). When the result has
  * any GS_UNUSABLE bit the outputs are zeroed (GS_BAD_ARG: left untouched).
+ *
+ * NaN and range: NaN or +-inf in any input, |xi| > GS_XI_LIMIT, |xi_dot| >
+ * GS_XI_DOT_LIMIT or |alpha| > GS_TILT_LIMIT: GS_BAD_INPUT, outputs zeroed. Any xi
+ * within the limit is wrapped (periodic axis); |xi_dot| and |alpha| beyond the table's
+ * axes are clamped to its last value (GS_CLAMPED_SPEED, GS_CLAMPED_TILT), |xi_dot|
+ * below the first speed clamped up to it. -0 and negative subnormals take the sign
+ * branch of their sign bit. Finite outputs for every finite table value.
+ *
+ * @param table   the table (gs_verify'd once at boot); NULL: GS_BAD_ARG
+ * @param xi      azimuth, rad
+ * @param xi_dot  azimuth rate, rad/s (negative: the other direction, symmetry S2)
+ * @param alpha   circle tilt, rad (negative: symmetry S1)
+ * @param K       [out] gains, 4 * table->n_state floats; NULL: GS_BAD_ARG
+ * @param u_d     [out] nominal motor thrusts, 4 floats, N; NULL: GS_BAD_ARG
+ * @param phi_d   [out] nominal roll, rad; NULL: GS_BAD_ARG
+ * @return        GS_* status bits
  */
 int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float *K, float *u_d,
               float *phi_d);
@@ -208,15 +224,40 @@ typedef struct gs_nominal {
  * With GS_NO_GAINS, K is zero and *nom is the drag-only closed form alone (a
  * firmware that holds its last good gains may still fly it); with GS_BAD_INPUT
  * everything is zero.
+ *
+ * NaN and range: ref[0], ref[1], alpha as gs_lookup's xi, xi_dot, alpha; ref[2..4]
+ * NaN, +-inf or beyond +-GS_XI_DERIV_LIMIT: GS_BAD_INPUT. The nominal is finite for
+ * every accepted reference (|alpha| <= GS_TILT_LIMIT < pi/2 keeps the closed form's
+ * normal force away from 0).
+ *
+ * @param table  the table, with vehicle constants (table->vehicle); else GS_BAD_ARG
+ * @param ref    the reference xi and four derivatives (above); NULL: GS_BAD_ARG
+ * @param alpha  circle tilt, rad
+ * @param K      [out] gains, 4 * table->n_state floats; NULL: GS_BAD_ARG
+ * @param nom    [out] the nominal: thrusts, reduced state, tension; NULL: GS_BAD_ARG
+ * @return       GS_* status bits
  */
 int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, float *K,
                       gs_nominal *nom);
 
-/* CRC-32 (IEEE, as zlib.crc32) of the table data in the documented order. */
+/*
+ * CRC-32 (IEEE, as zlib.crc32) of the table data in the documented order
+ * (docs/runtime.md, "CRC-32"). NaN payloads and -0 enter with their bits.
+ *
+ * @param table  the table; NULL or a structure gs_lookup cannot use: 0
+ * @return       the CRC-32, to compare with table->crc32
+ */
 uint32_t gs_table_crc32(const gs_table *table);
 
-/* GS_OK when the structure is consistent and the CRC matches, else GS_BAD_TABLE
- * (GS_BAD_ARG for NULL). Run once at boot: it reads every byte of the table. */
+/*
+ * GS_OK when the structure is consistent and the CRC matches, else GS_BAD_TABLE
+ * (GS_BAD_ARG for NULL). Run once at boot: it reads every byte of the table. A NaN or
+ * infinite vehicle constant, a non-increasing axis, a state map that is not a signed
+ * involution and a compact series outside coef are GS_BAD_TABLE.
+ *
+ * @param table  the table
+ * @return       GS_OK, GS_BAD_TABLE or GS_BAD_ARG
+ */
 int gs_verify(const gs_table *table);
 
 #ifdef __cplusplus

@@ -223,6 +223,9 @@ void gs_ctrl_commands(const gs_ctrl_params *p, const float thrust[4], float out[
  * position p_I (m), velocity v_I (m/s), attitude q_IB (unit) and body rates omega_B
  * (rad/s) on the circle of tilt alpha and heading gamma (rad), for a tether of
  * length rho attached L_e behind the COG (m). xi in [-pi, pi], chi in [-pi, pi].
+ * NaN and range: the inputs must be finite, |alpha| and |gamma| <= GS_XI_LIMIT (a NaN or
+ * infinite angle reaches a float-to-integer conversion: undefined behaviour in C);
+ * gs_ctrl_update checks its pose and reference before it calls this.
  *
  * @param p_I      COG position in I, m
  * @param v_I      COG velocity in I, m/s
