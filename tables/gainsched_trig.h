@@ -6,9 +6,9 @@
  * Hand-written, shipped with the gainsched package and copied next to each generated
  * table header (`gainsched export-c TABLE`). Implemented in gainsched_runtime.c (one
  * translation unit: a firmware that compiles the lookup has these too), but
- * gs_nonfinite, defined here. No libm, so that
- * host and target compute the same bits; no global state; every function is total:
- * any float input, NaN and infinities included, gives a defined result (below).
+ * gs_nonfinite, defined here. No libm, so that host and target compute the same bits;
+ * no global state. gs_atan2f, gs_sqrtf and gs_nonfinite take any float, NaN and
+ * infinities included; gs_sincosf has a domain (below).
  *
  * Error bounds against double precision of the same float input (held by
  * tests/firmware/test_feedforward_c.py and tests/firmware/test_compact.py).
@@ -28,8 +28,8 @@ extern "C" {
  * Domain: finite |x| <= GS_XI_LIMIT (1e4 rad, gainsched_runtime.h), where
  * |error| <= 1.5e-7. Beyond it the argument reduction loses bits (values unspecified);
  * NaN, inf and |x| >= 2^31 pi/2 overflow its float-to-integer conversion (undefined
- * behaviour in C): every caller in gainsched checks its angle first (gs_lookup refuses
- * them with GS_BAD_INPUT). sin(-0) is +0.
+ * behaviour in C): gainsched's callers pass checked angles (gs_lookup refuses others
+ * with GS_BAD_INPUT) or angles computed from a finite estimate. sin(-0) is +0.
  *
  * @param x  the angle, rad
  * @param s  [out] sin(x)
