@@ -26,9 +26,12 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)
 
+# ruff, the layer contract, and MISRA C:2012 on the hand-written C (cppcheck's MISRA
+# addon, gainsched/firmware/misra.py; fails, saying so, without cppcheck: .ci/run installs it)
 lint: $(STAMP)
 	$(BIN)/ruff check gainsched tests bench examples
 	$(BIN)/lint-imports --no-cache
+	$(BIN)/python -m gainsched.firmware.misra
 
 test: $(STAMP) lint
 	$(BIN)/python -m pytest $(PYTEST_XDIST) $(PYTEST_ARGS)

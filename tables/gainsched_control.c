@@ -8,8 +8,10 @@
  * identical statuses, and hold host and emulated Cortex-M4F builds bit for bit.
  */
 #include "gainsched_control.h"
+#include "gainsched_trig.h"
 
-#include <stddef.h> /* only freestanding headers: no libc, no libm */
+#include <stdbool.h> /* only freestanding headers: no libc, no libm */
+#include <stddef.h>
 
 /* No contraction into fused multiply-adds whatever the firmware's flags (see
  * gainsched_runtime.c): the same bits in every dialect and on every FPU. */
@@ -26,42 +28,36 @@
 #define GS_C_2PI_HI 6.28125f
 #define GS_C_2PI_LO 0x1.fb5444p-10f
 
-static int gs_c_nonfinite(float x)
-{
-    union {
-        float f;
-        uint32_t u;
-    } v;
-    v.f = x;
-    return (v.u & 0x7f800000u) == 0x7f800000u;
-}
-
-static int gs_c_any_nonfinite(const float *x, unsigned n)
+/* whether any of x[0..n-1] is NaN or infinite */
+static bool gs_c_any_nonfinite(const float *x, unsigned n)
 {
     unsigned i;
     for (i = 0u; i < n; ++i) {
-        if (gs_c_nonfinite(x[i])) {
-            return 1;
+        if (gs_nonfinite(x[i])) {
+            return true;
         }
     }
-    return 0;
+    return false;
 }
 
-/* 1 if x is finite and |x| <= limit */
-static int gs_c_within(float x, float limit)
+/* whether x is finite and |x| <= limit */
+static bool gs_c_within(float x, float limit)
 {
-    return !gs_c_nonfinite(x) && x <= limit && x >= -limit;
+    return !gs_nonfinite(x) && x <= limit && x >= -limit;
 }
 
 /* a (rad, |a| <= GS_XI_LIMIT) wrapped to [-pi, pi) */
 static float gs_c_wrap(float a)
 {
-    const float kf = (float)(int32_t)(a * GS_C_INV_2PI + (a < 0.0f ? -0.5f : 0.5f));
+    const float kr = (a * GS_C_INV_2PI) + ((a < 0.0f) ? -0.5f : 0.5f);
+    const float kf = (float)(int32_t)kr;
     float r = (a - kf * GS_C_2PI_HI) - kf * GS_C_2PI_LO;
     if (r >= GS_C_PI) {
         r -= GS_C_2PI;
     } else if (r < -GS_C_PI) {
         r += GS_C_2PI;
+    } else {
+        /* in [-pi, pi) already */
     }
     return r;
 }
@@ -69,7 +65,10 @@ static float gs_c_wrap(float a)
 /* R (row-major 3 x 3) of a unit Hamilton quaternion q = (w, x, y, z) */
 static void gs_c_matrix(const float q[4], float R[9])
 {
-    const float w = q[0], x = q[1], y = q[2], z = q[3];
+    const float w = q[0];
+    const float x = q[1];
+    const float y = q[2];
+    const float z = q[3];
     R[0] = 1.0f - 2.0f * (y * y + z * z);
     R[1] = 2.0f * (x * y - w * z);
     R[2] = 2.0f * (x * z + w * y);
@@ -95,7 +94,10 @@ static void gs_c_renorm(float q[4])
 /* q <- (1, a) (x) q, then renormalised: a small rotation a = theta / 2 (rad) applied in I */
 static void gs_c_rotate_left(const float a[3], float q[4])
 {
-    const float w = q[0], x = q[1], y = q[2], z = q[3];
+    const float w = q[0];
+    const float x = q[1];
+    const float y = q[2];
+    const float z = q[3];
     q[0] = w - (a[0] * x + a[1] * y + a[2] * z);
     q[1] = x + a[0] * w + (a[1] * z - a[2] * y);
     q[2] = y + a[1] * w + (a[2] * x - a[0] * z);
@@ -107,15 +109,34 @@ void gs_reduced_from_kinematics(const float p_I[3], const float v_I[3], const fl
                                 const float omega_B[3], float alpha, float gamma, float rho,
                                 float L_e, float z[10])
 {
-    float sa, ca, sg, cg, C[9], R_IB[9], R[9], p[3], v[3], h2, h, d2, rad;
-    unsigned i, j;
+    float sa;
+    float ca;
+    float sg;
+    float cg;
+    float C[9];
+    float R_IB[9];
+    float R[9];
+    float p[3];
+    float v[3];
+    float h2;
+    float h;
+    float d2;
+    float rad;
+    unsigned i;
+    unsigned j;
     (void)rho; /* the attachment point's own distance is used: exact off the sphere */
     gs_sincosf(alpha, &sa, &ca);
     gs_sincosf(gamma, &sg, &cg);
     /* R_CI = R_IC^T, R_IC = Rz(gamma) Rx(alpha) (docs/conventions.md) */
-    C[0] = cg, C[1] = sg, C[2] = 0.0f;
-    C[3] = -sg * ca, C[4] = cg * ca, C[5] = sa;
-    C[6] = sg * sa, C[7] = -cg * sa, C[8] = ca;
+    C[0] = cg;
+    C[1] = sg;
+    C[2] = 0.0f;
+    C[3] = -sg * ca;
+    C[4] = cg * ca;
+    C[5] = sa;
+    C[6] = sg * sa;
+    C[7] = -cg * sa;
+    C[8] = ca;
     gs_c_matrix(q_IB, R_IB);
     for (i = 0u; i < 3u; ++i) {
         for (j = 0u; j < 3u; ++j) {
@@ -152,43 +173,44 @@ void gs_reduced_from_kinematics(const float p_I[3], const float v_I[3], const fl
 
 /* the output fields: motor_slot a permutation of 0..3; normalized 0 or 1; with
  * normalized, thr_mdl_fac in 0..1 and thrust_full >= thrust_max, > 0 */
-static int gs_c_outputs_ok(const gs_ctrl_params *pr)
+static bool gs_c_outputs_ok(const gs_ctrl_params *pr)
 {
     uint32_t seen = 0u;
     unsigned i;
     for (i = 0u; i < 4u; ++i) {
         if (pr->motor_slot[i] > 3u) {
-            return 0;
+            return false;
         }
         seen |= 1u << pr->motor_slot[i];
     }
     if (seen != 0xFu || pr->normalized > 1u) {
-        return 0;
+        return false;
     }
     return pr->normalized == 0u ||
            ((pr->thr_mdl_fac >= 0.0f) && (pr->thr_mdl_fac <= 1.0f) &&
             (pr->thrust_full > 0.0f) && (pr->thrust_full >= pr->thrust_max) &&
-            !gs_c_nonfinite(pr->thrust_full));
+            !gs_nonfinite(pr->thrust_full));
 }
 
 int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params)
 {
     const gs_ctrl_params *pr = params;
-    float delay, timeout;
+    float delay;
+    float timeout;
     unsigned i;
     if (c == NULL || table == NULL || params == NULL || table->vehicle == NULL ||
         table->n_state > GS_CTRL_MAX_STATE || pr->n_int > GS_CTRL_MAX_INT ||
         10u + pr->n_int > table->n_state || !(pr->dt > 0.0f) ||
         !(pr->thrust_max >= pr->thrust_min) || !(pr->pose_period > 0.0f) ||
-        !(pr->pose_delay >= 0.0f) || !(pr->pose_timeout >= 0.0f) || gs_c_nonfinite(pr->dt) ||
-        gs_c_nonfinite(pr->pose_delay)) {
+        !(pr->pose_delay >= 0.0f) || !(pr->pose_timeout >= 0.0f) || gs_nonfinite(pr->dt) ||
+        gs_nonfinite(pr->pose_delay)) {
         return GS_BAD_ARG;
     }
     for (i = 0u; i < pr->n_int; ++i) {
         /* each bound finite and > 0 (NaN fails the comparison): a bound of 0 would hold
          * the integral at it, and GS_CTRL_INT_LIMIT, for ever */
         if (pr->int_of[i] > 1u || !(pr->int_limit[i] > 0.0f) ||
-            gs_c_nonfinite(pr->int_limit[i])) {
+            gs_nonfinite(pr->int_limit[i])) {
             return GS_BAD_ARG;
         }
     }
@@ -217,7 +239,8 @@ int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params
 /* fill the history with one state: the estimator starts there */
 static void gs_c_start(gs_ctrl *c, const float p[3], const float v[3], const float q[4])
 {
-    unsigned i, j;
+    unsigned i;
+    unsigned j;
     for (i = 0u; i <= GS_CTRL_MAX_DELAY; ++i) {
         for (j = 0u; j < 3u; ++j) {
             c->hist_p[i][j] = p[j];
@@ -245,7 +268,8 @@ static void gs_c_start(gs_ctrl *c, const float p[3], const float v[3], const flo
 /* the current estimate set to a given state (GS_CTRL_KINEMATICS), q near unit */
 static void gs_c_set(gs_ctrl *c, const float p[3], const float v[3], const float q[4])
 {
-    float *ph = c->hist_p[c->head], *qh = c->hist_q[c->head];
+    float *ph = c->hist_p[c->head];
+    float *qh = c->hist_q[c->head];
     unsigned j;
     for (j = 0u; j < 3u; ++j) {
         ph[j] = p[j];
@@ -262,12 +286,12 @@ static void gs_c_set(gs_ctrl *c, const float p[3], const float v[3], const float
 
 /* a usable pose: the position within GS_CTRL_POSE_LIMIT, the quaternion finite with
  * | |q|^2 - 1 | within the tolerance */
-static int gs_c_pose_ok(const float p[3], const float q[4], float tol)
+static bool gs_c_pose_ok(const float p[3], const float q[4], float tol)
 {
     float n2;
     if (!gs_c_within(p[0], GS_CTRL_POSE_LIMIT) || !gs_c_within(p[1], GS_CTRL_POSE_LIMIT) ||
         !gs_c_within(p[2], GS_CTRL_POSE_LIMIT) || gs_c_any_nonfinite(q, 4u)) {
-        return 0;
+        return false;
     }
     n2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
     return n2 - 1.0f <= tol && 1.0f - n2 <= tol;
@@ -297,15 +321,15 @@ int gs_ctrl_reset(gs_ctrl *c, const float p_I[3], const float v_I[3], const floa
     return GS_OK;
 }
 
-/* 1 if the three axes of a sample are finite and within +-range */
-static int gs_c_sample_ok(const float v[3], float range)
+/* whether the three axes of a sample are finite and within +-range */
+static bool gs_c_sample_ok(const float v[3], float range)
 {
     return gs_c_within(v[0], range) && gs_c_within(v[1], range) && gs_c_within(v[2], range);
 }
 
 /* The IMU sample of this step, checked: a bad one keeps the last good sample
  * (GS_CTRL_BAD_IMU). Returns the status bits; *gyro_bad says the rates are unusable. */
-static uint32_t gs_c_imu(gs_ctrl *c, const gs_ctrl_input *in, int *gyro_bad)
+static uint32_t gs_c_imu(gs_ctrl *c, const gs_ctrl_input *in, bool *gyro_bad)
 {
     const gs_ctrl_params *pr = c->params;
     uint32_t st = 0u;
@@ -363,8 +387,10 @@ static void gs_c_propagate(gs_ctrl *c, const float a_I[3], const float w_I[3])
     const float dt = c->params->dt;
     const uint32_t n = GS_CTRL_MAX_DELAY + 1u;
     const uint32_t next = c->head + 1u == n ? 0u : c->head + 1u;
-    const float *p = c->hist_p[c->head], *q = c->hist_q[c->head];
-    float *pn = c->hist_p[next], *qn = c->hist_q[next];
+    const float *p = c->hist_p[c->head];
+    const float *q = c->hist_q[c->head];
+    float *pn = c->hist_p[next];
+    float *qn = c->hist_q[next];
     /* dq = (1 - |t|^2 / 8, t (1/2 - |t|^2 / 48)), t = omega dt: cos and sin of |t| / 2
      * to third order; omega the mean of this step's and the previous step's gyro */
     const float hdt = 0.5f * dt;
@@ -372,8 +398,11 @@ static void gs_c_propagate(gs_ctrl *c, const float a_I[3], const float w_I[3])
     const float t1 = (c->gyro_prev[1] + c->gyro[1]) * hdt;
     const float t2 = (c->gyro_prev[2] + c->gyro[2]) * hdt;
     const float tt = t0 * t0 + t1 * t1 + t2 * t2;
-    const float dw = 1.0f - 0.125f * tt, ds = 0.5f - tt * (1.0f / 48.0f);
-    const float dx = ds * t0, dy = ds * t1, dz = ds * t2;
+    const float dw = 1.0f - 0.125f * tt;
+    const float ds = 0.5f - tt * (1.0f / 48.0f);
+    const float dx = ds * t0;
+    const float dy = ds * t1;
+    const float dz = ds * t2;
     const float w2 = (w_I[0] * w_I[0] + w_I[1] * w_I[1]) + w_I[2] * w_I[2];
     unsigned j;
     qn[0] = ((q[0] * dw - q[1] * dx) - q[2] * dy) - q[3] * dz;
@@ -393,7 +422,8 @@ static void gs_c_propagate(gs_ctrl *c, const float a_I[3], const float w_I[3])
                                                      (1.0f - (w2 * (1.0f / 42.0f)) *
                                                                  (1.0f - w2 * (1.0f / 72.0f))));
         const float wv = (w_I[0] * c->v[0] + w_I[1] * c->v[1]) + w_I[2] * c->v[2];
-        float wxv[3], perp[3];
+        float wxv[3];
+        float perp[3];
         wxv[0] = w_I[1] * c->v[2] - w_I[2] * c->v[1];
         wxv[1] = w_I[2] * c->v[0] - w_I[0] * c->v[2];
         wxv[2] = w_I[0] * c->v[1] - w_I[1] * c->v[0];
@@ -429,7 +459,9 @@ static void gs_c_acceleration(const gs_ctrl *c, const gs_ctrl_input *in, const g
     const float g = c->table->vehicle->g;
     if ((in->flags & GS_CTRL_ACCEL) != 0u) {
         float R[9];
-        float m[3], t[3], f[3];
+        float m[3];
+        float t[3];
+        float f[3];
         unsigned i;
         const float hdt = 0.25f * c->params->dt;
         for (i = 0u; i < 3u; ++i) {
@@ -450,7 +482,14 @@ static void gs_c_acceleration(const gs_ctrl *c, const gs_ctrl_input *in, const g
     } else {
         const float dt = c->params->dt;
         const float r = c->params->rho + c->params->L_e;
-        float sx, cx, sa, ca, sg, cg, a_C[2], th;
+        float sx;
+        float cx;
+        float sa;
+        float ca;
+        float sg;
+        float cg;
+        float a_C[2];
+        float th;
         const float xd = c->z[3];
         const float xdd = gs_c_within(ref->xi[2], GS_XI_DERIV_LIMIT) ? ref->xi[2] : 0.0f;
         gs_sincosf(c->z[1], &sx, &cx);
@@ -483,9 +522,15 @@ static void gs_c_correct(gs_ctrl *c, const float p_m[3], const float q_m[4])
     const uint32_t n = GS_CTRL_MAX_DELAY + 1u;
     const uint32_t D = c->delay;
     const uint32_t j0 = c->head >= D ? c->head - D : c->head + n - D;
-    const float *ph = c->hist_p[j0], *qh = c->hist_q[j0];
-    float dp[3], dv[3], a[3], qe[4], sgn;
-    uint32_t i, j;
+    const float *ph = c->hist_p[j0];
+    const float *qh = c->hist_q[j0];
+    float dp[3];
+    float dv[3];
+    float a[3];
+    float qe[4];
+    float sgn;
+    uint32_t i;
+    uint32_t j;
     for (j = 0u; j < 3u; ++j) {
         const float e = p_m[j] - ph[j];
         dp[j] = pr->k_pos * e;
@@ -516,11 +561,11 @@ static void gs_c_correct(gs_ctrl *c, const float p_m[3], const float q_m[4])
 
 /* Step 1: the estimator. Returns status bits; *gyro_bad as gs_c_imu. */
 static uint32_t gs_c_estimate(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl_ref *ref,
-                              int *gyro_bad)
+                              bool *gyro_bad)
 {
     const gs_ctrl_params *pr = c->params;
     uint32_t st = gs_c_imu(c, in, gyro_bad);
-    int pose_ok = 0;
+    bool pose_ok = false;
     if ((in->flags & GS_CTRL_POSE) != 0u) {
         pose_ok = gs_c_pose_ok(in->p_I, in->q_IB, pr->quat_tolerance);
         if (!pose_ok) {
@@ -528,7 +573,8 @@ static uint32_t gs_c_estimate(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl
         }
     }
     if (c->have_fix && !c->fresh) {
-        float a_I[3], w_I[3];
+        float a_I[3];
+        float w_I[3];
         gs_c_acceleration(c, in, ref, a_I, w_I);
         gs_c_propagate(c, a_I, w_I);
     }
@@ -541,7 +587,7 @@ static uint32_t gs_c_estimate(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl
         }
         gs_c_renorm(q);
         gs_c_renorm(q);
-        if (c->have_fix) {
+        if (c->have_fix != 0u) {
             gs_c_correct(c, in->p_I, q);
         } else {
             const float v0[3] = {0.0f, 0.0f, 0.0f}; /* start-up at rest (docs/runtime.md) */
@@ -550,6 +596,8 @@ static uint32_t gs_c_estimate(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl
         c->since_pose = 0u;
     } else if (c->since_pose < 0x7fffffffu) {
         c->since_pose += 1u;
+    } else {
+        /* no pose for 2^31 steps: the count stays */
     }
     if (c->since_pose > c->timeout) {
         st |= GS_CTRL_STALE_POSE;
@@ -572,7 +620,7 @@ static void gs_c_idle(const gs_ctrl_params *pr, float thrust[4])
 }
 
 /* Step 3: the control law on the reduced state c->z. */
-static uint32_t gs_c_control(gs_ctrl *c, const gs_ctrl_ref *ref, uint32_t st, int gyro_bad,
+static uint32_t gs_c_control(gs_ctrl *c, const gs_ctrl_ref *ref, uint32_t st, bool gyro_bad,
                              float thrust[4])
 {
     const gs_ctrl_params *pr = c->params;
@@ -580,10 +628,13 @@ static uint32_t gs_c_control(gs_ctrl *c, const gs_ctrl_ref *ref, uint32_t st, in
     const uint32_t n = t->n_state;
     float *const K = c->K[1u - c->good]; /* the lookup's: becomes K[good] when usable */
     const float *Kg;
-    float rq[5], e[GS_CTRL_MAX_STATE];
+    float rq[5];
+    float e[GS_CTRL_MAX_STATE];
     gs_nominal nom;
-    uint32_t i, j;
-    int status, clipped = 0;
+    uint32_t i;
+    uint32_t j;
+    int status;
+    bool clipped = false;
     for (i = 0u; i < 5u; ++i) {
         rq[i] = ref->xi[i];
     }
@@ -629,10 +680,15 @@ static uint32_t gs_c_control(gs_ctrl *c, const gs_ctrl_ref *ref, uint32_t st, in
     e[4] = gs_c_wrap(e[4]);
     e[6] = gs_c_wrap(e[6]);
     if ((st & GS_CTRL_STALE_POSE) != 0u) { /* no position feedback on a dead reckoning */
-        e[0] = e[1] = e[2] = e[3] = 0.0f;
+        e[0] = 0.0f;
+        e[1] = 0.0f;
+        e[2] = 0.0f;
+        e[3] = 0.0f;
     }
     if (gyro_bad) { /* no rate feedback from a bad gyro */
-        e[7] = e[8] = e[9] = 0.0f;
+        e[7] = 0.0f;
+        e[8] = 0.0f;
+        e[9] = 0.0f;
     }
     for (i = 0u; i < pr->n_int; ++i) {
         e[10u + i] = c->integ[i];
@@ -641,21 +697,23 @@ static uint32_t gs_c_control(gs_ctrl *c, const gs_ctrl_ref *ref, uint32_t st, in
         e[i] = 0.0f; /* effect states: not estimated, zero error */
     }
     for (i = 0u; i < 4u; ++i) {
-        const float *Ki = Kg + (size_t)i * n;
+        const float *Ki = &Kg[(size_t)i * n];
         float u = nom.u_d[i];
         for (j = 0u; j < n; ++j) {
             u -= Ki[j] * e[j];
         }
-        if (gs_c_nonfinite(u)) {
+        if (gs_nonfinite(u)) {
             gs_c_idle(pr, thrust);
             return st | GS_CTRL_IDLE;
         }
         if (u < pr->thrust_min) {
             u = pr->thrust_min;
-            clipped = 1;
+            clipped = true;
         } else if (u > pr->thrust_max) {
             u = pr->thrust_max;
-            clipped = 1;
+            clipped = true;
+        } else {
+            /* within the motors' range */
         }
         thrust[i] = u;
     }
@@ -668,6 +726,8 @@ static uint32_t gs_c_control(gs_ctrl *c, const gs_ctrl_ref *ref, uint32_t st, in
             s = s > lim ? lim : s < -lim ? -lim : s;
             c->integ[i] = s;
         }
+    } else {
+        /* a stale pose: the integrators hold */
     }
     for (i = 0u; i < pr->n_int; ++i) {
         if (c->integ[i] >= pr->int_limit[i] || c->integ[i] <= -pr->int_limit[i]) {
@@ -701,7 +761,7 @@ int gs_ctrl_update(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl_ref *ref, 
 {
     const gs_ctrl_params *pr;
     uint32_t st = 0u;
-    int gyro_bad = 0;
+    bool gyro_bad = false;
     float thrust[4];
     int status;
     if (c == NULL || in == NULL || ref == NULL || out == NULL || c->params == NULL ||
@@ -735,6 +795,8 @@ int gs_ctrl_update(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl_ref *ref, 
     } else if (c->have_fix && (st & GS_CTRL_BAD_POSE) == 0u) {
         gs_reduced_from_kinematics(c->hist_p[c->head], c->v, c->hist_q[c->head], c->gyro,
                                    ref->alpha, ref->gamma, pr->rho, pr->L_e, c->z);
+    } else {
+        /* no state estimate this step: the control step idles or keeps c->z */
     }
     status = (int)gs_c_control(c, ref, st, gyro_bad, thrust);
     gs_ctrl_commands(pr, thrust, out);

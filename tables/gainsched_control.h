@@ -4,7 +4,7 @@
  *
  * Hand-written, shipped with the gainsched package and copied next to each generated
  * table header with the runtime (`gainsched export-c TABLE`). It sits on the runtime
- * (gainsched_runtime.h: gs_lookup_nominal, gs_sincosf, gs_atan2f, gs_sqrtf) and keeps
+ * (gainsched_runtime.h: gs_lookup_nominal; gainsched_trig.h: gs_sincosf, gs_atan2f, gs_sqrtf, gs_nonfinite) and keeps
  * its rules: no malloc, no recursion, no global mutable state (the state lives in a
  * gs_ctrl the firmware owns), static stack, freestanding (<stdint.h> only), no libm,
  * floating-point contraction off, so that host and target compute the same bits.
@@ -149,11 +149,15 @@ typedef struct gs_ctrl {
     uint32_t good;         /* 0 or 1 */
     uint32_t have_az;      /* az_err holds the previous azimuth error */
     uint32_t fresh;        /* the estimate is of this step already: no propagation */
-    float p[3], v[3], q[4];                      /* the current estimate, I */
+    float p[3];                                  /* the current estimate, I */
+    float v[3];
+    float q[4];
     float hist_p[GS_CTRL_MAX_DELAY + 1u][3];     /* estimates of the last steps */
     float hist_q[GS_CTRL_MAX_DELAY + 1u][4];
-    float gyro[3], accel[3];                     /* the last good IMU samples */
-    float gyro_prev[3], accel_prev[3];           /* and the previous step's */
+    float gyro[3];                               /* the last good IMU samples */
+    float accel[3];
+    float gyro_prev[3];                          /* and the previous step's */
+    float accel_prev[3];
     float az_err;                                /* the previous azimuth error, rad */
     float integ[GS_CTRL_MAX_INT];                /* the integral states, rad s */
     float z[10];                                 /* the last reduced state estimate */
@@ -219,6 +223,9 @@ void gs_ctrl_commands(const gs_ctrl_params *p, const float thrust[4], float out[
  * position p_I (m), velocity v_I (m/s), attitude q_IB (unit) and body rates omega_B
  * (rad/s) on the circle of tilt alpha and heading gamma (rad), for a tether of
  * length rho attached L_e behind the COG (m). xi in [-pi, pi], chi in [-pi, pi].
+ * NaN and range: the inputs must be finite, |alpha| and |gamma| <= GS_XI_LIMIT (a NaN or
+ * infinite angle reaches a float-to-integer conversion: undefined behaviour in C);
+ * gs_ctrl_update checks its pose and reference before it calls this.
  *
  * @param p_I      COG position in I, m
  * @param v_I      COG velocity in I, m/s

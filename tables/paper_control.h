@@ -50,7 +50,9 @@ static const gs_ctrl_params paper_ctrl_params = {
     3.5f, /* thrust_full: N at command 1 */
 };
 
-/* Prepare `c` for this table with paper_ctrl_params: GS_OK or GS_BAD_ARG. */
+/* Prepare `c` for this table with paper_ctrl_params: gs_ctrl_init.
+ * @param c  [out] the controller
+ * @return   GS_OK or GS_BAD_ARG */
 static inline int paper_ctrl_init(gs_ctrl *c)
 {
     return gs_ctrl_init(c, &paper_table, &paper_ctrl_params);

@@ -5,9 +5,9 @@
   (tables/paper.h5), loaded once per test process;
 - ``small_config(**keys)``: configs/paper.toml on a 2 x 2 x 8 grid with keys set on top
   (:mod:`support`), the one way a test makes a variant config;
-- the markers ``needs_cc`` (a host C compiler) and ``needs_arm`` (the Cortex-M4F cross
-  compiler and QEMU), turned into skips with the reason in one hook
-  (:func:`pytest_runtest_setup`);
+- the markers ``needs_cc`` (a host C compiler), ``needs_arm`` (the Cortex-M4F cross
+  compiler and QEMU) and ``needs_cppcheck`` (cppcheck with its MISRA addon), turned into
+  skips with the reason in one hook (:func:`pytest_runtest_setup`);
 - the reference circle of the link-model tests;
 - ``fly(hidden)`` and ``diagnosed(hidden)``: the default campaign of
   :mod:`gainsched.sim.campaign` flown on a plant with a hidden effect, and its
@@ -22,6 +22,7 @@ to the build's content-keyed cache, which concurrent builders share safely
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +59,17 @@ _TOOL_SKIPS = {
         "processor-in-the-loop tests skipped: arm-none-eabi-gcc or qemu-system-arm not found "
         "(Debian: apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm; "
         ".ci/run installs them)"),
+    "needs_cppcheck": None if shutil.which("cppcheck") else (
+        "cppcheck not found: the MISRA C:2012 check cannot run (Debian: apt-get install "
+        "cppcheck; .ci/run installs it)"),
 }
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Register ``needs_cppcheck`` beside the markers pyproject.toml lists (a change there
+    would rebuild every checkout's venv)."""
+    config.addinivalue_line(
+        "markers", "needs_cppcheck: needs cppcheck and its MISRA addon (skipped, saying so)")
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:

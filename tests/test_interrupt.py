@@ -37,7 +37,7 @@ from support import small_config_text
 
 TRIALS = int(os.environ.get("GAINSCHED_INTERRUPT_TRIALS", "8"))
 SET = ("gainsched_control.c", "gainsched_control.h", "gainsched_runtime.c", "gainsched_runtime.h",
-       "trial.h5", "trial_control.h", "trial_gains.h")
+       "gainsched_trig.h", "trial.h5", "trial_control.h", "trial_gains.h")
 
 
 def _config(n_xi: int) -> str:

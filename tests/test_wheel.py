@@ -71,7 +71,8 @@ def test_wheel_install_runs_from_another_folder(tmp_path):
     run("build", cfg, "-o", "out")  # native kernels and the C runtime from package data
     assert sorted(p.name for p in (work / "out").iterdir()) == [
         "gainsched_control.c", "gainsched_control.h", "gainsched_runtime.c",
-        "gainsched_runtime.h", "wheel.h5", "wheel_control.h", "wheel_gains.h"]
+        "gainsched_runtime.h", "gainsched_trig.h", "wheel.h5", "wheel_control.h",
+        "wheel_gains.h"]
     run("inspect", "out/wheel.h5")
     run("export-c", "out/wheel.h5", "-o", "fw")
     run("simulate", cfg, "--tables", "out/wheel.h5", "--scenario", "braking", "-o", "sim")

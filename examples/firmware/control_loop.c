@@ -23,6 +23,7 @@
 
 #define GS_WITH_CONTROL
 #include "any_table.h"
+#include "gainsched_trig.h" /* gs_sincosf */
 
 #define PI_F 3.14159265f
 #define DEG (PI_F / 180.0f)

@@ -56,8 +56,8 @@ static bounds compact_bounds(const gs_table *t)
     const size_t n_circles = (size_t)t->n_tilt * t->n_speed;
     size_t c, e, j;
     for (c = 0; c < n_circles; ++c) {
-        const uint8_t *H = t->harmonics + c * n_value;
-        const float *cf = t->coef + t->coef_start[c];
+        const uint8_t *H = t->compact.harmonics + c * n_value;
+        const float *cf = t->compact.coef + t->compact.coef_start[c];
         if ((t->mask[c] & GS_MASK_NO_GAINS) != 0u) {
             continue;
         }
@@ -93,18 +93,18 @@ static bounds table_bounds(const gs_table *t)
         return compact_bounds(t);
     }
     for (i = 0; i < t->n_speed * nK; ++i) {
-        b.k_abs = f_abs(t->K_tilt0[i]) > b.k_abs ? f_abs(t->K_tilt0[i]) : b.k_abs;
+        b.k_abs = f_abs(t->dense.K_tilt0[i]) > b.k_abs ? f_abs(t->dense.K_tilt0[i]) : b.k_abs;
     }
     for (i = 0; i < nk; ++i) {
-        b.k_abs = f_abs(t->K[i]) > b.k_abs ? f_abs(t->K[i]) : b.k_abs;
+        b.k_abs = f_abs(t->dense.K[i]) > b.k_abs ? f_abs(t->dense.K[i]) : b.k_abs;
     }
-    b.u_min = b.u_max = t->u_d[0];
+    b.u_min = b.u_max = t->dense.u_d[0];
     for (i = 0; i < 4u * n_pts; ++i) {
-        b.u_min = t->u_d[i] < b.u_min ? t->u_d[i] : b.u_min;
-        b.u_max = t->u_d[i] > b.u_max ? t->u_d[i] : b.u_max;
+        b.u_min = t->dense.u_d[i] < b.u_min ? t->dense.u_d[i] : b.u_min;
+        b.u_max = t->dense.u_d[i] > b.u_max ? t->dense.u_d[i] : b.u_max;
     }
     for (i = 0; i < n_pts; ++i) {
-        b.phi_abs = f_abs(t->phi_d[i]) > b.phi_abs ? f_abs(t->phi_d[i]) : b.phi_abs;
+        b.phi_abs = f_abs(t->dense.phi_d[i]) > b.phi_abs ? f_abs(t->dense.phi_d[i]) : b.phi_abs;
     }
     /* zeroed outputs are inside the range too */
     b.u_min = b.u_min > 0.0f ? 0.0f : b.u_min;

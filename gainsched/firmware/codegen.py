@@ -59,10 +59,12 @@ __all__ = [
     "CRuntime",
 ]
 
-RUNTIME_FILES = ("gainsched_runtime.h", "gainsched_runtime.c")
+#: the lookup (its header and source, which also implements the trigonometry) and the
+#: trigonometry's header (docs/runtime.md, "Files")
+RUNTIME_FILES = ("gainsched_runtime.h", "gainsched_runtime.c", "gainsched_trig.h")
 #: the controller (pose and gyro to thrusts) shipped beside the runtime
 CONTROL_FILES = ("gainsched_control.h", "gainsched_control.c")
-RUNTIME_VERSION = 4
+RUNTIME_VERSION = 5
 STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror")
 #: Cortex-M4F flags of ``make firmware-size`` and :func:`code_bytes`
 M4F_CFLAGS = ("-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard")
@@ -222,14 +224,17 @@ def _dense_values(data: RuntimeData) -> dict:
         u_d=_body(data.u_d, c_float, per_line=4),
         phi_d=_body(data.phi_d, c_float),
         mask=_body(data.mask, _c_uint, per_line=18))
-    refs = (f"&{name}_K_tilt0[0][0][0][0]", f"&{name}_K[0][0][0][0][0]",
-            f"&{name}_u_d[0][0][0][0]", f"&{name}_phi_d[0][0][0]")
+    dense = (f"{NAME}_N_XI_TILT0", f"&{name}_K_tilt0[0][0][0][0]",
+             f"&{name}_K[0][0][0][0][0]", f"&{name}_u_d[0][0][0][0]", f"&{name}_phi_d[0][0][0]")
     return dict(
         format_macros=f"#define {NAME}_FORMAT GS_FORMAT_DENSE /* values at every azimuth */",
-        value_arrays=arrays, value_refs=",\n".join(f"    {r}" for r in refs),
-        mask_ref=f"&{name}_mask[0][0][0]",
-        format_fields=",\n".join(f"    {v}" for v in (
-            "GS_FORMAT_DENSE", "0u", "0u", "NULL", "NULL", "NULL")))
+        value_arrays=arrays, mask_ref=f"&{name}_mask[0][0][0]",
+        dense_part=_part(dense), compact_part=_part(("0u", "0u", "NULL", "NULL", "NULL")))
+
+
+def _part(fields) -> str:
+    """The initializer lines of a ``gs_dense_part`` or ``gs_compact_part``."""
+    return ",\n".join(f"        {v}" for v in fields)
 
 
 def _compact_values(data) -> dict:
@@ -251,13 +256,12 @@ def _compact_values(data) -> dict:
         harmonics=_body(data.harmonics, _c_uint, per_line=25),
         coef_start=_body(data.start.reshape(n_a, n_v), _c_uint, per_line=10),
         coef=_body(data.coef if n_coef else np.zeros(1, np.float32), c_float))
+    compact = (f"{NAME}_N_HARMONICS", f"{NAME}_N_COEF", f"&{name}_harmonics[0][0][0]",
+               f"&{name}_coef_start[0][0]", f"{name}_coef")
     return dict(
-        format_macros=macros, value_arrays=arrays,
-        value_refs=",\n".join(["    NULL"] * 4),
-        mask_ref=f"&{name}_mask[0][0]",
-        format_fields=",\n".join(f"    {v}" for v in (
-            "GS_FORMAT_COMPACT", f"{NAME}_N_HARMONICS", f"{NAME}_N_COEF",
-            f"&{name}_harmonics[0][0][0]", f"&{name}_coef_start[0][0]", f"{name}_coef")))
+        format_macros=macros, value_arrays=arrays, mask_ref=f"&{name}_mask[0][0]",
+        dense_part=_part(("0u", "NULL", "NULL", "NULL", "NULL")),
+        compact_part=_part(compact))
 
 
 def _state_macros(data: RuntimeData) -> str:
@@ -339,10 +343,14 @@ def write_header(table, out_dir) -> Path:
 
 
 def copy_runtime(out_dir) -> list[Path]:
-    """Copy ``gainsched_runtime.[ch]`` and ``gainsched_control.[ch]`` into ``out_dir``
-    (atomically); returns the paths in that order."""
+    """Copy :data:`RUNTIME_FILES` (``gainsched_runtime.[ch]``, ``gainsched_trig.h``) and
+    :data:`CONTROL_FILES` (``gainsched_control.[ch]``) into ``out_dir`` (atomically);
+    returns the paths: ``gainsched_runtime.h``, ``gainsched_runtime.c``,
+    ``gainsched_control.h``, ``gainsched_control.c``, ``gainsched_trig.h``."""
     out = []
-    for fname in RUNTIME_FILES + CONTROL_FILES:
+    # the original four first, so that a caller's index stays (``[1]`` the lookup's C,
+    # ``[3]`` the controller's), then the headers added since
+    for fname in (*RUNTIME_FILES[:2], *CONTROL_FILES, *RUNTIME_FILES[2:]):
         out.append(_write(Path(out_dir) / fname, _resource("c", fname)))
     return out
 

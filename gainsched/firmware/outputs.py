@@ -37,8 +37,8 @@ class OutputSet:
     ----------
     files : dict
         File name -> bytes: ``NAME.h5``, ``NAME_gains.h``, ``NAME_control.h``,
-        ``gainsched_runtime.h``, ``gainsched_runtime.c``, ``gainsched_control.h``,
-        ``gainsched_control.c``.
+        ``gainsched_runtime.h``, ``gainsched_runtime.c``, ``gainsched_trig.h``,
+        ``gainsched_control.h``, ``gainsched_control.c``.
     form : RuntimeData or CompactData
         What the C header holds (``[firmware] format``).
     certificate : MidpointCheck or None
@@ -215,6 +215,7 @@ def write_outputs(out_dir, config, grid, grid_auto=None) -> list[Path]:
         docs/table-format.md), ``NAME_gains.h`` (the float32 tables for the firmware),
         ``NAME_control.h`` (the controller's parameters from the config),
         ``gainsched_runtime.h`` and ``gainsched_runtime.c`` (the C lookup),
+        ``gainsched_trig.h`` (its trigonometry),
         ``gainsched_control.h`` and ``gainsched_control.c`` (the whole control step,
         pose and gyro to thrusts; docs/runtime.md).
 
@@ -240,7 +241,7 @@ def write_outputs(out_dir, config, grid, grid_auto=None) -> list[Path]:
     >>> paths = gs.write_outputs(out, small, gs.build_grid(small))
     >>> [p.name for p in paths]  # doctest: +NORMALIZE_WHITESPACE
     ['small.h5', 'small_gains.h', 'small_control.h', 'gainsched_runtime.h',
-     'gainsched_runtime.c', 'gainsched_control.h', 'gainsched_control.c']
+     'gainsched_runtime.c', 'gainsched_trig.h', 'gainsched_control.h', 'gainsched_control.c']
     >>> table = gs.load_table(paths[0])
     >>> table.name, table.K.shape, table.config_sha256 == small.sha256
     ('small', (1, 2, 8, 4, 11), True)

@@ -49,7 +49,7 @@ def write_controller(table, params: ControllerParams, out_dir) -> list[Path]:
     write_header(data, out)
     _write(out / control_header_name(data), render_control_header(data, params))
     paths = copy_runtime(out)
-    return [paths[1], paths[3]]
+    return [p for p in paths if p.suffix == ".c"]
 
 
 def driver_values(data, params: ControllerParams) -> dict:

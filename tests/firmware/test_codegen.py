@@ -157,6 +157,7 @@ def test_write_c_outputs(tmp_path):
         "paper_control.h",
         "gainsched_runtime.h",
         "gainsched_runtime.c",
+        "gainsched_trig.h",
         "gainsched_control.h",
         "gainsched_control.c",
     ]

@@ -67,7 +67,7 @@ def _check_equal(c_out, ff, lk=None):
 
 @pytest.mark.slow
 def test_trigonometry_error_bounds(paper):
-    """The bounds stated in gainsched_runtime.h, against double precision of the same
+    """The bounds stated in gainsched_trig.h, against double precision of the same
     float32 inputs: sin/cos <= 1.5e-7 for |x| <= 1e4 (the input limit), atan2 <= 3e-7 rad
     in every quadrant, sqrt <= 2.5e-7 relative."""
     _, _, c = paper

@@ -38,7 +38,7 @@ FAMILIES = {
     "Prescott": ("pni",),  # SSE3 is "pni" in /proc/cpuinfo
 }
 OUTPUTS = ("gainsched_control.c", "gainsched_control.h", "gainsched_runtime.c",
-           "gainsched_runtime.h", "det.h5", "det_control.h", "det_gains.h")
+           "gainsched_runtime.h", "gainsched_trig.h", "det.h5", "det_control.h", "det_gains.h")
 #: (kernel family, BLAS threads, numpy dispatch switched off, build options)
 MATRIX = [
     ("Haswell", "2", "", ("-j", "2")),

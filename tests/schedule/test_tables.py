@@ -182,7 +182,8 @@ def test_cli_build_twice_byte_identical(small, tmp_path):
         assert res.exit_code == 0, res.output
         assert "small.h5" in res.stdout
         names = ["gainsched_control.c", "gainsched_control.h", "gainsched_runtime.c",
-                 "gainsched_runtime.h", "small.h5", "small_control.h", "small_gains.h"]
+                 "gainsched_runtime.h", "gainsched_trig.h", "small.h5", "small_control.h",
+                 "small_gains.h"]
         assert sorted(p.name for p in out.iterdir()) == names
         outs.append(b"".join((out / n).read_bytes() for n in names))
         next_second()
@@ -387,7 +388,7 @@ class _Interrupt:
 
 
 SET = ["gainsched_control.c", "gainsched_control.h", "gainsched_runtime.c", "gainsched_runtime.h",
-       "small.h5", "small_control.h", "small_gains.h"]
+       "gainsched_trig.h", "small.h5", "small_control.h", "small_gains.h"]
 
 
 def _set_bytes(folder):

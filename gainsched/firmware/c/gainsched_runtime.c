@@ -1,6 +1,7 @@
 /*
  * gainsched runtime: gain-table lookup for flight firmware (C99).
- * Contract and status bits: gainsched_runtime.h and docs/runtime.md.
+ * Contract and status bits: gainsched_runtime.h and docs/runtime.md. It also implements
+ * the trigonometry of gainsched_trig.h (the lookup's and the controller's).
  *
  * Every float operation that decides which cell a query falls in is spelled
  * out here in single precision, in the same order as the Python reference
@@ -8,8 +9,10 @@
  * same status for every query. Change one, change the other.
  */
 #include "gainsched_runtime.h"
+#include "gainsched_trig.h"
 
-#include <stddef.h> /* only freestanding headers: no libc, no libm */
+#include <stdbool.h> /* only freestanding headers: no libc, no libm */
+#include <stddef.h>
 
 /* No contraction of a * b + c into a fused multiply-add, whatever the firmware's flags:
  * GCC contracts by default outside ISO modes (-std=gnu11) and ignores the standard
@@ -38,12 +41,6 @@ static uint32_t gs_bits(float x)
     } v;
     v.f = x;
     return v.u;
-}
-
-/* 1 if the float is NaN or +-inf (bit test: immune to -ffinite-math-only). */
-static int gs_nonfinite(float x)
-{
-    return (gs_bits(x) & 0x7f800000u) == 0x7f800000u;
 }
 
 /* Largest i in [0, n-2] with ax[i] <= v, for ax[0] <= v <= ax[n-1], n >= 2.
@@ -89,13 +86,16 @@ GS_INLINE float gs_axis_cell(const float *ax, uint32_t n, float v, uint32_t i[2]
     } else if (v > ax[n - 1u]) {
         v = ax[n - 1u];
         *status |= clamped_bit;
+    } else {
+        /* inside the axis: v as given */
     }
     if (n > 1u) {
         i[0] = gs_bracket(ax, n, v);
         i[1] = i[0] + 1u;
         return gs_snap((v - ax[i[0]]) / (ax[i[1]] - ax[i[0]]));
     }
-    i[0] = i[1] = 0u;
+    i[0] = 0u;
+    i[1] = 0u;
     return 0.0f;
 }
 
@@ -112,25 +112,25 @@ static void gs_zero(float *K, size_t nK, float *u_d, float *phi_d)
 }
 
 /* the fields the lookup relies on (gs_verify checks the rest once, at boot) */
-static inline int gs_table_usable(const gs_table *t)
+static inline bool gs_table_usable(const gs_table *t)
 {
-    const int common = t->n_tilt >= 1u && t->n_speed >= 1u && t->n_xi >= 1u &&
+    const bool common = t->n_tilt >= 1u && t->n_speed >= 1u && t->n_xi >= 1u &&
                        t->n_state >= 1u && t->n_state <= 255u && t->xi_dot != NULL &&
                        t->tilt != NULL && t->state_sign != NULL && t->state_perm != NULL &&
                        t->mask != NULL &&
                        (t->offsets == NULL || t->n_offset_harmonics <= GS_MAX_OFFSET_HARMONICS);
     if (t->format == GS_FORMAT_COMPACT) {
-        return common && t->harmonics != NULL && t->coef_start != NULL &&
-               (t->coef != NULL || t->n_coef == 0u) && t->n_harmonics <= GS_MAX_HARMONICS;
+        return common && t->compact.harmonics != NULL && t->compact.coef_start != NULL &&
+               (t->compact.coef != NULL || t->compact.n_coef == 0u) && t->compact.n_harmonics <= GS_MAX_HARMONICS;
     }
-    return common && t->format == GS_FORMAT_DENSE && t->K_tilt0 != NULL &&
-           (t->K != NULL || t->n_tilt == 1u) && t->u_d != NULL && t->phi_d != NULL &&
-           (t->n_xi_tilt0 <= 1u || t->n_xi_tilt0 == t->n_xi);
+    return common && t->format == GS_FORMAT_DENSE && t->dense.K_tilt0 != NULL &&
+           (t->dense.K != NULL || t->n_tilt == 1u) && t->dense.u_d != NULL && t->dense.phi_d != NULL &&
+           (t->dense.n_xi_tilt0 <= 1u || t->dense.n_xi_tilt0 == t->n_xi);
 }
 
 /* x < 0 read from the sign bit: a negative subnormal is negative with flush-to-zero
  * on as well (x < 0.0f would compare it as 0 there), -0 is not */
-static int gs_negative(float x)
+static bool gs_negative(float x)
 {
     const uint32_t b = gs_bits(x);
     return (b >> 31) != 0u && (b & 0x7fffffffu) != 0u;
@@ -139,15 +139,18 @@ static int gs_negative(float x)
 /* the tilt-0 gain block of speed iv and azimuth ix */
 static inline const float *gs_k_tilt0(const gs_table *t, size_t iv, size_t ix, size_t nK)
 {
-    return t->n_xi_tilt0 > 1u ? t->K_tilt0 + (iv * t->n_xi + ix) * nK : t->K_tilt0 + iv * nK;
+    return (t->dense.n_xi_tilt0 > 1u) ? &t->dense.K_tilt0[((iv * t->n_xi) + ix) * nK]
+                                      : &t->dense.K_tilt0[iv * nK];
 }
 
 /* where a query fell: corner indices and fractions per axis, and the symmetry maps */
 typedef struct gs_cell {
-    uint32_t ia[2], iv[2];
-    float fa, fv;
-    int mirrored; /* S2 applied */
-    int shifted;  /* S1 applied */
+    uint32_t ia[2];
+    uint32_t iv[2];
+    float fa;
+    float fv;
+    bool mirrored; /* S2 applied */
+    bool shifted;  /* S1 applied */
     float dphi_dxi; /* slope of the interpolated phi_d along xi (rad/rad), original frame */
 } gs_cell;
 
@@ -164,18 +167,24 @@ int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float 
  * fundamental domain, cell the tilt and speed cell. Returns GS_INFEASIBLE and GS_NO_GAINS
  * (outputs zeroed) as they apply; *dphi_dxi (if not NULL) the roll's slope along xi.
  * (Six pointer arguments and one float: all in registers, a static stack.) */
-static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *restrict K,
+static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *K,
                     float *u_d, float *phi_d, float *dphi_dxi)
 {
-    const size_t n = t->n_state, nK = 4u * n;
-    const uint32_t *const ia = cell->ia, *const iv = cell->iv;
-    const float fa = cell->fa, fv = cell->fv;
+    const size_t n = t->n_state;
+    const size_t nK = 4u * n;
+    const uint32_t *const ia = cell->ia;
+    const uint32_t *const iv = cell->iv;
+    const float fa = cell->fa;
+    const float fv = cell->fv;
     uint32_t ix[2];
-    float fx, tt;
-    int32_t fl, jx;
+    float fx;
+    float tt;
+    int32_t fl;
+    int32_t jx;
     unsigned any_mask = 0u;
     int status = GS_OK;
-    size_t P[8], e;
+    size_t P[8];
+    size_t e;
     const float *pk[8];
     float w[8];
 
@@ -199,10 +208,17 @@ static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *res
     {
         const size_t nx = t->n_xi;
         const size_t n_vx = (size_t)t->n_speed * nx;
-        const size_t a0 = ia[0] * n_vx, a1 = ia[1] * n_vx;
-        const size_t v0 = iv[0] * nx, v1 = iv[1] * nx;
-        const float wa0 = 1.0f - fa, wv0 = 1.0f - fv, wx0 = 1.0f - fx;
-        const float w00 = wa0 * wv0, w01 = wa0 * fv, w10 = fa * wv0, w11 = fa * fv;
+        const size_t a0 = ia[0] * n_vx;
+        const size_t a1 = ia[1] * n_vx;
+        const size_t v0 = iv[0] * nx;
+        const size_t v1 = iv[1] * nx;
+        const float wa0 = 1.0f - fa;
+        const float wv0 = 1.0f - fv;
+        const float wx0 = 1.0f - fx;
+        const float w00 = wa0 * wv0;
+        const float w01 = wa0 * fv;
+        const float w10 = fa * wv0;
+        const float w11 = fa * fv;
         P[0] = a0 + v0 + ix[0];
         P[1] = a0 + v0 + ix[1];
         P[2] = a0 + v1 + ix[0];
@@ -225,10 +241,10 @@ static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *res
             pk[2] = gs_k_tilt0(t, iv[1], ix[0], nK);
             pk[3] = gs_k_tilt0(t, iv[1], ix[1], nK);
         } else {
-            pk[0] = t->K + (P[0] - n_vx) * nK;
-            pk[1] = t->K + (P[1] - n_vx) * nK;
-            pk[2] = t->K + (P[2] - n_vx) * nK;
-            pk[3] = t->K + (P[3] - n_vx) * nK;
+            pk[0] = &t->dense.K[(P[0] - n_vx) * nK];
+            pk[1] = &t->dense.K[(P[1] - n_vx) * nK];
+            pk[2] = &t->dense.K[(P[2] - n_vx) * nK];
+            pk[3] = &t->dense.K[(P[3] - n_vx) * nK];
         }
         if (ia[1] == 0u) { /* only with a single tilt */
             pk[4] = gs_k_tilt0(t, iv[0], ix[0], nK);
@@ -236,10 +252,10 @@ static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *res
             pk[6] = gs_k_tilt0(t, iv[1], ix[0], nK);
             pk[7] = gs_k_tilt0(t, iv[1], ix[1], nK);
         } else {
-            pk[4] = t->K + (P[4] - n_vx) * nK;
-            pk[5] = t->K + (P[5] - n_vx) * nK;
-            pk[6] = t->K + (P[6] - n_vx) * nK;
-            pk[7] = t->K + (P[7] - n_vx) * nK;
+            pk[4] = &t->dense.K[(P[4] - n_vx) * nK];
+            pk[5] = &t->dense.K[(P[5] - n_vx) * nK];
+            pk[6] = &t->dense.K[(P[6] - n_vx) * nK];
+            pk[7] = &t->dense.K[(P[7] - n_vx) * nK];
         }
     }
     /* feasibility of the corners that contribute (all of them unless the query
@@ -268,16 +284,29 @@ static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *res
 
     /* interpolation: four lanes at a time (nK is a multiple of 4) */
     {
-        const float *const p0 = pk[0], *const p1 = pk[1], *const p2 = pk[2], *const p3 = pk[3];
-        const float *const p4 = pk[4], *const p5 = pk[5], *const p6 = pk[6], *const p7 = pk[7];
-        const float w0 = w[0], w1 = w[1], w2 = w[2], w3 = w[3];
-        const float w4 = w[4], w5 = w[5], w6 = w[6], w7 = w[7];
-        const float *const ud = t->u_d, *const ph = t->phi_d;
+        const float *const p0 = pk[0];
+        const float *const p1 = pk[1];
+        const float *const p2 = pk[2];
+        const float *const p3 = pk[3];
+        const float *const p4 = pk[4];
+        const float *const p5 = pk[5];
+        const float *const p6 = pk[6];
+        const float *const p7 = pk[7];
+        const float w0 = w[0];
+        const float w1 = w[1];
+        const float w2 = w[2];
+        const float w3 = w[3];
+        const float w4 = w[4];
+        const float w5 = w[5];
+        const float w6 = w[6];
+        const float w7 = w[7];
+        const float *const ud = t->dense.u_d;
+        const float *const ph = t->dense.phi_d;
         float o[4];
         unsigned l;
         /* four elements per pass (nK is a multiple of 4), written out: the 8 corner
          * pointers, the output and the bound stay in registers on a Cortex-M4 at -Os (no
-         * spills), and a host compiler may run the four as one vector (K is restrict) */
+         * spills) */
 #define GS_CORNERS(i)                                                                   \
     (((w0 * p0[i] + w1 * p1[i]) + (w2 * p2[i] + w3 * p3[i])) +                           \
      ((w4 * p4[i] + w5 * p5[i]) + (w6 * p6[i] + w7 * p7[i])))
@@ -287,7 +316,6 @@ static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *res
             K[e + 2u] = GS_CORNERS(e + 2u);
             K[e + 3u] = GS_CORNERS(e + 3u);
         }
-#undef GS_CORNERS
         for (l = 0u; l < 4u; ++l) {
             o[l] = ((w0 * ud[4u * P[0] + l] + w1 * ud[4u * P[1] + l]) +
                     (w2 * ud[4u * P[2] + l] + w3 * ud[4u * P[3] + l])) +
@@ -313,29 +341,36 @@ static int gs_dense(const gs_table *t, float xi, const gs_cell *cell, float *res
 }
 
 /* out[e] += sum_j g[j] cf[j] over the 2 H[e] + 1 coefficients of each of the count
- * (>= 1) series starting at cf, in order; returns the coefficients that follow. The hot
- * loop of a compact lookup, written so that GCC -Os keeps it to loads, multiply-adds
- * and one test per harmonic (bottom-tested loops, pointers stepped). */
+ * (>= 1) series starting at cf, in order; returns the coefficients that follow. H[e] <=
+ * GS_MAX_HARMONICS (gs_verify), the length of g. The hot loop of a compact lookup,
+ * written so that GCC -Os keeps it to loads, multiply-adds and one test per harmonic
+ * (bottom-tested loops, integer counters, pointers stepped). */
 static const float *gs_series(const float *g, const uint8_t *H, const float *cf, float *out,
-                              size_t count, int first)
+                              size_t count, bool first)
 {
     const float g0 = g[0];
-    float *const last = out + count;
-    do { /* the first corner starts from 0 (0 + x, as the reference: -0 becomes +0) */
-        const uint32_t k = *H++;
-        float acc = (first ? 0.0f : *out) + g0 * *cf++;
+    size_t e = count; /* >= 1, counted down */
+    do {
+        /* the first corner starts from 0 (0 + x, as the reference: -0 becomes +0) */
+        const uint32_t k = H[0];
+        const float *gp = &g[1];
+        float acc = (first ? 0.0f : out[0]) + (g0 * cf[0]);
+        cf = &cf[1];
+        H = &H[1];
         if (k != 0u) {
-            const float *gp = g + 1;
-            const float *const stop = cf + 2u * k;
+            uint32_t j = k; /* counted down: one flag-setting subtract per harmonic */
             do { /* the cosine and the sine term of one harmonic */
-                acc = acc + gp[0] * cf[0];
-                acc = acc + gp[1] * cf[1];
-                gp += 2;
-                cf += 2;
-            } while (cf != stop);
+                acc = acc + (gp[0] * cf[0]);
+                acc = acc + (gp[1] * cf[1]);
+                gp = &gp[2];
+                cf = &cf[2];
+                j -= 1u;
+            } while (j != 0u);
         }
-        *out++ = acc;
-    } while (out != last);
+        out[0] = acc;
+        out = &out[1];
+        e -= 1u;
+    } while (e != 0u);
     return cf;
 }
 
@@ -346,17 +381,25 @@ static const float *gs_series(const float *g, const uint8_t *H, const float *cf,
 static int gs_compact(const gs_table *t, float xi, const gs_cell *cell, float *K, float *u_d,
                       float *phi_d, float *dphi_dxi)
 {
-    const size_t nK = 4u * (size_t)t->n_state, n_value = nK + 5u;
-    const uint32_t *const ia = cell->ia, *const iv = cell->iv;
-    const float fa = cell->fa, fv = cell->fv;
-    const float wa0 = 1.0f - fa, wv0 = 1.0f - fv;
+    const size_t nK = 4u * (size_t)t->n_state;
+    const size_t n_value = nK + 5u;
+    const uint32_t *const ia = cell->ia;
+    const uint32_t *const iv = cell->iv;
+    const float fa = cell->fa;
+    const float fv = cell->fv;
+    const float wa0 = 1.0f - fa;
+    const float wv0 = 1.0f - fv;
     const float wq[4] = {wa0 * wv0, wa0 * fv, fa * wv0, fa * fv};
     const size_t q[4] = {(size_t)ia[0] * t->n_speed + iv[0], (size_t)ia[0] * t->n_speed + iv[1],
                          (size_t)ia[1] * t->n_speed + iv[0], (size_t)ia[1] * t->n_speed + iv[1]};
-    float ck[GS_MAX_HARMONICS + 1u], sk[GS_MAX_HARMONICS + 1u], g[2u * GS_MAX_HARMONICS + 1u];
+    float ck[GS_MAX_HARMONICS + 1u];
+    float sk[GS_MAX_HARMONICS + 1u];
+    float g[2u * GS_MAX_HARMONICS + 1u];
     float slope = 0.0f;
-    int status = GS_OK, first = 1;
-    unsigned any_mask = 0u, c;
+    int status = GS_OK;
+    bool first = true;
+    unsigned any_mask = 0u;
+    unsigned c;
     uint32_t j;
 
     for (c = 0u; c < 4u; ++c) {
@@ -377,27 +420,29 @@ static int gs_compact(const gs_table *t, float xi, const gs_cell *cell, float *K
     ck[0] = 1.0f;
     sk[0] = 0.0f;
     gs_sincosf(xi, &sk[1], &ck[1]);
-    for (j = 2u; j <= t->n_harmonics; ++j) {
+    for (j = 2u; j <= t->compact.n_harmonics; ++j) {
         ck[j] = ck[j - 1u] * ck[1] - sk[j - 1u] * sk[1];
         sk[j] = sk[j - 1u] * ck[1] + ck[j - 1u] * sk[1];
     }
     for (c = 0u; c < 4u; ++c) {
+        const uint8_t *const harmonics = t->compact.harmonics;
+        const float *const coef = t->compact.coef;
         const uint8_t *H;
         const float *cf;
         if (wq[c] == 0.0f) {
             continue;
         }
-        H = t->harmonics + q[c] * n_value;
-        cf = t->coef + t->coef_start[q[c]];
+        H = &harmonics[q[c] * n_value];
+        cf = &coef[t->compact.coef_start[q[c]]];
         g[0] = wq[c]; /* the corner's weight times each harmonic */
-        for (j = 1u; j <= t->n_harmonics; ++j) {
+        for (j = 1u; j <= t->compact.n_harmonics; ++j) {
             g[2u * j - 1u] = wq[c] * ck[j];
             g[2u * j] = wq[c] * sk[j];
         }
         cf = gs_series(g, H, cf, K, nK, first);
-        cf = gs_series(g, H + nK, cf, u_d, 4u, first);
-        (void)gs_series(g, H + nK + 4u, cf, phi_d, 1u, first);
-        first = 0;
+        cf = gs_series(g, &H[nK], cf, u_d, 4u, first);
+        (void)gs_series(g, &H[nK + 4u], cf, phi_d, 1u, first);
+        first = false;
         if (dphi_dxi != NULL) { /* d/dxi of the roll's series: k (b_k cos kxi - a_k sin kxi) */
             const uint32_t h = H[nK + 4u];
             float d = 0.0f;
@@ -419,7 +464,10 @@ static void gs_mirror(const gs_table *t, float *K, float *u_d, float *phi_d)
 {
     const size_t n = t->n_state;
     /* rows 0<->3 and 1<->2 swap with the column signs applied ... */
-    float *const r0 = K, *const r1 = K + n, *const r2 = K + 2u * n, *const r3 = K + 3u * n;
+    float *const r0 = &K[0];
+    float *const r1 = &K[n];
+    float *const r2 = &K[2u * n];
+    float *const r3 = &K[3u * n];
     const float *const sg = t->state_sign;
     const uint8_t *const pm = t->state_perm;
     float tmp;
@@ -438,10 +486,18 @@ static void gs_mirror(const gs_table *t, float *K, float *u_d, float *phi_d)
     for (col = GS_N_BASE_STATES; col < n; ++col) {
         const size_t q = pm[col];
         if (q > col) {
-            tmp = r0[col], r0[col] = r0[q], r0[q] = tmp;
-            tmp = r1[col], r1[col] = r1[q], r1[q] = tmp;
-            tmp = r2[col], r2[col] = r2[q], r2[q] = tmp;
-            tmp = r3[col], r3[col] = r3[q], r3[q] = tmp;
+            tmp = r0[col];
+            r0[col] = r0[q];
+            r0[q] = tmp;
+            tmp = r1[col];
+            r1[col] = r1[q];
+            r1[q] = tmp;
+            tmp = r2[col];
+            r2[col] = r2[q];
+            r2[q] = tmp;
+            tmp = r3[col];
+            r3[col] = r3[q];
+            r3[q] = tmp;
         }
     }
     tmp = u_d[0];
@@ -458,9 +514,12 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
 {
     const gs_table *t = table;
     gs_cell here;
-    uint32_t *const ia = here.ia, *const iv = here.iv;
-    float fa, fv;
-    int mirrored = 0, shifted = 0;
+    uint32_t *const ia = here.ia;
+    uint32_t *const iv = here.iv;
+    float fa;
+    float fv;
+    bool mirrored = false;
+    bool shifted = false;
     int status = GS_OK;
 
     if (t == NULL || K == NULL || u_d == NULL || phi_d == NULL || !gs_table_usable(t)) {
@@ -479,20 +538,22 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
     if (gs_negative(alpha)) { /* S1: (-alpha, xi) == (alpha, xi + pi) */
         xi = xi + GS_PI;
         alpha = -alpha;
-        shifted = 1;
+        shifted = true;
     }
     if (gs_negative(xi_dot)) { /* S2: mirror, undone on the outputs */
         xi = GS_PI - xi;
         xi_dot = -xi_dot;
-        mirrored = 1;
+        mirrored = true;
     }
 
     /* 4. speed (xi_dot) and tilt axes: clamp, bracket (xi is wrapped by the dense
      * lookup); alpha >= 0 == tilt[0] here, so only the top of the tilts can clamp */
     fv = gs_axis_cell(t->xi_dot, t->n_speed, xi_dot, iv, &status, GS_CLAMPED_SPEED);
     fa = gs_axis_cell(t->tilt, t->n_tilt, alpha, ia, &status, GS_CLAMPED_TILT);
-    here.fa = fa, here.fv = fv;
-    here.mirrored = mirrored, here.shifted = shifted;
+    here.fa = fa;
+    here.fv = fv;
+    here.mirrored = mirrored;
+    here.shifted = shifted;
     here.dphi_dxi = 0.0f;
 
     /* 5. the values at (xi, xi_dot, alpha) */
@@ -530,19 +591,33 @@ void gs_sincosf(float x, float *s, float *c)
 {
     const float ax = x < 0.0f ? -x : x;
     /* x = k pi/2 + r, |r| <= pi/4 (+ rounding); |x| <= 1e4 keeps k below 2^13 */
-    const int32_t k = (int32_t)(ax * GS_2_OVER_PI + 0.5f);
+    const float kr = (ax * GS_2_OVER_PI) + 0.5f;
+    const int32_t k = (int32_t)kr;
     const float kf = (float)k;
     const float r = ((ax - kf * GS_PIO2_1) - kf * GS_PIO2_2) - kf * GS_PIO2_3;
     const float z = r * r;
     const float sr = r + r * z * (-0x1.555546p-3f + z * (0x1.11073cp-7f + z * -0x1.9943f2p-13f));
     const float cr =
         (1.0f - 0.5f * z) + z * z * (0x1.55554ap-5f + z * (-0x1.6c0c34p-10f + z * 0x1.99eb9cp-16f));
-    float sv, cv;
+    float sv;
+    float cv;
     switch ((uint32_t)k & 3u) {
-    case 0u: sv = sr, cv = cr; break;
-    case 1u: sv = cr, cv = -sr; break;
-    case 2u: sv = -sr, cv = -cr; break;
-    default: sv = -cr, cv = sr; break;
+    case 0u:
+        sv = sr;
+        cv = cr;
+        break;
+    case 1u:
+        sv = cr;
+        cv = -sr;
+        break;
+    case 2u:
+        sv = -sr;
+        cv = -cr;
+        break;
+    default:
+        sv = -cr;
+        cv = sr;
+        break;
     }
     *s = x < 0.0f ? -sv : sv;
     *c = cv;
@@ -552,8 +627,11 @@ float gs_atan2f(float y, float x)
 {
     const float ay = y < 0.0f ? -y : y;
     const float ax = x < 0.0f ? -x : x;
-    const int swap = ay > ax;
-    float t, base = 0.0f, z, a;
+    const bool swap = ay > ax;
+    float t;
+    float base = 0.0f;
+    float z;
+    float a;
     if (ax == 0.0f && ay == 0.0f) {
         return 0.0f;
     }
@@ -613,25 +691,35 @@ float gs_sqrtf(float x)
  * dtheta/dxi, chi, dchi/dxi}. */
 static void gs_offsets(const gs_table *t, const gs_cell *c, float sx, float cx, float out[4])
 {
-    const uint32_t H = t->n_offset_harmonics, nb = 2u * H + 1u;
-    const float wa1 = c->fa, wv1 = c->fv, wa0 = 1.0f - c->fa, wv0 = 1.0f - c->fv;
+    const uint32_t H = t->n_offset_harmonics;
+    const uint32_t nb = 2u * H + 1u;
+    const float wa1 = c->fa;
+    const float wv1 = c->fv;
+    const float wa0 = 1.0f - c->fa;
+    const float wv0 = 1.0f - c->fv;
     const float wq[4] = {wa0 * wv0, wa0 * wv1, wa1 * wv0, wa1 * wv1};
     const size_t q[4] = {(size_t)c->ia[0] * t->n_speed + c->iv[0],
                          (size_t)c->ia[0] * t->n_speed + c->iv[1],
                          (size_t)c->ia[1] * t->n_speed + c->iv[0],
                          (size_t)c->ia[1] * t->n_speed + c->iv[1]};
     const float *const o = t->offsets;
-    uint32_t a, k;
+    uint32_t a;
+    uint32_t k;
     for (a = 0u; a < 2u; ++a) {
-        const size_t b0 = (q[0] * 2u + a) * nb, b1 = (q[1] * 2u + a) * nb;
-        const size_t b2 = (q[2] * 2u + a) * nb, b3 = (q[3] * 2u + a) * nb;
+        const size_t b0 = (q[0] * 2u + a) * nb;
+        const size_t b1 = (q[1] * 2u + a) * nb;
+        const size_t b2 = (q[2] * 2u + a) * nb;
+        const size_t b3 = (q[3] * 2u + a) * nb;
         /* the sign of chi under S2 */
         const float flip = (c->mirrored && a == 1u) ? -1.0f : 1.0f;
-        float ck = cx, sk = sx, sgn = -1.0f; /* cos, sin of k xi; (-1)^k */
+        float ck = cx; /* cos, sin of k xi; (-1)^k */
+        float sk = sx;
+        float sgn = -1.0f;
         float f = flip * ((wq[0] * o[b0] + wq[1] * o[b1]) + (wq[2] * o[b2] + wq[3] * o[b3]));
         float df = 0.0f;
         for (k = 1u; k <= H; ++k) {
-            const uint32_t ja = k, jb = H + k;
+            const uint32_t ja = k;
+            const uint32_t jb = H + k;
             float ak = (wq[0] * o[b0 + ja] + wq[1] * o[b1 + ja]) +
                        (wq[2] * o[b2 + ja] + wq[3] * o[b3 + ja]);
             float bk = (wq[0] * o[b0 + jb] + wq[1] * o[b1 + jb]) +
@@ -671,9 +759,16 @@ static void gs_closed_form(const gs_vehicle *vh, float inv_m, const float d[4], 
                            float cx, float sa, float ca, float u[4], float sc[2], float *dphi,
                            float *tension)
 {
-    const float m = vh->mass, g = vh->g, r = vh->radius;
-    const float xd = d[0], xdd = d[1], xddd = d[2], xdddd = d[3];
-    const float v = r * xd, vd = r * xdd, vdd = r * xddd;
+    const float m = vh->mass;
+    const float g = vh->g;
+    const float r = vh->radius;
+    const float xd = d[0];
+    const float xdd = d[1];
+    const float xddd = d[2];
+    const float xdddd = d[3];
+    const float v = r * xd;
+    const float vd = r * xdd;
+    const float vdd = r * xddd;
     const float av = v < 0.0f ? -v : v;
     const float sgn = v > 0.0f ? 1.0f : (v < 0.0f ? -1.0f : 0.0f);
     const float Dv = (vh->drag_mu1 + vh->drag_mu2 * av) * v;
@@ -688,12 +783,17 @@ static void gs_closed_form(const gs_vehicle *vh, float inv_m, const float d[4], 
     const float H = Dn * Dn + N * N;
     const float y = gs_rsqrtf(H); /* H >= (g cos alpha)^2 > 0 for |alpha| < pi/2 */
     const float iH = y * y;
-    const float sp = -N * y, cp = Dn * y; /* sin, cos of phi */
+    const float sp = -N * y; /* sin, cos of phi */
+    const float cp = Dn * y;
     const float p1 = -Dn * N1 * iH;
     const float p2 = -Dn * (N2 - 2.0f * N * N1 * N1 * iH) * iH;
     /* body rates and their derivative (eqs. 15-16) */
-    const float w0 = p1, w1 = xd * sp, w2 = xd * cp;
-    const float a0 = p2, a1 = xd * p1 * cp + xdd * sp, a2 = xdd * cp - xd * p1 * sp;
+    const float w0 = p1;
+    const float w1 = xd * sp;
+    const float w2 = xd * cp;
+    const float a0 = p2;
+    const float a1 = xd * p1 * cp + xdd * sp;
+    const float a2 = xdd * cp - xd * p1 * sp;
     const float *const J = vh->J;
     const float *const A = vh->alloc_inv;
     /* J w, then (T_C, tau_B = J w' + w x J w): the tether torque is zero on the
@@ -732,8 +832,22 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
 {
     const gs_table *t = table;
     const gs_vehicle *vh;
-    float ud_tab[4], phi_tab, u_cf[4], sc[2], dphi, ten, inv_m;
-    float sx, cx, sa, ca, phi, sphi, cphi, st = 0.0f, ct = 1.0f;
+    float ud_tab[4];
+    float phi_tab;
+    float u_cf[4];
+    float sc[2];
+    float dphi;
+    float ten;
+    float inv_m;
+    float sx;
+    float cx;
+    float sa;
+    float ca;
+    float phi;
+    float sphi;
+    float cphi;
+    float st = 0.0f;
+    float ct = 1.0f;
     float off[4] = {0.0f, 0.0f, 0.0f, 0.0f}; /* theta, dtheta/dxi, chi, dchi/dxi */
     gs_cell cell;
     int status;
@@ -761,17 +875,26 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
     inv_m = 1.0f / vh->mass;
     gs_sincosf(ref[0], &sx, &cx);
     gs_sincosf(alpha, &sa, &ca);
-    gs_closed_form(vh, inv_m, ref + 1, sx, cx, sa, ca, u_cf, sc, &dphi, &ten);
+    gs_closed_form(vh, inv_m, &ref[1], sx, cx, sa, ca, u_cf, sc, &dphi, &ten);
 
     if ((status & GS_UNUSABLE) == 0) {
         /* ... corrected by the table's nominal over the closed form's on the steady
          * circle at the point the lookup used (xi_dot and alpha clamped into the
          * table): thrust ratio per motor, roll offset */
-        const float lo = t->xi_dot[0], hi = t->xi_dot[t->n_speed - 1u];
+        const float lo = t->xi_dot[0];
+        const float hi = t->xi_dot[t->n_speed - 1u];
         const float amax = t->tilt[t->n_tilt - 1u];
         const float vq = gs_negative(ref[1]) ? -ref[1] : ref[1];
         const float aq = gs_negative(alpha) ? -alpha : alpha;
-        float d_st[4], u_st[4], sc_st[2], dphi_st, ten_st, sas = sa, cas = ca, xd_g, a_g;
+        float d_st[4];
+        float u_st[4];
+        float sc_st[2];
+        float dphi_st;
+        float ten_st;
+        float sas = sa;
+        float cas = ca;
+        float xd_g;
+        float a_g;
         xd_g = vq < lo ? lo : (vq > hi ? hi : vq);
         xd_g = gs_negative(ref[1]) ? -xd_g : xd_g;
         a_g = aq > amax ? amax : aq;
@@ -779,7 +902,10 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
         if (a_g != alpha) {
             gs_sincosf(a_g, &sas, &cas);
         }
-        d_st[0] = xd_g, d_st[1] = 0.0f, d_st[2] = 0.0f, d_st[3] = 0.0f;
+        d_st[0] = xd_g;
+        d_st[1] = 0.0f;
+        d_st[2] = 0.0f;
+        d_st[3] = 0.0f;
         gs_closed_form(vh, inv_m, d_st, sx, cx, sas, cas, u_st, sc_st, &dphi_st, &ten_st);
         for (i = 0u; i < 4u; ++i) {
             const float add = u_cf[i] + (ud_tab[i] - u_st[i]);
@@ -821,7 +947,8 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
     {
         /* omega_B from the ZYX Euler rates (eq. 15 with offsets): psi' = xi' (1 + chi_xi),
          * theta' = xi' theta_xi */
-        const float dpsi = ref[1] * (1.0f + off[3]), dth = ref[1] * off[1];
+        const float dpsi = ref[1] * (1.0f + off[3]);
+        const float dth = ref[1] * off[1];
         nom->x_d[7] = dphi - dpsi * st;
         nom->x_d[8] = dth * cphi + dpsi * ct * sphi;
         nom->x_d[9] = dpsi * ct * cphi - dth * sphi;
@@ -834,14 +961,13 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
 }
 
 /* CRC-32, reflected polynomial 0xEDB88320, four bits at a time */
-static const uint32_t gs_crc_nibble[16] = {
-    0x00000000u, 0x1db71064u, 0x3b6e20c8u, 0x26d930acu, 0x76dc4190u, 0x6b6b51f4u,
-    0x4db26158u, 0x5005713cu, 0xedb88320u, 0xf00f9344u, 0xd6d6a3e8u, 0xcb61b38cu,
-    0x9b64c2b0u, 0x86d3d2d4u, 0xa00ae278u, 0xbdbdf21cu,
-};
-
 static uint32_t gs_crc_byte(uint32_t crc, uint32_t byte)
 {
+    static const uint32_t gs_crc_nibble[16] = {
+        0x00000000u, 0x1db71064u, 0x3b6e20c8u, 0x26d930acu, 0x76dc4190u, 0x6b6b51f4u,
+        0x4db26158u, 0x5005713cu, 0xedb88320u, 0xf00f9344u, 0xd6d6a3e8u, 0xcb61b38cu,
+        0x9b64c2b0u, 0x86d3d2d4u, 0xa00ae278u, 0xbdbdf21cu,
+    };
     crc ^= byte & 0xffu;
     crc = (crc >> 4) ^ gs_crc_nibble[crc & 15u];
     crc = (crc >> 4) ^ gs_crc_nibble[crc & 15u];
@@ -877,8 +1003,10 @@ static uint32_t gs_crc_bytes(uint32_t crc, const uint8_t *p, size_t count)
 uint32_t gs_table_crc32(const gs_table *t)
 {
     uint32_t crc = 0xffffffffu;
-    size_t n_pts, n_circles, n;
-    int compact;
+    size_t n_pts;
+    size_t n_circles;
+    size_t n;
+    bool compact;
     if (t == NULL || !gs_table_usable(t) || t->xi == NULL || t->speed == NULL) {
         return 0u;
     }
@@ -893,10 +1021,12 @@ uint32_t gs_table_crc32(const gs_table *t)
     crc = gs_crc_u32(crc, gs_bits(t->xi_scale));
     if (compact) { /* the format and its sizes (dense tables keep their CRC) */
         crc = gs_crc_u32(crc, t->format);
-        crc = gs_crc_u32(crc, t->n_harmonics);
-        crc = gs_crc_u32(crc, t->n_coef);
-    } else if (t->n_xi_tilt0 > 1u) { /* only then: tables without it keep their CRC */
-        crc = gs_crc_u32(crc, t->n_xi_tilt0);
+        crc = gs_crc_u32(crc, t->compact.n_harmonics);
+        crc = gs_crc_u32(crc, t->compact.n_coef);
+    } else if (t->dense.n_xi_tilt0 > 1u) { /* only then: tables without it keep their CRC */
+        crc = gs_crc_u32(crc, t->dense.n_xi_tilt0);
+    } else {
+        /* a dense table with one tilt-0 gain block per speed: nothing */
     }
     crc = gs_crc_floats(crc, t->xi, t->n_xi);
     crc = gs_crc_floats(crc, t->speed, t->n_speed);
@@ -907,20 +1037,20 @@ uint32_t gs_table_crc32(const gs_table *t)
         crc = gs_crc_floats(crc, t->state_sign, n);
         crc = gs_crc_bytes(crc, t->state_perm, n);
         crc = gs_crc_bytes(crc, t->mask, n_circles);
-        crc = gs_crc_bytes(crc, t->harmonics, n_circles * (4u * n + 5u));
+        crc = gs_crc_bytes(crc, t->compact.harmonics, n_circles * (4u * n + 5u));
         for (i = 0; i < n_circles; ++i) {
-            crc = gs_crc_u32(crc, t->coef_start[i]);
+            crc = gs_crc_u32(crc, t->compact.coef_start[i]);
         }
-        crc = gs_crc_floats(crc, t->coef, t->n_coef);
+        crc = gs_crc_floats(crc, t->compact.coef, t->compact.n_coef);
     } else {
-        crc = gs_crc_floats(crc, t->K_tilt0,
-                            (size_t)t->n_speed * (t->n_xi_tilt0 > 1u ? t->n_xi : 1u) * 4u * n);
+        crc = gs_crc_floats(crc, t->dense.K_tilt0,
+                            (size_t)t->n_speed * (t->dense.n_xi_tilt0 > 1u ? t->n_xi : 1u) * 4u * n);
         if (t->n_tilt > 1u) {
-            crc = gs_crc_floats(crc, t->K,
+            crc = gs_crc_floats(crc, t->dense.K,
                                 (size_t)(t->n_tilt - 1u) * t->n_speed * t->n_xi * 4u * n);
         }
-        crc = gs_crc_floats(crc, t->u_d, n_pts * 4u);
-        crc = gs_crc_floats(crc, t->phi_d, n_pts);
+        crc = gs_crc_floats(crc, t->dense.u_d, n_pts * 4u);
+        crc = gs_crc_floats(crc, t->dense.phi_d, n_pts);
         crc = gs_crc_floats(crc, t->state_sign, n);
         crc = gs_crc_bytes(crc, t->state_perm, n);
         crc = gs_crc_bytes(crc, t->mask, n_pts);
@@ -968,15 +1098,15 @@ int gs_verify(const gs_table *t)
     }
     if (t->vehicle != NULL) {
         const gs_vehicle *vh = t->vehicle;
-        int bad = gs_nonfinite(vh->drag_mu1) || gs_nonfinite(vh->drag_mu2) ||
+        bool bad = gs_nonfinite(vh->drag_mu1) || gs_nonfinite(vh->drag_mu2) ||
                   gs_nonfinite(vh->min_tension) ||
                   !(vh->mass > 0.0f) || !(vh->radius > 0.0f) || !(vh->g > 0.0f) ||
                   gs_nonfinite(vh->mass) || gs_nonfinite(vh->radius) || gs_nonfinite(vh->g);
         for (i = 0u; i < 9u; ++i) {
-            bad |= gs_nonfinite(vh->J[i]);
+            bad = bad || gs_nonfinite(vh->J[i]);
         }
         for (i = 0u; i < 16u; ++i) {
-            bad |= gs_nonfinite(vh->alloc_inv[i]);
+            bad = bad || gs_nonfinite(vh->alloc_inv[i]);
         }
         if (bad) {
             return GS_BAD_TABLE;
@@ -985,14 +1115,17 @@ int gs_verify(const gs_table *t)
     if (t->format == GS_FORMAT_COMPACT) { /* every series inside coef, in order */
         const size_t n_value = 4u * (size_t)t->n_state + 5u;
         const size_t n_circles = (size_t)t->n_tilt * t->n_speed;
-        size_t c, e, next = 0;
+        size_t c;
+        size_t e;
+        size_t next = 0;
+        const uint8_t *const harmonics = t->compact.harmonics;
         for (c = 0; c < n_circles; ++c) {
-            const uint8_t *H = t->harmonics + c * n_value;
-            if (t->coef_start[c] != next) {
+            const uint8_t *H = &harmonics[c * n_value];
+            if (t->compact.coef_start[c] != next) {
                 return GS_BAD_TABLE;
             }
             for (e = 0; e < n_value; ++e) {
-                if (H[e] > t->n_harmonics ||
+                if (H[e] > t->compact.n_harmonics ||
                     ((t->mask[c] & GS_MASK_NO_GAINS) != 0u && H[e] != 0u)) {
                     return GS_BAD_TABLE;
                 }
@@ -1001,7 +1134,7 @@ int gs_verify(const gs_table *t)
                 }
             }
         }
-        if (next != t->n_coef) {
+        if (next != t->compact.n_coef) {
             return GS_BAD_TABLE;
         }
     }

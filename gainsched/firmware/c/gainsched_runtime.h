@@ -28,7 +28,7 @@
  *     outputs are zeroed.
  *     Compact tables (GS_FORMAT_COMPACT): every value of the (up to) 4 circles
  *     around (xi_dot, alpha) is a Fourier series in xi; the series are summed at
- *     xi, weighted bilinearly over (xi_dot, alpha), with one gs_sincosf per
+ *     xi, weighted bilinearly over (xi_dot, alpha), with one gs_sincosf (gainsched_trig.h) per
  *     lookup and angle addition for the harmonics. The circles' masks take the
  *     place of the corners' (same status bits).
  *
@@ -57,7 +57,7 @@
 extern "C" {
 #endif
 
-#define GS_RUNTIME_VERSION 4
+#define GS_RUNTIME_VERSION 5
 
 /* ---- status bits returned by gs_lookup (0 = GS_OK) ---------------------- */
 #define GS_OK 0x00            /* inside the table, all corners feasible */
@@ -120,43 +120,58 @@ typedef struct gs_vehicle {
     float alloc_inv[16]; /* (T_C N, tau_B N m) -> motor thrusts T1..T4 N, row-major */
 } gs_vehicle;
 
-/* A gain table in the fundamental domain (alpha >= 0, xi_dot > 0). All arrays
- * are row-major; generated headers fill this in, firmware never needs to. */
-typedef struct gs_table {
-    uint32_t n_tilt;          /* >= 1, tilt[0] == 0 */
-    uint32_t n_speed;         /* >= 1 */
-    uint32_t n_xi;            /* >= 1, uniform periodic axis */
-    uint32_t n_state;         /* LQR state dimension n (>= GS_N_BASE_STATES) */
-    float xi_scale;           /* n_xi / (2 pi) rounded to float, cells per rad */
-    const float *xi;          /* [n_xi] rad (informational, in the CRC) */
-    const float *speed;       /* [n_speed] m/s (informational, in the CRC) */
-    const float *xi_dot;      /* [n_speed] rad/s, strictly increasing, > 0 */
-    const float *tilt;        /* [n_tilt] rad, strictly increasing, tilt[0] = 0 */
-    const float *K_tilt0;     /* [n_speed][n_xi_tilt0][4][n_state] gains at tilt 0 (dense) */
-    const float *K;           /* [n_tilt-1][n_speed][n_xi][4][n_state] (dense) */
-    const float *u_d;         /* [n_tilt][n_speed][n_xi][4] N (dense) */
-    const float *phi_d;       /* [n_tilt][n_speed][n_xi] rad (dense) */
-    const float *state_sign;  /* [n_state] +-1, the S2 state map P_x ... */
-    const uint8_t *state_perm; /* [n_state] ... P_x[state_perm[j]][j] = state_sign[j] */
-    const uint8_t *mask;      /* dense: [n_tilt][n_speed][n_xi]; compact: [n_tilt][n_speed],
-                               * the OR over the circle's azimuths; 0 = feasible */
-    const gs_vehicle *vehicle; /* closed-form constants; NULL: no gs_lookup_nominal */
-    uint32_t n_offset_harmonics; /* H of the attitude offsets, <= GS_MAX_OFFSET_HARMONICS */
-    const float *offsets;     /* [n_tilt][n_speed][2][2H+1] rad: Fourier coefficients of the
-                               * nominal's pitch and yaw offsets per circle; NULL: none */
-    uint32_t crc32;           /* CRC-32 of the table data (docs/runtime.md) */
-    uint32_t n_xi_tilt0;      /* azimuths of K_tilt0: 0 or 1, independent of xi (a level
-                               * circle looks the same at every azimuth); n_xi when an
-                               * effect changes with the azimuth */
-    uint32_t format;          /* GS_FORMAT_DENSE or GS_FORMAT_COMPACT */
-    /* compact format only (0 / NULL in a dense table); a circle's values are K
-     * (4 x n_state, row-major), u_d (4), phi_d: n_value = 4 n_state + 5 series */
-    uint32_t n_harmonics;     /* the largest harmonic count of any series */
-    uint32_t n_coef;          /* coefficients in coef */
-    const uint8_t *harmonics; /* [n_tilt][n_speed][n_value] H of each series (0: constant) */
+/* The dense part of a gain table (GS_FORMAT_DENSE): the values at every grid point,
+ * interpolated trilinearly. All arrays row-major; zeros and NULL in a compact table. */
+typedef struct gs_dense_part {
+    uint32_t n_xi_tilt0;  /* azimuths of K_tilt0: 0 or 1, independent of xi (a level
+                           * circle looks the same at every azimuth); n_xi when an
+                           * effect changes with the azimuth */
+    const float *K_tilt0; /* [n_speed][n_xi_tilt0][4][n_state] gains at tilt 0 */
+    const float *K;       /* [n_tilt-1][n_speed][n_xi][4][n_state] gains at tilt[1:] */
+    const float *u_d;     /* [n_tilt][n_speed][n_xi][4] nominal motor thrusts, N */
+    const float *phi_d;   /* [n_tilt][n_speed][n_xi] nominal roll, rad */
+} gs_dense_part;
+
+/* The compact part of a gain table (GS_FORMAT_COMPACT): per (tilt, speed) circle, every
+ * value, K (4 x n_state, row-major), u_d (4), phi_d, is a Fourier series in xi:
+ * n_value = 4 n_state + 5 series per circle. Zeros and NULL in a dense table. */
+typedef struct gs_compact_part {
+    uint32_t n_harmonics;       /* the largest harmonic count of any series,
+                                 * <= GS_MAX_HARMONICS */
+    uint32_t n_coef;            /* coefficients in coef */
+    const uint8_t *harmonics;   /* [n_tilt][n_speed][n_value] H of each series (0: constant) */
     const uint32_t *coef_start; /* [n_tilt][n_speed] index in coef of the circle's first */
-    const float *coef;        /* per circle, per value: c0, a1, b1, ..., aH, bH of
-                               * f(xi) = c0 + sum_k a_k cos(k xi) + b_k sin(k xi) */
+    const float *coef;          /* per circle, per value: c0, a1, b1, ..., aH, bH of
+                                 * f(xi) = c0 + sum_k a_k cos(k xi) + b_k sin(k xi) */
+} gs_compact_part;
+
+/* A gain table in the fundamental domain (alpha >= 0, xi_dot > 0): the axes and the
+ * symmetry map every format has, then the format's part. All arrays are row-major;
+ * generated headers fill this in, firmware never needs to. */
+typedef struct gs_table {
+    uint32_t format;            /* GS_FORMAT_DENSE or GS_FORMAT_COMPACT: which part holds
+                                 * the values */
+    uint32_t n_tilt;            /* >= 1, tilt[0] == 0 */
+    uint32_t n_speed;           /* >= 1 */
+    uint32_t n_xi;              /* >= 1, uniform periodic axis */
+    uint32_t n_state;           /* LQR state dimension n (>= GS_N_BASE_STATES) */
+    float xi_scale;             /* n_xi / (2 pi) rounded to float, cells per rad */
+    const float *xi;            /* [n_xi] rad (informational, in the CRC) */
+    const float *speed;         /* [n_speed] m/s (informational, in the CRC) */
+    const float *xi_dot;        /* [n_speed] rad/s, strictly increasing, > 0 */
+    const float *tilt;          /* [n_tilt] rad, strictly increasing, tilt[0] = 0 */
+    const float *state_sign;    /* [n_state] +-1, the S2 state map P_x ... */
+    const uint8_t *state_perm;  /* [n_state] ... P_x[state_perm[j]][j] = state_sign[j] */
+    const uint8_t *mask;        /* dense: [n_tilt][n_speed][n_xi]; compact: [n_tilt][n_speed],
+                                 * the OR over the circle's azimuths; 0 = feasible */
+    gs_dense_part dense;        /* the values of a GS_FORMAT_DENSE table */
+    gs_compact_part compact;    /* the values of a GS_FORMAT_COMPACT table */
+    const gs_vehicle *vehicle;  /* closed-form constants; NULL: no gs_lookup_nominal */
+    uint32_t n_offset_harmonics; /* H of the attitude offsets, <= GS_MAX_OFFSET_HARMONICS */
+    const float *offsets;       /* [n_tilt][n_speed][2][2H+1] rad: Fourier coefficients of
+                                 * the nominal's pitch and yaw offsets per circle; NULL:
+                                 * none */
+    uint32_t crc32;             /* CRC-32 of the table data (docs/runtime.md) */
 } gs_table;
 
 /*
@@ -167,6 +182,22 @@ typedef struct gs_table {
  * u_d[4] nominal motor thrusts (N), *phi_d nominal roll (rad).
  * Returns a bit set of GS_* status flags (GS_OK == 0). When the result has
  * any GS_UNUSABLE bit the outputs are zeroed (GS_BAD_ARG: left untouched).
+ *
+ * NaN and range: NaN or +-inf in any input, |xi| > GS_XI_LIMIT, |xi_dot| >
+ * GS_XI_DOT_LIMIT or |alpha| > GS_TILT_LIMIT: GS_BAD_INPUT, outputs zeroed. Any xi
+ * within the limit is wrapped (periodic axis); |xi_dot| and |alpha| beyond the table's
+ * axes are clamped to its last value (GS_CLAMPED_SPEED, GS_CLAMPED_TILT), |xi_dot|
+ * below the first speed clamped up to it. -0 and negative subnormals take the sign
+ * branch of their sign bit. Finite outputs for every finite table value.
+ *
+ * @param table   the table (gs_verify'd once at boot); NULL: GS_BAD_ARG
+ * @param xi      azimuth, rad
+ * @param xi_dot  azimuth rate, rad/s (negative: the other direction, symmetry S2)
+ * @param alpha   circle tilt, rad (negative: symmetry S1)
+ * @param K       [out] gains, 4 * table->n_state floats; NULL: GS_BAD_ARG
+ * @param u_d     [out] nominal motor thrusts, 4 floats, N; NULL: GS_BAD_ARG
+ * @param phi_d   [out] nominal roll, rad; NULL: GS_BAD_ARG
+ * @return        GS_* status bits
  */
 int gs_lookup(const gs_table *table, float xi, float xi_dot, float alpha, float *K, float *u_d,
               float *phi_d);
@@ -193,28 +224,40 @@ typedef struct gs_nominal {
  * With GS_NO_GAINS, K is zero and *nom is the drag-only closed form alone (a
  * firmware that holds its last good gains may still fly it); with GS_BAD_INPUT
  * everything is zero.
+ *
+ * NaN and range: ref[0], ref[1], alpha as gs_lookup's xi, xi_dot, alpha; ref[2..4]
+ * NaN, +-inf or beyond +-GS_XI_DERIV_LIMIT: GS_BAD_INPUT. The nominal is finite for
+ * every accepted reference (|alpha| <= GS_TILT_LIMIT < pi/2 keeps the closed form's
+ * normal force away from 0).
+ *
+ * @param table  the table, with vehicle constants (table->vehicle); else GS_BAD_ARG
+ * @param ref    the reference xi and four derivatives (above); NULL: GS_BAD_ARG
+ * @param alpha  circle tilt, rad
+ * @param K      [out] gains, 4 * table->n_state floats; NULL: GS_BAD_ARG
+ * @param nom    [out] the nominal: thrusts, reduced state, tension; NULL: GS_BAD_ARG
+ * @return       GS_* status bits
  */
 int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, float *K,
                       gs_nominal *nom);
 
 /*
- * The runtime's own single-precision trigonometry (no libm, so that host and
- * target compute the same bits). Error bounds against double precision of the
- * same float input (held by tests/firmware/test_feedforward_c.py):
- *   gs_sincosf  |error| <= 1.5e-7 for |x| <= GS_XI_LIMIT (1e4 rad)
- *   gs_atan2f   |error| <= 3e-7 rad, all quadrants; gs_atan2f(0, 0) = 0 and
- *               gs_atan2f(-0, x < 0) = +pi
- *   gs_sqrtf    relative error <= 2.5e-7 for normal x > 0; 0 for x <= 0 or NaN
+ * CRC-32 (IEEE, as zlib.crc32) of the table data in the documented order
+ * (docs/runtime.md, "CRC-32"). NaN payloads and -0 enter with their bits.
+ *
+ * @param table  the table; NULL or a structure gs_lookup cannot use: 0
+ * @return       the CRC-32, to compare with table->crc32
  */
-void gs_sincosf(float x, float *s, float *c);
-float gs_atan2f(float y, float x);
-float gs_sqrtf(float x);
-
-/* CRC-32 (IEEE, as zlib.crc32) of the table data in the documented order. */
 uint32_t gs_table_crc32(const gs_table *table);
 
-/* GS_OK when the structure is consistent and the CRC matches, else GS_BAD_TABLE
- * (GS_BAD_ARG for NULL). Run once at boot: it reads every byte of the table. */
+/*
+ * GS_OK when the structure is consistent and the CRC matches, else GS_BAD_TABLE
+ * (GS_BAD_ARG for NULL). Run once at boot: it reads every byte of the table. A NaN or
+ * infinite vehicle constant, a non-increasing axis, a state map that is not a signed
+ * involution and a compact series outside coef are GS_BAD_TABLE.
+ *
+ * @param table  the table
+ * @return       GS_OK, GS_BAD_TABLE or GS_BAD_ARG
+ */
 int gs_verify(const gs_table *table);
 
 #ifdef __cplusplus

@@ -17,6 +17,7 @@
 #include <string.h>
 
 #include "${name}_gains.h"
+#include "gainsched_trig.h"
 
 #if defined(__SSE__) || defined(__x86_64__)
 #include <xmmintrin.h>
@@ -125,13 +126,13 @@ int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
     src[1] = t.speed; size[1] = t.n_speed * sizeof(float);
     src[2] = t.xi_dot; size[2] = t.n_speed * sizeof(float);
     src[3] = t.tilt; size[3] = t.n_tilt * sizeof(float);
-    src[4] = t.K_tilt0;
+    src[4] = t.dense.K_tilt0;
     size[4] = compact ? 0u
-                      : (size_t)t.n_speed * (t.n_xi_tilt0 > 1u ? t.n_xi : 1u) * NK * sizeof(float);
-    src[5] = t.K;
+                      : (size_t)t.n_speed * (t.dense.n_xi_tilt0 > 1u ? t.n_xi : 1u) * NK * sizeof(float);
+    src[5] = t.dense.K;
     size[5] = compact ? 0u : (size_t)(t.n_tilt - 1u) * t.n_speed * t.n_xi * NK * sizeof(float);
-    src[6] = t.u_d; size[6] = compact ? 0u : n_pts * 4u * sizeof(float);
-    src[7] = t.phi_d; size[7] = compact ? 0u : n_pts * sizeof(float);
+    src[6] = t.dense.u_d; size[6] = compact ? 0u : n_pts * 4u * sizeof(float);
+    src[7] = t.dense.phi_d; size[7] = compact ? 0u : n_pts * sizeof(float);
     src[8] = t.state_sign; size[8] = t.n_state * sizeof(float);
     src[9] = t.state_perm; size[9] = t.n_state;
     src[10] = t.mask; size[10] = compact ? n_circles : n_pts;
@@ -140,9 +141,9 @@ int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
     size[12] = t.offsets != NULL
                    ? n_circles * 2u * (2u * t.n_offset_harmonics + 1u) * sizeof(float)
                    : 0u;
-    src[13] = t.harmonics; size[13] = compact ? n_circles * (NK + 5u) : 0u;
-    src[14] = t.coef_start; size[14] = compact ? n_circles * sizeof(uint32_t) : 0u;
-    src[15] = t.coef; size[15] = compact ? t.n_coef * sizeof(float) : 0u;
+    src[13] = t.compact.harmonics; size[13] = compact ? n_circles * (NK + 5u) : 0u;
+    src[14] = t.compact.coef_start; size[14] = compact ? n_circles * sizeof(uint32_t) : 0u;
+    src[15] = t.compact.coef; size[15] = compact ? t.compact.n_coef * sizeof(float) : 0u;
     if (which < 0 || which > 15 || byte >= size[which]) {
         return -1;
     }
@@ -157,18 +158,18 @@ int ${name}_verify_flipped(int which, size_t byte, unsigned flip)
     case 1: t.speed = (const float *)(void *)copy; break;
     case 2: t.xi_dot = (const float *)(void *)copy; break;
     case 3: t.tilt = (const float *)(void *)copy; break;
-    case 4: t.K_tilt0 = (const float *)(void *)copy; break;
-    case 5: t.K = (const float *)(void *)copy; break;
-    case 6: t.u_d = (const float *)(void *)copy; break;
-    case 7: t.phi_d = (const float *)(void *)copy; break;
+    case 4: t.dense.K_tilt0 = (const float *)(void *)copy; break;
+    case 5: t.dense.K = (const float *)(void *)copy; break;
+    case 6: t.dense.u_d = (const float *)(void *)copy; break;
+    case 7: t.dense.phi_d = (const float *)(void *)copy; break;
     case 8: t.state_sign = (const float *)(void *)copy; break;
     case 9: t.state_perm = copy; break;
     case 10: t.mask = copy; break;
     case 11: t.vehicle = (const gs_vehicle *)(void *)copy; break;
     case 12: t.offsets = (const float *)(void *)copy; break;
-    case 13: t.harmonics = copy; break;
-    case 14: t.coef_start = (const uint32_t *)(void *)copy; break;
-    default: t.coef = (const float *)(void *)copy; break;
+    case 13: t.compact.harmonics = copy; break;
+    case 14: t.compact.coef_start = (const uint32_t *)(void *)copy; break;
+    default: t.compact.coef = (const float *)(void *)copy; break;
     }
     r = gs_verify(&t);
     free(copy);

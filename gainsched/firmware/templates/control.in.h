@@ -28,7 +28,9 @@ static const gs_ctrl_params ${name}_ctrl_params = {
 ${fields}
 };
 
-/* Prepare `c` for this table with ${name}_ctrl_params: GS_OK or GS_BAD_ARG. */
+/* Prepare `c` for this table with ${name}_ctrl_params: gs_ctrl_init.
+ * @param c  [out] the controller
+ * @return   GS_OK or GS_BAD_ARG */
 static inline int ${name}_ctrl_init(gs_ctrl *c)
 {
     return gs_ctrl_init(c, &${name}_table, &${name}_ctrl_params);

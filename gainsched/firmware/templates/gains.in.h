@@ -93,6 +93,7 @@ ${state_perm}
 ${value_arrays}
 ${vehicle_data}${offsets_data}
 static const gs_table ${name}_table = {
+    ${NAME}_FORMAT,
     ${NAME}_N_TILT,
     ${NAME}_N_SPEED,
     ${NAME}_N_XI,
@@ -102,35 +103,51 @@ static const gs_table ${name}_table = {
     ${name}_speed,
     ${name}_xi_dot,
     ${name}_tilt,
-${value_refs},
     ${name}_state_sign,
     ${name}_state_perm,
     ${mask_ref},
+    { /* dense part */
+${dense_part}
+    },
+    { /* compact part */
+${compact_part}
+    },
     ${vehicle_ref},
     ${NAME}_OFFSET_HARMONICS,
     ${offsets_ref},
     ${NAME}_CRC32,
-    ${NAME}_N_XI_TILT0,
-${format_fields},
 };
 
-/* Gains at (xi rad, xi_dot rad/s, alpha rad): returns GS_* status bits. */
+/* Gains at (xi rad, xi_dot rad/s, alpha rad): gs_lookup on this table (input checks
+ * and ranges: gainsched_runtime.h).
+ * @param xi      azimuth, rad
+ * @param xi_dot  azimuth rate, rad/s
+ * @param alpha   circle tilt, rad
+ * @param K       [out] gains, row = motor, column = state
+ * @param u_d     [out] nominal motor thrusts, N
+ * @param phi_d   [out] nominal roll, rad
+ * @return        GS_* status bits */
 static inline int ${name}_lookup(
     float xi, float xi_dot, float alpha, float K[4][${NAME}_N_STATE], float u_d[4], float *phi_d)
 {
     return gs_lookup(&${name}_table, xi, xi_dot, alpha, (float *)K, u_d, phi_d);
 }
 
-/* Gains and the nominal of an accelerating reference ref = {xi rad, xi' rad/s,
- * xi'' rad/s^2, xi''' rad/s^3, xi'''' rad/s^4} at tilt alpha rad: GS_* status bits
- * (GS_BAD_ARG when ${NAME}_HAS_NOMINAL is 0). */
+/* Gains and the nominal of an accelerating reference: gs_lookup_nominal on this table
+ * (GS_BAD_ARG when ${NAME}_HAS_NOMINAL is 0).
+ * @param ref    {xi rad, xi' rad/s, xi'' rad/s^2, xi''' rad/s^3, xi'''' rad/s^4}
+ * @param alpha  circle tilt, rad
+ * @param K      [out] gains, row = motor, column = state
+ * @param nom    [out] the nominal
+ * @return       GS_* status bits */
 static inline int ${name}_lookup_nominal(
     const float ref[5], float alpha, float K[4][${NAME}_N_STATE], gs_nominal *nom)
 {
     return gs_lookup_nominal(&${name}_table, ref, alpha, (float *)K, nom);
 }
 
-/* GS_OK if the table data match the embedded CRC-32 (reads the whole table). */
+/* GS_OK if the table data match the embedded CRC-32 (reads the whole table): gs_verify.
+ * @return  GS_OK or GS_BAD_TABLE */
 static inline int ${name}_verify(void)
 {
     return gs_verify(&${name}_table);
