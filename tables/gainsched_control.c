@@ -217,6 +217,11 @@ int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params
     if (!gs_c_outputs_ok(pr)) {
         return GS_BAD_ARG;
     }
+    if ((pr->n_lag != 0u && pr->n_lag != 4u) ||
+        (pr->n_lag == 4u && 10u + pr->n_int + 4u != table->n_state) ||
+        !(pr->lag_keep >= 0.0f) || !(pr->lag_keep < 1.0f)) {
+        return GS_BAD_ARG; /* a motor lag's 4 thrusts end the state, or none */
+    }
     delay = pr->pose_delay / pr->dt + 0.5f;
     timeout = pr->pose_timeout / pr->dt + 0.5f;
     if (delay >= (float)GS_CTRL_MAX_DELAY + 1.0f || !(timeout < 1.0e9f)) {
@@ -694,7 +699,12 @@ static uint32_t gs_c_control(gs_ctrl *c, const gs_ctrl_ref *ref, uint32_t st, bo
         e[10u + i] = c->integ[i];
     }
     for (i = 10u + pr->n_int; i < n; ++i) {
-        e[i] = 0.0f; /* effect states: not estimated, zero error */
+        e[i] = 0.0f; /* effect states without a prediction: zero error */
+    }
+    if (pr->n_lag == 4u) { /* the motor lag's thrusts: predicted from the commands */
+        for (i = 0u; i < 4u; ++i) {
+            e[10u + pr->n_int + i] = c->lag_err[i];
+        }
     }
     for (i = 0u; i < 4u; ++i) {
         const float *Ki = &Kg[(size_t)i * n];
@@ -716,6 +726,12 @@ static uint32_t gs_c_control(gs_ctrl *c, const gs_ctrl_ref *ref, uint32_t st, bo
             /* within the motors' range */
         }
         thrust[i] = u;
+    }
+    if (pr->n_lag == 4u) { /* the lag's exact step with this command held */
+        for (i = 0u; i < 4u; ++i) {
+            c->lag_err[i] = (pr->lag_keep * c->lag_err[i]) +
+                            ((1.0f - pr->lag_keep) * (thrust[i] - nom.u_d[i]));
+        }
     }
     if (clipped) {
         st |= GS_CTRL_SATURATED;

@@ -50,7 +50,7 @@ extern "C" {
 #endif
 
 /* 3: gs_ctrl_params.int_limit is an array, one bound per integral state */
-#define GS_CONTROL_VERSION 3
+#define GS_CONTROL_VERSION 4
 
 /* the largest LQR state a gs_ctrl holds (its last good gains), and the longest pose
  * delay its history buffers, in control steps */
@@ -116,6 +116,11 @@ typedef struct gs_ctrl_params {
                              * curve T / thrust_full = (1 - f) u + f u^2 */
     float thr_mdl_fac;      /* f, 0..1 (PX4's THR_MDL_FAC) */
     float thrust_full;      /* N at command 1 (>= thrust_max when normalized) */
+    /* a motor lag (a table built with [effects.motor_lag]) */
+    uint32_t n_lag;         /* 0, or 4: the LQR state ends with the 4 motor thrusts, whose
+                             * error the controller predicts from its own commands */
+    float lag_keep;         /* exp(-dt / tau), 0 <= lag_keep < 1: the predicted error
+                             * e <- lag_keep e + (1 - lag_keep) (u - u_d) each step */
 } gs_ctrl_params;
 
 /* One step's measurements. */
@@ -160,6 +165,8 @@ typedef struct gs_ctrl {
     float accel_prev[3];
     float az_err;                                /* the previous azimuth error, rad */
     float integ[GS_CTRL_MAX_INT];                /* the integral states, rad s */
+    float lag_err[4];                            /* predicted motor-lag thrust - the
+                                                  * nominal's, N (n_lag = 4) */
     float z[10];                                 /* the last reduced state estimate */
     float K[2][4u * GS_CTRL_MAX_STATE];          /* the last good gains, K[good], and
                                                   * the other buffer the lookup fills */
@@ -171,7 +178,8 @@ typedef struct gs_ctrl {
  * Returns GS_OK, or GS_BAD_ARG (NULL, a table without vehicle constants, a state
  * too large for GS_CTRL_MAX_STATE, a delay beyond GS_CTRL_MAX_DELAY, bad params:
  * among them n_int > GS_CTRL_MAX_INT, an int_of beyond 1, an int_limit[i] (i < n_int)
- * that is NaN, infinite or <= 0).
+ * that is NaN, infinite or <= 0, an n_lag other than 0 or 4 (4: the table's state
+ * must end with them) or a lag_keep outside [0, 1)).
  *
  * @param c       [out] the controller to prepare (zeroed and filled on GS_OK)
  * @param table   the table, verified (gs_verify)

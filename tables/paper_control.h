@@ -48,6 +48,8 @@ static const gs_ctrl_params paper_ctrl_params = {
     0u, /* normalized: 1: commands 0..1, 0: N */
     0.0f, /* thr_mdl_fac: thrust curve (PX4 THR_MDL_FAC) */
     3.5f, /* thrust_full: N at command 1 */
+    0u, /* n_lag: motor-lag thrusts at the LQR state's end (0 or 4) */
+    0.0f, /* lag_keep: exp(-dt / tau) of that motor lag */
 };
 
 /* Prepare `c` for this table with paper_ctrl_params: gs_ctrl_init.

@@ -370,6 +370,8 @@ _PARAM_COMMENTS = {
     "pose_period": "s between poses",
     "motor_slot": "output slot of T1..T4", "normalized": "1: commands 0..1, 0: N",
     "thr_mdl_fac": "thrust curve (PX4 THR_MDL_FAC)", "thrust_full": "N at command 1",
+    "n_lag": "motor-lag thrusts at the LQR state's end (0 or 4)",
+    "lag_keep": "exp(-dt / tau) of that motor lag",
 }
 
 

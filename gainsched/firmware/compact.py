@@ -104,7 +104,7 @@ class CompactData:
     >>> d = gs.load_table("tables/paper.h5")
     >>> form = gs.compact_data(gs.firmware.runtime.runtime_data(d))
     >>> form.nbytes(), form.n_value, form.n_harmonics   # bytes, series per circle, most H
-    (121945, 49, 7)
+    (121937, 49, 7)
     >>> len(form.series(2, 12)), form.series(2, 12)[0].size   # 20 deg, 9 m/s: K[0, 0]
     (49, 7)
     """
@@ -349,7 +349,7 @@ def compact_data(d: RuntimeData, bound: float = DEFAULT_AZIMUTH_ERROR, *,
     >>> from gainsched.firmware.runtime import runtime_data
     >>> dense = runtime_data(gs.load_table("tables/paper.h5"))
     >>> dense.nbytes(), gs.compact_data(dense).nbytes(), gs.compact_data(dense, 0.005).nbytes()
-    (834147, 121945, 139025)
+    (834147, 121937, 139065)
     """
     n_a, n_v, n_xi, n = d.dims
     n_value = 4 * n + 5

@@ -228,6 +228,15 @@ class ControllerParams:
         The thrust curve's quadratic part (PX4's ``THR_MDL_FAC``), 0..1.
     thrust_full : float, N
         Thrust at full command (normalised outputs).
+    n_lag : int
+        0, or 4 when the LQR state ends with the 4 thrusts of a motor lag (a table built
+        with ``[effects.motor_lag]``): no sensor measures them, so the controller
+        predicts their error from its own commands (:attr:`lag_keep`).
+    lag_keep : float
+        ``exp(-dt / tau)`` of that motor lag (tau, s): each step the predicted thrust
+        error ``e_T`` (N, thrust minus the nominal's) becomes ``lag_keep e_T + (1 -
+        lag_keep) (u - u_d)``, the lag's exact step with the applied command held,
+        relative to the nominal's.
     """
 
     dt: float
@@ -251,6 +260,8 @@ class ControllerParams:
     normalized: bool = False
     thr_mdl_fac: float = 0.0
     thrust_full: float = 0.0
+    n_lag: int = 0
+    lag_keep: float = 0.0
 
     def __post_init__(self):
         lim = self.int_limit
@@ -260,6 +271,10 @@ class ControllerParams:
                              f"states (at most {MAX_INT})")
         # float32, as gs_ctrl_params holds them: the same clamp and status in C and here
         object.__setattr__(self, "int_limit", tuple(float(np.float32(v)) for v in lim))
+        if self.n_lag not in (0, 4) or not 0.0 <= self.lag_keep < 1.0:
+            raise ValueError(f"n_lag {self.n_lag}, lag_keep {self.lag_keep}: a motor lag's "
+                             "4 thrusts with 0 <= lag_keep < 1, or none")
+        object.__setattr__(self, "lag_keep", float(np.float32(self.lag_keep)))
 
     @property
     def delay_steps(self) -> int:
@@ -293,7 +308,7 @@ class ControllerParams:
                         ("int_of", f"uint32_t[{MAX_INT}]", tuple(v) + (0,) * (MAX_INT - len(v)))]
             elif f.type == "float":
                 out.append((f.name, "float", float(v)))
-            elif f.type == "bool":
+            elif f.type in ("bool", "int"):
                 out.append((f.name, "uint32_t", int(v)))
             else:  # tuple[int, ...]
                 out.append((f.name, f"uint32_t[{len(v)}]", tuple(int(i) for i in v)))
@@ -525,7 +540,7 @@ def controller_params(config, table=None, **sensing) -> ControllerParams:
     int_of = tuple(INTEGRATORS[n] for n in config.control.integrators)
     names = {f.name for f in fields(ControllerParams)} - {
         "dt", "rho", "L_e", "thrust_min", "thrust_max", "int_of", "motor_slot", "normalized",
-        "thr_mdl_fac", "thrust_full"}
+        "thr_mdl_fac", "thrust_full", "n_lag", "lag_keep"}
     for k in sensing:
         if k not in names:
             raise TypeError(f"controller_params() got an unexpected field {k!r}")
@@ -543,8 +558,18 @@ def controller_params(config, table=None, **sensing) -> ControllerParams:
                 accel_range=accel_range_for(config),
                 motor_slot=slots_from_order(MOTOR_ORDERS[fw.motor_order]),
                 normalized=fw.command == "normalized", thr_mdl_fac=fw.thr_mdl_fac,
-                thrust_full=v.thrust_max if fw.thrust_full is None else fw.thrust_full)
+                thrust_full=v.thrust_max if fw.thrust_full is None else fw.thrust_full,
+                **_lag_params(config))
     return ControllerParams(**{**base, **sensing})
+
+
+def _lag_params(config) -> dict:
+    """``n_lag`` and ``lag_keep`` of a config with a motor lag (its 4 thrusts end the LQR
+    state, :func:`~gainsched.schedule.linearize.lqr_system`), else none."""
+    lag = [dict(e.params) for e in config.effects if e.name == "motor_lag"]
+    if not lag:
+        return {}
+    return {"n_lag": 4, "lag_keep": math.exp(-config.control.dt / lag[0]["tau"])}
 
 
 def _wrap(a):
@@ -667,6 +692,9 @@ class Controller:
         if n > MAX_STATE or N_STATE + len(params.int_of) > n:
             raise InputError(d.name, "n_state", f"{n} states: the controller holds "
                              f"{N_STATE + len(params.int_of)} to {MAX_STATE}")
+        if params.n_lag and N_STATE + len(params.int_of) + params.n_lag != n:
+            raise InputError(d.name, "n_state", f"{n} states do not end with the "
+                             f"{params.n_lag} motor-lag thrusts of the params (n_lag)")
         if not all(math.isfinite(v) and v > 0.0 for v in params.int_limit):
             raise InputError("controller", "int_limit", f"{params.int_limit}: each bound "
                              "must be finite and > 0 (gs_ctrl_init: GS_BAD_ARG)")
@@ -688,6 +716,7 @@ class Controller:
         self.since_pose = 0
         self.az_err = 0.0
         self.integ = np.zeros(len(params.int_of))
+        self.lag_err = np.zeros(params.n_lag)  # predicted motor-lag thrusts - nominal, N
         self.z = np.zeros(N_STATE)
         self.K_good = np.zeros((4, n))
 
@@ -938,11 +967,14 @@ class Controller:
             e[7:10] = 0.0
         m = len(pr.int_of)
         e[N_STATE:N_STATE + m] = self.integ
+        e[N_STATE + m:N_STATE + m + pr.n_lag] = self.lag_err
         u = u_d - self.K_good @ e
         if not _finite(u):
             return idle, st | CTRL_IDLE, self.z.copy()
         clipped = bool(np.any((u < pr.thrust_min) | (u > pr.thrust_max)))
         u = np.clip(u, pr.thrust_min, pr.thrust_max)
+        if pr.n_lag:  # the lag's exact step with this command held, relative to the nominal
+            self.lag_err = pr.lag_keep * self.lag_err + (1.0 - pr.lag_keep) * (u - u_d)
         if clipped:
             st |= CTRL_SATURATED
         elif not st & CTRL_STALE_POSE:
