@@ -864,21 +864,19 @@ def check(table, speed_stride, max_error, azimuth_error):
                    f"({100 * np.nanmax(res.u_rel):.2f}% of the circle's largest), roll "
                    f"{100 * np.nanmax(res.phi_rel):.2f}% of the circle's largest")
     rho = [(c[2], c) for c in res.circles if np.isfinite(c[2])]
-    stable = all(r < 1 for r, _ in rho)
     if rho:
         r, c = max(rho)
         click.echo(
             f"  closed loop with interpolated gains on {len(rho)} midpoint circles: "
             f"worst spectral radius {r:.5f} (speed {c[0]:g} m/s, tilt "
-            f"{np.rad2deg(c[1]):g} deg; direct LQR {c[3]:.5f}); all < 1: {stable}"
+            f"{np.rad2deg(c[1]):g} deg; direct LQR {c[3]:.5f}); all < 1: {res.stable}"
         )
     # a grid the build chose promised gains, nominal thrusts and roll (docs/grid.md)
     nominal = t.grid_auto is not None
     if nominal:
         click.echo(f"  {grid_auto_lines(t.grid_auto)[0]}; checked on gains, nominal "
                    "thrusts and roll")
-    worst = max(res.max_err, res.max_nominal_err) if nominal else res.max_err
-    passed = ok_pts > 0 and 100 * worst <= max_error and stable
+    passed = res.passed(max_error / 100, nominal)
     what = "gain, thrust and roll error" if nominal else "max error"
     click.echo(
         f"  {'PASS' if passed else 'FAIL'}: {what} <= {max_error:g}% and every "

@@ -70,6 +70,29 @@ class MidpointCheck:
         e = e[np.isfinite(e)]
         return float(e.max()) if e.size else float("nan")
 
+    @property
+    def stable(self) -> bool:
+        """Every midpoint circle closed with the interpolated gains is stable (spectral
+        radius < 1; circles without one are not counted)."""
+        return all(c[2] < 1 for c in self.circles if np.isfinite(c[2]))
+
+    def passed(self, max_error: float, nominal: bool = False) -> bool:
+        """The pass rule of ``gainsched check``: some midpoint checked, the largest
+        relative error within ``max_error`` (a fraction: 0.02 for 2 %), and every midpoint
+        circle stable. ``nominal``: the error counted is the gains' or the nominal
+        thrusts' and roll's, whichever is larger (a grid the build chose promised all
+        three, docs/grid.md).
+
+        Example
+        -------
+        >>> res = MidpointCheck(np.zeros(1), np.zeros(1), np.zeros(1), np.array([0.01]),
+        ...                     np.zeros(1), [(5.0, 0.0, 0.97, 0.96)], 0)
+        >>> res.passed(0.02), res.passed(0.005)
+        (True, False)
+        """
+        worst = max(self.max_err, self.max_nominal_err) if nominal else self.max_err
+        return bool(np.isfinite(self.rel_err).any() and worst <= max_error and self.stable)
+
     def worst_point(self):
         """``(speed, tilt, xi, rel_err)`` of the largest error."""
         e = np.where(np.isfinite(self.rel_err), self.rel_err, -1)

@@ -240,6 +240,28 @@ def test_cli_check_sample():
     assert strict.exit_code == 1 and "FAIL" in strict.output
 
 
+def _midpoints(err, rho=0.97, u_rel=0.0):
+    from gainsched.firmware.check import MidpointCheck
+
+    n = len(err)
+    return MidpointCheck(np.zeros(n), np.zeros(n), np.zeros(n), np.asarray(err, float),
+                         np.zeros(n), [(5.0, 0.0, rho, 0.96)], 0, np.full(n, u_rel),
+                         np.zeros(n))
+
+
+@pytest.mark.parametrize("res, max_error, nominal, passed", [
+    (_midpoints([0.01, np.nan]), 0.02, False, True),
+    (_midpoints([0.03]), 0.02, False, False),                 # a gain error above the bound
+    (_midpoints([0.01], rho=1.01), 0.02, False, False),       # an unstable midpoint circle
+    (_midpoints([np.nan]), 0.02, False, False),               # nothing checked
+    (_midpoints([0.01], u_rel=0.05), 0.02, False, True),      # thrust error: not promised
+    (_midpoints([0.01], u_rel=0.05), 0.02, True, False),      # a chosen grid promised it
+], ids=["pass", "gain-error", "unstable", "nothing-checked", "lists-grid", "chosen-grid"])
+def test_the_pass_rule_of_check(res, max_error, nominal, passed):
+    """Issue 40: `gainsched check`'s pass rule is MidpointCheck.passed, one case each."""
+    assert res.passed(max_error, nominal) is passed
+
+
 def test_header_names_the_state_columns_and_integrals(paper_header):
     """Macros say where each state sits in K and x and which integral states exist."""
     assert "#define PAPER_X_XI 1u" in paper_header
