@@ -8,20 +8,17 @@ the twins and the verdict (:mod:`._verdict`), gathered into a
 
 from __future__ import annotations
 
-import numpy as np
-
 from ...config import Config
 from ..compare import (
     AT_NOISE_FLOOR,
     Comparison,
     compare,
 )
-from ._candidates import _logged, candidate_library, select_candidates, separating_flight
-from ._fit import _choose_order, _fit_candidate
+from ._candidates import _logged, candidate_library, select_candidates
 from ._lsq import _sq
 from ._problem import _Problem
-from ._results import THRESHOLDS, CandidateResult, Diagnosis
-from ._select import _fit_joint, _forward, _nested, _parsimonious, _physical_first, _same_effect
+from ._results import Diagnosis
+from ._select import _select, _twins
 from ._verdict import _verdict
 
 
@@ -108,80 +105,40 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     >>> d.verdict
     'missing effect: thrust_momentum (thrust change with airspeed by momentum theory ...'
     """
+    base = comparison or compare(config, logs, channel_map=channel_map, trust=trust)
+    prob = _problem(config, base)
+    library = candidate_library()
+    names = select_candidates(candidates, exclude, library)
+    names = _logged(names, library, base.measured, asked=candidates is not None)
+    at_floor, base_vecs, base_sq = _base_residual(prob, base)
+    results, accepted = _select(prob, library, names, base, at_floor, base_sq, base_vecs,
+                                asked=candidates is not None, joint=joint, forward=forward,
+                                progress=progress)
+    twins, similarity = _twins(library, results, accepted)
+    verdict = _verdict(base, results, accepted, twins, at_floor)
+    return Diagnosis(config, base, results, accepted, twins, verdict, at_floor,
+                     prob.flight_names, int(round(prob.n_evals)), similarity)
+
+
+def _problem(config: Config, base: Comparison) -> _Problem:
+    """The fit problem of ``config`` on the flights of its comparison ``base``; InputError
+    with fewer than two flights (no held-out scores)."""
     from ...errors import InputError
 
-    base = comparison or compare(config, logs, channel_map=channel_map, trust=trust)
-    meas = base.measured
-    segs = base.segs
-    prob = _Problem(config, meas, segs, base.noise, base.residuals)
+    prob = _Problem(config, base.measured, base.segs, base.noise, base.residuals)
     if len(prob.flights) < 2:
         raise InputError("command line", "LOG", "diagnose needs at least two flights (log "
                          "files) for held-out scores")
-    library = candidate_library()
-    names = select_candidates(candidates, exclude, library)
-    names = _logged(names, library, meas, asked=candidates is not None)
+    return prob
+
+
+def _base_residual(prob: _Problem, base: Comparison):
+    """Whether every axis of ``base`` is within ``AT_NOISE_FLOOR`` times its noise floor
+    (then the fits are also scored on the binned structure ``base`` found) and the base
+    model's weighted residual with its sums of squares: ``(at_floor, base_vecs,
+    base_sq)``."""
     at_floor = all(s.rms_over_noise < AT_NOISE_FLOOR for s in base.stats.values())
     if at_floor:
         prob.track_structure(base)
     base_vecs = prob.base_vectors()
-    base_sq = _sq(base_vecs)
-
-    def fit(names_):
-        for n in names_:
-            if progress is not None:
-                progress(n)
-            cand, pre = library[n], None
-            if getattr(cand, "orders", ()):
-                cand, pre = _choose_order(prob, cand)
-            results.append(_fit_candidate(prob, cand, base_sq, base_vecs, pre))
-        results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
-        return _parsimonious([r for r in results if r.passes], library)
-
-    results: list[CandidateResult] = []
-    empirical = [n for n in names if getattr(library[n], "empirical", False)]
-    accepted = fit([n for n in names if n not in empirical])
-    if (accepted is None and not at_floor) or joint:
-        both = _fit_joint(prob, library, results, base_sq, base_vecs, progress)
-        if both is not None and (accepted is None or both.delta_bic < accepted.delta_bic
-                                 - THRESHOLDS["nested_bic_gain"]):
-            accepted = both
-    # beyond the library: empirical laws only when no physical effect explains what is
-    # there (an excess over the noise floor or binned structure), or when asked for
-    if accepted is None and empirical and (candidates is not None or base.structure
-                                           or not at_floor):
-        accepted = fit(empirical)
-    # several effects of similar size: add the next best while it explains clearly more
-    if forward and not at_floor and (accepted is None or accepted.excess_explained
-                                     < 1 - THRESHOLDS["forward_excess_gain"]):
-        if empirical and not any(r.empirical for r in results):
-            fit(empirical)  # what no effect of the library named may be the rest
-        start = accepted or next((r for r in _physical_first(
-            [r for r in results if " + " not in r.name], library) if r.rms_reduction > 0), None)
-        if start is not None:
-            accepted = _forward(prob, library, results, start, base_sq, base_vecs, progress)
-    twins = []
-    similarity = {}
-    if accepted is not None and not accepted.empirical:
-        ca = accepted.contribution.astype(float)
-        na_ = float(np.sqrt(np.sum(ca * ca)))
-        for r in results:
-            if r is accepted or r.contribution is None:
-                continue
-            cb = r.contribution.astype(float)
-            nb = float(np.sqrt(np.sum(cb * cb)))
-            if na_ == 0 or nb == 0:
-                continue
-            cos = abs(float(np.sum(ca * cb)) / (na_ * nb))
-            similarity[r.name] = cos
-            if (_same_effect(library, r.name, accepted.name) or _nested(library, r, accepted)
-                    or _nested(library, accepted, r)):
-                continue  # another fit of the same effect (drag_linear of drag), or one
-                # containing the other (thrust_scale in motor_efficiency): no twin
-            # told apart anyway when the held-out fits differ clearly: the twin leaves more
-            # than a tenth of the residual above noise that the accepted one explains
-            clear = accepted.excess_explained - r.excess_explained > THRESHOLDS["twin_excess_gap"]
-            if cos >= THRESHOLDS["twin_cos"] and not clear:
-                twins.append((r.name, cos, separating_flight(accepted.name, r.name)))
-    verdict = _verdict(base, results, accepted, twins, at_floor)
-    return Diagnosis(config, base, results, accepted, twins, verdict, at_floor,
-                     prob.flight_names, int(round(prob.n_evals)), similarity)
+    return at_floor, base_vecs, _sq(base_vecs)

@@ -25,6 +25,7 @@ one-standard-error rule).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -160,6 +161,25 @@ def _one_se_order(held) -> int:
     return best
 
 
+@dataclass(frozen=True)
+class _Fit:
+    """What a fitting algorithm hands to :func:`_score`: the estimate ``theta``, the
+    weighted residual there ``vecs`` (list over flights of {axis: (n,)}) and its sum of
+    squares ``fit_sq`` (n_flights, n_axes); the leave-one-flight-out estimates ``folds``
+    (n_flights, k) with each left-out flight's sum of squares ``held`` (n_flights,
+    n_axes) and residual ``held_vecs``; the Jacobian ``jac`` at the estimate and the
+    fold ``spread`` when the algorithm has them (None: :func:`_score` computes them)."""
+
+    theta: np.ndarray
+    vecs: list
+    fit_sq: np.ndarray
+    folds: np.ndarray
+    held: np.ndarray
+    held_vecs: list
+    jac: list | None
+    spread: float | None
+
+
 def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
                    pre=None) -> CandidateResult:
     """Fit ``cand`` and score it (module docstring). ``pre``: ``(vecs, jac)`` at the
@@ -171,132 +191,156 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
     k = len(cand.params)
     nf, na = base_sq.shape
     lin = [j for j in range(k) if j != cand.search]
-    notes = []
     if cand.search is None:
-        theta = start.copy()
-        vecs = pre[0] if pre else prob.vectors(cand.variant(cfg, theta))
-        for it in range(1 if cand.affine else 4):
-            jac = pre[1] if pre and it == 0 else _jacobian(prob, cand, theta, vecs, lin, lo, hi)
-            A, b, c = _stats(vecs, jac)
-            d, _ = _qp(A.sum((0, 1)), b.sum((0, 1)), lo - theta, hi - theta)
-            theta = theta + d
-            vecs = prob.vectors(cand.variant(cfg, theta))
-            if np.all(np.abs(d) <= 1e-6 * (hi - lo)):
-                break
-        if not cand.affine:
-            jac = _jacobian(prob, cand, theta, vecs, lin, lo, hi)
-        A, b, c = _stats(vecs, jac)
-        Atot = A.sum((0, 1))
-        folds = np.zeros((nf, k))
-        held = np.zeros((nf, na))
-        spread = 0.0
-        eff = np.concatenate([np.concatenate([bv[a] - v[a] for a in bv])
-                              for bv, v in zip(base_vecs, vecs, strict=True)])
-        eff_norm = float(np.sqrt(np.sum(eff * eff)))
-        held_vecs = []
-        for i in range(nf):
-            Ai = A.sum(1)[np.arange(nf) != i].sum(0)
-            bi = b.sum(1)[np.arange(nf) != i].sum(0)
-            d, _ = _qp(Ai, bi, lo - theta, hi - theta)
-            folds[i] = theta + d
-            held[i] = c[i] + 2 * b[i] @ d + np.einsum("j,ajk,k->a", d, A[i], d)
-            held_vecs.append({a: v + sum(d[j] * jac[j][i][a] for j in range(k))
-                              for a, v in vecs[i].items()})
-            dd = math.sqrt(max(float(d @ Atot @ d), 0.0))
-            spread = max(spread, dd / eff_norm if eff_norm > 0 else math.inf)
-        J_all = jac
-        fit_sq = c
+        fit = _fit_gauss_newton(prob, cand, start, lo, hi, lin, base_vecs, nf, na, k, pre)
     else:
-        s = cand.search
-        p = cand.params[s]
-        g = (np.geomspace(p.lower, p.upper, cand.grid_size) if p.scale == "log"
-             else np.linspace(p.lower, p.upper, cand.grid_size))
-        sse_tr, held_g, th_g, sse_all = _grid(prob, cand, g, lin, lo, hi, start, nf, na, k)
-        # all data: refine the search value between the grid neighbours of the best point
-        G = g.size
-        gbest = int(np.argmin(sse_all))
-        a_, b_ = g[max(gbest - 1, 0)], g[min(gbest + 1, G - 1)]
+        fit = _fit_search(prob, cand, start, lo, hi, lin, nf, na, k)
+    return _score(prob, cand, fit, base_sq, base_vecs, start, lo, hi)
 
-        def f(sv):
-            th, vecs, st = _profile(prob, cand, sv, lin, lo, hi, start)
-            if st is None:
-                return float(_sq(vecs).sum())
-            A, b, c, d, *_ = st
-            return float(c.sum() + 2 * b.sum((0, 1)) @ d + d @ A.sum((0, 1)) @ d)
 
-        if a_ < b_:
-            tol = 1e-3 * max(g[gbest], (b_ - a_) * 0.01)
-            opt = minimize_scalar(f, bounds=(a_, b_), method="bounded", options={"xatol": tol})
-            sbest = float(opt.x) if opt.fun <= sse_all[gbest] else float(g[gbest])
-        else:
-            sbest = float(g[gbest])
-        theta, vecs, st = _profile(prob, cand, sbest, lin, lo, hi, start)
-        if st is not None:
-            vecs = prob.vectors(cand.variant(cfg, theta))
-        fit_sq = _sq(vecs)
-        # folds: each fold's search value from a parabola through its training SSE on a
-        # fine local grid around the all-data estimate (or, when its optimum lies outside,
-        # on the coarse grid), linear parameters from the nearest grid point; then the
-        # held-out flight evaluated exactly there
-        to_u = (np.log if p.scale == "log" else (lambda x: np.asarray(x, float)))
-        from_u = (np.exp if p.scale == "log" else (lambda x: x))
-        h = 0.05 if p.scale == "log" else 0.02 * (p.upper - p.lower)
-        u0 = float(to_u(sbest))
-        ul = np.clip(u0 + h * np.arange(-2, 3), to_u(p.lower), to_u(p.upper))
-        ul = np.unique(ul)
-        loc = _grid(prob, cand, from_u(ul), lin, lo, hi, start, nf, na, k) if ul.size >= 3 else None
-        u = to_u(g)
-        folds = np.zeros((nf, k))
-        held = np.zeros((nf, na))
-        held_vecs = []
-        for i in range(nf):
-            uo = None
-            if loc is not None:
-                y = loc[0][:, i]
-                cc = np.polyfit(ul - u0, y, 2)
+def _fit_gauss_newton(prob, cand, start, lo, hi, lin, base_vecs, nf, na, k, pre) -> _Fit:
+    """A candidate without a searched parameter: bounded Gauss-Newton steps from
+    ``start`` (one for an affine residual, up to four otherwise), then each fold one
+    step from the estimate on the normal equations without its flight, its held-out
+    residual and how far it moves the prediction relative to the effect (the spread).
+    ``pre``: ``(vecs, jac)`` at ``start`` (:func:`_choose_order`) or None."""
+    cfg = prob.config
+    theta = start.copy()
+    vecs = pre[0] if pre else prob.vectors(cand.variant(cfg, theta))
+    for it in range(1 if cand.affine else 4):
+        jac = pre[1] if pre and it == 0 else _jacobian(prob, cand, theta, vecs, lin, lo, hi)
+        A, b, c = _stats(vecs, jac)
+        d, _ = _qp(A.sum((0, 1)), b.sum((0, 1)), lo - theta, hi - theta)
+        theta = theta + d
+        vecs = prob.vectors(cand.variant(cfg, theta))
+        if np.all(np.abs(d) <= 1e-6 * (hi - lo)):
+            break
+    if not cand.affine:
+        jac = _jacobian(prob, cand, theta, vecs, lin, lo, hi)
+    A, b, c = _stats(vecs, jac)
+    Atot = A.sum((0, 1))
+    folds = np.zeros((nf, k))
+    held = np.zeros((nf, na))
+    spread = 0.0
+    eff = np.concatenate([np.concatenate([bv[a] - v[a] for a in bv])
+                          for bv, v in zip(base_vecs, vecs, strict=True)])
+    eff_norm = float(np.sqrt(np.sum(eff * eff)))
+    held_vecs = []
+    for i in range(nf):
+        Ai = A.sum(1)[np.arange(nf) != i].sum(0)
+        bi = b.sum(1)[np.arange(nf) != i].sum(0)
+        d, _ = _qp(Ai, bi, lo - theta, hi - theta)
+        folds[i] = theta + d
+        held[i] = c[i] + 2 * b[i] @ d + np.einsum("j,ajk,k->a", d, A[i], d)
+        held_vecs.append({a: v + sum(d[j] * jac[j][i][a] for j in range(k))
+                          for a, v in vecs[i].items()})
+        dd = math.sqrt(max(float(d @ Atot @ d), 0.0))
+        spread = max(spread, dd / eff_norm if eff_norm > 0 else math.inf)
+    return _Fit(theta, vecs, c, folds, held, held_vecs, jac, spread)
+
+
+def _fit_search(prob, cand, start, lo, hi, lin, nf, na, k) -> _Fit:
+    """A candidate with a searched parameter: its grid (geometric for a log scale), the
+    all-data estimate refined by :func:`scipy.optimize.minimize_scalar` between the grid
+    neighbours of the best point, the linear parameters solved at the search value
+    (:func:`_profile`); the folds from :func:`_search_folds`. No Jacobian and no spread
+    (:func:`_score` takes both from the Jacobian at the estimate)."""
+    cfg = prob.config
+    s = cand.search
+    p = cand.params[s]
+    g = (np.geomspace(p.lower, p.upper, cand.grid_size) if p.scale == "log"
+         else np.linspace(p.lower, p.upper, cand.grid_size))
+    sse_tr, held_g, th_g, sse_all = _grid(prob, cand, g, lin, lo, hi, start, nf, na, k)
+    # all data: refine the search value between the grid neighbours of the best point
+    G = g.size
+    gbest = int(np.argmin(sse_all))
+    a_, b_ = g[max(gbest - 1, 0)], g[min(gbest + 1, G - 1)]
+
+    def f(sv):
+        th, vecs, st = _profile(prob, cand, sv, lin, lo, hi, start)
+        if st is None:
+            return float(_sq(vecs).sum())
+        A, b, c, d, *_ = st
+        return float(c.sum() + 2 * b.sum((0, 1)) @ d + d @ A.sum((0, 1)) @ d)
+
+    if a_ < b_:
+        tol = 1e-3 * max(g[gbest], (b_ - a_) * 0.01)
+        opt = minimize_scalar(f, bounds=(a_, b_), method="bounded", options={"xatol": tol})
+        sbest = float(opt.x) if opt.fun <= sse_all[gbest] else float(g[gbest])
+    else:
+        sbest = float(g[gbest])
+    theta, vecs, st = _profile(prob, cand, sbest, lin, lo, hi, start)
+    if st is not None:
+        vecs = prob.vectors(cand.variant(cfg, theta))
+    fit_sq = _sq(vecs)
+    folds, held, held_vecs = _search_folds(prob, cand, g, sbest, sse_tr, th_g, lin, lo, hi,
+                                           start, nf, na, k)
+    return _Fit(theta, vecs, fit_sq, folds, held, held_vecs, None, None)
+
+
+def _search_folds(prob, cand, g, sbest, sse_tr, th_g, lin, lo, hi, start, nf, na, k):
+    """The leave-one-flight-out estimates of a searched candidate, from its coarse grid
+    ``g`` (training SSE ``sse_tr`` (G, nf), fold parameters ``th_g`` (G, nf, k)) and its
+    all-data search value ``sbest``: ``(folds (nf, k), held (nf, na), held_vecs)``."""
+    cfg = prob.config
+    s = cand.search
+    p = cand.params[s]
+    G = g.size
+    # folds: each fold's search value from a parabola through its training SSE on a
+    # fine local grid around the all-data estimate (or, when its optimum lies outside,
+    # on the coarse grid), linear parameters from the nearest grid point; then the
+    # held-out flight evaluated exactly there
+    to_u = (np.log if p.scale == "log" else (lambda x: np.asarray(x, float)))
+    from_u = (np.exp if p.scale == "log" else (lambda x: x))
+    h = 0.05 if p.scale == "log" else 0.02 * (p.upper - p.lower)
+    u0 = float(to_u(sbest))
+    ul = np.clip(u0 + h * np.arange(-2, 3), to_u(p.lower), to_u(p.upper))
+    ul = np.unique(ul)
+    loc = _grid(prob, cand, from_u(ul), lin, lo, hi, start, nf, na, k) if ul.size >= 3 else None
+    u = to_u(g)
+    folds = np.zeros((nf, k))
+    held = np.zeros((nf, na))
+    held_vecs = []
+    for i in range(nf):
+        uo = None
+        if loc is not None:
+            y = loc[0][:, i]
+            cc = np.polyfit(ul - u0, y, 2)
+            if cc[0] > 0:
+                cand_u = u0 - cc[1] / (2 * cc[0])
+                if ul[0] <= cand_u <= ul[-1]:
+                    uo = float(cand_u)
+                    j = int(np.argmin(np.abs(ul - uo)))
+                    folds[i] = loc[2][j, i]
+        if uo is None:
+            j = int(np.argmin(sse_tr[:, i]))
+            jl, jr = max(j - 1, 0), min(j + 1, G - 1)
+            folds[i] = th_g[j, i]
+            uo = float(u[j])
+            if jr - jl == 2:
+                x3, y3 = u[jl : jr + 1], sse_tr[jl : jr + 1, i]
+                cc = np.polyfit(x3 - x3[1], y3, 2)
                 if cc[0] > 0:
-                    cand_u = u0 - cc[1] / (2 * cc[0])
-                    if ul[0] <= cand_u <= ul[-1]:
-                        uo = float(cand_u)
-                        j = int(np.argmin(np.abs(ul - uo)))
-                        folds[i] = loc[2][j, i]
-            if uo is None:
-                j = int(np.argmin(sse_tr[:, i]))
-                jl, jr = max(j - 1, 0), min(j + 1, G - 1)
-                folds[i] = th_g[j, i]
-                uo = float(u[j])
-                if jr - jl == 2:
-                    x3, y3 = u[jl : jr + 1], sse_tr[jl : jr + 1, i]
-                    cc = np.polyfit(x3 - x3[1], y3, 2)
-                    if cc[0] > 0:
-                        uo = float(np.clip(x3[1] - cc[1] / (2 * cc[0]), x3[0], x3[2]))
-            folds[i, s] = float(from_u(uo))
-            held_vecs += prob.vectors(cand.variant(cfg, folds[i]), only=i)
-            held[i] = _sq(held_vecs[-1:])[0]
-        J_all = None
-        spread = None  # below, from the Jacobian at the estimate
-    # confidence intervals from the Jacobian at the estimate (all parameters)
-    if J_all is None or len(J_all) != k:
-        J_all = _jacobian(prob, cand, theta, vecs, list(range(k)), lo, hi)
-    Aci, _, cci = _stats(vecs, J_all)
-    Atot = Aci.sum((0, 1))
-    if spread is None:
-        # how far the fold estimates move the prediction (linearised at the estimate),
-        # relative to the effect itself: robust to a poorly determined second parameter
-        eff = np.concatenate([np.concatenate([bv[a] - v[a] for a in bv])
-                              for bv, v in zip(base_vecs, vecs, strict=True)])
-        eff_norm = float(np.sqrt(np.sum(eff * eff)))
-        moves = [math.sqrt(max(float(d @ Atot @ d), 0.0)) for d in folds - theta]
-        spread = (max(moves) / eff_norm if eff_norm > 0 else math.inf) if nf > 1 else 0.0
-    n_total = sum(v.size for f_ in vecs for v in f_.values())
-    sse_fit = float(fit_sq.sum())
-    s2 = sse_fit / max(n_total - k, 1)
+                    uo = float(np.clip(x3[1] - cc[1] / (2 * cc[0]), x3[0], x3[2]))
+        folds[i, s] = float(from_u(uo))
+        held_vecs += prob.vectors(cand.variant(cfg, folds[i]), only=i)
+        held[i] = _sq(held_vecs[-1:])[0]
+    return folds, held, held_vecs
+
+
+def _intervals(cand, Atot, s2, window, lo, hi):
+    """95 % confidence half-widths and the parameter correlation matrix of the estimate
+    from the Gauss-Newton information ``Atot`` (k, k), the residual variance ``s2`` and
+    the differentiation ``window`` (neighbouring samples are not independent), with the
+    notes on what the flights do not identify: ``(ci (k,), corr (k, k), notes)``."""
+    k = len(cand.params)
+    notes = []
     # a parameter the residual does not see at all (a zero Jacobian column: a joint
     # fit's unidentified damping) has no interval; the others have theirs
     ci, corr = np.full(k, math.inf), np.full((k, k), math.nan)
     seen = np.diag(Atot) > 1e-12 * max(float(np.max(np.diag(Atot))), 1e-300)
     try:
-        cov = np.linalg.inv(Atot[np.ix_(seen, seen)]) * s2 * prob.window
+        cov = np.linalg.inv(Atot[np.ix_(seen, seen)]) * s2 * window
         ci[seen] = 1.96 * np.sqrt(np.maximum(np.diag(cov), 0.0))
         sd = np.sqrt(np.maximum(np.diag(cov), 1e-300))
         corr[np.ix_(seen, seen)] = cov / np.outer(sd, sd)
@@ -314,6 +358,35 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
             notes.append(f"parameters {' and '.join(names)} are correlated ({off:.3f}, VIF "
                          f"{1 / max(1 - off**2, 1e-12):.0f}): only their combination is "
                          "identified on these flights")
+    return ci, corr, notes
+
+
+def _score(prob, cand, fit: _Fit, base_sq, base_vecs, start, lo, hi) -> CandidateResult:
+    """The scores of a fit (module docstring of the package) and its
+    :class:`CandidateResult`."""
+    cfg = prob.config
+    k = len(cand.params)
+    nf = base_sq.shape[0]
+    theta, vecs, folds, held = fit.theta, fit.vecs, fit.folds, fit.held
+    # confidence intervals from the Jacobian at the estimate (all parameters)
+    J_all = fit.jac
+    if J_all is None or len(J_all) != k:
+        J_all = _jacobian(prob, cand, theta, vecs, list(range(k)), lo, hi)
+    Aci, _, cci = _stats(vecs, J_all)
+    Atot = Aci.sum((0, 1))
+    spread = fit.spread
+    if spread is None:
+        # how far the fold estimates move the prediction (linearised at the estimate),
+        # relative to the effect itself: robust to a poorly determined second parameter
+        eff = np.concatenate([np.concatenate([bv[a] - v[a] for a in bv])
+                              for bv, v in zip(base_vecs, vecs, strict=True)])
+        eff_norm = float(np.sqrt(np.sum(eff * eff)))
+        moves = [math.sqrt(max(float(d @ Atot @ d), 0.0)) for d in folds - theta]
+        spread = (max(moves) / eff_norm if eff_norm > 0 else math.inf) if nf > 1 else 0.0
+    n_total = sum(v.size for f_ in vecs for v in f_.values())
+    sse_fit = float(fit.fit_sq.sum())
+    s2 = sse_fit / max(n_total - k, 1)
+    ci, corr, notes = _intervals(cand, Atot, s2, prob.window, lo, hi)
     # scores
     sse_base = float(base_sq.sum())
     held_base = base_sq.sum()
@@ -340,25 +413,32 @@ def _fit_candidate(prob: _Problem, cand: Candidate, base_sq, base_vecs,
     p_before = prob.base_structure_power()
     structure = None
     if p_before:
-        structure = 1 - math.sqrt(prob.structure_power(held_vecs) / p_before)
+        structure = 1 - math.sqrt(prob.structure_power(fit.held_vecs) / p_before)
     empirical = bool(getattr(cand, "empirical", False))
     # what a right model would not leave: significant binned structure (in azimuth,
     # airspeed, thrust or time) on any axis of the held-out residual (at the noise floor
     # the structure removed judges instead: CandidateResult.failed)
     left = () if structure is not None else tuple(
-        f.sentence() for f in prob.structure_left(held_vecs))
-    # an empirical law, or a physical effect's own words (the weak motor), of the
-    # candidate or of the parts of a joint one; and what no such effect could be
-    kinds = [k for k in (getattr(c, "kind", None) for c in getattr(cand, "parts", (cand,)))
-             if k is not None]
-    effects = [e for e in Model(cand.variant(cfg, theta).config).effects if e.kind in kinds]
-    law = "; ".join(e.law() for e in effects
-                    if EFFECTS[e.kind].empirical or EFFECTS[e.kind].law is not Effect.law)
-    implausible = tuple(why for e in effects
-                        for why in [e.implausible(prob.airspeed_range)] if why)
+        f.sentence() for f in prob.structure_left(fit.held_vecs))
+    law, implausible = _effect_words(prob, cand, cand.variant(cfg, theta).config)
     return CandidateResult(
         cand.name, cand.doc, cand.params, theta, ci, folds, start, cand.report_values(theta),
         float(red), float(exc), float(dbic), bool(plausible), float(spread), bool(stable), corr,
         held_fit, n_eff, rb, ra, float(1 - math.sqrt(sse_fit / sse_base)), tuple(notes), contrib,
         structure, empirical, law, cand, left, implausible,
     )
+
+
+def _effect_words(prob, cand, fitted: Config) -> tuple[str, tuple]:
+    """An empirical law, or a physical effect's own words (the weak motor), of the
+    candidate or of the parts of a joint one, in the ``fitted`` config; and what no such
+    effect could be (:meth:`~gainsched.model.effects.Effect.implausible` over the
+    flights' airspeeds): ``(law, implausible)``."""
+    kinds = [k for k in (getattr(c, "kind", None) for c in getattr(cand, "parts", (cand,)))
+             if k is not None]
+    effects = [e for e in Model(fitted).effects if e.kind in kinds]
+    law = "; ".join(e.law() for e in effects
+                    if EFFECTS[e.kind].empirical or EFFECTS[e.kind].law is not Effect.law)
+    implausible = tuple(why for e in effects
+                        for why in [e.implausible(prob.airspeed_range)] if why)
+    return law, implausible

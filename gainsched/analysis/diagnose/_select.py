@@ -17,8 +17,8 @@ import itertools
 
 import numpy as np
 
-from ._candidates import JointCandidate
-from ._fit import _bounds, _fit_candidate
+from ._candidates import JointCandidate, separating_flight
+from ._fit import _bounds, _choose_order, _fit_candidate
 from ._results import THRESHOLDS, CandidateResult
 
 #: single candidates whose best are combined into joint fits when none passes
@@ -196,3 +196,88 @@ def _parsimonious(passing: list[CandidateResult], library) -> CandidateResult | 
                 and best.delta_bic > r.delta_bic - THRESHOLDS["nested_bic_gain"]):
             best = r
     return best
+
+
+def _select(prob, library, names, base, at_floor, base_sq, base_vecs, *, asked, joint,
+            forward, progress):
+    """The fits of a diagnosis, in their order, and the accepted one: ``(results,
+    accepted)``, ``results`` ranked by held-out RMS reduction, then delta-BIC.
+
+    The physical candidates of ``names`` first (a series' order chosen before its fit,
+    :func:`~._fit._choose_order`), the best passing one accepted (:func:`_parsimonious`);
+    joint fits of the best singles (:func:`_fit_joint`) when none passes above the noise
+    floor, or always with ``joint``; the empirical candidates when no physical one is
+    accepted and something is there to explain (an excess over the noise floor or binned
+    structure of ``base``), or when the candidates were ``asked`` for by name; forward
+    selection (:func:`_forward`, with ``forward``) while the fit leaves more than
+    ``THRESHOLDS["forward_excess_gain"]`` of the residual above noise. ``progress(name)``
+    before each fit, when given."""
+
+    def fit(names_):
+        for n in names_:
+            if progress is not None:
+                progress(n)
+            cand, pre = library[n], None
+            if getattr(cand, "orders", ()):
+                cand, pre = _choose_order(prob, cand)
+            results.append(_fit_candidate(prob, cand, base_sq, base_vecs, pre))
+        results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
+        return _parsimonious([r for r in results if r.passes], library)
+
+    results: list[CandidateResult] = []
+    empirical = [n for n in names if getattr(library[n], "empirical", False)]
+    accepted = fit([n for n in names if n not in empirical])
+    if (accepted is None and not at_floor) or joint:
+        both = _fit_joint(prob, library, results, base_sq, base_vecs, progress)
+        if both is not None and (accepted is None or both.delta_bic < accepted.delta_bic
+                                 - THRESHOLDS["nested_bic_gain"]):
+            accepted = both
+    # beyond the library: empirical laws only when no physical effect explains what is
+    # there (an excess over the noise floor or binned structure), or when asked for
+    if accepted is None and empirical and (asked or base.structure or not at_floor):
+        accepted = fit(empirical)
+    # several effects of similar size: add the next best while it explains clearly more
+    if forward and not at_floor and (accepted is None or accepted.excess_explained
+                                     < 1 - THRESHOLDS["forward_excess_gain"]):
+        if empirical and not any(r.empirical for r in results):
+            fit(empirical)  # what no effect of the library named may be the rest
+        start = accepted or next((r for r in _physical_first(
+            [r for r in results if " + " not in r.name], library) if r.rms_reduction > 0), None)
+        if start is not None:
+            accepted = _forward(prob, library, results, start, base_sq, base_vecs, progress)
+    return results, accepted
+
+
+def _twins(library, results, accepted):
+    """The candidates that cannot be told apart from ``accepted`` on these flights and
+    the similarity of every fit to it: ``(twins, similarity)``, ``twins`` a list of
+    ``(name, |cos| of the fitted contributions, the flight that would separate them)``,
+    ``similarity`` ``{name: |cos|}`` (both empty without an accepted physical fit). A
+    twin's contribution to the residual is nearly collinear with the accepted one's
+    (``THRESHOLDS["twin_cos"]``) and its held-out fit explains nearly as much
+    (``THRESHOLDS["twin_excess_gap"]``); another fit of the same effect, or one nested
+    in the other, is none."""
+    twins = []
+    similarity = {}
+    if accepted is not None and not accepted.empirical:
+        ca = accepted.contribution.astype(float)
+        na_ = float(np.sqrt(np.sum(ca * ca)))
+        for r in results:
+            if r is accepted or r.contribution is None:
+                continue
+            cb = r.contribution.astype(float)
+            nb = float(np.sqrt(np.sum(cb * cb)))
+            if na_ == 0 or nb == 0:
+                continue
+            cos = abs(float(np.sum(ca * cb)) / (na_ * nb))
+            similarity[r.name] = cos
+            if (_same_effect(library, r.name, accepted.name) or _nested(library, r, accepted)
+                    or _nested(library, accepted, r)):
+                continue  # another fit of the same effect (drag_linear of drag), or one
+                # containing the other (thrust_scale in motor_efficiency): no twin
+            # told apart anyway when the held-out fits differ clearly: the twin leaves more
+            # than a tenth of the residual above noise that the accepted one explains
+            clear = accepted.excess_explained - r.excess_explained > THRESHOLDS["twin_excess_gap"]
+            if cos >= THRESHOLDS["twin_cos"] and not clear:
+                twins.append((r.name, cos, separating_flight(accepted.name, r.name)))
+    return twins, similarity

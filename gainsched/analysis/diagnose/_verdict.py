@@ -38,7 +38,19 @@ def _table_refusal(result: CandidateResult) -> str:
 
 
 def _verdict(base, results, accepted, twins, at_floor) -> str:
-    if at_floor and accepted is None and base.structure:
+    """The conclusion of a diagnosis in one paragraph: of the ``accepted`` fit (None:
+    none passes) among the ranked ``results``, on the ``base`` comparison (``at_floor``:
+    every axis at its noise floor), with its ``twins``."""
+    if accepted is None:
+        return _no_effect_verdict(base, results, at_floor)
+    return _effect_verdict(base, accepted, twins)
+
+
+def _no_effect_verdict(base, results, at_floor) -> str:
+    """The verdict when no candidate passes: the structure or the correlation in time
+    left below the noise floor, no effect needed, or where the residual concentrates and
+    why the best candidate fails."""
+    if at_floor and base.structure:
         # the overall RMS hides it; averaging over revolutions (or airspeed, thrust bins)
         # shows a systematic residual: name it instead of "no effect needed"
         f = base.structure[0]
@@ -52,7 +64,7 @@ def _verdict(base, results, accepted, twins, at_floor) -> str:
                 f"the revolutions it is systematic.{tail}")
     grey = [f"{a} (Q {st.whiteness_q:.1f} > {st.whiteness_limit:.1f})"
             for a, st in base.stats.items() if not st.white]
-    if at_floor and accepted is None and grey:
+    if at_floor and grey:
         # "no effect needed" needs a white residual too: a correlation in time that no
         # bin shows is still something the model does not explain
         best = results[0] if results else None
@@ -62,19 +74,24 @@ def _verdict(base, results, accepted, twins, at_floor) -> str:
                 f"level (see the autocorrelation plot), although every axis is within "
                 f"{AT_NOISE_FLOOR:g}x its noise floor with no significant structure in "
                 f"azimuth, airspeed, thrust or time bins.{tail}")
-    if at_floor and accepted is None:
+    if at_floor:
         return (f"no effect needed: every residual axis is within {AT_NOISE_FLOOR:g}x its "
                 "noise floor, and white, with no significant structure in azimuth, "
                 "airspeed, thrust or time bins")
-    if accepted is None:
-        best = results[0] if results else None
-        tail = ""
-        if best is not None:
-            tail = (f" The best candidate, {best.name}, removes {best.rms_reduction:.0%} of the "
-                    f"held-out RMS but fails: {'; '.join(best.failed())}.")
-        if base.structure:
-            tail += f" Averaged over the revolutions: {base.structure[0].sentence()}."
-        return (f"no library effect explains it: {base.where['sentence']}.{tail}")
+    best = results[0] if results else None
+    tail = ""
+    if best is not None:
+        tail = (f" The best candidate, {best.name}, removes {best.rms_reduction:.0%} of the "
+                f"held-out RMS but fails: {'; '.join(best.failed())}.")
+    if base.structure:
+        tail += f" Averaged over the revolutions: {base.structure[0].sentence()}."
+    return (f"no library effect explains it: {base.where['sentence']}.{tail}")
+
+
+def _effect_verdict(base, accepted, twins) -> str:
+    """The verdict of an accepted fit: the effect (or empirical law) with its values and
+    held-out scores, what is not identified, and its twins with the flight that would
+    separate them."""
     if accepted.below_noise:
         score = (f"held-out binned structure -{accepted.structure_reduction:.0%}, held-out "
                  f"RMS -{accepted.rms_reduction:.1%}")
