@@ -428,7 +428,7 @@ def test_unidentified_damping_is_not_written(paper_config, diagnosed):
     """Issue 16: a stiff tether (k = 2e5 N/m): the stiffness is recovered, the damping's
     CI is wider than its range, so the verdict says it is not identified and --apply
     does not write it (the link's default applies)."""
-    from gainsched.analysis.diagnose import unidentified
+    from gainsched.analysis.diagnose._results import unidentified
     from gainsched.config import Tether
 
     d = diagnosed("stiff_tether")
@@ -474,7 +474,8 @@ def test_parsimony_between_nested_fits():
     lowers delta-BIC by more than THRESHOLDS["nested_bic_gain"]; other effects never."""
     from types import SimpleNamespace
 
-    from gainsched.analysis.diagnose import _parsimonious, candidate_library
+    from gainsched.analysis.diagnose import candidate_library
+    from gainsched.analysis.diagnose._select import _parsimonious
 
     lib = candidate_library()
 
@@ -494,7 +495,8 @@ def test_parsimony_between_nested_fits():
 def test_joint_candidate_composes_its_parts(paper_config):
     """A joint fit is its parts' edits applied in turn: the config text, the model's
     config, the written values and the bounds are those of the parts."""
-    from gainsched.analysis.diagnose import JointCandidate, _bounds
+    from gainsched.analysis.diagnose._candidates import JointCandidate
+    from gainsched.analysis.diagnose._fit import _bounds
 
     parts = [CANDIDATES["thrust_airspeed"], CANDIDATES["mass"]]
     bounds = [_bounds(c, paper_config, c.start(paper_config)) for c in parts]
@@ -626,7 +628,7 @@ def test_variants_that_change_one_axis_reuse_the_others(paper_config, load_cell)
     import dataclasses
 
     from gainsched.analysis.compare import compare
-    from gainsched.analysis.diagnose import _Problem
+    from gainsched.analysis.diagnose._problem import _Problem
     from gainsched.sim.campaign import default_flights
 
     scn = [s for s in default_flights(DURATION) if s.name in ("v9", "speedup")]
@@ -652,7 +654,7 @@ def test_no_effect_needed_only_when_white():
     white too; otherwise the verdict names the axis and its whiteness statistic."""
     from types import SimpleNamespace
 
-    from gainsched.analysis.diagnose import _verdict
+    from gainsched.analysis.diagnose._verdict import _verdict
 
     def base(pitch_white):
         st = lambda w, q: SimpleNamespace(white=w, whiteness_q=q, whiteness_limit=13.3)  # noqa: E731

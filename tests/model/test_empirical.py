@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gainsched.analysis.diagnose import _one_se_order, _qp, _qp_bvls
+from gainsched.analysis.diagnose._fit import _one_se_order
+from gainsched.analysis.diagnose._lsq import _qp, _qp_bvls
 from gainsched.model.effects import (
     AZIMUTH_HARMONICS,
     EFFECTS,

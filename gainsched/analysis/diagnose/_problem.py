@@ -1,0 +1,160 @@
+"""The fit problem: the flight logs, the base config, the noise weights.
+
+:class:`_Problem` evaluates the model variant of a candidate
+(:class:`~gainsched.analysis.diagnose._candidates.CandidateModel`) on every flight: the
+residual of :mod:`gainsched.analysis.compare` (measured minus the prediction of the
+equations of motion, paper eqs. 3, 6, 8, 10, as compare's module docstring says), every
+axis divided by its noise floor (so 1 per axis and sample is pure noise), the segments
+grouped by flight (the folds of the leave-one-flight-out scores). The base model's
+residual is computed once; the pose is re-measured only for another attachment offset.
+It also scores the binned structure (:mod:`gainsched.analysis.structure`) that a fit
+leaves or removes.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from ...config import Config
+from ...model.reduced import Model
+from ..compare import (
+    UNITS,
+    Comparison,
+    measure,
+    residual_axes,
+)
+from ..structure import Finding, binned_means, findings
+from ._candidates import CandidateModel
+
+
+class _Problem:
+    """The logs, the base config, the weights; evaluates variants on every flight."""
+
+    def __init__(self, config: Config, measured, segs, noise: dict, residuals):
+        self.config = config
+        self.residuals = residuals  # the base comparison's, for their binning variables
+        self.segs = segs
+        self._meas = {config.tether.attachment_offset: measured}
+        self.axes = tuple(a for a in noise if np.isfinite(noise[a]) and noise[a] > 0)
+        self.weights = {a: 1.0 / noise[a] for a in self.axes}
+        groups: dict[str, list[int]] = {}
+        for i, m in enumerate(measured):
+            groups.setdefault(m.source, []).append(i)
+        self.flights = list(groups.values())
+        self.flight_names = [measured[g[0]].name.split("#")[0] for g in self.flights]
+        self.window = max(m.window for m in measured)
+        self.n_evals = 0
+        speeds = np.concatenate([r.variables["airspeed"] for r in residuals])
+        self.airspeed_range = (float(speeds.min()), float(speeds.max()))
+        self.structure_keys: list[tuple[str, str]] = []
+        self._base: list[dict] | None = None
+        self._p_before: tuple | None = None
+
+    def track_structure(self, comparison: Comparison) -> None:
+        """Score fits also on the binned structure that ``comparison`` found (its
+        findings' axes and binning variables): :meth:`structure_power`."""
+        keys = [(f.axis, f.variable) for f in comparison.structure if f.axis in self.axes]
+        self.structure_keys = list(dict.fromkeys(keys))
+        self._p_before = None
+
+    def structure_power(self, vecs) -> float | None:
+        """Noise-corrected power of the block-averaged bins of weighted residuals ``vecs``
+        (list over flights of {axis: (n,)}) on the tracked findings: the sum over them
+        of ``sum_b n_b max(mean_b^2 - se_b^2, 0)`` (:func:`binned_means`); None when none
+        are tracked."""
+        if not self.structure_keys:
+            return None
+        segs = self._segments(vecs)
+        total = 0.0
+        for axis, var in self.structure_keys:
+            bm = binned_means(segs, [axis], var)[axis]
+            ok = np.isfinite(bm.mean)
+            total += float(np.sum(bm.n_blocks[ok] * np.maximum(bm.mean[ok] ** 2
+                                                               - bm.se[ok] ** 2, 0.0)))
+        return total
+
+    def _segments(self, vecs, scale=None) -> list:
+        """Residual segments (what :func:`binned_means` takes) of the weighted residuals
+        ``vecs`` (list over flights of {axis: (n,)}), each axis times ``scale[axis]``."""
+        segs = []
+        for g, f in zip(self.flights, vecs, strict=True):
+            off = 0
+            for i in g:
+                r = self.residuals[i]
+                n = r.t.size
+                segs.append(SimpleNamespace(t=r.t, variables=r.variables, residual={
+                    a: f[a][off:off + n] * (1.0 if scale is None else scale[a]) for a in f}))
+                off += n
+        return segs
+
+    def structure_left(self, vecs) -> list[Finding]:
+        """Significant binned structure of the weighted residuals ``vecs`` (list over
+        flights of {axis: (n,)}) in bins of every variable of
+        :data:`~gainsched.analysis.structure.STRUCTURE_BINS`
+        (:func:`~gainsched.analysis.structure.findings`, in the axes' units): what a fit
+        leaves that a right model would not."""
+        noise = {a: 1.0 / w for a, w in self.weights.items()}
+        return findings(self._segments(vecs, noise), noise, units=UNITS)[0]
+
+    def base_structure_power(self) -> float | None:
+        """:meth:`structure_power` of the base model's residual (computed once; its
+        prediction is :meth:`_base_residuals`', not counted as a new evaluation)."""
+        if self._p_before is None:
+            base = self._base_residuals()
+            vecs = [self._weighted(base, g) for g in self.flights]
+            self._p_before = (self.structure_power(vecs),)
+        return self._p_before[0]
+
+    def measured(self, L_e: float):
+        base_L = self.config.tether.attachment_offset
+        if L_e not in self._meas:
+            for key in [x for x in self._meas if x != base_L]:  # keep the base and one more
+                del self._meas[key]
+            cfg = self.config.with_values({"tether.attachment_offset": L_e})
+            base = self._meas[self.config.tether.attachment_offset]
+            self._meas[L_e] = [measure(s, cfg, name=m.name)
+                               for s, m in zip(self.segs, base, strict=True)]
+        return self._meas[L_e]
+
+    def _base_residuals(self) -> list[dict]:
+        """Unweighted residual axes of the base config per segment (computed once)."""
+        if self._base is None:
+            model = Model(self.config)
+            self._base = [residual_axes(model, m, self.config.analysis.latency_s)
+                          for m in self.measured(self.config.tether.attachment_offset)]
+        return self._base
+
+    def vectors(self, var: CandidateModel, only: int | None = None) -> list[dict]:
+        """Weighted residual per flight and axis: list over flights of {axis: (n,)}
+        (only flight ``only`` when given: a one-element list)."""
+        meas = self.measured(var.config.tether.attachment_offset)
+        model = Model(var.config)
+        groups = self.flights if only is None else [self.flights[only]]
+        self.n_evals += 1 if only is None else 1 / len(self.flights)
+        base = None
+        if (var.axes is not None and var.latency == self.config.analysis.latency_s
+                and var.config.tether.attachment_offset == self.config.tether.attachment_offset):
+            base = self._base_residuals()
+        out = []
+        for g in groups:
+            if base is None:
+                per_seg = {i: residual_axes(model, meas[i], var.latency) for i in g}
+            else:
+                per_seg = {i: {**base[i], **residual_axes(model, meas[i], var.latency, var.axes)}
+                           for i in g}
+            out.append(self._weighted(per_seg, g))
+        return out
+
+    def base_vectors(self) -> list[dict]:
+        """:meth:`vectors` of the base config, from :meth:`_base_residuals` (the base
+        model's prediction is computed once per diagnose, for both)."""
+        self.n_evals += 1
+        base = self._base_residuals()
+        return [self._weighted(base, g) for g in self.flights]
+
+    def _weighted(self, per_seg, g) -> dict:
+        """One flight's residual per axis: its segments ``g`` concatenated and weighted."""
+        return {a: np.concatenate([per_seg[i][a] for i in g]) * self.weights[a]
+                for a in self.axes}

@@ -1,0 +1,283 @@
+"""Choosing among the fits: parsimony, joint fits, forward selection and the twins.
+
+:func:`_select` runs the fits of a diagnosis in their order (the physical singles; the
+joint fits of the best of them, :func:`_fit_joint`, when none passes; the empirical
+laws when no physical effect explains what is there; forward selection,
+:func:`_forward`, while the fit leaves something) and returns the accepted one:
+among nested fits of the same effect the smaller unless the larger lowers delta-BIC
+clearly (:func:`_parsimonious`, :func:`_nested`), a physical effect before an empirical
+law that fits as well (:func:`_physical_first`). :func:`_twins` names the candidates
+whose fitted contributions are nearly collinear with the accepted one's and that
+explain nearly as much: not to be told apart on these flights.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from ._candidates import JointCandidate, separating_flight
+from ._fit import _bounds, _choose_order, _fit_candidate
+from ._results import THRESHOLDS, CandidateResult
+
+#: single candidates whose best are combined into joint fits when none passes
+JOINT_TOP = 4
+#: candidates never fitted in the pairs of :func:`_fit_joint` (their single fit switches
+#: the link model); forward selection (:func:`_forward`) adds them
+_NOT_JOINT = frozenset({"tether_elasticity"})
+#: the most candidates forward selection fits together
+FORWARD_PARTS = 4
+
+
+def _fit_joint(prob, library, results, base_sq, base_vecs, progress):
+    """When no single candidate passes: the :data:`JOINT_TOP` best singles (held-out RMS
+    reduction, distinct effects) fitted in pairs, and the best pair with each of the
+    others as a triple. Appends to ``results`` (re-ranked) and returns the accepted one:
+    the best passing pair, or a triple whose delta-BIC is lower by
+    ``THRESHOLDS["nested_bic_gain"]`` (parsimony)."""
+    top: list[CandidateResult] = []
+    for r in results:  # ranked already
+        if (r.rms_reduction > 0 and r.name in library and r.name not in _NOT_JOINT
+                and not r.empirical
+                and not any(_same_effect(library, r.name, t.name) or _nested(library, r, t)
+                            or _nested(library, t, r) for t in top)):
+            top.append(r)
+        if len(top) == JOINT_TOP:
+            break
+    if len(top) < 2:
+        return None
+
+    def joint(parts):
+        return _joint_fit(prob, parts, base_sq, base_vecs, progress)
+
+    pairs = [joint(pr) for pr in itertools.combinations(top, 2)]
+    pairs.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
+    best = pairs[0]
+    names = set(best.name.split(" + "))
+    triples = [joint([*(t for t in top if t.name in names), r]) for r in top
+               if r.name not in names]
+    results.extend(pairs + triples)
+    results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
+    ok_pairs = [r for r in pairs if r.passes]
+    ok_triples = sorted((r for r in triples if r.passes), key=lambda r: r.delta_bic)
+    pick = ok_pairs[0] if ok_pairs else None
+    if ok_triples and (pick is None or ok_triples[0].delta_bic
+                       < pick.delta_bic - THRESHOLDS["nested_bic_gain"]):
+        pick = ok_triples[0]
+    return pick
+
+
+def _joint_fit(prob, parts, base_sq, base_vecs, progress) -> CandidateResult:
+    """The candidates of the fits ``parts`` (CandidateResult, single or joint) fitted
+    together (:class:`JointCandidate`), started at their fits."""
+    cfg = prob.config
+    cands, starts, bounds = [], [], []
+    for r in parts:
+        subs = r.candidate.parts if isinstance(r.candidate, JointCandidate) else (r.candidate,)
+        thetas = (np.split(np.asarray(r.theta, dtype=float), r.candidate._cut)
+                  if isinstance(r.candidate, JointCandidate) else (r.theta,))
+        for c, th in zip(subs, thetas, strict=True):
+            b = _bounds(c, cfg, c.start(cfg))
+            cands.append(c)
+            bounds.append(b)
+            starts.append(np.clip(th, b[0], b[1]))
+    cand = JointCandidate(cands, starts, bounds)
+    if progress is not None:
+        progress(cand.name)
+    return _fit_candidate(prob, cand, base_sq, base_vecs)
+
+
+def _forward(prob, library, results, start, base_sq, base_vecs, progress):
+    """Forward selection from the fit ``start`` (the accepted one, or the best single
+    when none passes): add a single of another effect (held-out RMS reduction > 0; the
+    tether's elasticity and empirical terms included; those whose fitted contribution
+    projects most on what the current fit leaves tried first), all fitted
+    together, while the fit leaves something (more than ``forward_excess_gain`` of the
+    residual above noise, or binned structure) and the addition lowers delta-BIC by
+    ``THRESHOLDS["nested_bic_gain"]`` and explains ``THRESHOLDS["forward_excess_gain"]``
+    more of the residual above noise or removes the structure left; at most
+    :data:`FORWARD_PARTS` parts, the best :data:`JOINT_TOP` tried at each step, a passing
+    addition preferred. Appends its fits to ``results`` and returns the last passing fit
+    (None when ``start`` did not pass and no extension does)."""
+    current = start
+    accepted = start if start.passes else None
+    gain = THRESHOLDS["forward_excess_gain"]
+
+    def better(t):  # explains clearly more (of the whole, or of what is left), or
+        # removes the structure the current one left
+        left = 1.0 - current.excess_explained
+        return (t.excess_explained >= current.excess_explained + gain
+                or t.excess_explained >= current.excess_explained
+                + THRESHOLDS["forward_left_share"] * left
+                or (bool(current.structure_left) and not t.structure_left))
+
+    base = np.concatenate([np.concatenate(list(bv.values())) for bv in base_vecs])
+
+    def leftover_explained(r, left):
+        # the share of what the current fit leaves that the single's own fitted
+        # contribution could take (its projection on it): matching pursuit's choice
+        c = r.contribution.astype(float)
+        cc = float(c @ c)
+        return float(c @ left) ** 2 / cc if cc > 0 else 0.0
+
+    while current.name.count(" + ") + 1 < FORWARD_PARTS and (
+            current.excess_explained < 1 - gain or current.structure_left):
+        names = current.name.split(" + ")
+        left = base - current.contribution.astype(float)
+        eligible = [r for r in results
+                    if not (" + " in r.name or r.name in names or r.rms_reduction <= 0
+                            or r.candidate is None or r.contribution is None
+                            or any(_same_effect(library, r.name, n) for n in names)
+                            or any(_nested(library, r, t) or _nested(library, t, r)
+                                   for t in results if t.name in names))]
+        pool = sorted(_physical_first(eligible, library),
+                      key=lambda r: -leftover_explained(r, left))[:JOINT_TOP]
+        fitted = {frozenset(r.name.split(" + ")): r for r in results}
+        tries = [fitted.get(frozenset([*names, r.name]))
+                 or _joint_fit(prob, [current, r], base_sq, base_vecs, progress) for r in pool]
+        known = {id(r) for r in results}
+        results.extend(t for t in tries if id(t) not in known)
+        ok = [t for t in tries if better(t)
+              and t.delta_bic < current.delta_bic - THRESHOLDS["nested_bic_gain"]]
+        if not ok:
+            break
+        # a passing extension first; one that does not pass yet may still lead to one
+        current = min([t for t in ok if t.passes] or ok, key=lambda t: t.delta_bic)
+        if current.passes:
+            accepted = current
+    results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
+    return accepted
+
+
+def _same_effect(library, a: str, b: str) -> bool:
+    """Whether candidates ``a`` and ``b`` fit the same effect of the library (joint fits:
+    whether they share one)."""
+    if " + " in a or " + " in b:
+        return any(_same_effect(library, x, y) for x in a.split(" + ") for y in b.split(" + "))
+    ka, kb = getattr(library[a], "kind", None), getattr(library[b], "kind", None)
+    return ka is not None and ka == kb
+
+
+def _nested(library, small: CandidateResult, big: CandidateResult) -> bool:
+    """Whether every model of candidate ``small`` is one of ``big``'s: a subset of the
+    same effect's parameters (drag_quadratic in drag), or a candidate ``big``'s refit
+    declares it contains (thrust_scale in motor_efficiency, :class:`Refit` ``contains``)."""
+    if ({p.name for p in small.params} < {p.name for p in big.params}
+            and _same_effect(library, small.name, big.name)):
+        return True
+    refit = getattr(library.get(big.name), "refit", None)
+    return refit is not None and small.name in refit.contains
+
+
+def _physical_first(singles: list[CandidateResult], library) -> list[CandidateResult]:
+    """``singles`` without the empirical candidates that contain a physical one of them
+    (:func:`_nested`: ``thrust_motor`` holds every ``motor_efficiency``) which fits about as
+    well (delta-BIC within ``THRESHOLDS["nested_bic_gain"]``): forward selection then
+    builds on the effect with a physical story, as the parsimony of nested fits does for
+    the single candidates (:func:`_parsimonious`)."""
+    gain = THRESHOLDS["nested_bic_gain"]
+    return [r for r in singles
+            if not (r.empirical and any(not q.empirical and _nested(library, q, r)
+                                        and r.delta_bic > q.delta_bic - gain
+                                        for q in singles))]
+
+
+def _parsimonious(passing: list[CandidateResult], library) -> CandidateResult | None:
+    """The best-ranked passing candidate, or a passing one nested in it
+    (:func:`_nested`) unless the larger fit lowers delta-BIC by
+    ``THRESHOLDS["nested_bic_gain"]`` more: the parsimony between nested models that the
+    held-out ranking alone does not give."""
+    if not passing:
+        return None
+    best = passing[0]
+    for r in passing[1:]:
+        if (_nested(library, r, best)
+                and best.delta_bic > r.delta_bic - THRESHOLDS["nested_bic_gain"]):
+            best = r
+    return best
+
+
+def _select(prob, library, names, base, at_floor, base_sq, base_vecs, *, asked, joint,
+            forward, progress):
+    """The fits of a diagnosis, in their order, and the accepted one: ``(results,
+    accepted)``, ``results`` ranked by held-out RMS reduction, then delta-BIC.
+
+    The physical candidates of ``names`` first (a series' order chosen before its fit,
+    :func:`~._fit._choose_order`), the best passing one accepted (:func:`_parsimonious`);
+    joint fits of the best singles (:func:`_fit_joint`) when none passes above the noise
+    floor, or always with ``joint``; the empirical candidates when no physical one is
+    accepted and something is there to explain (an excess over the noise floor or binned
+    structure of ``base``), or when the candidates were ``asked`` for by name; forward
+    selection (:func:`_forward`, with ``forward``) while the fit leaves more than
+    ``THRESHOLDS["forward_excess_gain"]`` of the residual above noise. ``progress(name)``
+    before each fit, when given."""
+
+    def fit(names_):
+        for n in names_:
+            if progress is not None:
+                progress(n)
+            cand, pre = library[n], None
+            if getattr(cand, "orders", ()):
+                cand, pre = _choose_order(prob, cand)
+            results.append(_fit_candidate(prob, cand, base_sq, base_vecs, pre))
+        results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
+        return _parsimonious([r for r in results if r.passes], library)
+
+    results: list[CandidateResult] = []
+    empirical = [n for n in names if getattr(library[n], "empirical", False)]
+    accepted = fit([n for n in names if n not in empirical])
+    if (accepted is None and not at_floor) or joint:
+        both = _fit_joint(prob, library, results, base_sq, base_vecs, progress)
+        if both is not None and (accepted is None or both.delta_bic < accepted.delta_bic
+                                 - THRESHOLDS["nested_bic_gain"]):
+            accepted = both
+    # beyond the library: empirical laws only when no physical effect explains what is
+    # there (an excess over the noise floor or binned structure), or when asked for
+    if accepted is None and empirical and (asked or base.structure or not at_floor):
+        accepted = fit(empirical)
+    # several effects of similar size: add the next best while it explains clearly more
+    if forward and not at_floor and (accepted is None or accepted.excess_explained
+                                     < 1 - THRESHOLDS["forward_excess_gain"]):
+        if empirical and not any(r.empirical for r in results):
+            fit(empirical)  # what no effect of the library named may be the rest
+        start = accepted or next((r for r in _physical_first(
+            [r for r in results if " + " not in r.name], library) if r.rms_reduction > 0), None)
+        if start is not None:
+            accepted = _forward(prob, library, results, start, base_sq, base_vecs, progress)
+    return results, accepted
+
+
+def _twins(library, results, accepted):
+    """The candidates that cannot be told apart from ``accepted`` on these flights and
+    the similarity of every fit to it: ``(twins, similarity)``, ``twins`` a list of
+    ``(name, |cos| of the fitted contributions, the flight that would separate them)``,
+    ``similarity`` ``{name: |cos|}`` (both empty without an accepted physical fit). A
+    twin's contribution to the residual is nearly collinear with the accepted one's
+    (``THRESHOLDS["twin_cos"]``) and its held-out fit explains nearly as much
+    (``THRESHOLDS["twin_excess_gap"]``); another fit of the same effect, or one nested
+    in the other, is none."""
+    twins = []
+    similarity = {}
+    if accepted is not None and not accepted.empirical:
+        ca = accepted.contribution.astype(float)
+        na_ = float(np.sqrt(np.sum(ca * ca)))
+        for r in results:
+            if r is accepted or r.contribution is None:
+                continue
+            cb = r.contribution.astype(float)
+            nb = float(np.sqrt(np.sum(cb * cb)))
+            if na_ == 0 or nb == 0:
+                continue
+            cos = abs(float(np.sum(ca * cb)) / (na_ * nb))
+            similarity[r.name] = cos
+            if (_same_effect(library, r.name, accepted.name) or _nested(library, r, accepted)
+                    or _nested(library, accepted, r)):
+                continue  # another fit of the same effect (drag_linear of drag), or one
+                # containing the other (thrust_scale in motor_efficiency): no twin
+            # told apart anyway when the held-out fits differ clearly: the twin leaves more
+            # than a tenth of the residual above noise that the accepted one explains
+            clear = accepted.excess_explained - r.excess_explained > THRESHOLDS["twin_excess_gap"]
+            if cos >= THRESHOLDS["twin_cos"] and not clear:
+                twins.append((r.name, cos, separating_flight(accepted.name, r.name)))
+    return twins, similarity
