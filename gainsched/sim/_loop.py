@@ -25,6 +25,7 @@ from ._estimator import _Estimator
 from ._plant import _Plant
 from ._result import SimResult, _Record
 from ._scenario import Scenario, profile_path
+from ._schedulers import Scheduler
 
 __all__ = [
     "LOOKUP_BITS",
@@ -44,32 +45,26 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
              progress=None, controller: str = "path") -> SimResult:
     """Fly a scenario in closed loop: the scheduled LQR on the nonlinear tethered vehicle.
 
-    The control law of paper Sec. IV, ``u = u_d - K(xi_d, xi_d', alpha) (x - x_d)``, at
-    the design's control rate: ``x`` is the LQR state (the 10 reduced states, the azimuth
-    error from continuous azimuths, plus the integral states of ``[control]`` and the
-    design model's effect states, a motor lag's thrusts, which no sensor measures: they
-    are predicted from the applied input with the design model, as a firmware can),
-    ``(x_d, u_d)`` the nominal of the reference path and ``K`` the scheduled gains,
-    looked up at the reference. The plant is integrated by fixed-step RK4 with the input
-    held over each step (zero-order hold); the commands saturate at the plant's thrust
-    limits; the flight stops cleanly when the tether goes slack.
+    The control law of paper Sec. IV, ``u = u_d - K(xi_d, xi_d', alpha) (x - x_d)``, at the
+    design's control rate: ``x`` is the LQR state (the 10 reduced states, the azimuth error from
+    continuous azimuths, plus the integral states of ``[control]`` and the design model's effect
+    states, a motor lag's thrusts, which no sensor measures: they are predicted from the applied
+    input with the design model, as a firmware can), ``(x_d, u_d)`` the nominal of the reference
+    path and ``K`` the scheduled gains, looked up at the reference. The plant is integrated by
+    fixed-step RK4 with the input held over each step (zero-order hold); the commands saturate
+    at the plant's thrust limits; the flight stops cleanly when the tether goes slack.
 
     Parameters
     ----------
     design : Config
-        The model the tables were built from: the nominal ``(x_d, u_d)`` along the
-        reference, the control step ``control.dt`` (s), the integral states and the
-        tension margin come from it.
-    scheduler : callable
-        ``scheduler(xi, xi_dot, alpha) -> (K, status)``: the gains ``K``, ndarray of shape
-        (4, n) (N per unit of LQR state: rad, rad/s, rad s), and the lookup's status bits
-        (int) at the reference azimuth xi (rad), its rate xi_dot (rad/s) and the tilt
-        alpha (rad); :func:`table_scheduler`, :func:`runtime_scheduler` or
-        :func:`c_runtime_scheduler` make one. It is queried at the reference only, so a
-        scheduler may offer ``scheduler.batch(xi, xi_dot, alpha) -> (K (m, 4, n),
-        status (m,))`` giving the same numbers for arrays of queries: the gains are then
-        looked up in blocks of steps instead of once per step (``table_scheduler``
-        does). Where a lookup is unusable (``NO_GAINS``, bad input) the last good gains
+        The model the tables were built from: the nominal ``(x_d, u_d)`` along the reference,
+        the control step ``control.dt`` (s), the integral states and the tension margin.
+    scheduler : Scheduler or callable
+        The gains at the reference: a :class:`Scheduler` (:func:`table_scheduler`,
+        :func:`runtime_scheduler`, :func:`c_runtime_scheduler`; one that is ``batched``
+        is asked for blocks of steps at once, the same numbers), or a plain callable
+        ``(xi, xi_dot, alpha) -> (K (4, n), status)`` (rad, rad/s, rad; N per unit of LQR
+        state). Where a lookup is unusable (``NO_GAINS``, bad input) the last good gains
         are flown (``SimResult.held``), as the firmware does.
     scenario : Scenario
         The flight: circle, speed profile, duration, sensing, initial error.
@@ -82,39 +77,37 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         ``"path"``: the law above in Python, the nominal ``(x_d, u_d)`` from the design
         model along the reference (closed form or trim), the state from the sensing
         below. ``"firmware"``: the firmware's whole control step
-        (:mod:`gainsched.firmware.controller`, docs/runtime.md): sensors in, thrusts
-        out, with only what a firmware has (the table's lookup, the drag-only closed
-        form with the table's correction, its own estimator). With
-        ``c_runtime_scheduler`` it is the C controller itself, through ctypes (software
-        in the loop); with ``table_scheduler`` its Python reference. Ideal sensing gives
-        it the true COG kinematics; motion capture gives it the delayed noisy poses,
-        the gyro and the accelerometer (the plant's specific force), with its pose
-        delay set to the latency unless ``sensing.latency_compensation`` is false.
+        (:mod:`gainsched.firmware.controller`, docs/runtime.md), sensors in, thrusts out,
+        with only what a firmware has (the table's lookup, the drag-only closed form with
+        the table's correction, its own estimator): the C controller through ctypes with
+        ``c_runtime_scheduler`` (software in the loop), its Python reference with
+        ``table_scheduler``. Ideal sensing gives it the true COG kinematics; motion
+        capture the delayed noisy poses, the gyro and the accelerometer (the plant's
+        specific force), its pose delay set to the latency unless
+        ``sensing.latency_compensation`` is false.
 
     Returns
     -------
     SimResult
-        Time histories at the control rate from t = 0: ``round(duration / dt) + 1``
-        samples, fewer when the tether went slack.
+        Time histories at the control rate from t = 0: ``round(duration / dt) + 1`` samples,
+        fewer when the tether went slack.
 
     Raises
     ------
     InputError
-        The table has no usable gains where the flight starts (a firmware would refuse
-        to engage), or ``controller="firmware"`` with a C runtime whose table carries no
-        closed-form constants.
+        No usable gains in the table where the flight starts (a firmware would refuse to
+        engage), or ``controller="firmware"`` on a C runtime without closed-form constants.
     ValueError
         ``controller`` is neither ``"path"`` nor ``"firmware"``, or ``"firmware"`` with a
-        scheduler without ``controller`` and ``feedforward``.
+        scheduler that is no :class:`Scheduler` (a plain callable).
 
     Notes
     -----
-    Sensing (``scenario.sensing``): the true state, or motion-capture pose updates at
-    the sensing rate with noise and latency, fused with a prediction of the design
-    model between updates, and gyro body rates (paper Sec. V.A). The rigid-link plant
-    runs on the compiled kernel when a C compiler is available (the same results as the
-    numpy model to rounding, see tests/sim/test_fastplant.py); ``GAINSCHED_NATIVE=0`` forces
-    the numpy model (about 0.3x real time instead of 80x).
+    Sensing (``scenario.sensing``): the true state, or motion-capture poses (noise,
+    latency) fused with a design-model prediction between updates, and gyro body rates
+    (paper Sec. V.A). The rigid-link plant runs on the compiled kernel when a C compiler
+    is available (the numpy model's results to rounding, tests/sim/test_fastplant.py);
+    ``GAINSCHED_NATIVE=0`` forces the numpy model (about 0.3x real time instead of 80x).
 
     Examples
     --------
@@ -139,23 +132,73 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     '37 mm'
     """
     plant = design if plant is None else plant
-    P = _Plant(plant, scenario.gamma)
-    dmodel = Model(design)
+    P, dmodel = _Plant(plant, scenario.gamma), Model(design)
     dt = design.control.dt
-    n_steps = int(round(scenario.duration / dt)) + 1
-    t = np.arange(n_steps) * dt
-    alpha = scenario.tilt
+    t = np.arange(int(round(scenario.duration / dt)) + 1) * dt
     path = profile_path(scenario, dmodel.r, t)
     if controller == "path":
-        # a constant-speed circle flies the table's nominal, attitude offsets included
-        offsets = (circle_offsets(dmodel, scenario.speed, alpha) if not scenario.maneuvers
-                   else None)
-        nom = nominal_from_path(dmodel, path, alpha, offsets=offsets)
-        z_d, u_d, tension_d = nom.z[:, :N_STATE], nom.u, nom.tension
-    elif controller == "firmware":  # no trim of the design model: only what a firmware has
+        return _fly_path(design, scheduler, scenario, plant, P, dmodel, path, progress)
+    if controller == "firmware":  # no trim of the design model: only what a firmware has
         return _fly_firmware(design, scheduler, scenario, plant, P, path, progress)
-    else:
-        raise ValueError(f"controller must be 'path' or 'firmware', got {controller!r}")
+    raise ValueError(f"controller must be 'path' or 'firmware', got {controller!r}")
+
+
+def _refuse_to_engage(scenario: Scenario, status: int, speed: float, alpha: float):
+    """The InputError of a flight whose table has no usable gains where it starts."""
+    return InputError(
+        scenario.origin, "speed",
+        f"the table has no usable gains where the flight starts ({status_text(status)}"
+        f" at speed {speed:.3g} m/s, tilt "
+        f"{math.degrees(alpha):.3g} deg): a firmware would refuse to engage")
+
+
+class _PathGains:
+    """The path controller's gains at each step of the reference: one lookup per step,
+    or blocks of :data:`_LOOKUP_BLOCK` steps from a ``batched`` :class:`Scheduler`; an
+    unusable lookup (``NO_GAINS``, bad input) flies the last good gains, the firmware's
+    policy, and where there are none yet the flight is refused."""
+
+    def __init__(self, scheduler, path, alpha: float, scenario: Scenario, radius: float):
+        self.scheduler, self.alpha, self.scenario, self.radius = (scheduler, alpha, scenario,
+                                                                  radius)
+        self.xi_ref, self.xi_dot_ref = path.xi, path.d[0]
+        self.batch = (scheduler.batch if isinstance(scheduler, Scheduler) and scheduler.batched
+                      else None)
+        self.K_blk = self.S_blk = None
+        self.K_good = None  # the last usable gains (held through NO_GAINS / bad lookups)
+
+    def __call__(self, k: int):
+        """``(K, status, held)`` of step ``k`` (held: the last good gains are flown)."""
+        if self.batch is None:
+            K, status = self.scheduler(self.xi_ref[k], self.xi_dot_ref[k], self.alpha)
+        else:
+            j = k % _LOOKUP_BLOCK
+            if j == 0:
+                blk = slice(k, k + _LOOKUP_BLOCK)
+                self.K_blk, S_blk = self.batch(self.xi_ref[blk], self.xi_dot_ref[blk],
+                                               self.alpha)
+                self.S_blk = S_blk.tolist()
+            K, status = self.K_blk[j], self.S_blk[j]
+        if status & UNUSABLE:  # the firmware policy: hold the last good gains
+            if self.K_good is None:
+                raise _refuse_to_engage(self.scenario, status,
+                                        self.xi_dot_ref[k] * self.radius, self.alpha)
+            return self.K_good, status, True
+        self.K_good = K
+        return K, status, False
+
+
+def _fly_path(design, scheduler, scenario, plant, P, dmodel, path, progress) -> SimResult:
+    """``simulate(..., controller="path")``: the law of paper Sec. IV in Python on the
+    plant ``P``, the nominal from the design model ``dmodel`` along ``path``, the state
+    from the scenario's sensing (:class:`_Estimator`)."""
+    dt, alpha, t = design.control.dt, scenario.tilt, path.t
+    n_steps = t.size
+    # a constant-speed circle flies the table's nominal, attitude offsets included
+    offsets = (circle_offsets(dmodel, scenario.speed, alpha) if not scenario.maneuvers
+               else None)
+    nom = nominal_from_path(dmodel, path, alpha, offsets=offsets)
+    z_d, u_d, tension_d = nom.z[:, :N_STATE], nom.u, nom.tension
     u_min, u_max = plant.vehicle.thrust_min, plant.vehicle.thrust_max
 
     z0 = z_d[0].copy()
@@ -173,11 +216,9 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
                                          rec.STAT, rec.HELD)
     # per-step work kept to a few small numpy calls: bound methods and arrays looked
     # up once, the LQR error vector (11 + zero-padded effect states) reused
-    xi_ref, xi_dot_ref = path.xi, path.d[0]
     step, reduced, estimate, predict = P.step, P.reduced, est.estimate, est.predict
     rigid = P.maximal is None
-    batch = getattr(scheduler, "batch", None)
-    K_blk = S_blk = None
+    gains = _PathGains(scheduler, path, alpha, scenario, dmodel.r)
     # integral states of the design (int_delta, int_xi): the errors they integrate
     int_idx = [INTEGRATORS[name] for name in design.control.integrators]
     n_lqr = N_STATE + len(int_idx)
@@ -186,7 +227,6 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     n_fx = zx_d.shape[1]
     integ = np.zeros(len(int_idx))
     xi_true = z0[1]  # the plant's azimuth, tracked continuously (elastic links)
-    K_good = None  # the last usable gains (held through NO_GAINS / bad lookups)
     slack_time = None
     n_done = n_steps
     for k in range(n_steps):
@@ -197,25 +237,9 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         # no wrap: the estimate and the reference are continuous azimuths, so the error
         # stays right past half a lap (a lag of 4 rad is a lag, not a lead of 2.3 rad)
         err = z_hat - z_d[k]
-        if batch is None:
-            K, status = scheduler(xi_ref[k], xi_dot_ref[k], alpha)
-        else:
-            j = k % _LOOKUP_BLOCK
-            if j == 0:
-                blk = slice(k, k + _LOOKUP_BLOCK)
-                K_blk, S_blk = batch(xi_ref[blk], xi_dot_ref[blk], alpha)
-                S_blk = S_blk.tolist()
-            K, status = K_blk[j], S_blk[j]
-        if status & UNUSABLE:  # the firmware policy: hold the last good gains
-            if K_good is None:
-                raise InputError(
-                    scenario.origin, "speed",
-                    f"the table has no usable gains where the flight starts ({status_text(status)}"
-                    f" at speed {xi_dot_ref[k] * dmodel.r:.3g} m/s, tilt "
-                    f"{math.degrees(alpha):.3g} deg): a firmware would refuse to engage")
-            K, HELD[k] = K_good, True
-        else:
-            K_good = K
+        K, status, held = gains(k)
+        if held:
+            HELD[k] = True
         n = K.shape[-1]
         if n > xerr.size:
             xerr = np.zeros(n)
@@ -257,34 +281,79 @@ def uncompensated_latency_text(origin, latency: float, speed: float, radius: flo
             f"latency")
 
 
-def _firmware_controller(scheduler, params):
-    """The scheduler's firmware controller with ``params``: the C controller (software in
-    the loop) or its Python reference."""
-    make = getattr(scheduler, "controller", None)
-    if make is None:
+class _FirmwareSensors:
+    """The firmware controller's input row of each step (``gs_ctrl_step``'s inputs,
+    :data:`~gainsched.firmware.controller.INPUT_SLICES`): ideal sensing gives the true
+    COG kinematics (``FLAG_KINEMATICS``); motion capture gives poses taken every
+    ``every`` steps with noise, arriving ``delay`` steps late, the noisy gyro and the
+    accelerometer (``FLAG_ACCEL`` unless the scenario flies without it)."""
+
+    def __init__(self, sens, alpha: float, gamma: float, every: int, delay: int, rng):
+        from ..firmware.controller import INPUT_SLICES, N_INPUT
+
+        self.sens, self.every, self.delay, self.rng = sens, every, delay, rng
+        self.col = INPUT_SLICES
+        self.row = np.zeros(N_INPUT)
+        self.row[self.col["alpha"]], self.row[self.col["gamma"]] = alpha, gamma
+        self.pending: list[tuple[int, np.ndarray, np.ndarray]] = []
+
+    def fill(self, k: int, p_I, v_I, q_IB, w_B, f_B, ref_k) -> np.ndarray:
+        """The row of step ``k`` from the true sensors' values and the reference."""
+        from ..firmware.controller import FLAG_ACCEL, FLAG_KINEMATICS, FLAG_POSE
+
+        sens, row, col, rng, pending = self.sens, self.row, self.col, self.rng, self.pending
+        if sens.ideal:
+            row[0] = FLAG_KINEMATICS
+            row[col["p_I"]], row[col["v_I"]], row[col["q_IB"]] = p_I, v_I, q_IB
+            row[col["gyro"]] = w_B
+        else:
+            if k % self.every == 0:  # a pose taken now arrives after the latency
+                p_m = p_I + sens.position_noise * rng.standard_normal(3)
+                rot = sens.attitude_noise * rng.standard_normal(3)
+                R_m = matrix_from_quaternion(q_IB) @ matrix_from_euler_zyx_scalar(*rot)
+                pending.append((k + self.delay, p_m, quaternion_from_matrix_scalar(R_m)))
+            flags = FLAG_ACCEL if sens.accelerometer else 0
+            if pending and pending[0][0] <= k:
+                _, p_m, q_m = pending.pop(0)
+                flags |= FLAG_POSE
+                row[col["p_I"]], row[col["q_IB"]] = p_m, q_m
+            row[0] = flags
+            row[col["gyro"]] = w_B + sens.gyro_noise * rng.standard_normal(3)
+            row[col["accel"]] = f_B + sens.accel_noise * rng.standard_normal(3)
+        row[col["ref"]] = ref_k
+        return row
+
+
+def _firmware_controller(design, scheduler, scenario, path, xi_w, every: int, delay: int):
+    """The firmware's nominal along the reference, the controller's parameters and the
+    scheduler's controller with them (the C controller, software in the loop, or its
+    Python reference); ``lk``, each step's lookup for the Python reference, else None."""
+    from ..firmware.controller import Controller, controller_params
+
+    if not isinstance(scheduler, Scheduler):
         raise ValueError("controller='firmware' needs a scheduler with the table's "
                          "controller (table_scheduler, c_runtime_scheduler or "
                          "runtime_scheduler)")
-    return make(params)
+    dt, alpha, sens = design.control.dt, scenario.tilt, scenario.sensing
+    ff = scheduler.feedforward(AzimuthPath(path.t, xi_w, path.d), alpha)
+    params = controller_params(design, scheduler.data, pose_period=every * dt,
+                               pose_delay=delay * dt if sens.latency_compensation else 0.0)
+    if not sens.ideal and delay > 0 and params.pose_delay == 0:
+        warnings.warn(uncompensated_latency_text(scenario.origin, sens.latency, scenario.speed,
+                                                 design.radius),
+                      GainschedWarning, stacklevel=4)
+    ctl = scheduler.controller(params)
+    lk = None
+    if isinstance(ctl, Controller):  # the Python reference takes each step's nominal
+        lk = scheduler.batch(xi_w, path.d[0], np.full(path.t.size, alpha))[0]
+    return ff, params, ctl, lk
 
 
 def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimResult:
     """``simulate(..., controller="firmware")``: the firmware's whole loop, sensors in and
     thrusts out (:mod:`gainsched.firmware.controller`), in C through ctypes or its Python
-    reference, on the plant ``P``. Ideal sensing gives the controller the true COG
-    kinematics (``FLAG_KINEMATICS``); motion capture gives it delayed noisy poses at the
-    sensing rate, the gyro and the accelerometer every step."""
-    from ..firmware.controller import (
-        CTRL_HELD,
-        CTRL_SATURATED,
-        FLAG_ACCEL,
-        FLAG_KINEMATICS,
-        FLAG_POSE,
-        INPUT_SLICES,
-        N_INPUT,
-        Controller,
-        controller_params,
-    )
+    reference, on the plant ``P``, its inputs from :class:`_FirmwareSensors`."""
+    from ..firmware.controller import CTRL_HELD, CTRL_SATURATED
 
     dt, alpha, gamma = design.control.dt, scenario.tilt, scenario.gamma
     sens = scenario.sensing
@@ -292,36 +361,24 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
     n_steps = t.size
     xi_w = wrap_angle(path.xi)
     ref = np.stack([xi_w, *path.d], axis=1)
-    ff = scheduler.feedforward(AzimuthPath(t, xi_w, path.d), alpha)
-    z_d, u_d, tension_d = ff.x_d.copy(), ff.u_d, ff.tension
-    z_d[:, 1] = path.xi  # continuous, as the path controller's
     every = max(1, int(round(1.0 / (sens.rate_hz * dt))))
     delay = int(round(sens.latency / dt))
-    params = controller_params(design, getattr(scheduler, "data", None), pose_period=every * dt,
-                               pose_delay=delay * dt if sens.latency_compensation else 0.0)
-    if not sens.ideal and delay > 0 and params.pose_delay == 0:
-        warnings.warn(uncompensated_latency_text(scenario.origin, sens.latency, scenario.speed,
-                                                 design.radius),
-                      GainschedWarning, stacklevel=3)
-    ctl = _firmware_controller(scheduler, params)
-    reference = isinstance(ctl, Controller)
-    if reference:  # the Python reference takes each step's nominal (gs_lookup_nominal)
-        lk = scheduler.batch(xi_w, path.d[0], np.full(n_steps, alpha))[0]
+    ff, params, ctl, lk = _firmware_controller(design, scheduler, scenario, path, xi_w, every,
+                                               delay)
+    z_d, u_d, tension_d = ff.x_d.copy(), ff.u_d, ff.tension
+    z_d[:, 1] = path.xi  # continuous, as the path controller's
     u_min, u_max = plant.vehicle.thrust_min, plant.vehicle.thrust_max
     z0 = z_d[0].copy()
     z0[1] = path.xi[0]
     if scenario.initial_error:
         z0[: len(scenario.initial_error)] += np.asarray(scenario.initial_error)
     x = P.initial(z0, u_d[0])
-    rng = np.random.default_rng(sens.seed)
-    col = INPUT_SLICES
-    row = np.zeros(N_INPUT)
-    row[col["alpha"]], row[col["gamma"]] = alpha, gamma
+    inputs = _FirmwareSensors(sens, alpha, gamma, every, delay,
+                              np.random.default_rng(sens.seed))
     u_now = u_d[0]
     if not sens.ideal:
         p_I, v_I, q_IB, _, _ = P.sensors(x, u_now, alpha, gamma)
         ctl.reset(p_I, v_I, q_IB)  # the estimator starts on the true state
-    pending: list[tuple[int, np.ndarray, np.ndarray]] = []
     rec = _Record(n_steps, x, P)
     X, Z, Zh, U, TEN, SAT, STAT, HELD = (rec.X, rec.Z, rec.Zh, rec.U, rec.TEN, rec.SAT,
                                          rec.STAT, rec.HELD)
@@ -338,38 +395,15 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
         X[k] = x
         z_true = x[:N_STATE] if P.maximal is None else P.reduced(x, xi_true)
         xi_true = z_true[1]
-        p_I, v_I, q_IB, w_B, f_B = P.sensors(x, u_now, alpha, gamma, accel=not sens.ideal)
-        if sens.ideal:
-            row[0] = FLAG_KINEMATICS
-            row[col["p_I"]], row[col["v_I"]], row[col["q_IB"]] = p_I, v_I, q_IB
-            row[col["gyro"]] = w_B
-        else:
-            if k % every == 0:  # a pose taken now arrives after the latency
-                p_m = p_I + sens.position_noise * rng.standard_normal(3)
-                rot = sens.attitude_noise * rng.standard_normal(3)
-                R_m = matrix_from_quaternion(q_IB) @ matrix_from_euler_zyx_scalar(*rot)
-                pending.append((k + delay, p_m, quaternion_from_matrix_scalar(R_m)))
-            flags = FLAG_ACCEL if sens.accelerometer else 0
-            if pending and pending[0][0] <= k:
-                _, p_m, q_m = pending.pop(0)
-                flags |= FLAG_POSE
-                row[col["p_I"]], row[col["q_IB"]] = p_m, q_m
-            row[0] = flags
-            row[col["gyro"]] = w_B + sens.gyro_noise * rng.standard_normal(3)
-            row[col["accel"]] = f_B + sens.accel_noise * rng.standard_normal(3)
-        row[col["ref"]] = ref[k]
-        if reference:
+        row = inputs.fill(k, *P.sensors(x, u_now, alpha, gamma, accel=not sens.ideal), ref[k])
+        if lk is not None:
             out, status, z_hat = ctl.step(row, (lk[k], ff.x_d[k], ff.u_d[k],
                                                 int(ff.status[k])))
         else:
             out, status, z_hat = ctl.step(row)
         thrust = out if newtons else params.thrust_from_commands(out)  # mixer and motors
         if k == 0 and status & NO_GAINS:
-            raise InputError(
-                scenario.origin, "speed",
-                f"the table has no usable gains where the flight starts ({status_text(status)}"
-                f" at speed {path.d[0][0] * design.radius:.3g} m/s, tilt "
-                f"{math.degrees(alpha):.3g} deg): a firmware would refuse to engage")
+            raise _refuse_to_engage(scenario, status, path.d[0][0] * design.radius, alpha)
         u = np.minimum(np.maximum(thrust, u_min), u_max)
         # clipped: by the plant's limits, or by the controller at the design's
         SAT[k] = (u != thrust) | (bool(status & CTRL_SATURATED) & (

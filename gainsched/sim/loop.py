@@ -22,7 +22,8 @@ private module of its own (pytransform3d's pattern), whose names are re-exported
 - ``_result``: :class:`SimResult` and the accelerometer of a flown path;
 - ``_loop``: :func:`simulate`, the path controller's loop and the firmware's;
 - ``_metrics``: :func:`metrics`;
-- ``_schedulers``: the gain lookups (:func:`table_scheduler`, ...);
+- ``_schedulers``: the :class:`Scheduler` interface (the firmware's lookups as methods)
+  and its implementations (:func:`table_scheduler`, ...);
 - ``_logout``: :func:`log_from_result` and :func:`write_run`.
 """
 
@@ -46,7 +47,15 @@ from ._scenario import (
     profile_path,
     scenario_from_dict,
 )
-from ._schedulers import RUNTIMES, c_runtime_scheduler, runtime_scheduler, table_scheduler
+from ._schedulers import (
+    RUNTIMES,
+    CRuntimeScheduler,
+    Scheduler,
+    TableScheduler,
+    c_runtime_scheduler,
+    runtime_scheduler,
+    table_scheduler,
+)
 
 __all__ = [
     "Scenario",
@@ -60,6 +69,9 @@ __all__ = [
     "profile_path",
     "simulate",
     "metrics",
+    "Scheduler",
+    "TableScheduler",
+    "CRuntimeScheduler",
     "table_scheduler",
     "c_runtime_scheduler",
     "RUNTIMES",
