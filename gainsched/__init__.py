@@ -36,7 +36,7 @@ API = (
     ("Seeing a table", "schedule.viewer", ("schedule_figures", "schedule_plots",
                                            "table_summary")),
     ("A flight in simulation", "sim.loop", ("load_scenario", "Scenario", "simulate",
-                                            "SimResult", "table_scheduler",
+                                            "SimResult", "Scheduler", "table_scheduler",
                                             "runtime_scheduler", "metrics",
                                             "log_from_result")),
     ("Seeing a flight", "sim.plots", ("plot_result", "tracking_errors")),

@@ -190,7 +190,7 @@ class FastPlant:
     def rk4_step(self, x, u, alpha, dt, gamma=0.0):
         """One RK4 step of ``dt`` s with ``u`` held: ``(x_next (n_z,), tension at x, N)``.
 
-        Same operations as ``gainsched.sim.loop._rk4`` with the numpy model; ``gamma``
+        Same operations as ``gainsched.sim._plant._rk4`` with the numpy model; ``gamma``
         (rad) is the circle's heading (matters with a wind only).
         """
         self._x[:] = x

@@ -38,6 +38,7 @@ from .loop import (
     SCENARIO_DIR,
     Maneuver,
     Scenario,
+    Scheduler,
     SimResult,
     load_scenario,
     metrics,
@@ -407,12 +408,12 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
     ----------
     design : Config
         The config the tables were built from (the paper config).
-    scheduler : callable
+    scheduler : Scheduler or callable
         Gain lookup of the committed table (:func:`gainsched.sim.loop.runtime_scheduler`).
-        When it offers the table's feed-forward (the C runtime or its Python reference)
-        the flights are the firmware's whole control step (``simulate(controller=
-        "firmware")``: the C controller or its Python reference), else they fly the design
-        model's nominal.
+        When it is a :class:`~gainsched.sim.loop.Scheduler` (the C runtime or its Python
+        reference: the table's feed-forward and controller) the flights are the firmware's
+        whole control step (``simulate(controller="firmware")``: the C controller or its
+        Python reference), else they fly the design model's nominal.
     out_dir : path
     quick : bool
         Short smoke version (see :func:`experiments`).
@@ -437,7 +438,7 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
             truth = plant_config(plant or design, exp.plant_effect)
         # the firmware's nominal (lookup + closed form) when the scheduler offers it: the
         # flights a firmware would fly from the generated files
-        mode = "firmware" if getattr(scheduler, "feedforward", None) is not None else "path"
+        mode = "firmware" if isinstance(scheduler, Scheduler) else "path"
         res = simulate(design, scheduler, exp.scenario, truth, controller=mode)
         write_run(res, out_dir / exp.name)
         results[exp.name] = _analyse(exp, res)
@@ -454,8 +455,8 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
         "experiments_run": [e.name for e in exps],
         "nominal": (f"the firmware's control step: its estimator, the table lookup plus "
                     f"the drag-only closed form "
-                    f"({getattr(scheduler, 'source', 'table')})"
-                    if getattr(scheduler, "feedforward", None) is not None
+                    f"({scheduler.source})"
+                    if isinstance(scheduler, Scheduler)
                     else "design model along the reference"),
         **(meta or {}),
     }

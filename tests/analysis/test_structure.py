@@ -111,7 +111,7 @@ def test_thrust_dip_in_a_flight_campaign(monkeypatch):
     from gainsched.model.effects import ThrustAzimuth, registered_effect
     from gainsched.model.reduced import Model
     from gainsched.schedule.tables import load_table
-    from gainsched.sim import loop
+    from gainsched.sim import _plant as loop
     from gainsched.sim.campaign import HIDDEN, campaign, plant_config
     from gainsched.sim.loop import table_scheduler
 

@@ -31,9 +31,9 @@ from gainsched.firmware.controller import (
 from gainsched.firmware.runtime import BAD_INPUT, Interpolator, runtime_data
 from gainsched.firmware.sil import CController
 from gainsched.model.reduced import Model
+from gainsched.sim._plant import _Plant
 from gainsched.sim.loop import (
     Maneuver,
-    _Plant,
     load_scenario,
     metrics,
     runtime_scheduler,

@@ -37,6 +37,7 @@ from gainsched.model.effects import EFFECTS
 from gainsched.model.maximal import MaximalModel
 from gainsched.model.reduced import Model
 from gainsched.schedule.tables import load_table
+from gainsched.sim._plant import _Plant, _rk4
 from gainsched.sim.fastplant import (
     SUPPORTED_EFFECTS,
     FastMaximal,
@@ -44,7 +45,7 @@ from gainsched.sim.fastplant import (
     fast_plant,
     fast_plant_supported,
 )
-from gainsched.sim.loop import Scenario, Sensing, _Plant, _rk4, simulate, table_scheduler
+from gainsched.sim.loop import Scenario, Sensing, simulate, table_scheduler
 
 from support import PAPER_H5
 

@@ -1,0 +1,151 @@
+"""The plant: the reduced (rigid link) or maximal (elastic links) model behind one
+interface, compiled when it can be, integrated by fixed-step RK4, and its sensors."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from ..config import N_STATE, Config
+from ..errors import GainschedWarning
+from ..model.geometry import pose_from_reduced
+from ..model.maximal import MaximalModel, reduced_from_maximal
+from ..model.reduced import Model
+from ..model.rotations import (
+    R_IC_from_tilt,
+    matrix_from_euler_zyx_scalar,
+    matrix_from_quaternion,
+    quaternion_from_matrix,
+    quaternion_from_matrix_scalar,
+)
+from .fastplant import SUPPORTED_EFFECTS, fast_plant
+
+_FALLBACKS_SEEN: set[str] = set()
+
+
+def _warn_numpy_plant(cfg: Config) -> None:
+    """Say once per reason that the rigid-link plant runs on the numpy model (slower)."""
+    missing = sorted(s.name for s in cfg.effects if s.name not in SUPPORTED_EFFECTS)
+    why = (f"the compiled plant does not implement the effect(s) {', '.join(missing)}"
+           if missing else "the compiled plant is not available (no C compiler, or "
+           "GAINSCHED_NATIVE=0)")
+    if why in _FALLBACKS_SEEN:
+        return
+    _FALLBACKS_SEEN.add(why)
+    warnings.warn(f"{why}: the simulation runs on the numpy model, about 0.3x real time "
+                  f"instead of 80x (gainsched/sim/fastplant.py)", GainschedWarning,
+                  stacklevel=3)
+
+
+class _Plant:
+    """Reduced model (rigid link) or maximal model (elastic links) behind one interface.
+
+    The rigid and the spring-damper links run on the compiled plants
+    (:mod:`gainsched.sim.fastplant`) when they support the config and a compiler is
+    available, else on the numpy models (the reference). The SLS and lumped-mass links
+    keep their own path: set ``self.maximal`` (an object with ``f(x, u, alpha, gamma)``
+    and ``tension(x, u, alpha, gamma)``) and ``self.fast = None``. ``gamma`` (rad) is the
+    circle's heading: with a wind (``[effects.wind]``) it sets the wind's direction in C.
+    """
+
+    def __init__(self, cfg: Config, gamma: float = 0.0):
+        self.model = Model(cfg)
+        self.gamma = float(gamma)  # the circle's heading, rad: the wind's direction in C
+        self.maximal = None if cfg.tether.link == "rigid" else MaximalModel(self.model)
+        # compiled RK4 of the reduced or the spring-damper maximal model; None: numpy model
+        self.fast = fast_plant(cfg)
+        if self.maximal is None and self.fast is None:
+            _warn_numpy_plant(cfg)
+
+    def initial(self, z0, u0):
+        """Plant state from the reduced state ``z0`` (10,) and the thrusts ``u0`` (4,), N:
+        stateful effects (motor lag) start in their steady state at ``u0``."""
+        if self.maximal is None:
+            extra = [e.steady_states(u0, np.zeros(4))[0] for e in self.model.effects
+                     if e.n_states]
+            return np.concatenate([z0, *extra]) if extra else np.array(z0, dtype=float)
+        return self.maximal.from_reduced(z0)  # the elastic link pre-stretched (maximal.py)
+
+    def f(self, x, u, alpha):
+        """State derivative and tether tension (N) at one state."""
+        g = self.gamma
+        if self.fast is not None:
+            return self.fast.f(x, u, alpha, g)
+        if self.maximal is None:
+            ev = self.model.evaluate(x, u, alpha, g)
+            return ev.z_dot, ev.tension
+        return self.maximal.f(x, u, alpha, g), self.maximal.tension(x, u, alpha, g)
+
+    def step(self, x, u, alpha, dt):
+        """One RK4 step of ``dt`` s with ``u`` held: ``(x_next, tension at x in N)``
+        (elastic links: RK4 substeps, and a negative tension when slack)."""
+        if self.fast is not None:
+            return self.fast.rk4_step(x, u, alpha, dt, self.gamma)
+        if self.maximal is not None:
+            return self.maximal.step(x, u, alpha, dt, self.gamma)
+        return _rk4(self.f, x, u, alpha, dt)
+
+    def reduced(self, x, xi_ref):
+        if self.maximal is None:
+            return x[:N_STATE]
+        return reduced_from_maximal(self.model, x, xi_ref)
+
+    def pose(self, x, alpha, gamma):
+        """COG position in I (m) and R_IB of one state or a batch of states (..., n_x)."""
+        if self.maximal is None:
+            p_C, R_CB = pose_from_reduced(x, self.model.rho, self.model.p_e)
+        else:
+            q = x[..., 6:10]
+            p_C = x[..., 0:3]
+            R_CB = matrix_from_quaternion(q / np.linalg.norm(q, axis=-1, keepdims=True))
+        if np.ndim(x) == 1:  # one state (the pose sensor): scalar math
+            R_IC = matrix_from_euler_zyx_scalar(alpha, 0.0, gamma)
+        else:
+            R_IC = R_IC_from_tilt(alpha, gamma)
+        return p_C @ R_IC.T, R_IC @ R_CB
+
+    def sensors(self, x, u, alpha, gamma, accel=True):
+        """What the vehicle's sensors see of one state under the thrusts ``u`` (N): the COG
+        position ``p_I`` (m) and velocity ``v_I`` (m/s) in I, the attitude ``q_IB``, the body
+        rates (rad/s) and the specific force at the COG in B (m/s^2, what an accelerometer
+        there senses; None with ``accel=False``, which skips the plant's derivative)."""
+        R_IC = matrix_from_euler_zyx_scalar(alpha, 0.0, gamma)
+        f_B = None
+        if self.maximal is None:
+            z_dot = self.f(x, u, alpha)[0] if accel else np.zeros_like(x)
+            p_C, v_C, a_C, R_CB = self.model.cog_motion_one(x, z_dot)
+            w = x[7:10]
+        else:
+            p_C, v_C, w = x[0:3], x[3:6], x[10:13]
+            R_CB = matrix_from_quaternion(x[6:10] / np.linalg.norm(x[6:10]))
+            a_C = self.f(x, u, alpha)[0][3:6] if accel else None
+        if accel:
+            f_B = R_CB.T @ (a_C - self.model.g_C(alpha))
+        return (R_IC @ p_C, R_IC @ v_C, quaternion_from_matrix_scalar(R_IC @ R_CB),
+                np.array(w), f_B)
+
+    def battery_voltage(self, X):
+        """The battery's terminal voltage (N,), V, along plant states X (N, n_x), or None
+        without a battery (an effect whose ``log_channel`` is ``"vbat"``; the maximal
+        model carries no effect states)."""
+        if self.maximal is not None:
+            return None
+        i = N_STATE
+        for e in self.model.effects:
+            if e.log_channel == "vbat":
+                return e.voltage(X[:, i:i + e.n_states])
+            i += e.n_states
+        return None
+
+    def poses(self, X, alpha, gamma):
+        """COG positions in I (N, 3), m, and quaternions q_IB (N, 4) of states X (N, n_x)."""
+        p_I, R_IB = self.pose(X, alpha, gamma)
+        return p_I, quaternion_from_matrix(R_IB)
+
+def _rk4(f, x, u, alpha, dt):
+    k1, ten = f(x, u, alpha)
+    k2, _ = f(x + 0.5 * dt * k1, u, alpha)
+    k3, _ = f(x + 0.5 * dt * k2, u, alpha)
+    k4, _ = f(x + dt * k3, u, alpha)
+    return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), ten
