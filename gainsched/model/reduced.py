@@ -32,7 +32,6 @@ from .rotations import (
     euler_zyx_rates_from_body_rates,
     matrix_from_euler_zyx,
     matrix_from_euler_zyx_scalar,
-    skew,
     up_C_from_tilt,
 )
 
@@ -113,7 +112,6 @@ class Model:
         self.wind_I = air_velocity(self.effects)
         self.n_extra = sum(e.n_states for e in self.effects)
         self.n_z = N_STATE + self.n_extra
-        self._skew_pe = skew(self.p_e)
         self._J_inv = np.linalg.inv(self.J)
 
     # ------------------------------------------------------------------ helpers
@@ -236,7 +234,7 @@ class Model:
         ``-f_t p_e x n_B`` for a tension ``f_t`` (N) pulling the attachment point along
         ``-n`` (paper eq. 6); ``n_B`` (..., 3) is the unit vector from the anchor to the
         attachment point, in B."""
-        return n_B @ self._skew_pe.T
+        return cross(self.p_e, n_B)
 
     # ------------------------------------------------------------------ dynamics
     def _tether_solve(self, R, d, e_B, rhs_F, rhs_tau):
@@ -260,7 +258,7 @@ class Model:
         def torque_term(v):  # m R (p_e x J^-1 v), in C
             return m * mv(R, cross(self.p_e, v @ J_inv.T))
 
-        lever = cross(self.p_e, e_B)
+        lever = self.tether_lever(e_B)
         a, b = mr * d.e_delta, mr * d.e_xi
         c = d.e - torque_term(lever)
         r = rhs_F - torque_term(rhs_tau)
