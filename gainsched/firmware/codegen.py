@@ -99,10 +99,6 @@ def c_decimal(x) -> str:
     return np.format_float_positional(np.float32(x), unique=True, trim="0") + "f"
 
 
-def _c_uint(x) -> str:
-    return f"{int(x)}u"
-
-
 @lru_cache(maxsize=1)
 def _hex_tables():
     """Text pieces of :func:`c_floats`: three hex digits of a 12-bit half of the mantissa,
@@ -137,14 +133,17 @@ def c_floats(values) -> list[str]:
     return text.tolist()
 
 
+def _c_uints(values) -> list[str]:
+    """C unsigned literals (``3u``) of an array's values (or of one value)."""
+    return [f"{int(x)}u" for x in np.ravel(values)]
+
+
 def _body(arr, fmt, indent=1, per_line=6) -> str:
-    """Brace-nested initializer contents of ``arr`` (without the outermost braces), each
-    value written by ``fmt`` (:func:`c_float` in its vectorised form)."""
-    arr = np.asarray(arr)
-    flat = c_floats(arr) if fmt is c_float else [fmt(v) for v in arr.ravel()]
-    texts = np.empty(len(flat), dtype=object)
-    texts[:] = flat
-    return _nested(texts.reshape(arr.shape), indent, per_line)
+    """Brace-nested initializer contents of ``arr`` (without the outermost braces), written
+    by ``fmt``, an array's formatter (:func:`c_floats`, :func:`_c_uints`)."""
+    texts = np.empty(np.shape(arr), dtype=object)
+    texts.flat[:] = fmt(arr)
+    return _nested(texts, indent, per_line)
 
 
 def _nested(texts, indent, per_line) -> str:
@@ -195,12 +194,12 @@ def render_header(data) -> str:
         control_law=str(meta.get("control_law", "u = u_d - K (x - x_d)")),
         state_names=", ".join(base.state_names) if base.state_names else "?",
         mask_bits=f"{bits}; {MASK_NO_GAINS:#04x} no gains stored (zeros)",
-        xi=_body(base.xi, c_float),
-        speed=_body(base.speed, c_float),
-        xi_dot=_body(base.xi_dot, c_float),
-        tilt=_body(base.tilt, c_float),
-        state_sign=_body(base.state_sign, c_float, per_line=11),
-        state_perm=_body(base.state_perm, _c_uint, per_line=11),
+        xi=_body(base.xi, c_floats),
+        speed=_body(base.speed, c_floats),
+        xi_dot=_body(base.xi_dot, c_floats),
+        tilt=_body(base.tilt, c_floats),
+        state_sign=_body(base.state_sign, c_floats, per_line=11),
+        state_perm=_body(base.state_perm, _c_uints, per_line=11),
         n_xi_tilt0=base.n_xi_tilt0,
     )
     values["state_macros"] = _state_macros(base)
@@ -219,11 +218,11 @@ def _dense_values(data: RuntimeData) -> dict:
         "dense_values.in.h", name=name, NAME=NAME,
         tilt0_note=("independent of xi" if data.n_xi_tilt0 == 1
                     else "per azimuth: an effect changes with the azimuth"),
-        K_tilt0=_body(data.K_tilt0.reshape(n_v, data.n_xi_tilt0, 4, n), c_float),
-        K=_body(K, c_float),
-        u_d=_body(data.u_d, c_float, per_line=4),
-        phi_d=_body(data.phi_d, c_float),
-        mask=_body(data.mask, _c_uint, per_line=18))
+        K_tilt0=_body(data.K_tilt0.reshape(n_v, data.n_xi_tilt0, 4, n), c_floats),
+        K=_body(K, c_floats),
+        u_d=_body(data.u_d, c_floats, per_line=4),
+        phi_d=_body(data.phi_d, c_floats),
+        mask=_body(data.mask, _c_uints, per_line=18))
     dense = (f"{NAME}_N_XI_TILT0", f"&{name}_K_tilt0[0][0][0][0]",
              f"&{name}_K[0][0][0][0][0]", f"&{name}_u_d[0][0][0][0]", f"&{name}_phi_d[0][0][0]")
     return dict(
@@ -252,10 +251,10 @@ def _compact_values(data) -> dict:
     arrays = render(
         "compact_values.in.h", name=name, NAME=NAME, n_xi=n_xi,
         azimuth_error=f"{100 * data.bound:g}",
-        mask=_body(data.mask, _c_uint, per_line=19),
-        harmonics=_body(data.harmonics, _c_uint, per_line=25),
-        coef_start=_body(data.start.reshape(n_a, n_v), _c_uint, per_line=10),
-        coef=_body(data.coef if n_coef else np.zeros(1, np.float32), c_float))
+        mask=_body(data.mask, _c_uints, per_line=19),
+        harmonics=_body(data.harmonics, _c_uints, per_line=25),
+        coef_start=_body(data.start.reshape(n_a, n_v), _c_uints, per_line=10),
+        coef=_body(data.coef if n_coef else np.zeros(1, np.float32), c_floats))
     compact = (f"{NAME}_N_HARMONICS", f"{NAME}_N_COEF", f"&{name}_harmonics[0][0][0]",
                f"&{name}_coef_start[0][0]", f"{name}_coef")
     return dict(
@@ -294,7 +293,7 @@ def _vehicle_values(data: RuntimeData) -> dict:
     ])
     # one initializer per field, in gs_vehicle order: scalars, then the 3x3 and 4x4 blocks
     inits = [f"    {c_float(x[0])}" if x.size == 1 else
-             f"    {{\n{_body(x, c_float, 2, int(np.sqrt(x.size)))}\n    }}" for x in f.values()]
+             f"    {{\n{_body(x, c_floats, 2, int(np.sqrt(x.size)))}\n    }}" for x in f.values()]
     body = (f"/* closed-form constants of the feed-forward, in gs_vehicle order:\n"
             f" * {', '.join(VEHICLE_FIELDS)} */\n"
             f"static const gs_vehicle {name}_vehicle = {{\n" + ",\n".join(inits) + ",\n};\n")
@@ -312,7 +311,7 @@ def _offsets_values(data: RuntimeData) -> dict:
             f"in the\n * azimuth [1, cos k xi, sin k xi], k = 1..{H}: "
             f"[tilt][speed][theta, chi][2 H + 1] */\n"
             f"static const float {name}_offsets[{NAME}_N_TILT][{NAME}_N_SPEED][2][{2 * H + 1}] = "
-            f"{{\n{_body(data.offsets, c_float, per_line=7)}\n}};\n")
+            f"{{\n{_body(data.offsets, c_floats, per_line=7)}\n}};\n")
     return dict(offset_harmonics=H, offsets_data=body, offsets_ref=f"&{name}_offsets[0][0][0][0]")
 
 
@@ -388,9 +387,9 @@ def render_control_header(data, params) -> str:
     data = data.base if isinstance(data, CompactData) else data
     lines = []
     for key, ctype, v in params.c_fields():
-        text = (c_decimal(v) if ctype == "float" else _c_uint(v) if ctype == "uint32_t" else
+        text = (c_decimal(v) if ctype == "float" else _c_uints(v)[0] if ctype == "uint32_t" else
                 f"{{{', '.join(c_decimal(i) for i in v)}}}" if ctype.startswith("float") else
-                f"{{{', '.join(_c_uint(i) for i in v)}}}")
+                f"{{{', '.join(_c_uints(v))}}}")
         note = _PARAM_COMMENTS[key]
         if key == "accel_range":
             note = f"m/s^2 = {v / G0:.3g} g, {ACCEL_MARGIN:g}x the table's largest specific force"
