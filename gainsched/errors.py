@@ -3,6 +3,13 @@
 Every error a user can cause (bad config, bad log, bad CLI argument, bad table
 file) is raised as :class:`InputError`. The CLI turns it into a single line on
 stderr and exit code 2, with no traceback.
+
+The classes are usable as the built-ins they are (python-control's habit, e.g.
+``ControlArgument(TypeError)``): a bad value is a :class:`ValueError`, so
+``except ValueError`` in a caller's code catches an :class:`InputError` too. Code in
+this package that catches ``ValueError`` around something that may raise an
+:class:`InputError` lets that one through first (``except InputError: raise``), so
+that its message (file and key) is kept.
 """
 
 from __future__ import annotations
@@ -11,10 +18,14 @@ __all__ = ["InputError", "GainschedError", "GainschedWarning"]
 
 
 class GainschedError(Exception):
-    """Base class of the errors gainsched raises on purpose."""
+    """Base class of the errors gainsched raises on purpose.
+
+    Each subclass is also the built-in it stands for: :class:`InputError` (a bad
+    value) is a :class:`ValueError`.
+    """
 
 
-class InputError(GainschedError):
+class InputError(GainschedError, ValueError):
     """Bad user input (config, log, table, argument): one line naming the file, key and fault.
 
     A bad config, flight log, scenario, table file or command-line argument raises this
@@ -22,6 +33,8 @@ class InputError(GainschedError):
     (``"SOURCE: MESSAGE"`` without ``where``). The command line prints it as one line on
     stderr and exits with :attr:`exit_code` 2; from Python, catch it to report or fix
     the input.
+    It is a :class:`ValueError` (and a :class:`GainschedError`): ``except ValueError``
+    catches it.
 
     Parameters
     ----------

@@ -695,5 +695,5 @@ def check_runtime_data(table_path) -> RuntimeData:
 
     try:
         return runtime_data(load_table(table_path))
-    except ValueError as exc:
-        raise InputError(table_path, "", str(exc)) from None
+    except ValueError as exc:  # an InputError (a ValueError too) keeps its file and key
+        raise exc if isinstance(exc, InputError) else InputError(table_path, "", f"{exc}") from None

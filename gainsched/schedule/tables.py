@@ -452,6 +452,8 @@ def _verify(f, path) -> None:
             if (want.decode() if isinstance(want, bytes) else str(want)) != got:
                 raise InputError(path, name, "checksum mismatch: the data changed after the "
                                  "build (corrupt or edited file); rebuild the table")
+    except InputError:  # a ValueError too: keep the dataset it names
+        raise
     except (OSError, ValueError, KeyError) as exc:
         raise InputError(path, "", f"unreadable dataset ({exc})") from None
     if _root_sha256(dict(f.attrs), digests) != _decoded(f.attrs["data_sha256"]):
