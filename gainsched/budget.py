@@ -31,17 +31,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import numpy as np
 
 from .constants import N_INPUT, TILT_BATCH
 from .errors import InputError
 
-if TYPE_CHECKING:  # the config module calls this one: no import at run time
-    from .config import Config
-
-__all__ = ["BuildEstimate", "estimate_build", "check_budget", "GIB"]
+__all__ = ["BuildEstimate", "BuildConfig", "estimate_build", "check_budget", "GIB"]
 
 GIB = 2.0**30
 #: copies of a batch's (A_d, B_d) alive at the peak of a job (interpolation temporaries)
@@ -59,6 +56,40 @@ REF_RADIUS = 1.6
 REF_SPEED_MIN = 1.3
 #: the paper grid (speeds, tilts, azimuth samples): the axis furthest above it is blamed
 REF_GRID = {"grid.speeds": 18, "grid.tilts_deg": 6, "grid.azimuth_samples": 36}
+
+
+class BuildConfig(Protocol):
+    """What an estimate reads of a config: :class:`gainsched.config.Config` is one.
+
+    This module owns the type it takes and names no class of the config layer (which
+    calls it while it validates, from above): a structural type, the fields below.
+
+    Attributes
+    ----------
+    grid : Grid
+        ``speeds`` (n_v,) m/s, ``tilts`` (n_a,) rad, ``azimuth_samples``, and the ranges
+        the build chooses (``speeds_auto.lo``, ``.hi``, ``.max_count``;
+        ``tilts_auto.max_count``; ``azimuth_auto.hi``; None for a listed axis).
+    control : Control
+        ``rate_hz`` (Hz) and ``n_lqr`` (LQR states without the effects').
+    effects : tuple of EffectSpec
+        Each with the ``name`` of a registered effect (its states add to the LQR's).
+    tether : Tether
+        ``length`` (m), named when the circle's length drives the estimate.
+    limits : Limits
+        ``max_memory_gib`` (GiB) and ``max_build_cpu_s`` (s).
+    radius : float, m
+        The nominal COG circle radius ``rho + L_e``.
+    """
+
+    grid: Any
+    control: Any
+    effects: Any
+    tether: Any
+    limits: Any
+
+    @property
+    def radius(self) -> float: ...
 
 
 @dataclass(frozen=True)
@@ -96,7 +127,7 @@ class BuildEstimate:
     cpu_term: tuple[str, str] = ("", "")
 
 
-def _lqr_states(config: Config) -> int:
+def _lqr_states(config: BuildConfig) -> int:
     from .model.effects import EFFECTS
 
     return config.control.n_lqr + sum(EFFECTS[e.name].n_states for e in config.effects
@@ -108,7 +139,7 @@ def _grid_key(counts: dict[str, int]) -> str:
     return max(counts, key=lambda k: counts[k] / REF_GRID[k])
 
 
-def estimate_build(config: Config) -> BuildEstimate:
+def estimate_build(config: BuildConfig) -> BuildEstimate:
     """Memory (bytes) and CPU time (s) of building ``config``'s grid; see the module docs.
 
     Vectorised over the speeds: microseconds even for a million speeds.
@@ -179,7 +210,7 @@ def _fmt(x: float) -> str:
     return f"{x:.2g}" if math.isfinite(x) else "inf"
 
 
-def check_budget(config: Config, source) -> BuildEstimate:
+def check_budget(config: BuildConfig, source) -> BuildEstimate:
     """Refuse a config whose build needs more than ``config.limits`` allows.
 
     Raises :class:`InputError` naming ``source`` and the key that drives the estimate,

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .actuators import MOTOR_ORDERS
+from .budget import check_budget
 from .constants import INTEGRATORS, MAX_XI, N_INPUT, N_STATE, REDUCED_NAMES, XI_DOT_LIMIT
 from .errors import InputError
 from .plausible import G_RANGE, check_circles, check_hover, check_lengths
@@ -1133,8 +1134,6 @@ def _check_size(source: str, text: str) -> None:
 
 
 def _config(text: str, source: str, check_default_name: bool) -> Config:
-    from .budget import check_budget  # imported here: budget reads the Config classes
-
     _check_size(source, text)
     data = parse_toml(text, source)
     top = Section(source, "", data)
