@@ -498,3 +498,32 @@ def test_max_gain_is_optional_and_positive(paper_config):
     assert base.with_values({"control.max_gain": 50.0}).control.max_gain == 50.0
     with pytest.raises(InputError, match=r"control\.max_gain: "):
         base.with_values({"control.max_gain": 0.0})
+
+
+def test_config_is_a_flat_namespace_over_private_modules():
+    """gainsched.config re-exports its private modules (issue 40): every name in its
+    ``__all__`` resolves, the classes and functions come from a private module of the
+    package, and every name the package's modules, the tests and the examples import
+    from ``gainsched.config`` is in ``__all__``."""
+    import ast
+    from pathlib import Path
+
+    import gainsched.config as pkg
+
+    assert len(pkg.__all__) == len(set(pkg.__all__))
+    for name in pkg.__all__:
+        obj = getattr(pkg, name)
+        module = getattr(obj, "__module__", None)
+        if callable(obj) and module and module.startswith("gainsched.config"):
+            assert module.split(".")[-1].startswith("_"), (name, module)
+    root = Path(__file__).parents[1]
+    imported = set()
+    for path in [*root.glob("gainsched/**/*.py"), *root.glob("tests/**/*.py"),
+                 *root.glob("examples/**/*.py")]:
+        if path.parent == root / "gainsched" / "config":
+            continue  # the package's own modules
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (
+                    node.module == "gainsched.config" or (node.level and node.module == "config")):
+                imported |= {a.name for a in node.names}
+    assert imported and imported <= set(pkg.__all__), sorted(imported - set(pkg.__all__))

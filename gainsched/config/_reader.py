@@ -27,13 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .actuators import MOTOR_ORDERS
-from .budget import check_budget
-from .constants import INTEGRATORS, MAX_XI, N_INPUT, N_STATE, REDUCED_NAMES, XI_DOT_LIMIT
-from .errors import InputError
-from .plausible import G_RANGE, check_circles, check_hover, check_lengths
-from .resources import config_path, reference_configs
-from .textinput import parse_toml, read_text
+from ..actuators import MOTOR_ORDERS
+from ..budget import check_budget
+from ..constants import INTEGRATORS, MAX_XI, N_INPUT, N_STATE, REDUCED_NAMES, XI_DOT_LIMIT
+from ..errors import InputError
+from ..plausible import G_RANGE, check_circles, check_hover, check_lengths
+from ..resources import config_path, reference_configs
+from ..textinput import parse_toml, read_text
 
 __all__ = [
     "Config",
@@ -504,7 +504,7 @@ class Config:
         >>> cfg.with_values({"vehicle.mass": 0.55}).vehicle.mass  # doctest: +SKIP
         0.55
         """
-        from .configedit import set_values
+        from ..configedit import set_values
 
         return config_from_text(set_values(self.text, values),
                                 self.source if source is None else source)
@@ -775,7 +775,7 @@ def _tether(sec: Section) -> Tether:
 
 
 def _effects(sec: Section) -> tuple[EffectSpec, ...]:
-    from .model.effects import EFFECTS  # the registry; imported here to avoid a cycle
+    from ..model.effects import EFFECTS  # the registry; imported here to avoid a cycle
 
     out = []
     for name in sorted(sec.data):
@@ -818,7 +818,7 @@ def _control(sec: Section) -> Control:
     R = check_square_weight(sec, "R", N_INPUT, definite=True)
     # The table serves reversed circles through the direction mirror S2, exact only if
     # the weights are invariant under it (docs/symmetry.md).
-    from .model.symmetry import P_U, lqr_state_signs
+    from ..model.symmetry import P_U, lqr_state_signs
 
     signs = lqr_state_signs(integrators)
     if not np.array_equal(Q * np.outer(signs, signs), Q):

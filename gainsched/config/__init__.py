@@ -1,0 +1,52 @@
+"""Configuration: TOML in, one frozen dataclass tree out (:mod:`gainsched.config._reader`,
+re-exported here: ``from gainsched.config import load_config``)."""
+
+from __future__ import annotations
+
+from ._reader import (
+    MAX_RATE_HZ,
+    MAX_SPEED,
+    N_INPUT,
+    N_STATE,
+    TERMINAL_COSTS,
+    Analysis,
+    AxisRange,
+    AzimuthRange,
+    Config,
+    Control,
+    EffectSpec,
+    Feasibility,
+    Firmware,
+    Grid,
+    Limits,
+    Section,
+    Tether,
+    Vehicle,
+    check_name,
+    config_from_text,
+    load_config,
+)
+
+__all__ = [
+    "Config",
+    "Vehicle",
+    "Tether",
+    "Control",
+    "Grid",
+    "AxisRange",
+    "AzimuthRange",
+    "Feasibility",
+    "Analysis",
+    "Limits",
+    "Firmware",
+    "EffectSpec",
+    "load_config",
+    "config_from_text",
+    "check_name",
+    "N_STATE",
+    "N_INPUT",
+    "Section",
+    "MAX_SPEED",
+    "MAX_RATE_HZ",
+    "TERMINAL_COSTS",
+]
