@@ -25,7 +25,7 @@ __all__ = ["MAX_TEXT_BYTES", "MAX_NESTING", "read_text", "decode_text", "parse_t
            "load_toml"]
 
 #: largest scenario or channel map, bytes: a hand-written one is well under 10 KiB (1 MiB
-#: still parses in a fraction of a second). Configs set their own bound (config.py).
+#: still parses in a fraction of a second). Configs set their own bound (config/_reader.py).
 MAX_TEXT_BYTES = 2**20
 #: deepest nesting of arrays and tables: a config's deepest key is 3 tables down
 #: (``effects.motor_lag.tau``) and its deepest value a list of rows (Q, R); 32 leaves

@@ -22,8 +22,6 @@ MODULES = {
                                    "split (issue 40)"),
     "gainsched/cli.py": (1443, "every command's options and output lines: the thin CLI "
                          "over importable functions, to split by command group (issue 40)"),
-    "gainsched/config/_reader.py": (1233, "config.py moved into the package whole: split "
-                                    "in the next commit (issue 40)"),
     "gainsched/firmware/controller.py": (1013, "the controller's parameters, its Python "
                                          "reference and the estimator: to split (issue 40)"),
     "gainsched/firmware/runtime.py": (885, "the runtime data and the two interpolators: "

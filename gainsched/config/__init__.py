@@ -1,31 +1,50 @@
-"""Configuration: TOML in, one frozen dataclass tree out (:mod:`gainsched.config._reader`,
-re-exported here: ``from gainsched.config import load_config``)."""
+"""Configuration: TOML in, one frozen dataclass tree out.
+
+``load_config(path)`` is the only way in. Every key is checked at this
+boundary (unknown key, wrong type, missing key, impossible value) and a bad
+one raises :class:`~gainsched.errors.InputError` naming the file and the
+dotted key. Degrees exist only here (keys ending in ``_deg``); the dataclasses
+hold SI units.
+
+Besides types and ranges, the checks refuse what would only fail late in a
+build: a name that is not a safe file name (:func:`check_name`), grid axes that
+collapse in the tables' float32 (:func:`~gainsched.config._checks.check_float32_axis`), a
+weight Q that leaves the azimuth undetectable, a physically absurd vehicle, a control rate
+that undersamples the fastest circle (:func:`~gainsched.config._checks.check_rate`), a
+build that would need more memory or CPU time than ``[limits]`` allows
+(:func:`gainsched.budget.check_budget`), and a config no build could fly
+(:mod:`gainsched.plausible`: gravity, lengths, hover, a flyable circle).
+
+One concept per private module, every public name re-exported here:
+
+- ``_schema``: the frozen dataclasses, one per section (:class:`Vehicle`, ...);
+- ``_checks``: :class:`Section` (a TOML table read key by key, unknown keys refused
+  with the likely meant one) and the ``check_*`` helpers several sections share;
+- ``_sections``: one reader per section of the file (``read_vehicle``, ...);
+- ``_reader``: :class:`Config`, :func:`load_config`, :func:`config_from_text` and the
+  validation pass, with the checks across sections.
+"""
 
 from __future__ import annotations
 
-from ._reader import (
-    MAX_RATE_HZ,
-    MAX_SPEED,
-    N_INPUT,
-    N_STATE,
+from ..constants import N_INPUT, N_STATE
+from ._checks import Section, check_name
+from ._reader import Config, config_from_text, load_config
+from ._schema import (
     TERMINAL_COSTS,
     Analysis,
     AxisRange,
     AzimuthRange,
-    Config,
     Control,
     EffectSpec,
     Feasibility,
     Firmware,
     Grid,
     Limits,
-    Section,
     Tether,
     Vehicle,
-    check_name,
-    config_from_text,
-    load_config,
 )
+from ._sections import MAX_RATE_HZ, MAX_SPEED
 
 __all__ = [
     "Config",
