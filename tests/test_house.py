@@ -31,8 +31,6 @@ MODULES = {
                                       "source (issue 40)"),
     "gainsched/model/effects.py": (1263, "the effects library, one class per effect: to "
                                    "become a package of one module per family (issue 40)"),
-    "gainsched/schedule/refine.py": (830, "the automatic grid's refinement and its "
-                                     "certificate: to split (issue 40)"),
 }
 
 #: "module:function" -> (its ceiling in lines, why it is longer than MAX_FUNCTION_LINES)
