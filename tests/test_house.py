@@ -44,9 +44,6 @@ FUNCTIONS = {
     "gainsched/analysis/logs.py:read_log": (103, "its numpydoc docstring is half of it"),
     "gainsched/firmware/check.py:midpoint_check": (122, "the docstring and the midpoint "
                                                    "loop: to split with the check module"),
-    "gainsched/sim/paper.py:_rows": (104, "the report's table rows, one per metric"),
-    "gainsched/sim/paper.py:write_report": (105, "the report's sections in order"),
-    "gainsched/sim/plots.py:plot_result": (108, "one figure's panels in order"),
 }
 
 
