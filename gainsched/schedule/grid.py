@@ -119,7 +119,34 @@ def steps_per_period(speed: float, r: float, dt: float) -> int:
 
 
 @dataclass(frozen=True)
-class CircleSolution:
+class _Circles:
+    """The fields of solved circles, written once: one speed's tilts
+    (:class:`CircleSolution`) or every (tilt, speed) circle of a grid
+    (:class:`GridResult`, the same arrays stacked with the speed after the tilt axis;
+    ``steps`` and ``dt`` then per speed). Their docstrings give the shapes."""
+
+    K: np.ndarray
+    S: np.ndarray
+    u_d: np.ndarray
+    phi_d: np.ndarray
+    tension: np.ndarray
+    reasons: np.ndarray
+    spectral_radius: np.ndarray
+    sweeps: np.ndarray
+    lin_samples: np.ndarray
+    lin_error: np.ndarray
+    steps: int | np.ndarray
+    dt: float | np.ndarray
+    offsets: np.ndarray
+    mode_tau: np.ndarray
+    mode_frequency: np.ndarray
+    mode_damping: np.ndarray
+    mode_shape: np.ndarray
+    gain_max_free: np.ndarray
+
+
+@dataclass(frozen=True)
+class CircleSolution(_Circles):
     """The periodic LQR solution of one speed at several tilts: what a table holds of it.
 
     Returned by :func:`solve_circle`; every array has the tilt as its leading axis
@@ -184,25 +211,6 @@ class CircleSolution:
         ``[control] max_time_constant_s`` (the price of the bound is ``max |K|`` against
         it; the same as ``max |K|`` without a bound), N per state unit; NaN if infeasible.
     """
-
-    K: np.ndarray
-    S: np.ndarray
-    u_d: np.ndarray
-    phi_d: np.ndarray
-    tension: np.ndarray
-    reasons: np.ndarray
-    spectral_radius: np.ndarray
-    sweeps: np.ndarray
-    lin_samples: np.ndarray
-    lin_error: np.ndarray
-    steps: int
-    dt: float
-    offsets: np.ndarray
-    mode_tau: np.ndarray
-    mode_frequency: np.ndarray
-    mode_damping: np.ndarray
-    mode_shape: np.ndarray
-    gain_max_free: np.ndarray
 
     @classmethod
     def empty(cls, n_a: int, n_xi: int, n: int, steps: int, dt: float) -> CircleSolution:
@@ -430,7 +438,7 @@ def _fill_periodic(out: CircleSolution, ok, model, config, speed, tilts, Qx, kee
 
 
 @dataclass(frozen=True)
-class GridResult:
+class GridResult(_Circles):
     """The solved schedule grid: gains and nominal at every (tilt, speed, azimuth) point.
 
     Returned by :func:`build_grid` and written by :func:`gainsched.write_outputs`. The
@@ -483,24 +491,6 @@ class GridResult:
         of a level circle (the table then stores tilt-0 gains per azimuth).
     """
 
-    K: np.ndarray
-    S: np.ndarray
-    u_d: np.ndarray
-    phi_d: np.ndarray
-    tension: np.ndarray
-    reasons: np.ndarray
-    spectral_radius: np.ndarray
-    sweeps: np.ndarray
-    lin_samples: np.ndarray
-    lin_error: np.ndarray
-    steps: np.ndarray
-    dt: np.ndarray
-    offsets: np.ndarray
-    mode_tau: np.ndarray
-    mode_frequency: np.ndarray
-    mode_damping: np.ndarray
-    mode_shape: np.ndarray
-    gain_max_free: np.ndarray
     level_invariant: bool = True
 
     def gain_max(self) -> np.ndarray:
