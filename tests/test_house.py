@@ -29,10 +29,6 @@ MODULES = {
                                       "source (issue 40)"),
     "gainsched/model/effects.py": (1263, "the effects library, one class per effect: to "
                                    "become a package of one module per family (issue 40)"),
-    "gainsched/schedule/grid.py": (747, "the grid build and the periodic interpolation of "
-                                   "the linearisation: to split (issue 40)"),
-    "gainsched/schedule/refine.py": (830, "the automatic grid's refinement and its "
-                                     "certificate: to split (issue 40)"),
 }
 
 #: "module:function" -> (its ceiling in lines, why it is longer than MAX_FUNCTION_LINES)
@@ -46,12 +42,6 @@ FUNCTIONS = {
     "gainsched/analysis/logs.py:read_log": (103, "its numpydoc docstring is half of it"),
     "gainsched/firmware/check.py:midpoint_check": (122, "the docstring and the midpoint "
                                                    "loop: to split with the check module"),
-    "gainsched/schedule/grid.py:solve_circle": (163, "one circle's whole pipeline (nominal, "
-                                                "linearisation, Riccati, modes): to split "
-                                                "with grid.py"),
-    "gainsched/sim/paper.py:_rows": (104, "the report's table rows, one per metric"),
-    "gainsched/sim/paper.py:write_report": (105, "the report's sections in order"),
-    "gainsched/sim/plots.py:plot_result": (108, "one figure's panels in order"),
 }
 
 

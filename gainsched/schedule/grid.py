@@ -37,7 +37,7 @@ from ..native.reproducible import (
     pinned_executor,
     process_pinned,
 )
-from .linearize import discretize, jacobians, lqr_system
+from .discrete import LIN_TOL, _discrete_at, discrete_system, periodic_interp
 from .lqr import dlqr, periodic_lqr, spectral_radius, stability_scale
 from .modes import MODE_COUNT, floquet_modes
 from .nominal import circle_nominal, circle_offsets
@@ -53,8 +53,6 @@ __all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "bound_
            "level_circle_invariant", "LIN_TOL",
            "SYMMETRY_TOL"]
 
-#: relative accuracy demanded of the interpolated linearisation (see discrete_system)
-LIN_TOL = 1e-10
 
 
 def check_effect_symmetries(config) -> None:
@@ -121,7 +119,34 @@ def steps_per_period(speed: float, r: float, dt: float) -> int:
 
 
 @dataclass(frozen=True)
-class CircleSolution:
+class _Circles:
+    """The fields of solved circles, written once: one speed's tilts
+    (:class:`CircleSolution`) or every (tilt, speed) circle of a grid
+    (:class:`GridResult`, the same arrays stacked with the speed after the tilt axis;
+    ``steps`` and ``dt`` then per speed). Their docstrings give the shapes."""
+
+    K: np.ndarray
+    S: np.ndarray
+    u_d: np.ndarray
+    phi_d: np.ndarray
+    tension: np.ndarray
+    reasons: np.ndarray
+    spectral_radius: np.ndarray
+    sweeps: np.ndarray
+    lin_samples: np.ndarray
+    lin_error: np.ndarray
+    steps: int | np.ndarray
+    dt: float | np.ndarray
+    offsets: np.ndarray
+    mode_tau: np.ndarray
+    mode_frequency: np.ndarray
+    mode_damping: np.ndarray
+    mode_shape: np.ndarray
+    gain_max_free: np.ndarray
+
+
+@dataclass(frozen=True)
+class CircleSolution(_Circles):
     """The periodic LQR solution of one speed at several tilts: what a table holds of it.
 
     Returned by :func:`solve_circle`; every array has the tilt as its leading axis
@@ -187,24 +212,26 @@ class CircleSolution:
         it; the same as ``max |K|`` without a bound), N per state unit; NaN if infeasible.
     """
 
-    K: np.ndarray
-    S: np.ndarray
-    u_d: np.ndarray
-    phi_d: np.ndarray
-    tension: np.ndarray
-    reasons: np.ndarray
-    spectral_radius: np.ndarray
-    sweeps: np.ndarray
-    lin_samples: np.ndarray
-    lin_error: np.ndarray
-    steps: int
-    dt: float
-    offsets: np.ndarray
-    mode_tau: np.ndarray
-    mode_frequency: np.ndarray
-    mode_damping: np.ndarray
-    mode_shape: np.ndarray
-    gain_max_free: np.ndarray
+    @classmethod
+    def empty(cls, n_a: int, n_xi: int, n: int, steps: int, dt: float) -> CircleSolution:
+        """A solution of ``n_a`` tilts with nothing solved yet, to be filled in place:
+        NaN gains, nominal and figures, ``reasons`` "trim failed", no offsets.
+
+        Parameters
+        ----------
+        n_a, n_xi, n : int   tilts, grid azimuths, LQR states
+        steps : int   control steps per period; dt : float   their length, s
+        """
+        def nan(*shape):
+            return np.full(shape, np.nan)
+
+        return cls(nan(n_a, n_xi, 4, n), nan(n_a, n_xi, n, n), nan(n_a, n_xi, 4),
+                   nan(n_a, n_xi), nan(n_a, n_xi),
+                   np.full((n_a, n_xi), Reason.TRIM_FAILED, dtype=np.uint8), nan(n_a),
+                   np.zeros(n_a, dtype=np.int32), np.zeros(n_a, dtype=np.int32), nan(n_a),
+                   steps, dt, np.zeros((n_a, 2, 2 * HARMONICS + 1)), nan(n_a, MODE_COUNT),
+                   nan(n_a, MODE_COUNT), nan(n_a, MODE_COUNT), nan(n_a, MODE_COUNT, n),
+                   nan(n_a))
 
 
 def _sample_steps(N, n_xi):
@@ -224,96 +251,6 @@ def _sample(X, lo, hi, w):
     """Linear interpolation along axis 1 between the kept steps (see :func:`_sample_steps`)."""
     w = w.reshape((1, w.size) + (1,) * (X.ndim - 2))
     return (1 - w) * X[:, lo] + w * X[:, hi]
-
-
-def _discrete_at(model, speed, tilts, n, dt):
-    """Zero-order-hold LQR system at ``n`` equally spaced steps of the circle, all tilts."""
-    zs, us = [], []
-    for a in tilts:
-        nom = circle_nominal(model, speed, a, n)
-        zs.append(nom.z)
-        us.append(nom.u)
-    A, B = jacobians(model, np.stack(zs), np.stack(us), np.asarray(tilts)[:, None])
-    return discretize(*lqr_system(A, B, model.config.control.integrators), dt)
-
-
-def _rel_err(X, Y, offset=None):
-    scale = np.abs(Y if offset is None else Y - offset).max()
-    return np.abs(X - Y).max() / scale if scale > 0 else np.abs(X - Y).max()
-
-
-def periodic_interp(X, N):
-    """Trigonometric interpolation of M equally spaced samples of periodic functions to N.
-
-    The same interpolant as ``scipy.signal.resample(X, N, axis=1)`` (for even M < N:
-    the Nyquist term split evenly between +M/2 and -M/2), evaluated as one matrix
-    product of the N x M basis ``cos(j theta_k), sin(j theta_k)`` with the Fourier
-    coefficients. The FFT of length N that resample does costs more than the product
-    at every control rate tried and grows faster than N when N has large prime
-    factors (N is the step count per period, not a chosen length); the product is
-    linear in N. Angles are reduced exactly in integers (``j k mod N``), so the basis
-    is accurate to rounding.
-
-    Parameters
-    ----------
-    X : ndarray, shape (b, M, ...)   samples at azimuths 2 pi m / M, M even
-    N : int   number of output samples, N > M
-
-    Returns
-    -------
-    ndarray, shape (b, N, ...)   values at azimuths 2 pi k / N (a view; the steps are the
-        slowest axis in memory, the points next: each step's blocks are contiguous)
-    """
-    b, M = X.shape[:2]
-    h = M // 2
-    Y = np.moveaxis(X, 1, 0).reshape(M, -1)
-    F = np.fft.rfft(Y, axis=0) / M  # (h + 1, R)
-    coef = np.concatenate([F[:1].real, 2.0 * F[1:h].real, F[h:].real, -2.0 * F[1:h].imag])
-    r = (np.arange(N)[:, None] * np.arange(h + 1)[None, :]) % N  # j k mod N, exact
-    angle = 2.0 * np.pi / N * np.arange(N)
-    basis = np.concatenate([np.cos(angle)[r], np.sin(angle)[r[:, 1:h]]], axis=1)
-    out = (basis @ coef).reshape((N, b) + X.shape[2:])
-    return np.moveaxis(out, 0, 1)
-
-
-def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
-    """``(A_d, B_d)`` of the LQR system at the N control steps of one period (batched).
-
-    The nominal, and hence every entry of A_k and B_k, is an analytic periodic
-    function of the azimuth, so its Fourier series converges exponentially: the
-    exact (complex-step) Jacobians and their exact discretisation are computed at
-    ``M`` equally spaced azimuths and carried to the N steps by trigonometric
-    interpolation (:func:`periodic_interp`). M doubles from ``m0`` until the
-    interpolation from M/2 samples reproduces the M samples to ``tol`` (relative to
-    ``|A_d - I|`` and ``|B_d|``); the M-sample interpolation is then used, whose error
-    is smaller still. On the paper grid M = 64 gives 2e-15. With ``N <= M`` the
-    steps are computed directly.
-
-    Returns
-    -------
-    A_d : ndarray (n_a, N, n, n); B_d : ndarray (n_a, N, n, 4); M : int (N if direct);
-    err : float   the last interpolation check (0 if direct)
-    """
-    if N <= 2 * m0:
-        Ad, Bd = _discrete_at(model, speed, tilts, N, dt)
-        return Ad, Bd, N, 0.0
-    # [A_d | B_d] side by side, so that one interpolation carries both
-    M = m0
-    AB_M = np.concatenate(_discrete_at(model, speed, tilts, M, dt), axis=-1)
-    n = AB_M.shape[-2]
-    I = np.eye(n)
-    while True:
-        if 2 * M >= N:
-            Ad, Bd = _discrete_at(model, speed, tilts, N, dt)
-            return Ad, Bd, N, 0.0
-        AB_2M = np.concatenate(_discrete_at(model, speed, tilts, 2 * M, dt), axis=-1)
-        AB = periodic_interp(AB_M, 2 * M)
-        err = max(_rel_err(AB[..., :n], AB_2M[..., :n], I),
-                  _rel_err(AB[..., n:], AB_2M[..., n:]))
-        M, AB_M = 2 * M, AB_2M
-        if err <= tol:
-            AB = periodic_interp(AB_M, N)
-            return AB[..., :n], AB[..., n:], M, err
 
 
 def _tilt0(model, config, speed, N, dt, Qx):
@@ -413,67 +350,73 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=No
     if dare_tilt0 is None:
         dare_tilt0 = level_circle_invariant(model)
     tilts = np.asarray(tilts, dtype=float)
-    n_xi = config.grid.azimuth_samples
     N = steps_per_period(speed, model.r, config.control.dt)
-    dt = period(speed, model.r) / N
-    n_a = tilts.size
-
-    bad = np.zeros(n_a, dtype=np.uint8)
     n_lqr = config.control.n_lqr  # reduced state and integrals; effect states follow
     n = model.n_z - N_STATE + n_lqr
-    K = np.full((n_a, n_xi, 4, n), np.nan)
-    S = np.full((n_a, n_xi, n, n), np.nan)
-    radius = np.full(n_a, np.nan)  # closed-loop spectral radius per tilt
-    sweeps = np.zeros(n_a, dtype=np.int32)
-    lin_samples = np.zeros(n_a, dtype=np.int32)
-    lin_error = np.full(n_a, np.nan)
-    u_d = np.full((n_a, n_xi, 4), np.nan)
-    phi_d = np.full((n_a, n_xi), np.nan)
-    tension = np.full((n_a, n_xi), np.nan)
-    reasons = np.full((n_a, n_xi), Reason.TRIM_FAILED, dtype=np.uint8)
-    offsets = np.zeros((n_a, 2, 2 * HARMONICS + 1))
-    tau = np.full((n_a, MODE_COUNT), np.nan)
-    frequency, damping = np.full_like(tau, np.nan), np.full_like(tau, np.nan)
-    shape = np.full((n_a, MODE_COUNT, n), np.nan)
-    gain_max_free = np.full(n_a, np.nan)
+    out = CircleSolution.empty(tilts.size, config.grid.azimuth_samples, n, N,
+                               period(speed, model.r) / N)
+    ok = np.flatnonzero(_fill_nominals(out, model, speed, tilts) == 0)
+    Qx = np.zeros((n, n))
+    Qx[:n_lqr, :n_lqr] = config.control.Q
+    if dare_tilt0 and not keep_steps and config.control.terminal == "periodic":
+        for i in ok[tilts[ok] == 0.0]:
+            _fill_tilt0(out, i, model, config, speed, Qx)
+        ok = ok[tilts[ok] != 0.0]
+    steps = _fill_periodic(out, ok, model, config, speed, tilts, Qx, keep_steps)
+    return (out, steps) if keep_steps else out
 
-    def put_modes(idx, m):
-        tau[idx], frequency[idx], damping[idx], shape[idx] = (
-            m.tau, m.frequency, m.damping, m.shape)
 
+def _fill_nominals(out: CircleSolution, model, speed, tilts) -> np.ndarray:
+    """The nominal of every tilt into ``out`` (feed-forward, roll, tension and reasons at
+    the grid azimuths, the attitude offsets); returns the feasibility bits (n_a,) uint8
+    of every control step together, 0 where the tilt can have gains."""
+    n_xi = out.K.shape[1]
+    bad = np.zeros(tilts.size, dtype=np.uint8)
     for i, a in enumerate(tilts):
         try:
             # feasibility is checked on the nominal at every control step
-            bad[i] = np.bitwise_or.reduce(circle_nominal(model, speed, a, N).reasons)
+            bad[i] = np.bitwise_or.reduce(circle_nominal(model, speed, a, out.steps).reasons)
             g = circle_nominal(model, speed, a, n_xi)
         except TrimError:
             bad[i] = Reason.TRIM_FAILED
             continue
-        u_d[i], phi_d[i], tension[i] = g.u, g.phi, g.tension
+        out.u_d[i], out.phi_d[i], out.tension[i] = g.u, g.phi, g.tension
         off = circle_offsets(model, speed, a)
         if off is not None:
-            offsets[i] = off.pitch, off.yaw
+            out.offsets[i] = off.pitch, off.yaw
         elsewhere = (g.reasons == 0) & (bad[i] != 0)
-        reasons[i] = g.reasons | np.where(elsewhere, Reason.ELSEWHERE, 0).astype(np.uint8)
-    Qx = np.zeros((n, n))
-    Qx[:n_lqr, :n_lqr] = config.control.Q
-    scale = stability_scale(dt, config.control.max_time_constant_s)
-    ok = np.flatnonzero(bad == 0)
-    if dare_tilt0 and not keep_steps and config.control.terminal == "periodic":
-        for i in ok[tilts[ok] == 0.0]:
-            Ki, Si, radius[i], modes, gain_max_free[i] = _tilt0(model, config, speed, N, dt, Qx)
-            K[i], S[i] = Ki, Si
-            put_modes(i, modes)
-            lin_samples[i], lin_error[i], sweeps[i] = 1, 0.0, -1  # infinite horizon
-        ok = ok[tilts[ok] != 0.0]
-    keep, lo, hi, w = _sample_steps(N, n_xi)
+        out.reasons[i] = g.reasons | np.where(elsewhere, Reason.ELSEWHERE, 0).astype(np.uint8)
+    return bad
+
+
+def _put_modes(out: CircleSolution, idx, m) -> None:
+    out.mode_tau[idx], out.mode_frequency[idx], out.mode_damping[idx], out.mode_shape[idx] = (
+        m.tau, m.frequency, m.damping, m.shape)
+
+
+def _fill_tilt0(out: CircleSolution, i: int, model, config, speed, Qx) -> None:
+    """Tilt ``i`` (0) by the DARE (:func:`_tilt0`): infinite horizon, one linearisation."""
+    K, S, out.spectral_radius[i], modes, out.gain_max_free[i] = _tilt0(
+        model, config, speed, out.steps, out.dt, Qx)
+    out.K[i], out.S[i] = K, S
+    _put_modes(out, i, modes)
+    out.lin_samples[i], out.lin_error[i], out.sweeps[i] = 1, 0.0, -1  # infinite horizon
+
+
+def _fill_periodic(out: CircleSolution, ok, model, config, speed, tilts, Qx, keep_steps):
+    """The periodic Riccati recursion (paper eq. 23) of the feasible tilts ``ok``, in
+    batches of :data:`~gainsched.constants.TILT_BATCH`, into ``out``; returns the steps
+    ``(A_d, B_d, K)`` with ``keep_steps`` (see :func:`solve_circle`), else None."""
+    N, dt, ctrl = out.steps, out.dt, config.control
+    scale = stability_scale(dt, ctrl.max_time_constant_s)
+    keep, lo, hi, w = _sample_steps(N, out.K.shape[1])
     kept = []
     for c in range(0, ok.size, TILT_BATCH):
         idx = ok[c : c + TILT_BATCH]
         Ad, Bd, M, err = discrete_system(model, speed, tilts[idx], N, dt)
-        lin_samples[idx], lin_error[idx] = M, err
+        out.lin_samples[idx], out.lin_error[idx] = M, err
         As, Bs = (Ad, Bd) if scale == 1.0 else (scale * Ad, scale * Bd)
-        sol = periodic_lqr(As, Bs, Qx, config.control.R, terminal=config.control.terminal,
+        sol = periodic_lqr(As, Bs, Qx, ctrl.R, terminal=ctrl.terminal,
                            keep_S=True, steps=None if keep_steps else keep)
         # the monodromy of the real loop: prod (A_k - B_k K_k) = scale^-N prod (scaled)
         Phi = sol.Phi if scale == 1.0 else sol.Phi * scale ** -N
@@ -481,26 +424,21 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=No
         if keep_steps:  # every step was kept: pick the grid's bracketing steps
             Ks, Ss = Ks[:, keep], Ss[:, keep]
             kept.append((Ad, Bd, sol.K))
-        K[idx] = _sample(Ks, lo, hi, w)
-        S[idx] = _sample(Ss, lo, hi, w)
-        radius[idx] = spectral_radius(Phi)
-        put_modes(idx, floquet_modes(Phi, N * dt))
+        out.K[idx] = _sample(Ks, lo, hi, w)
+        out.S[idx] = _sample(Ss, lo, hi, w)
+        out.spectral_radius[idx] = spectral_radius(Phi)
+        _put_modes(out, idx, floquet_modes(Phi, N * dt))
         if scale != 1.0:  # the price of the bound: the gains without it
-            free = periodic_lqr(Ad, Bd, Qx, config.control.R, terminal=config.control.terminal,
-                                steps=keep)
-            gain_max_free[idx] = np.abs(_sample(free.K, lo, hi, w)).max(axis=(1, 2, 3))
+            free = periodic_lqr(Ad, Bd, Qx, ctrl.R, terminal=ctrl.terminal, steps=keep)
+            out.gain_max_free[idx] = np.abs(_sample(free.K, lo, hi, w)).max(axis=(1, 2, 3))
         else:
-            gain_max_free[idx] = np.abs(K[idx]).max(axis=(1, 2, 3))
-        sweeps[idx] = sol.sweeps
-    steps = tuple(np.concatenate(x) for x in zip(*kept, strict=True)) if kept else None
-    out = CircleSolution(K, S, u_d, phi_d, tension, reasons, radius, sweeps, lin_samples,
-                         lin_error, N, dt, offsets, tau, frequency, damping, shape,
-                         gain_max_free)
-    return (out, steps) if keep_steps else out
+            out.gain_max_free[idx] = np.abs(out.K[idx]).max(axis=(1, 2, 3))
+        out.sweeps[idx] = sol.sweeps
+    return tuple(np.concatenate(x) for x in zip(*kept, strict=True)) if kept else None
 
 
 @dataclass(frozen=True)
-class GridResult:
+class GridResult(_Circles):
     """The solved schedule grid: gains and nominal at every (tilt, speed, azimuth) point.
 
     Returned by :func:`build_grid` and written by :func:`gainsched.write_outputs`. The
@@ -553,24 +491,6 @@ class GridResult:
         of a level circle (the table then stores tilt-0 gains per azimuth).
     """
 
-    K: np.ndarray
-    S: np.ndarray
-    u_d: np.ndarray
-    phi_d: np.ndarray
-    tension: np.ndarray
-    reasons: np.ndarray
-    spectral_radius: np.ndarray
-    sweeps: np.ndarray
-    lin_samples: np.ndarray
-    lin_error: np.ndarray
-    steps: np.ndarray
-    dt: np.ndarray
-    offsets: np.ndarray
-    mode_tau: np.ndarray
-    mode_frequency: np.ndarray
-    mode_damping: np.ndarray
-    mode_shape: np.ndarray
-    gain_max_free: np.ndarray
     level_invariant: bool = True
 
     def gain_max(self) -> np.ndarray:

@@ -52,267 +52,35 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 
 from ..errors import InputError
-from ..model.effects import registered_effects, registered_effects_context
+from ..model.effects import registered_effects
 from ..model.reduced import Model
-from ..native.reproducible import blas_single_thread, ensure_blas_single_thread
+from ..native.reproducible import blas_single_thread
+from .certificate import (
+    ERROR_QUANTUM,
+    STABLE_RADIUS,
+    _Centre,
+    _check_centres,
+    _quanta,
+    midpoint_errors,
+)
+from .choice import GridChoice, grid_auto_lines
 from .grid import (
     CircleSolution,
-    GridResult,
     _solutions,
     check_effect_symmetries,
     check_gain_cap,
     grid_from_solutions,
     level_circle_invariant,
-    solve_circle,
 )
-from .lqr import monodromy, spectral_radius
 
 __all__ = ["refine_grid", "GridChoice", "midpoint_errors", "grid_auto_lines", "ERROR_QUANTUM"]
 
-#: decisions compare errors rounded to this (a fraction: 0.01 %) with the bound less one
-#: quantum, so that last-bit differences never change the grid
-ERROR_QUANTUM = 1e-4
 #: cells the envelope's edge runs through are halved until they span at most this share of
 #: their axis's range (the usable table then reaches that close to the edge)
 EDGE_SHARE = 1 / 16
 #: share of the bound the interpolation along the azimuth alone may take at a cell centre
 #: when the build chooses the azimuth count (the speed and tilt take the rest)
 AZIMUTH_SHARE = 0.5
-#: a midpoint loop counts as stable with a spectral radius below this
-STABLE_RADIUS = 1.0 - 1e-6
-
-
-def midpoint_errors(K, K_d, u, u_d, phi, phi_d, u_scale, phi_scale):
-    """Relative errors of interpolated gains and nominal against directly solved ones.
-
-    Parameters
-    ----------
-    K, K_d : ndarray, shape (m, 4, n)
-        Interpolated and direct gains at m azimuths, N per state unit.
-    u, u_d : ndarray, shape (m, 4)
-        Interpolated and direct nominal thrusts, N.
-    phi, phi_d : ndarray, shape (m,)
-        Interpolated and direct nominal roll, rad.
-    u_scale : float
-        The circle's largest nominal thrust magnitude, N.
-    phi_scale : float
-        The circle's largest nominal roll magnitude, rad (0: the roll error is absolute).
-
-    Returns
-    -------
-    gain, thrust, roll : ndarray, shape (m,)
-        ``||K - K_d||_F / ||K_d||_F`` (as ``gainsched check``), ``max |u - u_d| /
-        u_scale`` and ``|phi - phi_d| / phi_scale``.
-    """
-    gain = np.linalg.norm(K - K_d, axis=(-2, -1)) / np.linalg.norm(K_d, axis=(-2, -1))
-    thrust = np.abs(u - u_d).max(-1) / u_scale
-    roll = np.abs(phi - phi_d) / (phi_scale if phi_scale > 0 else 1.0)
-    return gain, thrust, roll
-
-
-def _quanta(err: float) -> float:
-    """An error in quanta of :data:`ERROR_QUANTUM`, rounded (inf stays inf)."""
-    return round(err / ERROR_QUANTUM) if math.isfinite(err) else math.inf
-
-
-@dataclass(frozen=True)
-class _Centre:
-    """The certificate of one cell: worst errors over its azimuth midpoints, the closed
-    loop along its centre circle with interpolated (``rho``) and direct gains, and the
-    error of the azimuth interpolation alone (direct gains at the grid azimuths)."""
-
-    gain: float = math.nan
-    thrust: float = math.nan
-    roll: float = math.nan
-    azimuth: float = math.nan
-    rho: float = math.nan
-    rho_direct: float = math.nan
-
-    @property
-    def usable(self) -> bool:
-        return math.isfinite(self.gain)
-
-    @property
-    def error(self) -> float:
-        return max(self.gain, self.thrust, self.roll)
-
-
-def _xi_linear(X, xs):
-    """Linear interpolation of samples ``X`` (n_xi, ...) at the uniform periodic azimuths
-    onto the azimuths ``xs`` (rad), as the runtime interpolates along xi."""
-    n_xi = X.shape[0]
-    pos = np.mod(xs, 2 * np.pi) * (n_xi / (2 * np.pi))
-    j = np.minimum(np.floor(pos).astype(int), n_xi - 1)
-    w = (pos - j).reshape((-1,) + (1,) * (X.ndim - 1))
-    return (1 - w) * X[j] + w * X[(j + 1) % n_xi]
-
-
-def _check_centres(config2, speed, tilts, corners, effects=(), dare_tilt0=True):
-    """One certificate job: the centre circles of the cells at one mid speed.
-
-    ``config2`` has twice the table's azimuth samples; ``tilts`` (rad) are the cells' mid
-    tilts; ``corners[i]`` the four corner circles' ``(K (4, n_xi, 4, n), u_d (4, n_xi,
-    4), phi_d (4, n_xi))``. Returns one :class:`_Centre` per tilt (all NaN when the direct
-    solve is infeasible)."""
-    ensure_blas_single_thread()
-    with registered_effects_context(effects):
-        sol, steps = solve_circle(config2, speed, tilts, keep_steps=True, dare_tilt0=dare_tilt0)
-    ok = list(np.flatnonzero(np.isfinite(sol.spectral_radius)))
-    out = []
-    for i in range(len(tilts)):
-        if i not in ok:
-            out.append(_Centre())
-            continue
-        K4, u4, phi4 = corners[i]
-        K_d, u_d, phi_d = sol.K[i, 1::2], sol.u_d[i, 1::2], sol.phi_d[i, 1::2]
-        u_scale, phi_scale = np.abs(sol.u_d[i]).max(), np.abs(sol.phi_d[i]).max()
-
-        def mid(X):  # centre of the cell (speed x tilt weights 1/4) at the azimuth midpoints
-            return 0.5 * (X + np.roll(X, -1, axis=1)).mean(axis=0)
-
-        gain, thrust, roll = midpoint_errors(mid(K4), K_d, mid(u4), u_d, mid(phi4), phi_d,
-                                             u_scale, phi_scale)
-        az = midpoint_errors(mid(sol.K[i, None, 0::2]), K_d, mid(sol.u_d[i, None, 0::2]), u_d,
-                             mid(sol.phi_d[i, None, 0::2]), phi_d, u_scale, phi_scale)
-        out.append(_Centre(float(gain.max()), float(thrust.max()), float(roll.max()),
-                           float(max(e.max() for e in az)), math.nan,
-                           float(sol.spectral_radius[i])))
-    if ok:  # the loops closed with the interpolated gains, all tilts at once
-        Ad, Bd, _ = steps
-        N = Ad.shape[-3]
-        xs = 2 * np.pi * np.arange(N) / N
-        K_steps = np.stack([_xi_linear(np.moveaxis(corners[i][0], 0, 1), xs).mean(axis=1)
-                            for i in ok])
-        rho = spectral_radius(monodromy(Ad, Bd, K_steps))
-        for b, i in enumerate(ok):
-            out[i] = replace(out[i], rho=float(rho[b]))
-    return out
-
-
-@dataclass(frozen=True)
-class GridChoice:
-    """The axes a build chose and what they cost (:func:`refine_grid`).
-
-    Attributes
-    ----------
-    config : Config
-        The config with the chosen breakpoints as lists (its text keeps the ranges as
-        comments): the table's config.
-    grid : GridResult
-        The grid solved on them.
-    bound : float
-        ``grid.max_interpolation_error``, a fraction.
-    speeds_spec, tilts_spec, azimuth_spec : str or None
-        The ranges as written (None: a list axis, or a fixed azimuth count, kept).
-    azimuth_error : float
-        The largest error of the interpolation along the azimuth alone at the cell
-        centres (direct gains at the azimuth samples against the midpoints; a fraction).
-    restarts : int
-        Times the azimuth count was doubled and the circles solved again.
-    dropped : int
-        Breakpoint circles solved at a smaller azimuth count, dropped at a restart.
-    gain_error, thrust_error, roll_error : float
-        The largest relative errors at the cell midpoints (fractions).
-    worst_rho : float
-        The largest closed-loop spectral radius along a midpoint circle with
-        interpolated gains.
-    worst_cell : tuple
-        ``(v_lo, v_hi, a_lo, a_hi)`` (m/s, deg) of the largest error.
-    cells, skipped : int
-        Cells certified; cells skipped (an infeasible corner or centre).
-    rounds : int
-        Refinement rounds.
-    circles : int
-        Breakpoint circles solved, each once (the chosen grid's).
-    reused : int
-        Breakpoint circles a round took from the earlier rounds instead of solving
-        them again (the reuse counter).
-    centres, centres_final : int
-        Centre circles solved (the certificate); of them, the chosen grid's usable
-        cells (the others belong to cells split later).
-    source_sha256 : str
-        SHA-256 of the config the build was given (with its ranges): the table's
-        ``config_sha256`` is the chosen config's, so this says which config the user
-        built it from (:meth:`~gainsched.schedule.tables.Table.built_from`).
-    """
-
-    config: object
-    grid: GridResult
-    bound: float
-    speeds_spec: str | None
-    tilts_spec: str | None
-    azimuth_spec: str | None
-    azimuth_error: float
-    restarts: int
-    dropped: int
-    gain_error: float
-    thrust_error: float
-    roll_error: float
-    worst_rho: float
-    worst_cell: tuple
-    cells: int
-    skipped: int
-    rounds: int
-    circles: int
-    reused: int
-    centres: int
-    centres_final: int
-    source_sha256: str = ""
-
-    @property
-    def max_error(self) -> float:
-        """The largest of the gain, thrust and roll errors (a fraction)."""
-        return max(self.gain_error, self.thrust_error, self.roll_error)
-
-    def record(self) -> dict:
-        """What the table records of the choice (JSON-able, ``grid_auto`` in the table)."""
-        g = self.config.grid
-        return {
-            "bound": self.bound,
-            "speeds": self.speeds_spec,
-            "tilts_deg": self.tilts_spec,
-            "azimuth_samples_range": self.azimuth_spec,
-            "azimuth_error": self.azimuth_error,
-            "restarts": self.restarts,
-            "dropped": self.dropped,
-            "speed_count": int(g.speeds.size),
-            "tilt_count": int(g.tilts.size),
-            "azimuth_samples": int(g.azimuth_samples),
-            "gain_error": self.gain_error,
-            "thrust_error": self.thrust_error,
-            "roll_error": self.roll_error,
-            "worst_rho": self.worst_rho,
-            "worst_cell": list(self.worst_cell),
-            "cells": self.cells,
-            "skipped": self.skipped,
-            "rounds": self.rounds,
-            "circles": self.circles,
-            "reused": self.reused,
-            "centres": self.centres,
-            "centres_final": self.centres_final,
-            "source_config_sha256": self.source_sha256,
-        }
-
-    def lines(self) -> list[str]:
-        """What ``gainsched build`` prints of the choice: the grid, then the errors met
-        and the cost as :func:`grid_auto_lines` renders the record."""
-        g = self.config.grid
-        tilts = np.rad2deg(g.tilts)
-
-        def source(spec, fixed="as listed"):
-            return f"chosen from {spec}" if spec else fixed
-
-        return [
-            f"grid chosen for {100 * self.bound:g} %: {g.speeds.size} speeds x {tilts.size} "
-            f"tilts = {g.speeds.size * tilts.size} circles, {g.azimuth_samples} azimuth "
-            f"samples ({source(self.azimuth_spec, 'as given')}; {self.rounds} rounds)",
-            f"  speeds (m/s, {source(self.speeds_spec)}): "
-            + ", ".join(f"{v:g}" for v in g.speeds),
-            f"  tilts (deg, {source(self.tilts_spec)}): " + ", ".join(f"{a:g}" for a in tilts),
-            *grid_auto_lines(self.record())[1:],
-        ]
-
-
 @dataclass
 class _Axis:
     """One axis during refinement: breakpoints in the config's unit (m/s or deg)."""
@@ -742,30 +510,6 @@ def refine_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridChoice:
                          "a range {min, max, max_count}; a list grid is built by build_grid")
     check_effect_symmetries(config)
     return _Refiner(config, n_jobs, progress, backend).run()
-
-
-def grid_auto_lines(record: dict) -> list[str]:
-    """A table's ``grid_auto`` record (:meth:`GridChoice.record`) as ``inspect`` and
-    ``check`` print it (``build`` prints all but the first line): the ranges, the errors
-    met at the cell midpoints, the cost."""
-    r = record
-    worst = max(r["gain_error"], r["thrust_error"], r["roll_error"])
-    v_lo, v_hi, a_lo, a_hi = r["worst_cell"]
-    return [
-        f"grid chosen by the build for {100 * r['bound']:g}% (docs/grid.md): speeds "
-        f"{r['speeds'] or 'as listed'}, tilts {r['tilts_deg'] or 'as listed'}, azimuth "
-        f"samples {r['azimuth_samples_range'] or 'as given'}",
-        f"  at {r['cells']} cell midpoints ({r['skipped']} skipped as infeasible): max "
-        f"error {100 * worst:.2f} % (gains {100 * r['gain_error']:.2f}, thrusts "
-        f"{100 * r['thrust_error']:.2f}, roll {100 * r['roll_error']:.2f}) in the cell "
-        f"{v_lo:g}-{v_hi:g} m/s x {a_lo:g}-{a_hi:g} deg; along the azimuth alone "
-        f"{100 * r['azimuth_error']:.2f} %; worst midpoint closed loop {r['worst_rho']:.5f}",
-        f"  cost: {r['circles'] + r['centres'] + r['dropped']} circles solved = "
-        f"{r['circles']} breakpoints, each once ({r['reused']} reused by later rounds) + "
-        f"{r['centres']} cell centres ({r['centres_final']} certify the chosen grid)"
-        + (f" + {r['dropped']} at a smaller azimuth count ({r['restarts']} restarts)"
-           if r["dropped"] else ""),
-    ]
 
 
 def _halvings(estimate: float, target: float) -> int:

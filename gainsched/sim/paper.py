@@ -292,33 +292,15 @@ def _effect_doc(name: str) -> str:
 
 
 def _rows(exps: list[Experiment], results: dict) -> list[Row]:
+    """The report's table rows: one block per kind of experiment, in the paper's order."""
     by_kind: dict[str, list] = {}
     for e in exps:
         by_kind.setdefault(e.kind, []).append(results[e.name])
     rows = []
-    hor = by_kind.get("horizontal", [])
-    if hor:
-        worst = max(hor, key=lambda r: r["rms_out_of_plane_m"])
-        each = ", ".join(f"{r['speed_mps']:g}: {1000 * r['rms_out_of_plane_m']:.2f}" for r in hor)
-        rows.append(Row(
-            "Sec. V.B", "RMS z error, horizontal circles 5-9 m/s (mocap 0.5 mm / 0.2 deg)",
-            "m", f"{RMS_Z_M} m", RMS_Z_M, worst["rms_out_of_plane_m"],
-            f"{worst['rms_out_of_plane_m']:.2g} m (worst; per speed m/s: mm {each})",
-            worst["rms_out_of_plane_m"] <= RMS_Z_M,
-            "no model error in the simulated plant",
-        ))
-    tilted = by_kind.get("tilted", [])
-    if tilted:
-        top = max(tilted, key=lambda r: r["tilt_deg"])
-        ok = all(r["slack_events"] == 0 and r["max_out_of_plane_m"] < 0.05 for r in tilted)
-        rows.append(Row(
-            "Sec. V.B", f"tilted circles at {top['speed_mps']:g} m/s", "deg",
-            "flown up to 40 deg", 40.0, top["tilt_deg"],
-            "; ".join(f"{r['tilt_deg']:g} deg: RMS z {r['rms_out_of_plane_m']:.2g} m, "
-                      f"saturated {100 * r['saturation_fraction']:.1f}%, "
-                      f"slack {r['slack_events']}" for r in tilted),
-            ok and top["tilt_deg"] >= 40.0,
-        ))
+    if by_kind.get("horizontal"):
+        rows.append(_row_horizontal(by_kind["horizontal"]))
+    if by_kind.get("tilted"):
+        rows.append(_row_tilted(by_kind["tilted"]))
     for r in by_kind.get("speedup", []):
         rows.append(Row(
             "Sec. V.B, eq. 20", "speed-up peak tangential acceleration", "m/s^2",
@@ -327,73 +309,114 @@ def _rows(exps: list[Experiment], results: dict) -> list[Row]:
             abs(r["peak_accel_mps2"] / SPEEDUP_PEAK - 1) <= ACCEL_TOL,
         ))
     for r in by_kind.get("braking", []):
-        hard = r["peak_accel_desired_mps2"] > 0.5 * (BRAKE_PEAK + BRAKE_PEAK_MAX)
-        peak = BRAKE_PEAK_MAX if hard else BRAKE_PEAK
-        fig = "Sec. V.B" if hard else "Fig. 4"
-        t = r["maneuver_time_s"]
-        rows.append(Row(
-            fig, f"braking {r['speed_mps']:g} -> {BRAKE_V1:g} m/s (peak {peak:g} m/s^2): time to "
-            f"reach "
-            f"{BRAKE_V1:g} +- {SPEED_TOL:g} m/s and stay", "s", f"< {BRAKE_TIME} s", BRAKE_TIME, t,
-            f"{_fmt(t, 's')} (desired {r['maneuver_time_desired_s']:.3g} s)",
-            None if t is None else t < BRAKE_TIME,
-        ))
-        rows.append(Row(
-            fig, "braking peak tangential deceleration", "m/s^2", f"{peak} m/s^2", peak,
-            r["peak_accel_mps2"],
-            f"{r['peak_accel_mps2']:.3g} m/s^2 (desired {r['peak_accel_desired_mps2']:.3g})",
-            abs(r["peak_accel_mps2"] / peak - 1) <= ACCEL_TOL,
-        ))
-        if not hard and r["roll_range_deg"] is not None:
-            lo, hi = r["roll_range_deg"]
-            dlo, dhi = r["roll_range_desired_deg"]
-            rows.append(Row(
-                "Fig. 4", "roll during braking", "deg", "plot only (Fig. 4, bottom)", None,
-                lo if abs(lo) > abs(hi) else hi,
-                f"{lo:.1f} .. {hi:.1f} deg (nominal {dlo:.1f} .. {dhi:.1f}; "
-                f"max error {r['max_roll_error_deg']:.2g} deg)", None,
-            ))
+        rows += _rows_braking(r)
     for r in by_kind.get("staircase", []):
-        rising = [p for p in r["plateaus"] if p["rising"]]  # Fig. 3: speeds going up
-        low = [p for p in rising if p["speed_mps"] <= GOOD_UP_TO]
-        high = [p for p in rising if p["speed_mps"] > GOOD_UP_TO]
-        worst = {k: max(sel, key=lambda p: abs(p["mean_speed_error_mps"])) if sel else None
-                 for k, sel in (("low", low), ("high", high))}
-        err = {k: None if w is None else abs(w["mean_speed_error_mps"]) for k, w in worst.items()}
-        effect = r["plant_effect"]
-        plant = "design plant" if effect is None else f"plant with {_effect_doc(effect)}"
-        if effect is None:
-            claims = (("low", "tracked well", err["low"] is not None and err["low"] <= TRACK_TOL),
-                      ("high", "tracking degrades (model error)", None))
-        else:
-            degrades = (err["high"] is not None and err["low"] is not None
-                        and err["high"] > TRACK_TOL and err["high"] > 2 * err["low"])
-            claims = (("low", "tracked well", err["low"] is not None and err["low"] <= TRACK_TOL),
-                      ("high", "tracking degrades (model error)", degrades))
-        for k, paper, agrees in claims:
-            w = worst[k]
-            if w is None:
-                continue
-            sel = low if k == "low" else high
-            label = f"<= {GOOD_UP_TO:g}" if k == "low" else f"> {GOOD_UP_TO:g}"
-            rows.append(Row(
-                "Fig. 3", f"speed staircase, {plant}: mean speed error on rising plateaus "
-                f"{label} m/s", "m/s", paper, None, w["mean_speed_error_mps"],
-                f"worst {w['mean_speed_error_mps']:+.3f} m/s at {w['speed_mps']:g} m/s "
-                f"(plateaus {', '.join(format(p['speed_mps'], 'g') for p in sel)} m/s)",
-                agrees,
-                "the design plant has no thrust loss at airspeed"
-                if effect is None and k == "high" else "",
-            ))
-        if effect is not None or r["max_speed_desired_mps"] < TOP_SPEED - SPEED_TOL:
-            continue  # (quick mode: not flown)
+        rows += _rows_staircase(r)
+    return rows
+
+
+def _row_horizontal(hor: list[dict]) -> Row:
+    """Sec. V.B: the RMS out-of-plane error of the horizontal circles (the worst)."""
+    worst = max(hor, key=lambda r: r["rms_out_of_plane_m"])
+    each = ", ".join(f"{r['speed_mps']:g}: {1000 * r['rms_out_of_plane_m']:.2f}" for r in hor)
+    return Row(
+        "Sec. V.B", "RMS z error, horizontal circles 5-9 m/s (mocap 0.5 mm / 0.2 deg)",
+        "m", f"{RMS_Z_M} m", RMS_Z_M, worst["rms_out_of_plane_m"],
+        f"{worst['rms_out_of_plane_m']:.2g} m (worst; per speed m/s: mm {each})",
+        worst["rms_out_of_plane_m"] <= RMS_Z_M,
+        "no model error in the simulated plant",
+    )
+
+
+def _row_tilted(tilted: list[dict]) -> Row:
+    """Sec. V.B: the tilted circles, flown up to 40 deg without slack."""
+    top = max(tilted, key=lambda r: r["tilt_deg"])
+    ok = all(r["slack_events"] == 0 and r["max_out_of_plane_m"] < 0.05 for r in tilted)
+    return Row(
+        "Sec. V.B", f"tilted circles at {top['speed_mps']:g} m/s", "deg",
+        "flown up to 40 deg", 40.0, top["tilt_deg"],
+        "; ".join(f"{r['tilt_deg']:g} deg: RMS z {r['rms_out_of_plane_m']:.2g} m, "
+                  f"saturated {100 * r['saturation_fraction']:.1f}%, "
+                  f"slack {r['slack_events']}" for r in tilted),
+        ok and top["tilt_deg"] >= 40.0,
+    )
+
+
+def _rows_braking(r: dict) -> list[Row]:
+    """Fig. 4 (or Sec. V.B for the hard brake): time to the lower speed, the peak
+    deceleration and the roll."""
+    hard = r["peak_accel_desired_mps2"] > 0.5 * (BRAKE_PEAK + BRAKE_PEAK_MAX)
+    peak = BRAKE_PEAK_MAX if hard else BRAKE_PEAK
+    fig = "Sec. V.B" if hard else "Fig. 4"
+    t = r["maneuver_time_s"]
+    rows = [Row(
+        fig, f"braking {r['speed_mps']:g} -> {BRAKE_V1:g} m/s (peak {peak:g} m/s^2): time to "
+        f"reach "
+        f"{BRAKE_V1:g} +- {SPEED_TOL:g} m/s and stay", "s", f"< {BRAKE_TIME} s", BRAKE_TIME, t,
+        f"{_fmt(t, 's')} (desired {r['maneuver_time_desired_s']:.3g} s)",
+        None if t is None else t < BRAKE_TIME,
+    ), Row(
+        fig, "braking peak tangential deceleration", "m/s^2", f"{peak} m/s^2", peak,
+        r["peak_accel_mps2"],
+        f"{r['peak_accel_mps2']:.3g} m/s^2 (desired {r['peak_accel_desired_mps2']:.3g})",
+        abs(r["peak_accel_mps2"] / peak - 1) <= ACCEL_TOL,
+    )]
+    if not hard and r["roll_range_deg"] is not None:
+        lo, hi = r["roll_range_deg"]
+        dlo, dhi = r["roll_range_desired_deg"]
         rows.append(Row(
-            "Sec. V.B", "top steady speed, centripetal load", "m/s", f"{TOP_SPEED:g} m/s (> 13 g)",
-            TOP_SPEED, r["max_speed_mps"],
-            f"{r['max_speed_mps']:.3g} m/s, {r['max_g_load']:.1f} g, "
-            f"max tension {r['max_tension_N']:.0f} N, slack {r['slack_events']}",
-            r["max_speed_mps"] >= TOP_SPEED - SPEED_TOL and r["slack_events"] == 0,
+            "Fig. 4", "roll during braking", "deg", "plot only (Fig. 4, bottom)", None,
+            lo if abs(lo) > abs(hi) else hi,
+            f"{lo:.1f} .. {hi:.1f} deg (nominal {dlo:.1f} .. {dhi:.1f}; "
+            f"max error {r['max_roll_error_deg']:.2g} deg)", None,
         ))
+    return rows
+
+
+def _rows_staircase(r: dict) -> list[Row]:
+    """Fig. 3: the mean speed error on the rising plateaus below and above
+    :data:`GOOD_UP_TO`, and (design plant, full mode) the top steady speed."""
+    rows = []
+    rising = [p for p in r["plateaus"] if p["rising"]]  # Fig. 3: speeds going up
+    low = [p for p in rising if p["speed_mps"] <= GOOD_UP_TO]
+    high = [p for p in rising if p["speed_mps"] > GOOD_UP_TO]
+    worst = {k: max(sel, key=lambda p: abs(p["mean_speed_error_mps"])) if sel else None
+             for k, sel in (("low", low), ("high", high))}
+    err = {k: None if w is None else abs(w["mean_speed_error_mps"]) for k, w in worst.items()}
+    effect = r["plant_effect"]
+    plant = "design plant" if effect is None else f"plant with {_effect_doc(effect)}"
+    if effect is None:
+        claims = (("low", "tracked well", err["low"] is not None and err["low"] <= TRACK_TOL),
+                  ("high", "tracking degrades (model error)", None))
+    else:
+        degrades = (err["high"] is not None and err["low"] is not None
+                    and err["high"] > TRACK_TOL and err["high"] > 2 * err["low"])
+        claims = (("low", "tracked well", err["low"] is not None and err["low"] <= TRACK_TOL),
+                  ("high", "tracking degrades (model error)", degrades))
+    for k, paper, agrees in claims:
+        w = worst[k]
+        if w is None:
+            continue
+        sel = low if k == "low" else high
+        label = f"<= {GOOD_UP_TO:g}" if k == "low" else f"> {GOOD_UP_TO:g}"
+        rows.append(Row(
+            "Fig. 3", f"speed staircase, {plant}: mean speed error on rising plateaus "
+            f"{label} m/s", "m/s", paper, None, w["mean_speed_error_mps"],
+            f"worst {w['mean_speed_error_mps']:+.3f} m/s at {w['speed_mps']:g} m/s "
+            f"(plateaus {', '.join(format(p['speed_mps'], 'g') for p in sel)} m/s)",
+            agrees,
+            "the design plant has no thrust loss at airspeed"
+            if effect is None and k == "high" else "",
+        ))
+    if effect is not None or r["max_speed_desired_mps"] < TOP_SPEED - SPEED_TOL:
+        return rows  # (quick mode: not flown)
+    rows.append(Row(
+        "Sec. V.B", "top steady speed, centripetal load", "m/s", f"{TOP_SPEED:g} m/s (> 13 g)",
+        TOP_SPEED, r["max_speed_mps"],
+        f"{r['max_speed_mps']:.3g} m/s, {r['max_g_load']:.1f} g, "
+        f"max tension {r['max_tension_N']:.0f} N, slack {r['slack_events']}",
+        r["max_speed_mps"] >= TOP_SPEED - SPEED_TOL and r["slack_events"] == 0,
+    ))
     return rows
 
 
@@ -510,7 +533,18 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
     from ..publish import write_atomic
 
     out_dir = Path(out_dir)
-    m, res = report.meta, report.results
+    lines = (_md_head(report) + _md_experiments(report.results, exps)
+             + _md_along(report.results, exps) + _md_envelope(report.meta))
+    lines += ["", "Every experiment folder holds log.csv / log.h5 (flight-log format), "
+              "metrics.json, speed_roll.png and path3d.png.", ""]
+    write_atomic(out_dir / "report.md", "\n".join(lines).encode())
+    text = json.dumps(_jsonable(report.to_json()), indent=2, sort_keys=True) + "\n"
+    write_atomic(out_dir / "report.json", text.encode())
+
+
+def _md_head(report: PaperReport) -> list[str]:
+    """The report's title, what was flown and the paper-versus-simulation table."""
+    m = report.meta
     yes = {True: "yes", False: "**no**", None: "-"}
     lines = [
         "# The paper's experiments in simulation",
@@ -536,6 +570,12 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
         [(r.figure, r.quantity, r.paper, r.simulated_text, yes[r.agrees], r.note)
          for r in report.rows],
     )
+    return lines
+
+
+def _md_experiments(res: dict, exps: list[Experiment]) -> list[str]:
+    """One section per kind of experiment: its table or its figures."""
+    lines = []
     kinds = {}
     for e in exps:
         kinds.setdefault(e.kind, []).append(e.name)
@@ -584,7 +624,12 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
               f"{1000 * p['rms_out_of_plane_m']:.3f}") for p in res[n]["plateaus"]],
         )
         lines += ["", f"![{n}]({n}/speed_roll.png)"]
-    lines += ["", "## Along the circle (every flight)", "",
+    return lines
+
+
+def _md_along(res: dict, exps: list[Experiment]) -> list[str]:
+    """The along-track table of every flight (held gains, time below the margin)."""
+    lines = ["", "## Along the circle (every flight)", "",
               "Azimuth error between continuous azimuths (a lap behind is -2 pi); along-track "
               "error = azimuth error x COG radius. Held: the lookup had no usable gains and "
               "the last good ones were flown. Below margin: the nominal tension under the "
@@ -597,6 +642,12 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
           f"{r['held_gains_s']:.2f}", f"{r['below_tension_margin_s']:.2f}")
          for n, r in ((e.name, res[e.name]) for e in exps)],
     )
+    return lines
+
+
+def _md_envelope(m: dict) -> list[str]:
+    """The table's flight envelope, when the report has one."""
+    lines = []
     if "envelope" in m:
         counts = ", ".join(f"{n} {c}" for c, n in m["envelope"].items())
         lines += ["", "## Flight envelope of the table", "",
@@ -605,11 +656,7 @@ def write_report(report: PaperReport, out_dir, exps: list[Experiment]) -> None:
                   "runs a motor out of range the table's nominal has pitch and yaw offsets "
                   "(docs/conventions.md, \"Attitude offsets\").", "",
                   "![flight envelope](envelope.png)"]
-    lines += ["", "Every experiment folder holds log.csv / log.h5 (flight-log format), "
-              "metrics.json, speed_roll.png and path3d.png.", ""]
-    write_atomic(out_dir / "report.md", "\n".join(lines).encode())
-    text = json.dumps(_jsonable(report.to_json()), indent=2, sort_keys=True) + "\n"
-    write_atomic(out_dir / "report.json", text.encode())
+    return lines
 
 
 def _jsonable(x):

@@ -130,6 +130,17 @@ def plot_result(res, out_dir) -> list[Path]:
 
     out_dir = Path(out_dir)
     err = tracking_errors(res)
+    paths = [out_dir / "speed_roll.png", out_dir / "path3d.png"]
+    for draw, path in zip((_speed_roll, _path3d), paths, strict=True):
+        fig = draw(plt, res, err)
+        fig.tight_layout()
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+    return paths
+
+
+def _speed_roll(plt, res, err):
+    """speed_roll.png of :func:`plot_result`: speed, its error, along-track error, roll."""
     name = res.scenario.name
     v, v_ref = res.z[:, 3] * res.r, res.z_d[:, 3] * res.r
     rms = lambda x: float(np.sqrt(np.mean(x * x)))  # noqa: E731
@@ -159,11 +170,12 @@ def plot_result(res, out_dir) -> list[Path]:
                           label=f"{cause} (left the table)" if a is ax[0] and k == 0 else None)
     if any(left_table_intervals(res).values()):
         ax[0].legend(fontsize=7)
-    fig.tight_layout()
-    paths = [out_dir / "speed_roll.png"]
-    fig.savefig(paths[-1], dpi=100)
-    plt.close(fig)
+    return fig
 
+
+def _path3d(plt, res, err):
+    """path3d.png of :func:`plot_result`: the 3-D path and the out-of-plane error."""
+    name = res.scenario.name
     fig = plt.figure(figsize=(12, 5.5))
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
     p = res.p_I
@@ -188,8 +200,4 @@ def plot_result(res, out_dir) -> list[Path]:
     ax.set_title(f"distance from the circle plane (max |.| "
                  f"{1000 * float(np.max(np.abs(err['out_of_plane_m']))):.3g} mm)")
     ax.grid(True, lw=0.3)
-    fig.tight_layout()
-    paths.append(out_dir / "path3d.png")
-    fig.savefig(paths[-1], dpi=100)
-    plt.close(fig)
-    return paths
+    return fig
