@@ -29,8 +29,6 @@ MODULES = {
     "gainsched/firmware/runtime.py": (885, "the runtime data and the two interpolators: "
                                       "to split with the table as the firmware's one "
                                       "source (issue 40)"),
-    "gainsched/model/effects.py": (1263, "the effects library, one class per effect: to "
-                                   "become a package of one module per family (issue 40)"),
     "gainsched/schedule/grid.py": (747, "the grid build and the periodic interpolation of "
                                    "the linearisation: to split (issue 40)"),
     "gainsched/schedule/refine.py": (830, "the automatic grid's refinement and its "
