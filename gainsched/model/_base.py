@@ -227,6 +227,9 @@ class Effect:
     #: without it cannot be compared with a model that has the effect, and diagnose does
     #: not offer the effect's candidates for it
     log_channel: ClassVar[str] = ""
+    #: the effect acts on the tether's stretch alone (:meth:`stretch`; no thrust, force,
+    #: torque or state): a diagnose fit of it re-evaluates the stretch axis only
+    stretch_only: ClassVar[bool] = False
 
     @classmethod
     def refusal(cls) -> str:
@@ -342,6 +345,20 @@ class Effect:
         refuses a fit that is implausible whatever its score."""
         return ""
 
+    def stretch(self, tension):
+        """The tether stretch this effect adds at the tether tension ``tension`` (..., N):
+        m, shape of ``tension``; None when it does not stretch the tether (every effect
+        but an empirical stretch law). It changes no force of the model: the comparison's
+        stretch axis (measured anchor-attachment distance minus the tether's length)
+        sees it, on top of the ``[tether] link``'s stretch."""
+        return None
+
+    def implausible_tension(self, tension_range) -> str:
+        """Why no real tether has the effect at these parameters over the flown
+        ``tension_range`` (``(lo, hi)``, N), in words; empty when it may (diagnose refuses
+        a fit that is implausible whatever its score, as for :meth:`implausible`)."""
+        return ""
+
     def drag_coefficients(self):
         """``(mu1, mu2)`` when the effect is a pure COG-velocity drag
         ``F = -(mu1 + mu2 |v|) v`` (N s/m, N s^2/m^2), else None.
@@ -351,6 +368,14 @@ class Effect:
         from the numerical trim and reaches the firmware through the table.
         """
         return None
+
+
+def tether_stretch_of(effects, tension):
+    """The tether stretch that ``effects`` add together at the tension ``tension`` (..., N)
+    (the sum of their :meth:`Effect.stretch`): m, shape of ``tension``, or None when none
+    of them stretches the tether."""
+    parts = [s for s in (e.stretch(tension) for e in effects) if s is not None]
+    return None if not parts else sum(parts[1:], parts[0])
 
 
 class _FlightTime(Effect):

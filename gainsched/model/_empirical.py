@@ -306,3 +306,81 @@ class ForceHorizontal(Effect):
         grow = (f", growing by {towards(self.e1, self.n1)} per {FORCE_SPEED_UNIT:g} m/s"
                 if self.e1 or self.n1 else "")
         return f"horizontal force {towards(self.e0, self.n0)} (from north, clockwise){grow}"
+
+
+#: the tension unit of :class:`TetherStretchSeries`' terms, N (its coefficients read as
+#: metres of stretch at that tension)
+TENSION_UNIT_N = 10.0
+#: highest power of the tension in :class:`TetherStretchSeries`
+TENSION_ORDER = 3
+#: how far (m) a stretch law may fall as the tension rises inside the flown tensions
+#: before it is no tether's (at least; 5 % of its rise over them when that is more):
+#: about the motion-capture noise of one position sample
+STRETCH_FALL_TOL_M = 5e-4
+
+
+class TetherStretchSeries(Effect):
+    """Empirical tether stretch in tension: the tether is longer than its ``[tether]
+    length`` by ``sum_k s_k (f / 10 N)^k`` m, k = 1..3, with f the tether tension (the
+    load cell's, or the radial equation's without one), on top of the stretch of the
+    ``[tether] link``.
+
+    No physical model behind it: a power series for a stretch residual that follows the
+    tension when no effect of the library explains it: a tether whose stretch is not
+    linear (a braided line that takes up its slack and stiffens, an elastomer that
+    softens), a knot or a spring in the line. Its first term is the static part of the
+    linear elasticity, ``s1 = 10 N / k``: it contains the ``tether_elasticity`` candidate
+    (``Refit.contains``; exactly at no damping, and to within the damping's lag of c / k
+    otherwise), so diagnose prefers the physical elasticity when it fits about as well.
+    Diagnose chooses its order held out. A stretch law is monotone: one that
+    falls as the tension rises over the flown tensions (by more than
+    :data:`STRETCH_FALL_TOL_M`, or 5 % of its rise) is no tether's and is refused.
+
+    It changes no force or torque of the model, only the predicted anchor-attachment
+    distance (the comparison's stretch axis), and a function of the tension is the same
+    in every quadrant (S1, S2 hold): a table can hold it, as it holds the elastic links,
+    built on the rigid tether of paper Sec. II. The simulator's plant flies the
+    ``[tether] link``; this law is not flown.
+    """
+
+    kind = "tether_stretch"
+    params = tuple(Param(f"s{k}", "m", 0.0, -0.5, 0.5,
+                         f"stretch per (tension / {TENSION_UNIT_N:g} N)^{k}", fit=(-0.1, 0.1))
+                   for k in range(1, TENSION_ORDER + 1))
+    empirical = True
+    stretch_only = True
+    fits = (Refit("tether_stretch", tuple(p.name for p in params),
+                  "empirical tether stretch, a power series in tension",
+                  orders=tuple(range(1, TENSION_ORDER + 1)),
+                  contains=("tether_elasticity",)),)
+
+    def stretch(self, tension):
+        f = np.asarray(tension)
+        f = np.where(np.real(f) > 0, f, 0.0)  # a slack tether does not stretch
+        return power_series(f / TENSION_UNIT_N,
+                            [0.0, *(self.values[f"s{k}"] for k in range(1, TENSION_ORDER + 1))])
+
+    def drag_coefficients(self):
+        # no force at all: the zero drag, so the closed-form nominal (and the firmware's
+        # compiled feed-forward) still covers a model with it, the same bits as without
+        return 0.0, 0.0
+
+    def implausible_tension(self, tension_range) -> str:
+        lo, hi = (max(float(x), 0.0) for x in tension_range)
+        f = np.linspace(lo, hi, 129)
+        s = self.stretch(f)
+        fall = np.maximum.accumulate(s) - s  # how far it has fallen below its running peak
+        k = int(np.argmax(fall))
+        tol = max(STRETCH_FALL_TOL_M, 0.05 * float(np.ptp(s)))
+        if fall[k] <= tol:
+            return ""
+        return (f"tether_stretch falls by {1e3 * fall[k]:.2g} mm as the tension rises to "
+                f"{f[k]:.1f} N inside the flown {lo:.1f}-{hi:.1f} N (no tether shortens when "
+                "pulled harder)")
+
+    def law(self) -> str:
+        used = [k for k in range(1, TENSION_ORDER + 1) if self.values[f"s{k}"]]
+        terms = " ".join(f"{1e3 * self.values[f's{k}']:+.3g} (f/{TENSION_UNIT_N:g} N)"
+                         + (f"^{k}" if k > 1 else "") for k in used)
+        at = ", ".join(f"{1e3 * float(self.stretch(f)):.3g} mm at {f:g} N" for f in (10.0, 40.0))
+        return f"tether stretch ({terms or '0'}) mm, f the tension: {at}"

@@ -36,16 +36,21 @@ from ._base import (
     _FlightTime,
     circle_to_inertial,
     norm,
+    tether_stretch_of,
     wind_in_circle_frame,
 )
 from ._empirical import (
     AIRSPEED_ORDER,
     AZIMUTH_HARMONICS,
     FORCE_SPEED_UNIT,
+    STRETCH_FALL_TOL_M,
+    TENSION_ORDER,
+    TENSION_UNIT_N,
     TIME_ORDER,
     TIME_UNIT_S,
     ForceAirspeed,
     ForceHorizontal,
+    TetherStretchSeries,
     ThrustAzimuth,
     ThrustMotorCurve,
     ThrustTimeSeries,
@@ -79,6 +84,11 @@ __all__ = [
     "ForceAirspeed",
     "FORCE_SPEED_UNIT",
     "AIRSPEED_ORDER",
+    "TetherStretchSeries",
+    "TENSION_UNIT_N",
+    "TENSION_ORDER",
+    "STRETCH_FALL_TOL_M",
+    "tether_stretch_of",
     "wind_in_circle_frame",
     "circle_to_inertial",
     "fundamental_azimuth",
@@ -572,7 +582,7 @@ EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
     for cls in (Drag, RotorDrag, ThrustScale, MotorEfficiency, ThrustTime, ThrustVoltage,
                 ThrustPolynomial, ThrustMomentum, MotorLag, ThrustAzimuth, ThrustTimeSeries,
-                ThrustMotorCurve, Wind, ForceAirspeed, ForceHorizontal)
+                ThrustMotorCurve, Wind, ForceAirspeed, ForceHorizontal, TetherStretchSeries)
 }
 
 
