@@ -17,8 +17,9 @@ import numpy as np
 import pytest
 
 from gainsched.analysis.compare import compare
-from gainsched.analysis.diagnose import CANDIDATES, diagnose
+from gainsched.analysis.diagnose import CANDIDATES, apply_candidate, diagnose
 from gainsched.analysis.diagnose._problem import _Problem
+from gainsched.config import config_from_text
 from gainsched.model.effects import TENSION_UNIT_N
 from gainsched.schedule.tables import load_table
 from gainsched.sim.campaign import HIDDEN, campaign, default_flights
@@ -26,6 +27,12 @@ from gainsched.sim.loop import table_scheduler
 
 from support import CAMPAIGN_DURATION as DURATION
 from support import PAPER_H5
+
+
+def d_base_vectors(d):
+    """The weighted residual per flight of the diagnosed config (its base model)."""
+    c = d.base
+    return _Problem(d.config, c.measured, c.segs, c.noise, c.residuals).base_vectors()
 
 
 def _excess_rms_fall(r) -> float:
@@ -63,7 +70,7 @@ def test_the_series_of_order_one_is_the_static_elasticity(paper_config, load_cel
 
 @pytest.mark.slow
 def test_an_elastic_tether_with_its_effect_left_out_gets_the_empirical_stretch(paper_config,
-                                                                              fly):
+                                                                              fly, tmp_path):
     """The elastic tether (k = 3000 N/m) with tether_elasticity left out: the tether
     length and attachment offset explain under half of the stretch residual above noise
     and leave its structure, so no physical effect is accepted; the verdict is "no
@@ -82,3 +89,13 @@ def test_an_elastic_tether_with_its_effect_left_out_gets_the_empirical_stretch(p
     assert a.values["s1"] == pytest.approx(TENSION_UNIT_N / 3000.0, rel=0.10)
     assert _excess_rms_fall(a) >= 0.8, a.excess_explained
     assert not a.implausible
+    # --apply writes the law as [effects.tether_stretch], and the fitted config's own
+    # diagnosis no longer sees the stretch residual (the law taken off the stretch axis)
+    new = config_from_text(apply_candidate(paper_config, a), str(tmp_path / "fitted.toml"))
+    law = next(s for s in new.effects if s.name == "tether_stretch").param_dict()
+    assert law["s1"] == pytest.approx(a.values["s1"], rel=1e-3)
+    prob = _Problem(new, d.base.measured, d.base.segs, d.base.noise,
+                    d.base.residuals)
+    before = np.sqrt(np.mean(np.concatenate([f["stretch"] for f in d_base_vectors(d)]) ** 2))
+    after = np.sqrt(np.mean(np.concatenate([f["stretch"] for f in prob.base_vectors()]) ** 2))
+    assert after <= 0.2 * before, (before, after)
