@@ -27,8 +27,6 @@ MODULES = {
     "gainsched/firmware/runtime.py": (885, "the runtime data and the two interpolators: "
                                       "to split with the table as the firmware's one "
                                       "source (issue 40)"),
-    "gainsched/model/effects.py": (1263, "the effects library, one class per effect: to "
-                                   "become a package of one module per family (issue 40)"),
 }
 
 #: "module:function" -> (its ceiling in lines, why it is longer than MAX_FUNCTION_LINES)

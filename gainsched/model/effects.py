@@ -25,13 +25,39 @@ from __future__ import annotations
 
 import contextlib
 import math
-from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
-from ._vec import dot, mtv, mv
-from .rotations import up_C_from_tilt
+from ._base import (
+    Effect,
+    Kinematics,
+    Param,
+    Refit,
+    _FlightTime,
+    circle_to_inertial,
+    norm,
+    tether_stretch_of,
+    wind_in_circle_frame,
+)
+from ._empirical import (
+    AIRSPEED_ORDER,
+    AZIMUTH_HARMONICS,
+    FORCE_SPEED_UNIT,
+    STRETCH_FALL_TOL_M,
+    TENSION_ORDER,
+    TENSION_UNIT_N,
+    TIME_ORDER,
+    TIME_UNIT_S,
+    ForceAirspeed,
+    ForceHorizontal,
+    TetherStretchSeries,
+    ThrustAzimuth,
+    ThrustMotorCurve,
+    ThrustTimeSeries,
+    fundamental_azimuth,
+    power_series,  # noqa: F401  (the series helper, importable here as before)
+)
+from ._vec import mv
 
 __all__ = [
     "Param",
@@ -58,6 +84,11 @@ __all__ = [
     "ForceAirspeed",
     "FORCE_SPEED_UNIT",
     "AIRSPEED_ORDER",
+    "TetherStretchSeries",
+    "TENSION_UNIT_N",
+    "TENSION_ORDER",
+    "STRETCH_FALL_TOL_M",
+    "tether_stretch_of",
     "wind_in_circle_frame",
     "circle_to_inertial",
     "fundamental_azimuth",
@@ -71,343 +102,6 @@ __all__ = [
     "air_velocity",
     "norm",
 ]
-
-_EPS2 = 1e-24  # keeps sqrt differentiable at exactly zero speed; changes values by < 1e-12 m/s
-
-
-#: the build's reason for refusing an effect of flight time (``Effect.time_varying``)
-_TIME_REFUSAL = "changes with flight time, which a table (periodic in the azimuth) cannot hold"
-
-
-def norm(v):
-    """Euclidean norm over the last axis, complex-step safe (no ``abs``)."""
-    return np.sqrt(dot(v, v) + _EPS2)
-
-
-@dataclass(frozen=True)
-class Param:
-    """A physical parameter of an effect.
-
-    Attributes
-    ----------
-    name, unit : str
-    default : float
-        Value when a config leaves it out.
-    lower, upper : float
-        The range a config may set (checked when it is loaded).
-    doc : str
-    fit : (float, float) or None
-        The plausible range ``gainsched diagnose`` searches when it fits the parameter
-        to flight logs (an estimate pinned to its edge is implausible); None: the
-        config range.
-    scale : {"lin", "log"}
-        How a 1-D search samples the fit range.
-    """
-
-    name: str
-    unit: str
-    default: float
-    lower: float
-    upper: float
-    doc: str = ""
-    fit: tuple[float, float] | None = None
-    scale: str = "lin"
-
-    @property
-    def fit_range(self) -> tuple[float, float]:
-        """``fit`` or the config range."""
-        return self.fit if self.fit is not None else (self.lower, self.upper)
-
-
-@dataclass(frozen=True)
-class Refit:
-    """One way ``gainsched diagnose`` may fit an effect to flight logs (one candidate).
-
-    Attributes
-    ----------
-    name : str
-        Candidate name (unique over all effects).
-    params : tuple of str
-        The effect's parameters the candidate fits; the others keep their values.
-    doc : str
-        One line for the report.
-    search : str or None
-        The parameter found by a bounded 1-D search (nonlinear, e.g. a time constant);
-        the others by least squares at each search value.
-    affine : bool
-        Whether the residual is affine in the least-squares parameters (one step is
-        exact); False: a few Gauss-Newton steps.
-    orders : tuple of int
-        Nested fits of the first ``n`` parameters for each ``n`` (a series truncated at
-        several orders); diagnose keeps the one with the best held-out score after a
-        BIC penalty per parameter. Empty: all ``params``.
-    contains : tuple of str
-        Candidates of other effects whose every model is one of this candidate's
-        (``thrust_scale`` in ``motor_efficiency``: four equal efficiencies). Diagnose
-        then prefers the smaller one unless this one fits clearly better (the parsimony
-        of nested fits), and does not call them twins.
-    """
-
-    name: str
-    params: tuple[str, ...]
-    doc: str
-    search: str | None = None
-    affine: bool = True
-    orders: tuple[int, ...] = ()
-    contains: tuple[str, ...] = ()
-
-
-def wind_in_circle_frame(wind_I, alpha, gamma=0.0):
-    """The air velocity ``wind_I`` (..., 3), m/s, in I expressed in C:
-    ``R_IC^T wind_I`` with ``R_IC = Rz(gamma) Rx(alpha)`` (docs/conventions.md), shape
-    broadcast of ``wind_I`` (..., 3) and ``alpha``, ``gamma`` (...) + (3,), m/s.
-
-    Complex-step safe (``wind_I`` may be complex; the angles are taken as given)."""
-    w = np.asarray(wind_I)
-    a, g = np.asarray(alpha), np.asarray(gamma)
-    ca, sa, cg, sg = np.cos(a), np.sin(a), np.cos(g), np.sin(g)
-    wx, wy, wz = w[..., 0], w[..., 1], w[..., 2]
-    u0 = cg * wx + sg * wy  # Rz(gamma)^T w
-    u1 = cg * wy - sg * wx
-    return np.stack(np.broadcast_arrays(u0, ca * u1 + sa * wz, ca * wz - sa * u1), -1)
-
-
-def circle_to_inertial(v_C, alpha, gamma=0.0):
-    """``R_IC v_C`` with ``R_IC = Rz(gamma) Rx(alpha)`` (docs/conventions.md): a vector
-    ``v_C`` (..., 3) of C expressed in I, shape the broadcast with ``alpha``, ``gamma``
-    (...) + (3,); the inverse of :func:`wind_in_circle_frame`. Complex-step safe."""
-    v = np.asarray(v_C)
-    a, g = np.asarray(alpha), np.asarray(gamma)
-    ca, sa, cg, sg = np.cos(a), np.sin(a), np.cos(g), np.sin(g)
-    t1 = ca * v[..., 1] - sa * v[..., 2]  # Rx(alpha) v
-    t2 = sa * v[..., 1] + ca * v[..., 2]
-    return np.stack(np.broadcast_arrays(cg * v[..., 0] - sg * t1, sg * v[..., 0] + cg * t1,
-                                        t2), -1)
-
-
-@dataclass(frozen=True)
-class Kinematics:
-    """What an effect may look at (all batched over leading dimensions).
-
-    Attributes
-    ----------
-    R_CB : ndarray, shape (..., 3, 3)
-        Body-to-circle rotation.
-    v_C : ndarray, shape (..., 3), m/s
-        COG velocity in C relative to the ground (the anchor). Effects of the airspeed
-        use :attr:`v_air_C`, which equals it when there is no wind.
-    omega_B : ndarray, shape (..., 3), rad/s
-        Body rates.
-    p_C : ndarray, shape (..., 3), m
-        COG position in C (the tether anchor at the origin).
-    alpha : float or ndarray, shape (...), rad
-        Tilt of the circle plane: C is turned by ``alpha`` about the inertial x axis
-        (paper eq. 1).
-    gamma : float or ndarray, shape (...), rad
-        Heading of the circle plane, ``R_IC = Rz(gamma) Rx(alpha)`` (docs/conventions.md).
-        It enters the physics through the wind only (an inertial direction).
-    wind_I : ndarray, shape (3,) or (..., 3), m/s, or None
-        Velocity of the air in I (x east, y north, z up), from the model's effects
-        (:meth:`Effect.air_velocity`); None: still air.
-    """
-
-    R_CB: np.ndarray
-    v_C: np.ndarray
-    omega_B: np.ndarray
-    p_C: np.ndarray
-    alpha: float | np.ndarray
-    gamma: float | np.ndarray = 0.0
-    wind_I: np.ndarray | None = None
-
-    @property
-    def v_B(self):
-        """COG velocity in B relative to the ground, shape (..., 3), m/s."""
-        return mtv(self.R_CB, self.v_C)
-
-    @property
-    def wind_C(self):
-        """The air velocity in C, ``R_IC^T wind_I``, shape (..., 3), m/s (zeros: still air)."""
-        if self.wind_I is None:
-            return np.zeros(3)
-        return wind_in_circle_frame(self.wind_I, self.alpha, self.gamma)
-
-    @property
-    def v_air_C(self):
-        """COG velocity relative to the air in C, ``v_C - wind_C``, shape (..., 3), m/s:
-        what every airspeed-dependent effect sees. Still air: ``v_C`` itself (bit for bit)."""
-        if self.wind_I is None:
-            return self.v_C
-        return self.v_C - self.wind_C
-
-    @property
-    def v_air_B(self):
-        """COG velocity relative to the air in B, shape (..., 3), m/s (still air: :attr:`v_B`)."""
-        if self.wind_I is None:
-            return self.v_B
-        return mtv(self.R_CB, self.v_air_C)
-
-    @property
-    def up_C(self):
-        """The inertial up direction ``R_IC^T (0, 0, 1) = (0, sin alpha, cos alpha)`` in C,
-        shape (..., 3) (broadcast against the batch of ``alpha``)."""
-        return up_C_from_tilt(self.alpha)
-
-    @property
-    def height(self):
-        """COG height above the anchor, ``(R_IC p_C)_z``, shape (...), m."""
-        return dot(self.p_C, self.up_C)
-
-
-class Effect:
-    """Base class. Subclasses set ``kind``, ``params`` and override hooks."""
-
-    kind: ClassVar[str] = ""
-    params: ClassVar[tuple[Param, ...]] = ()
-    n_states: ClassVar[int] = 0
-    doc: ClassVar[str] = ""
-    #: how ``gainsched diagnose`` fits the effect; empty: see :meth:`refits`
-    fits: ClassVar[tuple[Refit, ...]] = ()
-    #: an empirical law (no physical model behind it): diagnose fits it only when no
-    #: physical candidate explains the residual, and reports its law (:meth:`law`)
-    empirical: ClassVar[bool] = False
-    #: the effect changes with flight time (its states are not the motion's): a table,
-    #: which is periodic in the azimuth, cannot hold it (the build refuses it)
-    time_varying: ClassVar[bool] = False
-    #: why a gain table cannot hold the effect (it breaks what the table relies on: the
-    #: periodicity in azimuth, the symmetries S1 and S2, no heading axis), one clause for
-    #: the build's refusal; empty: a table can hold it (:meth:`refusal`)
-    table_refusal: ClassVar[str] = ""
-    #: the flight-log column (a key of ``FlightLog.optional``, e.g. ``"vbat"``) whose
-    #: samples give the effect's states in a log (:meth:`states_from_log`) instead of an
-    #: integration of :meth:`state_derivative` from the commands; empty: none. A log
-    #: without it cannot be compared with a model that has the effect, and diagnose does
-    #: not offer the effect's candidates for it
-    log_channel: ClassVar[str] = ""
-
-    @classmethod
-    def refusal(cls) -> str:
-        """Why no table can hold this effect (``table_refusal``; for an effect that is
-        only marked ``time_varying``, the flight-time reason), or "" when one can."""
-        if cls.table_refusal or not cls.time_varying:
-            return cls.table_refusal
-        return _TIME_REFUSAL
-
-    @classmethod
-    def refits(cls) -> tuple[Refit, ...]:
-        """The diagnose candidates of this effect: ``fits``, or one candidate named after
-        the effect that fits every parameter with no affine assumption (a bounded 1-D
-        search when there is one parameter, Gauss-Newton steps otherwise).
-
-        When ``fits`` fit the parameters one at a time, a joint candidate named after the
-        effect follows them: every parameter any of them fits, together (drag: mu1 and
-        mu2 at once, as the paper's Fig. 6 fit), affine when they all are and none
-        searches. An effect whose parameters are all wrong is then one candidate, not
-        several that each explain part of it.
-        """
-        if cls.fits:
-            names = tuple(dict.fromkeys(n for r in cls.fits for n in r.params))
-            if len(names) < 2 or any(set(r.params) == set(names) for r in cls.fits):
-                return cls.fits
-            affine = all(r.affine and r.search is None for r in cls.fits)
-            doc = f"{cls.kind.replace('_', ' ')}: {', '.join(names)} fitted together"
-            return (*cls.fits, Refit(cls.kind, names, doc, affine=affine))
-        line = (cls.__doc__ or cls.kind).strip().splitlines()[0]
-        names = tuple(p.name for p in cls.params)
-        return (Refit(cls.kind, names, line, search=names[0] if len(names) == 1 else None,
-                      affine=False),)
-
-    def __init__(self, **values: float):
-        names = {p.name for p in self.params}
-        unknown = set(values) - names
-        if unknown:
-            raise TypeError(f"{self.kind}: unknown parameter(s) {sorted(unknown)}")
-        vals = {p.name: float(values.get(p.name, p.default)) for p in self.params}
-        object.__setattr__(self, "values", vals)
-
-    def __getattr__(self, name):
-        try:
-            return self.__dict__["values"][name]
-        except KeyError:
-            raise AttributeError(name) from None
-
-    def __setattr__(self, name, value):
-        raise AttributeError("effects are immutable; use replace()")
-
-    def replace(self, **values: float) -> Effect:
-        """A copy with some parameters changed."""
-        return type(self)(**{**self.values, **values})
-
-    def __repr__(self):
-        inner = ", ".join(f"{k}={v:g}" for k, v in self.values.items())
-        return f"{type(self).__name__}({inner})"
-
-    def __eq__(self, other):
-        return type(self) is type(other) and self.values == other.values
-
-    def __hash__(self):
-        return hash((type(self), tuple(self.values.items())))
-
-    # ---- hooks (defaults: no contribution) ----
-    def modify_thrust(self, T, kin: Kinematics, x):
-        """Per-motor thrust after this effect, shape (..., 4), N. ``x``: own states."""
-        return T
-
-    def wrench(self, T, kin: Kinematics):
-        """(force at the COG in C, shape (..., 3), N; torque in B, shape (..., 3), N m) or None."""
-        return None
-
-    def air_velocity(self):
-        """The velocity of the air in I this effect sets, shape (3,), m/s, or None (the
-        model sums them into :attr:`Kinematics.wind_I`)."""
-        return None
-
-    def state_derivative(self, x, u, kin: Kinematics):
-        """Time derivative of the effect's own states, shape (..., n_states)."""
-        raise NotImplementedError
-
-    def steady_states(self, T_actual, T_actual_dot):
-        """States and command that produce the thrust trajectory ``T_actual`` (nominal use).
-
-        Returns ``(x, u_cmd)``, shapes (..., n_states) and (..., 4).
-        """
-        raise NotImplementedError
-
-    def states_from_held_commands(self, t, T_cmd):
-        """The effect's states along a log whose commands ``T_cmd`` (N, 4), N, are held
-        over each sample interval ``t`` (N,), s, started in steady state: shape
-        (N, n_states), or None when the effect has no exact form (the caller then
-        integrates :meth:`state_derivative`)."""
-        return None
-
-    def states_from_log(self, values):
-        """The effect's states along a log from the samples ``values`` (N, ...) of its
-        ``log_channel``: shape (N, n_states). Only for effects with a ``log_channel``."""
-        raise NotImplementedError
-
-    def mirror(self):
-        """How the effect's states map under the direction mirror S2, shape (n_states, n_states)."""
-        return np.eye(self.n_states)
-
-    def law(self) -> str:
-        """The effect's law in words with its numbers (reports of empirical effects)."""
-        return repr(self)
-
-    def implausible(self, airspeed_range) -> str:
-        """Why no real vehicle has the effect at these parameters over the flown
-        ``airspeed_range`` (``(lo, hi)``, m/s), in words; empty when it may. Diagnose
-        refuses a fit that is implausible whatever its score."""
-        return ""
-
-    def drag_coefficients(self):
-        """``(mu1, mu2)`` when the effect is a pure COG-velocity drag
-        ``F = -(mu1 + mu2 |v|) v`` (N s/m, N s^2/m^2), else None.
-
-        The closed-form nominal (paper eqs. 15-18) and the firmware's compiled
-        feed-forward cover such effects exactly; for any other effect the nominal comes
-        from the numerical trim and reaches the firmware through the table.
-        """
-        return None
-
 
 def polynomial_drag(mu1: float, mu2: float):
     """The tangential drag of ``F = -(mu1 + mu2 |v|) v`` (paper eq. 10) for the closed form.
@@ -552,29 +246,6 @@ class Wind(Effect):
         frm = math.degrees(math.atan2(-self.east, -self.north)) % 360.0
         return (f"wind {speed:.3g} m/s from {frm:.0f} deg (east {self.east:+.3g}, "
                 f"north {self.north:+.3g} m/s)")
-
-
-class _FlightTime(Effect):
-    """An effect whose one state is the flight time (``t' = 1``, from 0 at the start of a
-    simulated flight; in a flight log the log's time axis, ``t`` of
-    ``gainsched-flightlog/1``). The thrust then changes with time, so a table cannot
-    hold it (``time_varying``: the build refuses it)."""
-
-    n_states = 1
-    time_varying = True
-    table_refusal = _TIME_REFUSAL
-
-    def state_derivative(self, x, u, kin):
-        return np.ones_like(x)
-
-    def steady_states(self, T_actual, T_actual_dot):
-        return np.zeros((*np.shape(T_actual)[:-1], 1)), T_actual  # at t = 0: no change
-
-    def states_from_held_commands(self, t, T_cmd):
-        return np.asarray(t, dtype=float)[:, None]
-
-    def mirror(self):
-        return np.eye(1)
 
 
 class ThrustTime(_FlightTime):
@@ -907,295 +578,11 @@ class MotorLag(Effect):
         return lfilter([1 - a], [1, -a], T_cmd, axis=0, zi=(a * T_cmd[0])[None, :])[0]
 
 
-def fundamental_azimuth(kin: Kinematics):
-    """``(cos xi_f, sin xi_f)`` of the COG's azimuth mapped to the table's stored domain
-    (tilt >= 0, positive circulation) by the symmetries S1 and S2 (docs/symmetry.md),
-    each shape (...); complex-step safe (no ``arctan2``; the maps are decided on real parts).
-
-    The azimuth is that of the COG in C, ``xi = atan2(p_y, p_x)``; the direction of
-    circulation is the sign of ``(p_C x v_C)_z``. S1 (negative tilt) turns it by pi, S2
-    (negative circulation) mirrors it to ``pi - xi``: the same maps as
-    :func:`gainsched.model.symmetry.fundamental_from_query`, so an effect of ``xi_f``
-    keeps both symmetries by construction.
-    """
-    x, y = kin.p_C[..., 0], kin.p_C[..., 1]
-    rho = np.sqrt(x * x + y * y + _EPS2)
-    c, s = x / rho, y / rho
-    neg_tilt = np.real(np.asarray(kin.alpha)) < 0
-    c, s = np.where(neg_tilt, -c, c), np.where(neg_tilt, -s, s)
-    backwards = np.real(x * kin.v_C[..., 1] - y * kin.v_C[..., 0]) < 0
-    return np.where(backwards, -c, c), s
-
-
-#: harmonics of :class:`ThrustAzimuth`
-AZIMUTH_HARMONICS = 8
-
-
-class ThrustAzimuth(Effect):
-    """Empirical thrust factor in azimuth: every motor's thrust times
-    ``1 + a0 + sum_k (a_k cos k xi + b_k sin k xi)``, k = 1..8, with xi the azimuth of
-    the COG in C mapped to tilt >= 0 and positive circulation (:func:`fundamental_azimuth`).
-
-    No physical model behind it: a Fourier series for what diagnose finds locked to the
-    azimuth when no effect of the library explains it (an own wake, a draft in the hall).
-    Identified on the flown circles (one direction, tilts >= 0), it is extended to the
-    other quadrants by the table's symmetries.
-    """
-
-    kind = "thrust_azimuth"
-    params = (
-        Param("a0", "-", 0.0, -0.5, 0.5, "mean relative thrust change"),
-        *(Param(f"{ab}{k}", "-", 0.0, -0.5, 0.5, f"{'cos' if ab == 'a' else 'sin'} {k} xi "
-                "coefficient") for k in range(1, AZIMUTH_HARMONICS + 1) for ab in "ab"),
-    )
-    empirical = True
-    fits = (Refit("thrust_azimuth", tuple(p.name for p in params),
-                  "empirical thrust factor, a Fourier series in azimuth",
-                  orders=tuple(1 + 2 * k for k in range(1, AZIMUTH_HARMONICS + 1))),)
-
-    def factor(self, kin: Kinematics):
-        """The thrust factor, shape (...)."""
-        c1, s1 = fundamental_azimuth(kin)
-        f = 1.0 + self.a0 + 0 * c1
-        c, s = c1, s1
-        for k in range(1, AZIMUTH_HARMONICS + 1):
-            a, b = self.values[f"a{k}"], self.values[f"b{k}"]
-            if a or b:
-                f = f + a * c + b * s
-            c, s = c * c1 - s * s1, s * c1 + c * s1  # cos, sin of (k + 1) xi
-        return f
-
-    def modify_thrust(self, T, kin, x):
-        return T * self.factor(kin)[..., None]
-
-    def law(self) -> str:
-        xi = np.deg2rad(np.arange(0.0, 360.0, 0.5))
-        kin = Kinematics(np.eye(3), np.stack([-np.sin(xi), np.cos(xi), 0 * xi], -1),
-                         np.zeros(3), np.stack([np.cos(xi), np.sin(xi), 0 * xi], -1), 0.0)
-        d = self.factor(kin) - 1.0
-        lo, hi = int(np.argmin(d)), int(np.argmax(d))
-        used = [k for k in range(1, AZIMUTH_HARMONICS + 1)
-                if self.values[f"a{k}"] or self.values[f"b{k}"]]
-        return (f"thrust x (1 + Fourier series in azimuth, {max(used, default=0)} "
-                f"harmonics): {d[lo]:+.1%} at {np.rad2deg(xi[lo]):.0f} deg, "
-                f"{d[hi]:+.1%} at {np.rad2deg(xi[hi]):.0f} deg, mean {self.a0:+.1%}")
-
-
-def power_series(x, coefficients):
-    """``sum_k c_k x^k``, k = 0, 1, ..., shape of ``x`` (the empirical series in time and
-    airspeed); term by term with the powers built up (complex-step safe)."""
-    f, xk = coefficients[0] + 0 * x, 1.0
-    for c in coefficients[1:]:
-        xk = xk * x
-        f = f + c * xk
-    return f
-
-
-#: highest power of the flight time in :class:`ThrustTimeSeries`
-TIME_ORDER = 3
-#: the time unit of its terms, s (coefficients read as relative change per minute)
-TIME_UNIT_S = 60.0
-
-
-class ThrustTimeSeries(_FlightTime):
-    """Empirical thrust factor in flight time: every motor's thrust times
-    ``1 + sum_k c_k (t / 60 s)^k``, k = 1..3, with t the flight time (the state of
-    :class:`_FlightTime`).
-
-    No physical model behind it: a power series for a residual that drifts with time
-    when no effect of the library explains it (a battery whose sag is not linear, a
-    motor warming up, a draft that builds up). Diagnose chooses its order held out. A
-    table cannot hold it (it changes with time): simulate and diagnose with it.
-    """
-
-    kind = "thrust_time_series"
-    params = tuple(Param(f"c{k}", "-", 0.0, -2.0, 2.0,
-                         f"coefficient of (t / {TIME_UNIT_S:g} s)^{k}")
-                   for k in range(1, TIME_ORDER + 1))
-    empirical = True
-    fits = (Refit("thrust_time_series", tuple(p.name for p in params),
-                  "empirical thrust factor, a power series in flight time",
-                  orders=tuple(range(1, TIME_ORDER + 1))),)
-
-    def factor(self, t):
-        """The thrust factor at flight time ``t`` (s), shape of ``t``."""
-        return power_series(np.asarray(t) / TIME_UNIT_S,
-                            [1.0, *(self.values[f"c{k}"] for k in range(1, TIME_ORDER + 1))])
-
-    def modify_thrust(self, T, kin, x):
-        return T * self.factor(x[..., 0])[..., None]
-
-    def law(self) -> str:
-        used = [k for k in range(1, TIME_ORDER + 1) if self.values[f"c{k}"]]
-        terms = " ".join(f"{self.values[f'c{k}']:+.3g} (t/min)" + (f"^{k}" if k > 1 else "")
-                         for k in used)
-        return (f"thrust x (1 {terms}): {self.c1 / TIME_UNIT_S:+.2%} per second at the start "
-                f"of a flight, {self.factor(10.0) - 1:+.1%} after 10 s")
-
-
-class ThrustMotorCurve(Effect):
-    """Empirical thrust curve per motor: motor ``i`` gives ``1 + a_i + b_i T_i`` times
-    its commanded thrust ``T_i`` (N), and its reaction torque with it.
-
-    No physical model behind it: each motor's static-test map corrected by a line in its
-    own thrust, for a body-torque residual that follows one motor when no effect of the
-    library explains it. Its first order (``a_i`` only) is one constant factor per
-    motor. Unequal motors break the direction mirror S2 (docs/symmetry.md): the build
-    refuses it; simulate and diagnose with it.
-    """
-
-    kind = "thrust_motor"
-    params = (*(Param(f"a{i}", "-", 0.0, -0.5, 0.5, f"motor {i}: relative thrust change")
-                for i in range(1, 5)),
-              *(Param(f"b{i}", "1/N", 0.0, -0.1, 0.1,
-                      f"motor {i}: relative thrust change per N of its thrust")
-                for i in range(1, 5)))
-    empirical = True
-    fits = (Refit("thrust_motor", tuple(p.name for p in params),
-                  "empirical thrust curve per motor, 1 + a_i + b_i T_i", orders=(4, 8),
-                  contains=("motor_efficiency", "thrust_scale")),)
-
-    def modify_thrust(self, T, kin, x):
-        a = np.array([self.values[f"a{i}"] for i in range(1, 5)])
-        b = np.array([self.values[f"b{i}"] for i in range(1, 5)])
-        return T * (1.0 + a + b * T)
-
-    def law(self) -> str:
-        a = np.array([self.values[f"a{i}"] for i in range(1, 5)])
-        b = np.array([self.values[f"b{i}"] for i in range(1, 5)])
-        i = int(np.argmax(np.abs(a - np.median(a))))
-        others = ", ".join(f"motor {k + 1} {a[k]:+.1%}" for k in range(4) if k != i)
-        slope = (f"; per N of its thrust: {', '.join(f'{v:+.2%}' for v in b)}"
-                 if np.any(b) else "")
-        return f"motor {i + 1} thrust {a[i]:+.1%} ({others}){slope}"
-
-
-#: the airspeed unit of the empirical forces' speed terms (:class:`ForceAirspeed`,
-#: :class:`ForceHorizontal`), m/s (the coefficients read as newtons at that airspeed)
-FORCE_SPEED_UNIT = 10.0
-#: highest power of the airspeed in :class:`ForceAirspeed`
-AIRSPEED_ORDER = 3
-
-
-class ForceAirspeed(Effect):
-    """Empirical force against the air velocity: ``F = -(sum_k f_k s^k) u``, k = 0..3, N,
-    with ``s = |v_air| / 10 m/s`` and ``u`` the unit vector of the air velocity.
-
-    No physical model behind it: a power series in the airspeed for a residual along the
-    track that grows with speed when no effect of the library explains it (a body whose
-    drag is not the paper's law, eq. 10, a fairing, a payload). Its terms k = 1, 2 are
-    the paper's drag, ``f1 = 10 m/s mu1``, ``f2 = (10 m/s)^2 mu2``. Diagnose chooses its
-    order held out. It depends on the airspeed alone, so it keeps the table's symmetries
-    and a table can hold it.
-    """
-
-    kind = "force_airspeed"
-    params = tuple(Param(f"f{k}", "N", 0.0, -20.0, 20.0,
-                         f"force against the air velocity per (airspeed / "
-                         f"{FORCE_SPEED_UNIT:g} m/s)^{k}")
-                   for k in range(AIRSPEED_ORDER + 1))
-    empirical = True
-    fits = (Refit("force_airspeed", tuple(p.name for p in params),
-                  "empirical force against the air velocity, a power series in airspeed",
-                  orders=tuple(range(1, AIRSPEED_ORDER + 2))),)
-
-    def magnitude(self, speed):
-        """The force's size at airspeed ``speed`` (m/s), N, shape of ``speed``."""
-        return power_series(np.asarray(speed) / FORCE_SPEED_UNIT,
-                            [self.values[f"f{k}"] for k in range(AIRSPEED_ORDER + 1)])
-
-    def wrench(self, T, kin):
-        v = kin.v_air_C
-        speed = norm(v)
-        F = -(self.magnitude(speed) / speed)[..., None] * v
-        return F, np.zeros_like(F)
-
-    def law(self) -> str:
-        used = [k for k in range(AIRSPEED_ORDER + 1) if self.values[f"f{k}"]]
-        terms = " ".join(f"{self.values[f'f{k}']:+.3g}" + ("" if k == 0 else " s" if k == 1
-                                                           else f" s^{k}") for k in used)
-        return (f"force against the air velocity ({terms}) N, s = airspeed / "
-                f"{FORCE_SPEED_UNIT:g} m/s: {self.magnitude(5.0):.3g} N at 5 m/s, "
-                f"{self.magnitude(15.0):.3g} N at 15 m/s")
-
-
-_EN = {"e": "east", "n": "north"}
-
-
-class ForceHorizontal(Effect):
-    """Empirical horizontal force at the COG fixed in I:
-    ``F_I = (e0 + e1 s, n0 + n1 s, 0) + s (u . (e2, n2, 0)) u`` N, (east, north, up),
-    with ``s = |v_air| / 10 m/s`` the airspeed in units of 10 m/s and ``u`` the unit
-    vector of the air velocity, turned into each flight's circle frame by
-    ``R_IC = Rz(gamma) Rx(alpha)`` (docs/conventions.md).
-
-    No physical model behind it: a push from one inertial direction that may grow with
-    speed, for a residual locked to the inertial azimuth when no effect of the library
-    explains it (a wind, a draft in the hall, a tether that drags sideways). On a level
-    circle it is the first harmonic of the along-track and radial residual in the
-    inertial azimuth; on tilted circles it has the direction the flights share. Diagnose
-    chooses its order held out: a constant force, one growing with speed, and one along
-    the velocity that grows with its component along ``(e2, n2)`` (what a drag
-    quadratic in the airspeed adds in a wind, to first order in the wind). Like
-    the wind it comes from an inertial direction, so no table can hold it (no heading
-    axis; the symmetries S1 and S2 break): simulate and diagnose with it.
-    """
-
-    kind = "force_horizontal"
-    params = (
-        Param("e0", "N", 0.0, -20.0, 20.0, "force towards east"),
-        Param("n0", "N", 0.0, -20.0, 20.0, "force towards north"),
-        Param("e1", "N", 0.0, -20.0, 20.0,
-              f"force towards east per {FORCE_SPEED_UNIT:g} m/s of airspeed"),
-        Param("n1", "N", 0.0, -20.0, 20.0,
-              f"force towards north per {FORCE_SPEED_UNIT:g} m/s of airspeed"),
-        Param("e2", "N", 0.0, -20.0, 20.0, f"force along the velocity per "
-              f"{FORCE_SPEED_UNIT:g} m/s of airspeed, per unit of its east component"),
-        Param("n2", "N", 0.0, -20.0, 20.0, f"force along the velocity per "
-              f"{FORCE_SPEED_UNIT:g} m/s of airspeed, per unit of its north component"),
-        Param("d0", "N", 0.0, -20.0, 20.0, "force against the air velocity, whatever its "
-              "direction"),
-        *(Param(f"q{a}{b}", "N", 0.0, -20.0, 20.0, f"force towards {_EN[a]} per unit of the "
-                f"air velocity's {_EN[b]} direction component") for a in "en" for b in "en"),
-    )
-    empirical = True
-    table_refusal = ("comes from an inertial direction, which breaks the tilt-sign and "
-                     "direction symmetries (S1, S2) the table's query maps rely on, and a "
-                     "table has no heading axis")
-    fits = (Refit("force_horizontal", tuple(p.name for p in params),
-                  "empirical horizontal force from a fixed inertial direction",
-                  orders=(2, 4, 6, 7, 11)),)
-
-    def force_I(self, kin: Kinematics):
-        """The force in I, shape (..., 3), N."""
-        v = kin.v_air_C
-        speed = norm(v)
-        s = speed / FORCE_SPEED_UNIT
-        u = circle_to_inertial(v / speed[..., None], kin.alpha, kin.gamma)  # direction in I
-        ue, un = u[..., 0], u[..., 1]
-        along = s * (self.e2 * ue + self.n2 * un) - self.d0
-        east = self.e0 + self.e1 * s + self.qee * ue + self.qen * un + along * ue
-        north = self.n0 + self.n1 * s + self.qne * ue + self.qnn * un + along * un
-        return np.stack(np.broadcast_arrays(east, north, along * u[..., 2]), -1)
-
-    def wrench(self, T, kin):
-        F = wind_in_circle_frame(self.force_I(kin), kin.alpha, kin.gamma)
-        return F, np.zeros_like(F)
-
-    def law(self) -> str:
-        def towards(e, n):
-            return (f"{math.hypot(e, n):.3g} N towards "
-                    f"{math.degrees(math.atan2(e, n)) % 360.0:.0f} deg")
-        grow = (f", growing by {towards(self.e1, self.n1)} per {FORCE_SPEED_UNIT:g} m/s"
-                if self.e1 or self.n1 else "")
-        return f"horizontal force {towards(self.e0, self.n0)} (from north, clockwise){grow}"
-
-
 EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
     for cls in (Drag, RotorDrag, ThrustScale, MotorEfficiency, ThrustTime, ThrustVoltage,
                 ThrustPolynomial, ThrustMomentum, MotorLag, ThrustAzimuth, ThrustTimeSeries,
-                ThrustMotorCurve, Wind, ForceAirspeed, ForceHorizontal)
+                ThrustMotorCurve, Wind, ForceAirspeed, ForceHorizontal, TetherStretchSeries)
 }
 
 

@@ -38,7 +38,8 @@ that would separate them. Multi-parameter candidates report their parameter corr
 **Beyond the library**: when no physical candidate passes while something is there
 to explain (a residual above the noise floor, or significant binned structure of
 :mod:`gainsched.analysis.structure` below it), the empirical candidates (effects
-marked ``empirical``, e.g. the azimuth thrust series) are fitted too; a series'
+marked ``empirical``, e.g. the azimuth thrust series, or the tether stretch in tension,
+whose law :mod:`._problem` takes off the stretch axis) are fitted too; a series'
 order is chosen by leave-one-flight-out SSE with the one-standard-error rule
 (:func:`_choose_order`). At the noise floor with significant structure, candidates
 are judged by the share of that binned structure they remove on held-out flights

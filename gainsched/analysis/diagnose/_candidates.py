@@ -153,7 +153,9 @@ class EffectCandidate(Candidate):
     def variant(self, cfg, theta):
         vals = dict(zip((p.name for p in self.params), map(float, theta), strict=True))
         new = dataclasses.replace(cfg, effects=_specs_with(cfg, self.kind, vals))
-        return CandidateModel(new)
+        # an effect of the tether's stretch alone changes the stretch axis only
+        return CandidateModel(new, frozenset({"stretch"}) if EFFECTS[self.kind].stretch_only
+                              else None)
 
     def apply_text(self, text, cfg, theta, comments, header, keep=frozenset()):
         vals = dict(zip((p.name for p in self.params), map(float, theta), strict=True))

@@ -433,12 +433,14 @@ def _effect_words(prob, cand, fitted: Config) -> tuple[str, tuple]:
     """An empirical law, or a physical effect's own words (the weak motor), of the
     candidate or of the parts of a joint one, in the ``fitted`` config; and what no such
     effect could be (:meth:`~gainsched.model.effects.Effect.implausible` over the
-    flights' airspeeds): ``(law, implausible)``."""
+    flights' airspeeds, :meth:`~gainsched.model.effects.Effect.implausible_tension` over
+    their tensions): ``(law, implausible)``."""
     kinds = [k for k in (getattr(c, "kind", None) for c in getattr(cand, "parts", (cand,)))
              if k is not None]
     effects = [e for e in Model(fitted).effects if e.kind in kinds]
     law = "; ".join(e.law() for e in effects
                     if EFFECTS[e.kind].empirical or EFFECTS[e.kind].law is not Effect.law)
     implausible = tuple(why for e in effects
-                        for why in [e.implausible(prob.airspeed_range)] if why)
+                        for why in [e.implausible(prob.airspeed_range),
+                                    e.implausible_tension(prob.tension_range)] if why)
     return law, implausible
