@@ -19,6 +19,7 @@ __all__ = [
     "lqr_system",
     "discretize",
     "expm_batched",
+    "periodic_interp",
     "lqr_state_names",
     "STATE_NAMES",
     "REDUCED_NAMES",
@@ -127,3 +128,37 @@ def discretize(A, B, dt):
     M[..., :n, n:] = B * dt
     E = expm_batched(M)
     return E[..., :n, :n], E[..., :n, n:]
+
+
+def periodic_interp(X, N):
+    """Trigonometric interpolation of M equally spaced samples of periodic functions to N.
+
+    The same interpolant as ``scipy.signal.resample(X, N, axis=1)`` (for even M < N:
+    the Nyquist term split evenly between +M/2 and -M/2), evaluated as one matrix
+    product of the N x M basis ``cos(j theta_k), sin(j theta_k)`` with the Fourier
+    coefficients. The FFT of length N that resample does costs more than the product
+    at every control rate tried and grows faster than N when N has large prime
+    factors (N is the step count per period, not a chosen length); the product is
+    linear in N. Angles are reduced exactly in integers (``j k mod N``), so the basis
+    is accurate to rounding.
+
+    Parameters
+    ----------
+    X : ndarray, shape (b, M, ...)   samples at azimuths 2 pi m / M, M even
+    N : int   number of output samples, N > M
+
+    Returns
+    -------
+    ndarray, shape (b, N, ...)   values at azimuths 2 pi k / N (a view; the steps are the
+        slowest axis in memory, the points next: each step's blocks are contiguous)
+    """
+    b, M = X.shape[:2]
+    h = M // 2
+    Y = np.moveaxis(X, 1, 0).reshape(M, -1)
+    F = np.fft.rfft(Y, axis=0) / M  # (h + 1, R)
+    coef = np.concatenate([F[:1].real, 2.0 * F[1:h].real, F[h:].real, -2.0 * F[1:h].imag])
+    r = (np.arange(N)[:, None] * np.arange(h + 1)[None, :]) % N  # j k mod N, exact
+    angle = 2.0 * np.pi / N * np.arange(N)
+    basis = np.concatenate([np.cos(angle)[r], np.sin(angle)[r[:, 1:h]]], axis=1)
+    out = (basis @ coef).reshape((N, b) + X.shape[2:])
+    return np.moveaxis(out, 0, 1)
