@@ -229,10 +229,11 @@ def _initial_guess(model, path, alpha):
 
 
 def _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, tol=1e-12, max_iter=20,
-                  offsets=None):
+                  offsets=None, res=None):
     """Per-point Newton on the four thrusts for the xi'' and omega' equations (phi fixed):
     the thrusts (n, 4), N. The points are independent, so a point stops when its residual
-    is below ``tol`` (relative to max(1, max |T|)) and the rest go on alone."""
+    is below ``tol`` (relative to max(1, max |T|)) and the rest go on alone. ``res``: the
+    node-equation residuals (n, 5) at ``T`` if the caller has them."""
     T = np.array(T, dtype=float)
     idx = np.arange(T.shape[0])
 
@@ -241,13 +242,14 @@ def _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, tol=1e-12, max_iter=2
                 None if offsets is None else tuple(tuple(x[i] for x in o) for o in offsets))
 
     for _ in range(max_iter):
-        res = _local(model, *at(idx))[0][:, 1:]
+        res = (_local(model, *at(idx))[0] if res is None else res)[:, 1:]
         moving = np.abs(res).max(1) >= tol * max(1.0, np.abs(T).max())
         if not moving.any():
             break
         idx, res = idx[moving], res[moving]
         Jl = _local_jacobians(model, *at(idx), thrust_only=True)[:, 1:]
         T[idx] -= np.linalg.solve(Jl, res[..., None])[..., 0]
+        res = None
     return T
 
 
@@ -349,7 +351,7 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
         pkey = (key, N_FOURIER, t.tobytes())  # the same circle, nodes and samples
         if pkey not in polished:  # None: the interpolant meets the model at these samples
             polished[pkey] = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T,
-                                           offsets=off) if _rough(res, xd) else None
+                                           offsets=off, res=res) if _rough(res, xd) else None
         if polished[pkey] is not None:  # else the thrusts sample by sample
             T = polished[pkey]
             res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
@@ -366,7 +368,7 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
         T_dot = spl(t, nu=1) @ T_n
         res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
         if _rough(res, xd):
-            T = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off)
+            T = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off, res=res)
             res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
     u = T
     z_dot = sdot
