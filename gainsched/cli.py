@@ -582,8 +582,10 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
 def inspect(table, out_dir, as_json):
     """Summarise a gain table: grid, feasibility map (speed m/s x tilt deg), gain ranges,
     worst closed-loop spectral radius; with --out, the flight envelope as a PNG and JSON."""
+    from .analysis.progress import stage
     from .firmware.codegen import flash_summary
     from .publish import check_out_dir
+    from .schedule.envelope import write_envelope
     from .schedule.nominal import REASONS
     from .schedule.refine import grid_auto_lines
     from .schedule.tables import load_table
@@ -599,8 +601,11 @@ def inspect(table, out_dir, as_json):
         summary = {**table_summary(t, source=str(table)), "c_prefix": c_identifier(t.name)}
         click.echo(json.dumps(summary, indent=2, sort_keys=True))
         if out_dir is not None:
-            _write_envelope(t, table, out_dir, quiet=True)
+            write_envelope(t, table, out_dir)
         return
+    with _progress(f"inspect {t.name}", 1 + (out_dir is not None), "stage") as bar:
+        flash = stage(bar, "runtime code size (compiling)", flash_summary, t)
+        envelope = out_dir and stage(bar, "envelope.png", write_envelope, t, table, out_dir)
     click.echo(f"{table}: {t.attrs['schema']}, config {t.name} (sha256 {t.config_sha256[:12]}), "
                f"tool {t.attrs['tool_version']}, terminal cost {t.attrs['terminal']}")
     tilts = ", ".join(f"{x:g}" for x in np.rad2deg(t.tilt))
@@ -626,7 +631,7 @@ def inspect(table, out_dir, as_json):
         col = K[..., j][np.isfinite(K[..., j])]
         if col.size:
             click.echo(f"    {nm:>10s}: {col.min():9.3f} .. {col.max():9.3f}")
-    for line in flash_summary(t):
+    for line in flash:
         click.echo(f"  {line}")
     rho = t.spectral_radius
     if not np.any(np.isfinite(rho)):
@@ -639,26 +644,10 @@ def inspect(table, out_dir, as_json):
     for line in mode_lines(t):
         click.echo(f"  {line}")
     if out_dir is not None:
-        _write_envelope(t, table, out_dir)
+        click.echo(envelope)
 
 
 _ENVELOPE = ["envelope.png", "envelope.json"]
-
-
-def _write_envelope(t, table, out_dir, quiet=False) -> None:
-    """envelope.png and envelope.json of the loaded table ``t`` into ``out_dir`` (one set)."""
-    from .publish import publish
-    from .schedule.envelope import envelope_from_table, envelope_png
-
-    env = envelope_from_table(t)
-    summary = {"table": str(table), "config": t.name, **env.to_json()}
-    paths = publish(out_dir, {
-        "envelope.png": envelope_png(env),
-        "envelope.json": (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode(),
-    }, where="--out")
-    if not quiet:
-        counts = ", ".join(f"{n} {c}" for c, n in env.counts().items())
-        click.echo(f"  envelope: {counts} -> {', '.join(str(p) for p in paths)}")
 
 
 @cli.command()
@@ -1351,6 +1340,7 @@ def convert(log, out_path, map_path, config_path, trust):
     """Convert a PX4 ULog or a ROS 2 bag to the project's flight-log format
     (docs/flight-log.md) for inspection, and say what was mapped to what."""
     from .analysis.logs import convert_log
+    from .analysis.progress import on_bar, reporting
     from .config import load_config
     from .publish import check_out_file
     from .resources import config_path as shipped
@@ -1361,8 +1351,10 @@ def convert(log, out_path, map_path, config_path, trust):
     cfg = load_config(config_path) if config_path else None
     thrust_max = cfg.vehicle.thrust_max if cfg is not None else None
     check_out_file(out_path, "-o")
-    report, segs = convert_log(log, out_path, channel_map=cmap, thrust_max=thrust_max,
-                               config=cfg, trust=trust)
+    with _progress(f"convert {log.name}") as bar, reporting(on_bar(bar)):
+        report, segs = convert_log(log, out_path, channel_map=cmap, thrust_max=thrust_max,
+                                   config=cfg, trust=trust)
+        bar.set_postfix_str("written")
     for line in report:
         click.echo("  " + line)
     n = sum(len(s) for s in segs)

@@ -27,6 +27,8 @@ COMMANDS = {
                 r"compare paper: 100%\|.*\| 7/7 .*(step/s|s/step)"),
     "check": (["check", str(PAPER_H5), "--speed-stride", "9"],
               r"check paper: 100%\|.*\| 2/2 .*(speed/s|s/speed)"),
+    "inspect": (["inspect", str(PAPER_H5), "-o", "flights"],
+                r"inspect paper: 100%\|.*\| 2/2 .*(stage/s|s/stage), envelope.png\]"),
 }
 
 

@@ -48,6 +48,7 @@ import numpy as np
 from ..actuators import thrust_from_command
 from ..errors import InputError
 from .channelmap import ChannelMap
+from .progress import listener, report, watch_file
 
 __all__ = ["Topic", "ConvertedLog", "FOREIGN_FORMATS", "foreign_format", "read_topics",
            "convert_topics"]
@@ -141,7 +142,11 @@ def _ulog_topics(path: Path, wanted: dict[str, set[str]], optional=frozenset()
     from pyulog import ULog
 
     try:
-        ulog = ULog(str(path), message_name_filter_list=sorted(wanted))
+        if listener() is None:
+            ulog = ULog(str(path), message_name_filter_list=sorted(wanted))
+        else:  # the bytes parsed, watched on the open file
+            with open(path, "rb") as fh, watch_file(fh, path.stat().st_size, "read ULog"):
+                ulog = ULog(fh, message_name_filter_list=sorted(wanted))
     except Exception as exc:  # pyulog raises several types for a damaged file
         raise InputError(path, "", f"not a readable ULog ({type(exc).__name__}: {exc})") from None
     have = {d.name: d for d in ulog.data_list if d.multi_id == 0}
@@ -195,7 +200,11 @@ def _bag_topics(path: Path, wanted: dict[str, set[str]], stamp: str,
         times: dict[str, list[float]] = {t: [] for t in wanted}
         vals: dict[str, dict[str, list[float]]] = {t: {f: [] for f in wanted[t]} for t in wanted}
         checked: set[str] = set()
-        for conn, timestamp, raw in reader.messages(connections=conns):
+        total = sum(c.msgcount for c in conns)
+        report("read bag", 0, total, "msg")
+        for i, (conn, timestamp, raw) in enumerate(reader.messages(connections=conns)):
+            if i % 1000 == 999:
+                report("read bag", i + 1, total, "msg")
             msg = reader.deserialize(raw, conn.msgtype)
             topic = conn.topic
             if topic not in checked:
@@ -216,6 +225,7 @@ def _bag_topics(path: Path, wanted: dict[str, set[str]], stamp: str,
                 vals[topic][f].append(_field_of(msg, f))
     finally:
         reader.close()
+    report("read bag", total, total, "msg")
     out = {}
     for topic in wanted:
         order = np.argsort(np.asarray(times[topic]), kind="stable")

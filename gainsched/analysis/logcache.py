@@ -37,6 +37,7 @@ from ..native import cache_dir
 from ..publish import write_atomic
 from .channelmap import ChannelMap
 from .foreign import ConvertedLog, convert_topics, read_topics
+from .progress import report
 
 __all__ = ["converted_log", "log_cache_key"]
 
@@ -141,6 +142,7 @@ def converted_log(path, cmap: ChannelMap, thrust_max: float | None = None) -> Co
         if entry.is_file() and (conv := _load(entry)) is not None:
             return conv
     topics, params = read_topics(path, cmap)
+    report("convert")
     conv = convert_topics(path, topics, params, cmap, thrust_max=thrust_max)
     if entry is not None:
         _store(entry, conv)

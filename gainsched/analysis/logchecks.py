@@ -61,6 +61,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.rotations import matrix_from_quaternion
+from .progress import report
 
 __all__ = ["CHECKS", "RATIO_TOL", "QUAT_ALONG_MIN", "Figures", "figures", "check_log",
            "thrust_units", "trusted"]
@@ -371,6 +372,7 @@ def check_log(path, t, p_I, q, T_cmd, optional: dict, meta: dict, *, config=None
     if config is not None:
         kw = {"mass": config.vehicle.mass, "g": config.g,
               "thrust_scale": _thrust_scale(config)}
+    report("check channels")
     fig = figures(t, p_I, q, T_cmd, optional, meta, gap_factor=gap_factor, **kw)
 
     def fail(check, where, message):

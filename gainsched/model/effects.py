@@ -58,6 +58,7 @@ from ._empirical import (
     power_series,  # noqa: F401  (the series helper, importable here as before)
 )
 from ._vec import mv
+from .momentum import induced_velocity
 
 __all__ = [
     "Param",
@@ -471,7 +472,7 @@ class ThrustMomentum(Effect):
         # root of g(v) = v^2 ((v + vz)^2 + vxy^2) - vh^4 in the bracket [0, vh + max(0, -vz)]
         # (g < 0 at 0, >= 0 at the top): Newton, bisection where a step leaves the bracket
         # (vortex-ring states)
-        v = _induced_velocity(vh, vz, vxy2)
+        v = induced_velocity(vh, vz, vxy2)
         lam = v + vz  # inflow through the disk
         lam0, eps = 0.5 * vh, 0.02 * vh  # smooth max(lam, lam0), complex-step safe
         lam = 0.5 * (lam + lam0 + np.sqrt((lam - lam0) ** 2 + eps * eps))
@@ -479,73 +480,6 @@ class ThrustMomentum(Effect):
 
     def modify_thrust(self, T, kin, x):
         return T * self.ratio(T, kin.v_air_B)
-
-
-def _newton_bisect(v, lo, hi, vh2, vz, vxy2):
-    """One safeguarded Newton step for g(v) = v^2 ((v + vz)^2 + vxy^2) - vh^4 (real parts
-    decide, so complex-step perturbations ride along): (v, lo, hi). A Newton step that
-    stays in the closed bracket is taken (a converged step of zero included), else the
-    bracket is bisected."""
-    w = v + vz
-    g = v * v * (w * w + vxy2) - vh2 * vh2
-    dg = 2 * v * (w * w + vxy2) + 2 * v * v * w
-    pos = np.real(g) > 0
-    hi = np.where(pos, v, hi)
-    lo = np.where(pos, lo, v)
-    good = np.real(dg) > 0
-    newton = v - g / np.where(good, dg, 1.0)
-    nr = np.real(newton)
-    ok = good & (nr >= np.real(lo)) & (nr <= np.real(hi))
-    return np.where(ok, newton, 0.5 * (lo + hi)), lo, hi
-
-
-def _induced_velocity(vh, vz, vxy2, tol=1e-12, max_iter=80):
-    """Induced velocity v_i of :class:`ThrustMomentum`, broadcast shape of the inputs: the
-    largest root of g(v) = v^2 ((v + vz)^2 + vxy^2) - vh^4 in [0, vh + max(0, -vz)].
-
-    g' = 2 v (2 v^2 + 3 v vz + vz^2 + vxy^2) >= 0 on v > 0 when ``vz >= 0`` or ``8 vxy^2 >=
-    vz^2`` (the bracket's minimum over v is ``vxy^2 - vz^2 / 8``): there g has one root and
-    Newton starts from Glauert's estimate ``vh^2 / |(vxy, vh + vz)|`` (exact in hover and
-    in fast forward flight; about five steps to 1e-12). Elsewhere (descent along the rotor
-    axis, the vortex ring) there may be three roots, and it starts from the bracket's top,
-    so that the largest is found.
-    """
-    vh, vz, vxy2 = np.broadcast_arrays(vh, vz, vxy2)
-    vh2 = vh * vh
-    hi = vh + 0.5 * (np.sqrt(vz * vz + 1e-12) - vz)
-    lo = np.zeros_like(hi)
-    glauert = vh2 / np.sqrt(vxy2 + (vh + vz) ** 2 + 1e-12)
-    rvz, rvxy2 = np.real(vz), np.real(vxy2)
-    v0 = np.where((rvz >= 0) | (8 * rvxy2 >= rvz * rvz), glauert, hi)
-    if np.iscomplexobj(vh) or np.iscomplexobj(vz) or np.iscomplexobj(vxy2):
-        # a complex step: the root of the real parts, then its first-order change by the
-        # implicit function theorem, Im v = -Im g(v_r; inputs) / g'(v_r) (exact to the
-        # step's O(h^2), as iterating in complex arithmetic would be, at one evaluation)
-        v = _induced_velocity(np.real(vh), np.real(vz), np.real(vxy2), tol, max_iter)
-        w = v + vz
-        g = v * v * (w * w + vxy2) - vh2 * vh2
-        dg = 2 * v * (w * w + vxy2) + 2 * v * v * w
-        return v - 1j * np.imag(g) / np.real(dg)
-    shape = hi.shape
-    v, lo, hi = v0.reshape(-1), lo.reshape(-1), hi.reshape(-1)
-    a, b, c, h = vh2.reshape(-1), vz.reshape(-1), vxy2.reshape(-1), vh.reshape(-1)
-    steps = 0
-    while steps < max_iter:  # whole arrays while every sample moves
-        vn, lo, hi = _newton_bisect(v, lo, hi, a, b, c)
-        moving = np.abs(vn - v) > tol * h
-        v = vn
-        steps += 1
-        if not moving.all():
-            break
-    idx = np.flatnonzero(moving)
-    for _ in range(steps, max_iter):  # then only the samples not converged yet
-        if idx.size == 0:
-            break
-        vn, lo[idx], hi[idx] = _newton_bisect(v[idx], lo[idx], hi[idx], a[idx], b[idx], c[idx])
-        moving = np.abs(vn - v[idx]) > tol * h[idx]
-        v[idx] = vn
-        idx = idx[moving]
-    return v.reshape(shape)
 
 
 class MotorLag(Effect):

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from .linearize import discretize, jacobians, lqr_system
-from .nominal import circle_nominal
+from .nominal import circle_needs_polish, circle_nominal
 
 __all__ = ["LIN_TOL", "discrete_system", "periodic_interp"]
 
@@ -83,14 +83,24 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
     interpolation from M/2 samples reproduces the M samples to ``tol`` (relative to
     ``|A_d - I|`` and ``|B_d|``); the M-sample interpolation is then used, whose error
     is smaller still. On the paper grid M = 64 gives 2e-15. With ``N <= M`` the
-    steps are computed directly.
+    steps are computed directly, and so are those of tilts whose nominal is not smooth at
+    the trim's resolution (:func:`~gainsched.schedule.nominal.circle_needs_polish`: its
+    series would not converge before M reaches N).
 
     Returns
     -------
     A_d : ndarray (n_a, N, n, n); B_d : ndarray (n_a, N, n, 4); M : int (N if direct);
-    err : float   the last interpolation check (0 if direct)
+    err : float   the last interpolation check (0 if direct); M and err are arrays (n_a,)
+        when some tilts were computed directly and others not
     """
-    if N <= 2 * m0:
+    rough = np.array([N > 2 * m0 and circle_needs_polish(model, speed, a, N) for a in tilts])
+    if rough.any() and not rough.all():  # each part its own way, put back in tilt order
+        smooth, direct = (discrete_system(model, speed, np.asarray(tilts)[p], N, dt, tol=tol,
+                                          m0=m0) for p in (~rough, rough))
+        Ad, Bd = (np.empty((rough.size,) + x.shape[1:]) for x in direct[:2])
+        Ad[~rough], Ad[rough], Bd[~rough], Bd[rough] = smooth[0], direct[0], smooth[1], direct[1]
+        return Ad, Bd, np.where(rough, N, smooth[2]), np.where(rough, 0.0, smooth[3])
+    if N <= 2 * m0 or rough.all():
         Ad, Bd = _discrete_at(model, speed, tilts, N, dt)
         return Ad, Bd, N, 0.0
     # [A_d | B_d] side by side, so that one interpolation carries both

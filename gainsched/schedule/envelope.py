@@ -15,7 +15,7 @@ import numpy as np
 
 from ..constants import Reason
 
-__all__ = ["CATEGORIES", "Envelope", "envelope_from_table", "envelope_png"]
+__all__ = ["CATEGORIES", "Envelope", "envelope_from_table", "envelope_png", "write_envelope"]
 
 #: circle categories, in the order of :attr:`Envelope.category`; a circle without gains
 #: takes the first reason of the last four that any of its azimuths has
@@ -168,3 +168,35 @@ def envelope_png(env: Envelope) -> bytes:
     fig.savefig(buf, format="png", dpi=100, metadata={"Software": None})
     plt.close(fig)
     return buf.getvalue()
+
+
+def write_envelope(table, source, out_dir) -> str:
+    """Write envelope.png and envelope.json of a table into ``out_dir`` (one set, published
+    at once: ``gainsched inspect -o``).
+
+    Parameters
+    ----------
+    table : Table
+        A table from :func:`gainsched.schedule.tables.load_table`.
+    source : str or path-like
+        Where the table was read from (the JSON's ``table``).
+    out_dir : path-like
+        The folder.
+
+    Returns
+    -------
+    str
+        The line that says what was written: the circles per category and the paths.
+    """
+    import json
+
+    from ..publish import publish
+
+    env = envelope_from_table(table)
+    summary = {"table": str(source), "config": table.name, **env.to_json()}
+    paths = publish(out_dir, {
+        "envelope.png": envelope_png(env),
+        "envelope.json": (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode(),
+    }, where="--out")
+    counts = ", ".join(f"{n} {c}" for c, n in env.counts().items())
+    return f"  envelope: {counts} -> {', '.join(str(p) for p in paths)}"

@@ -26,13 +26,14 @@ from ..constants import REASONS, Reason
 from .closedform import closed_form
 from .offsets import CHECK_SAMPLES, AttitudeOffsets, solve_offsets
 from .path import AzimuthPath, circle_path, period
-from .trim import trim_path
+from .trim import needs_polish, trim_path
 
 __all__ = [
     "Nominal",
     "nominal_from_path",
     "circle_nominal",
     "circle_offsets",
+    "circle_needs_polish",
     "feasibility_reasons",
     "REASONS",
     "min_taut_speed",
@@ -124,6 +125,29 @@ def circle_nominal(model, speed: float, alpha: float, n: int, xi0: float = 0.0) 
     return nominal_from_path(model, circle_path(speed, model.r, t, xi0), alpha, periodic=True,
                              offsets=circle_offsets(model, speed, alpha))
 
+
+
+def circle_needs_polish(model, speed: float, alpha: float, n: int) -> bool:
+    """Whether :func:`circle_nominal` at ``n`` samples solves the thrusts sample by sample
+    (:func:`gainsched.schedule.trim.needs_polish`): a numerical trim whose nominal is not
+    smooth at the collocation's resolution. False for the closed form.
+
+    Parameters
+    ----------
+    model : Model
+    speed : float
+        Tangential COG speed, m/s.
+    alpha : float
+        Circle tilt, rad.
+    n : int
+        Samples per period.
+    """
+    offsets = circle_offsets(model, speed, alpha)
+    if offsets is None and model.closed_form_drag() is not None:
+        return False
+    T = period(speed, model.r)
+    t = np.arange(n) * (T / n)
+    return needs_polish(model, circle_path(speed, model.r, t), alpha, offsets)
 
 # offsets per model and circle: a circle's nominal is asked for at several sample counts
 _OFFSETS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()

@@ -54,6 +54,10 @@ POLISH_TOL = 1e-8
 # the collocation on the nodes does not depend on them. The same inputs give the same
 # node values, so the cache changes no bit of a table.
 _NODES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# per model, circle and samples: the thrusts solved sample by sample where the interpolated
+# nominal misses the model, None where it meets it (the same inputs give the same
+# thrusts: no bit changes)
+_POLISHED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 class TrimError(GainschedError):
@@ -225,16 +229,90 @@ def _initial_guess(model, path, alpha):
 
 
 def _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, tol=1e-12, max_iter=20,
-                  offsets=None):
-    """Per-point Newton on the four thrusts for the xi'' and omega' equations (phi fixed)."""
+                  offsets=None, res=None):
+    """Per-point Newton on the four thrusts for the xi'' and omega' equations (phi fixed):
+    the thrusts (n, 4), N. The points are independent, so a point stops when its residual
+    is below ``tol`` (relative to max(1, max |T|)) and the rest go on alone. ``res``: the
+    node-equation residuals (n, 5) at ``T`` if the caller has them."""
+    T = np.array(T, dtype=float)
+    idx = np.arange(T.shape[0])
+
+    def at(i):  # the arguments of the points i
+        return (_sub_path(path, i), alpha, phi[i], dphi[i], ddphi[i], T[i],
+                None if offsets is None else tuple(tuple(x[i] for x in o) for o in offsets))
+
     for _ in range(max_iter):
-        res = _local(model, path, alpha, phi, dphi, ddphi, T, offsets)[0][:, 1:]
-        if np.abs(res).max() < tol * max(1.0, np.abs(T).max()):
+        res = (_local(model, *at(idx))[0] if res is None else res)[:, 1:]
+        moving = np.abs(res).max(1) >= tol * max(1.0, np.abs(T).max())
+        if not moving.any():
             break
-        Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets,
-                              thrust_only=True)[:, 1:]
-        T = T - np.linalg.solve(Jl, res[..., None])[..., 0]
+        idx, res = idx[moving], res[moving]
+        Jl = _local_jacobians(model, *at(idx), thrust_only=True)[:, 1:]
+        T[idx] -= np.linalg.solve(Jl, res[..., None])[..., 0]
+        res = None
     return T
+
+
+def _rough(res, xd) -> bool:
+    """Whether the node-equation residuals ``res`` (n, 5) of an interpolated nominal miss
+    :data:`POLISH_TOL` in the thrust equations (relative to max(1, xi'^2), xi' (n,) rad/s)."""
+    return bool(np.abs(res[:, 1:]).max() > POLISH_TOL * max(1.0, float(np.abs(xd).max()) ** 2))
+
+
+def _circle_key(path: AzimuthPath, alpha: float, offsets=None):
+    """The cache key of a whole circle's collocation: (xi' rad/s, first xi rad, tilt rad,
+    the offsets' coefficients)."""
+    return (float(path.d[0][0]), float(path.xi[0]), float(alpha), None if offsets is None
+            else (offsets.pitch.tobytes(), offsets.yaw.tobytes()))
+
+
+def _periodic_guess(model, path: AzimuthPath, alpha: float, offsets=None):
+    """The Fourier collocation of a whole circle (:func:`trim_path`, periodic), its node
+    solution cached per model and circle, interpolated to ``path``'s samples.
+
+    Returns ``(key, (phi, phi', phi'', T, T'), local)``: the circle's cache key, the roll
+    (rad, rad/s, rad/s^2) and thrusts (N, N/s) at the samples, shapes (n,) and (n, 4),
+    and the :func:`_local` evaluation there (residuals (n, 5), state, its derivative,
+    the model's evaluation).
+    """
+    xd, t = path.d[0], path.t
+    Tp = 2 * np.pi / abs(xd[0])
+    tn = t[0] + np.arange(N_FOURIER) * (Tp / N_FOURIER)
+    xi_n = path.xi[0] + xd[0] * (tn - t[0])
+    z0 = np.zeros_like(tn)
+    nodes = AzimuthPath(tn, xi_n, (np.full_like(tn, xd[0]), z0, z0, z0))
+    key = _circle_key(path, alpha, offsets)
+    cache = _NODES.setdefault(model, {})
+    if key not in cache:
+        D1, D2 = _fourier_operators(N_FOURIER, Tp)
+        phi0, u0 = _initial_guess(model, nodes, alpha)
+        off_n = None if offsets is None else offsets.along(nodes)
+        cache[key] = _newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
+    phi_n, T_n = cache[key]
+    tt = t - t[0]
+    if np.allclose(tt, np.arange(t.size) * (Tp / t.size), rtol=0.0, atol=1e-12 * Tp):
+        # one period in equal steps (to rounding: the steps' times come from the period
+        # the caller computed)
+        f, f1, f2 = _fourier_samples(np.vstack([phi_n, T_n.T]), Tp, t.size)
+    else:
+        f, f1, f2 = _fourier_eval(np.vstack([phi_n, T_n.T]), Tp, tt)
+    phi, dphi, ddphi, T = f[:, 0], f1[:, 0], f2[:, 0], f[:, 1:]
+    off = None if offsets is None else offsets.along(path)
+    return key, (phi, dphi, ddphi, T, f1[:, 1:]), _local(model, path, alpha, phi, dphi,
+                                                         ddphi, T, off)
+
+
+def needs_polish(model, path: AzimuthPath, alpha: float, offsets=None) -> bool:
+    """Whether :func:`trim_path` of a whole circle (periodic) solves the thrusts sample by
+    sample at ``path``'s samples: the trigonometric interpolant of the collocation nodes
+    misses the model there by more than :data:`POLISH_TOL` (a nominal that is not smooth
+    at the nodes' resolution: momentum theory's floored inflow, say)."""
+    polished = _POLISHED.get(model, {}).get((_circle_key(path, alpha, offsets), N_FOURIER,
+                                             path.t.tobytes()), False)
+    if polished is not False:  # trim_path has been here: its decision
+        return polished is not None
+    _, _, local = _periodic_guess(model, path, alpha, offsets)
+    return _rough(local[0], path.d[0])
 
 
 def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None = None,
@@ -265,30 +343,18 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
     if periodic is None:
         periodic = bool(np.allclose(xd, xd[0]) and np.all(path.d[1] == 0))
     t = path.t
+    off = None if offsets is None else offsets.along(path)
     if periodic:
-        Tp = 2 * np.pi / abs(xd[0])
-        tn = t[0] + np.arange(N_FOURIER) * (Tp / N_FOURIER)
-        xi_n = path.xi[0] + xd[0] * (tn - t[0])
-        z0 = np.zeros_like(tn)
-        nodes = AzimuthPath(tn, xi_n, (np.full_like(tn, xd[0]), z0, z0, z0))
-        key = (float(xd[0]), float(path.xi[0]), float(alpha), None if offsets is None
-               else (offsets.pitch.tobytes(), offsets.yaw.tobytes()))
-        cache = _NODES.setdefault(model, {})
-        if key not in cache:
-            D1, D2 = _fourier_operators(N_FOURIER, Tp)
-            phi0, u0 = _initial_guess(model, nodes, alpha)
-            off_n = None if offsets is None else offsets.along(nodes)
-            cache[key] = _newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
-        phi_n, T_n = cache[key]
-        tt = t - t[0]
-        if np.allclose(tt, np.arange(t.size) * (Tp / t.size), rtol=0.0, atol=1e-12 * Tp):
-            # one period in equal steps (to rounding: the steps' times come from the period
-            # the caller computed)
-            f, f1, f2 = _fourier_samples(np.vstack([phi_n, T_n.T]), Tp, t.size)
-        else:
-            f, f1, f2 = _fourier_eval(np.vstack([phi_n, T_n.T]), Tp, tt)
-        phi, dphi, ddphi = f[:, 0], f1[:, 0], f2[:, 0]
-        T_guess, T_dot = f[:, 1:], f1[:, 1:]
+        key, (phi, dphi, ddphi, T, T_dot), local = _periodic_guess(model, path, alpha, offsets)
+        res, z, sdot, ev = local
+        polished = _POLISHED.setdefault(model, {})
+        pkey = (key, N_FOURIER, t.tobytes())  # the same circle, nodes and samples
+        if pkey not in polished:  # None: the interpolant meets the model at these samples
+            polished[pkey] = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T,
+                                           offsets=off, res=res) if _rough(res, xd) else None
+        if polished[pkey] is not None:  # else the thrusts sample by sample
+            T = polished[pkey]
+            res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
     else:
         idx = np.unique(np.linspace(0, t.size - 1, min(t.size, N_SPLINE_MAX)).round().astype(int))
         nodes = _sub_path(path, idx)
@@ -298,14 +364,12 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
         off_n = None if offsets is None else offsets.along(nodes)
         phi_n, T_n = _newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
         phi, dphi, ddphi = (spl(t, nu=k) @ phi_n for k in range(3))
-        T_guess = spl(t) @ T_n
+        T = spl(t) @ T_n
         T_dot = spl(t, nu=1) @ T_n
-    off = None if offsets is None else offsets.along(path)
-    T = T_guess
-    res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
-    if np.abs(res[:, 1:]).max() > POLISH_TOL * max(1.0, float(np.abs(xd).max()) ** 2):
-        T = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off)
         res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
+        if _rough(res, xd):
+            T = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off, res=res)
+            res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
     u = T
     z_dot = sdot
     if model.n_extra:

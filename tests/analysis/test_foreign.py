@@ -783,3 +783,51 @@ def test_ros2_battery_state_gives_vbat(paper_config, flight, tmp_path):
     write_bag(tmp_path / "nobat", msgs)
     (log,) = read_log(tmp_path / "nobat", channel_map=ros2_map())
     assert "vbat" not in log.optional
+
+
+def test_reading_reports_its_stages_to_a_listener(paper_config, flight, ulog_file, tmp_path,
+                                                   monkeypatch):
+    """Issue 39, progress of ``convert``: with a listener (gainsched.analysis.progress) a
+    ULog's read reports its bytes from 0 to the file's size, a bag's its messages from 0
+    to the count written, then the conversion and the channel checks, in that order; the
+    log read is the one read without a listener."""
+    from gainsched.analysis.progress import reporting
+
+    monkeypatch.setenv("GAINSCHED_LOG_CACHE", "0")
+    bag = tmp_path / "bag"
+    messages = ros2_messages(flight, ros_types())
+    write_bag(bag, messages, "mcap")
+    n_msg = sum(len(m[1]) for m in messages.values())
+    for path, cmap, stage, total, unit in (
+            (ulog_file, px4_map(), "read ULog", ulog_file.stat().st_size, "B"),
+            (bag, ros2_map(), "read bag", n_msg, "msg")):
+        calls = []
+        with reporting(lambda *a: calls.append(a)):  # noqa: B023 (used inside the loop)
+            (got,) = read_log(path, channel_map=cmap, thrust_max=3.5)
+        (quiet,) = read_log(path, channel_map=cmap, thrust_max=3.5)
+        _same_log(got, quiet)
+        reads = [c for c in calls if c[0] == stage]
+        assert reads[0] == (stage, 0, total, unit) and reads[-1] == (stage, total, total, unit)
+        assert all(a[1] <= b[1] for a, b in zip(reads, reads[1:], strict=False)), reads
+        assert [c[0] for c in calls[len(reads):]] == ["convert", "check channels"], calls
+
+
+def test_cli_convert_shows_progress_on_a_terminal_only(ulog_file, tmp_path, monkeypatch):
+    """``gainsched convert`` of a ULog draws its progress line (the bytes read, the stage)
+    on a terminal's stderr; piped, stderr has nothing; with --quiet the terminal shows
+    nothing."""
+    import subprocess
+    import sys
+
+    from support import on_terminal
+
+    monkeypatch.setenv("GAINSCHED_LOG_CACHE", "0")
+    args = lambda i: [sys.executable, "-m", "gainsched", *(["--quiet"] if i == 3 else []),  # noqa: E731
+                      "convert", str(ulog_file), "-o", f"out{i}.csv", "--config", "paper"]
+    code, shown = on_terminal(args(1), tmp_path)
+    assert code == 0 and re.search(r"convert flight\.ulg: 100%\|.*\| ([\d.]+[kM])/\1 "
+                                   r"\[.*B/s, written\]", shown), shown
+    piped = subprocess.run(args(2), capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert piped.returncode == 0 and piped.stderr == "", piped.stderr
+    code, shown = on_terminal(args(3), tmp_path)
+    assert code == 0 and shown == "", shown

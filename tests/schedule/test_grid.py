@@ -194,3 +194,81 @@ def test_tilt0_dare_equals_periodic_recursion(paper_config, speed):
         X, Y = getattr(dare, name), getattr(rec, name)
         assert np.abs(X - Y).max() / np.abs(Y).max() <= 1e-8, name
     assert dare.spectral_radius[0] == pytest.approx(rec.spectral_radius[0], rel=1e-6)
+
+
+#: issue 39: the nominal and gains of momentum theory's circles (paper vehicle,
+#: disk_area 0.006 m^2) as the trim gave them before its rework (commit 86b2e9d): per
+#: circle (speed m/s, tilt deg), T1..T4 (N) at the grid azimuths 0 and 180 deg, the roll
+#: (rad) there, the closed-loop spectral radius and max |K| (N per state unit)
+MOMENTUM_REFERENCE = {
+    (6.0, 20): ([[1.5040329914011779, 1.504032991401179, 1.5179747849264282, 1.5179747849264293],
+                 [0.9291089266873995, 0.9291089266874007, 0.9679963206140807,
+                  0.9679963206140808]],
+                [-0.5458406031457874, 0.11996481103305483], 0.8336883355119924,
+                4.344387428102001),
+    (9.0, 40): ([[2.025312623875298, 2.0253126238752945, 2.0543383052083977, 2.0543383052083937],
+                 [0.46253560418083767, 0.46253560418083683, 0.5407040005872197,
+                  0.5407040005872186]],
+                [-0.9169454617547561, 0.357213527982977], 0.9463249766287501,
+                6.712829727221583),
+    (15.0, 40): ([[2.7012094048001862, 2.9375448021430883, 2.839982854850278,
+                   2.9596841478882023],
+                  [0.2675045226810046, 0.19640866718344338, 0.7371945393163913,
+                   0.6786431459626842]],
+                 [-1.0398476916532544, 0.024311475522495185], 0.9925579442095606,
+                 11.098649896095719),
+}
+
+
+@pytest.fixture(scope="module")
+def momentum_config(paper_config):
+    return paper_config.with_values({"effects.thrust_momentum.disk_area": 0.006})
+
+
+@pytest.mark.parametrize("circle", list(MOMENTUM_REFERENCE))
+def test_momentum_circles_equal_the_trim_before_issue_39(momentum_config, circle):
+    """Issue 39's faster momentum-theory trim (plain Newton for the induced velocity, the
+    per-sample thrust solve point by point and cached, the rough circles linearised at every
+    step) gives the nominal of the trim before it to 1e-9 relative (measured 7e-15), and its
+    spectral radius and largest gain to 1e-9 (measured 4e-13). The 40 deg circles are in
+    the floored inflow: their thrusts are solved sample by sample."""
+    speed, tilt = circle
+    u, phi, rho, kmax = MOMENTUM_REFERENCE[circle]
+    sol = solve_circle(momentum_config, speed, np.deg2rad([tilt]))
+    np.testing.assert_allclose(sol.u_d[0, [0, 18]], u, rtol=1e-9)
+    np.testing.assert_allclose(sol.phi_d[0, [0, 18]], phi, rtol=1e-9)
+    assert sol.spectral_radius[0] == pytest.approx(rho, rel=1e-9)
+    assert np.abs(sol.K[0]).max() == pytest.approx(kmax, rel=1e-9)
+
+
+def test_rough_and_smooth_tilts_in_one_batch_equal_single_tilt_solves(momentum_config):
+    """A batch with a smooth circle (20 deg: interpolated linearisation) and a rough one
+    (40 deg: every step, the nominal not smooth at the trim's nodes) gives each the
+    solution of its own batch, to 1e-12 in the gains."""
+    from gainsched.schedule.nominal import circle_needs_polish
+
+    model = Model(momentum_config)
+    N = steps_per_period(9.0, model.r, momentum_config.control.dt)
+    tilts = np.deg2rad([40.0, 20.0])
+    assert [circle_needs_polish(model, 9.0, a, N) for a in tilts] == [True, False]
+    both = solve_circle(momentum_config, 9.0, tilts)
+    assert both.lin_samples.tolist()[0] == N and both.lin_samples[1] < N / 4
+    for i, a in enumerate(tilts):
+        alone = solve_circle(momentum_config, 9.0, [a])
+        assert both.lin_samples[i] == alone.lin_samples[0]
+        np.testing.assert_allclose(both.K[i], alone.K[0], rtol=0,
+                                   atol=1e-12 * np.abs(alone.K[0]).max())
+
+
+@pytest.mark.slow
+def test_momentum_build_is_bit_identical_for_any_worker_count(momentum_config):
+    """The momentum-theory build (rough circles, per-sample thrusts, their cache) gives the
+    same bits on one worker and on two."""
+    from dataclasses import fields
+
+    cfg = momentum_config.with_values({"grid.speeds": [9, 15], "grid.tilts_deg": [0, 20, 40],
+                                       "name": "momentum"})
+    one, two = build_grid(cfg, n_jobs=1), build_grid(cfg, n_jobs=2)
+    for f in fields(one):
+        a, b = np.asarray(getattr(one, f.name)), np.asarray(getattr(two, f.name))
+        assert a.tobytes() == b.tobytes(), f.name
