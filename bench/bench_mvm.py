@@ -46,7 +46,7 @@ def make_logs(out: Path, minutes: float, hidden: str) -> list[Path]:
 #: the candidates issue 37 added to the library
 ISSUE37_CANDIDATES = frozenset({"motor_efficiency", "thrust_time", "thrust_time_series",
                                 "thrust_motor", "wind", "thrust_voltage",
-                                "force_horizontal", "force_airspeed"})
+                                "force_horizontal", "force_airspeed", "tether_stretch"})
 
 
 def base_candidates() -> list[str]:
