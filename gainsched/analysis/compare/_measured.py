@@ -55,26 +55,26 @@ import numpy as np
 from scipy.ndimage import convolve1d, uniform_filter1d
 from scipy.signal import correlate, lfilter, savgol_coeffs, savgol_filter
 
-from ..config import Config
-from ..constants import BIN_VARIABLES
-from ..errors import InputError
-from ..model.effects import Effect, Kinematics, wind_in_circle_frame
-from ..model.geometry import (
+from ...config import Config
+from ...constants import BIN_VARIABLES
+from ...errors import InputError
+from ...model.effects import Effect, Kinematics, wind_in_circle_frame
+from ...model.geometry import (
     attachment_from_cog,
     cog_from_attachment,
     spherical_from_point,
     tether_direction,
 )
-from ..model.reduced import Model
-from ..model.rotations import (
+from ...model.reduced import Model
+from ...model.rotations import (
     R_IC_from_tilt,
     euler_zyx_from_matrix,
     matrix_from_euler_zyx,
     matrix_from_quaternion,
     up_C_from_tilt,
 )
-from .logs import FlightLog, LogWarning, read_log
-from .structure import findings
+from ..logs import FlightLog, LogWarning, read_log
+from ..structure import findings
 
 __all__ = [
     "centred_commands",
@@ -452,7 +452,7 @@ def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None,
     sa = 0.5 * (meas.raw_sigma["phi"] + meas.raw_sigma["theta"])
     n = len(log)
     rot = sa * rng.standard_normal((n, 3))
-    from ..model.rotations import Rx, Ry, Rz
+    from ...model.rotations import Rx, Ry, Rz
 
     R_IB = matrix_from_quaternion(log.q) @ Rz(rot[:, 2]) @ Ry(rot[:, 1]) @ Rx(rot[:, 0])
     raw = _raw_channels(log, meas.L_e, log.p_I + sp * rng.standard_normal((n, 3)), R_IB)
