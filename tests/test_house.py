@@ -16,8 +16,6 @@ MAX_FUNCTION_LINES = 100
 
 #: module -> (its ceiling in lines, why it is longer than MAX_MODULE_LINES today)
 MODULES = {
-    "gainsched/analysis/compare/_measured.py": (1549, "the comparison, its statistics, binning and "
-                                      "fits of paper eqs. 25-26 in one: to split (issue 40)"),
     "gainsched/analysis/logs.py": (1031, "reader, column checks and the log formats: to "
                                    "split (issue 40)"),
     "gainsched/cli.py": (1443, "every command's options and output lines: the thin CLI "
