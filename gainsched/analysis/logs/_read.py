@@ -73,10 +73,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import MAX_LOG_BYTES
-from ..errors import GainschedWarning, InputError
-from ..textinput import _size, decode_text
-from .logchecks import _plane_angles, _plane_normal, check_log, thrust_units
+from ...constants import MAX_LOG_BYTES
+from ...errors import GainschedWarning, InputError
+from ...textinput import _size, decode_text
+from ..logchecks import _plane_angles, _plane_normal, check_log, thrust_units
 
 __all__ = [
     "SCHEMA",
@@ -760,12 +760,12 @@ def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None,
 
 def _foreign(path: Path, channel_map, thrust_max):
     """The converted columns of a ULog or a bag (None for the project's own formats)."""
-    from .foreign import foreign_format
+    from ..foreign import foreign_format
 
     fmt = foreign_format(path)
     if fmt is None:
         return None
-    from .channelmap import ChannelMap, load_channel_map
+    from ..channelmap import ChannelMap, load_channel_map
 
     if channel_map is None:
         if fmt != "ulog":
@@ -776,7 +776,7 @@ def _foreign(path: Path, channel_map, thrust_max):
         channel_map)
     if not path.exists():
         raise InputError(path, "", "cannot read (No such file or directory)")
-    from .logcache import converted_log
+    from ..logcache import converted_log
 
     conv = converted_log(path, cmap, thrust_max)
     if "alpha_c_deg" in conv.meta:
@@ -999,7 +999,7 @@ def write_log(path, log_or_columns, meta=None) -> int:
     then unknown ones sorted. Floats are written with the shortest exact
     representation, so a round trip is lossless. ``schema`` is added if absent.
     """
-    from ..publish import write_atomic
+    from ...publish import write_atomic
 
     data = log_bytes(_format(path), log_or_columns, meta, name=Path(path).name)
     write_atomic(path, data)
