@@ -16,8 +16,6 @@ MAX_FUNCTION_LINES = 100
 
 #: module -> (its ceiling in lines, why it is longer than MAX_MODULE_LINES today)
 MODULES = {
-    "gainsched/analysis/logs/_read.py": (1031, "reader, column checks and the log formats: to "
-                                   "split (issue 40)"),
     "gainsched/cli.py": (1443, "every command's options and output lines: the thin CLI "
                          "over importable functions, to split by command group (issue 40)"),
     "gainsched/config.py": (1234, "schema, reader, check_* helpers and every section: the "
@@ -41,9 +39,6 @@ FUNCTIONS = {
                                                      "topics: to split per topic kind"),
     "gainsched/analysis/logchecks.py:figures": (125, "the log consistency figures, one "
                                                 "block per check: to split per check"),
-    "gainsched/analysis/logs/_read.py:_canonical": (103, "column normalisation: with the logs "
-                                              "module's split"),
-    "gainsched/analysis/logs/_read.py:read_log": (103, "its numpydoc docstring is half of it"),
     "gainsched/firmware/check.py:midpoint_check": (122, "the docstring and the midpoint "
                                                    "loop: to split with the check module"),
     "gainsched/schedule/grid.py:solve_circle": (163, "one circle's whole pipeline (nominal, "
