@@ -740,9 +740,9 @@ def test_a_log_that_is_a_device_is_refused(tmp_path, monkeypatch, name):
 
 
 def test_a_csv_log_past_the_size_bound_is_refused(monkeypatch):
-    import gainsched.analysis.logs
+    import gainsched.analysis.logs._files
 
-    monkeypatch.setattr(gainsched.analysis.logs, "MAX_LOG_BYTES", 2**16)
+    monkeypatch.setattr(gainsched.analysis.logs._files, "MAX_LOG_BYTES", 2**16)
     one_line_error(_run("compare", PAPER, FLIGHT), FLIGHT, "larger than 64 KiB",
                    "too large for a CSV flight log")
 

@@ -16,10 +16,6 @@ MAX_FUNCTION_LINES = 100
 
 #: module -> (its ceiling in lines, why it is longer than MAX_MODULE_LINES today)
 MODULES = {
-    "gainsched/analysis/compare.py": (1549, "the comparison, its statistics, binning and "
-                                      "fits of paper eqs. 25-26 in one: to split (issue 40)"),
-    "gainsched/analysis/logs.py": (1031, "reader, column checks and the log formats: to "
-                                   "split (issue 40)"),
     "gainsched/cli.py": (1443, "every command's options and output lines: the thin CLI "
                          "over importable functions, to split by command group (issue 40)"),
     "gainsched/firmware/controller.py": (1013, "the controller's parameters, its Python "
@@ -35,9 +31,6 @@ FUNCTIONS = {
                                                      "topics: to split per topic kind"),
     "gainsched/analysis/logchecks.py:figures": (125, "the log consistency figures, one "
                                                 "block per check: to split per check"),
-    "gainsched/analysis/logs.py:_canonical": (103, "column normalisation: with the logs "
-                                              "module's split"),
-    "gainsched/analysis/logs.py:read_log": (103, "its numpydoc docstring is half of it"),
     "gainsched/firmware/check.py:midpoint_check": (122, "the docstring and the midpoint "
                                                    "loop: to split with the check module"),
 }

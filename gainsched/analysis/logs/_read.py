@@ -1,0 +1,260 @@
+"""Reading a flight log file into its gap-free segments, :func:`read_log`, and converting a
+PX4 ULog or a ROS 2 bag, :func:`convert_log`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ...errors import GainschedWarning, InputError
+from ..logchecks import _plane_angles, check_log, thrust_units
+from ._checks import _canonical, _check_plane, fitted_plane
+from ._files import _check_file, _format, _read_file
+from ._flightlog import FlightLog, _make, _readonly
+from ._schema import DEFAULT_MIN_SAMPLES, GAP_FACTOR
+from ._write import write_log
+
+
+class LogWarning(GainschedWarning):
+    """A log problem that is reported but not fatal (a gap, a dropped short segment)."""
+
+
+def read_log(
+    path, *, channel_map=None, thrust_max: float | None = None,
+    min_samples: int = DEFAULT_MIN_SAMPLES, gap_factor: float = GAP_FACTOR,
+    config=None, trust=(),
+) -> list[FlightLog]:
+    """Read a flight log file into its gap-free segments, checked against the spec.
+
+    The format is docs/flight-log.md (``gainsched-flightlog/1``, CSV or HDF5), chosen by
+    the file extension; a PX4 ULog (``.ulg``) or a ROS 2 bag (a rosbag2 folder, or its
+    ``.mcap`` / ``.db3`` file) is converted to it first through a channel map
+    (:mod:`gainsched.analysis.foreign`). Every bad-data rule of the spec is enforced; the
+    reader normalises only the quaternions (rows off unit norm by more than 1e-12
+    divided by their norm, signs made continuous) and splits the log at gaps, never
+    interpolating across them (the docstring of :mod:`gainsched.analysis.logs` has the
+    details).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The log file: ``.csv``, ``.h5``, ``.hdf5``, ``.ulg``, ``.mcap``, ``.db3`` or a
+        rosbag2 folder.
+    channel_map : ChannelMap, str or path-like, optional
+        How a ULog or a bag holds the channels (:func:`gainsched.analysis.channelmap.
+        load_channel_map`: a file or a shipped map's name). Default for a ULog: the
+        shipped ``px4``; a bag needs one.
+    thrust_max : float, optional
+        A motor's thrust at full command, N, for normalised or PWM commands when the map
+        does not give it (the analysis config's ``vehicle.thrust_max``).
+    min_samples : int, default 31
+        Fewest samples of a segment (the differentiation window): shorter segments are
+        dropped with a warning (:data:`DEFAULT_MIN_SAMPLES`).
+    gap_factor : float, default 1.5
+        A sample interval more than ``gap_factor`` times the file's median interval is a
+        gap: the log is split there.
+    config : Config, optional
+        The config of the analysis: its vehicle (mass, g, thrust scale) is what the
+        commanded thrust and the load cell are checked against
+        (:mod:`gainsched.analysis.logchecks`); without it those two checks are skipped.
+    trust : iterable of str, default ()
+        Consistency checks to skip, by name (:data:`~gainsched.analysis.logchecks.
+        CHECKS`: ``plane``, ``quaternion``, ``gyro``, ``thrust``, ``tension``,
+        ``xi_ref``), where the user knows the log is right; the log's metadata ``trust``
+        adds to them.
+
+    Returns
+    -------
+    list of FlightLog
+        The segments kept, in time order: one for a log without gaps.
+
+    Raises
+    ------
+    InputError
+        Naming the file, the column or key and the row (``line 17`` in CSV, ``sample 17``
+        in HDF5): an unknown extension, an unreadable file, a missing required column or
+        metadata key, an unknown schema, an incomplete group of optional columns (``p``,
+        ``q`` without ``r``), a cell that is not a number, NaN or inf in a required
+        column, a value outside the plausible range (:data:`PLAUSIBLE`), time that does not
+        strictly increase, a quaternion norm off unit by more than 0.01, a declared
+        circle plane the positions do not lie in, channels that contradict each other
+        or the model (:func:`~gainsched.analysis.logchecks.check_log`), fewer than
+        ``min_samples`` samples, or no segment left after splitting.
+
+    Warns
+    -----
+    LogWarning
+        For each gap (the log is split there) and each dropped short segment.
+
+    Examples
+    --------
+    >>> segs = gs.read_log("examples/flights/v9.csv")
+    >>> log = segs[0]
+    >>> len(segs), len(log), log.duration, round(1 / log.dt_median)
+    (1, 551, 2.75, 200)
+    >>> sorted(log.optional)  # gyro, load cell, reference azimuth
+    ['omega_B', 'tension', 'xi_dot_ref', 'xi_ref']
+    >>> speed = np.linalg.norm(np.diff(log.p_I, axis=0), axis=1) / np.diff(log.t)
+    >>> print(f"mean COG speed {speed.mean():.1f} m/s, "
+    ...       f"tension {np.mean(log.optional['tension']):.0f} N")
+    mean COG speed 8.9 m/s, tension 25 N
+    """
+    path = Path(path)
+    _check_file(path)
+    foreign = _foreign(path, channel_map, thrust_max)
+    if foreign is not None:
+        return _segments(path, foreign.meta, foreign.columns, foreign.rows, foreign.label,
+                         min_samples, gap_factor, config=config, trust=trust)
+    meta, cols, rows, label = _read_file(path)
+    return _segments(path, meta, cols, rows, label, min_samples, gap_factor, config=config,
+                     trust=trust)
+
+
+def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None,
+                config=None, trust=()) -> tuple[tuple[str, ...], list[FlightLog]]:
+    """Convert a PX4 ULog or a ROS 2 bag to ``gainsched-flightlog/1`` at ``out``.
+
+    The whole converted log is written (gaps included, as the format allows), after it
+    passed every rule :func:`read_log` applies; nothing is written otherwise.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The ULog (``.ulg``) or bag (a rosbag2 folder, ``.mcap`` or ``.db3``).
+    out : str or path-like
+        ``.csv``, ``.h5`` or ``.hdf5``.
+    channel_map, thrust_max, config
+        As for :func:`read_log`.
+    trust : iterable of str, default ()
+        Consistency checks to skip (:func:`read_log`); written to the converted log's
+        metadata ``trust``, so that it is read as it was converted.
+
+    Returns
+    -------
+    (tuple of str, list of FlightLog)
+        What was mapped to what (one line per channel, the plane, the left-out samples),
+        and the segments as :func:`read_log` gives them.
+    """
+    path, out = Path(path), Path(out)
+    _format(out)  # a bad output name fails before any reading
+    _check_file(path)
+    conv = _foreign(path, channel_map, thrust_max)
+    if conv is None:
+        raise InputError(path, "", "not a PX4 ULog (.ulg) or a ROS 2 bag (.mcap, .db3, or a "
+                         "rosbag2 folder): nothing to convert")
+    meta = dict(conv.meta)
+    if trust:
+        meta["trust"] = ", ".join(dict.fromkeys(trust))
+    segs = _segments(path, meta, conv.columns, conv.rows, conv.label,
+                     DEFAULT_MIN_SAMPLES, GAP_FACTOR, config=config, trust=trust)
+    write_log(out, conv.columns, meta)
+    return conv.report, segs
+
+
+def _foreign(path: Path, channel_map, thrust_max):
+    """The converted columns of a ULog or a bag (None for the project's own formats)."""
+    from ..foreign import foreign_format
+
+    fmt = foreign_format(path)
+    if fmt is None:
+        return None
+    from ..channelmap import ChannelMap, load_channel_map
+
+    if channel_map is None:
+        if fmt != "ulog":
+            raise InputError(path, "", "a ROS 2 bag needs a channel map (--map; the "
+                             "shipped ros2 map is a template to copy)")
+        channel_map = "px4"
+    cmap = channel_map if isinstance(channel_map, ChannelMap) else load_channel_map(
+        channel_map)
+    if not path.exists():
+        raise InputError(path, "", "cannot read (No such file or directory)")
+    from ..logcache import converted_log
+
+    conv = converted_log(path, cmap, thrust_max)
+    if "alpha_c_deg" in conv.meta:
+        return conv
+    alpha, gamma = _plane_angles(fitted_plane(np.stack([conv.columns[c] for c in "xyz"],
+                                                       -1))[0])
+    meta = {**conv.meta, "alpha_c_deg": repr(alpha), "gamma_c_deg": repr(gamma),
+            "plane_source": "estimated from the logged positions"}
+    line = (f"circle plane: alpha_c {alpha:.2f} deg, gamma_c {gamma:.2f} deg, estimated "
+            "from the positions")
+    return dataclasses.replace(conv, meta=meta, report=(*conv.report, line))
+
+
+def _segments(path, meta, cols, rows, label, min_samples, gap_factor, *, config=None,
+              trust=()) -> list[FlightLog]:
+    """The common half of reading: the numeric rules, the plane, the channels' consistency
+    (:mod:`.logchecks`), the split at gaps."""
+    deferred: list[InputError] = []
+    arrays, optional, extra = _canonical(path, cols, rows, label, deferred)
+    if deferred:  # thrust out of range: in other units? (else the range error as such)
+        thrust_units(path, arrays, optional, meta, config=config, trust=trust,
+                     gap_factor=gap_factor)
+        raise deferred[0]
+    t = arrays["t"]
+    n = t.shape[0]
+    if n == 0:
+        raise InputError(path, "column t", "no data rows")
+    if n < min_samples:
+        raise InputError(
+            path,
+            f"column t, {label}s {rows[0]}-{rows[-1]}",
+            f"{n} samples, fewer than the differentiation window ({min_samples})",
+        )
+    _check_plane(path, meta, arrays["p_I"])
+    check_log(path, t, arrays["p_I"], arrays["q"], arrays["T_cmd"], optional, meta,
+              config=config, trust=trust, gap_factor=gap_factor)
+    dt = np.diff(t)
+    med = float(np.median(dt)) if dt.size else 0.0
+    cuts = np.flatnonzero(dt > gap_factor * med) + 1
+    gaps = tuple((float(t[k - 1]), float(t[k])) for k in cuts)
+    for k in cuts:
+        warnings.warn(
+            f"{path}: column t, {label} {rows[k]}: gap of {t[k] - t[k - 1]:.6g} s "
+            f"(median interval {med:.6g} s) from t = {float(t[k - 1])!r} to {float(t[k])!r}; "
+            "log split there",
+            LogWarning,
+            stacklevel=2,
+        )
+    bounds = [0, *cuts.tolist(), n]
+    pieces = list(zip(bounds[:-1], bounds[1:], strict=True))
+    keep = [(i, a, b) for i, (a, b) in enumerate(pieces) if b - a >= min_samples]
+    if not keep:
+        i, (a, b) = max(enumerate(pieces), key=lambda p: p[1][1] - p[1][0])
+        raise InputError(
+            path,
+            f"column t, {label}s {rows[a]}-{rows[b - 1]}",
+            f"after splitting at {len(gaps)} gap(s) no segment has {min_samples} samples "
+            f"(the differentiation window); the longest has {b - a}",
+        )
+    for i, (a, b) in enumerate(pieces):
+        if b - a < min_samples:
+            warnings.warn(
+                f"{path}: column t, {label}s {rows[a]}-{rows[b - 1]}: segment {i} has "
+                f"{b - a} samples, fewer than the differentiation window ({min_samples}); "
+                "dropped",
+                LogWarning,
+                stacklevel=2,
+            )
+    return [
+        _make(
+            arrays,
+            optional,
+            extra,
+            meta,
+            path,
+            slice(a, b),
+            segment=i,
+            n_segments=len(pieces),
+            gaps=gaps,
+            rows=_readonly(rows[a:b].copy()),
+            row_label=label,
+        )
+        for i, a, b in keep
+    ]
