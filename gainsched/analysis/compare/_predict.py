@@ -24,7 +24,7 @@ from scipy.ndimage import convolve1d
 from scipy.signal import lfilter, savgol_coeffs, savgol_filter
 
 from ...config import Config
-from ...model.effects import Kinematics
+from ...model.effects import Kinematics, tether_stretch_of
 from ...model.reduced import Model
 from ._inputs import _load_cell, centred_commands, effect_states, logged_channel
 from ._measured import Measured, _delayed
@@ -63,17 +63,20 @@ def _kelvin_voigt(f, k, c, dt):
     return lfilter([1 - a], [1, -a], s, zi=[a * s[0]])[0]
 
 
-def _tether_stretch(config: Config, f_t, dt):
+def _tether_stretch(config: Config, f_t, dt, effects=()):
     """Predicted stretch (m) of the tether for the tension f_t (N), per ``tether.link``
     (:mod:`gainsched.model.links`): 0 for the rigid link; Kelvin-Voigt ``c s' + k s = f`` for
     the spring-damper; ``f / k_s`` plus Kelvin-Voigt ``(k_p, c)`` for the standard linear
     solid; the lumped-mass chain quasi-statically as its whole-chain spring-damper (node
-    dynamics and sag neglected)."""
+    dynamics and sag neglected). Plus the stretch that ``effects`` add at that tension
+    (:func:`~gainsched.model.effects.tether_stretch_of`: an empirical stretch law)."""
+    extra = tether_stretch_of(effects, f_t)
+    s = np.zeros_like(f_t) if extra is None else extra
     teth = config.tether
     if teth.link == "rigid":
-        return np.zeros_like(f_t)
+        return s
     f = np.maximum(f_t, 0.0)
-    s = _kelvin_voigt(f, teth.stiffness, teth.damping, dt)
+    s = s + _kelvin_voigt(f, teth.stiffness, teth.damping, dt)
     if teth.link == "sls":
         s = s + f / teth.series_stiffness
     return s
@@ -181,6 +184,6 @@ def predict(model: Model, meas: Measured, *, latency: float | None = None,
     wd_gyro = wd_pose
     if meas.gyro_dot is not None:
         wd_gyro = _gyro_operator(wd, meas, edges)
-    stretch = _tether_stretch(cfg, f_t, meas.dt)
+    stretch = _tether_stretch(cfg, f_t, meas.dt, model.effects)
     inp = np.einsum("nk,jk->nj", u, model.alloc) if inputs else None
     return Prediction(acc, wd_gyro, stretch, f_t, T, inp, source, lat, wd_pose)

@@ -59,7 +59,8 @@ def residual_axes(model: Model, meas: Measured, latency: float | None = None,
     c = meas.core
     if axes == {"stretch"} and meas.tension is not None:
         f_t = _load_cell(meas, lat)
-        return {"stretch": meas.d[c] - model.rho - _tether_stretch(model.config, f_t, meas.dt)[c]}
+        return {"stretch": meas.d[c] - model.rho
+                - _tether_stretch(model.config, f_t, meas.dt, model.effects)[c]}
     pred = predict(model, meas, latency=lat, inputs=False, edges=False)
     acc_m = meas.acc_measured(lat)[c]
     out = {"tangential": acc_m[:, 0] - pred.acc[c, 0], "normal": acc_m[:, 1] - pred.acc[c, 1]}

@@ -18,7 +18,6 @@ from types import SimpleNamespace
 import numpy as np
 
 from ...config import Config
-from ...model.effects import tether_stretch_of
 from ...model.reduced import Model
 from ..compare import (
     UNITS,
@@ -125,9 +124,8 @@ class _Problem:
         """Unweighted residual axes of the base config per segment (computed once)."""
         if self._base is None:
             model = Model(self.config)
-            self._base = [self._stretched(model, i, residual_axes(
-                model, m, self.config.analysis.latency_s))
-                for i, m in enumerate(self.measured(self.config.tether.attachment_offset))]
+            self._base = [residual_axes(model, m, self.config.analysis.latency_s)
+                          for m in self.measured(self.config.tether.attachment_offset)]
         return self._base
 
     def vectors(self, var: CandidateModel, only: int | None = None) -> list[dict]:
@@ -144,26 +142,12 @@ class _Problem:
         out = []
         for g in groups:
             if base is None:
-                per_seg = {i: self._stretched(model, i, residual_axes(model, meas[i],
-                                                                      var.latency))
-                           for i in g}
+                per_seg = {i: residual_axes(model, meas[i], var.latency) for i in g}
             else:
-                per_seg = {i: {**base[i], **self._stretched(model, i, residual_axes(
-                    model, meas[i], var.latency, var.axes))} for i in g}
+                per_seg = {i: {**base[i], **residual_axes(model, meas[i], var.latency,
+                                                          var.axes)} for i in g}
             out.append(self._weighted(per_seg, g))
         return out
-
-    def _stretched(self, model: Model, i: int, res: dict) -> dict:
-        """Segment ``i``'s residual axes ``res`` with the stretch that ``model``'s effects
-        add (:func:`~gainsched.model.effects.tether_stretch_of`; an empirical stretch law)
-        taken off the stretch axis, at the base comparison's tension of the segment (the
-        load cell's, or the base model's radial equation's: a stretch law changes no
-        force, so its own tension is the same). ``res`` itself when no effect stretches
-        the tether or the stretch axis was not re-evaluated."""
-        if "stretch" not in res:
-            return res
-        extra = tether_stretch_of(model.effects, self.residuals[i].variables["tension"])
-        return res if extra is None else {**res, "stretch": res["stretch"] - extra}
 
     def base_vectors(self) -> list[dict]:
         """:meth:`vectors` of the base config, from :meth:`_base_residuals` (the base
