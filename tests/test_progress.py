@@ -1,6 +1,6 @@
 """Issue 39, "Progress": every command that can run for more than a few seconds shows a
 progress line (tqdm on stderr) on a terminal, none in a pipe, none under
-``gainsched --quiet``; one helper makes them all (gainsched/cli.py, ``_progress``)."""
+``gainsched --quiet``; one helper makes them all (gainsched/cli/_base.py, ``_progress``)."""
 
 from __future__ import annotations
 

@@ -50,11 +50,11 @@ def test_paper_command_prefers_the_checkouts_table_then_the_cache(tmp_path, monk
     built from the config; without a checkout (an installed package), the cache's."""
     monkeypatch.setenv("GAINSCHED_CACHE", str(tmp_path / "cache"))
     paper = load_config("paper")
-    table, path = cli._table_of(paper)
+    table, path = cli._base._table_of(paper)
     assert path == PAPER_H5 and table.config_sha256 == paper.sha256
-    monkeypatch.setattr(cli, "_REPO", tmp_path / "no-checkout")
+    monkeypatch.setattr(cli._base, "_REPO", tmp_path / "no-checkout")
     seeded = cached_table_path(paper)
     seeded.parent.mkdir(parents=True)
     shutil.copyfile(PAPER_H5, seeded)  # as a first use would have left it
-    table, path = cli._table_of(paper)
+    table, path = cli._base._table_of(paper)
     assert path == seeded and table.config_sha256 == paper.sha256

@@ -1,0 +1,211 @@
+"""Commands that fly a table in simulation: ``simulate``, ``paper`` and ``campaign``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+import numpy as np
+
+from ..constants import MAX_FLIGHT_S
+from ..errors import InputError
+from ._base import (
+    _RUNTIME,
+    CONFIG,
+    MAX_SPEED,
+    SEED,
+    FilePath,
+    FiniteFloat,
+    Name,
+    _load_for_compare,
+    _progress,
+    _table_of,
+    cli,
+    user_errors,
+)
+
+
+@cli.command()
+@CONFIG
+@click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
+              required=True, help="Gain table (HDF5) built from CONFIG.")
+@click.option("--scenario", type=Name(), required=True,
+              help="Scenario file, or the name of a shipped scenario (horizontal, tilted40, "
+              "speedup, braking, staircase).")
+@click.option("--plant", "plant_path", type=FilePath(dir_okay=False, path_type=Path),
+              help="Truth config for the plant (default: CONFIG).")
+@click.option("--speed", type=FiniteFloat(0, MAX_SPEED, lo_open=True, unit="m/s"),
+              help="Override the scenario's initial speed, m/s (0 < speed <= 100).")
+@_RUNTIME
+@click.option("--controller", type=click.Choice(["path", "firmware"]), default="path",
+              show_default=True,
+              help="'path': the control law in Python with the design model's nominal "
+              "along the reference; 'firmware': the firmware's whole control step, sensors "
+              "in and thrusts out, with only what a firmware has: its estimator, the table's "
+              "lookup plus the drag-only closed form (docs/runtime.md).")
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
+              required=True, help="Output folder (log.csv/.h5, metrics.json, plots).")
+@user_errors
+def simulate(config, table_path, scenario, plant_path, speed, runtime, controller, out_dir):
+    """Fly a scenario in closed loop on the nonlinear plant with gains from the table."""
+    import dataclasses
+
+    from ..config import load_config
+    from ..publish import check_out_dir, staged
+    from ..schedule.tables import load_table
+    from ..sim.loop import check_flight_steps, load_scenario, runtime_scheduler, write_run
+    from ..sim.loop import simulate as run
+
+    cfg = load_config(config)
+    plant = load_config(plant_path) if plant_path else None
+    table = load_table(table_path)
+    scn = load_scenario(scenario)
+    if speed is not None:
+        scn = dataclasses.replace(scn, speed=speed)
+    n = check_flight_steps(scn.duration, cfg.control.rate_hz, scenario, "duration")
+    check_out_dir(out_dir, names=["log.csv", "log.h5", "metrics.json"])
+    if not table.built_from(cfg):  # once every input passed
+        click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
+    with _progress(f"simulate {scn.name}", n, "step") as bar:
+        res = run(cfg, runtime_scheduler(table, runtime), scn, plant, progress=bar.update,
+                  controller=controller)
+    with staged(out_dir) as stage:
+        m = write_run(res, stage)
+    click.echo(
+        f"{out_dir}: {scn.name} {m['duration_s']:.2f} s, "
+        f"RMS out-of-plane {m['rms_out_of_plane_m']:.4f} m, "
+        f"RMS along-track {m['rms_along_track_m']:.3f} m (lap slips {m['lap_slips']}), "
+        f"RMS speed error {m['rms_speed_error_mps']:.3f} m/s, "
+        f"max tension {m['max_tension_N']:.1f} N, "
+        f"saturation {100 * m['saturation_fraction']:.1f}%, slack events {m['slack_events']}"
+    )
+    for line in _left_the_table(m, table_path):
+        click.echo(line)
+
+
+def _left_the_table(m: dict, table_path) -> list[str]:
+    """What a flight's metrics say about leaving the table (docs/runtime.md, the policy
+    the simulator flies): time on gains clamped to the table's speed range, on held gains,
+    or with the nominal's tension below ``feasibility.min_tension``; none when it stayed
+    inside."""
+    out = []
+    if m["clamped_speed_s"] > 0:
+        out.append(f"  left the table: {m['clamped_speed_s']:.2f} s at speeds outside "
+                   f"{table_path}'s range, flown on the gains of its nearest speed "
+                   "(clamped_speed_s)")
+    if m["held_gains_s"] > 0:
+        out.append(f"  left the table: {m['held_gains_s']:.2f} s on held gains (no usable "
+                   "gains at the lookup; held_gains_s)")
+    if m["below_tension_margin_s"] > 0:
+        out.append(f"  left the table: {m['below_tension_margin_s']:.2f} s with the nominal's "
+                   f"tension below min_tension (lowest {m['min_nominal_tension_N']:.2f} N; "
+                   "below_tension_margin_s)")
+    return out
+
+
+@cli.command()
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
+              required=True, help="Output folder (report.md, report.json, one folder per "
+              "experiment).")
+@click.option("--config", "config", type=FilePath(dir_okay=False, path_type=Path),
+              default="paper", show_default="paper, the shipped configs/paper.toml",
+              help="Design config (the paper vehicle).")
+@click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
+              help="Gain table built from the config [default: the checkout's "
+              "tables/NAME.h5 when it is the config's, else the config's table from the cache, "
+              "built there on first use].")
+@click.option("--plant", "plant_path", type=FilePath(dir_okay=False, path_type=Path),
+              help="Truth config for the plant (default: the design config).")
+@click.option("--quick", is_flag=True, help="Short smoke flights (for tests; seconds).")
+@_RUNTIME
+@user_errors
+def paper(out_dir, config, table_path, plant_path, quick, runtime):
+    """Fly the paper's experiments (Sec. V.B, Figs. 3-4) in simulation and write a report:
+    paper figure, paper value, simulated value."""
+    from ..config import load_config
+    from ..publish import check_out_dir, staged
+    from ..schedule.tables import load_table
+    from ..sim.loop import runtime_scheduler
+    from ..sim.paper import experiments, run_paper
+
+    cfg = load_config(config)
+    plant = load_config(plant_path) if plant_path else None
+    # before a first use builds the table (half a minute)
+    check_out_dir(out_dir, names=["report.md", "report.json"])
+    if table_path is None:
+        table, table_path = _table_of(cfg)
+    else:
+        table = load_table(table_path)
+    if not table.built_from(cfg):
+        click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
+    n = len(experiments(quick=quick))
+    meta = {"table": str(table_path), "table_config_sha256": table.config_sha256}
+    with _progress("paper", n, "flight") as bar, \
+            staged(out_dir) as stage:
+        rep = run_paper(cfg, runtime_scheduler(table, runtime), stage, quick=quick, plant=plant,
+                        progress=bar.update, meta=meta, table=table)
+    for r in rep.rows:
+        mark = {True: "ok ", False: "NO ", None: "-  "}[r.agrees]
+        click.echo(f"{mark} {r.figure:16s} {r.quantity}: paper {r.paper}; sim {r.simulated_text}")
+    click.echo(f"wrote {out_dir / 'report.md'} and {out_dir / 'report.json'}")
+
+
+class _HiddenOption(click.Option):
+    """``--hidden``: its help lists the hidden effects of
+    :data:`gainsched.sim.campaign.HIDDEN`, read when help is asked for (the simulator is
+    not imported to start a command)."""
+
+    def get_help_record(self, ctx):
+        from ..sim.campaign import HIDDEN
+
+        self.help = f"Hidden effect of the plant: {', '.join(HIDDEN)}."
+        return super().get_help_record(ctx)
+
+
+@cli.command()
+@CONFIG
+@click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
+              required=True, help="Gain table (HDF5) built from CONFIG.")
+@click.option("--hidden", type=Name(), default="none", show_default=True,
+              cls=_HiddenOption, help="Hidden effect of the plant.")
+@click.option("--duration", type=FiniteFloat(1.0, MAX_FLIGHT_S, unit="s"), default=3.0,
+              show_default=True, help=f"Seconds per flight (1..{MAX_FLIGHT_S:g}).")
+@click.option("--no-load-cell", is_flag=True, help="Drop the tether tension column.")
+@click.option("--format", "fmt", type=click.Choice(["csv", "h5"]), default="csv",
+              show_default=True)
+@click.option("--seed", type=SEED, default=1, show_default=True,
+              help="Seed of the sensor noise (a non-negative integer).")
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
+              required=True, help="Output folder for the flight logs.")
+@user_errors
+def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_dir):
+    """Fly a synthetic test campaign (speeds 3-15 m/s, tilts 0/20/40 deg, a speed-up, a
+    braking; motion-capture noise) on a plant with a HIDDEN effect and write the logs."""
+    from ..publish import check_out_dir, staged
+    from ..schedule.tables import load_table
+    from ..sim.campaign import HIDDEN, default_flights, outside_table, write_campaign
+    from ..sim.campaign import campaign as fly
+    from ..sim.loop import check_flight_steps, table_scheduler
+
+    if hidden not in HIDDEN:
+        known = ", ".join(HIDDEN)
+        raise InputError("command line", "--hidden",
+                         f"unknown hidden effect {hidden!r} (known: {known})")
+    cfg = _load_for_compare(config)
+    check_flight_steps(duration, cfg.control.rate_hz, "command line", "--duration")
+    table = load_table(table_path)
+    check_out_dir(out_dir)
+    if not table.built_from(cfg):  # as simulate and paper say it, before the work
+        click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
+    flights = default_flights(duration, seed)
+    if outside := outside_table(flights, table):
+        click.echo(f"gainsched: warning: {table_path} covers speeds "
+                   f"{table.speed.min():.3g}-{table.speed.max():.3g} m/s, tilts up to "
+                   f"{np.rad2deg(table.tilt.max()):.0f} deg: {', '.join(outside)} fly outside "
+                   "it, on the gains of its nearest circle", err=True)
+    with _progress(f"campaign {hidden}", len(flights), "flight") as bar:
+        logs = fly(cfg, table_scheduler(table), hidden, scenarios=flights, duration=duration,
+                   load_cell=not no_load_cell, seed=seed, progress=bar.update)
+    with staged(out_dir) as stage:
+        paths = write_campaign(stage, logs, fmt)
+    click.echo(f"{out_dir}: {len(paths)} flights, hidden effect: {HIDDEN[hidden].doc}")

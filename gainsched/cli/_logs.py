@@ -1,0 +1,359 @@
+"""Commands that read flight logs: ``compare``, ``diagnose``, ``improve`` and ``convert``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ..analysis.logchecks import CHECKS as LOG_CHECKS
+from ..constants import MAX_FLIGHT_S, MAX_JOBS
+from ..errors import InputError
+from ._base import (
+    CONFIG,
+    FilePath,
+    FiniteFloat,
+    Jobs,
+    Name,
+    _check_fit_arguments,
+    _distinct,
+    _fit_progress,
+    _load_for_compare,
+    _not_an_input,
+    _outputs_apart,
+    _progress,
+    _same_file,
+    _table_of,
+    cli,
+    user_errors,
+)
+from ._build import _build_into
+
+_LOGS = click.argument("logs", nargs=-1, required=True,
+                       type=FilePath(exists=True, path_type=Path))
+
+
+_MAP = click.option("--map", "map_path", type=Name(), help="Channel map of PX4 ULogs and "
+                    "ROS 2 bags among the logs: a TOML file or a shipped map (px4, "
+                    "px4_legacy, ros2); default for a ULog: px4 (docs/flight-log.md).")
+
+
+_TRUST = click.option("--trust", "trust", multiple=True, type=click.Choice(LOG_CHECKS),
+                      help="Skip a consistency check of the logs where you know the log is "
+                      "right (repeatable; docs/flight-log.md, \"Channels that contradict "
+                      "each other\").")
+
+
+def _channel_map(map_path):
+    """The validated channel map of --map, or None (checked before any work)."""
+    if map_path is None:
+        return None
+    from ..analysis.channelmap import load_channel_map
+
+    return load_channel_map(map_path)
+
+
+@cli.command()
+@CONFIG
+@_LOGS
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
+              help="Report folder: compare.json, compare.md and PNG plots.")
+@click.option("--before", "before_path", type=FilePath(dir_okay=False, path_type=Path),
+              help="An earlier config: its residual beside CONFIG's (before/after).")
+@click.option("--no-paper", is_flag=True, help="Skip the paper's thrust/drag analyses.")
+@_MAP
+@_TRUST
+@user_errors
+def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
+    """Compare the model of CONFIG with flight LOGS (CSV, HDF5, PX4 ULog or ROS 2 bag
+    through a channel map): residual per axis
+    (path frame m/s^2, body rad/s^2, tether stretch m), RMS, bias, fit %, whiteness,
+    input correlation, where it fails; the paper's Sec. V.C analyses."""
+    from ..analysis.compare import compare as run
+    from ..analysis.paperfits import paper_fits
+    from ..analysis.reports import (
+        before_after_lines,
+        compare_lines,
+        write_before_after,
+        write_compare,
+    )
+    from ..publish import check_out_dir, staged
+    from ..resources import config_path
+
+    _distinct("LOG", list(logs))
+    if before_path is not None and _same_file(config_path(before_path), config_path(config)):
+        shown = "" if str(before_path) == str(config) else f" ({config})"
+        raise InputError("command line", "--before", f"{before_path} is CONFIG{shown}: give "
+                         "the earlier config")
+    cfg = _load_for_compare(config)
+    before_cfg = None if before_path is None else _load_for_compare(before_path)
+    cmap = _channel_map(map_path)
+    if out_dir is not None:
+        check_out_dir(out_dir, names=["compare.json", "compare.md"])
+    # steps: each log read and the statistics, per config; the paper's fits
+    steps = (len(logs) + 1) * (1 if before_path is None else 2) + (0 if no_paper else 1)
+    with _progress(f"compare {cfg.name}", steps, "step") as bar:
+        cmp = run(cfg, logs, channel_map=cmap, trust=trust, progress=bar.update)
+        paper = None if no_paper else paper_fits(cfg, cmp.measured)
+        bar.update(0 if no_paper else 1)
+        before = None
+        if before_path is not None:
+            before = run(before_cfg, logs, channel_map=cmap, trust=trust,
+                         progress=bar.update)
+    for line in compare_lines(cmp, paper):
+        click.echo(line)
+    if before is not None:
+        click.echo("")
+        for line in before_after_lines(before, cmp):
+            click.echo(line)
+    if out_dir is not None:
+        with staged(out_dir) as stage:  # the report appears whole, or not at all
+            paths = write_compare(cmp, stage, paper)
+            if before is not None:
+                paths += write_before_after(before, cmp, stage)
+        click.echo(f"wrote {len(paths)} files to {out_dir} ({paths[1].name})")
+
+
+@cli.command()
+@CONFIG
+@_LOGS
+@click.option("--candidate", "candidates", type=Name(), multiple=True,
+              help="Only these candidates (repeatable; default: the whole library).")
+@click.option("--exclude", "exclude", type=Name(), multiple=True, metavar="NAME",
+              help="Leave out this candidate or effect (repeatable): the library told "
+                   "the effect is not there.")
+@click.option("--joint", is_flag=True,
+              help="Also fit the best candidates in pairs and triples when a single one "
+                   "passes (they are fitted when none does); a joint fit wins when its "
+                   "delta-BIC is lower by 10.")
+@click.option("--apply", "do_apply", is_flag=True,
+              help="Write the accepted effect and its fitted parameters to -o NEWCONFIG.")
+@click.option("-o", "--out", "new_config", type=FilePath(dir_okay=False, path_type=Path),
+              help="New config file for --apply.")
+@click.option("--report", "report_dir", type=FilePath(file_okay=False, path_type=Path),
+              help="Report folder: diagnose.json/.md, ranking.png, before/after.")
+@_MAP
+@_TRUST
+@user_errors
+def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, report_dir,
+             map_path, trust):
+    """Which physical effect is missing: fit every candidate effect the model lacks to
+    the residual on LOGS, score on held-out flights (leave one flight out), rank, check
+    identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
+    from ..analysis.compare import compare as run
+    from ..analysis.diagnose import apply_candidate
+    from ..analysis.diagnose import diagnose as run_diagnose
+    from ..analysis.reports import (
+        before_after_lines,
+        compare_lines,
+        diagnose_lines,
+        write_before_after,
+        write_compare,
+        write_diagnose,
+    )
+    from ..config import config_from_text
+    from ..publish import check_out_dir, check_out_file, staged, write_atomic
+
+    if do_apply and new_config is None:
+        raise InputError("command line", "--apply", "needs -o NEWCONFIG")
+    if new_config is not None and not do_apply:
+        raise InputError("command line", "-o", "is the new config of --apply: give --apply "
+                         "too (or --report DIR for a report)")
+    _check_fit_arguments("diagnose", logs, candidates, exclude)
+    _outputs_apart(**{"-o": new_config, "--report": report_dir})
+    if new_config is not None:
+        from ..resources import config_path
+
+        _not_an_input(new_config, "-o", CONFIG=config_path(config), LOG=list(logs),
+                      **{"--map": map_path})
+    cfg = _load_for_compare(config)
+    cmap = _channel_map(map_path)
+    if new_config is not None:
+        check_out_file(new_config, "-o")
+    if report_dir is not None:
+        check_out_dir(report_dir, "--report", names=["diagnose.json", "diagnose.md"])
+    base = run(cfg, logs, channel_map=cmap, trust=trust)
+    for line in compare_lines(base):
+        click.echo(line)
+    click.echo("")
+
+    with _fit_progress("diagnose") as fitted:
+        d = run_diagnose(cfg, logs, candidates=candidates or None, comparison=base,
+                         joint=joint, exclude=exclude, progress=fitted)
+    for line in diagnose_lines(d):
+        click.echo(line)
+    after = None
+    if do_apply:
+        if d.accepted is None:
+            click.echo("nothing applied: no candidate cleared the thresholds")
+        else:
+            from ..schedule.grid import check_effect_symmetries
+
+            text = apply_candidate(cfg, d.accepted)
+            write_atomic(new_config, text.encode(), where="-o")
+            new_cfg = config_from_text(text, str(new_config))
+            try:  # the build's own check: a wind, flight time, unequal motors
+                check_effect_symmetries(new_cfg)
+            except InputError as held:
+                click.echo(f"wrote {new_config} ({d.accepted.name}); no table can hold "
+                           f"{held.where}: {held.message}")
+            else:
+                click.echo(f"wrote {new_config} ({d.accepted.name}); rebuild the tables with "
+                           f"`gainsched build {new_config}`")
+            after = run(new_cfg, logs, channel_map=cmap, trust=trust)
+            click.echo("")
+            for line in before_after_lines(base, after):
+                click.echo(line)
+    if report_dir is not None:
+        with staged(report_dir, where="--report") as stage:
+            paths = write_diagnose(d, stage) + write_compare(base, stage, prefix="before")
+            if after is not None:
+                paths += write_compare(after, stage, prefix="after")
+                paths += write_before_after(base, after, stage, d)
+        click.echo(f"wrote {len(paths)} files to {report_dir}")
+
+
+@cli.command()
+@CONFIG
+@_LOGS
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
+              required=True, help="Output folder: NAME.toml (the improved config), "
+              "tables/ (rebuilt from it) and report/.")
+@click.option("--rounds", type=click.IntRange(1, 10), default=3, show_default=True,
+              help="The most diagnose rounds (1..10).")
+@click.option("--exclude", "exclude", type=Name(), multiple=True, metavar="NAME",
+              help="Leave out this candidate or effect (repeatable), as diagnose.")
+@click.option("--no-build", is_flag=True,
+              help="Write the config and the report only (no tables, no flights).")
+@click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
+              help="The old table, built from CONFIG, for the flights [default: the "
+              "checkout's tables/NAME.h5 when it is CONFIG's, else CONFIG's table from the "
+              "cache, built there on first use].")
+@click.option("--duration", type=FiniteFloat(1.0, MAX_FLIGHT_S, unit="s"), default=3.0,
+              show_default=True, help=f"Seconds per standard flight (1..{MAX_FLIGHT_S:g}).")
+@click.option("-j", "--jobs", type=Jobs(), default=-1, show_default=True,
+              help=f"Parallel workers of the build, 1..{MAX_JOBS} (-1 = all cores).")
+@_MAP
+@_TRUST
+@user_errors
+def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, duration, jobs,
+            map_path, trust):
+    """The model loop in one command: compare CONFIG with LOGS, diagnose and apply in
+    rounds until no effect is missing, rebuild the tables from the improved config (its
+    name kept: the same C symbols), fly the standard flights on the improved model with
+    the old and the new table, and write the report: the error round by round and the
+    tracking old against new. Each step is what compare, diagnose --apply, build and
+    simulate do."""
+
+    from ..analysis.improve import improve as run
+    from ..analysis.improve import write_improve
+    from ..config import config_from_text
+    from ..publish import check_out_dir, staged
+
+    _check_fit_arguments("improve", logs, (), exclude)
+    if no_build and table_path is not None:
+        raise InputError("command line", "--tables", "is the old table of the flights, and "
+                         "--no-build flies none: give one of them")
+    cfg = _load_for_compare(config)
+    cmap = _channel_map(map_path)
+    check_out_dir(out_dir, names=[f"{cfg.name}.toml", "tables", "report"])
+    # the improved config and the rebuilt table replace files of these names in DIR
+    _not_an_input(out_dir / f"{cfg.name}.toml", "-o", CONFIG=config, LOG=list(logs))
+    _not_an_input(out_dir / "tables" / f"{cfg.name}.h5", "-o", **{"--tables": table_path})
+    old_table = None
+    if table_path is not None:
+        from ..schedule.tables import load_table
+
+        old_table = load_table(table_path)
+        if not old_table.built_from(cfg):
+            raise InputError(table_path, "", f"was built from another config than {config}: "
+                             "the old table of the flights must be CONFIG's")
+    with _fit_progress("improve") as fitted:
+        imp = run(cfg, logs, rounds=rounds, exclude=exclude, channel_map=cmap, trust=trust,
+                  progress=fitted)
+    for k, r in enumerate(imp.rounds):
+        verdict = "" if r.diagnosis is None else f": {r.diagnosis.verdict[:160]}"
+        click.echo(f"round {k}: normalised RMS {r.rms:.3g}{verdict}")
+    new = imp.config
+    flights = None
+    with staged(out_dir) as stage:
+        path = stage / f"{new.name}.toml"
+        path.write_text(new.text)
+        report = stage / "report"
+        report.mkdir()
+        refusal = None
+        if not no_build:
+            from ..schedule.grid import check_effect_symmetries
+
+            try:
+                check_effect_symmetries(config_from_text(new.text, str(path)))
+            except InputError as held:
+                refusal = f"no table can hold {held.where}: {held.message}"
+            else:  # what build does; its lines name the output folder, not the stage
+                (stage / "tables").mkdir()
+                _build_into(config_from_text(new.text, str(out_dir / path.name)),
+                            stage / "tables", jobs, shown=out_dir / "tables")
+                # the standard flights on the improved model, old table and new (simulate's)
+                from ..schedule.tables import load_table
+                from ..sim.oldnew import N_FLIGHTS, fly_old_new
+
+                if old_table is None:  # CONFIG's, as paper finds it
+                    old_table, table_path = _table_of(cfg)
+                new_table = load_table(stage / "tables" / f"{new.name}.h5")
+                meta = {"old_table": str(table_path),
+                        "old_table_config_sha256": old_table.config_sha256,
+                        "new_table": str(out_dir / "tables" / f"{new.name}.h5"),
+                        "new_table_config_sha256": new_table.config_sha256}
+                with _progress("fly old and new tables", 2 * N_FLIGHTS, "flight") as bar:
+                    flights = fly_old_new(cfg, old_table, new, new_table, duration=duration,
+                                          progress=bar.update, meta=meta)
+        write_improve(imp, report, flights, not_flown=(
+            "--no-build" if no_build else refusal and f"the tables were not rebuilt: {refusal}"))
+    if flights is not None:
+        for line in flights.lines():
+            click.echo(line)
+    applied = ", ".join(imp.applied) or "nothing"
+    click.echo(f"{out_dir}: {new.name}.toml ({applied} applied), report/"
+               + (f"; tables not rebuilt: {refusal}" if refusal else
+                  "" if no_build else ", tables/"))
+
+
+@cli.command()
+@click.argument("log", type=FilePath(exists=True, path_type=Path))
+@click.option("-o", "--out", "out_path", type=FilePath(dir_okay=False, path_type=Path),
+              required=True, help="The converted log: OUT.csv or OUT.h5.")
+@_MAP
+@click.option("--config", "config_path", type=FilePath(dir_okay=False, path_type=Path),
+              help="A config whose vehicle.thrust_max is a motor's thrust at full command "
+                   "(normalised or PWM commands, when the map gives no thrust_max_N); "
+                   "its vehicle is what the thrust and the load cell are checked against.")
+@_TRUST
+@user_errors
+def convert(log, out_path, map_path, config_path, trust):
+    """Convert a PX4 ULog or a ROS 2 bag to the project's flight-log format
+    (docs/flight-log.md) for inspection, and say what was mapped to what."""
+    from ..analysis.logs import convert_log
+    from ..analysis.progress import on_bar, reporting
+    from ..config import load_config
+    from ..publish import check_out_file
+    from ..resources import config_path as shipped
+
+    _not_an_input(out_path, "-o", LOG=log, **{"--config": config_path and
+                                               shipped(config_path), "--map": map_path})
+    cmap = _channel_map(map_path)
+    cfg = load_config(config_path) if config_path else None
+    thrust_max = cfg.vehicle.thrust_max if cfg is not None else None
+    check_out_file(out_path, "-o")
+    with _progress(f"convert {log.name}") as bar, reporting(on_bar(bar)):
+        report, segs = convert_log(log, out_path, channel_map=cmap, thrust_max=thrust_max,
+                                   config=cfg, trust=trust)
+        bar.set_postfix_str("written")
+    for line in report:
+        click.echo("  " + line)
+    n = sum(len(s) for s in segs)
+    span = (f"{segs[0].duration:.3g} s" if len(segs) == 1 else
+            f"{len(segs)} segments (split at gaps)")
+    meta = segs[0].meta
+    alpha, gamma = float(meta["alpha_c_deg"]), float(meta["gamma_c_deg"])
+    click.echo(f"wrote {out_path}: {n} samples, {span}, alpha_c {alpha:.2f} deg, "
+               f"gamma_c {gamma:.2f} deg")
