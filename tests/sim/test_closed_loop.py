@@ -245,7 +245,7 @@ def test_paper_quick_report(tmp_path, monkeypatch):
     from gainsched.schedule.cached import cached_table_path
 
     monkeypatch.setenv("GAINSCHED_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(cli_module, "_REPO", tmp_path / "no-checkout")
+    monkeypatch.setattr(cli_module._base, "_REPO", tmp_path / "no-checkout")
     seeded = cached_table_path(load_config("paper"))
     seeded.parent.mkdir(parents=True)
     shutil.copyfile(PAPER_H5, seeded)
