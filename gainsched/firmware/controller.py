@@ -67,10 +67,11 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..actuators import MOTOR_ORDERS, command_from_thrust, slots_from_order, thrust_from_command
-from ..constants import INTEGRATORS, N_STATE
+from ..actuators import command_from_thrust, thrust_from_command
+from ..constants import N_STATE
 from ..errors import InputError
-from ..model.rotations import matrix_from_quaternion
+from ..rotations import matrix_from_quaternion
+from ..schedule.onboard import accel_range_for, largest_specific_force, outputs_from_config
 from ..schedule.path import AzimuthPath
 from .feedforward import FeedForward, feedforward
 from .runtime import (
@@ -108,6 +109,7 @@ __all__ = [
     "int_limits_for",
     "largest_specific_force",
     "accel_range_for",
+    "outputs_from_config",
     "reduced_from_kinematics",
     "Controller",
     "ctrl_status_text",
@@ -370,46 +372,6 @@ class ControllerParams:
         return c
 
 
-#: standard gravity, m/s^2: the unit of accelerometer ranges ("16 g")
-G0 = 9.80665
-#: the default accelerometer range over the largest specific force of the table's circles
-ACCEL_MARGIN = 1.5
-#: the least default accelerometer range, in g (a common MEMS range)
-ACCEL_RANGE_MIN_G = 16
-
-
-def largest_specific_force(config) -> float:
-    """The largest specific force (m/s^2) an accelerometer at the COG senses on the
-    nominal circles of the config's grid (the table's): ``f = a - g`` with the
-    centripetal ``a = v^2 / r`` at the fastest speed, largest where the tilted circle's
-    gravity adds to it, ``|f| = sqrt(a^2 + g^2 + 2 a g sin(alpha))`` at the largest tilt.
-
-    Examples
-    --------
-    >>> round(largest_specific_force(gs.load_config("configs/paper.toml")), 1)  # 15 m/s, 40 deg
-    147.1
-    """
-    v = float(np.max(np.abs(config.grid.speeds)))
-    a = v * v / config.radius
-    g = float(config.g)
-    s = math.sin(float(np.max(np.abs(config.grid.tilts))))
-    return math.sqrt(a * a + g * g + 2.0 * a * g * s)
-
-
-def accel_range_for(config) -> float:
-    """The default accelerometer range (m/s^2) of a config's controller: the largest
-    specific force of its table's circles (:func:`largest_specific_force`) times
-    :data:`ACCEL_MARGIN`, rounded up to whole g, at least :data:`ACCEL_RANGE_MIN_G` g.
-
-    Examples
-    --------
-    >>> round(accel_range_for(gs.load_config("configs/paper.toml")) / G0)  # 147 m/s^2 x 1.5
-    23
-    """
-    n = math.ceil(ACCEL_MARGIN * largest_specific_force(config) / G0 - 1e-9)
-    return G0 * max(ACCEL_RANGE_MIN_G, n)
-
-
 def _dense_data(table):
     """The dense float32 form (RuntimeData) of a table, a RuntimeData, a CompactData (the
     dense form it was made from) or a lookup holding one (``.data``)."""
@@ -502,74 +464,61 @@ def int_limits_for(table, thrust_min: float, thrust_max: float, n_int: int,
     return tuple(out)
 
 
-def controller_params(config, table=None, **sensing) -> ControllerParams:
-    """The controller's parameters from a config and the table it flies: the loop, the
-    vehicle and the motors, the outputs (``[firmware] motor_order``, ``command``,
-    ``thr_mdl_fac``, ``thrust_max_N``), the accelerometer range sized from the grid
-    (:func:`accel_range_for`), the integral states' bounds (``[control] int_limit``,
-    else sized from the table's gains: :func:`int_limits_for`), plus the sensing fields
-    (defaults of :class:`ControllerParams`, or ``sensing``).
+def controller_params(table, **overrides) -> ControllerParams:
+    """The controller's parameters of the table it flies: the design parameters the
+    table carries (its firmware record, computed at the build from its config: the loop,
+    the vehicle and the motors, the outputs, the accelerometer range sized from the grid,
+    the motor lag; :func:`~gainsched.schedule.onboard.controller_from_config`), the
+    integral states' bounds (``[control] int_limit``, else sized from the table's gains:
+    :func:`int_limits_for`), plus the sensing fields (defaults of
+    :class:`ControllerParams`, or ``overrides``).
 
     Parameters
     ----------
-    config : Config
-        The design config the table was built from.
-    table : Table, RuntimeData, CompactData or Interpolator, optional
-        The table the controller flies: the integral bounds are sized from its gains.
-        Needed unless the bounds are given (``[control] int_limit``, or ``int_limit``
-        here) or the config has no integral state.
-    **sensing
-        ``pose_delay``, ``pose_timeout``, ``quat_tolerance``, ``gyro_range``,
+    table : Table, RuntimeData, CompactData or Interpolator
+        The table the controller flies (a lookup holding one: ``.data``).
+    **overrides
+        Sensing: ``pose_delay``, ``pose_timeout``, ``quat_tolerance``, ``gyro_range``,
         ``accel_range``, ``k_pos``, ``k_vel``, ``k_att``, ``pose_period``,
         ``thrust_idle``, ``int_limit`` (rad s: one number for every integral state, or
-        one per state).
+        one per state); and outputs replacing the table's (``export-c --motor-order``,
+        ...): ``motor_slot``, ``normalized``, ``thr_mdl_fac``, ``thrust_full``.
+
+    Returns
+    -------
+    ControllerParams
 
     Raises
     ------
     TypeError
-        An unknown field, or no table to size the integral bounds from.
+        An unknown field.
+    InputError
+        The table carries no controller parameters (a RuntimeData made by hand).
 
     Examples
     --------
-    >>> p = controller_params(gs.load_config("configs/paper.toml"),
-    ...                       gs.load_table("tables/paper.h5"), pose_delay=0.012)
+    >>> p = controller_params(gs.load_table("tables/paper.h5"), pose_delay=0.012)
     >>> p.dt, p.rho, p.int_of, p.delay_steps, [round(v, 2) for v in p.int_limit]
     (0.001, 1.5, (0,), 12, [4.15])
     """
-    v, t, fw = config.vehicle, config.tether, config.firmware
-    int_of = tuple(INTEGRATORS[n] for n in config.control.integrators)
+    d = _dense_data(table)
     names = {f.name for f in fields(ControllerParams)} - {
-        "dt", "rho", "L_e", "thrust_min", "thrust_max", "int_of", "motor_slot", "normalized",
-        "thr_mdl_fac", "thrust_full", "n_lag", "lag_keep"}
-    for k in sensing:
+        "dt", "rho", "L_e", "thrust_min", "thrust_max", "int_of", "n_lag", "lag_keep"}
+    for k in overrides:
         if k not in names:
             raise TypeError(f"controller_params() got an unexpected field {k!r}")
-    limit = config.control.int_limit
-    if "int_limit" in sensing:
-        limit = sensing.pop("int_limit")
+    if d.controller is None:
+        raise InputError(d.name, "firmware/controller", "the table carries no controller "
+                         "parameters; rebuild it (gainsched build CONFIG)")
+    rec = dict(d.controller)
+    int_of = tuple(int(i) for i in rec["int_of"])
+    limit = overrides.pop("int_limit", rec["int_limit"])
     if limit is None and int_of:
-        if table is None:
-            raise TypeError("controller_params() needs the table: the integral states' "
-                            "bounds are sized from its gains (or set [control] int_limit)")
-        limit = int_limits_for(table, v.thrust_min, v.thrust_max, len(int_of))
-    base = dict(dt=config.control.dt, rho=t.length, L_e=t.attachment_offset,
-                thrust_min=v.thrust_min, thrust_max=v.thrust_max, thrust_idle=v.thrust_min,
-                int_limit=() if limit is None else limit, int_of=int_of,
-                accel_range=accel_range_for(config),
-                motor_slot=slots_from_order(MOTOR_ORDERS[fw.motor_order]),
-                normalized=fw.command == "normalized", thr_mdl_fac=fw.thr_mdl_fac,
-                thrust_full=v.thrust_max if fw.thrust_full is None else fw.thrust_full,
-                **_lag_params(config))
-    return ControllerParams(**{**base, **sensing})
-
-
-def _lag_params(config) -> dict:
-    """``n_lag`` and ``lag_keep`` of a config with a motor lag (its 4 thrusts end the LQR
-    state, :func:`~gainsched.schedule.linearize.lqr_system`), else none."""
-    lag = [dict(e.params) for e in config.effects if e.name == "motor_lag"]
-    if not lag:
-        return {}
-    return {"n_lag": 4, "lag_keep": math.exp(-config.control.dt / lag[0]["tau"])}
+        limit = int_limits_for(d, rec["thrust_min"], rec["thrust_max"], len(int_of))
+    out = {**rec, "int_limit": () if limit is None else limit, "int_of": int_of, **overrides}
+    out.update(motor_slot=tuple(int(i) for i in out["motor_slot"]),
+               normalized=bool(out["normalized"]), n_lag=int(out["n_lag"]))
+    return ControllerParams(**out)
 
 
 def _wrap(a):

@@ -31,6 +31,8 @@ import numpy as np
 from .. import constants
 from ..constants import MASK_NO_GAINS, MAX_XI
 from ..errors import InputError
+from ..schedule.closedform import polynomial_drag
+from ..schedule.onboard import VEHICLE_FIELDS
 
 __all__ = [
     "OK",
@@ -51,7 +53,6 @@ __all__ = [
     "runtime_data",
     "VEHICLE_FIELDS",
     "VehicleConstants",
-    "vehicle_constants",
     "vehicle_fields",
     "Lookup",
     "Interpolator",
@@ -95,12 +96,6 @@ SNAP = F32(2.0**-12)  # cell fractions this close to 0 or 1 are put on the grid 
 MAX_OFFSET_HARMONICS = 8  # GS_MAX_OFFSET_HARMONICS
 
 
-#: the closed-form constants a table carries for the firmware's feed-forward (``gs_vehicle``
-#: in gainsched_runtime.h, same order): name -> number of float32 values
-VEHICLE_FIELDS = {"mass": 1, "g": 1, "radius": 1, "min_tension": 1, "drag_mu1": 1,
-                  "drag_mu2": 1, "J": 9, "alloc_inv": 16}
-
-
 @dataclass(frozen=True)
 class VehicleConstants:
     """What the compiled closed form knows of the vehicle (paper eqs. 15-18).
@@ -142,8 +137,7 @@ class VehicleConstants:
                    f["alloc_inv"].reshape(4, 4))
 
     def closed_form_drag(self):
-        from ..model.effects import polynomial_drag
-
+        """The closed form's tangential drag ``D(v) -> (D, D', D'')`` of ``mu1, mu2``."""
         return polynomial_drag(self.mu1, self.mu2)
 
 
@@ -151,19 +145,6 @@ def vehicle_fields(a) -> dict[str, np.ndarray]:
     """A ``gs_vehicle`` array (:data:`VEHICLE_FIELDS` order) split into its fields."""
     ends = np.cumsum(list(VEHICLE_FIELDS.values()))
     return dict(zip(VEHICLE_FIELDS, np.split(np.asarray(a), ends[:-1]), strict=True))
-
-
-def vehicle_constants(config) -> np.ndarray:
-    """The ``gs_vehicle`` values of a config, float32 shape (30,) (:data:`VEHICLE_FIELDS`):
-    the drag-only part of its model (:meth:`gainsched.model.reduced.Model.drag_part`)."""
-    from ..model.reduced import Model
-
-    model = Model(config).drag_part()
-    mu1, mu2 = model.drag_coefficients()
-    values = {"mass": model.m, "g": model.g, "radius": model.r,
-              "min_tension": config.feasibility.min_tension, "drag_mu1": mu1,
-              "drag_mu2": mu2, "J": model.J, "alloc_inv": model.alloc_inv}
-    return np.concatenate([np.ravel(values[k]) for k in VEHICLE_FIELDS]).astype(np.float32)
 
 
 def _snap(f):
@@ -209,8 +190,9 @@ class RuntimeData:
     ``mask = reasons | MASK_NO_GAINS`` where a point has no finite gains or nominal.
     ``P_x[state_perm[j], j] = state_sign[j]`` is the S2 map of the LQR state.
     ``vehicle``: the closed-form constants of the feed-forward (:data:`VEHICLE_FIELDS`),
-    float32 (30,), or None when the table's config cannot be loaded here (an effect
-    registered in another process): the table then has no feed-forward.
+    float32 (31,), from the table's firmware record (None: no feed-forward).
+    ``controller``: the controller's design parameters of the firmware record
+    (:data:`gainsched.schedule.onboard.CONTROLLER_KEYS`), None when not known.
     ``offsets``: the nominal's pitch and yaw offsets per circle, float32 (n_a, n_v, 2,
     2 H + 1), Fourier coefficients in the azimuth; None when the table has none.
     """
@@ -233,6 +215,7 @@ class RuntimeData:
     meta: dict = field(default_factory=dict)
     vehicle: np.ndarray | None = None
     offsets: np.ndarray | None = None
+    controller: dict | None = None
 
     @property
     def dims(self) -> tuple[int, int, int, int]:
@@ -289,57 +272,6 @@ def c_identifier(name: str) -> str:
     return out if not out[0].isdigit() else f"t{out}"
 
 
-def loadable_config(table):
-    """The table's embedded config (:func:`gainsched.config_from_text`), or None when it
-    names an effect this process does not know (one registered elsewhere: the dense
-    header needs no config). Any other fault of the embedded config (not TOML, a key
-    out of range) raises its InputError, naming ``TABLE:config_text`` and the key: a
-    table is never exported half (without its controller) for a config that does not
-    load."""
-    from ..config import config_from_text
-
-    try:
-        return config_from_text(table.config_text, f"{table.source}:config_text")
-    except InputError as exc:
-        if exc.where.startswith("effects.") and exc.message.startswith("unknown effect"):
-            return None
-        raise
-
-
-def _table_config(table):
-    """``(config, None)`` of the table's config text, or ``(None, error)`` when this
-    process cannot load it (a config naming an effect registered elsewhere)."""
-    from ..config import config_from_text
-
-    try:
-        return config_from_text(table.config_text, f"{table.source}:config_text"), None
-    except InputError as exc:
-        return None, exc
-
-
-def _state_mirror(table, cfg, error) -> np.ndarray:
-    """P_x of the table's LQR state, from its config's integrals and effects (or, for a
-    config this process cannot load, ``cfg`` None with the loading ``error``, from the
-    integral states in ``state_names`` when there are no effect states)."""
-    from ..constants import INTEGRATORS, REDUCED_NAMES
-    from ..model.effects import effects_from_specs
-    from ..model.symmetry import state_mirror
-
-    n = table.K_tilt0.shape[-1]
-    if cfg is not None:
-        P = state_mirror(effects_from_specs(cfg.effects), cfg.control.integrators)
-    else:
-        names = str(table.attrs.get("state_names", "")).split(",")
-        integrators = tuple(x for x in names if x in INTEGRATORS)
-        if names[:len(REDUCED_NAMES)] != list(REDUCED_NAMES) or len(names) != len(
-                REDUCED_NAMES) + len(integrators):
-            raise error
-        P = state_mirror((), integrators)
-    if P.shape != (n, n):
-        raise InputError(table.source, "config_text", f"state map is {P.shape}, gains have n={n}")
-    return P
-
-
 def _signed_permutation(P, source="") -> tuple[np.ndarray, np.ndarray]:
     """``(perm, sign)`` with ``P[perm[j], j] = sign[j]``; P must be a signed involution."""
     n = P.shape[0]
@@ -392,8 +324,11 @@ def runtime_data(table) -> RuntimeData:
         raise InputError(src, "axes/xi_dot", "must be positive")
     if np.any(table.reasons & MASK_NO_GAINS):
         raise InputError(src, "feasibility/reasons", f"bit {MASK_NO_GAINS:#x} is reserved")
-    cfg, cfg_error = _table_config(table)
-    perm, sign = _signed_permutation(_state_mirror(table, cfg, cfg_error), src)
+    record = getattr(table, "firmware", None)
+    if record is None:
+        raise InputError(src, "firmware", "missing: the table carries no firmware record "
+                         "(docs/table-format.md); rebuild it (gainsched build CONFIG)")
+    perm, sign = _signed_permutation(np.asarray(record.state_map), src)
     K0 = np.asarray(table.K_tilt0, dtype=np.float64)
     K = np.asarray(table.K, dtype=np.float64)
     u_d = np.asarray(table.u_d, dtype=np.float64)
@@ -426,8 +361,6 @@ def runtime_data(table) -> RuntimeData:
         return np.ascontiguousarray(x, dtype=np.float32)
 
     names = tuple(str(table.attrs.get("state_names", "")).split(",")) if table.attrs else ()
-    # a config this process cannot load has no feed-forward
-    vehicle = None if cfg is None else vehicle_constants(cfg)
     meta = {
         k: table.attrs[k]
         for k in ("tool_version", "schema", "terminal", "rate_hz", "radius_m", "config_name",
@@ -447,8 +380,9 @@ def runtime_data(table) -> RuntimeData:
         state_names=names,
         config_sha256=str(table.config_sha256),
         meta=meta,
-        vehicle=vehicle,
+        vehicle=np.asarray(record.vehicle, dtype=np.float64).astype(np.float32),
         offsets=_offsets(table, src),
+        controller=dict(record.controller),
         **axes,
     )
 
