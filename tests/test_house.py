@@ -24,8 +24,6 @@ MODULES = {
                          "over importable functions, to split by command group (issue 40)"),
     "gainsched/config.py": (1234, "schema, reader, check_* helpers and every section: the "
                             "config split of issue 40"),
-    "gainsched/firmware/controller.py": (962, "the controller's parameters, its Python "
-                                         "reference and the estimator: to split (issue 40)"),
     "gainsched/firmware/runtime.py": (819, "the runtime data and the two interpolators: "
                                       "to split (issue 40)"),
     "gainsched/model/effects.py": (1263, "the effects library, one class per effect: to "
