@@ -24,8 +24,6 @@ MODULES = {
                          "over importable functions, to split by command group (issue 40)"),
     "gainsched/config.py": (1234, "schema, reader, check_* helpers and every section: the "
                             "config split of issue 40"),
-    "gainsched/firmware/runtime.py": (819, "the runtime data and the two interpolators: "
-                                      "to split (issue 40)"),
     "gainsched/model/effects.py": (1263, "the effects library, one class per effect: to "
                                    "become a package of one module per family (issue 40)"),
     "gainsched/schedule/grid.py": (747, "the grid build and the periodic interpolation of "

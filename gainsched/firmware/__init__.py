@@ -1,5 +1,6 @@
 """What flight firmware gets: the C header, the C runtime and their checks.
 
+- :mod:`.dense`: a table as the runtime holds it (float32, the mask, the firmware record).
 - :mod:`.runtime`: the Python reference of the C lookup (``c/gainsched_runtime.c``).
 - :mod:`.compact`: the compact form (Fourier series in the azimuth per circle) and its
   float32 reference lookup.
