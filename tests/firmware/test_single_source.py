@@ -17,17 +17,19 @@ import pytest
 from click.testing import CliRunner
 
 from gainsched.cli import cli
+from gainsched.config import config_from_text
 from gainsched.errors import InputError
 from gainsched.firmware.codegen import c_files
 from gainsched.firmware.controller import controller_params
 from gainsched.firmware.runtime import VehicleConstants, runtime_data
 from gainsched.model import reduced, symmetry
+from gainsched.model.effects import Drag, registered_effect
 from gainsched.schedule import onboard
 from gainsched.schedule import tables as tb
 from gainsched.schedule.grid import build_grid
 from gainsched.schedule.tables import load_table, table_bytes, table_from_bytes
 
-from support import PAPER_H5, REPO, small_config
+from support import PAPER_H5, REPO, small_config, small_config_text
 
 
 @pytest.fixture(scope="module")
@@ -175,3 +177,33 @@ def test_the_firmware_package_does_not_import_the_model():
     res = subprocess.run(["git", "grep", "-n", r"reduced import\|Model(", "gainsched/firmware"],
                          cwd=REPO, capture_output=True, text=True)
     assert res.returncode == 1 and res.stdout == "", res.stdout
+
+
+class _HullDrag(Drag):
+    """A user's pure COG-velocity drag, registered for a build (not built in)."""
+
+    kind = "hull_drag"
+
+
+def test_a_table_of_a_registered_effect_exports_whole_outside_the_registry(tmp_path):
+    """Issue 40: a table whose config names an effect registered in the building process
+    used to export without its feed-forward elsewhere. Its record carries the constants:
+    outside the registry block (where its config no longer loads) the runtime data have
+    the vehicle with both drags summed (paper eq. 10: the registered 0.2 N s/m on the
+    config's own), and export-c writes the header with the nominal and the controller."""
+    text = small_config_text(**{"name": "hull", "effects.hull_drag.mu1": 0.2})
+    with registered_effect(_HullDrag):
+        cfg = config_from_text(text, "hull.toml")
+        data = table_bytes(cfg, build_grid(cfg))
+        base_mu1 = sum(dict(e.params)["mu1"] for e in cfg.effects if e.name == "drag")
+    with pytest.raises(InputError, match="unknown effect"):
+        config_from_text(text, "hull.toml")
+    path = tmp_path / "hull.h5"
+    path.write_bytes(data)
+    v = VehicleConstants.from_array(runtime_data(load_table(path)).vehicle)
+    assert v.mu1 == pytest.approx(base_mu1 + 0.2, rel=1e-6)  # float32 in the runtime data
+    res = CliRunner().invoke(cli, ["export-c", str(path), "-o", str(tmp_path / "c"),
+                                   "--no-code-size"])
+    assert res.exit_code == 0, res.output
+    assert "#define HULL_HAS_NOMINAL 1" in (tmp_path / "c" / "hull_gains.h").read_text()
+    assert (tmp_path / "c" / "hull_control.h").exists()
