@@ -108,7 +108,7 @@ def main(argv=None) -> int:
     cfg, table = load_config(args.config), load_table(args.table)
     dense = runtime_data(table)
     forms = {"dense": dense, "compact": compact_data(dense)}
-    params = controller_params(cfg, table, pose_delay=DELAY * cfg.control.dt)
+    params = controller_params(table, pose_delay=DELAY * cfg.control.dt)
     rows, reset, col = recorded(cfg, table)
     kinds = step_kinds(rows, col)
     out = {"table": str(args.table), "steps": len(rows), "pose_delay_steps": DELAY}

@@ -20,6 +20,7 @@ from gainsched import native
 from gainsched.config import Config, config_from_text
 from gainsched.configedit import set_values
 from gainsched.firmware.pil import pil_tools
+from gainsched.schedule.onboard import record_from_config
 from gainsched.schedule.tables import Table
 
 REPO = Path(__file__).resolve().parents[1]
@@ -135,6 +136,7 @@ def synthetic_table(n_a=4, n_v=5, n_xi=8, *, motor_lag=False, azimuth_integral=F
             "state_names": ",".join(f"s{i}" for i in range(n)),
         },
         source=f"<{name}>",
+        firmware=record_from_config(config_from_text(text, f"<{name}>")),
     )
 
 

@@ -3,7 +3,9 @@
 The import-linter contract in pyproject.toml (run by ``make lint``) orders the
 modules in layers; these tests keep it honest: every module is in a layer, the
 import graph (lazy imports inside functions included) has no cycle, and an
-injected back-edge breaks the contract.
+injected back-edge breaks the contract. A second contract keeps the firmware off the
+model (issue 40: the firmware comes from the table alone); an injected
+``firmware -> model`` edge breaks it.
 """
 
 from __future__ import annotations
@@ -22,8 +24,14 @@ CONTRACT = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importl
 LINT = Path(sys.executable).with_name("lint-imports")
 
 
+def _contract(kind: str) -> dict:
+    """The one contract of type ``kind`` in pyproject.toml ("layers", "forbidden")."""
+    (contract,) = [c for c in CONTRACT["contracts"] if c["type"] == kind]
+    return contract
+
+
 def _layer_modules() -> list[str]:
-    (contract,) = CONTRACT["contracts"]
+    contract = _contract("layers")
     return [m.strip() for layer in contract["layers"] for m in layer.split("|")]
 
 
@@ -116,3 +124,32 @@ def test_contract_fails_on_an_injected_back_edge(tmp_path, module, back_edge):
         f.write("\n" + back_edge)
     res = _lint(tmp_path, tmp_path)
     assert res.returncode != 0 and "BROKEN" in res.stdout, res.stdout + res.stderr
+
+
+def test_the_firmware_contract_forbids_the_model():
+    """The contract that keeps the firmware off the model names them and allows only
+    indirect imports (firmware -> schedule -> model: the schedule owns the model)."""
+    contract = _contract("forbidden")
+    assert contract["source_modules"] == ["gainsched.firmware"]
+    assert contract["forbidden_modules"] == ["gainsched.model"]
+    assert contract["allow_indirect_imports"] is True
+
+
+@pytest.mark.skipif(not LINT.exists(), reason="import-linter not installed")
+@pytest.mark.parametrize("module, edge", [
+    ("firmware/runtime.py", "from ..model.reduced import Model  # injected\n"),
+    ("firmware/controller.py",
+     "def _f():\n    from ..model import rotations  # injected, lazy\n"),
+])
+def test_contract_fails_on_an_injected_firmware_to_model_edge(tmp_path, module, edge):
+    """firmware -> model is allowed by the layers (firmware is above model): only the
+    forbidden contract catches it, and says which."""
+    copy = tmp_path / "gainsched"
+    shutil.copytree(ROOT / "gainsched", copy, ignore=shutil.ignore_patterns("__pycache__"))
+    with open(copy / module, "a") as f:
+        f.write("\n" + edge)
+    res = _lint(tmp_path, tmp_path)
+    assert res.returncode != 0, res.stdout + res.stderr
+    broken = [line for line in res.stdout.splitlines() if line.endswith("BROKEN")]
+    assert broken == ["firmware from the table alone: firmware does not import model BROKEN"], (
+        res.stdout)

@@ -179,7 +179,7 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     (gainsched_runtime.c/.h, gainsched_control.c/.h) next to them; print the flash
     footprint."""
     from ..firmware.codegen import CONTROL_FILES, RUNTIME_FILES, c_files, flash_summary
-    from ..firmware.controller import controller_params
+    from ..firmware.controller import controller_params, outputs_from_config
     from ..firmware.outputs import certificate_lines, firmware_form, table_config
     from ..publish import check_out_dir, publish
     from ..schedule.tables import load_table
@@ -203,7 +203,7 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     n_mid = max(t.speed.size - 1, 1) if fmt == "compact" else 0
     with _progress("certify compact table", n_mid, "speed", show=n_mid > 0) as bar:
         form, cert = firmware_form(cfg, t, progress=bar.update)
-    params = None if cfg is None else controller_params(cfg, t)
+    params = controller_params(t, **(outputs_from_config(cfg) if outputs else {}))
     paths = publish(out_dir, c_files(form, params))
     for p in paths:
         click.echo(f"wrote {p}")

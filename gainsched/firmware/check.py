@@ -13,10 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import config_from_text
 from ..schedule.grid import solve_circle
 from ..schedule.lqr import monodromy, spectral_radius
 from ..schedule.refine import midpoint_errors
+from ..schedule.tables import config_from_table
 from .runtime import Interpolator
 
 __all__ = ["MidpointCheck", "midpoint_check"]
@@ -183,7 +183,7 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
     True
     """
     interp = Interpolator(table) if lookup is None else lookup
-    cfg = config_from_text(table.config_text, f"{table.source}:config_text")
+    cfg = config_from_table(table)
     n_xi = table.xi.size
     cfg2 = cfg.with_values({"grid.azimuth_samples": 2 * n_xi})
     r = cfg.radius

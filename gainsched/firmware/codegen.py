@@ -382,7 +382,7 @@ def render_control_header(data, params) -> str:
     """The text of ``<name>_control.h``: ``<name>_ctrl_params`` (the ``gs_ctrl_params`` of
     :class:`~gainsched.firmware.controller.ControllerParams`) and ``<name>_ctrl_init``."""
     from ..constants import INTEGRATORS
-    from .controller import ACCEL_MARGIN, G0
+    from ..schedule.onboard import ACCEL_MARGIN, G0
 
     data = data.base if isinstance(data, CompactData) else data
     lines = []
@@ -459,15 +459,11 @@ def write_c_outputs(table_path, out_dir=None) -> list[Path]:
     (:func:`gainsched.publish.publish`). Returns the written paths, header first."""
     from ..schedule.tables import load_table
     from .controller import controller_params
-    from .runtime import loadable_config
 
     table = load_table(table_path)
     out_dir = Path(table_path).parent if out_dir is None else Path(out_dir)
-    # the controller's parameters come from the table's config, unless it names an effect
-    # registered elsewhere; an embedded config that does not load is refused
-    cfg = loadable_config(table)
-    params = None if cfg is None else controller_params(cfg, table)
-    return publish(out_dir, c_files(table, params))
+    # everything from the table: its gains and its firmware record
+    return publish(out_dir, c_files(table, controller_params(table)))
 
 
 # --------------------------------------------------------------------------- sizes

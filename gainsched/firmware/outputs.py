@@ -16,14 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..model.reduced import Model
 from ..publish import publish
-from ..schedule.tables import table_bytes, table_from_bytes
+from ..schedule.tables import config_from_table, table_bytes, table_from_bytes
 from .check import MidpointCheck, midpoint_check
 from .codegen import c_files
 from .compact import CompactData, CompactInterpolator, compact_data
 from .controller import controller_params
-from .runtime import RuntimeData, loadable_config, runtime_data
+from .runtime import RuntimeData, runtime_data
 
 __all__ = ["OutputSet", "output_set", "output_files", "firmware_form", "certificate_lines",
            "table_config", "write_outputs"]
@@ -101,13 +100,10 @@ def table_config(table, fmt: str = "config"):
     set to ``fmt`` unless ``fmt`` is ``"config"``; None when this process cannot load it
     (an effect registered elsewhere) and ``fmt`` is not ``"compact"``: the dense header
     needs no config. Raises InputError when ``"compact"`` needs the unloadable config,
-    and for any other fault of the embedded config (:func:`~.runtime.loadable_config`)."""
-    cfg = loadable_config(table)
+    and for any other fault of the embedded config
+    (:func:`~gainsched.schedule.tables.config_from_table`)."""
+    cfg = config_from_table(table, unknown_effect_ok=fmt != "compact")
     if cfg is None:
-        if fmt == "compact":
-            from ..config import config_from_text
-
-            config_from_text(table.config_text, f"{table.source}:config_text")  # raises
         return None
     if fmt not in ("config", cfg.firmware.format):
         cfg = cfg.with_values({"firmware.format": fmt})
@@ -162,10 +158,10 @@ def output_set(config, grid, out_dir=".", progress=None, grid_auto=None) -> Outp
     in error messages; ``progress`` goes to the certificate; ``grid_auto`` is the record
     of axes the build chose (:meth:`gainsched.schedule.refine.GridChoice.record`)."""
     name = f"{config.name}.h5"
-    data = table_bytes(config, grid, Model(config), grid_auto)
+    data = table_bytes(config, grid, grid_auto=grid_auto)
     table = table_from_bytes(data, Path(out_dir) / name)
     form, cert = firmware_form(config, table, progress)
-    return OutputSet({name: data, **c_files(form, controller_params(config, table))}, form, cert)
+    return OutputSet({name: data, **c_files(form, controller_params(table))}, form, cert)
 
 
 def output_files(config, grid, out_dir=".", grid_auto=None) -> dict[str, bytes]:

@@ -12,10 +12,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import N_STATE
+from ..model.effects import polynomial_drag
 from ..plausible import balance
 from .path import AzimuthPath
 
-__all__ = ["state_from_roll", "state_from_attitude", "closed_form"]
+# polynomial_drag: the drag law the closed form takes (re-exported for the firmware's
+# feed-forward, which builds it from the table's drag coefficients, not from the model)
+__all__ = ["state_from_roll", "state_from_attitude", "closed_form", "polynomial_drag"]
 
 
 def state_from_roll(path: AzimuthPath, phi, dphi, ddphi):

@@ -111,9 +111,9 @@ def envelope_from_table(table) -> Envelope:
     >>> env.counts()                                                # doctest: +SKIP
     {'feasible': 89, 'feasible with attitude offsets': 9, 'tether slack': 16}
     """
-    from ..config import config_from_text
     from ..errors import InputError
     from .nominal import min_taut_speed
+    from .tables import config_from_table
 
     has_gains = np.isfinite(table.spectral_radius)
     max_offset = _max_offsets(table)
@@ -125,7 +125,7 @@ def envelope_from_table(table) -> Envelope:
     # a circle without gains and with no reason of its own (should not happen): trim failed
     category = np.where(~has_gains & (category < 2), 2, category)
     try:
-        cfg = config_from_text(table.config_text, f"{table.source}:config_text")
+        cfg = config_from_table(table)
     except InputError:
         taut_tilt = np.zeros(0)
     else:

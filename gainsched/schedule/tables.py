@@ -32,10 +32,14 @@ from ..plausible import MAX_TETHER_LENGTH
 from ..publish import write_atomic
 from ..textinput import parse_toml
 from .linearize import INPUT_NAMES, lqr_state_names
+from .onboard import FirmwareRecord, record_from_config, record_from_datasets
 
-__all__ = ["SCHEMA", "Table", "table_bytes", "write_table", "load_table", "table_from_bytes"]
+__all__ = ["SCHEMA", "Table", "table_bytes", "write_table", "load_table", "table_from_bytes",
+           "config_from_table"]
 
-SCHEMA = "gainsched-table/1"
+SCHEMA = "gainsched-table/2"
+#: the format before the firmware record (``firmware/``): refused, with a line to rebuild
+PREVIOUS_SCHEMA = "gainsched-table/1"
 
 
 @dataclass(frozen=True)
@@ -118,6 +122,11 @@ class Table:
         ranges as written, the errors met at the cell midpoints (fractions: ``gain_error``,
         ``thrust_error``, ``roll_error``), the worst midpoint loop ``worst_rho`` and the
         cost in circles; None: the axes were given as lists.
+    firmware : FirmwareRecord or None
+        What the firmware needs beyond the gains and the nominal, computed at the build
+        (``firmware/`` in the file; :class:`~gainsched.schedule.onboard.FirmwareRecord`):
+        the feed-forward's vehicle constants, the S2 state map, the controller's design
+        parameters. Every loaded table has it; None only in a Table made by hand.
     name : str
         Property: the config's name (``attrs["config_name"]``).
     per_azimuth_tilt0 : bool
@@ -164,6 +173,7 @@ class Table:
     mode_damping: np.ndarray | None = None
     mode_shape: np.ndarray | None = None
     grid_auto: dict | None = None
+    firmware: FirmwareRecord | None = None
 
     @property
     def name(self) -> str:
@@ -255,10 +265,16 @@ def _datasets(f) -> dict:
     return out
 
 
-def table_bytes(config, grid, model, grid_auto: dict | None = None) -> bytes:
-    """Serialise a built grid (``grid.GridResult``) to HDF5 bytes, deterministically;
+def table_bytes(config, grid, model=None, grid_auto: dict | None = None) -> bytes:
+    """Serialise a built grid (``grid.GridResult``) to HDF5 bytes, deterministically, with
+    the firmware record of ``config`` (:func:`~gainsched.schedule.onboard.record_from_config`);
+    ``model``: the config's (:class:`gainsched.model.reduced.Model`, default built here);
     ``grid_auto``: the record of axes the build chose
     (:meth:`~gainsched.schedule.refine.GridChoice.record`), stored as sorted-key JSON."""
+    if model is None:
+        from ..model.reduced import Model
+
+        model = Model(config)
     speeds, tilts = config.grid.speeds, config.grid.tilts
     n_xi = config.grid.azimuth_samples
     n = grid.K.shape[-1]
@@ -335,12 +351,50 @@ def table_bytes(config, grid, model, grid_auto: dict | None = None) -> bytes:
         w = _group(f, "weights")
         _create(w, "Q", Qx)
         _create(w, "R", np.asarray(config.control.R))
+        _write_firmware(_group(f, "firmware"), record_from_config(config))
         digests = {}
         for name, ds in _datasets(f).items():
             digests[name] = ds.attrs["sha256"] = _dataset_sha256(ds[()])
         a["data_sha256"] = _root_sha256(dict(a), digests)
         f.flush()
         return f.id.get_file_image()
+
+
+def config_from_table(table, *, unknown_effect_ok: bool = False):
+    """The config a table was built from: its embedded ``config_text``, loaded and
+    validated as ``gainsched validate`` loads a config (the one place it is parsed again).
+
+    Parameters
+    ----------
+    table : Table
+        A loaded table; errors name ``<its source>:config_text`` and the key.
+    unknown_effect_ok : bool
+        Return None, rather than raise, when the config names an effect this process
+        does not know (one registered in another process); any other fault raises.
+
+    Returns
+    -------
+    Config or None
+    """
+    from ..config import config_from_text
+
+    try:
+        return config_from_text(table.config_text, f"{table.source}:config_text")
+    except InputError as exc:
+        if (unknown_effect_ok and exc.where.startswith("effects.")
+                and exc.message.startswith("unknown effect")):
+            return None
+        raise
+
+
+def _write_firmware(g, record: FirmwareRecord) -> None:
+    """The firmware record's datasets (docs/table-format.md, "The firmware record")."""
+    _create(g, "vehicle", record.vehicle, "SI", "the feed-forward's gs_vehicle constants: "
+            "mass, g, radius, min_tension, drag_mu1, drag_mu2, J (3x3), alloc_inv (4x4)")
+    _create(g, "state_map", record.state_map, "-",
+            "S2 map of the LQR state P_x (signed permutation, n x n)")
+    _create(g, "controller", record.controller_json(), None,
+            "the controller's design parameters (gs_ctrl_params less sensing), JSON")
 
 
 def write_table(path, config, grid, model) -> int:
@@ -355,6 +409,7 @@ _REQUIRED = {
     "gains/K_tilt0": (3, 4), "gains/K": 5, "nominal/u_d": 4, "nominal/phi_d": 3,
     "nominal/tension": 3, "feasibility/reasons": 3, "closed_loop/spectral_radius": 2,
     "closed_loop/dt": 1, "weights/Q": 2, "weights/R": 2, "config_text": 0,
+    "firmware/vehicle": 1, "firmware/state_map": 2, "firmware/controller": 0,
 }
 
 
@@ -467,6 +522,10 @@ def _decoded(v):
 
 def _read(f, path) -> Table:
     schema = _decoded(f.attrs.get("schema"))
+    if schema == PREVIOUS_SCHEMA:
+        raise InputError(path, "schema", f"{schema!r}: built before the firmware record "
+                         f"({SCHEMA!r}, docs/table-format.md); rebuild the table "
+                         "(gainsched build CONFIG)")
     if schema != SCHEMA:
         raise InputError(path, "schema", f"must be {SCHEMA!r}, got {schema!r}")
     for key in _ATTRS:
@@ -539,12 +598,14 @@ def _read(f, path) -> Table:
     _verify(f, path)  # after the structure, so that a missing dataset is named as such
     _check_meaning(path, attrs, d)
     _check_feasible_finite(path, d, tilt, speed, xi)
+    record = record_from_datasets(path, d["firmware/vehicle"], d["firmware/state_map"],
+                                  d["firmware/controller"], n)
     return Table(
         xi, speed, d["axes/xi_dot"], tilt, K0, K, d["nominal/u_d"], d["nominal/phi_d"],
         d["nominal/tension"], d["feasibility/reasons"].astype(np.uint8),
         d["closed_loop/spectral_radius"], d["weights/Q"], d["weights/R"], d["closed_loop/dt"],
         str(d["config_text"]), str(attrs.get("config_sha256", "")), attrs, str(path),
-        offsets, **modes, grid_auto=grid_auto,
+        offsets, **modes, grid_auto=grid_auto, firmware=record,
     )
 
 

@@ -336,7 +336,7 @@ def _firmware_controller(design, scheduler, scenario, path, xi_w, every: int, de
                          "runtime_scheduler)")
     dt, alpha, sens = design.control.dt, scenario.tilt, scenario.sensing
     ff = scheduler.feedforward(AzimuthPath(path.t, xi_w, path.d), alpha)
-    params = controller_params(design, scheduler.data, pose_period=every * dt,
+    params = controller_params(scheduler.data, pose_period=every * dt,
                                pose_delay=delay * dt if sens.latency_compensation else 0.0)
     if not sens.ideal and delay > 0 and params.pose_delay == 0:
         warnings.warn(uncompensated_latency_text(scenario.origin, sens.latency, scenario.speed,

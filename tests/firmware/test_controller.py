@@ -75,7 +75,7 @@ def test_reduced_state_from_kinematics_inverts_the_plant_in_python_and_c(paper_c
     the reduced state: Python to 1e-12, C (float32) to 2e-5."""
     P = _Plant(paper_config)
     rng = np.random.default_rng(3)
-    ctl = CController(paper_table, controller_params(paper_config, paper_table),
+    ctl = CController(paper_table, controller_params(paper_table),
                       build_dir=tmp_path)
     fn = ctl.lib.gs_reduced_from_kinematics
     fp = ctypes.POINTER(ctypes.c_float)
@@ -126,7 +126,7 @@ def test_specific_force_equals_second_differences_of_the_flown_path(paper_config
 
 
 def _pair(cfg, table, tmp_path, **kw):
-    params = controller_params(cfg, table, **kw)
+    params = controller_params(table, **kw)
     c = CController(table, params, build_dir=tmp_path)
     py = Controller(params, Interpolator(runtime_data(table)))
     return c, py
@@ -194,7 +194,7 @@ def test_bad_inputs_give_a_status_and_safe_thrusts_fuzzed(paper_config, paper_ta
     _start(c, res), _start(py, res)
     T, S, _ = c.run(seq)
     Tp, Sp, _ = py.run(seq)
-    p = controller_params(paper_config, paper_table)
+    p = controller_params(paper_table)
     assert np.all(np.isfinite(T)) and np.all((T >= p.thrust_min) & (T <= p.thrust_max))
     assert np.all(np.isfinite(Tp))
     np.testing.assert_array_equal(S, Sp)
@@ -220,7 +220,7 @@ def test_status_policy_named_cases(paper_config, paper_table, tmp_path):
             r[int(col[1:])] = v
         return c.step(r)
 
-    p = controller_params(paper_config, paper_table)
+    p = controller_params(paper_table)
     _, s, _ = one(c1=np.nan, c0=FLAG_POSE | FLAG_ACCEL)
     assert s & CTRL_BAD_POSE  # NaN pose: skipped
     _, s, _ = one(c4=0.9, c5=0.0, c6=0.0, c7=0.0, c0=FLAG_POSE | FLAG_ACCEL)
@@ -296,7 +296,7 @@ def test_a_bad_integral_bound_is_refused(paper_config, paper_table, tmp_path, bo
     from gainsched.errors import InputError
     from gainsched.firmware.sil import build_controller
 
-    good = controller_params(paper_config, paper_table)
+    good = controller_params(paper_table)
     lib = build_controller(paper_table, good, tmp_path)  # the header's params are good
     p = dataclasses.replace(good, int_limit=(bound,))
     with pytest.raises(RuntimeError, match="refused"):
@@ -310,7 +310,7 @@ def test_the_generated_parameters_are_the_configs(paper_config, paper_table, tmp
     header)."""
     c, _ = _pair(paper_config, paper_table, tmp_path)
     fn = c.lib.paper_sil_params
-    want = controller_params(paper_config, paper_table).c_array()
+    want = controller_params(paper_table).c_array()
     pv = np.zeros(want.size, dtype=np.float32)
     fn.argtypes = [ctypes.c_void_p]
     fn(pv.ctypes.data)
@@ -402,7 +402,7 @@ def test_example_control_loop_builds_strict_and_runs(paper_config, paper_table, 
     from gainsched.firmware import codegen
     from gainsched.firmware.sil import write_controller
 
-    sources = write_controller(paper_table, controller_params(paper_config, paper_table),
+    sources = write_controller(paper_table, controller_params(paper_table),
                                tmp_path)
     flags = (["-g", "-O1", "-fsanitize=address,undefined", "-fno-sanitize-recover=all"]
              if san else ["-O2"])
@@ -429,7 +429,7 @@ def test_controller_fuzz_driver_bounded_run(paper_config, paper_table, tmp_path,
 
     data = runtime_data(paper_table)
     data = compact_data(data) if fmt == "compact" else data
-    sources = write_controller(data, controller_params(paper_config, paper_table), tmp_path)
+    sources = write_controller(data, controller_params(paper_table), tmp_path)
     exe = tmp_path / "fuzz_control"
     compile_c([*codegen.STRICT_CFLAGS, "-g", "-O1", "-fsanitize=address,undefined",
                "-fno-sanitize-recover=all", f"-I{tmp_path}",

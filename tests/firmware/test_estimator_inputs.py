@@ -16,12 +16,10 @@ from gainsched.configedit import set_section
 from gainsched.errors import GainschedWarning, InputError
 from gainsched.firmware import controller as fc
 from gainsched.firmware.controller import (
-    ACCEL_RANGE_MIN_G,
     CTRL_BAD_IMU,
     CTRL_INT_LIMIT,
     FLAG_ACCEL,
     FLAG_POSE,
-    G0,
     Controller,
     accel_range_for,
     controller_params,
@@ -31,6 +29,7 @@ from gainsched.firmware.runtime import Interpolator, runtime_data
 from gainsched.firmware.sil import CController
 from gainsched.model.reduced import Model
 from gainsched.schedule.grid import build_grid
+from gainsched.schedule.onboard import ACCEL_RANGE_MIN_G, G0, record_from_config
 from gainsched.schedule.tables import table_bytes, table_from_bytes
 from gainsched.sim.loop import Maneuver, Sensing, load_scenario, runtime_scheduler, simulate
 
@@ -99,7 +98,7 @@ def test_c_and_python_estimators_agree_without_an_accelerometer(paper_config, pa
     res = simulate(paper_config, runtime_scheduler(paper_table, "python"), scn())
     rows = recorded_rows(res)
     rows[:, 0] = rows[:, 0].astype(int) & ~FLAG_ACCEL
-    params = controller_params(paper_config, paper_table, pose_delay=LATENCY)
+    params = controller_params(paper_table, pose_delay=LATENCY)
     c = CController(paper_table, params, build_dir=tmp_path)
     py = Controller(params, Interpolator(runtime_data(paper_table)))
     v0 = np.gradient(res.p_I[:3], res.t[:3], axis=0)[0]
@@ -118,7 +117,7 @@ def test_the_circle_propagation_keeps_the_speed_exactly(paper_config, paper_tabl
     15 m/s circle: after 50 ms (50 steps) the estimate's speed is the true one within
     1e-9 relative and its position on the circle within 1e-9 m (Python reference, double:
     the propagation is exact on a circle; step-start acceleration grew |v| by 2.2e-3)."""
-    ctl = Controller(controller_params(paper_config, paper_table),
+    ctl = Controller(controller_params(paper_table),
                      Interpolator(runtime_data(paper_table)))
     r, v = paper_config.radius, 15.0
     w = v / r
@@ -146,7 +145,7 @@ def test_the_default_accel_range_has_margin_over_the_tables_circles(paper_config
     1 / 1.3 of the range."""
     f_max = largest_specific_force(paper_config)
     assert f_max == pytest.approx(147.12, abs=0.01)
-    params = controller_params(paper_config, paper_table)
+    params = controller_params(paper_table)
     assert params.accel_range == accel_range_for(paper_config) == pytest.approx(23 * G0)
     assert params.accel_range >= 1.5 * f_max
     for tilt in (20.0, 40.0):
@@ -163,7 +162,7 @@ def test_the_generated_header_states_the_accel_range(paper_config, paper_table):
     from gainsched.firmware.codegen import render_control_header
 
     text = render_control_header(runtime_data(paper_table),
-                                 controller_params(paper_config, paper_table))
+                                 controller_params(paper_table))
     assert "accel_range: m/s^2 = 23 g, 1.5x the table's largest specific force" in text
     assert "pose_delay: s: SET it to your poses' latency" in text
 
@@ -208,6 +207,13 @@ def recommended_level():
 OLD_INT_LIMIT = 0.5
 
 
+def _built_with_int_limit(design, table, limit):
+    """The design with ``[control] int_limit = limit`` and its table: the same gains (the
+    bound is no LQR weight), its firmware record carrying the bound."""
+    cfg = design.with_values({"control.int_limit": limit})
+    return cfg, dataclasses.replace(table, firmware=record_from_config(cfg))
+
+
 def _sized_here(table, thrust_min, thrust_max, n_int):
     """The sizing rule, computed here from the HDF5 table's float64 gains: the motors'
     range over each integral state's largest |gain| over the feasible points."""
@@ -231,7 +237,7 @@ def test_the_integral_bounds_are_sized_from_the_tables_gains(recommended_level, 
     from gainsched.firmware.controller import int_limits_for
 
     design, table, _ = recommended_level
-    p = controller_params(design, table)
+    p = controller_params(table)
     want = _sized_here(table, 0.1, 3.5, 2)
     assert p.int_limit == pytest.approx(want, rel=1e-6)
     assert p.int_limit == pytest.approx((0.0970, 1.934), rel=2e-3)  # measured
@@ -240,7 +246,7 @@ def test_the_integral_bounds_are_sized_from_the_tables_gains(recommended_level, 
     for i, lim in enumerate(p.int_limit):  # the largest command of each: the range
         assert np.nanmax(np.abs(K[..., 10 + i])) * lim == pytest.approx(3.4, rel=1e-6)
     rt = runtime_data(table)
-    assert controller_params(design, rt).int_limit == p.int_limit
+    assert controller_params(rt).int_limit == p.int_limit
     assert int_limits_for(compact_data(rt), 0.1, 3.5, 2) == p.int_limit
     # no feasible point (a table whose controller never engages): the fallback
     none = dataclasses.replace(rt, mask=np.ones_like(rt.mask))
@@ -250,23 +256,26 @@ def test_the_integral_bounds_are_sized_from_the_tables_gains(recommended_level, 
             "rad s, bound of int_delta, int_xi: motor range / largest gain (sized from "
             "the table) */") in text
     # the paper table: one integral state, 3.4 N / 0.818 N per rad s
-    paper = controller_params(paper_config, paper_table).int_limit
+    paper = controller_params(paper_table).int_limit
     assert paper == pytest.approx(_sized_here(paper_table, 0.1, 3.5, 1), rel=1e-6)
     assert paper == pytest.approx((4.155,), rel=1e-3)
-    # overrides: the config (one number for all, or one each), the argument
-    assert controller_params(design.with_values({"control.int_limit": 0.5}),
-                             table).int_limit == (0.5, 0.5)
-    both = controller_params(design.with_values({"control.int_limit": [0.05, 0.7]}), table)
+    # overrides: the config (one number for all, or one each: the table built from it
+    # carries it in its firmware record), the argument
+    def built_with(limit):
+        return _built_with_int_limit(design, table, limit)[1]
+
+    assert controller_params(built_with(0.5)).int_limit == (0.5, 0.5)
+    both = controller_params(built_with([0.05, 0.7]))
     assert both.int_limit == (float(np.float32(0.05)), float(np.float32(0.7)))
     assert "set, not sized from the table" in render_control_header(rt, both)
-    assert controller_params(design, int_limit=0.25).int_limit == (0.25, 0.25)
+    assert controller_params(table, int_limit=0.25).int_limit == (0.25, 0.25)
     with pytest.raises(InputError, match=r"control\.int_limit: must be one number or 2 "
                        r"\(int_delta, int_xi\)"):
         design.with_values({"control.int_limit": [0.1, 0.2, 0.3]})
     with pytest.raises(InputError, match=r"control\.int_limit: entries must be > 0"):
         design.with_values({"control.int_limit": [0.1, 0.0]})
-    with pytest.raises(TypeError, match="needs the table"):
-        controller_params(design)
+    with pytest.raises(InputError, match="carries no controller parameters"):
+        controller_params(dataclasses.replace(rt, controller=None))
 
 
 def test_c_and_python_clamp_each_integral_at_its_own_bound(recommended_level, tmp_path,
@@ -290,7 +299,7 @@ def test_c_and_python_clamp_each_integral_at_its_own_bound(recommended_level, tm
     rows[:, 2] = np.where(pose, np.sin(b) * p[:, 0] + np.cos(b) * p[:, 1], p[:, 1])
     rows[:, 3] = np.where(pose, p[:, 2] + 0.03 * sign, p[:, 2])  # out of the plane
     bounds = (0.006, 0.003)
-    params = controller_params(design, table, pose_delay=LATENCY, int_limit=bounds)
+    params = controller_params(table, pose_delay=LATENCY, int_limit=bounds)
     c = CController(table, params, build_dir=tmp_path)
     py = Controller(params, Interpolator(runtime_data(table)))
     v0 = np.gradient(res.p_I[:3], res.t[:3], axis=0)[0]
@@ -336,7 +345,7 @@ def test_a_flight_with_rotor_drag_and_motor_lag_reports_the_integrator_at_its_li
     flight: measured from 2.3 s on), and the C controller flown the same reports it
     too."""
     design, table, plant = recommended_level
-    design = design.with_values({"control.int_limit": OLD_INT_LIMIT})
+    design, table = _built_with_int_limit(design, table, OLD_INT_LIMIT)
     scn = _circle(12.0, 0.0, _sensing(), duration=6.0)
     integrals = []
     control = fc.Controller._control
@@ -349,7 +358,7 @@ def test_a_flight_with_rotor_drag_and_motor_lag_reports_the_integrator_at_its_li
     monkeypatch.setattr(fc.Controller, "_control", recording)
     res = simulate(design, runtime_scheduler(table, "python"), scn, plant, controller="firmware")
     integ = np.array(integrals)
-    limit = np.array(controller_params(design, table).int_limit)
+    limit = np.array(controller_params(table).int_limit)
     assert limit.tolist() == [OLD_INT_LIMIT, OLD_INT_LIMIT]
     at_limit = (np.abs(integ) >= limit).any(axis=1)
     bit = (res.controller_status & CTRL_INT_LIMIT) != 0
@@ -370,10 +379,10 @@ def test_table_sized_bounds_leave_less_azimuth_lag_on_the_rotor_drag_plant(recom
     the out-of-plane error is no worse (measured 1e-5 rad against 3e-4)."""
     design, table, plant = recommended_level
     scn = _circle(12.0, 0.0, _sensing(), duration=6.0)
-    sched = runtime_scheduler(table, "c")
-    old = simulate(design.with_values({"control.int_limit": OLD_INT_LIMIT}), sched, scn, plant,
+    design_old, table_old = _built_with_int_limit(design, table, OLD_INT_LIMIT)
+    old = simulate(design_old, runtime_scheduler(table_old, "c"), scn, plant,
                    controller="firmware")
-    new = simulate(design, sched, scn, plant, controller="firmware")
+    new = simulate(design, runtime_scheduler(table, "c"), scn, plant, controller="firmware")
 
     def delta_err(res, last=1.0):
         e = res.z[:, 0] - res.z_d[:, 0]

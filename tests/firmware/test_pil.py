@@ -97,7 +97,7 @@ def control_run(paper_config, paper_table):
     rows[120, col["gyro"].start] = 80.0
     rows[200, col["accel"].start] = np.inf
     rows[230:300, 0] = 2  # 70 ms without poses: stale
-    params = controller_params(cfg, table, pose_delay=DELAY * cfg.control.dt)
+    params = controller_params(table, pose_delay=DELAY * cfg.control.dt)
     return runtime_data(table), params, rows, reset, col, clean
 
 

@@ -24,6 +24,7 @@ from gainsched.errors import InputError
 from gainsched.firmware.controller import CTRL_IDLE, Controller, controller_params
 from gainsched.firmware.runtime import Interpolator, runtime_data
 from gainsched.firmware.sil import CController
+from gainsched.schedule.onboard import outputs_from_config
 from gainsched.sim.loop import load_scenario, metrics, runtime_scheduler, simulate
 
 from support import PAPER_H5, recorded_rows
@@ -76,14 +77,14 @@ def test_px4_order_puts_each_motor_where_px4_has_it():
 
 # ---------------------------------------------------------------- the config
 def test_config_gives_the_controller_px4_outputs(px4_config, paper_table):
-    p = controller_params(px4_config, paper_table)
+    p = controller_params(paper_table, **outputs_from_config(px4_config))
     assert p.motor_slot == (2, 1, 3, 0) and p.normalized
     assert (p.thr_mdl_fac, p.thrust_full) == (0.3, 4.0)
 
 
 def test_default_outputs_are_unchanged(paper_config, paper_table):
     """Without [firmware] output keys: thrusts in N, motors T1..T4 (the identity)."""
-    p = controller_params(paper_config, paper_table)
+    p = controller_params(paper_table)
     T = np.array([[0.5, 1.0, 1.5, 2.0]])
     np.testing.assert_array_equal(p.commands_from_thrust(T), T)
     np.testing.assert_array_equal(p.thrust_from_commands(T), T)
@@ -127,8 +128,8 @@ def test_c_and_python_emit_the_same_px4_commands_and_they_invert_to_the_default_
     thrusts of the same C controller within 1e-4 N (float32 rounding of the curve), and
     the Python reference's within 1e-9 N of its default."""
     res, rows = flight
-    base = controller_params(paper_config, paper_table, pose_delay=0.012)
-    px4 = controller_params(px4_config, paper_table, pose_delay=0.012)
+    base = controller_params(paper_table, pose_delay=0.012)
+    px4 = controller_params(paper_table, **outputs_from_config(px4_config), pose_delay=0.012)
     table = runtime_data(paper_table)
     c_n = CController(table, base, build_dir=tmp_path / "n")
     c_p = CController(table, px4, build_dir=tmp_path / "p")
@@ -159,7 +160,8 @@ def test_c_and_python_emit_the_same_px4_commands_and_they_invert_to_the_default_
 def test_c_runtime_refuses_bad_output_fields(px4_config, paper_table, tmp_path, field, value):
     """gs_ctrl_init answers GS_BAD_ARG for a motor_slot that is no permutation of 0..3, a
     thrust at full command below thrust_max and a curve outside 0..1."""
-    p = dataclasses.replace(controller_params(px4_config, paper_table), **{field: value})
+    px4 = controller_params(paper_table, **outputs_from_config(px4_config))
+    p = dataclasses.replace(px4, **{field: value})
     with pytest.raises(RuntimeError, match="refused"):
         CController(paper_table, p, build_dir=tmp_path)
 

@@ -118,6 +118,9 @@ LAYOUT = {
     "closed_loop/mode_shape": ((2, 2, 4, 11), "-"),
     "weights/Q": ((11, 11), None),
     "weights/R": ((4, 4), None),
+    "firmware/vehicle": ((31,), "SI"),
+    "firmware/state_map": ((11, 11), "-"),
+    "firmware/controller": ((), None),
 }
 
 
@@ -239,7 +242,7 @@ def test_committed_c_outputs_match_what_the_build_writes():
     t = load_table(PAPER_H5)
     cfg = table_config(t)
     form, _ = firmware_form(cfg, t)
-    for name, data in c_files(form, controller_params(cfg, t)).items():
+    for name, data in c_files(form, controller_params(t)).items():
         assert (PAPER_H5.parent / name).read_bytes() == data, (
             f"tables/{name} is stale: run `make tables` and commit it")
 

@@ -167,7 +167,7 @@ def test_the_firmware_predicts_a_motor_lags_thrusts_from_its_commands(small_conf
 
     cfg = small_config(name="lagged", **{"effects.motor_lag.tau": 0.03})
     table = table_from_bytes(table_bytes(cfg, build_grid(cfg), Model(cfg)))
-    p = controller_params(cfg, table)
+    p = controller_params(table)
     assert p.n_lag == 4 and p.lag_keep == pytest.approx(np.exp(-cfg.control.dt / 0.03))
     sched = table_scheduler(table) if runtime == "python" else c_runtime_scheduler(table,
                                                                                    tmp_path)
