@@ -181,9 +181,39 @@ def controller_from_config(config) -> dict:
 
 
 def record_from_config(config) -> FirmwareRecord:
-    """The firmware record of a config (computed at the build, stored in its table)."""
-    return FirmwareRecord(vehicle_from_config(config), state_map_from_config(config),
-                          controller_from_config(config))
+    """The firmware record of a config (computed at the build, stored in its table).
+
+    Computed on the pinned numerics, as the circles are (:mod:`gainsched.native.reproducible`):
+    in a pinned worker when this process is not pinned (a notebook, a test), since the
+    record's bits are part of the table's bytes and the model's constants pass through
+    kernels that differ between CPUs (the allocation matrix's inverse, vectorised sines).
+    """
+    from ..model.effects import registered_effects
+    from ..native.reproducible import (
+        children_ignore_sigint,
+        pin_available,
+        pinned_executor,
+        process_pinned,
+    )
+
+    if process_pinned() or not pin_available():
+        return _record(config)
+    with children_ignore_sigint():
+        pool = pinned_executor(1)
+    effects = registered_effects({s.name for s in config.effects})
+    return pool.submit(_record, config, effects).result()
+
+
+def _record(config, effects=()) -> FirmwareRecord:
+    """:func:`record_from_config` in this process (``effects``: the registered effect
+    classes the config names, which a worker does not know otherwise)."""
+    from ..model.effects import registered_effects_context
+    from ..native.reproducible import ensure_blas_single_thread
+
+    ensure_blas_single_thread()
+    with registered_effects_context(effects):
+        return FirmwareRecord(vehicle_from_config(config), state_map_from_config(config),
+                              controller_from_config(config))
 
 
 def _signed_involution(P) -> bool:
