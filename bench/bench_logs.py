@@ -54,7 +54,7 @@ def steady_circle(minutes: float, rate: float = 1000.0):
 def write_logs(folder: Path, minutes: float) -> tuple[Path, Path]:
     sys.path.insert(0, str(REPO / "tests"))
     from gainsched.analysis.logs import write_log
-    from gainsched.model.rotations import quaternion_from_matrix
+    from gainsched.rotations import quaternion_from_matrix
 
     from support import write_ulog
 

@@ -139,7 +139,7 @@ def test_the_firmware_contract_forbids_the_model():
 @pytest.mark.parametrize("module, edge", [
     ("firmware/runtime.py", "from ..model.reduced import Model  # injected\n"),
     ("firmware/controller.py",
-     "def _f():\n    from ..model import rotations  # injected, lazy\n"),
+     "def _f():\n    from ..model import geometry  # injected, lazy\n"),
 ])
 def test_contract_fails_on_an_injected_firmware_to_model_edge(tmp_path, module, edge):
     """firmware -> model is allowed by the layers (firmware is above model): only the

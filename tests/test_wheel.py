@@ -26,7 +26,7 @@ import pytest
 from gainsched.analysis.channelmap import load_channel_map
 from gainsched.analysis.logs import read_log
 from gainsched.config import load_config
-from gainsched.model.rotations import matrix_from_quaternion, quaternion_from_matrix
+from gainsched.rotations import matrix_from_quaternion, quaternion_from_matrix
 from gainsched.schedule.cached import cached_table_path
 
 from support import PAPER_H5, small_config_text, write_ulog

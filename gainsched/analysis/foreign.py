@@ -328,6 +328,37 @@ def convert_topics(path, topics: dict[str, Topic], params: dict[str, float],
     ``thrust_max`` (N): a motor's thrust at full command when the map does not give it
     (the analysis config's ``vehicle.thrust_max``).
     """
+    from scipy.spatial.transform import Rotation
+
+    report: list[str] = []
+    t, rows, p_I, R_IB = _pose(topics, cmap, report)
+    t, rows, p_I, R_IB, T = _commanded(path, topics, cmap, params, thrust_max,
+                                       (t, rows, p_I, R_IB), report)
+    q_IB = Rotation.from_matrix(R_IB).as_quat(scalar_first=True)
+    cols = {"t": t}
+    cols.update({n: p_I[:, j] for j, n in enumerate("xyz")})
+    cols.update({n: q_IB[:, j] for j, n in enumerate(("qw", "qx", "qy", "qz"))})
+    cols.update({f"T{j + 1}": T[:, j] for j in range(4)})
+    _add_imu(topics, cmap, t, cols, report)
+    _check_frames(path, cmap, t, R_IB, cols)
+    _add_tension_battery(topics, cmap, t, cols, report)
+    meta = {"schema": "gainsched-flightlog/1", "flight_id": Path(path).stem,
+            "source_format": foreign_format(path) or "", "channel_map": cmap.name,
+            "motors_order": str(list(cmap.motor_order))}
+    if cmap.alpha_c_deg is not None and cmap.gamma_c_deg is not None:
+        meta["alpha_c_deg"] = repr(float(cmap.alpha_c_deg))
+        meta["gamma_c_deg"] = repr(float(cmap.gamma_c_deg))
+        meta["plane_source"] = f"channel map {cmap.name}"
+    return ConvertedLog(cols, meta, rows, f"{cmap.position.topic} sample", tuple(report))
+
+
+def _pose(topics, cmap: ChannelMap, report: list) -> tuple:
+    """``(t, rows, p_I, R_IB)`` of the pose topics: time (s, with the map's pose offset),
+    the position topic's sample numbers (from 1), the COG position in the anchor's ENU
+    frame (m) and the body's FLU attitude (the attitude slerped to the position's times
+    when it has a topic of its own)."""
+    from scipy.spatial.transform import Rotation, Slerp
+
     pos_ch, att_ch = cmap.position, cmap.attitude
     pos = topics[pos_ch.topic]
     t = pos.t + cmap.pose_offset_s
@@ -337,10 +368,9 @@ def convert_topics(path, topics: dict[str, Topic], params: dict[str, float],
     q_raw = np.stack([att.fields[f] for f in att_ch.fields], -1)
     if cmap.attitude_order == "xyzw":
         q_raw = q_raw[:, [3, 0, 1, 2]]
-    report = [f"position: {pos_ch.topic} {', '.join(pos_ch.fields)} ({t.size} samples, "
-              f"{_rate(pos.t)}), {cmap.world} -> ENU at the anchor {cmap.anchor_m.tolist()} m"]
-    from scipy.spatial.transform import Rotation, Slerp
-
+    report.append(f"position: {pos_ch.topic} {', '.join(pos_ch.fields)} ({t.size} samples, "
+                  f"{_rate(pos.t)}), {cmap.world} -> ENU at the anchor "
+                  f"{cmap.anchor_m.tolist()} m")
     t_att = att.t + cmap.pose_offset_s
     if att_ch.topic == pos_ch.topic:
         R_wb = Rotation.from_quat(q_raw, scalar_first=True).as_matrix()
@@ -354,8 +384,15 @@ def convert_topics(path, topics: dict[str, Topic], params: dict[str, float],
                   f"{cmap.world}/{cmap.body} -> ENU/FLU")
     C_w = _NED_TO_ENU if cmap.world == "NED" else np.eye(3)
     C_b = _FRD_TO_FLU if cmap.body == "FRD" else np.eye(3)
-    p_I = (p - cmap.anchor_m) @ C_w.T
-    R_IB = C_w @ R_wb @ C_b
+    return t, rows, (p - cmap.anchor_m) @ C_w.T, C_w @ R_wb @ C_b
+
+
+def _commanded(path, topics, cmap: ChannelMap, params, thrust_max, pose, report: list):
+    """The pose samples ``pose = (t, rows, p_I, R_IB)`` while the motors were commanded,
+    with ``T`` (n, 4) N, the motor thrusts T1..T4 held and averaged over each pose
+    interval; a command outside the thrust curve's range inside that span is an error
+    naming its field and sample."""
+    t, rows, p_I, R_IB = pose
     mot = topics[cmap.motors.topic]
     fields = [cmap.motors.fields[i - 1] for i in cmap.motor_order]
     cmd = np.stack([mot.fields[f] for f in fields], -1)
@@ -380,19 +417,21 @@ def convert_topics(path, topics: dict[str, Topic], params: dict[str, float],
     left = int(np.count_nonzero(~armed))
     t, p_I, R_IB, rows = t[armed], p_I[armed], R_IB[armed], rows[armed]
     if t.size == 0:
-        raise InputError(path, f"topic {pos_ch.topic}", "no pose sample while the motors "
-                         "were commanded")
+        raise InputError(path, f"topic {cmap.position.topic}", "no pose sample while the "
+                         "motors were commanded")
     T = _held_mean(t_mot[first:last + 1], T_all[first:last + 1], t)
     report.append(f"motors: {cmap.motors.topic} {', '.join(fields)} as T1..T4 ({cmap.unit}"
                   f"{'' if cmap.unit == 'N' else ' through the thrust curve'}, {_rate(t_mot)}, "
                   "held, the mean over each pose interval)"
                   + (f"; {left} pose samples outside the commanded span left out" if left
                      else ""))
-    q_IB = Rotation.from_matrix(R_IB).as_quat(scalar_first=True)
-    cols = {"t": t}
-    cols.update({n: p_I[:, j] for j, n in enumerate("xyz")})
-    cols.update({n: q_IB[:, j] for j, n in enumerate(("qw", "qx", "qy", "qz"))})
-    cols.update({f"T{j + 1}": T[:, j] for j in range(4)})
+    return t, rows, p_I, R_IB, T
+
+
+def _add_imu(topics, cmap: ChannelMap, t, cols: dict, report: list) -> None:
+    """The gyro (p, q, r) and accelerometer (ax, ay, az) columns the map names, in FLU,
+    each the mean over a pose interval centred on each pose sample."""
+    C_b = _FRD_TO_FLU if cmap.body == "FRD" else np.eye(3)
     for ch, names in ((cmap.gyro, ("p", "q", "r")), (cmap.accelerometer, ("ax", "ay", "az"))):
         if ch is None:
             continue
@@ -403,7 +442,11 @@ def convert_topics(path, topics: dict[str, Topic], params: dict[str, float],
         report.append(f"{'gyro' if names[0] == 'p' else 'accelerometer'}: {ch.topic} "
                       f"{', '.join(ch.fields)} ({_rate(src.t)}, the mean over a pose "
                       f"interval centred on each pose sample), {cmap.body} -> FLU")
-    _check_frames(path, cmap, t, R_IB, cols)
+
+
+def _add_tension_battery(topics, cmap: ChannelMap, t, cols: dict, report: list) -> None:
+    """The load cell's ``tension`` (N) and the battery's ``vbat`` (V, unknown samples
+    NaN) columns when the map names them, each held at the pose samples."""
     if cmap.tension is not None:
         src = topics[cmap.tension.topic]
         x = src.fields[cmap.tension.fields[0]] * cmap.tension.scale
@@ -422,14 +465,6 @@ def convert_topics(path, topics: dict[str, Topic], params: dict[str, float],
         report.append(f"battery: {bat.topic} {bat.fields[0]} x {bat.scale:g} as vbat (held"
                       + (f"; {int(np.count_nonzero(unknown))} samples of 0 or less, unknown, "
                          "left out" if unknown.any() else "") + ")")
-    meta = {"schema": "gainsched-flightlog/1", "flight_id": Path(path).stem,
-            "source_format": foreign_format(path) or "", "channel_map": cmap.name,
-            "motors_order": str(list(cmap.motor_order))}
-    if cmap.alpha_c_deg is not None and cmap.gamma_c_deg is not None:
-        meta["alpha_c_deg"] = repr(float(cmap.alpha_c_deg))
-        meta["gamma_c_deg"] = repr(float(cmap.gamma_c_deg))
-        meta["plane_source"] = f"channel map {cmap.name}"
-    return ConvertedLog(cols, meta, rows, f"{pos_ch.topic} sample", tuple(report))
 
 
 def _check_frames(path, cmap: ChannelMap, t, R_IB, cols) -> None:

@@ -60,7 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..model.rotations import matrix_from_quaternion
+from ..rotations import matrix_from_quaternion
 from .progress import report
 
 __all__ = ["CHECKS", "RATIO_TOL", "QUAT_ALONG_MIN", "Figures", "figures", "check_log",
@@ -236,103 +236,125 @@ def figures(t, p_I, q, T_cmd, optional: dict, meta: dict, *, mass: float | None 
     if np.count_nonzero(far) >= 3:
         e = p[sel][far] / radius[far, None]
         out["x_along"] = float(np.mean(np.einsum("ki,ki->k", x_B[far], e)))
-
-    # gyro against the rates of the attitude: R_k^T R_{k+m} over RATE_WINDOW_S
-    gyro = optional.get("omega_B")
-    if gyro is not None:
-        m = _lag(t, RATE_WINDOW_S)
-        k, h = _windows(t, m, gap_factor)
-        if k.size > 10:
-            w = np.asarray(gyro, float)
-            bad = ~np.all(np.isfinite(w), -1)
-            wz = np.where(bad[:, None], 0.0, w)
-            # trapezoid integral of the gyro, so the window mean is a difference
-            cum = np.concatenate([np.zeros((1, 3)), np.cumsum(
-                0.5 * (wz[1:] + wz[:-1]) * np.diff(t)[:, None], 0)])
-            nbad = np.concatenate([[0], np.cumsum(bad)])
-            ok = (nbad[k + m + 1] - nbad[k]) == 0
-            k, h = _thin(k[ok]), h[ok]
-            h = t[k + m] - t[k]
-            if k.size > 10:
-                mean_w = (cum[k + m] - cum[k]) / h[:, None]
-                dR = np.einsum("kji,kjl->kil", matrix_from_quaternion(q[k]),
-                               matrix_from_quaternion(q[k + m]))
-                vee = np.stack([dR[:, 2, 1] - dR[:, 1, 2], dR[:, 0, 2] - dR[:, 2, 0],
-                                dR[:, 1, 0] - dR[:, 0, 1]], -1) / 2
-                s = np.linalg.norm(vee, axis=-1)
-                cos = np.clip((np.trace(dR, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
-                ang = np.arctan2(s, cos)
-                factor = np.where(s > 1e-12, ang / np.where(s > 1e-12, s, 1.0), 1.0)
-                pose_w = vee * (factor / h)[:, None]
-                moving = np.sqrt(np.mean(pose_w**2, 0)) > MOVING_RATE
-                sign = [math.nan] * 3
-                for j in np.flatnonzero(moving):
-                    a, b = mean_w[:, j], pose_w[:, j]
-                    den = float(np.sqrt(np.sum(a * a) * np.sum(b * b)))
-                    sign[j] = float(np.sum(a * b)) / den if den > 0 else 0.0
-                out["gyro_sign"] = tuple(sign)
-                if np.any(moving):
-                    a, b = mean_w[:, moving], pose_w[:, moving]
-                    # |w|^2 / (w . w_pose): the pose's rates are the noisy ones, and noise
-                    # in the regressor would bias w . w_pose / |w_pose|^2 towards zero
-                    out["gyro_scale"] = _ratio(float(np.sum(a * a)),
-                                               abs(float(np.sum(a * b))))
-
-    # the forces the motion needs (thrust across the tether-velocity plane; tension along
-    # the tether), from second differences of the positions
+    if optional.get("omega_B") is not None:
+        out.update(_gyro_figures(t, q, np.asarray(optional["omega_B"], float), gap_factor))
     if mass is not None:
-        c, a, v = _accelerations(t, p, gap_factor)
-        if c.size > 10:
-            e = _unit(p[c])
-            z_c = matrix_from_quaternion(q[c])[:, :, 2]
-            T_c = np.asarray(T_cmd, float)[c]
-            thrust = thrust_scale * np.sum(T_c, -1)
-            hold = a - np.array([0.0, 0.0, -g])  # what thrust and tether must supply, /m
-            nrm = np.cross(e, v)
-            # moving across the tether (m/s), every motor on (a motor at exactly zero is
-            # off: the reader's other rules, and compare, deal with those stretches)
-            good = (np.linalg.norm(nrm, axis=-1) > 0.5) & np.all(T_c != 0, -1)
-            if np.count_nonzero(good) > 10:
-                nn = _unit(nrm[good])
-                nn *= np.where(nn[:, 2] < 0, -1.0, 1.0)[:, None]
-                need = mass * np.einsum("ki,ki->k", hold[good], nn)
-                have = thrust[good] * np.einsum("ki,ki->k", z_c[good], nn)
-                if float(np.mean(need)) > MIN_FORCE:
-                    out["thrust_ratio"] = float(np.sum(have) / np.sum(need))
-            tension = optional.get("tension")
-            if tension is not None:
-                f = np.asarray(tension, float)[c]
-                fin = np.isfinite(f)
-                f_need = (thrust * np.einsum("ki,ki->k", z_c, e)
-                          - mass * np.einsum("ki,ki->k", hold, e))[fin]
-                if fin.sum() > 10 and float(np.mean(f_need)) > MIN_FORCE:
-                    out["tension_ratio"] = float(np.sum(f[fin]) / np.sum(f_need))
+        out.update(_force_figures(t, p, q, T_cmd, optional.get("tension"), mass, g,
+                                  thrust_scale, gap_factor))
+    out.update(_reference_figures(t, p, optional, alpha, gamma, gap_factor))
+    return Figures(**out)
 
-    # the reference azimuth against the azimuth flown in the declared circle frame
+
+def _gyro_figures(t, q, w, gap_factor: float) -> dict:
+    """``gyro_sign`` and ``gyro_scale``: the gyro ``w`` (n, 3) rad/s against the rates of
+    the attitude, R_k^T R_{k+m} over :data:`RATE_WINDOW_S`."""
+    out: dict = {}
+    m = _lag(t, RATE_WINDOW_S)
+    k, h = _windows(t, m, gap_factor)
+    if k.size <= 10:
+        return out
+    bad = ~np.all(np.isfinite(w), -1)
+    wz = np.where(bad[:, None], 0.0, w)
+    # trapezoid integral of the gyro, so the window mean is a difference
+    cum = np.concatenate([np.zeros((1, 3)), np.cumsum(
+        0.5 * (wz[1:] + wz[:-1]) * np.diff(t)[:, None], 0)])
+    nbad = np.concatenate([[0], np.cumsum(bad)])
+    ok = (nbad[k + m + 1] - nbad[k]) == 0
+    k, h = _thin(k[ok]), h[ok]
+    h = t[k + m] - t[k]
+    if k.size <= 10:
+        return out
+    mean_w = (cum[k + m] - cum[k]) / h[:, None]
+    dR = np.einsum("kji,kjl->kil", matrix_from_quaternion(q[k]),
+                   matrix_from_quaternion(q[k + m]))
+    vee = np.stack([dR[:, 2, 1] - dR[:, 1, 2], dR[:, 0, 2] - dR[:, 2, 0],
+                    dR[:, 1, 0] - dR[:, 0, 1]], -1) / 2
+    s = np.linalg.norm(vee, axis=-1)
+    cos = np.clip((np.trace(dR, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
+    ang = np.arctan2(s, cos)
+    factor = np.where(s > 1e-12, ang / np.where(s > 1e-12, s, 1.0), 1.0)
+    pose_w = vee * (factor / h)[:, None]
+    moving = np.sqrt(np.mean(pose_w**2, 0)) > MOVING_RATE
+    sign = [math.nan] * 3
+    for j in np.flatnonzero(moving):
+        a, b = mean_w[:, j], pose_w[:, j]
+        den = float(np.sqrt(np.sum(a * a) * np.sum(b * b)))
+        sign[j] = float(np.sum(a * b)) / den if den > 0 else 0.0
+    out["gyro_sign"] = tuple(sign)
+    if np.any(moving):
+        a, b = mean_w[:, moving], pose_w[:, moving]
+        # |w|^2 / (w . w_pose): the pose's rates are the noisy ones, and noise
+        # in the regressor would bias w . w_pose / |w_pose|^2 towards zero
+        out["gyro_scale"] = _ratio(float(np.sum(a * a)), abs(float(np.sum(a * b))))
+    return out
+
+
+def _force_figures(t, p, q, T_cmd, tension, mass: float, g: float, thrust_scale: float,
+                   gap_factor: float) -> dict:
+    """``thrust_ratio`` and ``tension_ratio``: the forces the motion needs (thrust across
+    the tether-velocity plane; tension along the tether), from second differences of the
+    positions, against the logged thrusts and load cell."""
+    out: dict = {}
+    c, a, v = _accelerations(t, p, gap_factor)
+    if c.size <= 10:
+        return out
+    e = _unit(p[c])
+    z_c = matrix_from_quaternion(q[c])[:, :, 2]
+    T_c = np.asarray(T_cmd, float)[c]
+    thrust = thrust_scale * np.sum(T_c, -1)
+    hold = a - np.array([0.0, 0.0, -g])  # what thrust and tether must supply, /m
+    nrm = np.cross(e, v)
+    # moving across the tether (m/s), every motor on (a motor at exactly zero is
+    # off: the reader's other rules, and compare, deal with those stretches)
+    good = (np.linalg.norm(nrm, axis=-1) > 0.5) & np.all(T_c != 0, -1)
+    if np.count_nonzero(good) > 10:
+        nn = _unit(nrm[good])
+        nn *= np.where(nn[:, 2] < 0, -1.0, 1.0)[:, None]
+        need = mass * np.einsum("ki,ki->k", hold[good], nn)
+        have = thrust[good] * np.einsum("ki,ki->k", z_c[good], nn)
+        if float(np.mean(need)) > MIN_FORCE:
+            out["thrust_ratio"] = float(np.sum(have) / np.sum(need))
+    if tension is not None:
+        f = np.asarray(tension, float)[c]
+        fin = np.isfinite(f)
+        f_need = (thrust * np.einsum("ki,ki->k", z_c, e)
+                  - mass * np.einsum("ki,ki->k", hold, e))[fin]
+        if fin.sum() > 10 and float(np.mean(f_need)) > MIN_FORCE:
+            out["tension_ratio"] = float(np.sum(f[fin]) / np.sum(f_need))
+    return out
+
+
+def _reference_figures(t, p, optional: dict, alpha: float, gamma: float,
+                       gap_factor: float) -> dict:
+    """``xi_ref_ratio`` and ``xi_dot_ref_ratio``: the reference azimuth (and its rate)
+    against the azimuth flown in the declared circle frame (tilt ``alpha``, heading
+    ``gamma``, rad)."""
+    out: dict = {}
     xi_ref = optional.get("xi_ref")
     xi_dot_ref = optional.get("xi_dot_ref")
-    if xi_ref is not None or xi_dot_ref is not None:
-        ca, sa, cg, sg = math.cos(alpha), math.sin(alpha), math.cos(gamma), math.sin(gamma)
-        x_c = cg * p[:, 0] + sg * p[:, 1]
-        y_c = ca * (-sg * p[:, 0] + cg * p[:, 1]) + sa * p[:, 2]
-        xi = np.arctan2(y_c, x_c)
-        k, h = _windows(t, 1, gap_factor)
-        dxi = (np.diff(xi)[k] + np.pi) % (2 * np.pi) - np.pi
-        if xi_ref is not None:
-            r = np.asarray(xi_ref, float)
-            dr = (np.diff(r)[k] + np.pi) % (2 * np.pi) - np.pi  # a wrapped xi_ref too
-            fin = np.isfinite(dr)
-            arc = float(np.sum(dxi[fin]))
-            if abs(arc) > MIN_ARC:
-                out["xi_ref_ratio"] = float(np.sum(dr[fin])) / arc
-        if xi_dot_ref is not None:
-            rd = np.asarray(xi_dot_ref, float)
-            mid = 0.5 * (rd[k] + rd[k + 1])
-            fin = np.isfinite(mid)
-            arc = float(np.sum(dxi[fin]))
-            if abs(arc) > MIN_ARC:
-                out["xi_dot_ref_ratio"] = float(np.sum(mid[fin] * h[fin])) / arc
-    return Figures(**out)
+    if xi_ref is None and xi_dot_ref is None:
+        return out
+    ca, sa, cg, sg = math.cos(alpha), math.sin(alpha), math.cos(gamma), math.sin(gamma)
+    x_c = cg * p[:, 0] + sg * p[:, 1]
+    y_c = ca * (-sg * p[:, 0] + cg * p[:, 1]) + sa * p[:, 2]
+    xi = np.arctan2(y_c, x_c)
+    k, h = _windows(t, 1, gap_factor)
+    dxi = (np.diff(xi)[k] + np.pi) % (2 * np.pi) - np.pi
+    if xi_ref is not None:
+        r = np.asarray(xi_ref, float)
+        dr = (np.diff(r)[k] + np.pi) % (2 * np.pi) - np.pi  # a wrapped xi_ref too
+        fin = np.isfinite(dr)
+        arc = float(np.sum(dxi[fin]))
+        if abs(arc) > MIN_ARC:
+            out["xi_ref_ratio"] = float(np.sum(dr[fin])) / arc
+    if xi_dot_ref is not None:
+        rd = np.asarray(xi_dot_ref, float)
+        mid = 0.5 * (rd[k] + rd[k + 1])
+        fin = np.isfinite(mid)
+        arc = float(np.sum(dxi[fin]))
+        if abs(arc) > MIN_ARC:
+            out["xi_dot_ref_ratio"] = float(np.sum(mid[fin] * h[fin])) / arc
+    return out
 
 
 # --------------------------------------------------------------------------- the checks

@@ -196,36 +196,9 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
     circles, skipped = [], 0
     for v in v_mid:
         sol, steps = solve_circle(cfg2, float(v), a_mid, keep_steps=True)
-        ok = np.flatnonzero(np.isfinite(sol.spectral_radius))
-        for i, a in enumerate(a_mid):
-            Kd = sol.K[i, 1::2]
-            look = interp(xi_mid, v / r, a)
-            use = np.all(np.isfinite(Kd), axis=(-2, -1)) & (look.status == 0)
-            skipped += int(np.count_nonzero(~use))
-            with np.errstate(invalid="ignore"):
-                err, urel, phirel = midpoint_errors(
-                    look.K, Kd, look.u_d, sol.u_d[i, 1::2], look.phi_d, sol.phi_d[i, 1::2],
-                    np.abs(sol.u_d[i]).max(), np.abs(sol.phi_d[i]).max())
-            uerr = np.abs(look.u_d - sol.u_d[i, 1::2]).max(-1)
-            rows["speed"].append(np.full(n_xi, v))
-            rows["tilt"].append(np.full(n_xi, a))
-            rows["xi"].append(xi_mid)
-            rows["err"].append(np.where(use, err, np.nan))
-            rows["uerr"].append(np.where(use, uerr, np.nan))
-            rows["urel"].append(np.where(use, urel, np.nan))
-            rows["phirel"].append(np.where(use, phirel, np.nan))
+        skipped += _midpoint_rows(rows, interp, sol, float(v), r, a_mid, xi_mid)
         if steps is not None:
-            Ad, Bd, Ks = steps
-            N = Ad.shape[-3]
-            xs = 2 * np.pi * np.arange(N) / N
-            for b, i in enumerate(ok):
-                look = interp(xs, v / r, a_mid[i])
-                direct = float(sol.spectral_radius[i])
-                if np.any(look.status != 0):
-                    circles.append((float(v), float(a_mid[i]), np.nan, direct))
-                    continue
-                interpolated = float(spectral_radius(monodromy(Ad[b], Bd[b], look.K)))
-                circles.append((float(v), float(a_mid[i]), interpolated, direct))
+            circles += _midpoint_circles(interp, sol, steps, float(v), r, a_mid)
         if progress is not None:
             progress(1)
     cat = {k: np.concatenate(x) if x else np.zeros(0) for k, x in rows.items()}
@@ -233,3 +206,48 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
         cat["speed"], cat["tilt"], cat["xi"], cat["err"], cat["uerr"], circles, skipped,
         cat["urel"], cat["phirel"]
     )
+
+
+def _midpoint_rows(rows: dict, interp, sol, v: float, r: float, a_mid, xi_mid) -> int:
+    """The errors at the azimuth midpoints of every tilt midpoint of the speed midpoint
+    ``v`` (m/s), appended to ``rows``: the lookup at ``xi_mid`` (rad), ``v / r`` (rad/s)
+    against the direct solve ``sol`` (odd samples of its ``2 n_xi``). Returns how many
+    midpoints have no comparison (direct solve infeasible or lookup not OK)."""
+    n_xi, skipped = xi_mid.size, 0
+    for i, a in enumerate(a_mid):
+        Kd = sol.K[i, 1::2]
+        look = interp(xi_mid, v / r, a)
+        use = np.all(np.isfinite(Kd), axis=(-2, -1)) & (look.status == 0)
+        skipped += int(np.count_nonzero(~use))
+        with np.errstate(invalid="ignore"):
+            err, urel, phirel = midpoint_errors(
+                look.K, Kd, look.u_d, sol.u_d[i, 1::2], look.phi_d, sol.phi_d[i, 1::2],
+                np.abs(sol.u_d[i]).max(), np.abs(sol.phi_d[i]).max())
+        uerr = np.abs(look.u_d - sol.u_d[i, 1::2]).max(-1)
+        rows["speed"].append(np.full(n_xi, v))
+        rows["tilt"].append(np.full(n_xi, a))
+        rows["xi"].append(xi_mid)
+        rows["err"].append(np.where(use, err, np.nan))
+        rows["uerr"].append(np.where(use, uerr, np.nan))
+        rows["urel"].append(np.where(use, urel, np.nan))
+        rows["phirel"].append(np.where(use, phirel, np.nan))
+    return skipped
+
+
+def _midpoint_circles(interp, sol, steps, v: float, r: float, a_mid) -> list[tuple]:
+    """``(speed m/s, tilt rad, rho_interp, rho_direct)`` of every feasible midpoint
+    circle at the speed ``v``: the loop closed at every control step with the
+    interpolated gains (NaN where a lookup is not OK) and with the direct ones."""
+    Ad, Bd, _ = steps
+    N = Ad.shape[-3]
+    xs = 2 * np.pi * np.arange(N) / N
+    out = []
+    for b, i in enumerate(np.flatnonzero(np.isfinite(sol.spectral_radius))):
+        look = interp(xs, v / r, a_mid[i])
+        direct = float(sol.spectral_radius[i])
+        if np.any(look.status != 0):
+            out.append((v, float(a_mid[i]), np.nan, direct))
+            continue
+        interpolated = float(spectral_radius(monodromy(Ad[b], Bd[b], look.K)))
+        out.append((v, float(a_mid[i]), interpolated, direct))
+    return out

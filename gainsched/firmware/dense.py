@@ -16,6 +16,7 @@ import numpy as np
 
 from ..constants import MASK_NO_GAINS, MAX_XI
 from ..errors import InputError
+from ..schedule.arrays import GainSchedule
 from ..schedule.closedform import polynomial_drag
 from ..schedule.onboard import VEHICLE_FIELDS
 
@@ -94,7 +95,7 @@ DESCRIPTOR_CHUNKS = ("dims", "xi_scale", "n_xi_tilt0", "offset_harmonics")
 
 
 @dataclass(frozen=True)
-class RuntimeData:
+class RuntimeData(GainSchedule):
     """A table as the runtime holds it: float32 data, infeasible gains as zeros, the mask.
 
     Arrays (shapes as in :class:`gainsched.schedule.tables.Table`): ``xi, speed, xi_dot, tilt,
@@ -110,14 +111,6 @@ class RuntimeData:
     """
 
     name: str
-    xi: np.ndarray
-    speed: np.ndarray
-    xi_dot: np.ndarray
-    tilt: np.ndarray
-    K_tilt0: np.ndarray
-    K: np.ndarray
-    u_d: np.ndarray
-    phi_d: np.ndarray
     state_sign: np.ndarray
     state_perm: np.ndarray
     mask: np.ndarray

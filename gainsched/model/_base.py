@@ -13,8 +13,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._vec import dot, mtv
-from .rotations import up_C_from_tilt
+from .._vec import dot, mtv
+from ..rotations import up_C_from_tilt
 
 _EPS2 = 1e-24  # keeps sqrt differentiable at exactly zero speed; changes values by < 1e-12 m/s
 

@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 
+from .._vec import mv
 from ._base import (
     Effect,
     Kinematics,
@@ -57,7 +58,6 @@ from ._empirical import (
     fundamental_azimuth,
     power_series,  # noqa: F401  (the series helper, importable here as before)
 )
-from ._vec import mv
 from .momentum import induced_velocity
 
 __all__ = [

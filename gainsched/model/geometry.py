@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._vec import dot, mv, stack3
-from .rotations import (
+from .._vec import dot, mv, stack3
+from ..rotations import (
     euler_zyx_from_matrix,
     matrix_from_euler_zyx,
     matrix_from_euler_zyx_scalar,

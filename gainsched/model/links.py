@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._vec import broadcast, dot
+from .._vec import broadcast, dot
 
 __all__ = [
     "LinkOutput",

@@ -34,8 +34,9 @@ import dataclasses
 
 import numpy as np
 
+from .._vec import broadcast, cross, dot, mtv, mv
 from ..constants import N_STATE
-from ._vec import broadcast, cross, dot, mtv, mv
+from ..rotations import matrix_from_quaternion, quaternion_from_matrix, skew
 from .effects import Kinematics
 from .geometry import (
     attachment_from_cog,
@@ -44,7 +45,6 @@ from .geometry import (
     tether_direction,
 )
 from .links import ELASTIC_LINKS, LinkOutput, SpringDamper, link_from_tether
-from .rotations import matrix_from_quaternion, quaternion_from_matrix, skew
 
 __all__ = ["MaximalModel", "maximal_from_reduced", "reduced_from_maximal", "N_MAXIMAL"]
 

@@ -24,16 +24,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._vec import broadcast, cross, dot, mtv, mv
 from ..constants import N_STATE
-from ._vec import broadcast, cross, dot, mtv, mv
-from .effects import Effect, Kinematics, air_velocity, effects_from_specs, polynomial_drag
-from .geometry import cog_from_attachment, pose_from_reduced, tether_direction
-from .rotations import (
+from ..rotations import (
     euler_zyx_rates_from_body_rates,
     matrix_from_euler_zyx,
     matrix_from_euler_zyx_scalar,
     up_C_from_tilt,
 )
+from .effects import Effect, Kinematics, air_velocity, effects_from_specs, polynomial_drag
+from .geometry import cog_from_attachment, pose_from_reduced, tether_direction
 
 if TYPE_CHECKING:  # the config imports the effects of this package
     from ..config import Config
@@ -383,7 +383,7 @@ class Model:
         """COG position ``p_q = rho e + L_e x_B`` in C (or I with ``frame="I"``), m."""
         p = pose_from_reduced(z, self.rho, self.p_e)[0]
         if frame == "I":
-            from .rotations import R_IC_from_tilt
+            from ..rotations import R_IC_from_tilt
 
             p = np.einsum("ij,...j->...i", R_IC_from_tilt(alpha, gamma), p)
         return p

@@ -22,8 +22,8 @@ import numpy as np
 from scipy.linalg import block_diag
 
 from ..constants import INTEGRATORS
+from ..rotations import matrix_from_euler_zyx
 from .effects import Kinematics
-from .rotations import matrix_from_euler_zyx
 
 __all__ = [
     "P_U",

@@ -31,6 +31,7 @@ from ..errors import InputError
 from ..plausible import MAX_TETHER_LENGTH
 from ..publish import write_atomic
 from ..textinput import parse_toml
+from .arrays import GainSchedule
 from .linearize import INPUT_NAMES, lqr_state_names
 from .onboard import FirmwareRecord, record_from_config, record_from_datasets
 
@@ -43,7 +44,7 @@ PREVIOUS_SCHEMA = "gainsched-table/1"
 
 
 @dataclass(frozen=True)
-class Table:
+class Table(GainSchedule):
     """A gain schedule as loaded from its HDF5 file: axes, gains, nominal, feasibility.
 
     Made by :func:`load_table` (checked; docs/table-format.md describes the file). It
@@ -149,14 +150,6 @@ class Table:
     ("Table('paper', 7 tilts 0-40 deg x 19 speeds 1.3-15 m/s x 36", True)
     """
 
-    xi: np.ndarray
-    speed: np.ndarray
-    xi_dot: np.ndarray
-    tilt: np.ndarray
-    K_tilt0: np.ndarray
-    K: np.ndarray
-    u_d: np.ndarray
-    phi_d: np.ndarray
     tension: np.ndarray
     reasons: np.ndarray
     spectral_radius: np.ndarray

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..config import N_STATE
 from ..model.geometry import pose_angles_from_pose, wrap_angle
-from ..model.rotations import (
+from ..rotations import (
     matrix_from_euler_zyx_scalar,
 )
 from .fastplant import fast_plant

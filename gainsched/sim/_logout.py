@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model.rotations import (
+from ..rotations import (
     matrix_from_quaternion,
     quaternion_from_matrix,
 )
@@ -68,7 +68,7 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
     1.0
     """
     from ..analysis.logs import log_from_arrays
-    from ..model.rotations import Rx, Ry, Rz
+    from ..rotations import Rx, Ry, Rz
 
     sens = res.scenario.sensing
     rate = sens.rate_hz if rate_hz is None else rate_hz

@@ -14,7 +14,7 @@ from ..errors import GainschedWarning, InputError
 from ..firmware.runtime import NO_GAINS, UNUSABLE, status_text
 from ..model.geometry import wrap_angle
 from ..model.reduced import Model
-from ..model.rotations import (
+from ..rotations import (
     matrix_from_euler_zyx_scalar,
     matrix_from_quaternion,
     quaternion_from_matrix_scalar,

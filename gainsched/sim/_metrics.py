@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from ..firmware.runtime import CLAMPED_SPEED
-from ..model.rotations import (
+from ..rotations import (
     R_IC_from_tilt,
 )
 from ._result import SimResult

@@ -12,7 +12,7 @@ from ..errors import GainschedWarning
 from ..model.geometry import pose_from_reduced
 from ..model.maximal import MaximalModel, reduced_from_maximal
 from ..model.reduced import Model
-from ..model.rotations import (
+from ..rotations import (
     R_IC_from_tilt,
     matrix_from_euler_zyx_scalar,
     matrix_from_quaternion,

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import N_STATE, Config
-from ..model.rotations import matrix_from_quaternion
+from ..rotations import matrix_from_quaternion
 from ._plant import _Plant
 from ._scenario import Scenario
 

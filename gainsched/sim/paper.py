@@ -270,7 +270,7 @@ def _settling_time(t, v, t_start, target) -> float | None:
 
 
 def _rms_z(res, sel) -> float:
-    from ..model.rotations import R_IC_from_tilt
+    from ..rotations import R_IC_from_tilt
 
     p_C = res.p_I[sel] @ R_IC_from_tilt(res.scenario.tilt, res.scenario.gamma)
     return float(np.sqrt(np.mean(p_C[:, 2] ** 2)))
@@ -504,7 +504,7 @@ def _plot_out_of_plane(runs: list[SimResult], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..model.rotations import R_IC_from_tilt
+    from ..rotations import R_IC_from_tilt
 
     fig, ax = plt.subplots(figsize=(8, 4))
     for res in runs:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..model.geometry import wrap_angle
-from ..model.rotations import R_IC_from_tilt
+from ..rotations import R_IC_from_tilt
 
 __all__ = ["tracking_errors", "plot_result", "left_table_intervals"]
 

@@ -21,7 +21,7 @@ from gainsched.cli import cli
 from gainsched.config import config_from_text, load_config
 from gainsched.configedit import set_values
 from gainsched.errors import InputError
-from gainsched.model.rotations import matrix_from_euler_zyx, quaternion_from_matrix
+from gainsched.rotations import matrix_from_euler_zyx, quaternion_from_matrix
 from gainsched.schedule.tables import load_table
 from gainsched.sim.campaign import default_flights, write_campaign
 from gainsched.sim.loop import table_scheduler
@@ -45,7 +45,7 @@ def _circle_log(v=8.0, phi=-0.3, accel=0.0, T=10.0, rate=200.0, alpha=0.0, noise
     R_CB = matrix_from_euler_zyx(np.full_like(t, phi), np.zeros_like(t), xi)
     e = np.stack([np.cos(xi), np.sin(xi), np.zeros_like(t)], -1)
     p_C = rho * e + L_e * R_CB[:, :, 0]
-    from gainsched.model.rotations import R_IC_from_tilt
+    from gainsched.rotations import R_IC_from_tilt
 
     R_IC = R_IC_from_tilt(alpha)
     p_I = p_C @ R_IC.T

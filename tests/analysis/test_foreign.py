@@ -33,7 +33,7 @@ from gainsched.configedit import set_values
 from gainsched.errors import InputError
 from gainsched.model.effects import EFFECTS
 from gainsched.model.reduced import Model
-from gainsched.model.rotations import matrix_from_quaternion, quaternion_from_matrix
+from gainsched.rotations import matrix_from_quaternion, quaternion_from_matrix
 from gainsched.sim.campaign import HIDDEN, write_campaign
 from gainsched.sim.loop import Scenario, Sensing, log_from_result, simulate, table_scheduler
 

@@ -41,7 +41,7 @@ from gainsched.model.effects import (
     Wind,
 )
 from gainsched.model.reduced import Model
-from gainsched.model.rotations import R_IC_from_tilt
+from gainsched.rotations import R_IC_from_tilt
 from gainsched.schedule.grid import build_grid
 from gainsched.sim.campaign import HIDDEN, default_flights, fly, plant_config
 from gainsched.sim.loop import table_scheduler
@@ -173,7 +173,7 @@ def _force_values(mu1: float, mu2: float, w) -> dict:
 
 def test_the_empirical_force_is_turned_into_the_circle_frame():
     """ForceHorizontal's force in C is ``R_IC^T F_I`` with R_IC of docs/conventions.md
-    (a second formulation with the matrices of model.rotations), F_I written out in I:
+    (a second formulation with the matrices of gainsched.rotations), F_I written out in I:
     horizontal terms, the along-velocity terms along the air velocity's direction in I."""
     R, v, omega, p, alpha, gamma = _kinematics(300, 4)
     rng = np.random.default_rng(5)

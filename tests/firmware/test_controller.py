@@ -445,7 +445,7 @@ def test_one_sample_sensor_forms_equal_the_batched_ones(paper_config):
     Model.cog_acceleration and pose_from_reduced; quaternion_from_matrix_scalar against
     quaternion_from_matrix; on random states with effect-free derivatives."""
     from gainsched.model.geometry import pose_from_reduced
-    from gainsched.model.rotations import (
+    from gainsched.rotations import (
         matrix_from_euler_zyx,
         quaternion_from_matrix,
         quaternion_from_matrix_scalar,

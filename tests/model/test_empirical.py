@@ -16,12 +16,12 @@ from gainsched.model.effects import (
     ThrustAzimuth,
     fundamental_azimuth,
 )
-from gainsched.model.rotations import matrix_from_euler_zyx
 from gainsched.model.symmetry import (
     azimuth_invariance_error,
     effect_symmetry_errors,
     fundamental_from_query,
 )
+from gainsched.rotations import matrix_from_euler_zyx
 
 from support import small_config_text
 

@@ -15,7 +15,7 @@ from gainsched.model.geometry import (
     tether_direction,
     wrap_angle,
 )
-from gainsched.model.rotations import R_IC_from_tilt, matrix_from_euler_zyx
+from gainsched.rotations import R_IC_from_tilt, matrix_from_euler_zyx
 
 RNG = np.random.default_rng(7)
 P_E = np.array([-0.05, 0.0, 0.0])

@@ -21,7 +21,7 @@ from gainsched.errors import InputError
 from gainsched.model.links import LumpedMassChain, SpringDamper, StandardLinearSolid
 from gainsched.model.maximal import RK4_REACH, MaximalModel, reduced_from_maximal
 from gainsched.model.reduced import Model
-from gainsched.model.rotations import matrix_from_quaternion
+from gainsched.rotations import matrix_from_quaternion
 
 from support import CIRCLE_SPEED as SPEED
 from support import CIRCLE_TILT as TILT

@@ -8,7 +8,7 @@ from scipy.integrate import solve_ivp
 
 from gainsched.model.effects import MotorLag
 from gainsched.model.maximal import MaximalModel, maximal_from_reduced, reduced_from_maximal
-from gainsched.model.rotations import matrix_from_quaternion
+from gainsched.rotations import matrix_from_quaternion
 
 from support import CIRCLE_TILT as TILT
 

@@ -8,7 +8,7 @@ from scipy.integrate import solve_ivp
 
 from gainsched.model.effects import Drag
 from gainsched.model.reduced import allocation_matrix, motor_positions
-from gainsched.model.rotations import matrix_from_euler_zyx
+from gainsched.rotations import matrix_from_euler_zyx
 
 
 def random_states(rng, n):
@@ -180,9 +180,9 @@ def test_the_eliminated_tether_system_is_the_dense_solve(model):
     """Issue 39: the equations of motion solved by eliminating the body rates and Cramer's
     rule (`Model._tether_solve`) equal the dense 6 x 6 solve of the same system (paper
     eqs. 3-8 with p_t = rho e), real and under a complex step, to 1e-12 relative."""
-    from gainsched.model._vec import cross, mtv
+    from gainsched._vec import cross, mtv
     from gainsched.model.geometry import tether_direction
-    from gainsched.model.rotations import matrix_from_euler_zyx, skew
+    from gainsched.rotations import matrix_from_euler_zyx, skew
 
     rng = np.random.default_rng(7)
     z = random_states(rng, 40) + 1j * 1e-20 * rng.normal(size=(40, 10))

@@ -1,4 +1,4 @@
-"""Rotations (gainsched.model.rotations) against scipy.spatial.transform.Rotation.
+"""Rotations (gainsched.rotations) against scipy.spatial.transform.Rotation.
 
 Conventions (docs/conventions.md): ``R_CB = Rz(psi) Ry(theta) Rx(phi)`` (intrinsic
 z-y-x), quaternions Hamilton, scalar first, rotating body vectors into I.
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from gainsched.model import rotations as rot
+from gainsched import rotations as rot
 
 RNG = np.random.default_rng(13)
 ANGLES = np.column_stack([RNG.uniform(-np.pi, np.pi, 200), RNG.uniform(-1.5, 1.5, 200),
@@ -106,10 +106,10 @@ def test_up_direction_of_one_tilt_is_cached_with_the_same_bits(alpha):
 
 @pytest.mark.parametrize("dtype", [float, complex])
 def test_small_vector_helpers_are_numpys_forms_bit_for_bit(dtype):
-    """model._vec's cross and dot (the hot paths' forms) equal np.cross and np.sum bit for
+    """gainsched._vec's cross and dot (the hot paths' forms) equal np.cross and np.sum bit for
     bit, on batches, one vector, broadcast against a constant vector, real and complex
     (complex steps ride through them)."""
-    from gainsched.model import _vec
+    from gainsched import _vec
 
     a = RNG.normal(size=(64, 3)).astype(dtype)
     b = RNG.normal(size=(64, 3)).astype(dtype)

@@ -19,7 +19,6 @@ from gainsched.configedit import set_values
 from gainsched.errors import InputError
 from gainsched.model.effects import Drag, MotorLag, RotorDrag, ThrustScale
 from gainsched.model.reduced import Model
-from gainsched.model.rotations import R_IC_from_tilt, Rz
 from gainsched.model.symmetry import (
     P_U,
     STATE_SIGNS,
@@ -28,6 +27,7 @@ from gainsched.model.symmetry import (
     mirror_state,
     state_mirror,
 )
+from gainsched.rotations import R_IC_from_tilt, Rz
 from gainsched.schedule.grid import solve_circle
 from gainsched.schedule.nominal import circle_nominal
 

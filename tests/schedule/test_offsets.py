@@ -9,8 +9,8 @@ import pytest
 from gainsched.configedit import remove_key, set_values
 from gainsched.errors import InputError
 from gainsched.model.reduced import Model
-from gainsched.model.rotations import matrix_from_euler_zyx
 from gainsched.model.symmetry import REDUCED_SIGNS
+from gainsched.rotations import matrix_from_euler_zyx
 from gainsched.schedule import offsets as offsets_mod
 from gainsched.schedule.closedform import state_from_attitude
 from gainsched.schedule.nominal import circle_nominal, circle_offsets

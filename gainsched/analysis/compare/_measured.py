@@ -36,7 +36,7 @@ from ...model.geometry import (
     spherical_from_point,
     tether_direction,
 )
-from ...model.rotations import (
+from ...rotations import (
     R_IC_from_tilt,
     euler_zyx_from_matrix,
     matrix_from_euler_zyx,

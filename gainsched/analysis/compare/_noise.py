@@ -10,7 +10,7 @@ import numpy as np
 
 from ...config import Config
 from ...model.reduced import Model
-from ...model.rotations import (
+from ...rotations import (
     matrix_from_quaternion,
 )
 from ..logs import FlightLog
@@ -39,7 +39,7 @@ def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None,
     sa = 0.5 * (meas.raw_sigma["phi"] + meas.raw_sigma["theta"])
     n = len(log)
     rot = sa * rng.standard_normal((n, 3))
-    from ...model.rotations import Rx, Ry, Rz
+    from ...rotations import Rx, Ry, Rz
 
     R_IB = matrix_from_quaternion(log.q) @ Rz(rot[:, 2]) @ Ry(rot[:, 1]) @ Rx(rot[:, 0])
     raw = _raw_channels(log, meas.L_e, log.p_I + sp * rng.standard_normal((n, 3)), R_IB)
