@@ -452,14 +452,9 @@ class GridResult(_Circles):
         Gains for ``u = u_d - K (x - x_d)``, N per state unit; NaN where infeasible.
     S : ndarray, shape (n_a, n_v, n_xi, n, n)
         Riccati cost-to-go; NaN where infeasible.
-    u_d : ndarray, shape (n_a, n_v, n_xi, 4)
-        Nominal motor thrusts T1..T4, N.
-    phi_d : ndarray, shape (n_a, n_v, n_xi)
-        Nominal roll, rad.
-    tension : ndarray, shape (n_a, n_v, n_xi)
-        Nominal tether tension, N.
-    reasons : ndarray of uint8, shape (n_a, n_v, n_xi)
-        Feasibility bits, 0 = feasible (:class:`gainsched.constants.Reason`).
+    u_d, phi_d, tension, reasons : ndarray, shape (n_a, n_v, n_xi, ...)
+        The nominal thrusts (N), roll (rad), tether tension (N) and feasibility bits of
+        :class:`CircleSolution`, every speed's stacked after the tilt axis.
     spectral_radius : ndarray, shape (n_a, n_v)
         Closed-loop monodromy spectral radius per circle (< 1: stable); NaN if
         infeasible.
