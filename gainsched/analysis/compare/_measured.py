@@ -1,23 +1,10 @@
 """The measurement: one log segment in reduced coordinates, differentiated
 (:class:`Measured`, :func:`measure`).
 
-Steps 1-2 of the pipeline of :mod:`gainsched.analysis.compare` (docs/model-vs-measurement.md),
-per gap-free log segment (:class:`~gainsched.analysis.logs.FlightLog`):
-
-1. **Reduced coordinates from the pose.** The attachment point
-   ``p_t = p_q + R_CB p_e`` in the circle frame gives the tether distance
-   ``d = |p_t|`` and the spherical angles ``(delta, xi)``; ``R_CB`` gives the
-   Z-Y-X Euler angles ``(phi, theta, psi)``, ``chi = psi - xi`` (docs/conventions.md,
-   the conversion of :func:`gainsched.model.maximal.reduced_from_maximal`).
-   These six channels vary slowly even at 15 m/s (xi and psi grow linearly),
-   which is why they, and not the Cartesian pose, are differentiated.
-2. **Differentiation.** Savitzky-Golay (:func:`scipy.signal.savgol_filter`,
-   window and order from ``[analysis]``) gives each channel and its first two
-   derivatives; the COG velocity and acceleration and the body rates and
-   their derivatives follow from exact kinematics
-   (``p_q'' = p_t'' - R (omega' x p_e + omega x (omega x p_e))``, paper eq. 9
-   corrected; Euler rates to body rates). Half a window at each segment end,
-   where the filter extrapolates, is dropped from every statistic.
+Steps 1-2 of the pipeline that :mod:`gainsched.analysis.compare` describes
+(docs/model-vs-measurement.md): the pose in reduced coordinates (the conversion of
+:func:`gainsched.model.maximal.reduced_from_maximal`), then the Savitzky-Golay
+derivatives and the exact kinematics (paper eq. 9 corrected) per gap-free segment.
 """
 
 from __future__ import annotations

@@ -1,16 +1,9 @@
 """The prediction: the model's accelerations for the measured state and the logged
 commands, put through the filter the measurement went through (:func:`predict`).
 
-Step 3 of the pipeline of :mod:`gainsched.analysis.compare`:
-
-3. **Prediction.** The model's forces for the measured state and the logged
-   commands (centred on the sample time: a logged command is held over the
-   interval before its sample): thrust along z_B after the thrust modifiers,
-   gravity, effect forces and torques (paper eqs. 3, 6, 8, 10), the tether
-   tension from the load cell when logged, otherwise solved from the radial
-   equation. Stateful effects (motor lag) are run along the log. The
-   predicted accelerations are smoothed with the same filter as the
-   measurement, so the residual compares like with like.
+Step 3 of the pipeline that :mod:`gainsched.analysis.compare` describes (the thrust,
+gravity, effects and tether of paper eqs. 3, 6, 8, 10; the tension from the load cell
+or the radial equation; stateful effects run along the log).
 """
 
 from __future__ import annotations
