@@ -183,25 +183,18 @@ def controller_from_config(config) -> dict:
 def record_from_config(config) -> FirmwareRecord:
     """The firmware record of a config (computed at the build, stored in its table).
 
-    Computed on the pinned numerics, as the circles are (:mod:`gainsched.native.reproducible`):
-    in a pinned worker when this process is not pinned (a notebook, a test), since the
+    Computed on the pinned numerics, where the circles are (the build's job runner,
+    ``grid._solutions``: in a pinned worker when this process is not pinned, a notebook
+    or a test), since the
     record's bits are part of the table's bytes and the model's constants pass through
     kernels that differ between CPUs (the allocation matrix's inverse, vectorised sines).
     """
     from ..model.effects import registered_effects
-    from ..native.reproducible import (
-        children_ignore_sigint,
-        pin_available,
-        pinned_executor,
-        process_pinned,
-    )
+    from .grid import _solutions
 
-    if process_pinned() or not pin_available():
-        return _record(config)
-    with children_ignore_sigint():
-        pool = pinned_executor(1)
     effects = registered_effects({s.name for s in config.effects})
-    return pool.submit(_record, config, effects).result()
+    (record,) = _solutions([(config, effects)], 1, None, job=_record)
+    return record
 
 
 def _record(config, effects=()) -> FirmwareRecord:
