@@ -19,18 +19,27 @@ from gainsched.native.reproducible import pin_environ
 pin_environ()  # before numpy, as the command does
 
 import cProfile  # noqa: E402
+import importlib  # noqa: E402
 import pstats  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 
+#: stage -> the function whose cumulative time it is (module, name): resolved to its code
+#: object, so a function that moves or is renamed fails here instead of reading as 0 s
 STAGES = {
-    "nominal": ("nominal.py", "circle_nominal"),
-    "offsets": ("nominal.py", "circle_offsets"),
-    "linearisation": ("grid.py", "discrete_system"),
-    "riccati": ("lqr.py", "periodic_lqr"),
-    "riccati_tilt0": ("lqr.py", "dlqr"),
-    "outputs": ("outputs.py", "output_set"),
+    "nominal": ("gainsched.schedule.nominal", "circle_nominal"),
+    "offsets": ("gainsched.schedule.nominal", "circle_offsets"),
+    "linearisation": ("gainsched.schedule.discrete", "discrete_system"),
+    "riccati": ("gainsched.schedule.lqr", "periodic_lqr"),
+    "riccati_tilt0": ("gainsched.schedule.lqr", "dlqr"),
+    "outputs": ("gainsched.firmware.outputs", "output_set"),
 }
+
+
+def _profile_key(module: str, name: str) -> tuple:
+    """cProfile's key ``(file, first line, name)`` of a module's function."""
+    code = getattr(importlib.import_module(module), name).__code__
+    return code.co_filename, code.co_firstlineno, code.co_name
 
 
 def main(path: str) -> dict:
@@ -48,9 +57,9 @@ def main(path: str) -> dict:
     total = time.perf_counter() - t0
     stats = pstats.Stats(prof).stats  # (file, line, name) -> (cc, nc, tt, ct, callers)
     out = {"total_s": total}
-    for stage, (file, name) in STAGES.items():
-        out[f"{stage}_s"] = sum(v[3] for (f, _, n), v in stats.items()
-                                if n == name and f.endswith(file))
+    for stage, where in STAGES.items():
+        key = _profile_key(*where)
+        out[f"{stage}_s"] = stats[key][3] if key in stats else 0.0
     return out
 
 

@@ -453,59 +453,15 @@ def bench_build(cfg):
     return out
 
 
-#: library effects that leave the closed form (their nominal is the numerical trim), with
-#: the parameters of the hidden-effect campaigns (gainsched.sim.campaign.HIDDEN)
-TRIM_EFFECTS = {
-    "rotor_drag": {"k_rd": 0.015},
-    "motor_lag": {"tau": 0.035},
-    "thrust_momentum": {"disk_area": 0.006},
-    "thrust_airspeed": {"c1": -0.01, "c2": 0.0},
-}
-
-
-#: the automatic-grid case: a user's vehicle whose speeds and tilts the build chooses
-USER_QUAD = ROOT / "bench" / "configs" / "user_quad.toml"
-#: the effects of the automatic-grid case, the ones issue 39 measured (values: that
-#: vehicle's size)
-AUTO_EFFECTS = {"rotor_drag": {"k_rd": 0.01}, "motor_lag": {"tau": 0.03}}
-
-
 def bench_effect_builds(cfg):
-    """Issue 39: a build whose effects leave the closed form (the numerical trim at every
-    circle) against the drag-only build of the same grid, both on one worker in this run:
-    the paper's grid cut to 5 speeds x 3 tilts, and a user's vehicle whose grid the build
-    chooses (bench/configs/user_quad.toml; the chosen grid may differ with the effect, as
-    the user's rebuild's would)."""
-    from gainsched.configedit import set_section
-    from gainsched.schedule.refine import refine_grid
-
-    text = _variant(PAPER.read_text(), speeds=[3, 6, 9, 12, 15], tilts=[0, 20, 40])
-    t0, g0 = best_of(lambda: build_grid(config_from_text(text, "cut.toml"), n_jobs=1), 2)
-    out = {"drag_only_s": t0}
-    print(f"  build of the paper grid cut to 5 speeds x 3 tilts ({g0.spectral_radius.size} "
-          f"circles), drag only (closed form): {t0:.2f} s")
-    for kind, values in TRIM_EFFECTS.items():
-        eff = set_section(text, f"effects.{kind}", [(k, v, None) for k, v in values.items()])
-        cfg_e = config_from_text(eff, f"{kind}.toml")
-        t, _ = best_of(lambda c=cfg_e: build_grid(c, n_jobs=1), 2)
-        print(f"    + {kind}: {t:.2f} s, x{t / t0:.2f} the drag-only build")
-        out[f"{kind}_s"], out[f"{kind}_ratio"] = t, t / t0
-    user = USER_QUAD.read_text()
-
-    def auto(t, name):
-        choice = refine_grid(config_from_text(t, name), n_jobs=1)
-        return len(choice.config.grid.speeds) * len(choice.config.grid.tilts)
-
-    t0, n0 = best_of(lambda: auto(user, "user_quad.toml"), 1)
-    out["auto_drag_only_s"] = t0
-    print(f"  automatic grid of a user's vehicle (bench/configs/user_quad.toml), drag only: "
-          f"{t0:.2f} s, {n0} circles chosen")
-    for kind, values in AUTO_EFFECTS.items():
-        eff = set_section(user, f"effects.{kind}", [(k, v, None) for k, v in values.items()])
-        t, n = best_of(lambda e=eff, k=kind: auto(e, f"{k}.toml"), 1)
-        print(f"    + {kind}: {t:.2f} s ({n} circles chosen), x{t / t0:.2f} the drag-only build")
-        out[f"auto_{kind}_s"], out[f"auto_{kind}_ratio"] = t, t / t0
-    return out
+    """Issue 39: builds whose effects leave the closed form against the drag-only build of
+    the same grid, in a process pinned like the command (bench/_effects.py, one worker:
+    the builds run in it, no worker hand-off in the figures)."""
+    res = subprocess.run([sys.executable, "-m", "bench._effects"], check=True,
+                         capture_output=True, text=True, cwd=ROOT)
+    *lines, last = res.stdout.splitlines()
+    print("\n".join(lines))
+    return json.loads(last)
 
 
 def build_stages():

@@ -22,13 +22,15 @@ __all__ = ["LIN_TOL", "discrete_system", "periodic_interp"]
 LIN_TOL = 1e-10
 
 
-def _discrete_at(model, speed, tilts, n, dt):
-    """Zero-order-hold LQR system at ``n`` equally spaced steps of the circle, all tilts."""
+def _discrete_at(model, speed, tilts, n, dt, odd=False):
+    """Zero-order-hold LQR system at ``n`` equally spaced steps of the circle, all tilts;
+    with ``odd`` at the odd ones alone (those the ``n / 2`` steps lack)."""
     zs, us = [], []
+    pick = slice(1, None, 2) if odd else slice(None)
     for a in tilts:
         nom = circle_nominal(model, speed, a, n)
-        zs.append(nom.z)
-        us.append(nom.u)
+        zs.append(nom.z[pick])
+        us.append(nom.u[pick])
     A, B = jacobians(model, np.stack(zs), np.stack(us), np.asarray(tilts)[:, None])
     return discretize(*lqr_system(A, B, model.config.control.integrators), dt)
 
@@ -112,7 +114,12 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
         if 2 * M >= N:
             Ad, Bd = _discrete_at(model, speed, tilts, N, dt)
             return Ad, Bd, N, 0.0
-        AB_2M = np.concatenate(_discrete_at(model, speed, tilts, 2 * M, dt), axis=-1)
+        # the even steps of 2M are the M steps: only the odd ones are new (every step is
+        # linearised and discretised on its own, so the bits are those of all 2M at once)
+        AB_2M = np.empty((AB_M.shape[0], 2 * M) + AB_M.shape[2:])
+        AB_2M[:, 0::2] = AB_M
+        AB_2M[:, 1::2] = np.concatenate(_discrete_at(model, speed, tilts, 2 * M, dt, odd=True),
+                                        axis=-1)
         AB = periodic_interp(AB_M, 2 * M)
         err = max(_rel_err(AB[..., :n], AB_2M[..., :n], I),
                   _rel_err(AB[..., n:], AB_2M[..., n:]))

@@ -63,10 +63,15 @@ N_NODES = 32
 #: values by several mN between 32 nodes
 FINE = 8
 #: the bounds are imposed this much inside the config's (N), for the difference between
-#: the optimisation's collocation and the nominal's; doubled (up to 4 times) while a check
-#: on CHECK_SAMPLES samples of the circle finds a motor outside (on the paper grid it
-#: never does: one SLSQP per circle)
+#: the optimisation's collocation and the nominal's. While a check on CHECK_SAMPLES
+#: samples of the circle finds a motor outside by ``d`` N, the next round (at most
+#: ROUNDS in all, each from the last one's offsets) moves the bounds in by ``max(safety,
+#: 1.5 d)`` more: doubling them for an interpolation bulge of a few mN, and in one round
+#: past the dip of a thrust the 32 nodes cannot resolve (momentum theory's floored inflow
+#: on a motor near its minimum: 40-90 mN, issue 39). On the paper grid the check never
+#: fails: one SLSQP per circle.
 NODE_SAFETY_N = 2e-3
+ROUNDS = 3
 CHECK_SAMPLES = 1024
 #: the optimisation variables are the coefficients in degrees (objective of order 1)
 _DEG = np.pi / 180
@@ -183,18 +188,22 @@ def solve_offsets(model, speed: float, alpha: float, *, bound: float,
     hi = cfg.vehicle.thrust_max - cfg.feasibility.thrust_margin
     Tp = period(speed, model.r)
     check = circle_path(speed, model.r, np.arange(CHECK_SAMPLES) * (Tp / CHECK_SAMPLES))
-    safety = NODE_SAFETY_N
-    for _ in range(4):
-        off = _solve(model, speed, alpha, bound, harmonics, n_nodes, lo + safety, hi - safety)
+    safety, off = NODE_SAFETY_N, None
+    for _ in range(ROUNDS):
+        off = _solve(model, speed, alpha, bound, harmonics, n_nodes, lo + safety, hi - safety,
+                     start=off)
         if off is None:
             return None
         try:
             u = trim_path(model, check, alpha, periodic=True, offsets=off)[2]
         except TrimError:
             return None
-        if np.all((u >= lo) & (u <= hi)):
+        outside = max(float(np.max(lo - u)), float(np.max(u - hi)))
+        if outside <= 0.0:
             return off
-        safety *= 2
+        safety += max(safety, 1.5 * outside)
+        if lo + safety >= hi - safety:  # no room left between the bounds
+            return None
     return None
 
 
@@ -208,8 +217,9 @@ def _command_map(model, P, P1):
     return P if not lag else lag[0].steady_states(P, P1)[1]
 
 
-def _solve(model, speed, alpha, bound, harmonics, n_nodes, lo, hi):
-    """One SLSQP at node thrust bounds ``[lo, hi]`` (N); None if it fails."""
+def _solve(model, speed, alpha, bound, harmonics, n_nodes, lo, hi, start=None):
+    """One SLSQP at node thrust bounds ``[lo, hi]`` (N) from the offsets ``start`` (default
+    zero); None if it fails."""
     Tp = period(speed, model.r)
     t = np.arange(n_nodes) * (Tp / n_nodes)
     nodes = circle_path(speed, model.r, t)
@@ -274,7 +284,8 @@ def _solve(model, speed, alpha, bound, harmonics, n_nodes, lo, hi):
         {"type": "ineq", "fun": lambda x: bound / _DEG - A_bound @ x, "jac": lambda x: -A_bound},
     ]
     try:
-        sol = minimize(objective, np.zeros(2 * nb), jac=objective_grad, method="SLSQP",
+        x0 = np.zeros(2 * nb) if start is None else np.concatenate([start.pitch, start.yaw]) / _DEG
+        sol = minimize(objective, x0, jac=objective_grad, method="SLSQP",
                        constraints=constraints, options={"maxiter": 100, "ftol": 1e-10})
         if not sol.success or np.min(thrust_margins(sol.x)) < -1e-6 or np.min(
                 bound / _DEG - A_bound @ sol.x) < -1e-7:

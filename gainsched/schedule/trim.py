@@ -233,7 +233,8 @@ def _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, tol=1e-12, max_iter=2
     """Per-point Newton on the four thrusts for the xi'' and omega' equations (phi fixed):
     the thrusts (n, 4), N. The points are independent, so a point stops when its residual
     is below ``tol`` (relative to max(1, max |T|)) and the rest go on alone. ``res``: the
-    node-equation residuals (n, 5) at ``T`` if the caller has them."""
+    node-equation residuals (n, 5) at ``T`` if the caller has them. Raises TrimError when
+    a point has not converged after ``max_iter`` steps."""
     T = np.array(T, dtype=float)
     idx = np.arange(T.shape[0])
 
@@ -241,16 +242,19 @@ def _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, tol=1e-12, max_iter=2
         return (_sub_path(path, i), alpha, phi[i], dphi[i], ddphi[i], T[i],
                 None if offsets is None else tuple(tuple(x[i] for x in o) for o in offsets))
 
-    for _ in range(max_iter):
+    for step in range(max_iter + 1):
         res = (_local(model, *at(idx))[0] if res is None else res)[:, 1:]
-        moving = np.abs(res).max(1) >= tol * max(1.0, np.abs(T).max())
+        moving = ~(np.abs(res).max(1) < tol * max(1.0, np.abs(T).max()))  # NaN moves
         if not moving.any():
-            break
+            return T
         idx, res = idx[moving], res[moving]
+        if step == max_iter:
+            break
         Jl = _local_jacobians(model, *at(idx), thrust_only=True)[:, 1:]
         T[idx] -= np.linalg.solve(Jl, res[..., None])[..., 0]
         res = None
-    return T
+    raise TrimError(f"per-sample thrust trim did not converge at {idx.size} samples "
+                    f"(residual {np.abs(res).max():.3g})")
 
 
 def _rough(res, xd) -> bool:
