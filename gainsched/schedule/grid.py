@@ -22,22 +22,15 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 import numpy as np
-from joblib import Parallel, cpu_count, delayed
 
 from ..constants import N_STATE, TILT_BATCH, Reason
 from ..errors import InputError
 from ..model.effects import registered_effects, registered_effects_context
 from ..model.reduced import Model
 from ..model.symmetry import SYMMETRY_TOL, azimuth_invariance_error, table_refusal
-from ..native.reproducible import (
-    blas_single_thread,
-    children_ignore_sigint,
-    ensure_blas_single_thread,
-    pin_available,
-    pinned_executor,
-    process_pinned,
-)
+from ..native.reproducible import blas_single_thread, ensure_blas_single_thread
 from .discrete import LIN_TOL, _discrete_at, discrete_system, periodic_interp
+from .jobs import run_jobs
 from .lqr import dlqr, periodic_lqr, spectral_radius, stability_scale
 from .modes import MODE_COUNT, floquet_modes
 from .nominal import circle_nominal, circle_offsets
@@ -509,47 +502,6 @@ def _solve_speed(config, speed: float, tilts, effects=(), dare_tilt0=True) -> Ci
         return solve_circle(config, speed, tilts, dare_tilt0=dare_tilt0)
 
 
-def _dask_active() -> bool:
-    """Whether joblib's active backend is Dask (set by ``distributed.executor``)."""
-    from joblib.parallel import get_active_backend
-
-    return type(get_active_backend()[0]).__name__.startswith("Dask")
-
-
-def _solutions(args, n_jobs, backend, job=None):
-    """Run ``job`` (default :func:`_solve_speed`) over ``args`` and yield the results in
-    submission order.
-
-    Worker processes on this machine (the default, ``"loky"``) come from
-    :func:`~gainsched.native.reproducible.pinned_executor`: started with the pinned numerics
-    and ended by the kernel when this process dies, even by SIGKILL. A process that
-    does not run the pinned numerics (a notebook, a test) sends every job there,
-    also for the ``sequential`` and ``threading`` backends, so that the table bits
-    never depend on the calling process. joblib runs the jobs on Dask, and in this
-    process for ``sequential``, ``threading`` or one job when it is pinned.
-    """
-    job = _solve_speed if job is None else job
-    dask = backend == "dask" or (backend is None and _dask_active())
-    here = (process_pinned() or not pin_available()) and (
-        backend in ("sequential", "threading") or n_jobs == 1
-    )
-    if dask or here:
-        par = Parallel(n_jobs=n_jobs, backend=backend, return_as="generator")
-        yield from par(delayed(job)(*a) for a in args)
-        return
-    n = n_jobs if n_jobs > 0 else max(1, cpu_count() + 1 + n_jobs)
-    n = 1 if backend == "sequential" else min(n, len(args))
-    with children_ignore_sigint():  # the workers (and loky's tracker) start in here
-        pool = pinned_executor(n)
-        futures = [pool.submit(job, *a) for a in args]
-    try:
-        for f in futures:
-            yield f.result()
-    except BaseException:  # Ctrl-C, an error, a closed generator: stop the workers now
-        pool.shutdown(wait=False, kill_workers=True)
-        raise
-
-
 def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
     """Solve the periodic LQR at every (speed, tilt) circle of a config's grid.
 
@@ -617,7 +569,7 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
     args = [(config, float(v), tilts, extra, invariant) for v in speeds]
     sols = []
     with blas_single_thread():
-        for s in _solutions(args, n_jobs, backend):
+        for s in run_jobs(args, n_jobs, backend, _solve_speed):
             sols.append(s)
             if progress is not None:
                 progress(1)

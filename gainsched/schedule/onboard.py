@@ -184,16 +184,16 @@ def record_from_config(config) -> FirmwareRecord:
     """The firmware record of a config (computed at the build, stored in its table).
 
     Computed on the pinned numerics, where the circles are (the build's job runner,
-    ``grid._solutions``: in a pinned worker when this process is not pinned, a notebook
-    or a test), since the
-    record's bits are part of the table's bytes and the model's constants pass through
-    kernels that differ between CPUs (the allocation matrix's inverse, vectorised sines).
+    :func:`~gainsched.schedule.jobs.run_jobs`: in a pinned worker when this process is
+    not pinned, a notebook or a test), since the record's bits are part of the table's
+    bytes and the model's constants pass through kernels that differ between CPUs (the
+    allocation matrix's inverse, vectorised sines).
     """
     from ..model.effects import registered_effects
-    from .grid import _solutions
+    from .jobs import run_jobs
 
     effects = registered_effects({s.name for s in config.effects})
-    (record,) = _solutions([(config, effects)], 1, None, job=_record)
+    (record,) = run_jobs([(config, effects)], 1, None, _record)
     return record
 
 

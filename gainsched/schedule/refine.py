@@ -66,12 +66,12 @@ from .certificate import (
 from .choice import GridChoice, grid_auto_lines
 from .grid import (
     CircleSolution,
-    _solutions,
     check_effect_symmetries,
     check_gain_cap,
     grid_from_solutions,
     level_circle_invariant,
 )
+from .jobs import run_jobs
 
 __all__ = ["refine_grid", "GridChoice", "midpoint_errors", "grid_auto_lines", "ERROR_QUANTUM"]
 
@@ -189,7 +189,7 @@ class _Refiner:
 
     def _run(self, job, args):
         with blas_single_thread():
-            for a, res in zip(args, _solutions(args, self.n_jobs, self.backend, job),
+            for a, res in zip(args, run_jobs(args, self.n_jobs, self.backend, job),
                               strict=True):
                 yield a, res
                 if self.progress is not None:

@@ -325,7 +325,7 @@ class _Interrupt:
     @staticmethod
     def solve_circle(monkeypatch):
         """Ctrl-C after the first speed of the grid (in this process or a worker)."""
-        real = gainsched.schedule.grid._solutions
+        real = gainsched.schedule.grid.run_jobs
 
         def fake(*args, **kwargs):
             for i, sol in enumerate(real(*args, **kwargs)):
@@ -333,7 +333,7 @@ class _Interrupt:
                     raise KeyboardInterrupt
                 yield sol
 
-        monkeypatch.setattr(gainsched.schedule.grid, "_solutions", fake)
+        monkeypatch.setattr(gainsched.schedule.grid, "run_jobs", fake)
 
     @staticmethod
     def table_bytes(monkeypatch):
