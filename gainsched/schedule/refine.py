@@ -66,6 +66,7 @@ from .certificate import (
 from .choice import GridChoice, grid_auto_lines
 from .grid import (
     CircleSolution,
+    _solve_speed,
     check_effect_symmetries,
     check_gain_cap,
     grid_from_solutions,
@@ -205,7 +206,7 @@ class _Refiner:
                 todo[v].append(a)
         args = [(self.solve_config, v, np.array([self.rad(a) for a in ts]), self.effects,
                  self.invariant) for v, ts in todo.items()]
-        for (_, v, _, _, _), sol in self._run(None, args):
+        for (_, v, _, _, _), sol in self._run(_solve_speed, args):
             self.meta[v] = (sol.steps, sol.dt)
             for i, a in enumerate(todo[v]):
                 self.points[v, a] = _one(sol, i)

@@ -97,7 +97,7 @@ def test_dask_build_equals_local_build_byte_for_byte(scheduler, small_path, loca
 def test_result_order_does_not_follow_completion_order(scheduler, small_path, local_build,
                                                        tmp_path, monkeypatch):
     """The low speeds are made to finish last on the cluster; the table is unchanged."""
-    from gainsched.schedule import grid
+    from gainsched.schedule import jobs
 
     handed_back = []  # (finish time on the worker, speed), in the order build_grid gets them
     workers = set()
@@ -110,7 +110,7 @@ def test_result_order_does_not_follow_completion_order(scheduler, small_path, lo
         time.sleep(delay)
         return func(*args, **kwargs), time.time(), get_worker().address
 
-    class SlowLowSpeeds(grid.Parallel):
+    class SlowLowSpeeds(jobs.Parallel):
         def __call__(self, iterable):
             jobs = [(timed, (f, 0.5 * (1 - args[1] / SPEEDS[-1]), *args), kw)
                     for f, args, kw in iterable]  # args = (config, speed, tilts)
@@ -119,7 +119,7 @@ def test_result_order_does_not_follow_completion_order(scheduler, small_path, lo
                 workers.add(worker)
                 yield out
 
-    monkeypatch.setattr(grid, "Parallel", SlowLowSpeeds)
+    monkeypatch.setattr(jobs, "Parallel", SlowLowSpeeds)
     res = _invoke("build", small_path, "-o", tmp_path, "--backend", "dask", "--scheduler",
                   scheduler)
     assert res.exit_code == 0, res.output
