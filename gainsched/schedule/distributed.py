@@ -283,6 +283,10 @@ def executor(backend: str = "local", scheduler: str | None = None, n_jobs: int =
     if backend != "dask":
         name = "loky" if backend == "local" else backend
         jobs = 1 if name == "sequential" else n_jobs
+        if name == "loky":
+            from .jobs import start_workers
+
+            start_workers(jobs)
         yield Execution(name, jobs, f"local ({name}, n_jobs={jobs})")
         return
     with _dask(scheduler, n_jobs, connect_timeout) as ex:

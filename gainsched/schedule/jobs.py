@@ -27,7 +27,7 @@ from ..native.reproducible import (
     process_pinned,
 )
 
-__all__ = ["run_jobs"]
+__all__ = ["run_jobs", "start_workers"]
 
 
 def _dask_active() -> bool:
@@ -35,6 +35,32 @@ def _dask_active() -> bool:
     from joblib.parallel import get_active_backend
 
     return type(get_active_backend()[0]).__name__.startswith("Dask")
+
+
+def _local_processes(n_jobs: int, n_args: int | None = None) -> int:
+    """Processes at work at once for ``n_jobs`` (-1: every core), at most ``n_args``."""
+    n = n_jobs if n_jobs > 0 else max(1, cpu_count() + 1 + n_jobs)
+    return n if n_args is None else min(n, n_args)
+
+
+def _import_schedule() -> None:
+    """A worker's first job from :func:`start_workers`: the modules every circle needs."""
+    from . import grid  # noqa: F401
+
+
+def start_workers(n_jobs: int) -> None:
+    """Start the workers :func:`run_jobs` will use beside this pinned process and have them
+    import the schedule now, while this process imports its own: both take about a
+    second, and this way they overlap (the ``gainsched`` command calls it first thing in
+    a build). Nothing when this process would not work beside workers (not pinned, or
+    one job at a time)."""
+    n = _local_processes(n_jobs)
+    if n < 2 or not (process_pinned() or not pin_available()):
+        return
+    with children_ignore_sigint():
+        pool = pinned_executor(n - 1)
+        for _ in range(n - 1):
+            pool.submit(_import_schedule)
 
 
 def run_jobs(args, n_jobs, backend, job):
@@ -46,9 +72,10 @@ def run_jobs(args, n_jobs, backend, job):
     numerics and ended by the kernel when this process dies, even by SIGKILL. A process
     that does not run the pinned numerics (a notebook, a test) sends every job there,
     also for the ``sequential`` and ``threading`` backends, so that the table bits never
-    depend on the calling process; a pinned one (the command) runs jobs itself beside
-    ``n_jobs - 1`` workers (:func:`_beside_workers`). joblib runs the jobs on Dask, and
-    in this process for ``sequential``, ``threading`` or one job when it is pinned.
+    depend on the calling process; a pinned one (the command) runs them itself when one
+    process is to work (``sequential``, ``n_jobs`` 1 or one job), in threads for
+    ``threading``, else beside ``n - 1`` workers (:func:`_beside_workers`). joblib runs
+    the jobs on Dask.
 
     Parameters
     ----------
@@ -62,16 +89,19 @@ def run_jobs(args, n_jobs, backend, job):
     job : callable
         Picklable (a module-level function): it travels to the workers.
     """
-    dask = backend == "dask" or (backend is None and _dask_active())
-    same_numerics = process_pinned() or not pin_available()
-    if dask or (same_numerics and (backend in ("sequential", "threading") or n_jobs == 1)):
-        par = Parallel(n_jobs=n_jobs, backend=backend, return_as="generator")
-        yield from par(delayed(job)(*a) for a in args)
+    if backend == "dask" or (backend is None and _dask_active()):
+        yield from Parallel(n_jobs=n_jobs, backend=backend, return_as="generator")(
+            delayed(job)(*a) for a in args)
         return
-    n = n_jobs if n_jobs > 0 else max(1, cpu_count() + 1 + n_jobs)
-    n = 1 if backend == "sequential" else min(n, len(args))
-    if same_numerics and n > 1:
-        yield from _beside_workers(args, n - 1, job)
+    n = 1 if backend == "sequential" else _local_processes(n_jobs, len(args))
+    if process_pinned() or not pin_available():  # this process has the workers' numerics
+        if backend == "threading" and n > 1:
+            yield from Parallel(n_jobs=n, backend="threading", return_as="generator")(
+                delayed(job)(*a) for a in args)
+        elif n == 1:
+            yield from (job(*a) for a in args)
+        else:
+            yield from _beside_workers(args, n - 1, job)
         return
     with children_ignore_sigint():  # the workers (and loky's tracker) start in here
         pool = pinned_executor(n)

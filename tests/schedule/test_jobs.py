@@ -17,17 +17,19 @@ from gainsched.native.reproducible import pin_environ
 pin_environ()
 import json, os, sys, time
 from gainsched.native.reproducible import process_pinned, pin_available
-from gainsched.schedule.jobs import run_jobs
+from gainsched.schedule.jobs import run_jobs, start_workers
 
 def job(k, fail):
     time.sleep(0.05)
     if k == fail:
         raise ValueError(f"job {k} failed")
-    return k, os.getpid()
+    return k, os.getpid(), "gainsched.schedule.grid" in sys.modules
 
-fail = int(sys.argv[1])
+fail, n_args, warm = (int(a) for a in sys.argv[1:])
+if warm:
+    start_workers(2)
 try:
-    out = list(run_jobs([(k, fail) for k in range(12)], 2, None, job))
+    out = list(run_jobs([(k, fail) for k in range(n_args)], 2, None, job))
 except ValueError as exc:
     out = str(exc)
 print(json.dumps({"same": process_pinned() or not pin_available(), "main": os.getpid(),
@@ -35,11 +37,14 @@ print(json.dumps({"same": process_pinned() or not pin_available(), "main": os.ge
 """
 
 
-def _run(fail: int) -> dict:
-    res = subprocess.run([sys.executable, "-c", _SCRIPT, str(fail)], capture_output=True,
-                         text=True, timeout=120)
+def _run(fail: int, n_args: int = 12, warm: bool = False) -> dict:
+    res = subprocess.run([sys.executable, "-c", _SCRIPT, str(fail), str(n_args), str(int(warm))],
+                         capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
-    return json.loads(res.stdout)
+    got = json.loads(res.stdout)
+    if not got["same"]:
+        pytest.skip("this process did not get the pinned numerics")
+    return got
 
 
 def test_a_pinned_process_works_beside_its_worker_in_order():
@@ -47,11 +52,25 @@ def test_a_pinned_process_works_beside_its_worker_in_order():
     the schedule: it takes jobs itself. Both processes ran jobs, the results are in
     submission order, and one worker was started for two processes at work."""
     got = _run(fail=-1)
-    if not got["same"]:
-        pytest.skip("this process did not get the pinned numerics")
-    assert [k for k, _ in got["out"]] == list(range(12))
-    pids = {pid for _, pid in got["out"]}
+    assert [k for k, _, _ in got["out"]] == list(range(12))
+    pids = {pid for _, pid, _ in got["out"]}
     assert got["main"] in pids and len(pids) == 2
+
+
+def test_one_job_runs_in_this_process():
+    """One circle to solve: no worker is waited for (the old pool started one)."""
+    got = _run(fail=-1, n_args=1)
+    assert [pid for _, pid, _ in got["out"]] == [got["main"]]
+
+
+@pytest.mark.parametrize("warm", [False, True], ids=["cold", "started"])
+def test_started_workers_have_the_schedule_imported(warm):
+    """start_workers (called as a build begins) has the worker import the schedule while
+    this process imports its own; run_jobs then uses that worker. The job itself imports
+    nothing: a cold worker does not have the schedule (the control)."""
+    got = _run(fail=-1, warm=warm)
+    in_worker = [grid for _, pid, grid in got["out"] if pid != got["main"]]
+    assert in_worker and all(g is warm for g in in_worker)
 
 
 @pytest.mark.parametrize("fail", [0, 1, 11], ids=["first", "second", "last"])
