@@ -1,6 +1,7 @@
 """Builds whose effects leave the closed form (issue 39) against the drag-only build of
 the same grid, in a process pinned like the ``gainsched`` command
-(:mod:`gainsched.native.reproducible`), one worker, best of 2: ``python -m
+(:mod:`gainsched.native.reproducible`), one worker, best of 2 (the whole paper grid: of
+1): ``python -m
 bench._effects`` prints one line per figure and the figures as JSON on its last line
 (run by :func:`bench.bench_build.bench_effect_builds`).
 
@@ -91,13 +92,13 @@ def main() -> dict:
         choice = refine_grid(config_from_text(t, name), n_jobs=1)
         return len(choice.config.grid.speeds) * len(choice.config.grid.tilts)
 
-    t0, n0 = best_of(lambda: auto(user, "user_quad.toml"), 1)
+    t0, n0 = best_of(lambda: auto(user, "user_quad.toml"), 2)
     out["auto_drag_only_s"] = t0
     print(f"  automatic grid of a user's vehicle (bench/configs/user_quad.toml), drag only: "
           f"{t0:.2f} s, {n0} circles chosen")
     for kind, values in AUTO_EFFECTS.items():
         eff = _with(user, {kind: values})
-        t, n = best_of(lambda e=eff, k=kind: auto(e, f"{k}.toml"), 1)
+        t, n = best_of(lambda e=eff, k=kind: auto(e, f"{k}.toml"), 2)
         print(f"    + {kind}: {t:.2f} s ({n} circles chosen), x{t / t0:.2f} the drag-only build")
         out[f"auto_{kind}_s"], out[f"auto_{kind}_ratio"] = t, t / t0
     return out

@@ -286,7 +286,7 @@ def executor(backend: str = "local", scheduler: str | None = None, n_jobs: int =
         if name == "loky":
             from .jobs import start_workers
 
-            start_workers(jobs)
+            start_workers(jobs, "gainsched.schedule.grid")  # a build's circles
         yield Execution(name, jobs, f"local ({name}, n_jobs={jobs})")
         return
     with _dask(scheduler, n_jobs, connect_timeout) as ex:

@@ -35,8 +35,8 @@ from .lqr import dlqr, periodic_lqr, spectral_radius, stability_scale
 from .modes import MODE_COUNT, floquet_modes
 from .nominal import circle_nominal, circle_offsets
 from .offsets import HARMONICS
-from .path import period
-from .trim import TrimError
+from .path import circle_path, period
+from .trim import TrimError, solve_circles
 
 __all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "bound_price",
            "grid_from_solutions",
@@ -365,6 +365,8 @@ def _fill_nominals(out: CircleSolution, model, speed, tilts) -> np.ndarray:
     of every control step together, 0 where the tilt can have gains."""
     n_xi = out.K.shape[1]
     bad = np.zeros(tilts.size, dtype=np.uint8)
+    if model.closed_form_drag() is None:  # the numerical trim: every tilt's at once
+        solve_circles(model, circle_path(speed, model.r, np.zeros(1)), tilts)
     for i, a in enumerate(tilts):
         try:
             # feasibility is checked on the nominal at every control step

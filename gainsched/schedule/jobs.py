@@ -15,6 +15,7 @@ and concurrent.futures' callers only wait), hence these few lines.
 
 from __future__ import annotations
 
+import importlib
 import threading
 from collections import deque
 
@@ -43,24 +44,24 @@ def _local_processes(n_jobs: int, n_args: int | None = None) -> int:
     return n if n_args is None else min(n, n_args)
 
 
-def _import_schedule() -> None:
-    """A worker's first job from :func:`start_workers`: the modules every circle needs."""
-    from . import grid  # noqa: F401
+def _import(module: str) -> None:
+    """A worker's first job from :func:`start_workers`: import ``module``."""
+    importlib.import_module(module)
 
 
-def start_workers(n_jobs: int) -> None:
+def start_workers(n_jobs: int, module: str) -> None:
     """Start the workers :func:`run_jobs` will use beside this pinned process and have them
-    import the schedule now, while this process imports its own: both take about a
-    second, and this way they overlap (the ``gainsched`` command calls it first thing in
-    a build). Nothing when this process would not work beside workers (not pinned, or
-    one job at a time)."""
+    import ``module`` (what their jobs need) now, while this process imports its own:
+    both take about a second, and this way they overlap (the ``gainsched`` command calls
+    it first thing in a build). Nothing when this process would not work beside workers
+    (not pinned, or one job at a time)."""
     n = _local_processes(n_jobs)
     if n < 2 or not (process_pinned() or not pin_available()):
         return
     with children_ignore_sigint():
         pool = pinned_executor(n - 1)
         for _ in range(n - 1):
-            pool.submit(_import_schedule)
+            pool.submit(_import, module)
 
 
 def run_jobs(args, n_jobs, backend, job):

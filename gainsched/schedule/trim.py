@@ -33,7 +33,7 @@ from ..errors import GainschedError
 from .closedform import closed_form, state_from_attitude
 from .path import AzimuthPath
 
-__all__ = ["trim_path", "TrimError"]
+__all__ = ["trim_path", "solve_circles", "TrimError"]
 
 #: nodes of the periodic collocation: the interpolated nominal of 64 meets the model to
 #: 1e-11 (relative) at 1024 samples per circle with rotor drag, motor lag or momentum
@@ -174,7 +174,8 @@ def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets=None, *,
         for j in range(6):
             off[j][(7 + j - first) * n:(8 + j - first) * n] += 1j * h
     o = (tuple(off[:3]), tuple(off[3:]))
-    res = np.imag(_local(model, _sub_path(path, tile), alpha, *roll, Tc, o)[0]) / h
+    a = alpha if np.ndim(alpha) == 0 else np.asarray(alpha)[tile]  # a tilt per node
+    res = np.imag(_local(model, _sub_path(path, tile), a, *roll, Tc, o)[0]) / h
     return res.reshape(m, n, 5).transpose(1, 2, 0)
 
 
@@ -205,6 +206,53 @@ def _newton_step(Jl, D1, D2, res):
     if res.ndim == 2:
         return d_phi[:, 0], d_T[..., 0]
     return d_phi, d_T
+
+
+def _newton_step_circles(Jl, D1, D2, res, m):
+    """:func:`_newton_step` of ``m`` circles' collocations at once, each on the same ``n``
+    nodes (``Jl`` (m n, 5, 7) and ``res`` (m n, 5) circle by circle): ``(d phi (m, n),
+    d T (m, n, 4))``, the roll's ``(n, n)`` systems solved as one stack."""
+    n = D1.shape[0]
+    Q, R = np.linalg.qr(Jl[:, :, 3:7], mode="complete")
+    q = Q[:, :, 4]
+    c = np.einsum("ni,nij->nj", q, Jl[:, :, :3]).reshape(m, n, 3)
+    M = c[..., 0, None] * np.eye(n) + c[..., 1, None] * D1 + c[..., 2, None] * D2
+    d_phi = np.linalg.solve(M, np.einsum("ni,ni->n", q, res).reshape(m, n, 1))[..., 0]
+    derivs = [x.reshape(-1, 1) for x in (d_phi, d_phi @ D1.T, d_phi @ D2.T)]
+    rest = res - sum(Jl[:, :, j] * derivs[j] for j in range(3))
+    d_T = np.linalg.solve(R[:, :4, :], np.einsum("nij,ni->nj", Q[:, :, :4], rest)[..., None])
+    return d_phi, d_T[..., 0].reshape(m, n, 4)
+
+
+def _newton_circles(model, nodes, alphas, D1, D2, phi, T, tol=1e-11, max_iter=40):
+    """:func:`_newton` of the zero-offset circles at the tilts ``alphas`` (m,) rad on the
+    same ``nodes``, from ``phi`` (m, n) and ``T`` (m, n, 4), in one model evaluation per
+    step: a circle leaves the batch once its own residual meets ``tol``. Returns one
+    ``(phi, T)`` per circle, None for a circle that did not converge."""
+    m, n = phi.shape
+    scale = max(1.0, float(np.abs(nodes.d[0]).max()) ** 2)
+    out = [None] * m
+    live = np.arange(m)
+    for _ in range(max_iter):
+        flat = _sub_path(nodes, np.tile(np.arange(n), live.size))
+        a = np.repeat(alphas[live], n)
+        roll = (phi[live], phi[live] @ D1.T, phi[live] @ D2.T)
+        res = _local(model, flat, a, *(x.reshape(-1) for x in roll), T[live].reshape(-1, 4))[0]
+        done = np.abs(res).reshape(live.size, -1).max(1) < tol * scale
+        for j in live[done]:
+            out[j] = (phi[j].copy(), T[j].copy())
+        if done.all():
+            break
+        keep = np.repeat(~done, n)
+        live = live[~done]
+        flat = _sub_path(flat, np.flatnonzero(keep))
+        roll = [x[~done] for x in roll]
+        Jl = _local_jacobians(model, flat, a[keep], *(x.reshape(-1) for x in roll),
+                              T[live].reshape(-1, 4))
+        d_phi, d_T = _newton_step_circles(Jl, D1, D2, res[keep], live.size)
+        phi[live] -= d_phi
+        T[live] -= d_T
+    return out
 
 
 def _newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40, offsets=None):
@@ -270,6 +318,39 @@ def _circle_key(path: AzimuthPath, alpha: float, offsets=None):
             else (offsets.pitch.tobytes(), offsets.yaw.tobytes()))
 
 
+def _nodes(path: AzimuthPath):
+    """The collocation's :data:`N_FOURIER` nodes of the whole circle ``path`` starts (its
+    first sample and azimuth rate), and the period, s."""
+    xd, t0 = path.d[0][0], path.t[0]
+    Tp = 2 * np.pi / abs(xd)
+    tn = t0 + np.arange(N_FOURIER) * (Tp / N_FOURIER)
+    z0 = np.zeros_like(tn)
+    return AzimuthPath(tn, path.xi[0] + xd * (tn - t0), (np.full_like(tn, xd), z0, z0, z0)), Tp
+
+
+def solve_circles(model, path: AzimuthPath, alphas) -> None:
+    """Solve the Fourier collocations of the whole circle ``path`` starts at the tilts
+    ``alphas`` (rad), without offsets, in one batched Newton (:func:`_newton_circles`), into
+    the cache :func:`trim_path` reads: a grid's job asks for every tilt of a speed, and
+    the model's cost is per evaluation more than per node (issue 39: a seventh of the
+    evaluations). Each circle stops when its own residual meets the tolerance, as alone;
+    one that does not converge is left to :func:`trim_path`, which raises."""
+    cache = _NODES.setdefault(model, {})
+    todo = [float(a) for a in alphas if _circle_key(path, a) not in cache]
+    if len(todo) < 2:
+        return
+    nodes, Tp = _nodes(path)
+    D1, D2 = _fourier_operators(N_FOURIER, Tp)
+    guesses = [_initial_guess(model, nodes, a) for a in todo]
+    phi = np.stack([g[0] for g in guesses])
+    T = np.stack([g[1] for g in guesses])
+    with np.errstate(all="ignore"):  # a diverging circle is left out, not raised here
+        solved = _newton_circles(model, nodes, np.array(todo), D1, D2, phi, T)
+    for a, sol in zip(todo, solved, strict=True):
+        if sol is not None:
+            cache[_circle_key(path, a)] = sol
+
+
 def _periodic_guess(model, path: AzimuthPath, alpha: float, offsets=None):
     """The Fourier collocation of a whole circle (:func:`trim_path`, periodic), its node
     solution cached per model and circle, interpolated to ``path``'s samples.
@@ -279,12 +360,8 @@ def _periodic_guess(model, path: AzimuthPath, alpha: float, offsets=None):
     and the :func:`_local` evaluation there (residuals (n, 5), state, its derivative,
     the model's evaluation).
     """
-    xd, t = path.d[0], path.t
-    Tp = 2 * np.pi / abs(xd[0])
-    tn = t[0] + np.arange(N_FOURIER) * (Tp / N_FOURIER)
-    xi_n = path.xi[0] + xd[0] * (tn - t[0])
-    z0 = np.zeros_like(tn)
-    nodes = AzimuthPath(tn, xi_n, (np.full_like(tn, xd[0]), z0, z0, z0))
+    t = path.t
+    nodes, Tp = _nodes(path)
     key = _circle_key(path, alpha, offsets)
     cache = _NODES.setdefault(model, {})
     if key not in cache:

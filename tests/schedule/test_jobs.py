@@ -27,7 +27,7 @@ def job(k, fail):
 
 fail, n_args, warm = (int(a) for a in sys.argv[1:])
 if warm:
-    start_workers(2)
+    start_workers(2, "gainsched.schedule.grid")
 try:
     out = list(run_jobs([(k, fail) for k in range(n_args)], 2, None, job))
 except ValueError as exc:
