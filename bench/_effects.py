@@ -1,7 +1,7 @@
 """Builds whose effects leave the closed form (issue 39) against the drag-only build of
 the same grid, in a process pinned like the ``gainsched`` command
-(:mod:`gainsched.native.reproducible`), one worker, best of 2 (the whole paper grid: of
-1): ``python -m
+(:mod:`gainsched.native.reproducible`), one worker, each case's best of rounds that take
+every case in turn (:func:`interleaved`): ``python -m
 bench._effects`` prints one line per figure and the figures as JSON on its last line
 (run by :func:`bench.bench_build.bench_effect_builds`).
 
@@ -43,14 +43,18 @@ USER_QUAD = ROOT / "bench" / "configs" / "user_quad.toml"
 AUTO_EFFECTS = {"rotor_drag": {"k_rd": 0.01}, "motor_lag": {"tau": 0.03}}
 
 
-def best_of(fn, repeat):
-    """Minimum wall time of ``repeat`` calls and the last result."""
-    best, out = float("inf"), None
+def interleaved(cases, repeat):
+    """``{name: (best wall time s, last result)}`` of the calls ``cases`` (name ->
+    function), ``repeat`` rounds of one call each in turn: a slow spell of a shared
+    machine lands on every case alike, not on one case's repeats."""
+    best = dict.fromkeys(cases, float("inf"))
+    last = {}
     for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
+        for name, fn in cases.items():
+            t0 = time.perf_counter()
+            last[name] = fn()
+            best[name] = min(best[name], time.perf_counter() - t0)
+    return {name: (best[name], last[name]) for name in cases}
 
 
 def _with(text, effects):
@@ -67,38 +71,44 @@ def main() -> dict:
     from gainsched.schedule.grid import build_grid
     from gainsched.schedule.refine import refine_grid
 
-    def build(text, name, repeat=2):
-        return best_of(lambda: build_grid(config_from_text(text, name), n_jobs=1), repeat)
+    def build(text, name):
+        return lambda: build_grid(config_from_text(text, name), n_jobs=1)
 
+    def auto(text, name):
+        def run():
+            choice = refine_grid(config_from_text(text, name), n_jobs=1)
+            return len(choice.config.grid.speeds) * len(choice.config.grid.tilts)
+        return run
+
+    out = {}
     text = _variant(PAPER.read_text(), speeds=[3, 6, 9, 12, 15], tilts=[0, 20, 40])
-    t0, g0 = build(text, "cut.toml")
-    out = {"drag_only_s": t0}
+    got = interleaved({"drag_only": build(text, "cut.toml")} | {
+        kind: build(_with(text, {kind: values}), f"{kind}.toml")
+        for kind, values in TRIM_EFFECTS.items()}, 3)
+    t0, g0 = got.pop("drag_only")
+    out["drag_only_s"] = t0
     print(f"  build of the paper grid cut to 5 speeds x 3 tilts ({g0.spectral_radius.size} "
           f"circles), drag only (closed form): {t0:.2f} s")
-    for kind, values in TRIM_EFFECTS.items():
-        t, _ = build(_with(text, {kind: values}), f"{kind}.toml")
+    for kind, (t, _) in got.items():
         print(f"    + {kind}: {t:.2f} s, x{t / t0:.2f} the drag-only build")
         out[f"{kind}_s"], out[f"{kind}_ratio"] = t, t / t0
     paper = PAPER.read_text()
-    t0, g0 = build(paper, "paper.toml", 1)
-    t, _ = build(_with(paper, IMPROVED), "paper_1.toml", 1)
+    got = interleaved({"drag_only": build(paper, "paper.toml"),
+                       "improved": build(_with(paper, IMPROVED), "paper_1.toml")}, 1)
+    (t0, g0), (t, _) = got["drag_only"], got["improved"]
     print(f"  the paper grid ({g0.spectral_radius.size} circles), drag only: {t0:.2f} s; with "
           f"what improve finds on the example flights (thrust_momentum + motor_lag): {t:.2f} "
           f"s, x{t / t0:.2f}")
     out.update(paper_drag_only_s=t0, paper_improved_s=t, paper_improved_ratio=t / t0)
     user = USER_QUAD.read_text()
-
-    def auto(t, name):
-        choice = refine_grid(config_from_text(t, name), n_jobs=1)
-        return len(choice.config.grid.speeds) * len(choice.config.grid.tilts)
-
-    t0, n0 = best_of(lambda: auto(user, "user_quad.toml"), 2)
+    got = interleaved({"drag_only": auto(user, "user_quad.toml")} | {
+        kind: auto(_with(user, {kind: values}), f"{kind}.toml")
+        for kind, values in AUTO_EFFECTS.items()}, 2)
+    t0, n0 = got.pop("drag_only")
     out["auto_drag_only_s"] = t0
     print(f"  automatic grid of a user's vehicle (bench/configs/user_quad.toml), drag only: "
           f"{t0:.2f} s, {n0} circles chosen")
-    for kind, values in AUTO_EFFECTS.items():
-        eff = _with(user, {kind: values})
-        t, n = best_of(lambda e=eff, k=kind: auto(e, f"{k}.toml"), 2)
+    for kind, (t, n) in got.items():
         print(f"    + {kind}: {t:.2f} s ({n} circles chosen), x{t / t0:.2f} the drag-only build")
         out[f"auto_{kind}_s"], out[f"auto_{kind}_ratio"] = t, t / t0
     return out
