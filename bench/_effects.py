@@ -65,6 +65,22 @@ def _with(text, effects):
     return text
 
 
+def _against_drag_only(out, prefix, make, text, name, effects, repeat, title, detail):
+    """Time the drag-only build of ``text`` and one with each of ``effects`` (kind ->
+    values) in interleaved rounds; print them with their ratios and store them in ``out``
+    under ``prefix``. ``make(text, name)``: the call to time; ``title`` and ``detail``
+    describe the drag-only result and an effect's result."""
+    got = interleaved({"drag_only": make(text, name)} | {
+        kind: make(_with(text, {kind: values}), f"{kind}.toml")
+        for kind, values in effects.items()}, repeat)
+    t0, r0 = got.pop("drag_only")
+    out[f"{prefix}drag_only_s"] = t0
+    print(f"  {title(r0)}: {t0:.2f} s")
+    for kind, (t, r) in got.items():
+        print(f"    + {kind}: {t:.2f} s{detail(r)}, x{t / t0:.2f} the drag-only build")
+        out[f"{prefix}{kind}_s"], out[f"{prefix}{kind}_ratio"] = t, t / t0
+
+
 def main() -> dict:
     from bench.bench_build import _variant
     from gainsched.config import config_from_text
@@ -82,16 +98,9 @@ def main() -> dict:
 
     out = {}
     text = _variant(PAPER.read_text(), speeds=[3, 6, 9, 12, 15], tilts=[0, 20, 40])
-    got = interleaved({"drag_only": build(text, "cut.toml")} | {
-        kind: build(_with(text, {kind: values}), f"{kind}.toml")
-        for kind, values in TRIM_EFFECTS.items()}, 3)
-    t0, g0 = got.pop("drag_only")
-    out["drag_only_s"] = t0
-    print(f"  build of the paper grid cut to 5 speeds x 3 tilts ({g0.spectral_radius.size} "
-          f"circles), drag only (closed form): {t0:.2f} s")
-    for kind, (t, _) in got.items():
-        print(f"    + {kind}: {t:.2f} s, x{t / t0:.2f} the drag-only build")
-        out[f"{kind}_s"], out[f"{kind}_ratio"] = t, t / t0
+    _against_drag_only(out, "", build, text, "cut.toml", TRIM_EFFECTS, 3, lambda g: (
+        f"build of the paper grid cut to 5 speeds x 3 tilts ({g.spectral_radius.size} "
+        "circles), drag only (closed form)"), lambda g: "")
     paper = PAPER.read_text()
     got = interleaved({"drag_only": build(paper, "paper.toml"),
                        "improved": build(_with(paper, IMPROVED), "paper_1.toml")}, 1)
@@ -100,17 +109,10 @@ def main() -> dict:
           f"what improve finds on the example flights (thrust_momentum + motor_lag): {t:.2f} "
           f"s, x{t / t0:.2f}")
     out.update(paper_drag_only_s=t0, paper_improved_s=t, paper_improved_ratio=t / t0)
-    user = USER_QUAD.read_text()
-    got = interleaved({"drag_only": auto(user, "user_quad.toml")} | {
-        kind: auto(_with(user, {kind: values}), f"{kind}.toml")
-        for kind, values in AUTO_EFFECTS.items()}, 2)
-    t0, n0 = got.pop("drag_only")
-    out["auto_drag_only_s"] = t0
-    print(f"  automatic grid of a user's vehicle (bench/configs/user_quad.toml), drag only: "
-          f"{t0:.2f} s, {n0} circles chosen")
-    for kind, (t, n) in got.items():
-        print(f"    + {kind}: {t:.2f} s ({n} circles chosen), x{t / t0:.2f} the drag-only build")
-        out[f"auto_{kind}_s"], out[f"auto_{kind}_ratio"] = t, t / t0
+    _against_drag_only(out, "auto_", auto, USER_QUAD.read_text(), "user_quad.toml",
+                       AUTO_EFFECTS, 2, lambda n: (
+                           "automatic grid of a user's vehicle (bench/configs/user_quad.toml), "
+                           f"drag only ({n} circles chosen)"), lambda n: f" ({n} circles chosen)")
     return out
 
 
