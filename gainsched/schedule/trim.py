@@ -179,13 +179,16 @@ def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets=None, *,
     return res.reshape(m, n, 5).transpose(1, 2, 0)
 
 
-def _newton_step(Jl, D1, D2, res):
+def _newton_step(Jl, D1, D2, res, circles=1):
     """The solution ``(d phi (n, ...), d T (n, 4, ...))`` of the collocation system
     ``J x = res`` by eliminating the thrusts. J is the (5n, 5n) Jacobian of all node
     residuals in (phi nodes, T1 nodes, ..., T4 nodes) from the local partials ``Jl``
     (n, 5, >= 7): equation i's rows are ``diag(Jl[:, i, 0]) + Jl[:, i, 1] D1 +
     Jl[:, i, 2] D2`` in phi and ``diag(Jl[:, i, 3 + j])`` in T_j; ``res`` (n, 5) or
-    (n, 5, k) for k right-hand sides.
+    (n, 5, k) for k right-hand sides. With ``circles`` m > 1, ``Jl`` and ``res`` hold m
+    circles' collocations on the same n nodes one after the other (m n rows) and the
+    result is ``(d phi (m, n), d T (m, n, 4))``: the m roll systems are solved as one
+    stack.
 
     The thrusts enter each node's five equations only at that node (a 5 x 4 block
     ``B_k``), so the vector ``q_k`` orthogonal to ``B_k``'s columns (the last column of
@@ -193,35 +196,22 @@ def _newton_step(Jl, D1, D2, res):
     the thrusts follow node by node from the QR. The same solution as the dense
     (5n, 5n) solve, for about 1/100 of its cost at n = 128 (hand-written: no library
     solves this bordered collocation structure)."""
+    n = D1.shape[0]
     r = res if res.ndim == 3 else res[..., None]
     B = Jl[:, :, 3:7]
-    Q, R = np.linalg.qr(B, mode="complete")  # (n, 5, 5), (n, 5, 4)
+    Q, R = np.linalg.qr(B, mode="complete")  # (m n, 5, 5), (m n, 5, 4)
     q = Q[:, :, 4]
-    c = np.einsum("ni,nij->nj", q, Jl[:, :, :3])
-    M = np.diag(c[:, 0]) + c[:, 1, None] * D1 + c[:, 2, None] * D2
-    d_phi = np.linalg.solve(M, np.einsum("ni,nik->nk", q, r))
-    rest = r - (Jl[:, :, 0, None] * d_phi[:, None] + Jl[:, :, 1, None] * (D1 @ d_phi)[:, None]
-                + Jl[:, :, 2, None] * (D2 @ d_phi)[:, None])
-    d_T = np.linalg.solve(R[:, :4, :], np.einsum("nij,nik->njk", Q[:, :, :4], rest))
-    if res.ndim == 2:
-        return d_phi[:, 0], d_T[..., 0]
-    return d_phi, d_T
-
-
-def _newton_step_circles(Jl, D1, D2, res, m):
-    """:func:`_newton_step` of ``m`` circles' collocations at once, each on the same ``n``
-    nodes (``Jl`` (m n, 5, 7) and ``res`` (m n, 5) circle by circle): ``(d phi (m, n),
-    d T (m, n, 4))``, the roll's ``(n, n)`` systems solved as one stack."""
-    n = D1.shape[0]
-    Q, R = np.linalg.qr(Jl[:, :, 3:7], mode="complete")
-    q = Q[:, :, 4]
-    c = np.einsum("ni,nij->nj", q, Jl[:, :, :3]).reshape(m, n, 3)
+    c = np.einsum("ni,nij->nj", q, Jl[:, :, :3]).reshape(circles, n, 3)
     M = c[..., 0, None] * np.eye(n) + c[..., 1, None] * D1 + c[..., 2, None] * D2
-    d_phi = np.linalg.solve(M, np.einsum("ni,ni->n", q, res).reshape(m, n, 1))[..., 0]
-    derivs = [x.reshape(-1, 1) for x in (d_phi, d_phi @ D1.T, d_phi @ D2.T)]
-    rest = res - sum(Jl[:, :, j] * derivs[j] for j in range(3))
-    d_T = np.linalg.solve(R[:, :4, :], np.einsum("nij,ni->nj", Q[:, :, :4], rest)[..., None])
-    return d_phi, d_T[..., 0].reshape(m, n, 4)
+    d_phi = np.linalg.solve(M, np.einsum("ni,nik->nk", q, r).reshape(circles, n, -1))
+    derivs = [x.reshape(circles * n, 1, -1) for x in (d_phi, D1 @ d_phi, D2 @ d_phi)]
+    rest = r - sum(Jl[:, :, j, None] * derivs[j] for j in range(3))
+    d_T = np.linalg.solve(R[:, :4, :], np.einsum("nij,nik->njk", Q[:, :, :4], rest))
+    if circles > 1:
+        return d_phi[..., 0], d_T[..., 0].reshape(circles, n, 4)
+    if res.ndim == 2:
+        return d_phi[0, :, 0], d_T[..., 0]
+    return d_phi[0], d_T
 
 
 def _newton_circles(model, nodes, alphas, D1, D2, phi, T, tol=1e-11, max_iter=40):
@@ -249,7 +239,7 @@ def _newton_circles(model, nodes, alphas, D1, D2, phi, T, tol=1e-11, max_iter=40
         roll = [x[~done] for x in roll]
         Jl = _local_jacobians(model, flat, a[keep], *(x.reshape(-1) for x in roll),
                               T[live].reshape(-1, 4))
-        d_phi, d_T = _newton_step_circles(Jl, D1, D2, res[keep], live.size)
+        d_phi, d_T = _newton_step(Jl, D1, D2, res[keep], circles=live.size)
         phi[live] -= d_phi
         T[live] -= d_T
     return out
