@@ -38,6 +38,11 @@ def _dask_active() -> bool:
     return type(get_active_backend()[0]).__name__.startswith("Dask")
 
 
+def _same_numerics() -> bool:
+    """Whether this process runs what the pinned workers run (pinned, or no pin here)."""
+    return process_pinned() or not pin_available()
+
+
 def _local_processes(n_jobs: int, n_args: int | None = None) -> int:
     """Processes at work at once for ``n_jobs`` (-1: every core), at most ``n_args``."""
     n = n_jobs if n_jobs > 0 else max(1, cpu_count() + 1 + n_jobs)
@@ -56,7 +61,7 @@ def start_workers(n_jobs: int, module: str) -> None:
     it first thing in a build). Nothing when this process would not work beside workers
     (not pinned, or one job at a time)."""
     n = _local_processes(n_jobs)
-    if n < 2 or not (process_pinned() or not pin_available()):
+    if n < 2 or not _same_numerics():
         return
     with children_ignore_sigint():
         pool = pinned_executor(n - 1)
@@ -95,7 +100,7 @@ def run_jobs(args, n_jobs, backend, job):
             delayed(job)(*a) for a in args)
         return
     n = 1 if backend == "sequential" else _local_processes(n_jobs, len(args))
-    if process_pinned() or not pin_available():  # this process has the workers' numerics
+    if _same_numerics():
         if backend == "threading" and n > 1:
             yield from Parallel(n_jobs=n, backend="threading", return_as="generator")(
                 delayed(job)(*a) for a in args)
