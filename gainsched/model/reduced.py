@@ -185,6 +185,14 @@ class Model:
             i += eff.n_states
         return T
 
+    @property
+    def thrust_modifiers(self) -> tuple[Effect, ...]:
+        """The effects without states that change the thrust, in the order :meth:`thrust`
+        applies them (after the stateful ones): empty when the actual thrusts are the
+        commands, or with a motor lag its states."""
+        return tuple(e for e in self.effects if not e.n_states
+                     and type(e).modify_thrust is not Effect.modify_thrust)
+
     def effect_wrench(self, T, kin):
         """Sum of the effects' forces at the COG (in C, N) and torques (in B, N m)."""
         shape = np.broadcast_shapes(T.shape[:-1], kin.v_C.shape[:-1]) + (3,)
@@ -268,7 +276,7 @@ class Model:
         w_dot = (rhs_tau - lever * ft[..., None]) @ J_inv.T
         return np.concatenate([dd[..., None], dx[..., None], w_dot, ft[..., None]], -1)
 
-    def evaluate(self, z, u, alpha, gamma=0.0) -> Evaluation:
+    def evaluate(self, z, u, alpha, gamma=0.0, thrust=None) -> Evaluation:
         """Full-state derivative and tether tension.
 
         Parameters
@@ -282,6 +290,10 @@ class Model:
         gamma : float or ndarray broadcastable to z.shape[:-1], rad
             Heading of the circle plane (``R_IC = Rz(gamma) Rx(alpha)``); it matters only
             with a wind (:attr:`wind_I`).
+        thrust : ndarray, shape (..., 4), N, optional
+            The actual motor thrusts, in place of those :meth:`thrust` makes of ``u`` and
+            the effect states (the trim's unknowns: :mod:`gainsched.schedule.trim`); ``u``
+            then enters the effect states' derivatives alone.
         """
         z = np.asarray(z)
         u = np.asarray(u)
@@ -291,7 +303,7 @@ class Model:
         R, d, v_q, w_x_pe = self.kinematics(z)
         e = d.e
         kin = self._effect_kinematics(R, d, v_q, w, alpha, gamma)
-        T = self.thrust(z, u, kin)
+        T = self.thrust(z, u, kin) if thrust is None else thrust
         F0, rhs_tau = self.body_wrench(T, kin, alpha)
 
         # p_t'' = rho (e_delta delta'' + e_xi xi'' + c2), c2 the velocity-product terms

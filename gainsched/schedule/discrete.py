@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from .linearize import discretize, jacobians, lqr_system
-from .nominal import circle_needs_polish, circle_nominal
+from .nominal import circle_is_rough, circle_nominal
 
 __all__ = ["LIN_TOL", "discrete_system", "periodic_interp"]
 
@@ -86,7 +86,7 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
     ``|A_d - I|`` and ``|B_d|``); the M-sample interpolation is then used, whose error
     is smaller still. On the paper grid M = 64 gives 2e-15. With ``N <= M`` the
     steps are computed directly, and so are those of tilts whose nominal is not smooth at
-    the trim's resolution (:func:`~gainsched.schedule.nominal.circle_needs_polish`: its
+    the trim's resolution (:func:`~gainsched.schedule.nominal.circle_is_rough`: its
     series would not converge before M reaches N).
 
     Returns
@@ -95,7 +95,7 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
     err : float   the last interpolation check (0 if direct); M and err are arrays (n_a,)
         when some tilts were computed directly and others not
     """
-    rough = np.array([N > 2 * m0 and circle_needs_polish(model, speed, a, N) for a in tilts])
+    rough = np.array([N > 2 * m0 and circle_is_rough(model, speed, a, N) for a in tilts])
     if rough.any() and not rough.all():  # each part its own way, put back in tilt order
         smooth, direct = (discrete_system(model, speed, np.asarray(tilts)[p], N, dt, tol=tol,
                                           m0=m0) for p in (~rough, rough))

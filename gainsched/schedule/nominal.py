@@ -26,14 +26,14 @@ from ..constants import REASONS, Reason
 from .closedform import closed_form
 from .offsets import CHECK_SAMPLES, AttitudeOffsets, solve_offsets
 from .path import AzimuthPath, circle_path, period
-from .trim import needs_polish, trim_path
+from .trim import is_rough, trim_path
 
 __all__ = [
     "Nominal",
     "nominal_from_path",
     "circle_nominal",
     "circle_offsets",
-    "circle_needs_polish",
+    "circle_is_rough",
     "feasibility_reasons",
     "REASONS",
     "min_taut_speed",
@@ -127,10 +127,11 @@ def circle_nominal(model, speed: float, alpha: float, n: int, xi0: float = 0.0) 
 
 
 
-def circle_needs_polish(model, speed: float, alpha: float, n: int) -> bool:
-    """Whether :func:`circle_nominal` at ``n`` samples solves the thrusts sample by sample
-    (:func:`gainsched.schedule.trim.needs_polish`): a numerical trim whose nominal is not
-    smooth at the collocation's resolution. False for the closed form.
+def circle_is_rough(model, speed: float, alpha: float, n: int) -> bool:
+    """Whether :func:`circle_nominal` at ``n`` samples is not smooth at the trim's resolution
+    (:func:`gainsched.schedule.trim.is_rough`: its thrusts solved sample by sample, or its
+    commands sharper than the interpolant of the node commands). False for the closed
+    form.
 
     Parameters
     ----------
@@ -147,7 +148,7 @@ def circle_needs_polish(model, speed: float, alpha: float, n: int) -> bool:
         return False
     T = period(speed, model.r)
     t = np.arange(n) * (T / n)
-    return needs_polish(model, circle_path(speed, model.r, t), alpha, offsets)
+    return is_rough(model, circle_path(speed, model.r, t), alpha, offsets)
 
 # offsets per model and circle: a circle's nominal is asked for at several sample counts
 _OFFSETS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()

@@ -20,9 +20,13 @@ those offsets, and the constraint gradients come from the implicit function
 theorem on that trim's Newton Jacobian (one extra linear solve), not from finite
 differences. The bounds hold for the commanded thrusts (with a motor lag: ``T + tau
 T'``) at :data:`FINE` points per node of the collocation's interpolant, so that the
-nominal between the nodes keeps them too. scipy's SLSQP is the optimizer; the
-collocation and its sensitivities are ours because no library offers this trim (see
-:mod:`gainsched.schedule.trim`).
+nominal between the nodes keeps them too. Unlike the trim's, this collocation's free
+thrusts are the input of the thrust modifiers (the commands, or a motor lag's states),
+in which the bounds are linear: through momentum theory's inverse (paper eq. 29) a
+command near zero thrust moves by tens of newtons per degree of offset (the thrust goes
+as the command's 3/2 power there), which SLSQP does not follow (issue 39, measured).
+scipy's SLSQP is the optimizer; the collocation and its sensitivities are ours because
+no library offers this trim (see :mod:`gainsched.schedule.trim`).
 """
 
 from __future__ import annotations
@@ -242,11 +246,11 @@ def _solve(model, speed, alpha, bound, harmonics, n_nodes, lo, hi, start=None):
         if key not in cache:
             off = offsets_of(p).along(nodes)
             phi, T = _newton(model, nodes, alpha, D1, D2, state["phi"], state["T"],
-                             offsets=off)
+                             offsets=off, actual=False)
             state["phi"], state["T"] = phi, T
             # implicit function theorem: R(y(p), p) = 0  ->  dy/dp = -R_y^-1 R_p
             Jl = _local_jacobians(model, nodes, alpha, phi, D1 @ phi, D2 @ phi, T, off,
-                                  wrt_offsets=True)
+                                  wrt_offsets=True, actual=False)
             dB = _basis(nodes.xi, harmonics)
             xd = nodes.d[0]
             # node values and time derivatives of the offsets per coefficient (n, nb)

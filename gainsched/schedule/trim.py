@@ -8,13 +8,20 @@ the path's ``xi''`` and the ``omega'`` the attitude kinematics derive from the
 angles (eq. 16 without offsets): five equations in five unknowns per node,
 coupled through ``phi'`` and ``phi''``.
 
+The free thrusts are the actual ones, after every thrust modifier and a motor lag: the
+motion asks for them, so they are as smooth as it is, and the model's equations at given
+thrusts do not go through the modifiers. The commands (with a motor lag, its states and
+the command from the lag's inverse) come point by point from the modifiers' inverse
+(:mod:`gainsched.model.thrustmap`); momentum theory's floored inflow (paper eq. 29) turns
+them sharply where the actual thrusts are smooth (issue 39).
+
 ``phi`` is represented by its node values with a linear differentiation
 operator: a Fourier (spectral) one for whole periodic circles, a quintic
 interpolating spline for manoeuvres. Newton's method on all nodes at once; the
 local partial derivatives come from complex steps (exact to rounding), and
 the chain rule through the differentiation operators assembles the Jacobian.
-With stateful effects (motor lag) the free thrusts are the effect states (the
-actual thrusts) and the command follows from the effect's inverse.
+With a motor lag its states are the modifiers' input (the actual thrusts without
+modifiers) and the command follows from the lag's inverse.
 
 Dense linear algebra is fine: 64 periodic nodes (a few hundred spline nodes)
 give a 320 x 320 (a few thousand) system, and the Newton step eliminates the thrusts
@@ -29,11 +36,13 @@ import weakref
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
+from ..constants import N_STATE
 from ..errors import GainschedError
+from ..model.thrustmap import input_from_thrust
 from .closedform import closed_form, state_from_attitude
 from .path import AzimuthPath
 
-__all__ = ["trim_path", "solve_circles", "TrimError"]
+__all__ = ["trim_path", "solve_circles", "is_rough", "TrimError"]
 
 #: nodes of the periodic collocation: the interpolated nominal of 64 meets the model to
 #: 1e-11 (relative) at 1024 samples per circle with rotor drag, motor lag or momentum
@@ -47,6 +56,10 @@ N_SPLINE_MAX = 600
 #: (residuals <= 3e-10 on the paper's grid with rotor drag: thrusts within 4e-11 N of the
 #: polished ones); the splines of manoeuvres mostly do not.
 POLISH_TOL = 1e-8
+#: the commands at a circle's samples are taken as smooth when the trigonometric
+#: interpolant of the node commands meets them to this (N, relative to max(1, |u|)); else
+#: the linearisation is computed at every step (:func:`is_rough`)
+COMMAND_TOL = 1e-8
 
 # the node solution of a whole circle per model and circle (speed, starting azimuth,
 # tilt, offsets): a grid asks for one circle's nominal at several sample counts (the
@@ -54,10 +67,18 @@ POLISH_TOL = 1e-8
 # the collocation on the nodes does not depend on them. The same inputs give the same
 # node values, so the cache changes no bit of a table.
 _NODES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-# per model, circle and samples: the thrusts solved sample by sample where the interpolated
-# nominal misses the model, None where it meets it (the same inputs give the same
-# thrusts: no bit changes)
-_POLISHED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# per model, circle and samples: (the thrusts solved sample by sample where the interpolated
+# nominal misses the model, None where it meets it; whether the commands are rough there)
+# (the same inputs give the same thrusts: no bit changes)
+_SAMPLES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# per model and circle: the thrust modifiers' input at the collocation nodes
+_NODE_INPUTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _forget(model) -> None:
+    """Drop every cached solution of ``model`` (tests that solve a circle again)."""
+    for cache in (_NODES, _SAMPLES, _NODE_INPUTS):
+        cache.pop(model, None)
 
 
 class TrimError(GainschedError):
@@ -123,19 +144,24 @@ def _sub_path(path: AzimuthPath, idx) -> AzimuthPath:
     return AzimuthPath(path.t[idx], path.xi[idx], tuple(d[idx] for d in path.d))
 
 
-def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T, offsets=None):
+def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T, offsets=None, *,
+           actual=True):
     """Residuals (n, 5) of the node equations, and the full state and its derivative.
 
     ``offsets``: ``(pitch, yaw)``, each ``(value, rate, acceleration)`` at the nodes, or None.
+    ``T`` (n, 4): the actual thrusts, or with ``actual=False`` the input of the thrust
+    modifiers (the commands, or a motor lag's states: the offsets' optimisation, which
+    bounds the commands at its nodes).
     """
     pitch, yaw = (None, None) if offsets is None else offsets
     s, sdot = state_from_attitude(path, (phi, dphi, ddphi), pitch, yaw)
     n_x = model.n_extra
-    if n_x:  # stateful effects: the free thrusts are the actual thrusts (effect states)
+    if n_x:  # a motor lag: its states stand in (the node equations do not depend on
+        # them at given actual thrusts)
         z = np.concatenate([s.astype(T.dtype), T], -1)
     else:
         z = s.astype(np.result_type(s, T))
-    ev = model.evaluate(z, T, alpha)
+    ev = model.evaluate(z, T, alpha, thrust=T if actual else None)
     res = np.stack(
         [
             ev.z_dot[:, 2],
@@ -150,7 +176,7 @@ def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T, offsets=None):
 
 
 def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets=None, *,
-                     wrt_offsets=False, thrust_only=False):
+                     wrt_offsets=False, thrust_only=False, actual=True):
     """d res / d(phi, phi', phi'', T1..T4) per node by complex steps, shape (n, 5, 7); with
     ``wrt_offsets`` six more columns, d res / d(theta, theta', theta'', chi, chi', chi'');
     with ``thrust_only`` the four thrust columns alone, shape (n, 5, 4).
@@ -175,7 +201,7 @@ def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets=None, *,
             off[j][(7 + j - first) * n:(8 + j - first) * n] += 1j * h
     o = (tuple(off[:3]), tuple(off[3:]))
     a = alpha if np.ndim(alpha) == 0 else np.asarray(alpha)[tile]  # a tilt per node
-    res = np.imag(_local(model, _sub_path(path, tile), a, *roll, Tc, o)[0]) / h
+    res = np.imag(_local(model, _sub_path(path, tile), a, *roll, Tc, o, actual=actual)[0]) / h
     return res.reshape(m, n, 5).transpose(1, 2, 0)
 
 
@@ -245,14 +271,15 @@ def _newton_circles(model, nodes, alphas, D1, D2, phi, T, tol=1e-11, max_iter=40
     return out
 
 
-def _newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40, offsets=None):
+def _newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40, offsets=None, *,
+            actual=True):
     scale = max(1.0, float(np.abs(path.d[0]).max()) ** 2)
     for _ in range(max_iter):
         dphi, ddphi = D1 @ phi, D2 @ phi
-        res = _local(model, path, alpha, phi, dphi, ddphi, T, offsets)[0]
+        res = _local(model, path, alpha, phi, dphi, ddphi, T, offsets, actual=actual)[0]
         if np.abs(res).max() < tol * scale:
             return phi, T
-        Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets)
+        Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets, actual=actual)
         d_phi, d_T = _newton_step(Jl, D1, D2, res)
         phi = phi - d_phi
         T = T - d_T
@@ -341,14 +368,32 @@ def solve_circles(model, path: AzimuthPath, alphas) -> None:
             cache[_circle_key(path, a)] = sol
 
 
+def _node_inputs(model, nodes: AzimuthPath, Tp: float, key, alpha: float, offsets=None):
+    """The thrust modifiers' input (:data:`N_FOURIER`, 4) N at the collocation nodes of a
+    solved circle (cached per model and circle): the start of the inverse at the samples."""
+    cache = _NODE_INPUTS.setdefault(model, {})
+    if (key, N_FOURIER) not in cache:
+        phi_n, T_n = _NODES[model][key]
+        D1, D2 = _fourier_operators(N_FOURIER, Tp)
+        off = (None, None) if offsets is None else offsets.along(nodes)
+        s, _ = state_from_attitude(nodes, (phi_n, D1 @ phi_n, D2 @ phi_n), *off)
+        T0, _, ok = input_from_thrust(model, s, T_n, alpha)
+        if not ok.all():
+            raise TrimError(f"no command gives the nominal's thrusts at {int((~ok).sum())} "
+                            "nodes (the thrust modifiers' inverse did not converge)")
+        cache[key, N_FOURIER] = T0
+    return cache[key, N_FOURIER]
+
+
 def _periodic_guess(model, path: AzimuthPath, alpha: float, offsets=None):
     """The Fourier collocation of a whole circle (:func:`trim_path`, periodic), its node
     solution cached per model and circle, interpolated to ``path``'s samples.
 
-    Returns ``(key, (phi, phi', phi'', T, T'), local)``: the circle's cache key, the roll
-    (rad, rad/s, rad/s^2) and thrusts (N, N/s) at the samples, shapes (n,) and (n, 4),
-    and the :func:`_local` evaluation there (residuals (n, 5), state, its derivative,
-    the model's evaluation).
+    Returns ``(key, (phi, phi', phi'', T, T', T0), local)``: the circle's cache key, the
+    roll (rad, rad/s, rad/s^2) and actual thrusts (N, N/s) at the samples, shapes (n,) and
+    (n, 4), the interpolant of the thrust modifiers' input at the nodes (n, 4) N (None
+    without modifiers), and the :func:`_local` evaluation there (residuals (n, 5), state,
+    its derivative, the model's evaluation).
     """
     t = path.t
     nodes, Tp = _nodes(path)
@@ -360,30 +405,60 @@ def _periodic_guess(model, path: AzimuthPath, alpha: float, offsets=None):
         off_n = None if offsets is None else offsets.along(nodes)
         cache[key] = _newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
     phi_n, T_n = cache[key]
+    rows = [phi_n, T_n.T]
+    if model.thrust_modifiers:
+        rows.append(_node_inputs(model, nodes, Tp, key, alpha, offsets).T)
     tt = t - t[0]
     if np.allclose(tt, np.arange(t.size) * (Tp / t.size), rtol=0.0, atol=1e-12 * Tp):
         # one period in equal steps (to rounding: the steps' times come from the period
         # the caller computed)
-        f, f1, f2 = _fourier_samples(np.vstack([phi_n, T_n.T]), Tp, t.size)
+        f, f1, f2 = _fourier_samples(np.vstack(rows), Tp, t.size)
     else:
-        f, f1, f2 = _fourier_eval(np.vstack([phi_n, T_n.T]), Tp, tt)
-    phi, dphi, ddphi, T = f[:, 0], f1[:, 0], f2[:, 0], f[:, 1:]
+        f, f1, f2 = _fourier_eval(np.vstack(rows), Tp, tt)
+    phi, dphi, ddphi, T = f[:, 0], f1[:, 0], f2[:, 0], f[:, 1:5]
+    T0 = f[:, 5:] if model.thrust_modifiers else None
     off = None if offsets is None else offsets.along(path)
-    return key, (phi, dphi, ddphi, T, f1[:, 1:]), _local(model, path, alpha, phi, dphi,
-                                                         ddphi, T, off)
+    return key, (phi, dphi, ddphi, T, f1[:, 1:5], T0), _local(model, path, alpha, phi, dphi,
+                                                              ddphi, T, off)
 
 
-def needs_polish(model, path: AzimuthPath, alpha: float, offsets=None) -> bool:
-    """Whether :func:`trim_path` of a whole circle (periodic) solves the thrusts sample by
-    sample at ``path``'s samples: the trigonometric interpolant of the collocation nodes
-    misses the model there by more than :data:`POLISH_TOL` (a nominal that is not smooth
-    at the nodes' resolution: momentum theory's floored inflow, say)."""
-    polished = _POLISHED.get(model, {}).get((_circle_key(path, alpha, offsets), N_FOURIER,
-                                             path.t.tobytes()), False)
-    if polished is not False:  # trim_path has been here: its decision
-        return polished is not None
-    _, _, local = _periodic_guess(model, path, alpha, offsets)
-    return _rough(local[0], path.d[0])
+def _commands(model, alpha, s, sdot, T, T_dot, start=None):
+    """The state, its derivative and the commands ``(z (n, n_z), z_dot (n, n_z), u (n, 4))``
+    of the reduced states ``s, sdot`` (n, 10) and the actual thrusts ``T`` (n, 4) N with
+    their rate ``T_dot`` N/s: the thrust modifiers' input from their inverse
+    (:func:`~gainsched.model.thrustmap.input_from_thrust`, from ``start`` (n, 4) N if
+    given; the actual thrusts themselves without modifiers), and with a motor lag its
+    states and the command from its inverse; and whether the input is rough: further
+    from ``start`` than :data:`COMMAND_TOL`. Raises TrimError where the inverse did not
+    converge."""
+    lag = [e for e in model.effects if e.n_states]
+    T0, T0_dot, rough = T, T_dot, False
+    if model.thrust_modifiers:
+        T0, T0_dot, ok = input_from_thrust(model, s, T, alpha, (sdot, T_dot) if lag else None,
+                                           start=start)
+        if not ok.all():
+            raise TrimError(f"no command gives the nominal's thrusts at {int((~ok).sum())} "
+                            "samples (the thrust modifiers' inverse did not converge)")
+        rough = start is not None and bool(
+            np.abs(T0 - start).max() > COMMAND_TOL * max(1.0, float(np.abs(T0).max())))
+    if not lag:
+        return s, sdot, T0, rough
+    _, u = lag[0].steady_states(T0, T0_dot)
+    return np.concatenate([s, T0], -1), np.concatenate([sdot, T0_dot], -1), u, rough
+
+
+def is_rough(model, path: AzimuthPath, alpha: float, offsets=None) -> bool:
+    """Whether the nominal of a whole circle (:func:`trim_path`, periodic) is not smooth at
+    the collocation's resolution at ``path``'s samples: the interpolant of the nodes
+    misses the model there by more than :data:`POLISH_TOL` (its thrusts are solved sample
+    by sample), or its commands miss the interpolant of the node commands by more than
+    :data:`COMMAND_TOL` (momentum theory's floored inflow, say). A rough nominal's
+    linearisation is not carried by a Fourier series of a few azimuths."""
+    key = (_circle_key(path, alpha, offsets), N_FOURIER, path.t.tobytes())
+    if key not in _SAMPLES.get(model, {}):  # trim_path has not been here: it decides
+        trim_path(model, path, alpha, periodic=True, offsets=offsets)
+    polished, rough = _SAMPLES[model][key]
+    return polished is not None or rough
 
 
 def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None = None,
@@ -416,17 +491,21 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
     t = path.t
     off = None if offsets is None else offsets.along(path)
     if periodic:
-        key, (phi, dphi, ddphi, T, T_dot), local = _periodic_guess(model, path, alpha, offsets)
+        key, (phi, dphi, ddphi, T, T_dot, start), local = _periodic_guess(model, path, alpha,
+                                                                         offsets)
         res, z, sdot, ev = local
-        polished = _POLISHED.setdefault(model, {})
+        cache = _SAMPLES.setdefault(model, {})
         pkey = (key, N_FOURIER, t.tobytes())  # the same circle, nodes and samples
-        if pkey not in polished:  # None: the interpolant meets the model at these samples
-            polished[pkey] = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T,
-                                           offsets=off, res=res) if _rough(res, xd) else None
-        if polished[pkey] is not None:  # else the thrusts sample by sample
-            T = polished[pkey]
+        if pkey in cache:
+            polished = cache[pkey][0]
+        else:  # None: the interpolant meets the model at these samples
+            polished = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off,
+                                     res=res) if _rough(res, xd) else None
+        if polished is not None:  # else the thrusts sample by sample
+            T = polished
             res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
     else:
+        start = None
         idx = np.unique(np.linspace(0, t.size - 1, min(t.size, N_SPLINE_MAX)).round().astype(int))
         nodes = _sub_path(path, idx)
         spl = make_interp_spline(nodes.t, np.eye(idx.size), k=5)
@@ -441,12 +520,7 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
         if _rough(res, xd):
             T = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off, res=res)
             res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
-    u = T
-    z_dot = sdot
-    if model.n_extra:
-        # the free thrusts are the states of the one stateful effect (the actual thrusts);
-        # the command comes from its inverse
-        (lag,) = (e for e in model.effects if e.n_states)
-        _, u = lag.steady_states(T, T_dot)
-        z_dot = np.concatenate([sdot, T_dot], -1)
+    z, z_dot, u, rough = _commands(model, alpha, z[:, :N_STATE], sdot, T, T_dot, start)
+    if periodic:
+        cache[pkey] = (polished, rough)
     return z, z_dot, u, ev.tension
