@@ -379,3 +379,32 @@ def test_bounds_that_would_cross_end_the_search(improved, monkeypatch):
     assert offsets_mod.solve_offsets(improved, 14.0, A40,
                                      bound=cfg.feasibility.max_attitude_offset) is None
     assert len(starts) == 1
+
+
+def test_the_search_stops_at_its_own_accuracy(paper_text, monkeypatch):
+    """Issue 39: at 10 m/s and 40 deg with a motor lag the least-squares offsets (3e-3 deg)
+    are found in a few SLSQP iterations; at a tolerance of 1e-10 the search took the
+    rounding-level violations of its 2048 bounds for ones to remove and ran about 70
+    iterations and 500 trims. At ``FTOL`` it stops within 10."""
+    from gainsched.config import config_from_text
+    from gainsched.configedit import set_section
+
+    text = set_section(paper_text, "effects.motor_lag", [("tau", 0.02979, None)])
+    model = Model(config_from_text(text, "lag.toml"))
+    cfg = model.config
+    lo = cfg.vehicle.thrust_min + cfg.feasibility.thrust_margin
+    hi = cfg.vehicle.thrust_max - cfg.feasibility.thrust_margin
+    runs = []
+    orig = offsets_mod.minimize
+
+    def counted(fun, x0, **kwargs):
+        runs.append(orig(fun, x0, **kwargs))
+        return runs[-1]
+
+    monkeypatch.setattr(offsets_mod, "minimize", counted)
+    off = offsets_mod._solve(model, 10.0, A40, cfg.feasibility.max_attitude_offset,
+                             offsets_mod.HARMONICS, offsets_mod.N_NODES,
+                             lo + offsets_mod.NODE_SAFETY_N, hi - offsets_mod.NODE_SAFETY_N)
+    (run,) = runs
+    assert off is not None and run.success and run.nit <= 10, (run.nit, run.nfev)
+    assert 1e-3 < np.abs(run.x).max() < 1e-2  # deg
