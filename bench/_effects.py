@@ -6,7 +6,8 @@ bench._effects`` prints one line per figure and the figures as JSON on its last 
 (run by :func:`bench.bench_build.bench_effect_builds`).
 
 - the paper's grid cut to 5 speeds x 3 tilts, with each effect of :data:`TRIM_EFFECTS`;
-- the whole paper grid with what ``gainsched improve`` finds on the example flights
+- the whole paper grid with rotor drag, with a motor lag, and with what ``gainsched
+  improve`` finds on the example flights
   (:data:`IMPROVED`: momentum theory and a motor lag, docs/model-vs-measurement.md): the
   rebuild every user of the paper's loop waits for;
 - a user's vehicle whose grid the build chooses (bench/configs/user_quad.toml; the chosen
@@ -23,6 +24,8 @@ import json  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+import numpy as np  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "configs" / "paper.toml"
 
@@ -36,11 +39,18 @@ TRIM_EFFECTS = {
 }
 #: what ``gainsched improve configs/paper.toml examples/flights/*.csv`` fits
 IMPROVED = {"thrust_momentum": {"disk_area": 0.005986}, "motor_lag": {"tau": 0.02979}}
+#: the effects of issue 39's whole-paper-grid cases (the campaigns' values)
+PAPER_EFFECTS = {kind: TRIM_EFFECTS[kind] for kind in ("rotor_drag", "motor_lag")}
 #: the automatic-grid case: a user's vehicle whose speeds and tilts the build chooses
 USER_QUAD = ROOT / "bench" / "configs" / "user_quad.toml"
 #: the effects of the automatic-grid case, the ones issue 39 measured (values: that
 #: vehicle's size)
 AUTO_EFFECTS = {"rotor_drag": {"k_rd": 0.01}, "motor_lag": {"tau": 0.03}}
+
+
+def _each(effects):
+    """One case per effect: ``{kind: {kind: values}}``."""
+    return {kind: {kind: values} for kind, values in effects.items()}
 
 
 def interleaved(cases, repeat):
@@ -66,13 +76,13 @@ def _with(text, effects):
 
 
 def _against_drag_only(out, prefix, make, text, name, effects, repeat, title, detail):
-    """Time the drag-only build of ``text`` and one with each of ``effects`` (kind ->
-    values) in interleaved rounds; print them with their ratios and store them in ``out``
-    under ``prefix``. ``make(text, name)``: the call to time; ``title`` and ``detail``
-    describe the drag-only result and an effect's result."""
+    """Time the drag-only build of ``text`` and one with each of ``effects`` (case name ->
+    its effects, kind -> values) in interleaved rounds; print them with their ratios and
+    store them in ``out`` under ``prefix``. ``make(text, name)``: the call to time;
+    ``title`` and ``detail`` describe the drag-only result and an effect's result."""
     got = interleaved({"drag_only": make(text, name)} | {
-        kind: make(_with(text, {kind: values}), f"{kind}.toml")
-        for kind, values in effects.items()}, repeat)
+        kind: make(_with(text, case), f"{kind}.toml") for kind, case in effects.items()},
+        repeat)
     t0, r0 = got.pop("drag_only")
     out[f"{prefix}drag_only_s"] = t0
     print(f"  {title(r0)}: {t0:.2f} s")
@@ -98,19 +108,18 @@ def main() -> dict:
 
     out = {}
     text = _variant(PAPER.read_text(), speeds=[3, 6, 9, 12, 15], tilts=[0, 20, 40])
-    _against_drag_only(out, "", build, text, "cut.toml", TRIM_EFFECTS, 3, lambda g: (
+    def gains(g):
+        return f" ({int(np.isfinite(g.spectral_radius).sum())} circles with gains)"
+
+    _against_drag_only(out, "", build, text, "cut.toml", _each(TRIM_EFFECTS), 3, lambda g: (
         f"build of the paper grid cut to 5 speeds x 3 tilts ({g.spectral_radius.size} "
         "circles), drag only (closed form)"), lambda g: "")
-    paper = PAPER.read_text()
-    got = interleaved({"drag_only": build(paper, "paper.toml"),
-                       "improved": build(_with(paper, IMPROVED), "paper_1.toml")}, 1)
-    (t0, g0), (t, _) = got["drag_only"], got["improved"]
-    print(f"  the paper grid ({g0.spectral_radius.size} circles), drag only: {t0:.2f} s; with "
-          f"what improve finds on the example flights (thrust_momentum + motor_lag): {t:.2f} "
-          f"s, x{t / t0:.2f}")
-    out.update(paper_drag_only_s=t0, paper_improved_s=t, paper_improved_ratio=t / t0)
+    _against_drag_only(out, "paper_", build, PAPER.read_text(), "paper.toml",
+                       _each(PAPER_EFFECTS) | {"improved": IMPROVED}, 1, lambda g: (
+                           f"the paper grid ({g.spectral_radius.size} circles), drag only"
+                           f"{gains(g)}"), gains)
     _against_drag_only(out, "auto_", auto, USER_QUAD.read_text(), "user_quad.toml",
-                       AUTO_EFFECTS, 2, lambda n: (
+                       _each(AUTO_EFFECTS), 2, lambda n: (
                            "automatic grid of a user's vehicle (bench/configs/user_quad.toml), "
                            f"drag only ({n} circles chosen)"), lambda n: f" ({n} circles chosen)")
     return out
