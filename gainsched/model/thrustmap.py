@@ -54,9 +54,8 @@ def _take(kin, idx):
 def _per_motor(model, T0, kin) -> bool:
     """Whether the thrust modifiers act motor by motor at the first point: the off-diagonal
     of their 4 x 4 Jacobian is zero there (one point's complex steps)."""
-    G = thrust_from_input(model, T0[:1, None, :] + 1j * _H * np.eye(4), _take(kin, [0]))
-    J = np.imag(G[0])
-    return not np.any(J - np.diag(np.diag(J)))
+    G = thrust_from_input(model, T0[:1, None, :] + 1j * _H * np.eye(4), _take(kin, slice(0, 1)))
+    return not np.any(np.imag(G) * (1.0 - np.eye(4)))  # none: no point, nothing coupled
 
 
 def input_from_thrust(model, s, T, alpha, rates=None, *, start=None, tol=1e-13, max_iter=30):
@@ -67,8 +66,9 @@ def input_from_thrust(model, s, T, alpha, rates=None, *, start=None, tol=1e-13, 
     The Newton steps take each motor's thrust as a function of its own input, its
     derivative by one complex step of all four inputs at once: exact for every library
     modifier, which act motor by motor; for a modifier that couples the motors the steps
-    are those of a quasi-Newton method, whose result is checked the same way, and the
-    rate takes the whole 4 x 4 Jacobian.
+    are those of a quasi-Newton method, whose result is checked the same way. The rate
+    divides by each motor's slope where the modifiers act motor by motor (their Jacobian
+    is diagonal at the first point), else solves with the whole 4 x 4 Jacobian.
 
     Parameters
     ----------
