@@ -6,13 +6,17 @@ periodic function of the azimuth, so its Fourier series converges exponentially:
 :func:`discrete_system` computes the exact (complex-step) Jacobians and their exact
 zero-order-hold discretisation at ``M`` equally spaced azimuths (64-128 on the paper
 grid) and interpolates them to the N steps with :func:`periodic_interp`, checked to
-:data:`LIN_TOL` (docs/performance.md).
+:data:`LIN_TOL` (docs/performance.md). A circle whose commands turn sharply (momentum
+theory's floored inflow) is linearised at every step, the model past its thrust modifiers
+still interpolated from a few azimuths (:func:`_discrete_split`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..constants import N_STATE
+from ..model.thrustmap import thrust_from_input
 from .linearize import discretize, jacobians, lqr_system
 from .nominal import circle_is_rough, circle_nominal
 
@@ -38,6 +42,91 @@ def _discrete_at(model, speed, tilts, n, dt, odd=False):
 def _rel_err(X, Y, offset=None):
     scale = np.abs(Y if offset is None else Y - offset).max()
     return np.abs(X - Y).max() / scale if scale > 0 else np.abs(X - Y).max()
+
+
+_H = 1e-30  # complex step
+
+
+def _at_given_thrusts(model, speed, tilts, n, odd=False):
+    """``d f / d (z, u, F)`` (b, n, n_z, n_z + 8) of the model at the nominal's actual
+    thrusts ``F`` (:meth:`~gainsched.model.reduced.Model.evaluate` with ``thrust``), at the
+    ``n`` equally spaced steps of each tilt (with ``odd`` the odd ones alone), by complex
+    steps: what the model does past the thrust modifiers, as smooth as the nominal's
+    motion and actual thrusts."""
+    pick = slice(1, None, 2) if odd else slice(None)
+    noms = [circle_nominal(model, speed, a, n) for a in tilts]
+    z = np.stack([nom.z[pick] for nom in noms])
+    u = np.stack([nom.u[pick] for nom in noms])
+    a = np.asarray(tilts)[:, None]
+    F = model.evaluate(z, u, a).T
+    n_z = z.shape[-1]
+    E = np.eye(n_z + 8) * (1j * _H)  # one batched evaluation, a direction per row
+    J = model.evaluate(z[..., None, :] + E[:, :n_z], u[..., None, :] + E[:, n_z:n_z + 4],
+                       a[..., None], thrust=F[..., None, :] + E[:, n_z + 4:]).z_dot
+    return np.swapaxes(np.imag(J) / _H, -1, -2)
+
+
+def _thrust_partials(model, s, T0, alpha):
+    """The thrust modifiers' partial derivatives at states ``s`` (..., 10) and input ``T0``
+    (..., 4) N by complex steps: ``d F / d s`` (..., 4, 10) and ``d F / d T0`` (..., 4, 4)."""
+    a = np.asarray(alpha)[..., None] if np.ndim(alpha) else alpha
+    along_s = model.effect_kinematics(s[..., None, :] + (1j * _H) * np.eye(N_STATE), a)
+    F_s = thrust_from_input(model, T0[..., None, :], along_s)
+    F_T = thrust_from_input(model, T0[..., None, :] + (1j * _H) * np.eye(4),
+                            model.effect_kinematics(s[..., None, :], a))
+    return np.swapaxes(np.imag(F_s), -1, -2) / _H, np.swapaxes(np.imag(F_T), -1, -2) / _H
+
+
+def _discrete_split(model, speed, tilts, N, dt, tol, m0):
+    """The LQR system at every step of circles whose commands are rough (momentum theory's
+    floored inflow, :func:`~gainsched.schedule.nominal.circle_is_rough`) by the chain rule
+    through the thrust modifiers: ``f(z, u) = g(z, u, F(s, T0))`` with ``T0`` the
+    modifiers' input (``u``, or a motor lag's states). ``g`` is the model at given actual
+    thrusts, smooth along the nominal: its Jacobians are computed at M azimuths and
+    interpolated as :func:`discrete_system` does with the discrete system (M doubling
+    from ``m0`` to ``tol``); the modifiers' partials, sharp where the inflow is floored,
+    at every step, where they cost a fraction of the whole model's (issue 39). Returns
+    ``(A_d, B_d, err)``, err the last interpolation check (0 if ``g``'s Jacobians were
+    computed at every step)."""
+    G, _, err = _interpolated(
+        lambda n, odd=False: _at_given_thrusts(model, speed, tilts, n, odd), N, tol, m0)
+    n_z = G.shape[-2]
+    A, B = G[..., :n_z].copy(), G[..., n_z:n_z + 4].copy()
+    G_F = G[..., n_z + 4:]
+    noms = [circle_nominal(model, speed, a, N) for a in tilts]
+    zs = np.stack([nom.z for nom in noms])
+    lag = model.n_extra > 0
+    T0 = zs[..., N_STATE:N_STATE + 4] if lag else np.stack([nom.u for nom in noms])
+    F_s, F_T = _thrust_partials(model, zs[..., :N_STATE], T0, np.asarray(tilts)[:, None])
+    A[..., :N_STATE] += G_F @ F_s
+    if lag:  # the lag's states are the modifiers' input
+        A[..., N_STATE:N_STATE + 4] += G_F @ F_T
+    else:
+        B += G_F @ F_T
+    Ad, Bd = discretize(*lqr_system(A, B, model.config.control.integrators), dt)
+    return Ad, Bd, err
+
+
+def _interpolated(at, N, tol, m0, error=_rel_err):
+    """Samples (b, N, ...) of a periodic function of the step from its values ``at(n,
+    odd=False)`` (b, n, ...) at ``n`` equally spaced steps (the odd ones alone with
+    ``odd``): trigonometric interpolation from M samples, M doubling from ``m0`` until the
+    interpolation from M/2 reproduces the M to ``tol`` (``error(interpolated, exact)``,
+    default relative to the largest value), else every step computed. The even steps of
+    2M are the M steps: only the odd ones are new (every step is computed on its own, so
+    the bits are those of all 2M at once). Returns ``(samples, M, err)``: M = N and err = 0
+    when every step was computed."""
+    if N <= 2 * m0:
+        return at(N), N, 0.0
+    M, X_M = m0, at(m0)
+    while 2 * M < N:
+        X_2M = np.empty((X_M.shape[0], 2 * M) + X_M.shape[2:])
+        X_2M[:, 0::2], X_2M[:, 1::2] = X_M, at(2 * M, odd=True)
+        err = error(periodic_interp(X_M, 2 * M), X_2M)
+        M, X_M = 2 * M, X_2M
+        if err <= tol:
+            return periodic_interp(X_M, N), M, err
+    return at(N), N, 0.0
 
 
 def periodic_interp(X, N):
@@ -87,7 +176,9 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
     is smaller still. On the paper grid M = 64 gives 2e-15. With ``N <= M`` the
     steps are computed directly, and so are those of tilts whose nominal is not smooth at
     the trim's resolution (:func:`~gainsched.schedule.nominal.circle_is_rough`: its
-    series would not converge before M reaches N).
+    series would not converge before M reaches N); where that is the thrust modifiers'
+    doing (momentum theory's floored inflow), by the chain rule through them, the rest of
+    the model interpolated (:func:`_discrete_split`).
 
     Returns
     -------
@@ -101,29 +192,22 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
                                           m0=m0) for p in (~rough, rough))
         Ad, Bd = (np.empty((rough.size,) + x.shape[1:]) for x in direct[:2])
         Ad[~rough], Ad[rough], Bd[~rough], Bd[rough] = smooth[0], direct[0], smooth[1], direct[1]
-        return Ad, Bd, np.where(rough, N, smooth[2]), np.where(rough, 0.0, smooth[3])
-    if N <= 2 * m0 or rough.all():
+        return Ad, Bd, np.where(rough, N, smooth[2]), np.where(rough, direct[3], smooth[3])
+    if rough.all() and model.thrust_modifiers:
+        Ad, Bd, err = _discrete_split(model, speed, tilts, N, dt, tol, m0)
+        return Ad, Bd, N, err
+    if rough.all():
         Ad, Bd = _discrete_at(model, speed, tilts, N, dt)
         return Ad, Bd, N, 0.0
-    # [A_d | B_d] side by side, so that one interpolation carries both
-    M = m0
-    AB_M = np.concatenate(_discrete_at(model, speed, tilts, M, dt), axis=-1)
-    n = AB_M.shape[-2]
-    I = np.eye(n)
-    while True:
-        if 2 * M >= N:
-            Ad, Bd = _discrete_at(model, speed, tilts, N, dt)
-            return Ad, Bd, N, 0.0
-        # the even steps of 2M are the M steps: only the odd ones are new (every step is
-        # linearised and discretised on its own, so the bits are those of all 2M at once)
-        AB_2M = np.empty((AB_M.shape[0], 2 * M) + AB_M.shape[2:])
-        AB_2M[:, 0::2] = AB_M
-        AB_2M[:, 1::2] = np.concatenate(_discrete_at(model, speed, tilts, 2 * M, dt, odd=True),
-                                        axis=-1)
-        AB = periodic_interp(AB_M, 2 * M)
-        err = max(_rel_err(AB[..., :n], AB_2M[..., :n], I),
-                  _rel_err(AB[..., n:], AB_2M[..., n:]))
-        M, AB_M = 2 * M, AB_2M
-        if err <= tol:
-            AB = periodic_interp(AB_M, N)
-            return AB[..., :n], AB[..., n:], M, err
+
+    def at(n_steps, odd=False):  # [A_d | B_d] side by side: one interpolation carries both
+        return np.concatenate(_discrete_at(model, speed, tilts, n_steps, dt, odd), axis=-1)
+
+    def error(AB, AB_exact):  # relative to |A_d - I| and |B_d|
+        n = AB.shape[-2]
+        return max(_rel_err(AB[..., :n], AB_exact[..., :n], np.eye(n)),
+                   _rel_err(AB[..., n:], AB_exact[..., n:]))
+
+    AB, M, err = _interpolated(at, N, tol, m0, error)
+    n = AB.shape[-2]
+    return AB[..., :n], AB[..., n:], M, err

@@ -4,7 +4,9 @@
   for the paper model and for a model with extra effects (motor-lag states,
   rotor drag, thrust scale);
 - the batched matrix exponential against scipy.linalg.expm (random and real
-  blocks) and the ZOH against scipy.signal.cont2discrete.
+  blocks) and the ZOH against scipy.signal.cont2discrete;
+- a rough circle's system by the chain rule through the thrust modifiers against the
+  whole model's complex steps at every step.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import scipy.linalg
 from scipy.signal import cont2discrete
 
 from gainsched.config import N_STATE
-from gainsched.model.effects import Drag, MotorLag, RotorDrag, ThrustScale
+from gainsched.model.effects import Drag, MotorLag, RotorDrag, ThrustMomentum, ThrustScale
 from gainsched.model.reduced import Model
 from gainsched.schedule.linearize import (
     discretize,
@@ -201,3 +203,29 @@ def test_lqr_system_integrals_by_simulation(model, integrators):
         assert sol.y[N_STATE + j, -1] == pytest.approx(trapezoid(ref[src], t), abs=1e-4)
     names = lqr_state_names(model, integrators)
     assert names[N_STATE:N_STATE + n_i] == integrators and len(names) == n_z + n_i
+
+
+@pytest.mark.parametrize("lag", [False, True], ids=["momentum", "momentum_and_lag"])
+def test_a_rough_circles_system_through_the_thrust_modifiers_is_the_whole_models(
+        paper_config, lag):
+    """Issue 39: a circle whose commands are rough (momentum theory's floored inflow, 9 m/s
+    and 40 deg) is linearised at every step by the chain rule through the thrust modifiers,
+    the model at given thrusts interpolated from a few azimuths: its discrete system equals
+    the whole model's complex steps at every step (``_discrete_at``) to 1e-9 relative, with
+    momentum theory alone and with a motor lag whose states are the modifiers' input."""
+    from gainsched.schedule.discrete import _discrete_at, discrete_system
+    from gainsched.schedule.grid import steps_per_period
+    from gainsched.schedule.nominal import circle_is_rough
+
+    effects = (Drag(mu1=0.172, mu2=0.0025), ThrustMomentum(disk_area=0.005986))
+    m = Model(paper_config, effects=((MotorLag(tau=0.02979),) if lag else ()) + effects)
+    v, a = 9.0, np.deg2rad(40.0)
+    N = steps_per_period(v, m.r, paper_config.control.dt)
+    dt = 2 * np.pi * m.r / v / N
+    assert circle_is_rough(m, v, a, N)
+    Ad, Bd, M, err = discrete_system(m, v, [a], N, dt)
+    Ad0, Bd0 = _discrete_at(m, v, [a], N, dt)
+    assert M == N and 0.0 < err < 1e-10  # the smooth part interpolated
+    I = np.eye(Ad.shape[-1])
+    assert np.abs(Ad - Ad0).max() < 1e-9 * np.abs(Ad0 - I).max()
+    assert np.abs(Bd - Bd0).max() < 1e-9 * np.abs(Bd0).max()
