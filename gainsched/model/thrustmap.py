@@ -19,7 +19,9 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["thrust_from_input", "input_from_thrust"]
+from ..constants import N_STATE
+
+__all__ = ["thrust_from_input", "input_from_thrust", "thrust_partials"]
 
 _H = 1e-30  # complex step
 
@@ -35,11 +37,24 @@ def thrust_from_input(model, T0, kin):
     return T
 
 
+def _rows(model, s_rows, alpha):
+    """The kinematics of states ``s_rows`` (..., k, >= 10) whose axis before the last
+    enumerates complex steps, the tilt ``alpha`` (float, or (...)) broadcast along it."""
+    a = np.asarray(alpha)[..., None] if np.ndim(alpha) else alpha
+    return model.effect_kinematics(s_rows, a)
+
+
 def _batch(model, s, alpha):
     """The kinematics of states ``s`` (..., >= 10) with an axis before the last for the
     complex steps of four motors, shapes (..., 1, 3)."""
-    a = np.asarray(alpha)[..., None] if np.ndim(alpha) else alpha
-    return model.effect_kinematics(s[..., None, :], a)
+    return _rows(model, s[..., None, :], alpha)
+
+
+def _jacobian(model, T0, kin):
+    """``d T_i / d T0_j`` (..., 4, 4) at the input ``T0`` (..., 4) N and the kinematics
+    ``kin`` of :func:`_batch`, by complex steps."""
+    G = thrust_from_input(model, T0[..., None, :] + 1j * _H * np.eye(4), kin)
+    return np.swapaxes(np.imag(G), -1, -2) / _H
 
 
 def _take(kin, idx):
@@ -54,8 +69,8 @@ def _take(kin, idx):
 def _per_motor(model, T0, kin) -> bool:
     """Whether the thrust modifiers act motor by motor at the first point: the off-diagonal
     of their 4 x 4 Jacobian is zero there (one point's complex steps)."""
-    G = thrust_from_input(model, T0[:1, None, :] + 1j * _H * np.eye(4), _take(kin, slice(0, 1)))
-    return not np.any(np.imag(G) * (1.0 - np.eye(4)))  # none: no point, nothing coupled
+    J = _jacobian(model, T0[:1], _take(kin, slice(0, 1)))
+    return not np.any(J * (1.0 - np.eye(4)))  # none: no point, nothing coupled
 
 
 def input_from_thrust(model, s, T, alpha, rates=None, *, start=None, tol=1e-13, max_iter=30):
@@ -125,6 +140,15 @@ def input_from_thrust(model, s, T, alpha, rates=None, *, start=None, tol=1e-13, 
     rhs = T_dot - np.imag(thrust_from_input(model, T0[:, None, :], moved)[:, 0]) / _H
     if _per_motor(model, T0, kin):
         return T0, rhs / slope, converged
-    G = thrust_from_input(model, T0[:, None, :] + 1j * _H * np.eye(4), kin)
-    J = np.swapaxes(np.imag(G), -1, -2) / _H  # J[i, j] = d T_i / d T0_j
+    J = _jacobian(model, T0, kin)
     return T0, np.linalg.solve(J, rhs[..., None])[..., 0], converged
+
+
+def thrust_partials(model, s, T0, alpha):
+    """The thrust modifiers' partial derivatives at states ``s`` (..., >= 10) and input
+    ``T0`` (..., 4) N by complex steps: ``d F / d s`` (..., 4, 10) and ``d F / d T0``
+    (..., 4, 4) (the linearisation of a circle whose commands are sharp:
+    :mod:`gainsched.schedule.discrete`)."""
+    moved = _rows(model, s[..., None, :N_STATE] + 1j * _H * np.eye(N_STATE), alpha)
+    F_s = thrust_from_input(model, T0[..., None, :], moved)
+    return np.swapaxes(np.imag(F_s), -1, -2) / _H, _jacobian(model, T0, _batch(model, s, alpha))

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..constants import N_STATE
-from ..model.thrustmap import thrust_from_input
+from ..model.thrustmap import thrust_partials
 from .linearize import discretize, jacobians, lqr_system
 from .nominal import circle_is_rough, circle_nominal
 
@@ -44,37 +44,18 @@ def _rel_err(X, Y, offset=None):
     return np.abs(X - Y).max() / scale if scale > 0 else np.abs(X - Y).max()
 
 
-_H = 1e-30  # complex step
-
-
 def _at_given_thrusts(model, speed, tilts, n, odd=False):
     """``d f / d (z, u, F)`` (b, n, n_z, n_z + 8) of the model at the nominal's actual
-    thrusts ``F`` (:meth:`~gainsched.model.reduced.Model.evaluate` with ``thrust``), at the
-    ``n`` equally spaced steps of each tilt (with ``odd`` the odd ones alone), by complex
-    steps: what the model does past the thrust modifiers, as smooth as the nominal's
-    motion and actual thrusts."""
+    thrusts ``F`` (:func:`~gainsched.schedule.linearize.jacobians` with ``thrust``), at the
+    ``n`` equally spaced steps of each tilt (with ``odd`` the odd ones alone): what the
+    model does past the thrust modifiers, as smooth as the nominal's motion and actual
+    thrusts."""
     pick = slice(1, None, 2) if odd else slice(None)
     noms = [circle_nominal(model, speed, a, n) for a in tilts]
     z = np.stack([nom.z[pick] for nom in noms])
     u = np.stack([nom.u[pick] for nom in noms])
     a = np.asarray(tilts)[:, None]
-    F = model.evaluate(z, u, a).T
-    n_z = z.shape[-1]
-    E = np.eye(n_z + 8) * (1j * _H)  # one batched evaluation, a direction per row
-    J = model.evaluate(z[..., None, :] + E[:, :n_z], u[..., None, :] + E[:, n_z:n_z + 4],
-                       a[..., None], thrust=F[..., None, :] + E[:, n_z + 4:]).z_dot
-    return np.swapaxes(np.imag(J) / _H, -1, -2)
-
-
-def _thrust_partials(model, s, T0, alpha):
-    """The thrust modifiers' partial derivatives at states ``s`` (..., 10) and input ``T0``
-    (..., 4) N by complex steps: ``d F / d s`` (..., 4, 10) and ``d F / d T0`` (..., 4, 4)."""
-    a = np.asarray(alpha)[..., None] if np.ndim(alpha) else alpha
-    along_s = model.effect_kinematics(s[..., None, :] + (1j * _H) * np.eye(N_STATE), a)
-    F_s = thrust_from_input(model, T0[..., None, :], along_s)
-    F_T = thrust_from_input(model, T0[..., None, :] + (1j * _H) * np.eye(4),
-                            model.effect_kinematics(s[..., None, :], a))
-    return np.swapaxes(np.imag(F_s), -1, -2) / _H, np.swapaxes(np.imag(F_T), -1, -2) / _H
+    return np.concatenate(jacobians(model, z, u, a, thrust=model.evaluate(z, u, a).T), -1)
 
 
 def _discrete_split(model, speed, tilts, N, dt, tol, m0):
@@ -97,7 +78,7 @@ def _discrete_split(model, speed, tilts, N, dt, tol, m0):
     zs = np.stack([nom.z for nom in noms])
     lag = model.n_extra > 0
     T0 = zs[..., N_STATE:N_STATE + 4] if lag else np.stack([nom.u for nom in noms])
-    F_s, F_T = _thrust_partials(model, zs[..., :N_STATE], T0, np.asarray(tilts)[:, None])
+    F_s, F_T = thrust_partials(model, zs[..., :N_STATE], T0, np.asarray(tilts)[:, None])
     A[..., :N_STATE] += G_F @ F_s
     if lag:  # the lag's states are the modifiers' input
         A[..., N_STATE:N_STATE + 4] += G_F @ F_T

@@ -31,29 +31,37 @@ INPUT_NAMES = ("T1", "T2", "T3", "T4")
 _H = 1e-30
 
 
-def jacobians(model, z, u, alpha):
-    """Exact ``A = df/dz`` and ``B = df/du`` by complex steps.
+def jacobians(model, z, u, alpha, thrust=None):
+    """Exact ``A = df/dz`` and ``B = df/du`` by complex steps; with the actual thrusts
+    ``thrust`` the model at given thrusts (:meth:`~gainsched.model.reduced.Model.evaluate`)
+    and also ``B_F = df/dF``.
 
     Parameters
     ----------
     z : ndarray, shape (..., n_z); u : ndarray, shape (..., 4), N; alpha : float or ndarray, rad
+    thrust : ndarray, shape (..., 4), N, optional
 
     Returns
     -------
     A : ndarray, shape (..., n_z, n_z); B : ndarray, shape (..., n_z, 4)
+    B_F : ndarray, shape (..., n_z, 4), only with ``thrust``
     """
     z = np.asarray(z, dtype=float)
     u = np.asarray(u, dtype=float)
-    n_z, shape = z.shape[-1], np.broadcast_shapes(z.shape[:-1], u.shape[:-1])
+    given = thrust is not None
+    n_z = z.shape[-1]
+    shape = np.broadcast_shapes(z.shape[:-1], u.shape[:-1], *(
+        (np.shape(thrust)[:-1],) if given else ()))
     # one batched evaluation for all perturbation directions: axis -2 enumerates them
-    dz = np.concatenate([np.eye(n_z), np.zeros((4, n_z))]) * (1j * _H)
-    du = np.concatenate([np.zeros((n_z, 4)), np.eye(4)]) * (1j * _H)
-    zc = np.broadcast_to(z[..., None, :], shape + (n_z + 4, n_z)) + dz
-    uc = np.broadcast_to(u[..., None, :], shape + (n_z + 4, 4)) + du
+    k = n_z + (8 if given else 4)
+    E = np.eye(k) * (1j * _H)
+    zc = np.broadcast_to(z[..., None, :], shape + (k, n_z)) + E[:, :n_z]
+    uc = np.broadcast_to(u[..., None, :], shape + (k, 4)) + E[:, n_z:n_z + 4]
+    Fc = np.broadcast_to(thrust[..., None, :], shape + (k, 4)) + E[:, n_z + 4:] if given else None
     a = np.asarray(alpha)[..., None] if np.ndim(alpha) else alpha
-    J = np.imag(model.f(zc, uc, a)) / _H  # (..., n_z + 4, n_z): row j = d f / d x_j
+    J = np.imag(model.evaluate(zc, uc, a, thrust=Fc).z_dot) / _H  # row j = d f / d x_j
     J = np.swapaxes(J, -1, -2)
-    return J[..., :n_z], J[..., n_z:]
+    return (J[..., :n_z], J[..., n_z:n_z + 4]) + ((J[..., n_z + 4:],) if given else ())
 
 
 def lqr_system(A, B, integrators=("int_delta",)):

@@ -368,6 +368,16 @@ def solve_circles(model, path: AzimuthPath, alphas) -> None:
             cache[_circle_key(path, a)] = sol
 
 
+def _inputs(model, s, T, alpha, rates=None, start=None, where="samples"):
+    """:func:`~gainsched.model.thrustmap.input_from_thrust` ``(T0, T0_dot)``, or TrimError
+    naming how many of the ``where`` it did not converge at."""
+    T0, T0_dot, ok = input_from_thrust(model, s, T, alpha, rates, start=start)
+    if not ok.all():
+        raise TrimError(f"no command gives the nominal's thrusts at {int((~ok).sum())} "
+                        f"{where} (the thrust modifiers' inverse did not converge)")
+    return T0, T0_dot
+
+
 def _node_inputs(model, nodes: AzimuthPath, Tp: float, key, alpha: float, offsets=None):
     """The thrust modifiers' input (:data:`N_FOURIER`, 4) N at the collocation nodes of a
     solved circle (cached per model and circle): the start of the inverse at the samples."""
@@ -377,11 +387,7 @@ def _node_inputs(model, nodes: AzimuthPath, Tp: float, key, alpha: float, offset
         D1, D2 = _fourier_operators(N_FOURIER, Tp)
         off = (None, None) if offsets is None else offsets.along(nodes)
         s, _ = state_from_attitude(nodes, (phi_n, D1 @ phi_n, D2 @ phi_n), *off)
-        T0, _, ok = input_from_thrust(model, s, T_n, alpha)
-        if not ok.all():
-            raise TrimError(f"no command gives the nominal's thrusts at {int((~ok).sum())} "
-                            "nodes (the thrust modifiers' inverse did not converge)")
-        cache[key, N_FOURIER] = T0
+        cache[key, N_FOURIER] = _inputs(model, s, T_n, alpha, where="nodes")[0]
     return cache[key, N_FOURIER]
 
 
@@ -434,11 +440,7 @@ def _commands(model, alpha, s, sdot, T, T_dot, start=None):
     lag = [e for e in model.effects if e.n_states]
     T0, T0_dot, rough = T, T_dot, False
     if model.thrust_modifiers:
-        T0, T0_dot, ok = input_from_thrust(model, s, T, alpha, (sdot, T_dot) if lag else None,
-                                           start=start)
-        if not ok.all():
-            raise TrimError(f"no command gives the nominal's thrusts at {int((~ok).sum())} "
-                            "samples (the thrust modifiers' inverse did not converge)")
+        T0, T0_dot = _inputs(model, s, T, alpha, (sdot, T_dot) if lag else None, start)
         rough = start is not None and bool(
             np.abs(T0 - start).max() > COMMAND_TOL * max(1.0, float(np.abs(T0).max())))
     if not lag:
