@@ -77,6 +77,20 @@ def paper_config_text(**keys) -> str:
     return set_values(PAPER_TOML.read_text(), _dotted(keys)) if keys else PAPER_TOML.read_text()
 
 
+#: what ``gainsched improve configs/paper.toml examples/flights/*.csv`` adds to the paper's
+#: model (docs/model-vs-measurement.md), as :func:`paper_config_text` keys
+IMPROVED = {"effects.thrust_momentum.disk_area": 0.005986, "effects.motor_lag.tau": 0.02979}
+
+
+def paper_model(**keys):
+    """The reduced model of :func:`paper_config_text` (``paper_model(**{
+    "effects.motor_lag.tau": 0.035})``: the paper vehicle with a motor lag), a new one per
+    call: the trim's caches are per model."""
+    from gainsched.model.reduced import Model
+
+    return Model(config_from_text(paper_config_text(**keys), "paper.toml"))
+
+
 # --------------------------------------------------------------------------- firmware
 
 

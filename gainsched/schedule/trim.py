@@ -50,11 +50,14 @@ __all__ = ["trim_path", "solve_circles", "is_rough", "TrimError"]
 N_FOURIER = 64
 N_SPLINE_MAX = 600
 
-#: the interpolated nominal is taken as it is when its node equations hold at every
-#: sample to this (relative to max(1, xi'^2), as the collocation's tolerance); else the
-#: thrusts are solved sample by sample. The Fourier interpolant of a whole circle meets it
-#: (residuals <= 3e-10 on the paper's grid with rotor drag: thrusts within 4e-11 N of the
-#: polished ones); the splines of manoeuvres mostly do not.
+#: the interpolated nominal of a whole circle is taken as it is when its node equations
+#: hold to this (relative to max(1, xi'^2), as the collocation's tolerance) at the check's
+#: eight samples per node interval (:func:`_circle`): then every sampling of the circle
+#: is the interpolant of its nodes (tension included) and the model is not evaluated
+#: there; else the thrusts are solved sample by sample. The Fourier interpolant of a whole
+#: circle meets it (residuals <= 3e-10 on the paper's grid with rotor drag: thrusts within
+#: 4e-11 N of the polished ones); the splines of manoeuvres, checked at their samples,
+#: mostly do not.
 POLISH_TOL = 1e-8
 #: the commands at a circle's samples are taken as smooth when the trigonometric
 #: interpolant of the node commands meets them to this (N, relative to max(1, |u|)); else
@@ -71,13 +74,14 @@ _NODES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 # nominal misses the model, None where it meets it; whether the commands are rough there)
 # (the same inputs give the same thrusts: no bit changes)
 _SAMPLES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-# per model and circle: the thrust modifiers' input at the collocation nodes
-_NODE_INPUTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# per model, circle and node count: the node rows its samplings interpolate and whether the
+# interpolant meets the model (:func:`_circle`)
+_CIRCLES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def _forget(model) -> None:
     """Drop every cached solution of ``model`` (tests that solve a circle again)."""
-    for cache in (_NODES, _SAMPLES, _NODE_INPUTS):
+    for cache in (_NODES, _SAMPLES, _CIRCLES):
         cache.pop(model, None)
 
 
@@ -335,12 +339,14 @@ def _circle_key(path: AzimuthPath, alpha: float, offsets=None):
             else (offsets.pitch.tobytes(), offsets.yaw.tobytes()))
 
 
-def _nodes(path: AzimuthPath):
-    """The collocation's :data:`N_FOURIER` nodes of the whole circle ``path`` starts (its
-    first sample and azimuth rate), and the period, s."""
+def _nodes(path: AzimuthPath, n: int | None = None):
+    """``n`` equal steps (default the collocation's :data:`N_FOURIER` nodes) of one period
+    of the whole circle ``path`` starts (its first sample and azimuth rate), and the
+    period, s."""
+    n = N_FOURIER if n is None else n
     xd, t0 = path.d[0][0], path.t[0]
     Tp = 2 * np.pi / abs(xd)
-    tn = t0 + np.arange(N_FOURIER) * (Tp / N_FOURIER)
+    tn = t0 + np.arange(n) * (Tp / n)
     z0 = np.zeros_like(tn)
     return AzimuthPath(tn, path.xi[0] + xd * (tn - t0), (np.full_like(tn, xd), z0, z0, z0)), Tp
 
@@ -378,54 +384,75 @@ def _inputs(model, s, T, alpha, rates=None, start=None, where="samples"):
     return T0, T0_dot
 
 
-def _node_inputs(model, nodes: AzimuthPath, Tp: float, key, alpha: float, offsets=None):
-    """The thrust modifiers' input (:data:`N_FOURIER`, 4) N at the collocation nodes of a
-    solved circle (cached per model and circle): the start of the inverse at the samples."""
-    cache = _NODE_INPUTS.setdefault(model, {})
-    if (key, N_FOURIER) not in cache:
-        phi_n, T_n = _NODES[model][key]
-        D1, D2 = _fourier_operators(N_FOURIER, Tp)
-        off = (None, None) if offsets is None else offsets.along(nodes)
-        s, _ = state_from_attitude(nodes, (phi_n, D1 @ phi_n, D2 @ phi_n), *off)
-        cache[key, N_FOURIER] = _inputs(model, s, T_n, alpha, where="nodes")[0]
-    return cache[key, N_FOURIER]
+def _smooth_samples() -> int:
+    """Samples per period at which a solved circle's interpolant is checked against the
+    model once (:func:`_circle`): eight per node interval. The interpolant meets the model
+    at its nodes, and its residual between them is a smooth periodic function of about the
+    nodes' bandwidth, so eight samples per interval find its largest value to a few
+    percent, well inside the margin of :data:`POLISH_TOL` (the paper's grid with rotor
+    drag, a motor lag or momentum theory: residuals <= 3e-10 against 1e-8)."""
+    return 8 * N_FOURIER
+
+
+def _circle(model, path: AzimuthPath, alpha: float, offsets=None):
+    """The Fourier collocation of the whole circle ``path`` starts (solved once, cached per
+    model and circle) and what every sampling of it needs, computed once from one model
+    evaluation at :func:`_smooth_samples` samples (the nodes among them).
+
+    Returns ``(key, rows, smooth)``: the circle's cache key; the node values
+    (6, or 10 with modifiers, N_FOURIER) the samples interpolate: the roll (rad), the actual thrusts
+    (N), the tension (N) and, with thrust modifiers, their input (N; the start of their
+    inverse at the samples); and whether the interpolant meets the model's equations to
+    :data:`POLISH_TOL` (else every sampling solves its thrusts sample by sample).
+    """
+    nodes, Tp = _nodes(path)
+    key = _circle_key(path, alpha, offsets)
+    cache = _CIRCLES.setdefault(model, {})
+    if (key, N_FOURIER) in cache:
+        return (key, *cache[key, N_FOURIER])
+    solved = _NODES.setdefault(model, {})
+    D1, D2 = _fourier_operators(N_FOURIER, Tp)
+    if key not in solved:
+        phi0, u0 = _initial_guess(model, nodes, alpha)
+        off_n = None if offsets is None else offsets.along(nodes)
+        solved[key] = _newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
+    phi_n, T_n = solved[key]
+    n = _smooth_samples()
+    check = _nodes(path, n)[0]
+    f, f1, f2 = _fourier_samples(np.vstack([phi_n, T_n.T]), Tp, n)
+    off = None if offsets is None else offsets.along(check)
+    res, _, _, ev = _local(model, check, alpha, f[:, 0], f1[:, 0], f2[:, 0], f[:, 1:], off)
+    rows = [phi_n, T_n.T, ev.tension[:: n // N_FOURIER]]
+    if model.thrust_modifiers:
+        s, _ = state_from_attitude(nodes, (phi_n, D1 @ phi_n, D2 @ phi_n),
+                                   *((None, None) if offsets is None else offsets.along(nodes)))
+        rows.append(_inputs(model, s, T_n, alpha, where="nodes")[0].T)
+    cache[key, N_FOURIER] = (np.vstack(rows), not _rough(res, check.d[0]))
+    return (key, *cache[key, N_FOURIER])
 
 
 def _periodic_guess(model, path: AzimuthPath, alpha: float, offsets=None):
-    """The Fourier collocation of a whole circle (:func:`trim_path`, periodic), its node
-    solution cached per model and circle, interpolated to ``path``'s samples.
+    """The Fourier collocation of a whole circle (:func:`_circle`) interpolated to
+    ``path``'s samples.
 
-    Returns ``(key, (phi, phi', phi'', T, T', T0), local)``: the circle's cache key, the
-    roll (rad, rad/s, rad/s^2) and actual thrusts (N, N/s) at the samples, shapes (n,) and
-    (n, 4), the interpolant of the thrust modifiers' input at the nodes (n, 4) N (None
-    without modifiers), and the :func:`_local` evaluation there (residuals (n, 5), state,
-    its derivative, the model's evaluation).
+    Returns ``(key, (phi, phi', phi'', T, T', tension, T0), smooth)``: the circle's cache
+    key; the roll (rad, rad/s, rad/s^2), actual thrusts (N, N/s) and tension (N) at the
+    samples, shapes (n,), (n, 4) and (n,), and the interpolant of the thrust modifiers'
+    input at the nodes (n, 4) N (None without modifiers); and whether the interpolant
+    meets the model (:func:`_circle`).
     """
     t = path.t
-    nodes, Tp = _nodes(path)
-    key = _circle_key(path, alpha, offsets)
-    cache = _NODES.setdefault(model, {})
-    if key not in cache:
-        D1, D2 = _fourier_operators(N_FOURIER, Tp)
-        phi0, u0 = _initial_guess(model, nodes, alpha)
-        off_n = None if offsets is None else offsets.along(nodes)
-        cache[key] = _newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
-    phi_n, T_n = cache[key]
-    rows = [phi_n, T_n.T]
-    if model.thrust_modifiers:
-        rows.append(_node_inputs(model, nodes, Tp, key, alpha, offsets).T)
+    key, rows, smooth = _circle(model, path, alpha, offsets)
+    Tp = 2 * np.pi / abs(path.d[0][0])
     tt = t - t[0]
     if np.allclose(tt, np.arange(t.size) * (Tp / t.size), rtol=0.0, atol=1e-12 * Tp):
         # one period in equal steps (to rounding: the steps' times come from the period
         # the caller computed)
-        f, f1, f2 = _fourier_samples(np.vstack(rows), Tp, t.size)
+        f, f1, f2 = _fourier_samples(rows, Tp, t.size)
     else:
-        f, f1, f2 = _fourier_eval(np.vstack(rows), Tp, tt)
-    phi, dphi, ddphi, T = f[:, 0], f1[:, 0], f2[:, 0], f[:, 1:5]
-    T0 = f[:, 5:] if model.thrust_modifiers else None
-    off = None if offsets is None else offsets.along(path)
-    return key, (phi, dphi, ddphi, T, f1[:, 1:5], T0), _local(model, path, alpha, phi, dphi,
-                                                              ddphi, T, off)
+        f, f1, f2 = _fourier_eval(rows, Tp, tt)
+    T0 = f[:, 6:] if model.thrust_modifiers else None
+    return key, (f[:, 0], f1[:, 0], f2[:, 0], f[:, 1:5], f1[:, 1:5], f[:, 5], T0), smooth
 
 
 def _commands(model, alpha, s, sdot, T, T_dot, start=None):
@@ -493,19 +520,20 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
     t = path.t
     off = None if offsets is None else offsets.along(path)
     if periodic:
-        key, (phi, dphi, ddphi, T, T_dot, start), local = _periodic_guess(model, path, alpha,
-                                                                         offsets)
-        res, z, sdot, ev = local
+        key, (phi, dphi, ddphi, T, T_dot, tension, start), smooth = _periodic_guess(
+            model, path, alpha, offsets)
         cache = _SAMPLES.setdefault(model, {})
         pkey = (key, N_FOURIER, t.tobytes())  # the same circle, nodes and samples
-        if pkey in cache:
-            polished = cache[pkey][0]
-        else:  # None: the interpolant meets the model at these samples
-            polished = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off,
-                                     res=res) if _rough(res, xd) else None
-        if polished is not None:  # else the thrusts sample by sample
+        polished = None  # the interpolant meets the model: no evaluation at the samples
+        if smooth:
+            z, sdot = state_from_attitude(path, (phi, dphi, ddphi),
+                                          *((None, None) if off is None else off))
+        else:  # the thrusts sample by sample
+            polished = cache[pkey][0] if pkey in cache else _solve_thrust(
+                model, path, alpha, phi, dphi, ddphi, T, offsets=off)
             T = polished
-            res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
+            _, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
+            tension = ev.tension
     else:
         start = None
         idx = np.unique(np.linspace(0, t.size - 1, min(t.size, N_SPLINE_MAX)).round().astype(int))
@@ -522,7 +550,8 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
         if _rough(res, xd):
             T = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off, res=res)
             res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
+        tension = ev.tension
     z, z_dot, u, rough = _commands(model, alpha, z[:, :N_STATE], sdot, T, T_dot, start)
     if periodic:
         cache[pkey] = (polished, rough)
-    return z, z_dot, u, ev.tension
+    return z, z_dot, u, tension

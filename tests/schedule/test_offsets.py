@@ -16,6 +16,8 @@ from gainsched.schedule.closedform import state_from_attitude
 from gainsched.schedule.nominal import circle_nominal, circle_offsets
 from gainsched.schedule.path import AzimuthPath, period
 
+from support import IMPROVED, paper_model
+
 A40 = np.deg2rad(40.0)
 
 
@@ -277,20 +279,16 @@ def test_newly_feasible_circles_fly(paper_config, paper_table, paper_c_scheduler
 
 
 @pytest.mark.parametrize("lag", [False, True], ids=["no-lag", "motor-lag"])
-def test_one_slsqp_keeps_the_commands_in_range_between_the_nodes(paper_text, lag, monkeypatch):
+def test_one_slsqp_keeps_the_commands_in_range_between_the_nodes(lag, monkeypatch):
     """Issue 39: the SLSQP bounds the commanded thrusts at eight points per collocation node
     (the collocation's own interpolant), so the check on 1024 samples passes at the first
     attempt: one SLSQP per circle, where the node-only bounds needed two or three (each a
     third of the paper build's offsets). With a motor lag the bound is on the command
     ``T + tau T'`` (what the table's feasibility checks), not on the lagged thrust."""
-    from gainsched.config import config_from_text
-    from gainsched.configedit import set_section
     from gainsched.schedule.path import circle_path
     from gainsched.schedule.trim import trim_path
 
-    text = set_section(paper_text, "effects.motor_lag", [("tau", 0.035, None)]) if lag \
-        else paper_text
-    model = Model(config_from_text(text, "lag.toml"))
+    model = paper_model(**({"effects.motor_lag.tau": 0.035} if lag else {}))
     runs = []
     orig = offsets_mod.minimize
     monkeypatch.setattr(offsets_mod, "minimize", lambda *a, **k: runs.append(1) or orig(*a, **k))
@@ -310,16 +308,12 @@ def test_one_slsqp_keeps_the_commands_in_range_between_the_nodes(paper_text, lag
 
 
 @pytest.fixture(scope="module")
-def improved(paper_text):
+def improved():
     """The paper vehicle with what `improve` finds on the example flights (thrust_momentum
     + motor_lag, docs/model-vs-measurement.md): a motor's commanded thrust dips where the
     inflow meets momentum theory's floor, a dip the optimisation's 32 nodes cannot see."""
-    from gainsched.config import config_from_text
-    from gainsched.configedit import set_section
 
-    text = set_section(paper_text, "effects.thrust_momentum", [("disk_area", 0.005986, None)])
-    text = set_section(text, "effects.motor_lag", [("tau", 0.02979, None)])
-    return Model(config_from_text(text, "paper_1.toml"))
+    return paper_model(**IMPROVED)
 
 
 def _slsqp_starts(monkeypatch):
@@ -381,16 +375,13 @@ def test_bounds_that_would_cross_end_the_search(improved, monkeypatch):
     assert len(starts) == 1
 
 
-def test_the_search_stops_at_its_own_accuracy(paper_text, monkeypatch):
+def test_the_search_stops_at_its_own_accuracy(monkeypatch):
     """Issue 39: at 10 m/s and 40 deg with a motor lag the least-squares offsets (3e-3 deg)
     are found in a few SLSQP iterations; at a tolerance of 1e-10 the search took the
     rounding-level violations of its 2048 bounds for ones to remove and ran about 70
     iterations and 500 trims. At ``FTOL`` it stops within 10."""
-    from gainsched.config import config_from_text
-    from gainsched.configedit import set_section
 
-    text = set_section(paper_text, "effects.motor_lag", [("tau", 0.02979, None)])
-    model = Model(config_from_text(text, "lag.toml"))
+    model = paper_model(**{"effects.motor_lag.tau": IMPROVED["effects.motor_lag.tau"]})
     cfg = model.config
     lo = cfg.vehicle.thrust_min + cfg.feasibility.thrust_margin
     hi = cfg.vehicle.thrust_max - cfg.feasibility.thrust_margin

@@ -15,6 +15,8 @@ from gainsched.schedule.closedform import closed_form
 from gainsched.schedule.path import circle_path, maneuver_path, period
 from gainsched.schedule.trim import trim_path
 
+from support import IMPROVED, paper_model
+
 
 @pytest.mark.parametrize("speed, tilt_deg", [(4.0, 0.0), (9.0, 20.0), (-12.0, 35.0)])
 def test_trim_equals_closed_form_on_circles(model, speed, tilt_deg):
@@ -113,18 +115,14 @@ def test_equal_step_samples_of_the_interpolant_are_its_general_evaluation(n_out)
 
 @pytest.mark.parametrize("effect, values", [("rotor_drag", {"k_rd": 0.015}),
                                             ("motor_lag", {"tau": 0.035})])
-def test_the_64_node_collocation_is_the_128_node_one(paper_text, effect, values, monkeypatch):
+def test_the_64_node_collocation_is_the_128_node_one(effect, values, monkeypatch):
     """Issue 39: the periodic collocation on 64 nodes (the trim since issue 39) gives the
     nominal of the 128 it had before, at 1024 samples of circles across the paper's
     speeds and tilts, to 1e-9 N in the commands and 1e-10 rad in the roll (measured
     4e-12 N)."""
-    from gainsched.config import config_from_text
-    from gainsched.configedit import set_section
-    from gainsched.model.reduced import Model
     from gainsched.schedule import trim
 
-    text = set_section(paper_text, f"effects.{effect}", [(k, v, None) for k, v in values.items()])
-    m = Model(config_from_text(text, f"{effect}.toml"))
+    m = paper_model(**{f"effects.{effect}.{k}": v for k, v in values.items()})
     for v, a in ((3.0, 0.0), (9.0, 0.35), (15.0, 0.6)):
         T = period(v, m.r)
         path = circle_path(v, m.r, np.arange(1024) * (T / 1024))
@@ -137,23 +135,19 @@ def test_the_64_node_collocation_is_the_128_node_one(paper_text, effect, values,
         np.testing.assert_allclose(got[64][0][:, 4], got[128][0][:, 4], rtol=0, atol=1e-10)
 
 
-def test_a_per_sample_thrust_trim_that_does_not_converge_is_an_error(paper_text):
+def test_a_per_sample_thrust_trim_that_does_not_converge_is_an_error():
     """The per-sample Newton on the thrusts (the polish of a nominal the collocation's
     interpolant misses) raises TrimError when a sample has not converged in its steps,
     instead of returning the last iterate; with its default steps it converges to the
     model's equations. Started 50 mN off the nominal of momentum theory at 9 m/s, 40 deg,
     whose actual thrusts the interpolant meets (no polish since the trim solves for them)."""
-    from gainsched.config import config_from_text
-    from gainsched.configedit import set_section
-    from gainsched.model.reduced import Model
     from gainsched.schedule import trim
 
-    text = set_section(paper_text, "effects.thrust_momentum", [("disk_area", 0.006, None)])
-    m = Model(config_from_text(text, "tm.toml"))
+    m = paper_model(**{"effects.thrust_momentum.disk_area": 0.006})
     v, a = 9.0, np.deg2rad(40.0)
     path = circle_path(v, m.r, np.arange(1024) * (period(v, m.r) / 1024))
-    _, (phi, dphi, ddphi, T, _, _), local = trim._periodic_guess(m, path, a)
-    assert not trim._rough(local[0], path.d[0])  # the actual thrusts are smooth
+    _, (phi, dphi, ddphi, T, *_), smooth = trim._periodic_guess(m, path, a)
+    assert smooth  # the actual thrusts are smooth
     off = T + 0.05
     with pytest.raises(trim.TrimError, match="did not converge"):
         trim._solve_thrust(m, path, a, phi, dphi, ddphi, off, max_iter=0)
@@ -166,18 +160,14 @@ def test_a_per_sample_thrust_trim_that_does_not_converge_is_an_error(paper_text)
 @pytest.mark.parametrize("effect, values", [("rotor_drag", {"k_rd": 0.015}),
                                             ("thrust_momentum", {"disk_area": 0.006}),
                                             ("motor_lag", {"tau": 0.035})])
-def test_a_speeds_tilts_solved_together_equal_each_alone(paper_text, effect, values):
+def test_a_speeds_tilts_solved_together_equal_each_alone(effect, values):
     """Issue 39: a job's tilts solved in one batched Newton (solve_circles: one model
     evaluation per step for all of them) give each circle's nominal as its own Newton does,
     to 1e-12 N and rad at 1024 samples, the 40 deg circle of momentum theory (in the floored
     inflow) included; the batch fills the cache trim_path reads."""
-    from gainsched.config import config_from_text
-    from gainsched.configedit import set_section
-    from gainsched.model.reduced import Model
     from gainsched.schedule import trim
 
-    text = set_section(paper_text, f"effects.{effect}", [(k, v, None) for k, v in values.items()])
-    m = Model(config_from_text(text, f"{effect}.toml"))
+    m = paper_model(**{f"effects.{effect}.{k}": v for k, v in values.items()})
     v, tilts = 9.0, np.deg2rad([0.0, 20.0, 34.0, 40.0])
     path = circle_path(v, m.r, np.arange(1024) * (period(v, m.r) / 1024))
     alone = []
@@ -194,7 +184,7 @@ def test_a_speeds_tilts_solved_together_equal_each_alone(paper_text, effect, val
         np.testing.assert_allclose(tension_b, tension, rtol=0, atol=1e-11)
 
 
-def test_a_lag_after_momentum_theory_has_its_states_rate(paper_text):
+def test_a_lag_after_momentum_theory_has_its_states_rate():
     """Issue 39: with a motor lag and momentum theory (what improve fits on the example
     flights) the lag's states are the modifiers' inverse of the smooth actual thrusts,
     sharp where the inflow is floored (9 m/s, 40 deg); the rate the command ``x + tau x'``
@@ -203,16 +193,54 @@ def test_a_lag_after_momentum_theory_has_its_states_rate(paper_text):
     kept the interpolant's rate: 0.024 N off."""
     from scipy.integrate import cumulative_trapezoid
 
-    from gainsched.config import config_from_text
-    from gainsched.configedit import set_section
-    from gainsched.model.reduced import Model
 
-    text = set_section(paper_text, "effects.thrust_momentum", [("disk_area", 0.005986, None)])
-    text = set_section(text, "effects.motor_lag", [("tau", 0.02979, None)])
-    m = Model(config_from_text(text, "improved.toml"))
+    m = paper_model(**IMPROVED)
     v, a, n = 9.0, np.deg2rad(40.0), 4096
     Tp = period(v, m.r)
     z, z_dot, u, _ = trim_path(m, circle_path(v, m.r, np.arange(n) * (Tp / n)), a, periodic=True)
     change = cumulative_trapezoid(z_dot[:, 10:], dx=Tp / n, axis=0, initial=0.0)
     assert np.abs(change - (z[:, 10:] - z[0, 10:])).max() < 1e-4  # N
-    np.testing.assert_allclose(u, z[:, 10:] + 0.02979 * z_dot[:, 10:], rtol=0, atol=1e-12)
+    tau = IMPROVED["effects.motor_lag.tau"]
+    np.testing.assert_allclose(u, z[:, 10:] + tau * z_dot[:, 10:], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("keys", [{"effects.rotor_drag.k_rd": 0.015},
+                                  {"effects.thrust_momentum.disk_area": 0.006}, IMPROVED],
+                         ids=["rotor_drag", "thrust_momentum", "improved"])
+@pytest.mark.parametrize("n", [96, 1000])
+def test_a_circles_samples_are_the_models_equilibrium_and_tension(keys, n):
+    """Issue 39: a whole circle's samples are the interpolant of its collocation, checked
+    against the model once per circle (at 8 samples per node), not evaluated at every
+    sampling: at sample counts that are not multiples of the nodes the model's derivative
+    at the state and commands is the path's to 1e-8 (relative to xi'^2), and its tension
+    the interpolated one to 1e-9 N, in and out of momentum theory's floored inflow."""
+    m = paper_model(**keys)
+    for v, a in ((9.0, np.deg2rad(40.0)), (15.0, np.deg2rad(20.0))):
+        path = circle_path(v, m.r, np.arange(n) * (period(v, m.r) / n))
+        z, z_dot, u, tension = trim_path(m, path, a, periodic=True)
+        ev = m.evaluate(z, u, a)
+        assert np.abs(ev.z_dot - z_dot).max() < 1e-8 * max(1.0, (v / m.r) ** 2)
+        np.testing.assert_allclose(tension, ev.tension, rtol=0, atol=1e-9)  # N
+
+
+def test_a_circle_the_interpolant_misses_is_solved_sample_by_sample(monkeypatch):
+    """A circle whose interpolant misses the model by more than ``POLISH_TOL`` at the
+    check (here every circle: the tolerance set to 0) has its thrusts solved at every
+    sample and is rough; they are the smooth circle's to 1e-9 N, and its tension the
+    model's at them."""
+    from gainsched.schedule import trim
+
+    m = paper_model(**{"effects.rotor_drag.k_rd": 0.015})
+    v, a, n = 9.0, np.deg2rad(30.0), 700
+    path = circle_path(v, m.r, np.arange(n) * (period(v, m.r) / n))
+    smooth = trim_path(m, path, a, periodic=True)
+    assert not trim.is_rough(m, path, a)
+    trim._forget(m)
+    monkeypatch.setattr(trim, "POLISH_TOL", 0.0)
+    calls = []
+    solve = trim._solve_thrust
+    monkeypatch.setattr(trim, "_solve_thrust", lambda *a, **k: calls.append(1) or solve(*a, **k))
+    z, _, u, tension = trim_path(m, path, a, periodic=True)
+    assert calls and trim.is_rough(m, path, a)
+    np.testing.assert_allclose(u, smooth[2], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(tension, m.evaluate(z, u, a).tension, rtol=0, atol=1e-12)
