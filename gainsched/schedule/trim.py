@@ -70,9 +70,8 @@ COMMAND_TOL = 1e-8
 # the collocation on the nodes does not depend on them. The same inputs give the same
 # node values, so the cache changes no bit of a table.
 _NODES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-# per model, circle and samples: (the thrusts solved sample by sample where the interpolated
-# nominal misses the model, None where it meets it; whether the commands are rough there)
-# (the same inputs give the same thrusts: no bit changes)
+# per model, circle and samples: the thrusts solved sample by sample of a circle whose
+# interpolant misses the model (the same inputs give the same thrusts: no bit changes)
 _SAMPLES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 # per model, circle and node count: the node rows its samplings interpolate and whether the
 # interpolant meets the model (:func:`_circle`)
@@ -396,14 +395,18 @@ def _smooth_samples() -> int:
 
 def _circle(model, path: AzimuthPath, alpha: float, offsets=None):
     """The Fourier collocation of the whole circle ``path`` starts (solved once, cached per
-    model and circle) and what every sampling of it needs, computed once from one model
-    evaluation at :func:`_smooth_samples` samples (the nodes among them).
+    model and circle) and what every sampling of it needs, computed once at
+    :func:`_smooth_samples` samples (the nodes among them): one model evaluation and, with
+    thrust modifiers, their inverse.
 
-    Returns ``(key, rows, smooth)``: the circle's cache key; the node values
-    (6, or 10 with modifiers, N_FOURIER) the samples interpolate: the roll (rad), the actual thrusts
-    (N), the tension (N) and, with thrust modifiers, their input (N; the start of their
-    inverse at the samples); and whether the interpolant meets the model's equations to
-    :data:`POLISH_TOL` (else every sampling solves its thrusts sample by sample).
+    Returns ``(key, rows, smooth)``: the circle's cache key; the node values (6, or 10
+    with modifiers, N_FOURIER) the samples interpolate: the roll (rad), the actual thrusts
+    (N), the tension (N) and, with thrust modifiers, their input (N); and ``(meets,
+    smooth_input)``: whether the interpolant meets the model's equations to
+    :data:`POLISH_TOL` (else every sampling solves its thrusts sample by sample), and
+    whether the interpolant of the node inputs meets their inverse, and with a motor lag
+    the command from its rate, to :data:`COMMAND_TOL` (else every sampling takes the
+    inverse at its samples).
     """
     nodes, Tp = _nodes(path)
     key = _circle_key(path, alpha, offsets)
@@ -421,13 +424,21 @@ def _circle(model, path: AzimuthPath, alpha: float, offsets=None):
     check = _nodes(path, n)[0]
     f, f1, f2 = _fourier_samples(np.vstack([phi_n, T_n.T]), Tp, n)
     off = None if offsets is None else offsets.along(check)
-    res, _, _, ev = _local(model, check, alpha, f[:, 0], f1[:, 0], f2[:, 0], f[:, 1:], off)
+    res, z, sdot, ev = _local(model, check, alpha, f[:, 0], f1[:, 0], f2[:, 0], f[:, 1:], off)
     rows = [phi_n, T_n.T, ev.tension[:: n // N_FOURIER]]
+    smooth_input = True
     if model.thrust_modifiers:
-        s, _ = state_from_attitude(nodes, (phi_n, D1 @ phi_n, D2 @ phi_n),
-                                   *((None, None) if offsets is None else offsets.along(nodes)))
-        rows.append(_inputs(model, s, T_n, alpha, where="nodes")[0].T)
-    cache[key, N_FOURIER] = (np.vstack(rows), not _rough(res, check.d[0]))
+        s_n, _ = state_from_attitude(nodes, (phi_n, D1 @ phi_n, D2 @ phi_n),
+                                     *((None, None) if offsets is None else offsets.along(nodes)))
+        rows.append(_inputs(model, s_n, T_n, alpha, where="nodes")[0].T)
+        g, g1, _ = _fourier_samples(rows[-1], Tp, n)
+        s = z[:, :N_STATE]
+        exact = _commands(model, alpha, s, sdot, f[:, 1:], f1[:, 1:], start=g)
+        interpolated = _lagged(model, s, sdot, g, g1)
+        scale = COMMAND_TOL * max(1.0, float(np.abs(exact[2]).max()))
+        smooth_input = all(np.abs(x - y).max() <= scale
+                           for x, y in zip(exact, interpolated, strict=True))
+    cache[key, N_FOURIER] = (np.vstack(rows), (not _rough(res, check.d[0]), smooth_input))
     return (key, *cache[key, N_FOURIER])
 
 
@@ -435,14 +446,14 @@ def _periodic_guess(model, path: AzimuthPath, alpha: float, offsets=None):
     """The Fourier collocation of a whole circle (:func:`_circle`) interpolated to
     ``path``'s samples.
 
-    Returns ``(key, (phi, phi', phi'', T, T', tension, T0), smooth)``: the circle's cache
-    key; the roll (rad, rad/s, rad/s^2), actual thrusts (N, N/s) and tension (N) at the
-    samples, shapes (n,), (n, 4) and (n,), and the interpolant of the thrust modifiers'
-    input at the nodes (n, 4) N (None without modifiers); and whether the interpolant
-    meets the model (:func:`_circle`).
+    Returns ``(key, (phi, phi', phi'', T, T', tension, T0, T0'), (meets, smooth_input))``:
+    the circle's cache key; the roll (rad, rad/s, rad/s^2), actual thrusts (N, N/s) and
+    tension (N) at the samples, shapes (n,), (n, 4) and (n,), and the interpolant of the
+    thrust modifiers' input at the nodes and its rate (n, 4) N, N/s (None without
+    modifiers); and what :func:`_circle` found of the circle.
     """
     t = path.t
-    key, rows, smooth = _circle(model, path, alpha, offsets)
+    key, rows, found = _circle(model, path, alpha, offsets)
     Tp = 2 * np.pi / abs(path.d[0][0])
     tt = t - t[0]
     if np.allclose(tt, np.arange(t.size) * (Tp / t.size), rtol=0.0, atol=1e-12 * Tp):
@@ -451,43 +462,44 @@ def _periodic_guess(model, path: AzimuthPath, alpha: float, offsets=None):
         f, f1, f2 = _fourier_samples(rows, Tp, t.size)
     else:
         f, f1, f2 = _fourier_eval(rows, Tp, tt)
-    T0 = f[:, 6:] if model.thrust_modifiers else None
-    return key, (f[:, 0], f1[:, 0], f2[:, 0], f[:, 1:5], f1[:, 1:5], f[:, 5], T0), smooth
+    T0, T0_dot = (f[:, 6:], f1[:, 6:]) if model.thrust_modifiers else (None, None)
+    return key, (f[:, 0], f1[:, 0], f2[:, 0], f[:, 1:5], f1[:, 1:5], f[:, 5], T0, T0_dot), found
+
+
+def _lagged(model, s, sdot, T0, T0_dot):
+    """The state, its derivative and the commands ``(z (n, n_z), z_dot (n, n_z), u (n,
+    4))`` of the reduced states ``s, sdot`` (n, 10) and the thrust modifiers' input ``T0``
+    (n, 4) N with its rate ``T0_dot`` N/s: with a motor lag its states are ``T0`` and the
+    command comes from its inverse, else the commands are ``T0``."""
+    lag = [e for e in model.effects if e.n_states]
+    if not lag:
+        return s, sdot, T0
+    _, u = lag[0].steady_states(T0, T0_dot)
+    return np.concatenate([s, T0], -1), np.concatenate([sdot, T0_dot], -1), u
 
 
 def _commands(model, alpha, s, sdot, T, T_dot, start=None):
-    """The state, its derivative and the commands ``(z (n, n_z), z_dot (n, n_z), u (n, 4))``
-    of the reduced states ``s, sdot`` (n, 10) and the actual thrusts ``T`` (n, 4) N with
-    their rate ``T_dot`` N/s: the thrust modifiers' input from their inverse
-    (:func:`~gainsched.model.thrustmap.input_from_thrust`, from ``start`` (n, 4) N if
-    given; the actual thrusts themselves without modifiers), and with a motor lag its
-    states and the command from its inverse; and whether the input is rough: further
-    from ``start`` than :data:`COMMAND_TOL`. Raises TrimError where the inverse did not
-    converge."""
-    lag = [e for e in model.effects if e.n_states]
-    T0, T0_dot, rough = T, T_dot, False
+    """:func:`_lagged` of the reduced states ``s, sdot`` (n, 10) and the actual thrusts
+    ``T`` (n, 4) N with their rate ``T_dot`` N/s: the thrust modifiers' input from their
+    inverse (:func:`~gainsched.model.thrustmap.input_from_thrust`, from ``start`` (n, 4) N
+    if given; the actual thrusts themselves without modifiers). Raises TrimError where the
+    inverse did not converge."""
+    T0, T0_dot = T, T_dot
     if model.thrust_modifiers:
-        T0, T0_dot = _inputs(model, s, T, alpha, (sdot, T_dot) if lag else None, start)
-        rough = start is not None and bool(
-            np.abs(T0 - start).max() > COMMAND_TOL * max(1.0, float(np.abs(T0).max())))
-    if not lag:
-        return s, sdot, T0, rough
-    _, u = lag[0].steady_states(T0, T0_dot)
-    return np.concatenate([s, T0], -1), np.concatenate([sdot, T0_dot], -1), u, rough
+        rates = (sdot, T_dot) if model.n_extra else None
+        T0, T0_dot = _inputs(model, s, T, alpha, rates, start)
+    return _lagged(model, s, sdot, T0, T0_dot)
 
 
 def is_rough(model, path: AzimuthPath, alpha: float, offsets=None) -> bool:
-    """Whether the nominal of a whole circle (:func:`trim_path`, periodic) is not smooth at
-    the collocation's resolution at ``path``'s samples: the interpolant of the nodes
-    misses the model there by more than :data:`POLISH_TOL` (its thrusts are solved sample
-    by sample), or its commands miss the interpolant of the node commands by more than
-    :data:`COMMAND_TOL` (momentum theory's floored inflow, say). A rough nominal's
-    linearisation is not carried by a Fourier series of a few azimuths."""
-    key = (_circle_key(path, alpha, offsets), N_FOURIER, path.t.tobytes())
-    if key not in _SAMPLES.get(model, {}):  # trim_path has not been here: it decides
-        trim_path(model, path, alpha, periodic=True, offsets=offsets)
-    polished, rough = _SAMPLES[model][key]
-    return polished is not None or rough
+    """Whether the nominal of the whole circle ``path`` starts (:func:`trim_path`,
+    periodic) is not smooth at the collocation's resolution: the interpolant of the nodes
+    misses the model by more than :data:`POLISH_TOL` (its thrusts are solved sample by
+    sample), or the commands miss the interpolant of the node commands by more than
+    :data:`COMMAND_TOL` (momentum theory's floored inflow, say), checked once per circle
+    (:func:`_circle`). A rough nominal's linearisation is not carried by a Fourier series
+    of a few azimuths."""
+    return not all(_circle(model, path, alpha, offsets)[2])
 
 
 def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None = None,
@@ -520,18 +532,20 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
     t = path.t
     off = None if offsets is None else offsets.along(path)
     if periodic:
-        key, (phi, dphi, ddphi, T, T_dot, tension, start), smooth = _periodic_guess(
-            model, path, alpha, offsets)
-        cache = _SAMPLES.setdefault(model, {})
-        pkey = (key, N_FOURIER, t.tobytes())  # the same circle, nodes and samples
-        polished = None  # the interpolant meets the model: no evaluation at the samples
-        if smooth:
+        key, (phi, dphi, ddphi, T, T_dot, tension, start, start_dot), (meets, smooth_input) = (
+            _periodic_guess(model, path, alpha, offsets))
+        if meets:  # the interpolant meets the model: no evaluation at the samples
             z, sdot = state_from_attitude(path, (phi, dphi, ddphi),
                                           *((None, None) if off is None else off))
-        else:  # the thrusts sample by sample
-            polished = cache[pkey][0] if pkey in cache else _solve_thrust(
-                model, path, alpha, phi, dphi, ddphi, T, offsets=off)
-            T = polished
+            if smooth_input and start is not None:  # and the commands their inverse
+                z, z_dot, u = _lagged(model, z, sdot, start, start_dot)
+                return z, z_dot, u, tension
+        else:  # the thrusts sample by sample (cached per circle and samples)
+            cache = _SAMPLES.setdefault(model, {})
+            pkey = (key, N_FOURIER, t.tobytes())
+            if pkey not in cache:
+                cache[pkey] = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off)
+            T = cache[pkey]
             _, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
             tension = ev.tension
     else:
@@ -551,7 +565,5 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
             T = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off, res=res)
             res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
         tension = ev.tension
-    z, z_dot, u, rough = _commands(model, alpha, z[:, :N_STATE], sdot, T, T_dot, start)
-    if periodic:
-        cache[pkey] = (polished, rough)
+    z, z_dot, u = _commands(model, alpha, z[:, :N_STATE], sdot, T, T_dot, start)
     return z, z_dot, u, tension

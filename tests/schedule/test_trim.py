@@ -244,3 +244,29 @@ def test_a_circle_the_interpolant_misses_is_solved_sample_by_sample(monkeypatch)
     assert calls and trim.is_rough(m, path, a)
     np.testing.assert_allclose(u, smooth[2], rtol=0, atol=1e-9)
     np.testing.assert_allclose(tension, m.evaluate(z, u, a).tension, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("keys", [{"effects.thrust_momentum.disk_area": 0.006}, IMPROVED],
+                         ids=["thrust_momentum", "improved"])
+def test_a_smooth_circles_commands_are_the_modifiers_inverse(keys, monkeypatch):
+    """Issue 39: where the interpolant of the node commands meets the thrust modifiers'
+    inverse at the check (8 samples per node), every sampling of the circle takes the
+    interpolant and its rate; they are the inverse's commands (and a motor lag's states and
+    command ``x + tau x'`` from the implicit function theorem's rate) to ``COMMAND_TOL``
+    (relative to the largest command) at 700 samples. With a tolerance below 0 the circle is
+    rough and the inverse is taken at every sample (a negative one: the inverse may
+    return its start unchanged)."""
+    from gainsched.schedule import trim
+
+    m = paper_model(**keys)
+    v, a, n = 15.0, np.deg2rad(20.0), 700
+    path = circle_path(v, m.r, np.arange(n) * (period(v, m.r) / n))
+    assert not trim.is_rough(m, path, a)
+    z, z_dot, u, _ = trim_path(m, path, a, periodic=True)
+    trim._forget(m)
+    monkeypatch.setattr(trim, "COMMAND_TOL", -1.0)  # every circle rough
+    assert trim.is_rough(m, path, a)
+    z_i, z_dot_i, u_i, _ = trim_path(m, path, a, periodic=True)
+    tol = 1e-8 * np.abs(u_i).max()  # N
+    np.testing.assert_allclose(u, u_i, rtol=0, atol=tol)
+    np.testing.assert_allclose(z, z_i, rtol=0, atol=tol)
