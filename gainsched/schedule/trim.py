@@ -49,6 +49,15 @@ __all__ = ["trim_path", "solve_circles", "is_rough", "TrimError"]
 #: theory, and its thrusts equal those of 128 nodes to 4e-12 N (issue 39)
 N_FOURIER = 64
 N_SPLINE_MAX = 600
+#: the largest roll change (rad) one Newton step of a collocation takes at any node (and a
+#: thrust change at most the motors' range): a longer step is shortened to it. Near a
+#: command at which the thrust modifiers' slope vanishes (momentum theory's thrust goes as
+#: the command's 3/2 power near zero) a full step is long and heads for a spurious
+#: solution whose roll winds around the circle: inside the offsets' search at 13 m/s, 37 deg
+#: with momentum theory and a motor lag, roll to 96 rad and commands to 3.7e3 N, where
+#: SLSQP stayed for 268 trims (issue 39). The physical nominal is reached in far shorter
+#: steps, which the limit leaves as they are.
+MAX_ROLL_STEP = 0.5
 
 #: the interpolated nominal of a whole circle is taken as it is when its node equations
 #: hold to this (relative to max(1, xi'^2), as the collocation's tolerance) at the check's
@@ -268,10 +277,21 @@ def _newton_circles(model, nodes, alphas, D1, D2, phi, T, tol=1e-11, max_iter=40
         roll = [x[~done] for x in roll]
         Jl = _local_jacobians(model, flat, a[keep], *(x.reshape(-1) for x in roll),
                               T[live].reshape(-1, 4))
-        d_phi, d_T = _newton_step(Jl, D1, D2, res[keep], circles=live.size)
+        d_phi, d_T = _limited(model, *_newton_step(Jl, D1, D2, res[keep], circles=live.size))
         phi[live] -= d_phi
         T[live] -= d_T
     return out
+
+
+def _limited(model, d_phi, d_T):
+    """The Newton step ``(d phi (..., n) rad, d T (..., n, 4) N)`` shortened, per circle
+    (leading axes), so that no node's roll moves by more than :data:`MAX_ROLL_STEP` and no
+    thrust by more than the motors' range; a step within both is returned bit for bit."""
+    v = model.config.vehicle
+    size = np.maximum(np.abs(d_phi).max(-1) / MAX_ROLL_STEP,
+                      np.abs(d_T).max((-2, -1)) / (v.thrust_max - v.thrust_min))
+    f = 1.0 / np.maximum(size, 1.0)  # exactly 1 unless the step is long
+    return d_phi * f[..., None], d_T * f[..., None, None]
 
 
 def _newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40, offsets=None, *,
@@ -283,7 +303,7 @@ def _newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40, offsets=
         if np.abs(res).max() < tol * scale:
             return phi, T
         Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets, actual=actual)
-        d_phi, d_T = _newton_step(Jl, D1, D2, res)
+        d_phi, d_T = _limited(model, *_newton_step(Jl, D1, D2, res))
         phi = phi - d_phi
         T = T - d_T
     raise TrimError(f"trim did not converge (residual {np.abs(res).max():.3g})")

@@ -353,6 +353,24 @@ def test_a_dip_the_nodes_miss_costs_one_more_round_from_the_last(improved, monke
     assert lo - u1.min() > 16 * offsets_mod.NODE_SAFETY_N  # beyond what doubling covered
 
 
+def test_a_long_newton_step_of_the_search_is_shortened(improved, monkeypatch):
+    """Issue 39: at 13 m/s and 37 deg the zero-offset commands reach below zero, where
+    momentum theory's thrust has no slope in its command. The search's second trim, from
+    the first iterate's solution, took full Newton steps of 98 rad in roll and landed on a
+    spurious solution (roll 96 rad, commands to 3.7e3 N); SLSQP stayed there for 158 trims
+    before giving up. With the steps limited (``trim.MAX_ROLL_STEP``, the motors' range)
+    that trim does not converge, the search ends at once, and the circle has no offsets, as
+    before."""
+    calls = []
+    newton = offsets_mod._newton
+    monkeypatch.setattr(offsets_mod, "_newton",
+                        lambda *a, **k: calls.append(1) or newton(*a, **k))
+    cfg = improved.config
+    assert offsets_mod.solve_offsets(improved, 13.0, np.deg2rad(37.0),
+                                     bound=cfg.feasibility.max_attitude_offset) is None
+    assert len(calls) <= 10
+
+
 def test_bounds_that_would_cross_end_the_search(improved, monkeypatch):
     """A check that finds the motors out by more than half the thrust range leaves no room
     between the bounds: no offsets, after one SLSQP (before: three more, the last at bounds

@@ -270,3 +270,23 @@ def test_a_smooth_circles_commands_are_the_modifiers_inverse(keys, monkeypatch):
     tol = 1e-8 * np.abs(u_i).max()  # N
     np.testing.assert_allclose(u, u_i, rtol=0, atol=tol)
     np.testing.assert_allclose(z, z_i, rtol=0, atol=tol)
+
+
+def test_a_long_newton_step_is_shortened_and_a_short_one_kept(model):
+    """The collocation's Newton steps are limited per circle to ``MAX_ROLL_STEP`` in roll
+    and the motors' range in thrust (the longer of the two decides), the direction kept; a
+    step within both is returned bit for bit."""
+    from gainsched.schedule import trim
+
+    v = model.config.vehicle
+    span = v.thrust_max - v.thrust_min
+    rng = np.random.default_rng(3)
+    d_phi, d_T = rng.normal(size=(3, 16)) * 0.1, rng.normal(size=(3, 16, 4))
+    d_phi[1, 5] = 4 * trim.MAX_ROLL_STEP  # circle 1: roll four times too long
+    d_T[2, 7, 1] = 3 * span  # circle 2: a thrust three times the range
+    got_phi, got_T = trim._limited(model, d_phi, d_T)
+    assert np.array_equal(got_phi[0], d_phi[0]) and np.array_equal(got_T[0], d_T[0])
+    for c, f in ((1, 0.25), (2, 1 / 3)):
+        np.testing.assert_allclose(got_phi[c], f * d_phi[c], rtol=1e-15)
+        np.testing.assert_allclose(got_T[c], f * d_T[c], rtol=1e-15)
+    assert np.abs(got_phi).max() <= trim.MAX_ROLL_STEP and np.abs(got_T).max() <= span
