@@ -115,7 +115,7 @@ def main() -> dict:
         f"build of the paper grid cut to 5 speeds x 3 tilts ({g.spectral_radius.size} "
         "circles), drag only (closed form)"), lambda g: "")
     _against_drag_only(out, "paper_", build, PAPER.read_text(), "paper.toml",
-                       _each(PAPER_EFFECTS) | {"improved": IMPROVED}, 1, lambda g: (
+                       _each(PAPER_EFFECTS) | {"improved": IMPROVED}, 2, lambda g: (
                            f"the paper grid ({g.spectral_radius.size} circles), drag only"
                            f"{gains(g)}"), gains)
     _against_drag_only(out, "auto_", auto, USER_QUAD.read_text(), "user_quad.toml",

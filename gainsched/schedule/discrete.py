@@ -167,7 +167,7 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
     err : float   the last interpolation check (0 if direct); M and err are arrays (n_a,)
         when some tilts were computed directly and others not
     """
-    rough = np.array([N > 2 * m0 and circle_is_rough(model, speed, a, N) for a in tilts])
+    rough = np.array([N > 2 * m0 and circle_is_rough(model, speed, a) for a in tilts])
     if rough.any() and not rough.all():  # each part its own way, put back in tilt order
         smooth, direct = (discrete_system(model, speed, np.asarray(tilts)[p], N, dt, tol=tol,
                                           m0=m0) for p in (~rough, rough))

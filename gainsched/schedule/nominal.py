@@ -127,11 +127,11 @@ def circle_nominal(model, speed: float, alpha: float, n: int, xi0: float = 0.0) 
 
 
 
-def circle_is_rough(model, speed: float, alpha: float, n: int) -> bool:
-    """Whether :func:`circle_nominal` at ``n`` samples is not smooth at the trim's resolution
-    (:func:`gainsched.schedule.trim.is_rough`: its thrusts solved sample by sample, or its
-    commands sharper than the interpolant of the node commands). False for the closed
-    form.
+def circle_is_rough(model, speed: float, alpha: float) -> bool:
+    """Whether the circle's nominal (:func:`circle_nominal`) is not smooth at the trim's
+    resolution (:func:`gainsched.schedule.trim.is_rough`, checked once per circle: its
+    thrusts solved sample by sample, or its commands sharper than the interpolant of the
+    node commands). False for the closed form.
 
     Parameters
     ----------
@@ -140,15 +140,11 @@ def circle_is_rough(model, speed: float, alpha: float, n: int) -> bool:
         Tangential COG speed, m/s.
     alpha : float
         Circle tilt, rad.
-    n : int
-        Samples per period.
     """
     offsets = circle_offsets(model, speed, alpha)
     if offsets is None and model.closed_form_drag() is not None:
         return False
-    T = period(speed, model.r)
-    t = np.arange(n) * (T / n)
-    return is_rough(model, circle_path(speed, model.r, t), alpha, offsets)
+    return is_rough(model, circle_path(speed, model.r, np.zeros(1)), alpha, offsets)
 
 # offsets per model and circle: a circle's nominal is asked for at several sample counts
 _OFFSETS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()

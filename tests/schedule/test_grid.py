@@ -260,7 +260,7 @@ def test_rough_and_smooth_tilts_in_one_batch_equal_single_tilt_solves(momentum_c
     model = Model(momentum_config)
     N = steps_per_period(9.0, model.r, momentum_config.control.dt)
     tilts = np.deg2rad([40.0, 20.0])
-    assert [circle_is_rough(model, 9.0, a, N) for a in tilts] == [True, False]
+    assert [circle_is_rough(model, 9.0, a) for a in tilts] == [True, False]
     both = solve_circle(momentum_config, 9.0, tilts)
     assert both.lin_samples.tolist()[0] == N and both.lin_samples[1] < N / 4
     for i, a in enumerate(tilts):

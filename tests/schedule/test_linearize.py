@@ -222,7 +222,7 @@ def test_a_rough_circles_system_through_the_thrust_modifiers_is_the_whole_models
     v, a = 9.0, np.deg2rad(40.0)
     N = steps_per_period(v, m.r, paper_config.control.dt)
     dt = 2 * np.pi * m.r / v / N
-    assert circle_is_rough(m, v, a, N)
+    assert circle_is_rough(m, v, a)
     Ad, Bd, M, err = discrete_system(m, v, [a], N, dt)
     Ad0, Bd0 = _discrete_at(m, v, [a], N, dt)
     assert M == N and 0.0 < err < 1e-10  # the smooth part interpolated
