@@ -20,11 +20,15 @@ those offsets, and the constraint gradients come from the implicit function
 theorem on that trim's Newton Jacobian (one extra linear solve), not from finite
 differences. The bounds hold for the commanded thrusts (with a motor lag: ``T + tau
 T'``) at :data:`FINE` points per node of the collocation's interpolant, so that the
-nominal between the nodes keeps them too. Unlike the trim's, this collocation's free
-thrusts are the input of the thrust modifiers (the commands, or a motor lag's states),
-in which the bounds are linear: through momentum theory's inverse (paper eq. 29) a
-command near zero thrust moves by tens of newtons per degree of offset (the thrust goes
-as the command's 3/2 power there), which SLSQP does not follow (issue 39, measured).
+nominal between the nodes keeps them too. The collocation solves for the actual thrusts,
+as the trim's does (the model at given thrusts never goes through the thrust modifiers);
+the bounds are on the interpolant of the node values of the modifiers' input (the
+commands, or a motor lag's states), taken from the modifiers' inverse at the nodes, with
+their gradients by the chain rule through it (:func:`_inputs_at_nodes`). The bounds are
+linear in those node values: put on the inverse of the interpolated actual thrusts
+instead, a command near zero thrust moves by tens of newtons per degree of offset
+(momentum theory's thrust goes as the command's 3/2 power there, paper eq. 29), which
+SLSQP does not follow (issue 39, measured).
 scipy's SLSQP is the optimizer; the collocation and its sensitivities are ours because
 no library offers this trim (see :mod:`gainsched.schedule.trim`).
 """
@@ -36,12 +40,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
+from ..model.thrustmap import thrust_partials
+from .closedform import state_from_attitude
 from .path import AzimuthPath, circle_path, period
 from .trim import (
     TrimError,
     _fourier_operators,
     _fourier_samples,
     _initial_guess,
+    _inputs,
     _local_jacobians,
     _newton,
     _newton_step,
@@ -226,6 +233,42 @@ def _command_map(model, P, P1):
     return P if not lag else lag[0].steady_states(P, P1)[1]
 
 
+def _inputs_at_nodes(model, nodes, alpha, D1, D2, phi, T, off, dphi_dp, dT_dp, trip,
+                     start=None):
+    """The thrust modifiers' input ``T0`` (n, 4) N at the nodes of a solved collocation
+    (roll ``phi`` (n,) rad, actual thrusts ``T`` (n, 4) N, offsets ``off`` along the nodes)
+    and its sensitivity to the offsets' coefficients (n, 4, 2 nb) N per coefficient, from
+    those of the roll and the actual thrusts (``dphi_dp`` (n, 2 nb), ``dT_dp`` (n, 4,
+    2 nb)) by the chain rule through ``F(s, T0) = T``: ``dT0/dp = F_T0^-1 (dT/dp - F_s
+    ds/dp)``, ``ds/dp`` through the attitude (roll and offsets, each with its two time
+    derivatives) by complex steps of :func:`state_from_attitude`; ``trip`` the offsets'
+    node values and time derivatives per coefficient (3 of (n, nb)); ``start`` (n, 4) N
+    where the inverse starts (the last search point's, default ``T``)."""
+    roll = (phi, D1 @ phi, D2 @ phi)
+    angles = [roll, *off]  # roll, pitch, yaw: each (value, rate, acceleration)
+    s, _ = state_from_attitude(nodes, *angles)
+    T0 = _inputs(model, s, T, alpha, start=start, where="nodes")[0]
+    F_s, F_T0 = thrust_partials(model, s, T0, alpha)
+    n, nb = phi.size, trip[0].shape[1]
+    # d s / d (each angle and its derivatives): 9 complex steps (n, 10, 9)
+    h = 1e-30
+    ds_dq = np.empty((n, s.shape[-1], 9))
+    for i in range(3):
+        for j in range(3):
+            moved = [list(x) for x in angles]
+            moved[i][j] = moved[i][j] + 1j * h
+            ds_dq[:, :, 3 * i + j] = np.imag(state_from_attitude(nodes, *map(tuple, moved))[0]) / h
+    # d (angles) / dp (n, 9, 2 nb): the roll's through the trim, each offset's own series
+    dq_dp = np.zeros((n, 9, 2 * nb))
+    for j, D in enumerate((None, D1, D2)):
+        dq_dp[:, j] = dphi_dp if D is None else D @ dphi_dp
+    for a in range(2):
+        for j in range(3):
+            dq_dp[:, 3 + 3 * a + j, a * nb:(a + 1) * nb] = trip[j]
+    ds_dp = ds_dq @ dq_dp  # (n, 10, 2 nb)
+    return T0, np.linalg.solve(F_T0, dT_dp - F_s @ ds_dp[:, :F_s.shape[-1]])
+
+
 def _solve(model, speed, alpha, bound, harmonics, n_nodes, lo, hi, start=None):
     """One SLSQP at node thrust bounds ``[lo, hi]`` (N) from the offsets ``start`` (default
     zero); None if it fails."""
@@ -240,34 +283,41 @@ def _solve(model, speed, alpha, bound, harmonics, n_nodes, lo, hi, start=None):
     command = _command_map(model, P, P1)
     B, _, _ = _basis(nodes.xi, harmonics)
     nb = B.shape[1]
-    state = dict(zip(("phi", "T"), _initial_guess(model, nodes, alpha), strict=True))
+    state = dict(zip(("phi", "T"), _initial_guess(model, nodes, alpha), strict=True), T0=None)
     cache: dict[bytes, tuple] = {}
 
     def offsets_of(x):
         return AttitudeOffsets(x[:nb] * _DEG, x[nb:] * _DEG)
 
+    dB = _basis(nodes.xi, harmonics)
+    xd = nodes.d[0]
+    # node values and time derivatives of the offsets per coefficient (n, nb)
+    trip = (dB[0], xd[:, None] * dB[1], xd[:, None] ** 2 * dB[2])
+    modifiers = bool(model.thrust_modifiers)
+
     def solve(p):
         key = p.tobytes()
         if key not in cache:
             off = offsets_of(p).along(nodes)
+            # the trim in actual thrusts (the model at given thrusts never goes through the
+            # modifiers; without modifiers they are the commands)
             phi, T = _newton(model, nodes, alpha, D1, D2, state["phi"], state["T"],
-                             offsets=off, actual=False)
+                             offsets=off)
             state["phi"], state["T"] = phi, T
             # implicit function theorem: R(y(p), p) = 0  ->  dy/dp = -R_y^-1 R_p
             Jl = _local_jacobians(model, nodes, alpha, phi, D1 @ phi, D2 @ phi, T, off,
-                                  wrt_offsets=True, actual=False)
-            dB = _basis(nodes.xi, harmonics)
-            xd = nodes.d[0]
-            # node values and time derivatives of the offsets per coefficient (n, nb)
-            trip = (dB[0], xd[:, None] * dB[1], xd[:, None] ** 2 * dB[2])
+                                  wrt_offsets=True)
             Rp = np.zeros((n_nodes, 5, 2 * nb))
             for a in range(2):
                 Rp[:, :, a * nb:(a + 1) * nb] = sum(
                     Jl[:, :, 7 + 3 * a + j, None] * trip[j][:, None] for j in range(3))
-            dT = -_newton_step(Jl, D1, D2, Rp)[1]  # (n, 4, 2 nb)
+            d_phi, d_T = _newton_step(Jl, D1, D2, Rp)  # (n, 2 nb), (n, 4, 2 nb), negated
+            T0, dT0 = (T, -d_T) if not modifiers else _inputs_at_nodes(
+                model, nodes, alpha, D1, D2, phi, T, off, -d_phi, -d_T, trip, state["T0"])
+            state["T0"] = T0
             cache.clear()
-            dU = np.einsum("fn,nmp->mfp", command, dT).reshape(-1, 2 * nb)
-            cache[key] = (command @ T, dU * _DEG)
+            dU = np.einsum("fn,nmp->mfp", command, dT0).reshape(-1, 2 * nb)
+            cache[key] = (command @ T0, dU * _DEG)
         return cache[key]
 
     G = B.T @ B / n_nodes  # mean square of a series over the nodes: c^T G c

@@ -156,14 +156,11 @@ def _sub_path(path: AzimuthPath, idx) -> AzimuthPath:
     return AzimuthPath(path.t[idx], path.xi[idx], tuple(d[idx] for d in path.d))
 
 
-def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T, offsets=None, *,
-           actual=True):
+def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T, offsets=None):
     """Residuals (n, 5) of the node equations, and the full state and its derivative.
 
     ``offsets``: ``(pitch, yaw)``, each ``(value, rate, acceleration)`` at the nodes, or None.
-    ``T`` (n, 4): the actual thrusts, or with ``actual=False`` the input of the thrust
-    modifiers (the commands, or a motor lag's states: the offsets' optimisation, which
-    bounds the commands at its nodes).
+    ``T`` (n, 4): the actual thrusts.
     """
     pitch, yaw = (None, None) if offsets is None else offsets
     s, sdot = state_from_attitude(path, (phi, dphi, ddphi), pitch, yaw)
@@ -173,7 +170,7 @@ def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T, offsets=None, *
         z = np.concatenate([s.astype(T.dtype), T], -1)
     else:
         z = s.astype(np.result_type(s, T))
-    ev = model.evaluate(z, T, alpha, thrust=T if actual else None)
+    ev = model.evaluate(z, T, alpha, thrust=T)
     res = np.stack(
         [
             ev.z_dot[:, 2],
@@ -188,7 +185,7 @@ def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T, offsets=None, *
 
 
 def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets=None, *,
-                     wrt_offsets=False, thrust_only=False, actual=True):
+                     wrt_offsets=False, thrust_only=False):
     """d res / d(phi, phi', phi'', T1..T4) per node by complex steps, shape (n, 5, 7); with
     ``wrt_offsets`` six more columns, d res / d(theta, theta', theta'', chi, chi', chi'');
     with ``thrust_only`` the four thrust columns alone, shape (n, 5, 4).
@@ -213,7 +210,7 @@ def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets=None, *,
             off[j][(7 + j - first) * n:(8 + j - first) * n] += 1j * h
     o = (tuple(off[:3]), tuple(off[3:]))
     a = alpha if np.ndim(alpha) == 0 else np.asarray(alpha)[tile]  # a tilt per node
-    res = np.imag(_local(model, _sub_path(path, tile), a, *roll, Tc, o, actual=actual)[0]) / h
+    res = np.imag(_local(model, _sub_path(path, tile), a, *roll, Tc, o)[0]) / h
     return res.reshape(m, n, 5).transpose(1, 2, 0)
 
 
@@ -294,15 +291,14 @@ def _limited(model, d_phi, d_T):
     return d_phi * f[..., None], d_T * f[..., None, None]
 
 
-def _newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40, offsets=None, *,
-            actual=True):
+def _newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40, offsets=None):
     scale = max(1.0, float(np.abs(path.d[0]).max()) ** 2)
     for _ in range(max_iter):
         dphi, ddphi = D1 @ phi, D2 @ phi
-        res = _local(model, path, alpha, phi, dphi, ddphi, T, offsets, actual=actual)[0]
+        res = _local(model, path, alpha, phi, dphi, ddphi, T, offsets)[0]
         if np.abs(res).max() < tol * scale:
             return phi, T
-        Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets, actual=actual)
+        Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets)
         d_phi, d_T = _limited(model, *_newton_step(Jl, D1, D2, res))
         phi = phi - d_phi
         T = T - d_T
