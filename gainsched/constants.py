@@ -9,6 +9,7 @@ from __future__ import annotations
 from enum import IntFlag
 
 __all__ = [
+    "COMPLEX_STEP",
     "N_STATE",
     "N_INPUT",
     "INTEGRATORS",
@@ -33,6 +34,10 @@ __all__ = [
 
 #: reduced state (delta, xi, delta', xi', phi, theta, chi, omega_x, omega_y, omega_z)
 N_STATE = 10
+#: the imaginary step of every complex-step derivative (the model's Jacobians, the trim's
+#: local partials, the thrust modifiers' partials): exact to rounding for any step this
+#: small, since no subtraction cancels
+COMPLEX_STEP = 1e-30
 #: names of the reduced state entries (LQR state columns 0-9)
 REDUCED_NAMES = ("delta", "xi", "delta_dot", "xi_dot", "phi", "theta", "chi",
                  "omega_x", "omega_y", "omega_z")

@@ -19,11 +19,10 @@ import dataclasses
 
 import numpy as np
 
-from ..constants import N_STATE
+from ..constants import COMPLEX_STEP, N_STATE
 
 __all__ = ["thrust_from_input", "input_from_thrust", "thrust_partials"]
 
-_H = 1e-30  # complex step
 
 
 def thrust_from_input(model, T0, kin):
@@ -53,8 +52,8 @@ def _batch(model, s, alpha):
 def _jacobian(model, T0, kin):
     """``d T_i / d T0_j`` (..., 4, 4) at the input ``T0`` (..., 4) N and the kinematics
     ``kin`` of :func:`_batch`, by complex steps."""
-    G = thrust_from_input(model, T0[..., None, :] + 1j * _H * np.eye(4), kin)
-    return np.swapaxes(np.imag(G), -1, -2) / _H
+    G = thrust_from_input(model, T0[..., None, :] + 1j * COMPLEX_STEP * np.eye(4), kin)
+    return np.swapaxes(np.imag(G), -1, -2) / COMPLEX_STEP
 
 
 def _take(kin, idx):
@@ -123,9 +122,9 @@ def input_from_thrust(model, s, T, alpha, rates=None, *, start=None, tol=1e-13, 
     converged = np.zeros(T.shape[0], dtype=bool)
     slope = np.ones_like(T0)  # d T_i / d T0_i at the points' last input
     for step in range(max_iter + 1):
-        G = thrust_from_input(model, T0[idx, None, :] + 1j * _H, _take(kin, idx))[:, 0]
+        G = thrust_from_input(model, T0[idx, None, :] + 1j * COMPLEX_STEP, _take(kin, idx))[:, 0]
         miss = np.real(G) - T[idx]
-        slope[idx] = np.imag(G) / _H
+        slope[idx] = np.imag(G) / COMPLEX_STEP
         done = np.abs(miss).max(-1) <= scale[idx]
         converged[idx[done]] = True
         if done.all() or step == max_iter:
@@ -136,8 +135,9 @@ def input_from_thrust(model, s, T, alpha, rates=None, *, start=None, tol=1e-13, 
     if rates is None:
         return T0, None, converged
     s_dot, T_dot = rates
-    moved = _batch(model, s + 1j * _H * s_dot, alpha)  # d thrust / d s s', one complex step
-    rhs = T_dot - np.imag(thrust_from_input(model, T0[:, None, :], moved)[:, 0]) / _H
+    # d thrust / d s s', one complex step
+    moved = _batch(model, s + 1j * COMPLEX_STEP * s_dot, alpha)
+    rhs = T_dot - np.imag(thrust_from_input(model, T0[:, None, :], moved)[:, 0]) / COMPLEX_STEP
     if _per_motor(model, T0, kin):
         return T0, rhs / slope, converged
     J = _jacobian(model, T0, kin)
@@ -149,6 +149,7 @@ def thrust_partials(model, s, T0, alpha):
     ``T0`` (..., 4) N by complex steps: ``d F / d s`` (..., 4, 10) and ``d F / d T0``
     (..., 4, 4) (the linearisation of a circle whose commands are sharp:
     :mod:`gainsched.schedule.discrete`)."""
-    moved = _rows(model, s[..., None, :N_STATE] + 1j * _H * np.eye(N_STATE), alpha)
+    moved = _rows(model, s[..., None, :N_STATE] + 1j * COMPLEX_STEP * np.eye(N_STATE), alpha)
     F_s = thrust_from_input(model, T0[..., None, :], moved)
-    return np.swapaxes(np.imag(F_s), -1, -2) / _H, _jacobian(model, T0, _batch(model, s, alpha))
+    return (np.swapaxes(np.imag(F_s), -1, -2) / COMPLEX_STEP,
+            _jacobian(model, T0, _batch(model, s, alpha)))

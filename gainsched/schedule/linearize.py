@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import N_STATE
-from ..constants import INTEGRATORS, REDUCED_NAMES
+from ..constants import COMPLEX_STEP, INTEGRATORS, REDUCED_NAMES
 
 __all__ = [
     "jacobians",
@@ -28,7 +28,6 @@ __all__ = [
 #: the paper's LQR state (reduced state and the delta integral)
 STATE_NAMES = REDUCED_NAMES + ("int_delta",)
 INPUT_NAMES = ("T1", "T2", "T3", "T4")
-_H = 1e-30
 
 
 def jacobians(model, z, u, alpha, thrust=None):
@@ -54,12 +53,12 @@ def jacobians(model, z, u, alpha, thrust=None):
         (np.shape(thrust)[:-1],) if given else ()))
     # one batched evaluation for all perturbation directions: axis -2 enumerates them
     k = n_z + (8 if given else 4)
-    E = np.eye(k) * (1j * _H)
+    E = np.eye(k) * (1j * COMPLEX_STEP)
     zc = np.broadcast_to(z[..., None, :], shape + (k, n_z)) + E[:, :n_z]
     uc = np.broadcast_to(u[..., None, :], shape + (k, 4)) + E[:, n_z:n_z + 4]
     Fc = np.broadcast_to(thrust[..., None, :], shape + (k, 4)) + E[:, n_z + 4:] if given else None
     a = np.asarray(alpha)[..., None] if np.ndim(alpha) else alpha
-    J = np.imag(model.evaluate(zc, uc, a, thrust=Fc).z_dot) / _H  # row j = d f / d x_j
+    J = np.imag(model.evaluate(zc, uc, a, thrust=Fc).z_dot) / COMPLEX_STEP  # row j = d f / d x_j
     J = np.swapaxes(J, -1, -2)
     return (J[..., :n_z], J[..., n_z:n_z + 4]) + ((J[..., n_z + 4:],) if given else ())
 

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
+from ..constants import COMPLEX_STEP
 from ..model.thrustmap import thrust_partials
 from .closedform import state_from_attitude
 from .path import AzimuthPath, circle_path, period
@@ -251,7 +252,7 @@ def _inputs_at_nodes(model, nodes, alpha, D1, D2, phi, T, off, dphi_dp, dT_dp, t
     F_s, F_T0 = thrust_partials(model, s, T0, alpha)
     n, nb = phi.size, trip[0].shape[1]
     # d s / d (each angle and its derivatives): 9 complex steps (n, 10, 9)
-    h = 1e-30
+    h = COMPLEX_STEP
     ds_dq = np.empty((n, s.shape[-1], 9))
     for i in range(3):
         for j in range(3):

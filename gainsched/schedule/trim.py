@@ -36,7 +36,7 @@ import weakref
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
-from ..constants import N_STATE
+from ..constants import COMPLEX_STEP, N_STATE
 from ..errors import GainschedError
 from ..model.thrustmap import input_from_thrust
 from .closedform import closed_form, state_from_attitude
@@ -192,7 +192,7 @@ def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets=None, *,
 
     The complex steps of every column go through the model in one evaluation (the nodes
     repeated once per column): the model's cost is per call more than per node."""
-    h = 1e-30
+    h = COMPLEX_STEP
     n = np.size(phi)
     first = 3 if thrust_only else 0  # the first column computed
     m = (13 if wrt_offsets else 7) - first
