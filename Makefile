@@ -72,8 +72,9 @@ FW_TABLE  ?= tables/paper.h5
 FW_DIR    ?= build/firmware
 # the C prefix of FW_TABLE's symbols (paper_table, PAPER_N_STATE): the examples are built
 # for any table (examples/firmware/any_table.h); read only by the firmware targets
-FW_NAME    = $(shell $(BIN)/gainsched inspect $(FW_TABLE) --json \
-	| $(BIN)/python -c "import json, sys; print(json.load(sys.stdin)['c_prefix'])")
+# (empty for a table inspect cannot read: the target's export-c then says why, in one line)
+FW_NAME    = $(shell $(BIN)/gainsched inspect $(FW_TABLE) --json 2>/dev/null \
+	| $(BIN)/python -c "import json, sys; t = sys.stdin.read(); print(json.loads(t)['c_prefix'] if t else '')")
 FW_NAMES   = -DGS_NAME=$(FW_NAME) -DGS_NAME_UC=$(shell echo $(FW_NAME) | tr a-z A-Z)
 FW_CFLAGS ?= -std=c99 -Wall -Wextra -Wpedantic -Werror -O2
 M4F_FLAGS  = -mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard -Os -ffunction-sections -fdata-sections
@@ -97,7 +98,9 @@ firmware-example: $(STAMP)
 # arm-none-eabi-gcc).
 firmware-size: $(STAMP)
 	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR)/dense --format dense --no-code-size
-	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR)/compact --format compact --no-code-size
+	@rm -rf $(FW_DIR)/compact; \
+	$(BIN)/gainsched export-c $(FW_TABLE) -o $(FW_DIR)/compact --format compact --no-code-size \
+		|| echo "firmware-size: no compact table of $(FW_TABLE) (why: the line above); the dense one alone"
 	@set -e; \
 	if command -v arm-none-eabi-gcc >/dev/null 2>&1; then \
 		CC_SIZE="arm-none-eabi-gcc $(FW_CFLAGS) $(M4F_FLAGS)"; SIZE=arm-none-eabi-size; \
@@ -107,6 +110,7 @@ firmware-size: $(STAMP)
 		CC_SIZE="$(CC) $(FW_CFLAGS) -Os"; SIZE=size; TARGET="host ($(CC) -Os)"; \
 	fi; \
 	for fmt in dense compact; do \
+		[ -f $(FW_DIR)/$$fmt/gainsched_runtime.c ] || continue; \
 		$$CC_SIZE -I$(FW_DIR)/$$fmt -c $(FW_DIR)/$$fmt/gainsched_runtime.c -o $(FW_DIR)/$$fmt/runtime.o; \
 		$$CC_SIZE -I$(FW_DIR)/$$fmt -c $(FW_DIR)/$$fmt/gainsched_control.c -o $(FW_DIR)/$$fmt/control.o; \
 		$$CC_SIZE $(FW_NAMES) -I$(FW_DIR)/$$fmt -c examples/firmware/size_probe.c -o $(FW_DIR)/$$fmt/table.o; \

@@ -53,6 +53,7 @@ from .trim import (
     _local_jacobians,
     _newton,
     _newton_step,
+    _sub_path,
 )
 
 __all__ = [
@@ -251,14 +252,15 @@ def _inputs_at_nodes(model, nodes, alpha, D1, D2, phi, T, off, dphi_dp, dT_dp, t
     T0 = _inputs(model, s, T, alpha, start=start, where="nodes")[0]
     F_s, F_T0 = thrust_partials(model, s, T0, alpha)
     n, nb = phi.size, trip[0].shape[1]
-    # d s / d (each angle and its derivatives): 9 complex steps (n, 10, 9)
+    # d s / d (each angle and its derivatives): 9 complex steps in one evaluation, the
+    # nodes repeated once per step (n, 10, 9)
     h = COMPLEX_STEP
-    ds_dq = np.empty((n, s.shape[-1], 9))
-    for i in range(3):
-        for j in range(3):
-            moved = [list(x) for x in angles]
-            moved[i][j] = moved[i][j] + 1j * h
-            ds_dq[:, :, 3 * i + j] = np.imag(state_from_attitude(nodes, *map(tuple, moved))[0]) / h
+    tile = np.tile(np.arange(n), 9)
+    moved = [[np.asarray(x, dtype=complex)[tile] for x in angle] for angle in angles]
+    for k in range(9):
+        moved[k // 3][k % 3][k * n:(k + 1) * n] += 1j * h
+    s_c = state_from_attitude(_sub_path(nodes, tile), *map(tuple, moved))[0]
+    ds_dq = (np.imag(s_c) / h).reshape(9, n, -1).transpose(1, 2, 0)
     # d (angles) / dp (n, 9, 2 nb): the roll's through the trim, each offset's own series
     dq_dp = np.zeros((n, 9, 2 * nb))
     for j, D in enumerate((None, D1, D2)):

@@ -85,11 +85,15 @@ _SAMPLES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 # per model, circle and node count: the node rows its samplings interpolate and whether the
 # interpolant meets the model (:func:`_circle`)
 _CIRCLES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# per model, circle and samples: the thrust modifiers' input (and its rate) from their
+# inverse at the samples of a circle whose commands are rough (the grid's nominal and its
+# linearisation both sample the N control steps; the same inputs give the same input)
+_INPUTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def _forget(model) -> None:
     """Drop every cached solution of ``model`` (tests that solve a circle again)."""
-    for cache in (_NODES, _SAMPLES, _CIRCLES):
+    for cache in (_NODES, _SAMPLES, _CIRCLES, _INPUTS):
         cache.pop(model, None)
 
 
@@ -431,9 +435,9 @@ def _circle(model, path: AzimuthPath, alpha: float, offsets=None):
         return (key, *cache[key, N_FOURIER])
     solved = _NODES.setdefault(model, {})
     D1, D2 = _fourier_operators(N_FOURIER, Tp)
+    off_n = None if offsets is None else offsets.along(nodes)
     if key not in solved:
         phi0, u0 = _initial_guess(model, nodes, alpha)
-        off_n = None if offsets is None else offsets.along(nodes)
         solved[key] = _newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
     phi_n, T_n = solved[key]
     n = _smooth_samples()
@@ -445,7 +449,7 @@ def _circle(model, path: AzimuthPath, alpha: float, offsets=None):
     smooth_input = True
     if model.thrust_modifiers:
         s_n, _ = state_from_attitude(nodes, (phi_n, D1 @ phi_n, D2 @ phi_n),
-                                     *((None, None) if offsets is None else offsets.along(nodes)))
+                                     *((None, None) if off_n is None else off_n))
         rows.append(_inputs(model, s_n, T_n, alpha, where="nodes")[0].T)
         g, g1, _ = _fourier_samples(rows[-1], Tp, n)
         s = z[:, :N_STATE]
@@ -494,16 +498,20 @@ def _lagged(model, s, sdot, T0, T0_dot):
     return np.concatenate([s, T0], -1), np.concatenate([sdot, T0_dot], -1), u
 
 
-def _commands(model, alpha, s, sdot, T, T_dot, start=None):
+def _commands(model, alpha, s, sdot, T, T_dot, start=None, key=None):
     """:func:`_lagged` of the reduced states ``s, sdot`` (n, 10) and the actual thrusts
     ``T`` (n, 4) N with their rate ``T_dot`` N/s: the thrust modifiers' input from their
     inverse (:func:`~gainsched.model.thrustmap.input_from_thrust`, from ``start`` (n, 4) N
-    if given; the actual thrusts themselves without modifiers). Raises TrimError where the
-    inverse did not converge."""
+    if given; the actual thrusts themselves without modifiers), computed once per ``key``
+    (a circle's samples: :data:`_INPUTS`) if given. Raises TrimError where the inverse did
+    not converge."""
     T0, T0_dot = T, T_dot
     if model.thrust_modifiers:
-        rates = (sdot, T_dot) if model.n_extra else None
-        T0, T0_dot = _inputs(model, s, T, alpha, rates, start)
+        cache = {} if key is None else _INPUTS.setdefault(model, {})
+        if key not in cache:
+            rates = (sdot, T_dot) if model.n_extra else None
+            cache[key] = _inputs(model, s, T, alpha, rates, start)
+        T0, T0_dot = (None if x is None else x.copy() for x in cache[key])  # callers own
     return _lagged(model, s, sdot, T0, T0_dot)
 
 
@@ -550,6 +558,7 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
     if periodic:
         key, (phi, dphi, ddphi, T, T_dot, tension, start, start_dot), (meets, smooth_input) = (
             _periodic_guess(model, path, alpha, offsets))
+        pkey = (key, N_FOURIER, t.tobytes())  # this circle at these samples
         if meets:  # the interpolant meets the model: no evaluation at the samples
             z, sdot = state_from_attitude(path, (phi, dphi, ddphi),
                                           *((None, None) if off is None else off))
@@ -558,14 +567,13 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
                 return z, z_dot, u, tension
         else:  # the thrusts sample by sample (cached per circle and samples)
             cache = _SAMPLES.setdefault(model, {})
-            pkey = (key, N_FOURIER, t.tobytes())
             if pkey not in cache:
                 cache[pkey] = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off)
             T = cache[pkey]
             _, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
             tension = ev.tension
     else:
-        start = None
+        start = pkey = None
         idx = np.unique(np.linspace(0, t.size - 1, min(t.size, N_SPLINE_MAX)).round().astype(int))
         nodes = _sub_path(path, idx)
         spl = make_interp_spline(nodes.t, np.eye(idx.size), k=5)
@@ -581,5 +589,5 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
             T = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off, res=res)
             res, z, sdot, ev = _local(model, path, alpha, phi, dphi, ddphi, T, off)
         tension = ev.tension
-    z, z_dot, u = _commands(model, alpha, z[:, :N_STATE], sdot, T, T_dot, start)
+    z, z_dot, u = _commands(model, alpha, z[:, :N_STATE], sdot, T, T_dot, start, pkey)
     return z, z_dot, u, tension

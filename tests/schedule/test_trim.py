@@ -272,6 +272,38 @@ def test_a_smooth_circles_commands_are_the_modifiers_inverse(keys, monkeypatch):
     np.testing.assert_allclose(z, z_i, rtol=0, atol=tol)
 
 
+@pytest.mark.parametrize("keys", [{"effects.thrust_momentum.disk_area": 0.006}, IMPROVED],
+                         ids=["thrust_momentum", "improved"])
+def test_a_rough_circles_commands_are_inverted_once_per_sampling(keys, monkeypatch):
+    """Issue 39: a circle whose commands are rough (momentum theory's floored inflow, 7.5
+    m/s at 34 deg) takes the modifiers' inverse at its samples
+    once per sampling (the grid's nominal and its linearisation both sample the N control
+    steps): asked again, the commands are the first answer bit for bit, without the
+    inverse, and a caller that changes them changes no later answer; another sampling
+    inverts again."""
+    from gainsched.schedule import trim
+
+    m = paper_model(**keys)
+    v, a, n = 7.5, np.deg2rad(34.0), 700
+    path = circle_path(v, m.r, np.arange(n) * (period(v, m.r) / n))
+    assert trim.is_rough(m, path, a)
+    calls = []
+    inputs = trim._inputs
+    monkeypatch.setattr(trim, "_inputs", lambda *a, **k: calls.append(1) or inputs(*a, **k))
+    z, z_dot, u, _ = trim_path(m, path, a, periodic=True)
+    assert len(calls) == 1
+    first = [x.copy() for x in (z, z_dot, u)]
+    for x in (z, z_dot, u):
+        x[:] = np.nan
+    again = trim_path(m, path, a, periodic=True)
+    assert len(calls) == 1
+    for x, y in zip(first, again, strict=False):
+        np.testing.assert_array_equal(x, y)
+    other = circle_path(v, m.r, np.arange(n + 1) * (period(v, m.r) / (n + 1)))
+    trim_path(m, other, a, periodic=True)
+    assert len(calls) == 2
+
+
 def test_a_long_newton_step_is_shortened_and_a_short_one_kept(model):
     """The collocation's Newton steps are limited per circle to ``MAX_ROLL_STEP`` in roll
     and the motors' range in thrust (the longer of the two decides), the direction kept; a
