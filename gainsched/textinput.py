@@ -41,7 +41,7 @@ def _size(n: int) -> str:
 
 
 def read_text(path, *, what: str = "file", limit: int = MAX_TEXT_BYTES,
-              allowed: str | None = None, hint: str = "") -> str:
+              allowed: str | None = None, hint: str = "", advice: str = "") -> str:
     """The text of a user's file: at most ``limit`` bytes, UTF-8, newlines as ``\\n``.
 
     Parameters
@@ -55,6 +55,8 @@ def read_text(path, *, what: str = "file", limit: int = MAX_TEXT_BYTES,
         The size limit as the message states it (default: ``limit`` in KiB or MiB).
     hint : str
         Appended to the "cannot read" message (e.g. the shipped names).
+    advice : str
+        What the "too large" message advises (default: the size a ``what`` may have).
 
     Raises
     ------
@@ -69,8 +71,9 @@ def read_text(path, *, what: str = "file", limit: int = MAX_TEXT_BYTES,
     except OSError as exc:
         raise InputError(p, "", f"cannot read ({exc.strerror or exc}){hint}") from None
     if len(data) > limit:
-        raise InputError(p, "", f"larger than {_size(limit)}: too large for a {what} (a "
-                         f"{what} may have at most {allowed or _size(limit)})")
+        advice = advice or f"a {what} may have at most {allowed or _size(limit)}"
+        raise InputError(p, "", f"larger than {_size(limit)}: too large for a {what} "
+                         f"({advice})")
     return decode_text(p, data)
 
 

@@ -744,7 +744,7 @@ def test_a_csv_log_past_the_size_bound_is_refused(monkeypatch):
 
     monkeypatch.setattr(gainsched.analysis.logs._files, "MAX_LOG_BYTES", 2**16)
     one_line_error(_run("compare", PAPER, FLIGHT), FLIGHT, "larger than 64 KiB",
-                   "too large for a CSV flight log")
+                   "too large for a CSV flight log (write a longer flight as HDF5, .h5)")
 
 
 def test_campaign_with_another_configs_table_says_so(tmp_path, monkeypatch):

@@ -11,7 +11,7 @@ import numpy as np
 
 from ...constants import MAX_LOG_BYTES
 from ...errors import InputError
-from ...textinput import _size, decode_text
+from ...textinput import read_text
 from ._checks import _check_meta
 from ._schema import _EXTENSIONS, _KEY_RE, REQUIRED_COLUMNS
 
@@ -43,15 +43,9 @@ def _format(path) -> str:
 
 def _read_csv(path: Path):
     """-> (meta, columns {name: list[str]}, rows (N,) line numbers)."""
-    try:
-        with open(path, "rb") as f:
-            data = f.read(MAX_LOG_BYTES + 1)
-    except OSError as exc:
-        raise InputError(path, "", f"cannot read the file ({exc.strerror or exc})") from None
-    if len(data) > MAX_LOG_BYTES:
-        raise InputError(path, "", f"larger than {_size(MAX_LOG_BYTES)}: too large for a CSV "
-                         "flight log (write a longer flight as HDF5, .h5)")
-    text = decode_text(path, data)  # UTF-8 or refused with the line of the first bad byte
+    # bounded by the bytes read, UTF-8 or refused with the line of the first bad byte
+    text = read_text(path, what="CSV flight log", limit=MAX_LOG_BYTES,
+                     advice="write a longer flight as HDF5, .h5")
     lines = text.splitlines()
     meta: dict[str, str] = {}
     header = None
