@@ -98,12 +98,52 @@ def pin_environ(environ: MutableMapping[str, str] | None = None) -> bool:
     return True
 
 
+@contextmanager
+def _ctrl_c_after():
+    """Defer a Ctrl-C (SIGINT) that arrives in the block to its end, where it is raised
+    as usual. threadpoolctl finds the loaded libraries through a ctypes callback of
+    ``dl_iterate_phdr``; a KeyboardInterrupt raised inside it cannot leave the callback:
+    ctypes prints its traceback and carries on, and the Ctrl-C is lost. The handler is
+    Python's (it runs in the main thread whichever thread the signal reached), so the
+    block only changes anything in the main thread."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending = []
+    handler = signal.signal(signal.SIGINT, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, handler)
+        if pending:  # delivered to the handler of before (ignored where that ignores it)
+            signal.raise_signal(signal.SIGINT)
+
+
+def _threadpool_info() -> list[dict]:
+    """threadpoolctl's ``threadpool_info()``, a Ctrl-C during its scan raised after it."""
+    from threadpoolctl import threadpool_info
+
+    with _ctrl_c_after():
+        return threadpool_info()
+
+
+def _threadpool_limits(limits: int):
+    """threadpoolctl's ``threadpool_limits(limits, user_api="blas")`` (a context manager
+    and a call that limits at once), a Ctrl-C during its scan raised after it."""
+    from threadpoolctl import threadpool_limits
+
+    with _ctrl_c_after():
+        return threadpool_limits(limits=limits, user_api="blas")
+
+
 def _blas_libraries() -> list[dict]:
     import numpy  # noqa: F401  (load both OpenBLAS copies before asking threadpoolctl)
     import scipy.linalg  # noqa: F401
-    from threadpoolctl import threadpool_info
 
-    return [i for i in threadpool_info() if i.get("user_api") == "blas"]
+    return [i for i in _threadpool_info() if i.get("user_api") == "blas"]
 
 
 def fingerprint() -> str:
@@ -145,9 +185,7 @@ def status() -> str:
 @contextmanager
 def blas_single_thread():
     """Limit every BLAS in this process to one thread for the block (and restore after)."""
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _threadpool_limits(1):
         yield
 
 
@@ -157,10 +195,8 @@ def ensure_blas_single_thread() -> None:
     Unlike :func:`blas_single_thread` it never restores, so tasks running on
     concurrent threads of one worker (Dask) cannot undo each other's limit.
     """
-    from threadpoolctl import threadpool_info, threadpool_limits
-
-    if any(i["num_threads"] != 1 for i in threadpool_info() if i.get("user_api") == "blas"):
-        threadpool_limits(limits=1, user_api="blas")
+    if any(i["num_threads"] != 1 for i in _threadpool_info() if i.get("user_api") == "blas"):
+        _threadpool_limits(1)
 
 
 def pinned_executor(n_workers: int):
