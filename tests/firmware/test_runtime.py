@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import shutil
 import subprocess
+import sys
 import zlib
 from pathlib import Path
 
@@ -36,6 +37,7 @@ from gainsched.schedule.tables import Table, load_table
 from support import (
     FIRMWARE_EXAMPLES,
     PAPER_H5,
+    REPO,
     SAN_ENV,
     compile_c,
     query_mix,
@@ -508,8 +510,6 @@ def test_the_examples_build_for_any_table(my_quad_table, tmp_path):
 
     from gainsched.cli import cli
 
-    from support import REPO
-
     table = my_quad_table
     prefix = json.loads(CliRunner().invoke(cli, ["inspect", str(table), "--json"]).output
                         )["c_prefix"]
@@ -533,10 +533,6 @@ def test_the_examples_build_for_any_table(my_quad_table, tmp_path):
 def _make(target, table, out, *options):
     """``make -s TARGET FW_TABLE=table FW_DIR=out`` in the repository with this
     interpreter's ``gainsched`` (its virtualenv's ``bin``, not rebuilt)."""
-    import sys
-
-    from support import REPO
-
     gainsched = Path(sys.executable).with_name("gainsched")
     assert gainsched.exists(), f"no gainsched next to {sys.executable}"
     return subprocess.run(
