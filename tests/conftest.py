@@ -57,11 +57,11 @@ _TOOL_SKIPS = {
     "needs_cc": None if CC is not None else "no C compiler (set CC, or install gcc)",
     "needs_arm": None if ARM_TOOLS is not None and CC is not None else (
         "processor-in-the-loop tests skipped: arm-none-eabi-gcc or qemu-system-arm not found "
-        "(Debian: apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm; "
-        ".ci/run installs them)"),
+        "(Debian: apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm, "
+        "or `bash .ci/install-tools pil` as root)"),
     "needs_cppcheck": None if shutil.which("cppcheck") else (
         "cppcheck not found: the MISRA C:2012 check cannot run (Debian: apt-get install "
-        "cppcheck; .ci/run installs it)"),
+        "cppcheck, or `bash .ci/install-tools lint` as root)"),
 }
 
 
