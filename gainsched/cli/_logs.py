@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import shutil
+import sys
 from pathlib import Path
 
 import click
@@ -268,14 +271,20 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
         if not old_table.built_from(cfg):
             raise InputError(table_path, "", f"was built from another config than {config}: "
                              "the old table of the flights must be CONFIG's")
-    with _fit_progress("improve") as fitted:
+    with _fit_progress("improve") as fitted, _step("compare and diagnose",
+                                                   user_errors=False) as step:
         imp = run(cfg, logs, rounds=rounds, exclude=exclude, channel_map=cmap, trust=trust,
                   progress=fitted)
+    if step.why:  # nothing done before it: nothing to keep
+        click.echo(f"gainsched: error: improve: the step '{step.name}' failed: {step.why}",
+                   err=True)
+        sys.exit(1)
     for k, r in enumerate(imp.rounds):
         verdict = "" if r.diagnosis is None else f": {r.diagnosis.verdict[:160]}"
         click.echo(f"round {k}: normalised RMS {r.rms:.3g}{verdict}")
     new = imp.config
     flights = None
+    failed = None  # the _Step that could not be done: what was done before it is kept
     with staged(out_dir) as stage:
         path = stage / f"{new.name}.toml"
         path.write_text(new.text)
@@ -291,31 +300,78 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
                 refusal = f"no table can hold {held.where}: {held.message}"
             else:  # what build does; its lines name the output folder, not the stage
                 (stage / "tables").mkdir()
-                _build_into(config_from_text(new.text, str(out_dir / path.name)),
-                            stage / "tables", jobs, shown=out_dir / "tables")
+                with _step("rebuild the tables", stage / "tables") as step:
+                    _build_into(config_from_text(new.text, str(out_dir / path.name)),
+                                stage / "tables", jobs, shown=out_dir / "tables")
+                failed = step if step.why else None
+            if refusal is None and failed is None:
                 # the standard flights on the improved model, old table and new (simulate's)
-                from ..schedule.tables import load_table
-                from ..sim.oldnew import N_FLIGHTS, fly_old_new
-
-                if old_table is None:  # CONFIG's, as paper finds it
-                    old_table, table_path = _table_of(cfg)
-                new_table = load_table(stage / "tables" / f"{new.name}.h5")
-                meta = {"old_table": str(table_path),
-                        "old_table_config_sha256": old_table.config_sha256,
-                        "new_table": str(out_dir / "tables" / f"{new.name}.h5"),
-                        "new_table_config_sha256": new_table.config_sha256}
-                with _progress("fly old and new tables", 2 * N_FLIGHTS, "flight") as bar:
-                    flights = fly_old_new(cfg, old_table, new, new_table, duration=duration,
-                                          progress=bar.update, meta=meta)
-        write_improve(imp, report, flights, not_flown=(
-            "--no-build" if no_build else refusal and f"the tables were not rebuilt: {refusal}"))
+                with _step("fly the old and the new tables") as step:
+                    flights = _fly_old_new(cfg, old_table, table_path, new, stage, out_dir,
+                                           duration)
+                failed = step if step.why else None
+        not_flown = ("--no-build" if no_build else
+                     refusal and f"the tables were not rebuilt: {refusal}" or
+                     failed and f"the step '{failed.name}' failed: {failed.why}")
+        write_improve(imp, report, flights, not_flown=not_flown)
     if flights is not None:
         for line in flights.lines():
             click.echo(line)
     applied = ", ".join(imp.applied) or "nothing"
-    click.echo(f"{out_dir}: {new.name}.toml ({applied} applied), report/"
-               + (f"; tables not rebuilt: {refusal}" if refusal else
-                  "" if no_build else ", tables/"))
+    kept = "" if no_build or refusal or (failed and failed.undo) else ", tables/"
+    click.echo(f"{out_dir}: {new.name}.toml ({applied} applied), report/{kept}"
+               + (f"; tables not rebuilt: {refusal}" if refusal else ""))
+    if failed is not None:
+        click.echo(f"gainsched: error: improve: the step '{failed.name}' failed: {failed.why} "
+                   f"(what was done before it is in {out_dir})", err=True)
+        sys.exit(1)
+
+
+class _Step:
+    """One step of ``improve`` (:func:`_step`): its ``name``, the folder it writes
+    (``undo``, removed when it fails) and ``why`` it failed, in one line (None: it did
+    not)."""
+
+    def __init__(self, name: str, undo: Path | None):
+        self.name, self.undo, self.why = name, undo, None
+
+
+@contextlib.contextmanager
+def _step(name: str, undo: Path | None = None, user_errors: bool = True):
+    """Run one step of ``improve`` whose failure must not lose the steps before it: an
+    error (a bound of the config not met, or any fault of the step) is caught and
+    said in one line (:attr:`_Step.why`, with the exception's type when it is not a user
+    error), and ``undo`` (a folder the step was writing) removed; Ctrl-C still stops the
+    whole command. ``user_errors=False``: an InputError (a bad log) passes through, to
+    the command's one line and exit code 2."""
+    step = _Step(name, undo)
+    try:
+        yield step
+    except Exception as exc:  # noqa: BLE001 - every fault of the step becomes its one line
+        if isinstance(exc, InputError) and not user_errors:
+            raise
+        text = " ".join(str(exc).split()) or "no message"
+        step.why = text if isinstance(exc, InputError) else f"{type(exc).__name__}: {text}"
+        if undo is not None:
+            shutil.rmtree(undo, ignore_errors=True)
+
+
+def _fly_old_new(cfg, old_table, table_path, new, stage, out_dir, duration):
+    """The standard flights on the improved config ``new`` with CONFIG's table (given, or
+    as ``paper`` finds it) and the one rebuilt into ``stage/tables``."""
+    from ..schedule.tables import load_table
+    from ..sim.oldnew import N_FLIGHTS, fly_old_new
+
+    if old_table is None:  # CONFIG's, as paper finds it
+        old_table, table_path = _table_of(cfg)
+    new_table = load_table(stage / "tables" / f"{new.name}.h5")
+    meta = {"old_table": str(table_path),
+            "old_table_config_sha256": old_table.config_sha256,
+            "new_table": str(out_dir / "tables" / f"{new.name}.h5"),
+            "new_table_config_sha256": new_table.config_sha256}
+    with _progress("fly old and new tables", 2 * N_FLIGHTS, "flight") as bar:
+        return fly_old_new(cfg, old_table, new, new_table, duration=duration,
+                           progress=bar.update, meta=meta)
 
 
 @cli.command()

@@ -10,12 +10,13 @@ interrupted build leaves the old set or the new one, never a mix.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import GainschedWarning, InputError
 from ..publish import publish
 from ..schedule.tables import config_from_table, table_bytes, table_from_bytes
 from .check import MidpointCheck, midpoint_check
@@ -24,8 +25,14 @@ from .compact import CompactData, CompactInterpolator, compact_data
 from .controller import controller_params
 from .runtime import RuntimeData, runtime_data
 
-__all__ = ["OutputSet", "output_set", "output_files", "firmware_form", "certificate_lines",
-           "table_config", "write_outputs"]
+__all__ = ["DEFAULT_FLASH_BYTES", "OutputSet", "output_set", "output_files", "firmware_form",
+           "certificate_lines", "table_config", "write_outputs"]
+
+
+#: the flash budget of a table's data when the config states none
+#: (``firmware.max_table_bytes``): 1 MiB, the flash of common Cortex-M4F flight controllers
+#: (STM32F405, STM32F427); a table over it builds with a one-line warning
+DEFAULT_FLASH_BYTES = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -57,7 +64,8 @@ def firmware_form(config, table, progress=None):
     (``firmware.azimuth_error``), certified at every cell midpoint against directly
     solved gains (:func:`~.check.midpoint_check`): the largest relative gain error must
     be within ``grid.max_interpolation_error`` and every midpoint loop closed with the
-    table's gains stable. Either format must fit ``firmware.max_table_bytes``.
+    table's gains stable. Either format must fit ``firmware.max_table_bytes`` (with none
+    stated, a table over :data:`DEFAULT_FLASH_BYTES` is built with a warning).
 
     Parameters
     ----------
@@ -86,13 +94,35 @@ def firmware_form(config, table, progress=None):
         form = compact_data(form, fw.azimuth_error, source=config.source)
         cert = midpoint_check(table, lookup=CompactInterpolator(form), progress=progress)
         _check_certificate(config, cert)
-    if fw.max_table_bytes is not None and form.nbytes() > fw.max_table_bytes:
-        raise InputError(config.source, "firmware.max_table_bytes",
-                         f"{fw.max_table_bytes:,} bytes exceeded: the {fw.format} table holds "
-                         f"{form.nbytes():,} bytes of data"
-                         + ("; try [firmware] format = \"compact\"" if fw.format == "dense"
-                            else "; raise firmware.azimuth_error or thin the grid"))
+    _check_budget(config, form)
     return form, cert
+
+
+def _check_budget(config, form) -> None:
+    """The table's data against the flash budget: ``firmware.max_table_bytes`` refuses a
+    table over it; with no budget stated, a table over :data:`DEFAULT_FLASH_BYTES` is
+    built with a one-line warning. Either names the way out: a dense table's compact
+    form and its size (the series only, uncertified: the build certifies it when asked
+    for), a compact one's key."""
+    fw = config.firmware
+    budget = DEFAULT_FLASH_BYTES if fw.max_table_bytes is None else fw.max_table_bytes
+    if form.nbytes() <= budget:
+        return
+    if fw.format == "dense":
+        try:
+            way = (f"[firmware] format = \"compact\" holds "
+                   f"{compact_data(form, fw.azimuth_error).nbytes():,} bytes")
+        except InputError as exc:  # no series fits: the compact form has no size
+            way = f"the compact format cannot hold it either ({exc.message})"
+    else:
+        way = "raise firmware.azimuth_error or thin the grid"
+    held = f"the {fw.format} table holds {form.nbytes():,} bytes of data"
+    if fw.max_table_bytes is not None:
+        raise InputError(config.source, "firmware.max_table_bytes",
+                         f"{budget:,} bytes exceeded: {held}; {way}")
+    warnings.warn(f"{config.source}: firmware.max_table_bytes: {held}, more than "
+                  f"{budget:,} bytes, the flash assumed where the config states no budget "
+                  f"(set it to yours); {way}", GainschedWarning, stacklevel=3)
 
 
 def table_config(table, fmt: str = "config"):

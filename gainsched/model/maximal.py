@@ -24,8 +24,12 @@ with ``n = p_t / |p_t|``. Link models for the tension ``f_t`` (N):
 - ``"spring-damper"``, ``"sls"``, ``"lumped-mass"``: the tension-only elastic
   links of :mod:`gainsched.model.links` (sec. 3.1 of the book chapter cited there).
   The link force ``F_t`` replaces ``-f_t n`` above (for the chain it acts along the
-  last segment, not along ``n``) and the link's own states follow the rigid-body ones:
-  ``x = (p_q, v_q, q_CB, omega_B, s_link)``, shape (..., 13 + n_link).
+  last segment, not along ``n``) and the link's own states come last.
+
+Stateful effects (a motor lag, a battery, the flight time) carry their states as in the
+reduced model, after the rigid-body ones, with the same derivatives
+(:meth:`gainsched.model.reduced.Model.effect_state_rates`): ``x = (p_q, v_q, q_CB, omega_B,
+s_effects, s_link)``, shape (..., 13 + n_extra + n_link).
 """
 
 from __future__ import annotations
@@ -78,14 +82,12 @@ class MaximalModel:
     link_model : links.SpringDamper, links.StandardLinearSolid, links.LumpedMassChain or None
         None for the rigid link.
     n_x : int
-        State size, 13 plus the link's states.
+        State size: 13, the effects' states (``model.n_extra``), the link's states.
+    i_link : int
+        Where the link's states start in x (``13 + model.n_extra``).
     """
 
     def __init__(self, model, link=None, stiffness=None, damping=None, baumgarte=(10.0, 10.0)):
-        if model.n_extra > 0:
-            raise NotImplementedError(
-                "stateful effects (e.g. motor_lag) are not supported in maximal coordinates"
-            )
         tether = model.config.tether
         self.model = model
         self.k = float(tether.stiffness if stiffness is None else stiffness)
@@ -104,7 +106,8 @@ class MaximalModel:
             self.link_model = link
         self.link = "rigid" if self.link_model is None else self.link_model.kind
         self.n_link = 0 if self.link_model is None else int(self.link_model.n_states)
-        self.n_x = N_MAXIMAL + self.n_link
+        self.i_link = N_MAXIMAL + model.n_extra
+        self.n_x = self.i_link + self.n_link
         self.baumgarte = tuple(float(b) for b in baumgarte)
         self.J_inv = np.linalg.inv(model.J)
         self._S = skew(model.p_e)  # [p_e x]
@@ -116,7 +119,8 @@ class MaximalModel:
         Parameters
         ----------
         x : ndarray, shape (..., n_x)
-            ``(p_q [m], v_q [m/s], q_CB, omega_B [rad/s], link states)``, p and v in C.
+            ``(p_q [m], v_q [m/s], q_CB, omega_B [rad/s], effect states, link states)``,
+            p and v in C.
         u : ndarray, shape (..., 4), N
             Commanded motor thrusts.
         alpha : float or ndarray, rad
@@ -142,8 +146,9 @@ class MaximalModel:
         qn = q / np.sqrt(dot(q, q))[..., None]
         R = matrix_from_quaternion(qn)
         kin = Kinematics(R, v, w, p, alpha, gamma, md.wind_I)
-        # thrust after the (stateless) thrust modifiers; everything but the tether
-        T = md.thrust(np.zeros(x.shape[:-1] + (N_STATE,)), u, kin)
+        # thrust after the stateful effects and the thrust modifiers; all but the tether
+        x_e = x[..., N_MAXIMAL:self.i_link]
+        T = md.thrust_from_effect_states(x_e, u, kin)
         F0, tau0 = md.body_wrench(T, kin, alpha)
         shape = F0.shape
 
@@ -153,7 +158,7 @@ class MaximalModel:
         v_t = v + mv(R, w_pe)
         link = None
         if self.link_model is not None:
-            link = self.link_model.evaluate(p_t, v_t, x[..., N_MAXIMAL:], md.g_C(alpha))
+            link = self.link_model.evaluate(p_t, v_t, x[..., self.i_link:], md.g_C(alpha))
             F_B = mtv(R, link.force)
             a_q = (F0 + link.force) / m
             w_dot = (tau0 + F_B @ self._S.T) @ self.J_inv.T  # p_e x F_B
@@ -164,6 +169,8 @@ class MaximalModel:
         qw, qv = q[..., :1], q[..., 1:]
         q_dot = 0.5 * np.concatenate([-dot(qv, w)[..., None], qw * w + cross(qv, w)], -1)
         parts = [broadcast(v, shape), a_q, broadcast(q_dot, shape[:-1] + (4,)), w_dot]
+        parts += [broadcast(r, shape[:-1] + r.shape[-1:])
+                  for r in md.effect_state_rates(x_e, u, kin)]
         if link is not None:
             sd = link.state_dot
             parts.append(broadcast(sd, shape[:-1] + sd.shape[-1:]))
@@ -213,7 +220,7 @@ class MaximalModel:
             raise ValueError("the rigid link has no link output (its force needs the input)")
         x = np.asarray(x, dtype=float)
         p_t, v_t = self._attachment(x)
-        return self.link_model.evaluate(p_t, v_t, x[..., N_MAXIMAL:], self.model.g_C(alpha))
+        return self.link_model.evaluate(p_t, v_t, x[..., self.i_link:], self.model.g_C(alpha))
 
     def _attachment(self, x):
         """Attachment point position (m) and velocity (m/s) in C, shapes (..., 3)."""
@@ -235,7 +242,7 @@ class MaximalModel:
         if self.link_model is None:
             return np.zeros(np.shape(x)[:-1])
         p_t, v_t = self._attachment(np.asarray(x, dtype=float))
-        return self.link_model.energy(p_t, v_t, x[..., N_MAXIMAL:], self.model.g_C(alpha))
+        return self.link_model.energy(p_t, v_t, x[..., self.i_link:], self.model.g_C(alpha))
 
     def power_loss(self, x, alpha):
         """Power dissipated in an elastic link (dampers, and the tension-only clip), W >= 0.
@@ -245,29 +252,41 @@ class MaximalModel:
         if self.link_model is None:
             return np.zeros(np.shape(x)[:-1])
         p_t, v_t = self._attachment(np.asarray(x, dtype=float))
-        return self.link_model.power_loss(p_t, v_t, x[..., N_MAXIMAL:], self.model.g_C(alpha))
+        return self.link_model.power_loss(p_t, v_t, x[..., self.i_link:],
+                                          self.model.g_C(alpha))
 
     # ------------------------------------------------------------------ simulation
     def from_reduced(self, z, tension=None, u=None, alpha=0.0, gamma=0.0):
-        """Maximal state (..., n_x) from the reduced state z (..., >= 10), link in equilibrium.
+        """Maximal state (..., n_x) from the reduced state z (..., 10 or n_z), link in
+        equilibrium.
 
-        The elastic link starts stretched to the static elongation of ``tension`` (N)
-        along ``e(delta, xi)``, its own states relaxed at that tension (SLS: ``s_p =
-        f / k_p``; chain: nodes evenly on the straight line, moving with it). Default
-        ``tension``: the rigid-link tension of the reduced model at ``(z, u, alpha)``
-        (``u`` default: hover thrust ``m g / 4`` per motor), clipped at 0. The rigid
-        link ignores ``tension`` (:func:`maximal_from_reduced`).
+        The effect states are z's after its first 10 when z has them (``model.n_z``
+        entries), else at rest at the thrusts ``u``
+        (:meth:`~gainsched.model.reduced.Model.steady_effect_states`). The elastic link
+        starts stretched to the static elongation of ``tension`` (N) along ``e(delta,
+        xi)``, its own states relaxed at that tension (SLS: ``s_p = f / k_p``; chain: nodes
+        evenly on the straight line, moving with it). Default ``tension``: the rigid-link
+        tension of the reduced model at ``(z, u, alpha)`` (``u`` default: hover thrust ``m
+        g / 4`` per motor), clipped at 0. The rigid link ignores ``tension``
+        (:func:`maximal_from_reduced`).
         """
+        md = self.model
         z = np.asarray(z, dtype=float)
+        u = np.full(4, md.m * md.g / 4) if u is None else np.asarray(u, dtype=float)
+        if z.shape[-1] >= md.n_z:
+            z = z[..., :md.n_z]
+        else:
+            rest = md.steady_effect_states(u)
+            z = np.concatenate([z[..., :N_STATE], np.broadcast_to(
+                rest, z.shape[:-1] + rest.shape[-1:])], -1)
+        x_e = z[..., N_STATE:]
         if self.link_model is None:
-            return maximal_from_reduced(self.model, z)
+            return np.concatenate([maximal_from_reduced(md, z), x_e], -1)
         if tension is None:
-            md = self.model
-            u = np.full(4, md.m * md.g / 4) if u is None else u
-            tension = np.maximum(md.evaluate(z[..., :N_STATE], u, alpha, gamma).tension, 0.0)
-        x = maximal_from_reduced(self.model, z, stretch=self.link_model.stretch(tension))
+            tension = np.maximum(md.evaluate(z, u, alpha, gamma).tension, 0.0)
+        x = maximal_from_reduced(md, z, stretch=self.link_model.stretch(tension))
         p_t, v_t = self._attachment(x)
-        return np.concatenate([x, self.link_model.initial(p_t, v_t, tension)], -1)
+        return np.concatenate([x, x_e, self.link_model.initial(p_t, v_t, tension)], -1)
 
     def to_reduced(self, x, xi_ref=None):
         """Reduced state (..., 10) of x; see :func:`reduced_from_maximal`."""

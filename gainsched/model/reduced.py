@@ -176,14 +176,39 @@ class Model:
                           gamma, self.wind_I)
 
     def thrust(self, z, u, kin):
-        """Actual motor thrusts (N) after stateful effects and thrust modifiers."""
+        """Actual motor thrusts (N) after stateful effects and thrust modifiers, at states
+        ``z`` (..., n_z) (the effect states follow the first 10)."""
+        return self.thrust_from_effect_states(z[..., N_STATE:], u, kin)
+
+    def thrust_from_effect_states(self, x_e, u, kin):
+        """Actual motor thrusts (..., 4), N, of the commands ``u`` (..., 4), N, after the
+        stateful effects at their states ``x_e`` (..., n_extra) and the thrust modifiers:
+        what :meth:`thrust` computes, for any formulation that carries the effect states
+        (the maximal model's follow its rigid-body states)."""
         T = u
-        i = N_STATE
+        i = 0
         for eff in self.effects:
-            x = z[..., i : i + eff.n_states]
-            T = eff.modify_thrust(T, kin, x)
+            T = eff.modify_thrust(T, kin, x_e[..., i : i + eff.n_states])
             i += eff.n_states
         return T
+
+    def steady_effect_states(self, T):
+        """The effect states (..., n_extra) at rest at the thrusts ``T`` (..., 4), N (a
+        motor lag at T, a full battery, the flight time 0): where a simulation starts."""
+        T = np.asarray(T, dtype=float)
+        parts = [e.steady_states(T, np.zeros_like(T))[0] for e in self.effects if e.n_states]
+        return np.concatenate(parts, -1) if parts else np.zeros(T.shape[:-1] + (0,))
+
+    def effect_state_rates(self, x_e, u, kin):
+        """Derivatives of the effect states ``x_e`` (..., n_extra) under the commands ``u``
+        (..., 4), N, as a list of one array (..., n_states) per stateful effect, in model
+        order (empty without one): the same in every formulation."""
+        parts, i = [], 0
+        for eff in self.effects:
+            if eff.n_states:
+                parts.append(eff.state_derivative(x_e[..., i : i + eff.n_states], u, kin))
+                i += eff.n_states
+        return parts
 
     @property
     def thrust_modifiers(self) -> tuple[Effect, ...]:
@@ -322,11 +347,7 @@ class Model:
             (euler_dot[..., 2] - dx)[..., None],
             sol[..., 2:5],
         ]
-        i = N_STATE
-        for eff in self.effects:
-            if eff.n_states:
-                parts.append(eff.state_derivative(z[..., i : i + eff.n_states], u, kin))
-                i += eff.n_states
+        parts += self.effect_state_rates(z[..., N_STATE:], u, kin)
         shape = np.broadcast_shapes(*(p.shape[:-1] for p in parts))
         z_dot = np.concatenate([broadcast(p, shape + p.shape[-1:]) for p in parts], -1)
         return Evaluation(z_dot, sol[..., 5], T)

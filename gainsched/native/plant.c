@@ -37,8 +37,10 @@
  *   J omega' = sum L_i x T_i + tau_M - omega x J omega + tau_eff + p_e x R^T (-f n)
  *   q' = q (x) (0, omega) / 2
  *
- * It takes the stateless effects only (as MaximalModel does). The stiff links it serves
- * need RK4 substeps (MaximalModel.substeps): gs_maximal_rk4 takes their count.
+ * Stateful effects carry their states after the rigid body's, x = (p_q, v_q, q_CB,
+ * omega_B, effect states), with the reduced model's derivatives (effect_rates), as
+ * MaximalModel does. The stiff links it serves need RK4 substeps (MaximalModel.substeps):
+ * gs_maximal_rk4 takes their count.
  *
  * Parameters: one read-only double array built by gainsched/sim/fastplant.py
  * (layout below, GS_PLANT_LAYOUT); no globals, no allocation, C99.
@@ -48,13 +50,14 @@
 
 #define GS_PLANT_LAYOUT 5
 #define N_BASE 10
-#define MAX_Z 64 /* largest state the RK4 scratch holds (10 + effect states) */
+#define N_MAXIMAL 13 /* the maximal model's rigid-body states */
+#define MAX_Z 64 /* largest state the RK4 scratch holds (10 or 13 + effect states) */
 #define EPS2 1e-24 /* effects.norm: keeps sqrt differentiable at zero speed */
 
 /* parameter array layout (doubles) */
 enum {
     P_LAYOUT = 0, /* GS_PLANT_LAYOUT */
-    P_NZ,         /* state size n_z */
+    P_NZ,         /* state size: n_z (reduced), n_x (maximal) */
     P_M,          /* mass, kg */
     P_RHO,        /* tether length, m */
     P_LE,         /* attachment offset L_e, m (p_e = (-L_e, 0, 0) in B) */
@@ -339,6 +342,31 @@ static void effect_force(const double *p, double T_C, double R[3][3], const doub
     }
 }
 
+/* The effect states' derivatives into z_dot at the effects' state indices, from the
+ * states in z and the command u (4, N): the same in both formulations.
+ * Model.effect_state_rates. */
+static void effect_rates(const double *p, const double *z, const double *u, double *z_dot)
+{
+    const int n_eff = (int)p[P_NEFF];
+    int j, k;
+    for (k = 0; k < n_eff; ++k) {
+        const double *ef = p + P_EFF + EFF_STRIDE * k;
+        if ((int)ef[0] == FX_MOTOR_LAG) { /* T_actual' = (T_cmd - T_actual) / tau */
+            const int s0 = (int)ef[EFF_STATE];
+            for (j = 0; j < 4; ++j) {
+                z_dot[s0 + j] = (u[j] - z[s0 + j]) / ef[1];
+            }
+        } else if ((int)ef[0] == FX_THRUST_TIME) { /* t' = 1 */
+            z_dot[(int)ef[EFF_STATE]] = 1.0;
+        } else if ((int)ef[0] == FX_THRUST_VOLTAGE) { /* the battery (ThrustVoltage) */
+            const int s0 = (int)ef[EFF_STATE];
+            const double s = ((u[0] + u[1]) + u[2]) + u[3];
+            z_dot[s0] = -ef[3] * s;
+            z_dot[s0 + 1] = (ef[4] * s - z[s0 + 1]) / ef[5];
+        }
+    }
+}
+
 /*
  * State derivative z_dot (n_z) and tether tension f_t (N, negative = slack) of the
  * reduced model at state z (n_z) and commanded thrust u (4, N); T_out (4, N, may be
@@ -350,7 +378,6 @@ int gs_plant_eval(const double *p, const double *z, const double *u, double alph
 {
     const double m = p[P_M], rho = p[P_RHO], L_e = p[P_LE], g = p[P_G];
     const double *J = p + P_J, *Al = p + P_ALLOC;
-    const int n_eff = (int)p[P_NEFF];
     const double delta = z[0], xi = z[1], dd = z[2], dx = z[3];
     const double phi = z[4], theta = z[5], chi = z[6];
     const double w[3] = {z[7], z[8], z[9]};
@@ -361,7 +388,7 @@ int gs_plant_eval(const double *p, const double *z, const double *u, double alph
     /* effect torque in B: none of the supported effects has one (kept for the form) */
     double tau[3] = {0, 0, 0}, Jw[3], wJw[3], rhs[6], A[6][6], sol[6], RT_e[3], pe_RTe[3];
     double speed = -1.0; /* |v_air| (effects.norm), computed once when an effect needs it */
-    int i, j, k;
+    int i, j;
 
     /* kinematics: R_CB = Rz(chi + xi) Ry(theta) Rx(phi) (paper eq. 2) */
     {
@@ -466,22 +493,7 @@ int gs_plant_eval(const double *p, const double *z, const double *u, double alph
         z_dot[8] = sol[3];
         z_dot[9] = sol[4];
     }
-    for (k = 0; k < n_eff; ++k) {
-        const double *ef = p + P_EFF + EFF_STRIDE * k;
-        if ((int)ef[0] == FX_MOTOR_LAG) { /* T_actual' = (T_cmd - T_actual) / tau */
-            const int s0 = (int)ef[EFF_STATE];
-            for (j = 0; j < 4; ++j) {
-                z_dot[s0 + j] = (u[j] - z[s0 + j]) / ef[1];
-            }
-        } else if ((int)ef[0] == FX_THRUST_TIME) { /* t' = 1 */
-            z_dot[(int)ef[EFF_STATE]] = 1.0;
-        } else if ((int)ef[0] == FX_THRUST_VOLTAGE) { /* the battery (ThrustVoltage) */
-            const int s0 = (int)ef[EFF_STATE];
-            const double s = ((u[0] + u[1]) + u[2]) + u[3];
-            z_dot[s0] = -ef[3] * s;
-            z_dot[s0 + 1] = (ef[4] * s - z[s0 + 1]) / ef[5];
-        }
-    }
+    effect_rates(p, z, u, z_dot);
     *tension = sol[5];
     if (T_out != NULL) {
         for (j = 0; j < 4; ++j) {
@@ -535,9 +547,9 @@ int gs_plant_rk4(const double *p, const double *x, const double *u, double alpha
 }
 
 /*
- * State derivative x_dot (13) and tether tension (N) of the maximal model with the
- * spring-damper link at state x (13: p_q m, v_q m/s, q_CB, omega_B rad/s; p and v in C)
- * and commanded thrust u (4, N). The tension is the force law k s + c s' before the
+ * State derivative x_dot (n_x) and tether tension (N) of the maximal model with the
+ * spring-damper link at state x (n_x: p_q m, v_q m/s, q_CB, omega_B rad/s, p and v in C;
+ * the effect states) and commanded thrust u (4, N). The tension is the force law k s + c s' before the
  * tension-only clip: negative (minus the push the link would need) when slack, as
  * MaximalModel.step reports it. MaximalModel.evaluate, one state. Returns 0.
  */
@@ -568,7 +580,7 @@ int gs_maximal_eval(const double *p, const double *x, const double *u, double al
     }
     /* everything but the tether (Model.body_wrench), the effects in the air's frame */
     (void)air_velocity(p, alpha, gamma, v, v_air);
-    const double T_C = effect_thrust(p, NULL, u, R, v_air, &speed, T);
+    const double T_C = effect_thrust(p, x, u, R, v_air, &speed, T);
     effect_force(p, T_C, R, v_air, &speed, F);
     for (i = 0; i < 3; ++i) {
         Jw[i] = J[3 * i] * w[0] + J[3 * i + 1] * w[1] + J[3 * i + 2] * w[2];
@@ -619,45 +631,47 @@ int gs_maximal_eval(const double *p, const double *x, const double *u, double al
     x_dot[7] = 0.5 * (q[0] * w[0] + (q[2] * w[2] - q[3] * w[1]));
     x_dot[8] = 0.5 * (q[0] * w[1] + (q[3] * w[0] - q[1] * w[2]));
     x_dot[9] = 0.5 * (q[0] * w[2] + (q[1] * w[1] - q[2] * w[0]));
+    effect_rates(p, x, u, x_dot);
     return 0;
 }
 
 /*
  * Advance the maximal model by dt (s) with u held: `substeps` classical RK4 steps of
  * dt / substeps (MaximalModel.step). *tension receives the force law at x (N, negative:
- * slack). Returns 0, or 2 if substeps < 1.
+ * slack). Returns 0, or 2 if substeps < 1 or the state size is not 13..MAX_Z.
  */
 int gs_maximal_rk4(const double *p, const double *x, const double *u, double alpha,
                    double gamma, double dt, int substeps, double *x_next, double *tension)
 {
-    double k1[13], k2[13], k3[13], k4[13], xs[13], xc[13], ten;
+    const int n = (int)p[P_NZ];
+    double k1[MAX_Z], k2[MAX_Z], k3[MAX_Z], k4[MAX_Z], xs[MAX_Z], xc[MAX_Z], ten;
     const double h = dt / substeps;
     int i, s;
-    if (substeps < 1) {
+    if (substeps < 1 || n > MAX_Z || n < N_MAXIMAL) {
         return 2;
     }
-    for (i = 0; i < 13; ++i) {
+    for (i = 0; i < n; ++i) {
         xc[i] = x[i];
     }
     for (s = 0; s < substeps; ++s) {
         (void)gs_maximal_eval(p, xc, u, alpha, gamma, k1, s == 0 ? tension : &ten);
-        for (i = 0; i < 13; ++i) {
+        for (i = 0; i < n; ++i) {
             xs[i] = xc[i] + 0.5 * h * k1[i];
         }
         (void)gs_maximal_eval(p, xs, u, alpha, gamma, k2, &ten);
-        for (i = 0; i < 13; ++i) {
+        for (i = 0; i < n; ++i) {
             xs[i] = xc[i] + 0.5 * h * k2[i];
         }
         (void)gs_maximal_eval(p, xs, u, alpha, gamma, k3, &ten);
-        for (i = 0; i < 13; ++i) {
+        for (i = 0; i < n; ++i) {
             xs[i] = xc[i] + h * k3[i];
         }
         (void)gs_maximal_eval(p, xs, u, alpha, gamma, k4, &ten);
-        for (i = 0; i < 13; ++i) {
+        for (i = 0; i < n; ++i) {
             xc[i] = xc[i] + h / 6 * (((k1[i] + 2 * k2[i]) + 2 * k3[i]) + k4[i]);
         }
     }
-    for (i = 0; i < 13; ++i) {
+    for (i = 0; i < n; ++i) {
         x_next[i] = xc[i];
     }
     return 0;

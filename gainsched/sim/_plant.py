@@ -10,7 +10,7 @@ import numpy as np
 from ..config import N_STATE, Config
 from ..errors import GainschedWarning
 from ..model.geometry import pose_from_reduced
-from ..model.maximal import MaximalModel, reduced_from_maximal
+from ..model.maximal import N_MAXIMAL, MaximalModel, reduced_from_maximal
 from ..model.reduced import Model
 from ..rotations import (
     R_IC_from_tilt,
@@ -62,10 +62,9 @@ class _Plant:
         """Plant state from the reduced state ``z0`` (10,) and the thrusts ``u0`` (4,), N:
         stateful effects (motor lag) start in their steady state at ``u0``."""
         if self.maximal is None:
-            extra = [e.steady_states(u0, np.zeros(4))[0] for e in self.model.effects
-                     if e.n_states]
-            return np.concatenate([z0, *extra]) if extra else np.array(z0, dtype=float)
-        return self.maximal.from_reduced(z0)  # the elastic link pre-stretched (maximal.py)
+            return np.concatenate([z0, self.model.steady_effect_states(u0)])
+        # the elastic link pre-stretched (maximal.py), the effect states at rest at u0
+        return self.maximal.from_reduced(z0[:N_STATE], u=u0)
 
     def f(self, x, u, alpha):
         """State derivative and tether tension (N) at one state."""
@@ -127,11 +126,8 @@ class _Plant:
 
     def battery_voltage(self, X):
         """The battery's terminal voltage (N,), V, along plant states X (N, n_x), or None
-        without a battery (an effect whose ``log_channel`` is ``"vbat"``; the maximal
-        model carries no effect states)."""
-        if self.maximal is not None:
-            return None
-        i = N_STATE
+        without a battery (an effect whose ``log_channel`` is ``"vbat"``)."""
+        i = N_STATE if self.maximal is None else N_MAXIMAL
         for e in self.model.effects:
             if e.log_channel == "vbat":
                 return e.voltage(X[:, i:i + e.n_states])

@@ -113,6 +113,12 @@ HIDDEN: dict[str, HiddenEffect] = {
                      (("tether", "link", "spring-damper"), ("tether", "stiffness", 2e5),
                       ("tether", "damping", 20.0)),
                      truth=("tether_elasticity", "stiffness", 2e5)),
+        HiddenEffect("lag_on_stiff_tether", "a first-order motor lag tau = 35 ms on a stiff "
+                     "elastic tether, k = 2e5 N/m, c = 20 N s/m: what a real vehicle has",
+                     (("effects.motor_lag", None, (("tau", 0.035),)),
+                      ("tether", "link", "spring-damper"), ("tether", "stiffness", 2e5),
+                      ("tether", "damping", 20.0)),
+                     truth=("motor_lag", "tau", 0.035)),
         HiddenEffect("thrust_scale", "thrust scale k_T = 0.92 (static test 8% optimistic)",
                      (("effects.thrust_scale", None, (("k_T", 0.92),)),),
                      truth=("thrust_scale", "k_T", 0.92)),

@@ -13,10 +13,9 @@ Supported: the rigid link with the state-only effects ``drag`` (eq. 10),
 ``thrust_momentum`` (eq. 29), ``wind`` (the circle's heading gamma is then an argument of
 every call), ``thrust_time`` (1 extra state), ``thrust_voltage`` (2 extra states: the
 battery model) and ``motor_lag`` (4 extra states) (:class:`FastPlant`); the
-spring-damper link with the same effects but the stateful ``motor_lag``,
-``thrust_time`` and ``thrust_voltage`` (:class:`FastMaximal`, the
-maximal-coordinate model of :mod:`gainsched.model.maximal`, which has no stateful
-effects either). Anything else (other effects, the SLS and lumped-mass links) uses the
+spring-damper link with the same effects, their states after the rigid body's
+(:class:`FastMaximal`, the maximal-coordinate model of :mod:`gainsched.model.maximal`).
+Anything else (other effects, the SLS and lumped-mass links) uses the
 numpy model: :func:`fast_plant` returns None and the caller falls back, as it does when
 no C compiler is available or ``GAINSCHED_NATIVE=0`` (:func:`gainsched.native.load`).
 """
@@ -29,7 +28,6 @@ import numpy as np
 
 from ..config import N_STATE, Config
 from ..model.effects import (
-    EFFECTS,
     Drag,
     MotorEfficiency,
     MotorLag,
@@ -70,28 +68,26 @@ SUPPORTED_EFFECTS = frozenset(cls.kind for cls in _CODES)
 
 
 def fast_plant_supported(config: Config) -> bool:
-    """Whether a compiled plant implements ``config``: the rigid link with the supported
-    effects, or the spring-damper link with the supported stateless effects.
+    """Whether a compiled plant implements ``config``: the rigid or the spring-damper
+    link with the supported effects.
 
     Says nothing about whether a compiler is available (see :func:`fast_plant`).
     """
-    link = config.tether.link
     names = {s.name for s in config.effects}
-    if link == "spring-damper":  # the maximal model carries no effect states
-        return names <= {k for k in SUPPORTED_EFFECTS if EFFECTS[k].n_states == 0}
-    return link == "rigid" and names <= SUPPORTED_EFFECTS
+    return config.tether.link in ("rigid", "spring-damper") and names <= SUPPORTED_EFFECTS
 
 
 def _params(model: Model, maximal: MaximalModel | None = None) -> np.ndarray:
     """The ``plant.c`` parameter array of a model (layout in plant.c), float64; with
-    ``maximal`` (spring-damper link) its link constants and state size."""
+    ``maximal`` (spring-damper link) its link constants, state size and the effect
+    states' indices after its rigid-body states."""
     alloc = np.asarray(model.alloc, dtype=float)
     n_x = model.n_z if maximal is None else maximal.n_x
     link = [0.0, 0.0] if maximal is None else [maximal.link_model.k, maximal.link_model.c]
     J_inv = np.linalg.inv(model.J) if maximal is None else maximal.J_inv
     head = [_LAYOUT, n_x, model.m, model.rho, model.L_e, model.g]
     eff = []
-    i = N_STATE
+    i = N_STATE if maximal is None else N_MAXIMAL
     for e in model.effects:
         code, names = _CODES[type(e)]
         vals = ([float(v) for v in names(e)] if callable(names)
@@ -223,7 +219,9 @@ class FastMaximal:
         if int(lib.gs_plant_layout()) != _LAYOUT:
             raise RuntimeError("plant.c parameter layout does not match fastplant.py")
         self.maximal = MaximalModel(Model(config))
-        self.n_x = N_MAXIMAL
+        self.n_x = self.maximal.n_x
+        if self.n_x > int(lib.gs_plant_max_states()):
+            raise ValueError(f"{self.n_x} states: more than plant.c holds")
         self._p = _params(self.maximal.model, self.maximal)
         self._x = np.zeros(self.n_x)
         self._u = np.zeros(4)
@@ -242,7 +240,7 @@ class FastMaximal:
         self._lib = lib
 
     def f(self, x, u, alpha, gamma=0.0):
-        """State derivative (13,) and tether tension (float, N, >= 0) at one state, as
+        """State derivative (n_x,) and tether tension (float, N, >= 0) at one state, as
         ``MaximalModel.f`` and ``MaximalModel.tension``."""
         self._x[:] = x
         self._u[:] = u
@@ -250,7 +248,7 @@ class FastMaximal:
         return self._out.copy(), max(0.0, float(self._ten[0]))
 
     def rk4_step(self, x, u, alpha, dt, gamma=0.0):
-        """Advance by ``dt`` s with ``u`` held, as ``MaximalModel.step``: ``(x_next (13,),
+        """Advance by ``dt`` s with ``u`` held, as ``MaximalModel.step``: ``(x_next (n_x,),
         signed tension at x, N)`` (negative: slack, the push the link would need)."""
         n = self._substeps.get(dt)
         if n is None:

@@ -114,57 +114,79 @@ def test_improve_refuses_before_any_work(tmp_path, monkeypatch, args, needle):
 USER_VEHICLE = {"name": "user", "vehicle.mass": 0.8, "vehicle.arm_length": 0.15,
                 "vehicle.inertia": [4e-3, 4e-3, 7e-3], "vehicle.thrust_max": 5.0,
                 "tether.length": 2.5, "grid.speeds": [3, 6, 9, 12], "grid.tilts_deg": [0, 20]}
-#: the most the rebuilt table's RMS tracking errors over the flights may be, as a share of
-#: the old table's, on the hidden-effect plant. Measured: along track 0.167 -> 0.00049 m
-#: (0.0029), out of the plane 0.175 -> 0.00072 m (0.0041); on the improved model 0.0024
-#: and 0.0029; per flight at most 0.2 (v3, where the old table's error is 1.4 mm). The
-#: old controller's feed-forward lacks the thrust loss and the motor lag. (Flying the old
-#: table twice gives 1.0: the test fails.)
-BETTER_BY = 0.05
+#: per hidden effect of the campaign: what improve applies, and the most the rebuilt
+#: table's RMS tracking errors over the flights may be, as a share of the old table's, on
+#: the hidden-effect plant.
+#: - "example" (momentum theory and a 30 ms motor lag, rigid tether). Measured: along
+#:   track 0.167 -> 0.00049 m (0.0029), out of the plane 0.175 -> 0.00072 m (0.0041); on
+#:   the improved model 0.0024 and 0.0029; per flight at most 0.2 (v3, where the old
+#:   table's error is 1.4 mm). The old controller's feed-forward lacks the thrust loss and
+#:   the motor lag.
+#: - "lag_on_stiff_tether" (issue 59: a 35 ms motor lag on a k = 2e5 N/m tether, which the
+#:   simulator flies in maximal coordinates). Measured (2 s flights): along track
+#:   0.037, out of the plane 0.019 (speed-up 21 -> 0.34 mm, braking 26 -> 0.77 mm); at
+#:   3 m/s both tables fly within the motion-capture noise (0.2 and 0.3 mm along track).
+#: (Flying the old table twice gives 1.0: the test fails.)
+IMPROVE_CASES = {
+    "example": ("thrust_momentum + motor_lag", 0.05),
+    "lag_on_stiff_tether": ("motor_lag + tether_elasticity", 0.1),
+}
+#: a flight's RMS error (m) below which old and new are both at the motion-capture noise
+#: (0.5 mm, gainsched.sim.campaign.default_flights): "lower on every flight" above it
+AT_NOISE = 1e-3
 
 
 @pytest.mark.slow
-def test_rebuilt_tables_fly_the_hidden_effect_plant_better_than_the_old(tmp_path,
-                                                                        monkeypatch):
-    """A user's vehicle flies a campaign (gainsched campaign, 2 s flights) on a plant with a
-    hidden thrust change with airspeed (momentum theory) and a 30 ms motor lag; improve
-    finds both, rebuilds and flies the standard flights on the improved model. Flown again
-    on the hidden-effect plant itself (the truth improve never saw), the rebuilt table's
-    RMS along-track and out-of-plane errors over the flights are at most BETTER_BY of the
-    old table's (lower by 95 % or more), and lower on every flight."""
-    from gainsched.sim.campaign import plant_config
+@pytest.mark.parametrize("hidden", list(IMPROVE_CASES))
+def test_rebuilt_tables_fly_the_hidden_effect_plant_better_than_the_old(tmp_path, monkeypatch,
+                                                                        hidden):
+    """A user's vehicle flies a campaign (gainsched campaign, 2 s flights) on a plant with
+    hidden effects; improve finds them, rebuilds and flies the standard flights on the
+    improved model (with a motor lag on an elastic tether: issue 59). Flown again on the
+    hidden-effect plant itself (the truth improve never saw), the rebuilt table's RMS
+    along-track and out-of-plane errors over the flights are at most the case's share of
+    the old table's, and lower on every flight (but where both are at the noise,
+    AT_NOISE)."""
+    from gainsched.sim.campaign import HIDDEN, plant_config
     from gainsched.sim.oldnew import fly_old_new
 
+    applied, better_by = IMPROVE_CASES[hidden]
     monkeypatch.chdir(tmp_path)
     (tmp_path / "user.toml").write_text(small_config_text(**USER_VEHICLE))
     run = CliRunner().invoke
     assert run(cli, ["build", "user.toml", "-o", "old"]).exit_code == 0
-    res = run(cli, ["campaign", "user.toml", "--tables", "old/user.h5", "--hidden", "example",
+    res = run(cli, ["campaign", "user.toml", "--tables", "old/user.h5", "--hidden", hidden,
                     "--duration", "2", "-o", "logs"])
     assert res.exit_code == 0, res.output
     res = run(cli, ["improve", "user.toml", *sorted(map(str, (tmp_path / "logs").glob("*.csv"))),
                     "--tables", "old/user.h5", "--duration", "2", "-o", "imp"])
     assert res.exit_code == 0, res.output
-    assert "thrust_momentum + motor_lag applied" in res.output
+    assert f"{applied} applied" in res.output
+    new_cfg = gs.load_config(tmp_path / "imp" / "user.toml")
+    if hidden == "lag_on_stiff_tether":  # the lag and the stiffness found (truth: HIDDEN)
+        fx = {s.name: s.param_dict() for s in new_cfg.effects}
+        assert fx["motor_lag"]["tau"] == pytest.approx(HIDDEN[hidden].truth[2], rel=0.05)
+        assert new_cfg.tether.link == "spring-damper"
+        assert new_cfg.tether.stiffness == pytest.approx(2e5, rel=0.15)
 
     # the report's flights: on the improved model
     data = json.loads((tmp_path / "imp" / "report" / "improve.json").read_text())
     flown = [f["name"] for f in data["flights"]["flights"]]
     assert flown == ["v3", "v9", "tilt20-v8", "speedup", "braking"], data["flights"]
     for key in ("rms_along_track_m", "rms_out_of_plane_m"):
-        assert data["flights"]["summary"][key]["ratio"] <= BETTER_BY, data["flights"]["summary"]
+        assert data["flights"]["summary"][key]["ratio"] <= better_by, data["flights"]["summary"]
 
     # the same flights on the hidden-effect plant, the old table against the rebuilt one
     old_cfg = gs.load_config(tmp_path / "user.toml")
-    new_cfg = gs.load_config(tmp_path / "imp" / "user.toml")
-    truth = plant_config(old_cfg, "example")
+    truth = plant_config(old_cfg, hidden)
     fl = fly_old_new(old_cfg, gs.load_table(tmp_path / "old" / "user.h5"), new_cfg,
                      gs.load_table(tmp_path / "imp" / "tables" / "user.h5"), truth, duration=2)
     assert [f.name for f in fl.flights] == flown and not fl.plant_is_new
     s = fl.summary()
     for key in ("rms_along_track_m", "rms_out_of_plane_m"):
-        assert s[key]["ratio"] <= BETTER_BY, (key, s[key])
-        assert all(f.new[key] < f.old[key] for f in fl.flights), (key, fl.flights)
+        assert s[key]["ratio"] <= better_by, (key, s[key])
+        assert all(f.new[key] < max(f.old[key], AT_NOISE) for f in fl.flights), (
+            key, fl.flights)
     assert s["slack_events"]["new"] == 0
 
 
@@ -181,3 +203,89 @@ def test_improve_never_writes_over_its_inputs(tmp_path, monkeypatch):
     assert res.output.strip() == ("gainsched: error: command line: -o: out/paper.toml is the input "
                                   "CONFIG: give a new file (an input is never overwritten)")
     assert cfg.read_text() == PAPER_TOML.read_text()
+
+
+def _improved(monkeypatch, tmp_path, **keys):
+    """Let ``improve`` find a motor lag at once (its diagnosis stands in: the steps after
+    it are what these tests break) and give the config those keys on top."""
+    from types import SimpleNamespace
+
+    import gainsched.analysis.improve as imp_mod
+
+    old = gs.config_from_text(small_config_text(), str(tmp_path / "small.toml"))
+    new = gs.config_from_text(small_config_text(**{"effects.motor_lag.tau": 0.03, **keys}),
+                              str(tmp_path / "small.toml"))
+    d = SimpleNamespace(accepted=SimpleNamespace(name="motor_lag"), verdict="missing effect")
+    rounds = [imp_mod.Round(old, SimpleNamespace(normalized_rms=lambda: 3.0), d),
+              imp_mod.Round(new, SimpleNamespace(normalized_rms=lambda: 1.0), None)]
+    monkeypatch.setattr(imp_mod, "improve", lambda *a, **k: imp_mod.Improvement(rounds))
+
+
+def test_a_failed_flight_step_keeps_the_config_tables_and_report(tmp_path, monkeypatch):
+    """Fault injection (issue 59): the flights of the old and the new table raise. The
+    improved config, the rebuilt tables and the report (saying which step failed) are
+    published; one line names the step and the fault; exit 1; no traceback."""
+    import gainsched.sim.oldnew
+
+    def broken(*args, **kwargs):
+        raise NotImplementedError("injected: the simulator cannot fly this")
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "small.toml").write_text(small_config_text())
+    assert CliRunner().invoke(cli, ["build", "small.toml", "-o", "old"]).exit_code == 0
+    _improved(monkeypatch, tmp_path)
+    monkeypatch.setattr(gainsched.sim.oldnew, "fly_old_new", broken)
+    res = CliRunner().invoke(cli, ["improve", "small.toml", *map(str, FLIGHTS[:2]), "-o", "out",
+                                   "--tables", "old/small.h5"])
+    assert res.exit_code == 1, res.output
+    assert "Traceback" not in res.output and isinstance(res.exception, SystemExit)
+    errors = [ln for ln in res.stderr.splitlines() if ln.startswith("gainsched: error:")]
+    assert errors == ["gainsched: error: improve: the step 'fly the old and the new tables' "
+                      "failed: NotImplementedError: injected: the simulator cannot fly this "
+                      "(what was done before it is in out)"], res.stderr
+    assert "out: small.toml (motor_lag applied), report/, tables/" in res.stdout
+    cfg = gs.load_config(tmp_path / "out" / "small.toml")
+    assert any(s.name == "motor_lag" for s in cfg.effects)
+    assert gs.load_table(tmp_path / "out" / "tables" / "small.h5").built_from(cfg)
+    data = json.loads((tmp_path / "out" / "report" / "improve.json").read_text())
+    assert data["flights"] is None and data["flights_not_flown"].startswith(
+        "the step 'fly the old and the new tables' failed: NotImplementedError")
+    assert not list((tmp_path / "out").glob(".gainsched-stage*"))
+
+
+def test_a_refused_rebuild_keeps_the_config_and_report(tmp_path, monkeypatch):
+    """The improved model's table over the flash budget the config states: the rebuild is
+    refused, and the improved config and the report are published without tables; the one
+    line names the step, the key and the compact format's size; exit 1 (the rebuild's
+    half-written tables are not published)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "small.toml").write_text(small_config_text())
+    _improved(monkeypatch, tmp_path, **{"firmware.max_table_bytes": 1000})
+    res = CliRunner().invoke(cli, ["improve", "small.toml", *map(str, FLIGHTS[:2]), "-o", "out2"])
+    assert res.exit_code == 1, res.output
+    errors = [ln for ln in res.stderr.splitlines() if ln.startswith("gainsched: error:")]
+    assert len(errors) == 1 and "the step 'rebuild the tables' failed: " in errors[0]
+    assert "firmware.max_table_bytes: 1,000 bytes exceeded" in errors[0]
+    assert 'format = "compact" holds' in errors[0] and "Traceback" not in res.output
+    assert (tmp_path / "out2" / "small.toml").exists()
+    assert not (tmp_path / "out2" / "tables").exists()
+    md = (tmp_path / "out2" / "report" / "improve.md").read_text()
+    assert "Not flown: the step 'rebuild the tables' failed" in md
+
+
+def test_a_fault_in_the_diagnosis_is_one_line_and_writes_nothing(tmp_path, monkeypatch):
+    """Fault injection: the rounds of compare and diagnose raise (not a user error): one
+    line naming the step, exit 1, no traceback, nothing written (nothing was done)."""
+    import gainsched.analysis.improve as imp_mod
+
+    def broken(*args, **kwargs):
+        raise FloatingPointError("injected")
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(imp_mod, "improve", broken)
+    res = CliRunner().invoke(cli, ["improve", str(PAPER_TOML), *map(str, FLIGHTS[:2]),
+                                   "-o", "out"])
+    assert res.exit_code == 1 and isinstance(res.exception, SystemExit), res.output
+    assert res.stderr.strip() == ("gainsched: error: improve: the step 'compare and diagnose' "
+                                  "failed: FloatingPointError: injected")
+    assert not (tmp_path / "out").exists()

@@ -6,6 +6,7 @@ certification on the paper table (gains solved directly at the cell midpoints)."
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -515,6 +516,28 @@ def test_a_bound_the_firmware_table_misses_stops_the_build(tmp_path, extra, valu
     assert f"bad.toml: {key}: " in r.output and "Traceback" not in r.output
     assert len(r.output.strip().splitlines()) == 1
     assert not out.exists() or not any(out.glob("bad*"))
+    if key == "firmware.max_table_bytes":  # the way out, with its size (issue 59)
+        size = re.search(r'format = "compact" holds ([0-9,]+) bytes', r.output)
+        assert size and 1000 < int(size.group(1).replace(",", "")) < int(re.search(
+            r"the dense table holds ([0-9,]+) bytes", r.output).group(1).replace(",", ""))
+
+
+def test_a_table_over_the_default_flash_builds_and_says_so(tmp_path, monkeypatch):
+    """No budget in the config: a table over DEFAULT_FLASH_BYTES (1 MiB; here lowered to
+    the small table's scale) is built, and one warning line names the key, the size and
+    the compact format's size; under it, no warning."""
+    from gainsched.firmware import outputs
+
+    r, _ = _build(tmp_path, "under")
+    assert r.exit_code == 0 and "warning" not in r.output, r.output
+    monkeypatch.setattr(outputs, "DEFAULT_FLASH_BYTES", 1000)
+    r, out = _build(tmp_path, "over")
+    assert r.exit_code == 0, r.output
+    warned = [ln for ln in r.output.splitlines() if ln.startswith("gainsched: warning:")]
+    assert len(warned) == 1 and "over.toml: firmware.max_table_bytes: the dense table " \
+        "holds" in warned[0] and "more than 1,000 bytes" in warned[0], r.output
+    assert 'format = "compact" holds' in warned[0]
+    assert (out / "over.h5").exists()
 
 
 def test_export_c_and_check_follow_the_tables_format(tmp_path):

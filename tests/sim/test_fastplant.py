@@ -8,7 +8,8 @@
 - One RK4 step equals ``sim._rk4`` on the numpy model.
 - The maximal model with the spring-damper link (``FastMaximal``) equals
   ``MaximalModel``: derivative and tension at random states (taut and slack, every
-  combination of the stateless effects), and a step with its RK4 substeps (a stiff link).
+  combination of the effects, their states random: issue 59), and a step with its RK4
+  substeps (a stiff link).
 - A closed-loop flight with the compiled plants equals the numpy-plant flight.
 - A wind (issue 37): derivative, tension and thrusts of both plants, reduced and
   maximal, equal the numpy models at random tilts *and headings* gamma (the wind's
@@ -302,7 +303,8 @@ def test_fallback_for_unsupported_configs(paper_config):
         assert not fast_plant_supported(elastic) and fast_plant(elastic) is None
         assert _Plant(elastic).fast is None and _Plant(elastic).maximal is not None
     lagged = link("spring-damper", with_effects(paper_config.text, ("drag", "motor_lag")))
-    assert not fast_plant_supported(lagged)  # no stateful effects in maximal coordinates
+    assert fast_plant_supported(lagged)  # stateful effects in maximal coordinates (#59)
+    assert isinstance(_Plant(lagged).fast, FastMaximal)
     other = dataclasses.replace(paper_config, effects=(EffectSpec("latency", ()),))
     assert not fast_plant_supported(other) and fast_plant(other) is None
     for kind in sorted(set(EFFECTS) - SUPPORTED_EFFECTS):  # real effects plant.c lacks
@@ -316,8 +318,8 @@ def test_fallback_for_unsupported_configs(paper_config):
 
 
 # ----------------------------------------------------------- maximal model, spring-damper
-STATELESS = [c for c in COMBOS if not {"motor_lag", "thrust_time", "thrust_voltage"} & set(c)]
-# (the wind's own maximal test is test_wind_maximal_equals_numpy_model)
+# every combination, stateful effects included (the wind's own maximal test is
+# test_wind_maximal_equals_numpy_model)
 
 
 def spring_damper(paper_text: str, names, stiffness: float, damping: float):
@@ -329,24 +331,25 @@ def spring_damper(paper_text: str, names, stiffness: float, damping: float):
 
 
 def maximal_states(mm: MaximalModel, n: int, seed: int):
-    """Maximal states (n, 13) from random reduced states, the link stretched to 0-40 N and
-    the radius jittered by 1e-4; every third one 1 mm shorter than its rest length
-    (slack); inputs (n, 4) N, tilts (n,)."""
+    """Maximal states (n, n_x) from random reduced states and effect states, the link
+    stretched to 0-40 N and the radius jittered by 1e-4; every third one 1 mm shorter
+    than its rest length (slack); inputs (n, 4) N, tilts (n,)."""
     model = mm.model
     z, u, alpha = random_states(model, n, seed)
     rng = np.random.default_rng(seed + 100)
     tension = rng.uniform(0.0, 40.0, n)
     tension[::3] = 0.0
-    x = mm.from_reduced(z[:, :N_STATE], tension=tension)
+    x = mm.from_reduced(z, tension=tension)
+    np.testing.assert_array_equal(x[:, 13:], z[:, N_STATE:])
     x[:, :3] *= 1 + 1e-4 * rng.standard_normal((n, 1))
     x[::3, :3] *= 1 - 1e-3 / model.rho
     return x, u, alpha
 
 
-@pytest.mark.parametrize("names", STATELESS, ids=lambda c: "+".join(c) or "none")
+@pytest.mark.parametrize("names", COMBOS, ids=lambda c: "+".join(c) or "none")
 def test_maximal_derivative_and_tension_equal_numpy_model(paper_text, names):
     """x' within 1e-12 of its largest entry, tension within 1e-12 N; slack states
-    (tension 0, no push) among them."""
+    (tension 0, no push) among them; the effect states' rates too."""
     cfg = spring_damper(paper_text, names, 3000.0, 5.0)
     fm = fast_plant(cfg)
     assert isinstance(fm, FastMaximal)
@@ -360,7 +363,8 @@ def test_maximal_derivative_and_tension_equal_numpy_model(paper_text, names):
         assert abs(ten - ten_ref[i]) <= 1e-12 * max(ten_ref[i], 1.0)
 
 
-@pytest.mark.parametrize("names", [(), tuple(STATELESS[-1])], ids=["none", "all"])
+@pytest.mark.parametrize("names", [(), COMBOS[63], COMBOS[-1]],
+                         ids=["none", "first six", "stateful+efficiency"])
 def test_maximal_step_with_substeps_equals_numpy(paper_text, names):
     """A stiff link (k = 2e5 N/m: 3 RK4 substeps per 1 ms) and a soft one (1 substep): the
     compiled step equals ``MaximalModel.step``, the signed tension (negative when
