@@ -2,15 +2,25 @@
 
 from __future__ import annotations
 
+import dataclasses
+import warnings
+
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from gainsched.config import N_STATE
-from gainsched.model.effects import MotorLag
-from gainsched.model.maximal import MaximalModel, maximal_from_reduced, reduced_from_maximal
+from gainsched.config import N_STATE, EffectSpec
+from gainsched.errors import GainschedWarning
+from gainsched.model.effects import EFFECTS, MotorLag
+from gainsched.model.maximal import (
+    LINKS,
+    MaximalModel,
+    maximal_from_reduced,
+    reduced_from_maximal,
+)
 from gainsched.model.reduced import Model
 from gainsched.rotations import matrix_from_quaternion
+from gainsched.sim._plant import _Plant
 
 from support import CIRCLE_TILT as TILT
 
@@ -312,3 +322,36 @@ def test_wind_model_is_complex_step_safe(paper_config):
         cs = np.imag(model.f(z + 1e-30j * dz, u, 0.3, 0.8)) / 1e-30
         fd = (model.f(z + 1e-6 * dz, u, 0.3, 0.8) - model.f(z - 1e-6 * dz, u, 0.3, 0.8)) / 2e-6
         np.testing.assert_allclose(cs, fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
+
+
+@pytest.mark.parametrize("kind", sorted(EFFECTS))
+def test_every_library_effect_flies_on_every_link(paper_config, kind):
+    """Issue 59: the simulator's plant takes every library effect (its default parameters,
+    beside the paper's drag) on every tether link: the state holds the effect's states
+    after the rigid body's and the link's after them, a 10 us step is finite, and the
+    maximal model with the rigid link has the reduced model's tension, omega' and effect
+    state rates at the same state (to 1e-9 of their scale)."""
+    cfg = dataclasses.replace(paper_config, effects=(*paper_config.effects, EffectSpec(kind, ())))
+    md = Model(cfg)
+    z = np.array([np.pi / 2, 0.3, 0.05, 6.0, -0.6, 0.05, 0.02, 0.1, -0.2, 6.0])
+    u = np.array([1.4, 1.5, 1.6, 1.5])
+    zf = np.concatenate([z, md.steady_effect_states(u)])
+    for link in LINKS:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", GainschedWarning)  # the numpy plant's note
+            P = _Plant(dataclasses.replace(cfg, tether=dataclasses.replace(cfg.tether,
+                                                                           link=link)))
+        x = P.initial(z, u)
+        n_link = 0 if P.maximal is None else P.maximal.n_link
+        base = N_STATE if P.maximal is None else 13
+        assert x.shape == (base + md.n_extra + n_link,), (link, x.shape)
+        np.testing.assert_array_equal(x[base:base + md.n_extra], zf[N_STATE:])
+        x_next, ten = P.step(x, u, 0.3, 1e-5)  # the chain's stiff nodes: ~1300 substeps/ms
+        assert np.all(np.isfinite(x_next)) and ten > 0, link
+    mx = MaximalModel(md, "rigid")
+    ev = md.evaluate(zf, u, 0.3)
+    x_dot, f_t = mx.evaluate(mx.from_reduced(zf), u, 0.3)
+    assert abs(f_t - ev.tension) <= 1e-9 * abs(ev.tension)
+    np.testing.assert_allclose(x_dot[10:13], ev.z_dot[7:10], rtol=0,
+                               atol=1e-9 * np.abs(ev.z_dot[7:10]).max())
+    np.testing.assert_array_equal(x_dot[13:], ev.z_dot[N_STATE:])
