@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 
 import tomlkit
+from tomlkit.container import OutOfOrderTableProxy
 from tomlkit.items import Table
 
 __all__ = ["get_value", "has_section", "set_value", "set_values", "remove_key", "set_section"]
@@ -26,17 +27,29 @@ _COMMENT_COL = 39
 
 
 def _table(doc, section: str, create: bool):
-    """The table ``[section]`` of ``doc`` (the document itself for ``""``), or None."""
+    """The table ``[section]`` of ``doc`` (the document itself for ``""``), or None. A
+    table written in pieces (``[effects.drag]`` near the top, ``[effects.rotor_drag]``
+    at the end of the file: valid TOML) is tomlkit's proxy over its pieces, edited
+    through it."""
     node = doc
     for part in [p for p in section.split(".") if p]:
         if part not in node:
             if not create:
                 return None
-            node.append(part, tomlkit.table())
+            _add(node, part, tomlkit.table())
         node = node[part]
-        if not isinstance(node, Table):
+        if not isinstance(node, (Table, OutOfOrderTableProxy)):
             raise ValueError(f"[{section}]: {part!r} is not a table")
     return node
+
+
+def _add(node, key: str, value) -> None:
+    """Add ``key`` to a table at its end (a proxy over a table in pieces: to its pieces,
+    as tomlkit places it)."""
+    if isinstance(node, OutOfOrderTableProxy):
+        node[key] = value
+    else:
+        node.append(key, value)
 
 
 def _item(value, comment: str | None, key: str):
@@ -122,5 +135,5 @@ def set_section(text: str, section: str, items, header_comment: str | None = Non
     if name in parent:
         parent[name] = table
     else:
-        parent.append(name, table)
+        _add(parent, name, table)
     return tomlkit.dumps(doc)

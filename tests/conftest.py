@@ -164,11 +164,13 @@ def small_config_text():
 
 @pytest.fixture(scope="module")
 def fly(paper_config, paper_table):
-    """The factory ``fly(hidden="none", scenarios=None, load_cell=True)``: the flight logs
-    (list of FlightLog) of :func:`gainsched.sim.campaign.campaign` on the plant with the
-    hidden effect ``hidden`` (a name of ``HIDDEN``), the paper table flying, flights of
+    """The factory ``fly(hidden="none", scenarios=None, load_cell=True,
+    real_tether=False)``: the flight logs (list of FlightLog) of
+    :func:`gainsched.sim.campaign.campaign` on the plant with the hidden effect ``hidden``
+    (a name of ``HIDDEN``), the paper table flying, flights of
     :data:`support.CAMPAIGN_DURATION` s: the default flights, or ``scenarios`` (Scenario
-    objects, or names of default flights); ``load_cell=False`` drops the tension. Flown
+    objects, or names of default flights); ``load_cell=False`` drops the tension;
+    ``real_tether``: on the elastic tether of a real vehicle (``REAL_TETHER``). Flown
     once per module."""
     from gainsched.sim.campaign import campaign, default_flights
     from gainsched.sim.loop import table_scheduler
@@ -176,15 +178,16 @@ def fly(paper_config, paper_table):
     sched = table_scheduler(paper_table)
     cache = {}
 
-    def get(hidden="none", scenarios=None, load_cell=True):
+    def get(hidden="none", scenarios=None, load_cell=True, real_tether=False):
         if scenarios is not None and all(isinstance(s, str) for s in scenarios):
             scenarios = [s for s in default_flights(support.CAMPAIGN_DURATION)
                          if s.name in scenarios]
         key = (hidden, None if scenarios is None else tuple(s.name for s in scenarios),
-               load_cell)
+               load_cell, real_tether)
         if key not in cache:
             cache[key] = campaign(paper_config, sched, hidden, duration=support.CAMPAIGN_DURATION,
-                                  scenarios=scenarios, load_cell=load_cell)
+                                  scenarios=scenarios, load_cell=load_cell,
+                                  real_tether=real_tether)
         return cache[key]
 
     return get
@@ -192,18 +195,19 @@ def fly(paper_config, paper_table):
 
 @pytest.fixture(scope="module")
 def diagnosed(paper_config, fly):
-    """The factory ``diagnosed(hidden, scenarios=None)``: :func:`gainsched.analysis.
-    diagnose.diagnose` of the paper config on ``fly(hidden, scenarios)``, once per
-    module."""
+    """The factory ``diagnosed(hidden, scenarios=None, real_tether=False)``:
+    :func:`gainsched.analysis.diagnose.diagnose` of the paper config on ``fly(hidden,
+    scenarios, real_tether=real_tether)``, once per module."""
     from gainsched.analysis.diagnose import diagnose
 
     cache = {}
 
-    def get(hidden, scenarios=None):
+    def get(hidden, scenarios=None, real_tether=False):
         key = (hidden, None if scenarios is None else tuple(
-            s if isinstance(s, str) else s.name for s in scenarios))
+            s if isinstance(s, str) else s.name for s in scenarios), real_tether)
         if key not in cache:
-            cache[key] = diagnose(paper_config, fly(hidden, scenarios))
+            cache[key] = diagnose(paper_config, fly(hidden, scenarios,
+                                                    real_tether=real_tether))
         return cache[key]
 
     return get

@@ -89,3 +89,23 @@ def test_config_variant_carries_its_own_text_and_hash():
     assert var.tether == cfg.tether and var.effects == cfg.effects
     with pytest.raises(InputError, match=r"paper.toml: vehicle.mass: "):
         cfg.with_values({"vehicle.mass": -1.0})
+
+
+def test_an_effects_table_in_pieces_is_edited(tmp_path):
+    """Issue 53: ``[effects.rotor_drag]`` added at the end of a config, after other
+    sections (valid TOML: ``[effects]`` written in pieces) is read, and every edit works
+    on it: a new effect, a replaced one, a value, a removed key (diagnose --apply and
+    improve write through these); the other pieces stay where they are."""
+    text = PAPER.read_text() + "\n[effects.rotor_drag]\nk_rd = 0.01\n"
+    assert {s.name for s in config_from_text(text).effects} == {"drag", "rotor_drag"}
+    new = set_section(text, "effects.motor_lag", [("tau", 0.03, "s; fitted")], "diagnose")
+    new = set_section(new, "effects.rotor_drag", [("k_rd", 0.02, None)])
+    new = set_value(new, "effects.drag", "mu1", 0.2)
+    new = remove_key(new, "analysis", "latency_s")
+    cfg = config_from_text(new)
+    assert {s.name: s.param_dict() for s in cfg.effects} == {
+        "drag": {"mu1": 0.2, "mu2": 0.0025}, "motor_lag": {"tau": 0.03},
+        "rotor_drag": {"k_rd": 0.02}}
+    assert new.index("[effects.drag]") < new.index("[environment]") < new.index(
+        "[effects.rotor_drag]")
+    assert get_value(new, "effects.motor_lag", "tau") == 0.03

@@ -517,6 +517,9 @@ def diagnose_lines(d: Diagnosis) -> list[str]:
         for n in r.notes:
             if r.rms_reduction >= THRESHOLDS["min_rms_reduction"]:
                 out.append(f"  note ({r.name}): {n}")
+    # why the candidates that explain something fail (all of them: diagnose.md)
+    out += [f"  fails ({r.name}): {'; '.join(r.failed())}" for r in d.results
+            if r.rms_reduction > 0 and not r.passes]
     out.append(f"verdict: {d.verdict}")
     return out
 
@@ -592,6 +595,9 @@ def write_diagnose(d: Diagnosis, out_dir) -> list[Path]:
     md += _md_table(head, rows)
     md += ["", "Thresholds: " + ", ".join(f"{k} = {v:g}" for k, v in THRESHOLDS.items()), "",
            f"![ranking]({pic.name})", ""]
+    fails = [f"- {r.name}: {'; '.join(r.failed())}" for r in d.results if not r.passes]
+    if fails:
+        md += ["## Thresholds each failing candidate misses", "", *fails, ""]
     notes = [f"- {r.name}: {n}" for r in d.results for n in r.notes]
     if notes:
         md += ["## Notes", "", *notes, ""]

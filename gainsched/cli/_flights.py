@@ -171,6 +171,9 @@ class _HiddenOption(click.Option):
 @click.option("--duration", type=FiniteFloat(1.0, MAX_FLIGHT_S, unit="s"), default=3.0,
               show_default=True, help=f"Seconds per flight (1..{MAX_FLIGHT_S:g}).")
 @click.option("--no-load-cell", is_flag=True, help="Drop the tether tension column.")
+@click.option("--real-tether", is_flag=True,
+              help="Fly on the elastic tether of a real vehicle (spring-damper, k = 2e5 N/m, "
+                   "c = 25 N s/m) under the hidden effect.")
 @click.option("--format", "fmt", type=click.Choice(["csv", "h5"]), default="csv",
               show_default=True)
 @click.option("--seed", type=SEED, default=1, show_default=True,
@@ -178,7 +181,8 @@ class _HiddenOption(click.Option):
 @click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
               required=True, help="Output folder for the flight logs.")
 @user_errors
-def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_dir):
+def campaign(config, table_path, hidden, duration, no_load_cell, real_tether, fmt, seed,
+             out_dir):
     """Fly a synthetic test campaign (speeds 3-15 m/s, tilts 0/20/40 deg, a speed-up, a
     braking; motion-capture noise) on a plant with a HIDDEN effect and write the logs."""
     from ..publish import check_out_dir, staged
@@ -205,7 +209,9 @@ def campaign(config, table_path, hidden, duration, no_load_cell, fmt, seed, out_
                    "it, on the gains of its nearest circle", err=True)
     with _progress(f"campaign {hidden}", len(flights), "flight") as bar:
         logs = fly(cfg, table_scheduler(table), hidden, scenarios=flights, duration=duration,
-                   load_cell=not no_load_cell, seed=seed, progress=bar.update)
+                   load_cell=not no_load_cell, seed=seed, real_tether=real_tether,
+                   progress=bar.update)
     with staged(out_dir) as stage:
         paths = write_campaign(stage, logs, fmt)
-    click.echo(f"{out_dir}: {len(paths)} flights, hidden effect: {HIDDEN[hidden].doc}")
+    click.echo(f"{out_dir}: {len(paths)} flights, hidden effect: {HIDDEN[hidden].doc}"
+               + ("; on a real (elastic) tether" if real_tether else ""))

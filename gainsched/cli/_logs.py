@@ -280,7 +280,7 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
                    err=True)
         sys.exit(1)
     for k, r in enumerate(imp.rounds):
-        verdict = "" if r.diagnosis is None else f": {r.diagnosis.verdict[:160]}"
+        verdict = "" if r.diagnosis is None else f": {r.diagnosis.verdict}"
         click.echo(f"round {k}: normalised RMS {r.rms:.3g}{verdict}")
     new = imp.config
     flights = None
@@ -291,7 +291,9 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
         report = stage / "report"
         report.mkdir()
         refusal = None
-        if not no_build:
+        # nothing applied: the tables would be CONFIG's own, and the flights old = new
+        unchanged = not imp.applied
+        if not no_build and not unchanged:
             from ..schedule.grid import check_effect_symmetries
 
             try:
@@ -311,6 +313,7 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
                                            duration)
                 failed = step if step.why else None
         not_flown = ("--no-build" if no_build else
+                     "nothing was applied: the tables are CONFIG's own" if unchanged else
                      refusal and f"the tables were not rebuilt: {refusal}" or
                      failed and f"the step '{failed.name}' failed: {failed.why}")
         write_improve(imp, report, flights, not_flown=not_flown)
@@ -318,9 +321,11 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
         for line in flights.lines():
             click.echo(line)
     applied = ", ".join(imp.applied) or "nothing"
-    kept = "" if no_build or refusal or (failed and failed.undo) else ", tables/"
+    kept = "" if no_build or unchanged or refusal or (failed and failed.undo) else ", tables/"
     click.echo(f"{out_dir}: {new.name}.toml ({applied} applied), report/{kept}"
-               + (f"; tables not rebuilt: {refusal}" if refusal else ""))
+               + (f"; tables not rebuilt: {refusal}" if refusal else
+                  "; nothing applied, so no tables rebuilt and no flights flown"
+                  if unchanged and not no_build else ""))
     if failed is not None:
         click.echo(f"gainsched: error: improve: the step '{failed.name}' failed: {failed.why} "
                    f"(what was done before it is in {out_dir})", err=True)

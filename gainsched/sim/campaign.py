@@ -28,6 +28,7 @@ from .loop import Maneuver, Scenario, Sensing, log_from_result, simulate
 __all__ = [
     "HiddenEffect",
     "HIDDEN",
+    "REAL_TETHER",
     "outside_table",
     "AzimuthThrustLoss",
     "default_flights",
@@ -228,11 +229,25 @@ def outside_table(scenarios, table) -> list[str]:
             or abs(s.tilt) > tilt + 1e-9]
 
 
-def plant_config(design: Config, hidden: HiddenEffect | str) -> Config:
-    """The truth: the design config's text with the hidden effect's edits."""
+#: the tether of a real vehicle, the base truth of a campaign with ``real_tether``: a
+#: tension-only spring-damper of k = 2e5 N/m and c = 25 N s/m (M. Tognon and A. Franchi,
+#: "Theory and Applications for Control of Aerial Robots in Physical Interaction Through
+#: Tethers", Springer, 2021, sec. 3.1), which stretches about 0.3 mm at the highest
+#: tensions of the flights, as every real tether does
+REAL_TETHER = (("tether", "link", "spring-damper"), ("tether", "stiffness", 2e5),
+               ("tether", "damping", 25.0))
+
+
+def plant_config(design: Config, hidden: HiddenEffect | str, *,
+                 real_tether: bool = False) -> Config:
+    """The truth: the design config's text with the hidden effect's edits; with
+    ``real_tether`` on :data:`REAL_TETHER` (unless the hidden effect is a tether link of
+    its own)."""
     h = HIDDEN[hidden] if isinstance(hidden, str) else hidden
     text = design.text
-    for section, key, value in h.sections:
+    own_link = any(e[:2] == ("tether", "link") for e in h.sections)  # the tether is hidden
+    base = REAL_TETHER if real_tether and not own_link else ()
+    for section, key, value in (*base, *h.sections):
         if key is None:
             text = set_section(text, section, [(k, v, None) for k, v in value],
                                f"hidden: {h.name}")
@@ -286,12 +301,13 @@ def fly(design: Config, scheduler, scenarios, plant: Config | None = None, *,
 
 def campaign(design: Config, scheduler, hidden: str = "none", *, scenarios=None,
              duration: float = 3.0, load_cell: bool = True,
-             seed: int = 1, progress=None) -> list[FlightLog]:
+             seed: int = 1, real_tether: bool = False, progress=None) -> list[FlightLog]:
     """Fly the default (or given) scenarios on the plant with the hidden effect ``hidden``
-    (``progress(1)`` after each flight)."""
+    (``progress(1)`` after each flight); ``real_tether``: on :data:`REAL_TETHER`, the
+    elastic tether of a real vehicle, under the hidden effect (:func:`plant_config`)."""
     h = HIDDEN[hidden]
     scenarios = default_flights(duration, seed) if scenarios is None else scenarios
-    plant = plant_config(design, h)
+    plant = plant_config(design, h, real_tether=real_tether)
     return fly(design, scheduler, scenarios, plant, latency=h.latency, load_cell=load_cell,
                hidden=h.name, custom=h.custom, progress=progress)
 

@@ -289,3 +289,29 @@ def test_a_fault_in_the_diagnosis_is_one_line_and_writes_nothing(tmp_path, monke
     assert res.stderr.strip() == ("gainsched: error: improve: the step 'compare and diagnose' "
                                   "failed: FloatingPointError: injected")
     assert not (tmp_path / "out").exists()
+
+
+def test_nothing_applied_rebuilds_nothing_and_prints_the_whole_verdict(tmp_path,
+                                                                       monkeypatch):
+    """Issue 53: a first round that accepts nothing: no rebuild and no flights (the tables
+    would be CONFIG's own), the report says why, and the round's line holds the whole
+    verdict, however long."""
+    from types import SimpleNamespace
+
+    import gainsched.analysis.improve as imp_mod
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "small.toml").write_text(small_config_text())
+    cfg = gs.load_config(tmp_path / "small.toml")
+    verdict = "no library effect explains it: " + "the residual concentrates there; " * 12
+    d = SimpleNamespace(accepted=None, verdict=verdict)
+    rounds = [imp_mod.Round(cfg, SimpleNamespace(normalized_rms=lambda: 3.0), d)]
+    monkeypatch.setattr(imp_mod, "improve", lambda *a, **k: imp_mod.Improvement(rounds))
+    res = CliRunner().invoke(cli, ["improve", "small.toml", *map(str, FLIGHTS[:2]), "-o", "out"])
+    assert res.exit_code == 0, res.output
+    assert f"round 0: normalised RMS 3: {verdict}" in res.output
+    assert "out: small.toml (nothing applied), report/; nothing applied, so no tables " \
+        "rebuilt and no flights flown" in res.output
+    assert not (tmp_path / "out" / "tables").exists() and "flights on" not in res.output
+    data = json.loads((tmp_path / "out" / "report" / "improve.json").read_text())
+    assert data["flights_not_flown"] == "nothing was applied: the tables are CONFIG's own"

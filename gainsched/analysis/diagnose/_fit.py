@@ -397,10 +397,15 @@ def _score(prob, cand, fit: _Fit, base_sq, base_vecs, start, lo, hi) -> Candidat
     n_eff = n_total / prob.window
     dbic = n_eff * math.log(max(sse_fit, 1e-300) / sse_base) + k * math.log(n_eff)
     rng = hi - lo
-    edge = np.any((theta - lo < 0.01 * rng) & (lo > 0)) or np.any(hi - theta < 0.01 * rng)
-    names_ = [q.name for q in cand.params]
+    # at the edge: an identified parameter (95 % CI within its range) on a bound; one the
+    # flights do not identify is not written as fitted (unidentified()), so no reason
+    # to refuse the parameters it rides with
+    seen = ci < rng
+    at = seen & (((theta - lo < 0.01 * rng) & (lo > 0)) | (hi - theta < 0.01 * rng))
+    edge = bool(np.any(at))
     if edge:
-        notes.append(f"{', '.join(names_)} at the edge of the plausible range")
+        notes.append(f"{', '.join(q.name for q, a in zip(cand.params, at, strict=True) if a)}"
+                     " at the edge of the plausible range")
     plausible = not edge
     stable = spread <= THRESHOLDS["max_fold_spread"]
     axes = list(prob.axes)

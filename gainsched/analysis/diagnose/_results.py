@@ -16,6 +16,7 @@ import numpy as np
 
 from ...config import Config
 from ..compare import (
+    AT_NOISE_FLOOR,
     Comparison,
 )
 from ._candidates import Candidate
@@ -35,6 +36,10 @@ THRESHOLDS = {
     # below the noise floor (no excess to explain) a candidate must instead remove this
     # share of the held-out binned structure (analysis.structure) that compare found
     "min_structure_explained": 0.5,
+    # no residual axis may be worse held out by more than this share and end above its
+    # noise floor (AT_NOISE_FLOOR times it): a fit that trades one axis for another tells
+    # a wrong story
+    "max_axis_worse": 0.05,
     # forward selection adds a candidate only when the fit together explains this much
     # more of the residual power above the noise floor (and lowers delta-BIC by
     # nested_bic_gain)
@@ -102,6 +107,14 @@ class CandidateResult:
     def passes(self) -> bool:
         return not self.failed()
 
+    def worse_axes(self) -> list[str]:
+        """The residual axes the fit makes worse held out: normalised RMS up by more than
+        ``THRESHOLDS["max_axis_worse"]`` and above the noise floor after (``AT_NOISE_FLOOR``
+        times it: within it, the axis is noise either way)."""
+        tol = THRESHOLDS["max_axis_worse"]
+        return [a for a, before in self.axis_rms_before.items()
+                if self.axis_rms_after.get(a, 0.0) > max(before * (1 + tol), AT_NOISE_FLOOR)]
+
     def failed(self) -> list[str]:
         """Which thresholds the candidate misses, in words (empty: it passes)."""
         t = THRESHOLDS
@@ -119,12 +132,18 @@ class CandidateResult:
             if not self.rms_reduction >= t["min_rms_reduction"]:
                 out.append(f"held-out RMS reduction {self.rms_reduction:.1%} < "
                            f"{t['min_rms_reduction']:.0%}")
-            if not (np.isfinite(self.excess_explained)
-                    and self.excess_explained >= t["min_excess_explained"]):
+            # nan: no residual power above the noise floor over all axes to speak of (one
+            # axis above it, the others at it): the held-out RMS, delta-BIC and the
+            # structure left judge alone
+            if (np.isfinite(self.excess_explained)
+                    and not self.excess_explained >= t["min_excess_explained"]):
                 out.append(f"explains {self.excess_explained:.0%} of the residual above noise "
                            f"(< {t['min_excess_explained']:.0%})")
         if not self.below_noise and not self.delta_bic <= t["max_delta_bic"]:
             out.append(f"delta-BIC {self.delta_bic:.1f} > {t['max_delta_bic']:g}")
+        for a in self.worse_axes():
+            out.append(f"makes the {a} axis worse held out (normalised RMS "
+                       f"{self.axis_rms_before[a]:.3g} -> {self.axis_rms_after[a]:.3g})")
         if self.structure_left and not self.below_noise:
             out.append(f"leaves structure a right model would remove: {self.structure_left[0]}")
         if not self.plausible:

@@ -199,7 +199,7 @@ def _parsimonious(passing: list[CandidateResult], library) -> CandidateResult | 
 
 
 def _select(prob, library, names, base, at_floor, base_sq, base_vecs, *, asked, joint,
-            forward, progress):
+            forward, progress, fitted=None):
     """The fits of a diagnosis, in their order, and the accepted one: ``(results,
     accepted)``, ``results`` ranked by held-out RMS reduction, then delta-BIC.
 
@@ -211,10 +211,15 @@ def _select(prob, library, names, base, at_floor, base_sq, base_vecs, *, asked, 
     structure of ``base``), or when the candidates were ``asked`` for by name; forward
     selection (:func:`_forward`, with ``forward``) while the fit leaves more than
     ``THRESHOLDS["forward_excess_gain"]`` of the residual above noise. ``progress(name)``
-    before each fit, when given."""
+    before each fit, when given. ``fitted``: fits already made on ``prob``, by name (not
+    made again)."""
+    fitted = dict(fitted or {})
 
     def fit(names_):
         for n in names_:
+            if n in fitted:
+                results.append(fitted.pop(n))
+                continue
             if progress is not None:
                 progress(n)
             cand, pre = library[n], None
