@@ -146,6 +146,17 @@ HIDDEN: dict[str, HiddenEffect] = {
                      truth=("wind", "east", 2.4)),
         HiddenEffect("mass", "mass 0.55 kg instead of 0.5 kg", (("vehicle", "mass", 0.55),),
                      truth=("mass", "mass", 0.55)),
+        HiddenEffect("inertia_z", "yaw moment of inertia 30 % below the config's: Jzz = "
+                     "0.00315 instead of 0.0045 kg m^2",
+                     (("vehicle", "inertia", [2.5e-3, 2.5e-3, 3.15e-3]),),
+                     truth=("inertia_z", "Jzz", 3.15e-3)),
+        HiddenEffect("inertia_x", "roll moment of inertia 30 % above the config's: Jxx = "
+                     "0.00325 instead of 0.0025 kg m^2",
+                     (("vehicle", "inertia", [3.25e-3, 2.5e-3, 4.5e-3]),),
+                     truth=("inertia_x", "Jxx", 3.25e-3)),
+        HiddenEffect("kappa", "rotor reaction-torque coefficient 50 % above the config's: "
+                     "kappa = 0.024 instead of 0.016 m",
+                     (("vehicle", "kappa", 0.024),), truth=("kappa", "kappa", 0.024)),
         HiddenEffect("attachment_offset", "attachment offset L_e = 0.12 m instead of 0.10 m",
                      (("tether", "attachment_offset", 0.12),),
                      truth=("attachment_offset", "attachment_offset", 0.12)),

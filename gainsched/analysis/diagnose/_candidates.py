@@ -191,6 +191,51 @@ class ConfigCandidate(Candidate):
                          f"{comments[0]}; {header}")
 
 
+class InertiaCandidate(Candidate):
+    """Refit one principal moment of inertia (a diagonal entry of ``vehicle.inertia``):
+    the angular accelerations about that axis scale with its inverse. Bounds 0.5-2x the
+    config's value (a CAD estimate or a pendulum test is good to tens of percent)."""
+
+    affine = False
+
+    def __init__(self, axis: int):
+        a = "xyz"[axis]
+        self.axis = axis
+        self.name = f"inertia_{a}"
+        self.doc = (f"moment of inertia about the body {a} axis (vehicle.inertia J{a}{a}) "
+                    "error")
+        self.params = (FitParam(f"J{a}{a}", "kg m^2", 0.0, 0.0),)
+        self.bounds_rel = (0.5, 2.0)
+
+    def start(self, cfg):
+        return np.array([float(cfg.vehicle.inertia[self.axis, self.axis])])
+
+    def fit_bounds(self, cfg, start):
+        """0.5-2x the config's value, within the triangle inequalities of a rigid body's
+        principal moments (each at most the sum of the other two)."""
+        d = np.diag(np.asarray(cfg.vehicle.inertia, dtype=float))
+        others = np.delete(d, self.axis)
+        lo = max(0.5 * start[0], abs(others[0] - others[1]))
+        hi = min(2.0 * start[0], others.sum())
+        return np.array([lo]), np.array([hi])
+
+    def _inertia(self, cfg, value):
+        J = np.array(cfg.vehicle.inertia, dtype=float)
+        J[self.axis, self.axis] = value
+        return J
+
+    def variant(self, cfg, theta):
+        return CandidateModel(_replaced(cfg, "vehicle", "inertia",
+                                        self._inertia(cfg, float(theta[0]))))
+
+    def apply_text(self, text, cfg, theta, comments, header, keep=frozenset()):
+        J = self._inertia(cfg, float(theta[0]))
+        value = ([float(v) for v in np.diag(J)] if np.count_nonzero(J - np.diag(np.diag(J))) == 0
+                 else [[float(v) for v in row] for row in J])
+        return set_value(text, "vehicle", "inertia", value,
+                         f"kg m^2; J{'xyz'[self.axis] * 2}: {comments[0]}; {header}")
+
+
 class LatencyCandidate(Candidate):
     """Measurement latency: the pose lags the logged commands (``analysis.latency_s``)."""
 
@@ -343,6 +388,12 @@ def candidate_library() -> dict[str, Candidate]:
                         "attachment offset L_e error", affine=False, bounds_rel=(0.0, 3.0)),
         ConfigCandidate("tether_length", "tether", "length", P("length", "m", 0.0, 0.0),
                         "tether length error", affine=True, bounds_rel=(0.8, 1.2)),
+        # what every real quadcopter has a little of (issue 53): the moments of inertia
+        # and the rotors' reaction-torque coefficient, each known to tens of percent
+        *(InertiaCandidate(i) for i in range(3)),
+        ConfigCandidate("kappa", "vehicle", "kappa", P("kappa", "m", 0.0, 0.0),
+                        "rotor reaction-torque coefficient (vehicle.kappa: yaw torque per "
+                        "newton of thrust) error", affine=True, bounds_rel=(0.3, 3.0)),
     ]
     by_name: dict[str, Candidate] = {}
     for c in out:
@@ -475,6 +526,12 @@ _SEPARATE = {
         "a speed staircase: an elastic tether stretches with the tension, a length error does not",
     frozenset({"tether_elasticity", "attachment_offset"}):
         "a speed staircase: an elastic tether stretches with the tension, an offset error does not",
+    frozenset({"inertia_y", "inertia_z"}):
+        "pitch or yaw manoeuvres (a yaw step, a pitch doublet): on steady circles only "
+        "Jzz - Jyy shows, through the gyroscopic roll torque of the turning vehicle",
+    frozenset({"kappa", "inertia_z"}):
+        "yaw manoeuvres at low thrust and at high thrust: the reaction torque scales with "
+        "the thrust, the yaw inertia does not",
     frozenset({"mass", "drag_linear"}):
         "speed-ups and braking at several speeds: the mass acts on the acceleration, drag on "
         "the speed",

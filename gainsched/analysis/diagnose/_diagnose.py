@@ -114,33 +114,9 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     names = select_candidates(candidates, exclude, library)
     names = _logged(names, library, base.measured, asked=candidates is not None)
     at_floor, base_vecs, base_sq = _base_residual(prob, base)
-    nuisance, tried = ((None, None) if candidates is not None else
-                       _nuisance(prob, library, names, base_sq, base_vecs, progress))
-    if nuisance is None:
-        results, accepted = _select(prob, library, names, base, at_floor, base_sq, base_vecs,
-                                    asked=candidates is not None, joint=joint,
-                                    forward=forward, progress=progress, fitted=tried)
-        twins, similarity = _twins(library, results, accepted)
-    else:
-        # every candidate fitted with the tether's own stretch in the model (held at its
-        # fit): the nuisance never vetoes the effect it rides with
-        cfg2 = nuisance.candidate.variant(config, nuisance.theta).config
-        base2 = compare(cfg2, base.segs, measured=base.measured, segs=base.segs)
-        prob2 = _problem(cfg2, base2)
-        at2, vecs2, sq2 = _base_residual(prob2, base2)
-        results, found = _select(prob2, library, [n for n in names if n != nuisance.name],
-                                 base2, at2, sq2, vecs2, asked=False, joint=joint,
-                                 forward=forward, progress=progress)
-        held = (f"fitted with {nuisance.name} in the model ("
-                + ", ".join(f"{k} = {v:.4g}" for k, v in nuisance.values.items()) + ")")
-        results = [dataclasses.replace(r, notes=(*r.notes, held)) for r in results]
-        found = next((r for r in results if found is not None and r.name == found.name),
-                     None)
-        twins, similarity = _twins(library, results, found)
-        accepted = _with_nuisance(prob, nuisance, found, base_sq, base_vecs, progress)
-        results = _ranked([nuisance, *([accepted] if accepted not in (None, nuisance)
-                                        else []), *results])
-        prob.n_evals += prob2.n_evals
+    results, accepted, twins, similarity = _fits(
+        prob, library, names, base, at_floor, base_sq, base_vecs,
+        asked=candidates is not None, joint=joint, forward=forward, progress=progress)
     verdict = _verdict(base, results, accepted, twins, at_floor)
     return Diagnosis(config, base, results, accepted, twins, verdict, at_floor,
                      prob.flight_names, int(round(prob.n_evals)), similarity)
@@ -193,6 +169,48 @@ def _nuisance(prob: _Problem, library, names, base_sq, base_vecs, progress):
                             for a in axes)):
             return r, None
     return None, tried
+
+
+def _fits(prob, library, names, base, at_floor, base_sq, base_vecs, *, asked, joint, forward,
+          progress):
+    """Every fit of a diagnosis and the choice among them: ``(results, accepted, twins,
+    similarity)``. With a nuisance these flights need (:func:`_nuisance`; not when the
+    candidates were ``asked`` for by name), the candidates are fitted beside it
+    (:func:`_select_beside`); otherwise as they are (:func:`_select`)."""
+    nuisance, tried = ((None, None) if asked else
+                       _nuisance(prob, library, names, base_sq, base_vecs, progress))
+    if nuisance is not None:
+        return _select_beside(prob, library, names, base, nuisance, base_sq, base_vecs,
+                              joint=joint, forward=forward, progress=progress)
+    results, accepted = _select(prob, library, names, base, at_floor, base_sq, base_vecs,
+                                asked=asked, joint=joint, forward=forward, progress=progress,
+                                fitted=tried)
+    return (results, accepted, *_twins(library, results, accepted))
+
+
+def _select_beside(prob, library, names, base, nuisance, base_sq, base_vecs, *, joint,
+                   forward, progress):
+    """:func:`_select` with the ``nuisance`` in the model (held at its fit): every other
+    candidate fitted beside it, so it never vetoes the effect it rides with; the one
+    accepted there fitted again together with it on the model as it is
+    (:func:`_with_nuisance`). Returns ``(results, accepted, twins, similarity)``, the
+    fits beside the nuisance noting it."""
+    cfg2 = nuisance.candidate.variant(prob.config, nuisance.theta).config
+    base2 = compare(cfg2, base.segs, measured=base.measured, segs=base.segs)
+    prob2 = _problem(cfg2, base2)
+    at2, vecs2, sq2 = _base_residual(prob2, base2)
+    results, found = _select(prob2, library, [n for n in names if n != nuisance.name],
+                             base2, at2, sq2, vecs2, asked=False, joint=joint,
+                             forward=forward, progress=progress)
+    held = (f"fitted with {nuisance.name} in the model ("
+            + ", ".join(f"{k} = {v:.4g}" for k, v in nuisance.values.items()) + ")")
+    results = [dataclasses.replace(r, notes=(*r.notes, held)) for r in results]
+    found = next((r for r in results if found is not None and r.name == found.name), None)
+    twins, similarity = _twins(library, results, found)
+    accepted = _with_nuisance(prob, nuisance, found, base_sq, base_vecs, progress)
+    prob.n_evals += prob2.n_evals
+    return (_ranked([nuisance, *([accepted] if accepted not in (None, nuisance) else []),
+                     *results]), accepted, twins, similarity)
 
 
 def _with_nuisance(prob, nuisance, found, base_sq, base_vecs, progress):

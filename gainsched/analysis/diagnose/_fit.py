@@ -42,6 +42,8 @@ from ._results import THRESHOLDS, CandidateResult
 def _bounds(cand: Candidate, cfg: Config, start):
     if getattr(cand, "bounds", None) is not None:
         return cand.bounds
+    if hasattr(cand, "fit_bounds"):  # bounds of its own (a moment of inertia's)
+        return cand.fit_bounds(cfg, start)
     lo = np.array([p.lower for p in cand.params], float)
     hi = np.array([p.upper for p in cand.params], float)
     rel = getattr(cand, "bounds_rel", None)
