@@ -406,3 +406,9 @@ def on_terminal(args, cwd, *, columns: int = 100, timeout: float = 300) -> tuple
     p.wait(timeout=timeout)
     os.close(master)
     return p.returncode, b"".join(chunks).decode(errors="replace")
+
+
+def excess_rms_fall(result) -> float:
+    """Held-out fall of the residual RMS above the noise floor of a diagnose fit (a
+    CandidateResult): ``1 - sqrt(1 - excess_explained)``."""
+    return 1 - float(np.sqrt(max(0.0, 1 - result.excess_explained)))

@@ -11,7 +11,6 @@ to leave the tether's elasticity out.
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 import pytest
@@ -26,7 +25,7 @@ from gainsched.sim.campaign import HIDDEN, campaign, default_flights
 from gainsched.sim.loop import table_scheduler
 
 from support import CAMPAIGN_DURATION as DURATION
-from support import PAPER_H5
+from support import PAPER_H5, excess_rms_fall
 
 
 def d_base_vectors(d):
@@ -34,10 +33,6 @@ def d_base_vectors(d):
     c = d.base
     return _Problem(d.config, c.measured, c.segs, c.noise, c.residuals).base_vectors()
 
-
-def _excess_rms_fall(r) -> float:
-    """Held-out fall of the residual RMS above the noise floor: 1 - sqrt(1 - explained)."""
-    return 1 - math.sqrt(max(0.0, 1 - r.excess_explained))
 
 
 @pytest.mark.parametrize("load_cell", [True, False])
@@ -87,7 +82,7 @@ def test_an_elastic_tether_with_its_effect_left_out_gets_the_empirical_stretch(p
     assert d.verdict.startswith("no physical effect of the library explains"), d.verdict
     assert "empirical correction: tether_stretch, tether stretch (" in d.verdict, d.verdict
     assert a.values["s1"] == pytest.approx(TENSION_UNIT_N / 3000.0, rel=0.10)
-    assert _excess_rms_fall(a) >= 0.8, a.excess_explained
+    assert excess_rms_fall(a) >= 0.8, a.excess_explained
     assert not a.implausible
     # --apply writes the law as [effects.tether_stretch], and the fitted config's own
     # diagnosis no longer sees the stretch residual (the law taken off the stretch axis)

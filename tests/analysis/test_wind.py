@@ -46,14 +46,10 @@ from gainsched.schedule.grid import build_grid
 from gainsched.sim.campaign import HIDDEN, default_flights, fly, plant_config
 from gainsched.sim.loop import table_scheduler
 
-from support import CAMPAIGN_DURATION, PAPER_TOML
+from support import CAMPAIGN_DURATION, PAPER_TOML, excess_rms_fall
 
 WIND = (2.4, -1.8)  # east, north, m/s: the ``wind`` campaign's
 
-
-def _excess_rms_fall(r) -> float:
-    """Held-out fall of the residual RMS above the noise floor: 1 - sqrt(1 - explained)."""
-    return 1 - math.sqrt(max(0.0, 1 - r.excess_explained))
 
 
 def _wind_text(east: float, north: float) -> str:
@@ -295,7 +291,7 @@ def test_diagnose_finds_the_wind(diagnosed):
     speed = math.hypot(*WIND)
     assert abs(a.values["east"] - WIND[0]) <= 0.1 * speed, a.values
     assert abs(a.values["north"] - WIND[1]) <= 0.1 * speed, a.values
-    assert _excess_rms_fall(a) >= 0.8, a.excess_explained
+    assert excess_rms_fall(a) >= 0.8, a.excess_explained
     assert "from 307 deg" in d.verdict, d.verdict
 
 
@@ -318,7 +314,7 @@ def test_a_wind_with_its_effect_left_out_gets_the_empirical_force(paper_config, 
     assert math.hypot(a.values["e0"] - mu1 * WIND[0],
                       a.values["n0"] - mu1 * WIND[1]) <= 0.1 * mu1 * math.hypot(*WIND)
     assert re.search(r"horizontal force 0\.5\d* N towards 12[5-9] deg", d.verdict), d.verdict
-    assert _excess_rms_fall(a) >= 0.8, a.excess_explained
+    assert excess_rms_fall(a) >= 0.8, a.excess_explained
 
 
 @pytest.mark.slow
