@@ -19,8 +19,27 @@ import sys
 INTERRUPTED = 130
 
 
+def _ctrl_c_in_a_callback(unraisable) -> None:
+    """``sys.unraisablehook`` of the command: a Ctrl-C that lands where Python cannot raise
+    (a weakref callback such as a ``WeakValueDictionary``'s, a ``__del__``, a ctypes
+    callback) would be printed as "Exception ignored" with its traceback and lost, the
+    command going on. It is delivered again to the main thread once the callback is
+    over, from a timer thread (raised inside this hook it would be lost the same way);
+    every other unraisable exception is shown as Python shows it."""
+    if issubclass(unraisable.exc_type, KeyboardInterrupt):
+        import _thread
+        import threading
+
+        timer = threading.Timer(0.005, _thread.interrupt_main)
+        timer.daemon = True
+        timer.start()
+        return
+    sys.__unraisablehook__(unraisable)
+
+
 def main() -> None:
     """Pin the numerics of this process, then run the command line."""
+    sys.unraisablehook = _ctrl_c_in_a_callback
     try:
         from .native.reproducible import pin_environ
 

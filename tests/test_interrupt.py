@@ -212,6 +212,45 @@ def test_a_ctrl_c_during_the_library_scan_is_raised_after_it(call):
         res.stdout + res.stderr
 
 
+#: a Ctrl-C inside a weakref callback (fault injection: the callback of a
+#: WeakValueDictionary entry raises it when the value dies), with the command's hook
+_CTRL_C_IN_WEAKREF = """
+import sys, time, weakref
+from gainsched.__main__ import _ctrl_c_in_a_callback
+{hook}
+class Value:
+    pass
+def ctrl_c_inside(ref):
+    raise KeyboardInterrupt
+values = weakref.WeakValueDictionary()
+v = values["x"] = Value()
+ref = weakref.ref(v, ctrl_c_inside)
+try:
+    del v
+    time.sleep(2.0)
+    print("not interrupted")
+except KeyboardInterrupt:
+    print("interrupted after the callback")
+"""
+
+
+@pytest.mark.parametrize("hooked", [True, False], ids=["command", "python"])
+def test_a_ctrl_c_in_a_weakref_callback_is_raised_after_it(hooked):
+    """CI saw it in the random trials: a Ctrl-C that lands in a weakref callback (a
+    WeakValueDictionary's, which cannot raise) printed "Exception ignored" with a
+    traceback and was lost, the build went on. The command's unraisable hook
+    (gainsched/__main__.py) delivers it again once the callback is over; without the
+    hook (Python's) it is lost, as the test shows."""
+    hook = "sys.unraisablehook = _ctrl_c_in_a_callback" if hooked else ""
+    res = subprocess.run([sys.executable, "-c", _CTRL_C_IN_WEAKREF.format(hook=hook)],
+                         capture_output=True, text=True, timeout=120)
+    if hooked:
+        assert res.stdout == "interrupted after the callback\n" and res.stderr == "", \
+            res.stdout + res.stderr
+    else:
+        assert res.stdout == "not interrupted\n" and "Exception ignored" in res.stderr
+
+
 @pytest.fixture()
 def fake_shm(tmp_path, monkeypatch):
     from gainsched.native import shm
