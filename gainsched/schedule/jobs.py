@@ -148,7 +148,16 @@ def _beside_workers(args, n_workers, job):
                 i, a = queue.popleft()
             except IndexError:
                 return
-            future = pool.submit(job, *a)
+            try:
+                future = pool.submit(job, *a)
+            except BaseException as exc:  # noqa: BLE001 - the pool shut down under this
+                # thread (Ctrl-C or an error in the caller, between the check above and
+                # here: nothing to tell), or it broke (handed to the caller)
+                if not stop.is_set():
+                    with ready:
+                        done[i] = (False, exc)
+                        ready.notify()
+                return
 
     for i, future in first:
         threading.Thread(target=feed, args=(i, future), daemon=True).start()

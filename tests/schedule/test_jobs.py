@@ -79,3 +79,59 @@ def test_an_error_in_any_job_reaches_the_caller(fail):
     second), its error is raised to the caller."""
     got = _run(fail)
     assert got["out"] == f"job {fail} failed"
+
+
+#: fault injection: the worker's feeder thread submits its next job just as the caller
+#: fails and shuts the pool down (the pool's submit waits for the shutdown, then raises
+#: what loky raises there); the caller's error must be the only thing that shows
+_SHUTDOWN_RACE = """
+from gainsched.native.reproducible import pin_environ
+pin_environ()
+import json, threading, time
+import gainsched.schedule.jobs as jobs
+from joblib.externals.loky.process_executor import ShutdownExecutorError
+
+real = jobs.pinned_executor
+
+feeding = threading.Event()
+
+class Pool:
+    def __init__(self, n):
+        self.pool, self.calls, self.down = real(n), 0, threading.Event()
+    def submit(self, *args, **kwargs):
+        self.calls += 1
+        if self.calls > 1:  # the feeder's next job: lands after the caller's shutdown
+            feeding.set()
+            self.down.wait(10)
+            raise ShutdownExecutorError("cannot schedule new futures after shutdown")
+        return self.pool.submit(*args, **kwargs)
+    def shutdown(self, **kwargs):
+        self.down.set()
+        self.pool.shutdown(**kwargs)
+
+jobs.pinned_executor = Pool
+
+def job(k):  # job 1 (this process's) fails once the feeder is submitting its next
+    if k == 1:
+        feeding.wait(30)
+        raise ValueError("job 1 failed")
+    return k
+
+try:
+    list(jobs._beside_workers([(k,) for k in range(6)], 1, job))
+except ValueError as exc:
+    time.sleep(0.5)  # the feeder thread's turn
+    print(json.dumps(str(exc)))
+"""
+
+
+def test_a_feeder_that_meets_the_shut_down_pool_stops_quietly():
+    """CI's random interrupt trials once printed a feeder thread's ShutdownExecutorError
+    after "gainsched: interrupted": the thread submitted its next job after the caller
+    had shut the pool down. It now stops without a word; the caller's error is what
+    shows."""
+    res = subprocess.run([sys.executable, "-c", _SHUTDOWN_RACE], capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 0 and json.loads(res.stdout) == "job 1 failed", res.stderr
+    assert "Traceback" not in res.stderr and "Exception in thread" not in res.stderr, \
+        res.stderr
