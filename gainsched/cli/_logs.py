@@ -276,9 +276,7 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
         imp = run(cfg, logs, rounds=rounds, exclude=exclude, channel_map=cmap, trust=trust,
                   progress=fitted)
     if step.why:  # nothing done before it: nothing to keep
-        click.echo(f"gainsched: error: improve: the step '{step.name}' failed: {step.why}",
-                   err=True)
-        sys.exit(1)
+        step.exit()
     for k, r in enumerate(imp.rounds):
         verdict = "" if r.diagnosis is None else f": {r.diagnosis.verdict}"
         click.echo(f"round {k}: normalised RMS {r.rms:.3g}{verdict}")
@@ -327,9 +325,7 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
                   "; nothing applied, so no tables rebuilt and no flights flown"
                   if unchanged and not no_build else ""))
     if failed is not None:
-        click.echo(f"gainsched: error: improve: the step '{failed.name}' failed: {failed.why} "
-                   f"(what was done before it is in {out_dir})", err=True)
-        sys.exit(1)
+        failed.exit(f"what was done before it is in {out_dir}")
 
 
 class _Step:
@@ -339,6 +335,13 @@ class _Step:
 
     def __init__(self, name: str, undo: Path | None):
         self.name, self.undo, self.why = name, undo, None
+
+    def exit(self, kept: str = "") -> None:
+        """Say in one line that the step failed and why (and what was ``kept``), then end
+        the command with exit code 1."""
+        click.echo(f"gainsched: error: improve: the step '{self.name}' failed: {self.why}"
+                   + (f" ({kept})" if kept else ""), err=True)
+        sys.exit(1)
 
 
 @contextlib.contextmanager

@@ -204,8 +204,7 @@ class InertiaCandidate(Candidate):
         self.name = f"inertia_{a}"
         self.doc = (f"moment of inertia about the body {a} axis (vehicle.inertia J{a}{a}) "
                     "error")
-        self.params = (FitParam(f"J{a}{a}", "kg m^2", 0.0, 0.0),)
-        self.bounds_rel = (0.5, 2.0)
+        self.params = (FitParam(f"J{a}{a}", "kg m^2", 0.0, 0.0),)  # bounds: fit_bounds
 
     def start(self, cfg):
         return np.array([float(cfg.vehicle.inertia[self.axis, self.axis])])
