@@ -217,6 +217,12 @@ int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params
     if (!gs_c_outputs_ok(pr)) {
         return GS_BAD_ARG;
     }
+    for (i = 0u; i < 3u; ++i) {
+        if (!(pr->gyro_scale[i] > 0.0f) || gs_nonfinite(pr->gyro_scale[i]) ||
+            gs_nonfinite(pr->gyro_bias[i])) {
+            return GS_BAD_ARG; /* a gyro calibration that cannot be undone */
+        }
+    }
     if ((pr->n_lag != 0u && pr->n_lag != 4u) ||
         (pr->n_lag == 4u && 10u + pr->n_int + 4u != table->n_state) ||
         !(pr->lag_keep >= 0.0f) || !(pr->lag_keep < 1.0f)) {
@@ -333,7 +339,9 @@ static bool gs_c_sample_ok(const float v[3], float range)
 }
 
 /* The IMU sample of this step, checked: a bad one keeps the last good sample
- * (GS_CTRL_BAD_IMU). Returns the status bits; *gyro_bad says the rates are unusable. */
+ * (GS_CTRL_BAD_IMU); the range is checked on the raw reading (the sensor saturates),
+ * then the gyro's calibration is undone, omega = (gyro - bias) / scale.
+ * Returns the status bits; *gyro_bad says the rates are unusable. */
 static uint32_t gs_c_imu(gs_ctrl *c, const gs_ctrl_input *in, bool *gyro_bad)
 {
     const gs_ctrl_params *pr = c->params;
@@ -348,7 +356,7 @@ static uint32_t gs_c_imu(gs_ctrl *c, const gs_ctrl_input *in, bool *gyro_bad)
         st |= GS_CTRL_BAD_IMU;
     } else {
         for (j = 0u; j < 3u; ++j) {
-            c->gyro[j] = in->gyro[j];
+            c->gyro[j] = (in->gyro[j] - pr->gyro_bias[j]) / pr->gyro_scale[j];
         }
     }
     if ((in->flags & GS_CTRL_ACCEL) != 0u) {

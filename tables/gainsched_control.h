@@ -103,6 +103,10 @@ typedef struct gs_ctrl_params {
     float pose_timeout;   /* s: no pose for longer -> GS_CTRL_STALE_POSE */
     float quat_tolerance; /* a pose with | |q|^2 - 1 | above it is rejected */
     float gyro_range;     /* rad/s: a gyro axis beyond it is saturated (GS_CTRL_BAD_IMU) */
+    float gyro_scale[3];  /* the gyro's calibration: axis j reads gyro_scale[j] omega_j +
+                           * gyro_bias[j]; each finite and > 0 (else GS_BAD_ARG) */
+    float gyro_bias[3];   /* rad/s, each finite; the controller uses
+                           * omega_j = (gyro_j - gyro_bias[j]) / gyro_scale[j] */
     float accel_range;    /* m/s^2: the accelerometer's range (the generated default:
                            * 1.5x the largest specific force of the table's circles) */
     float k_pos;          /* position correction per pose: p += k_pos e_p */

@@ -27,8 +27,9 @@ import gainsched.schedule.grid
 from gainsched.cli import cli
 from gainsched.errors import InputError
 from gainsched.publish import JOURNAL, publish, recover, staged
-from gainsched.schedule.tables import _dataset_sha256, _datasets, _root_sha256, load_table
+from gainsched.schedule.tables import load_table
 
+import support
 from support import PAPER_H5 as TABLE
 from support import PAPER_TOML as PAPER
 from support import REPO, paper_config_text, small_config_text
@@ -70,10 +71,7 @@ def _edit_K(path, fn, *, rechecksum=False):
         K[i, j, k, 0, 0] = fn(K[i, j, k, 0, 0])
         f["gains/K"][...] = K
         if rechecksum:  # a tool that "repairs" the checksums: the finiteness check still holds
-            digests = {}
-            for name, ds in _datasets(f).items():
-                digests[name] = ds.attrs["sha256"] = _dataset_sha256(ds[()])
-            f.attrs["data_sha256"] = _root_sha256(dict(f.attrs), digests)
+            support.rechecksum(f)
     return i, j, k
 
 
@@ -375,10 +373,7 @@ def _edited_table(attrs=None, text=None, sha=False) -> bytes:
             f["config_text"] = text
             if sha:
                 f.attrs["config_sha256"] = hashlib.sha256(text.encode()).hexdigest()
-        digests = {}
-        for name, ds in _datasets(f).items():
-            digests[name] = ds.attrs["sha256"] = _dataset_sha256(ds[()])
-        f.attrs["data_sha256"] = _root_sha256(dict(f.attrs), digests)
+        support.rechecksum(f)
     return buf.getvalue()
 
 

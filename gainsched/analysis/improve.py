@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ..config import Config, config_from_text
 from .compare import Comparison, compare, load_segments
-from .diagnose import Diagnosis, apply_candidate, diagnose
+from .diagnose import Diagnosis, apply_diagnosis, diagnose
 
 __all__ = ["Round", "Improvement", "improve", "write_improve"]
 
@@ -64,8 +64,8 @@ class Improvement:
     @property
     def applied(self) -> list[str]:
         """The candidates written into the config, in order."""
-        return [r.diagnosis.accepted.name for r in self.rounds
-                if r.diagnosis is not None and r.diagnosis.accepted is not None]
+        return [" + ".join(r.diagnosis.applied) for r in self.rounds
+                if r.diagnosis is not None and r.diagnosis.applied]
 
     def to_json(self) -> dict:
         return {
@@ -126,9 +126,10 @@ def improve(config: Config, logs, *, rounds: int = 3, exclude=(), channel_map=No
     for _ in range(rounds):
         d = diagnose(cfg, segs, comparison=cmp, exclude=exclude, progress=progress)
         out.append(Round(cfg, cmp, d))
-        if d.accepted is None:
+        text = apply_diagnosis(d)
+        if text is None:
             return Improvement(out)
-        new = config_from_text(apply_candidate(cfg, d.accepted), cfg.source)
+        new = config_from_text(text, cfg.source)
         new_measured = load_segments(new, segs)[0]
         after = compare(new, segs, measured=new_measured, segs=segs)
         if after.normalized_rms() >= cmp.normalized_rms():  # a fit that does not help

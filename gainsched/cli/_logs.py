@@ -144,7 +144,7 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
     the residual on LOGS, score on held-out flights (leave one flight out), rank, check
     identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
     from ..analysis.compare import compare as run
-    from ..analysis.diagnose import apply_candidate
+    from ..analysis.diagnose import apply_diagnosis
     from ..analysis.diagnose import diagnose as run_diagnose
     from ..analysis.reports import (
         before_after_lines,
@@ -187,21 +187,22 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
         click.echo(line)
     after = None
     if do_apply:
-        if d.accepted is None:
+        text = apply_diagnosis(d)
+        if text is None:
             click.echo("nothing applied: no candidate cleared the thresholds")
         else:
             from ..schedule.grid import check_effect_symmetries
 
-            text = apply_candidate(cfg, d.accepted)
+            what = " + ".join(d.applied)
             write_atomic(new_config, text.encode(), where="-o")
             new_cfg = config_from_text(text, str(new_config))
             try:  # the build's own check: a wind, flight time, unequal motors
                 check_effect_symmetries(new_cfg)
             except InputError as held:
-                click.echo(f"wrote {new_config} ({d.accepted.name}); no table can hold "
+                click.echo(f"wrote {new_config} ({what}); no table can hold "
                            f"{held.where}: {held.message}")
             else:
-                click.echo(f"wrote {new_config} ({d.accepted.name}); rebuild the tables with "
+                click.echo(f"wrote {new_config} ({what}); rebuild the tables with "
                            f"`gainsched build {new_config}`")
             after = run(new_cfg, logs, channel_map=cmap, trust=trust)
             click.echo("")

@@ -41,6 +41,7 @@ from ._schema import (
     Firmware,
     Grid,
     Limits,
+    Sensors,
     Tether,
     Vehicle,
 )
@@ -57,6 +58,7 @@ __all__ = [
     "Feasibility",
     "Analysis",
     "Limits",
+    "Sensors",
     "Firmware",
     "EffectSpec",
     "load_config",

@@ -31,6 +31,7 @@ from ._schema import (
     Firmware,
     Grid,
     Limits,
+    Sensors,
     Tether,
     Vehicle,
 )
@@ -42,6 +43,7 @@ from ._sections import (
     read_firmware,
     read_grid,
     read_limits,
+    read_sensors,
     read_tether,
     read_vehicle,
 )
@@ -112,6 +114,9 @@ class Config:
     firmware : Firmware
         ``[firmware]`` (defaults when absent): the table format the C header carries and
         the flash budget.
+    sensors : Sensors
+        ``[sensors]`` (defaults when absent): the gyro's calibration (scale and bias per
+        body axis), which the log reader and the firmware controller undo.
     radius : float
         Property: nominal COG circle radius ``r = rho + L_e``, m.
     sha256 : str
@@ -154,6 +159,7 @@ class Config:
     analysis: Analysis = field(default_factory=Analysis)
     limits: Limits = field(default_factory=Limits)
     firmware: Firmware = field(default_factory=Firmware)
+    sensors: Sensors = field(default_factory=Sensors)
 
     def __repr__(self) -> str:
         """One line: the name, the source, the vehicle and tether at a glance, the effects,
@@ -326,12 +332,13 @@ def _config(text: str, source: str, check_default_name: bool) -> Config:
     analysis = read_analysis(top.sub("analysis", {}))
     limits = read_limits(top.sub("limits", {}))
     firmware = read_firmware(top.sub("firmware", {}))
+    sensors = read_sensors(top.sub("sensors", {}))
     _check_commands(source, firmware, vehicle)
     if feas.thrust_margin * 2 >= vehicle.thrust_max - vehicle.thrust_min:
         raise InputError(source, "feasibility.thrust_margin", "leaves no usable thrust range")
     top.done()
     cfg = Config(name, vehicle, tether, effects, g, control, grid, feas, source, text,
-                 analysis=analysis, limits=limits, firmware=firmware)
+                 analysis=analysis, limits=limits, firmware=firmware, sensors=sensors)
     check_budget(cfg, source)
     check_circles(cfg, source)  # after the budget: the grid is of a size a build takes
     return cfg

@@ -293,6 +293,49 @@ class Analysis:
 
 
 @dataclass(frozen=True)
+class Sensors:
+    """The on-board sensors' calibration (``[sensors]``): each gyro axis reads
+    ``gyro_scale * omega + gyro_bias`` for a body rate ``omega``. The log reader
+    (:func:`gainsched.compare`) and the firmware controller undo it,
+    ``omega = (reading - gyro_bias) / gyro_scale``, before using a reading; ``diagnose``
+    estimates it against the motion capture's rates
+    (:mod:`gainsched.analysis.calibration`).
+
+    Attributes
+    ----------
+    gyro_scale : tuple of 3 float
+        Scale factor of the gyro's x, y, z axes (body frame B), in [0.5, 2].
+    gyro_bias : tuple of 3 float, rad/s
+        Bias of the gyro's x, y, z axes, each within +-0.5 rad/s.
+    """
+
+    gyro_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def identity(self) -> bool:
+        """True when the gyro reads the body rates as they are (scale 1, bias 0)."""
+        return self.gyro_scale == (1.0, 1.0, 1.0) and self.gyro_bias == (0.0, 0.0, 0.0)
+
+    def body_rates(self, reading):
+        """The body rates (..., 3), rad/s, of gyro readings ``reading`` (..., 3), rad/s:
+        ``(reading - gyro_bias) / gyro_scale``.
+
+        Examples
+        --------
+        >>> Sensors((1.02, 1.0, 1.0), (0.01, 0.0, 0.0)).body_rates(np.array([1.03, 2, 3]))
+        array([1., 2., 3.])
+        """
+        return (np.asarray(reading, dtype=float) - np.array(self.gyro_bias)) / np.array(
+            self.gyro_scale)
+
+    def readings(self, omega):
+        """The gyro readings (..., 3), rad/s, of body rates ``omega`` (..., 3), rad/s."""
+        return np.asarray(omega, dtype=float) * np.array(self.gyro_scale) + np.array(
+            self.gyro_bias)
+
+
+@dataclass(frozen=True)
 class Limits:
     """Resource limits of a build (``[limits]``, checked by :func:`gainsched.budget.check_budget`).
 

@@ -26,6 +26,7 @@ from ._schema import (
     Firmware,
     Grid,
     Limits,
+    Sensors,
     Tether,
     Vehicle,
     integral_states,
@@ -326,6 +327,30 @@ def read_analysis(sec: Section) -> Analysis:
     accel = sec.boolean("use_accelerometer", Analysis.use_accelerometer)
     sec.done()
     return Analysis(window, order, latency, gyro, accel)
+
+
+#: the range of a gyro axis's scale factor and of its bias (rad/s) in ``[sensors]``
+GYRO_SCALE_RANGE = (0.5, 2.0)
+GYRO_BIAS_MAX = 0.5
+
+
+def read_sensors(sec: Section) -> Sensors:
+    """``[sensors]`` -> :class:`Sensors`: the gyro's scale factors and biases (rad/s) per
+    body axis."""
+
+    def axes(key, default, lo, hi, unit):
+        a = sec.array(key, list(default))
+        if a.shape != (3,):
+            raise sec.error(key, f"must be 3 numbers (x, y, z), got shape {a.shape}")
+        if np.any(a < lo) or np.any(a > hi):
+            raise sec.error(key, f"each must be in [{lo:g}, {hi:g}]{unit}, got "
+                                 f"{', '.join(f'{x:g}' for x in a)}")
+        return tuple(float(x) for x in a)
+
+    scale = axes("gyro_scale", Sensors.gyro_scale, *GYRO_SCALE_RANGE, "")
+    bias = axes("gyro_bias", Sensors.gyro_bias, -GYRO_BIAS_MAX, GYRO_BIAS_MAX, " rad/s")
+    sec.done()
+    return Sensors(scale, bias)
 
 
 def read_limits(sec: Section) -> Limits:

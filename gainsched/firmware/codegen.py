@@ -364,6 +364,8 @@ _PARAM_COMMENTS = {
     "pose_delay": "s: SET it to your poses' latency (0: a lead that no status shows)",
     "pose_timeout": "s",
     "quat_tolerance": "| |q|^2 - 1 | of a usable pose", "gyro_range": "rad/s",
+    "gyro_scale": "gyro reads scale * omega + bias ([sensors])",
+    "gyro_bias": "rad/s, undone: omega = (gyro - bias) / scale",
     "accel_range": "m/s^2", "k_pos": "estimator: position per pose",
     "k_vel": "estimator: velocity per pose", "k_att": "estimator: attitude per pose",
     "pose_period": "s between poses",

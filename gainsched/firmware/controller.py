@@ -316,6 +316,8 @@ class Controller:
         self.head = 0
         self.v = np.zeros(3)
         self.gyro = self.gyro_prev = np.zeros(3)
+        self._gyro_scale = np.array(params.gyro_scale)
+        self._gyro_bias = np.array(params.gyro_bias)
         self.accel = self.accel_prev = np.zeros(3)
         self.fresh = False
         self.have_fix = self.have_gains = self.have_az = False
@@ -372,7 +374,8 @@ class Controller:
         if gyro_bad:
             st |= CTRL_BAD_IMU
         else:
-            self.gyro = gyro.astype(float)
+            # the gyro's calibration undone, as the C controller and the log reader do
+            self.gyro = (gyro - self._gyro_bias) / self._gyro_scale
         if flags & FLAG_ACCEL:
             f = row[_COL["accel"]]
             if not _sample_ok(f, pr.accel_range):

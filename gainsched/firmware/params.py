@@ -10,6 +10,7 @@ step itself is :mod:`gainsched.firmware.controller`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -71,6 +72,10 @@ class ControllerParams:
         A pose quaternion with ``| |q|^2 - 1 |`` above this is rejected.
     gyro_range : float, rad/s
         A gyro axis beyond it is saturated.
+    gyro_scale, gyro_bias : tuple of 3 float (-, rad/s)
+        The gyro's calibration (``[sensors]`` of the config): each axis reads
+        ``gyro_scale * omega + gyro_bias``; the controller uses
+        ``(reading - gyro_bias) / gyro_scale`` (float32, as in C), as the log reader does.
     accel_range : float, m/s^2
         The accelerometer's range: an axis beyond it is a bad sample (``CTRL_BAD_IMU``).
         :func:`controller_params` sizes it from the config's grid
@@ -112,6 +117,8 @@ class ControllerParams:
     pose_timeout: float = 0.05
     quat_tolerance: float = 0.01
     gyro_range: float = 34.9  # 2000 deg/s
+    gyro_scale: tuple[float, ...] = (1.0, 1.0, 1.0)
+    gyro_bias: tuple[float, ...] = (0.0, 0.0, 0.0)
     accel_range: float = 156.9  # 16 g
     k_pos: float = 0.3
     k_vel: float = 0.04
@@ -136,6 +143,13 @@ class ControllerParams:
             raise ValueError(f"n_lag {self.n_lag}, lag_keep {self.lag_keep}: a motor lag's "
                              "4 thrusts with 0 <= lag_keep < 1, or none")
         object.__setattr__(self, "lag_keep", float(np.float32(self.lag_keep)))
+        for name in ("gyro_scale", "gyro_bias"):
+            v = tuple(float(np.float32(x)) for x in getattr(self, name))
+            if len(v) != 3 or not all(math.isfinite(x) for x in v):
+                raise ValueError(f"{name}: 3 finite numbers (x, y, z), got {v}")
+            object.__setattr__(self, name, v)
+        if not all(x > 0 for x in self.gyro_scale):
+            raise ValueError(f"gyro_scale: each > 0, got {self.gyro_scale}")
 
     @property
     def delay_steps(self) -> int:
@@ -171,6 +185,8 @@ class ControllerParams:
                 out.append((f.name, "float", float(v)))
             elif f.type in ("bool", "int"):
                 out.append((f.name, "uint32_t", int(v)))
+            elif f.type == "tuple[float, ...]":
+                out.append((f.name, f"float[{len(v)}]", tuple(float(x) for x in v)))
             else:  # tuple[int, ...]
                 out.append((f.name, f"uint32_t[{len(v)}]", tuple(int(i) for i in v)))
         return out

@@ -54,7 +54,8 @@ OUTPUT_KEYS = ("motor_slot", "normalized", "thr_mdl_fac", "thrust_full")
 #: fields of :class:`gainsched.firmware.controller.ControllerParams` that come from the
 #: config (``int_limit`` the config's ``[control] int_limit``, null: sized from the gains)
 CONTROLLER_KEYS = ("dt", "rho", "L_e", "thrust_min", "thrust_max", "thrust_idle", "int_limit",
-                   "int_of", "accel_range", *OUTPUT_KEYS, "n_lag", "lag_keep")
+                   "int_of", "accel_range", *OUTPUT_KEYS, "n_lag", "lag_keep", "gyro_scale",
+                   "gyro_bias")
 
 #: standard gravity, m/s^2: the unit of accelerometer ranges ("16 g")
 G0 = 9.80665
@@ -81,7 +82,9 @@ class FirmwareRecord:
         The controller's design parameters, :data:`CONTROLLER_KEYS`: dt s, rho m, L_e m,
         thrust_min/max/idle N, int_limit (rad s, a number, one per integral state, or
         None), int_of (reduced-state indices), accel_range m/s^2, motor_slot (4 ints),
-        normalized (bool), thr_mdl_fac, thrust_full N, n_lag (0 or 4), lag_keep.
+        normalized (bool), thr_mdl_fac, thrust_full N, n_lag (0 or 4), lag_keep,
+        gyro_scale and gyro_bias rad/s (3 each: ``[sensors]``; a table without them was
+        built before the gyro's calibration was carried: 1 and 0).
     """
 
     vehicle: np.ndarray
@@ -164,7 +167,8 @@ def controller_from_config(config) -> dict:
     the grid (:func:`accel_range_for`), ``[control] int_limit`` (None: sized from the
     table's gains by the firmware) and the motor lag's ``n_lag`` and ``lag_keep =
     exp(-dt / tau)`` (its 4 thrusts end the LQR state,
-    :func:`~gainsched.schedule.linearize.lqr_system`)."""
+    :func:`~gainsched.schedule.linearize.lqr_system`), and the gyro's calibration
+    (``[sensors]``), which the controller undoes as the log reader does."""
     v, t, c = config.vehicle, config.tether, config.control
     limit = c.int_limit
     if limit is not None:
@@ -176,7 +180,9 @@ def controller_from_config(config) -> dict:
            "int_of": [int(INTEGRATORS[n]) for n in c.integrators],
            "accel_range": float(accel_range_for(config)), **outputs_from_config(config),
            "n_lag": 4 if lag else 0,
-           "lag_keep": math.exp(-c.dt / lag[0]["tau"]) if lag else 0.0}
+           "lag_keep": math.exp(-c.dt / lag[0]["tau"]) if lag else 0.0,
+           "gyro_scale": list(config.sensors.gyro_scale),
+           "gyro_bias": list(config.sensors.gyro_bias)}
     return {k: out[k] for k in CONTROLLER_KEYS}
 
 
@@ -234,7 +240,20 @@ def record_from_datasets(path, vehicle, state_map, controller, n: int) -> Firmwa
         ctl = json.loads(controller)
     except (TypeError, ValueError):
         raise InputError(path, "firmware/controller", "not a JSON record") from None
+    if isinstance(ctl, dict):  # a table built before the gyro's calibration was carried
+        ctl = {**_GYRO_UNCALIBRATED, **ctl}
     if not isinstance(ctl, dict) or sorted(ctl) != sorted(CONTROLLER_KEYS):
         raise InputError(path, "firmware/controller", "must be a JSON object with the keys "
                          f"{', '.join(CONTROLLER_KEYS)}")
+    for key in _GYRO_UNCALIBRATED:
+        v = np.asarray(ctl[key], dtype=object)
+        if (v.shape != (3,) or not all(isinstance(x, int | float) and not isinstance(x, bool)
+                                       and math.isfinite(x) for x in v)
+                or (key == "gyro_scale" and not all(x > 0 for x in v))):
+            raise InputError(path, "firmware/controller", f"{key} must be 3 finite numbers"
+                             + (" > 0" if key == "gyro_scale" else "") + f", got {ctl[key]!r}")
     return FirmwareRecord(vehicle, P, {k: ctl[k] for k in CONTROLLER_KEYS})
+
+
+#: the gyro's calibration of a table whose record has none (built before it was carried)
+_GYRO_UNCALIBRATED = {"gyro_scale": [1.0, 1.0, 1.0], "gyro_bias": [0.0, 0.0, 0.0]}

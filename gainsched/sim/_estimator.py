@@ -28,8 +28,10 @@ class _Estimator:
     own time (ring buffer) and the correction is applied now.
     """
 
-    def __init__(self, model, plant, sens, dt, alpha, gamma, z0, rng):
+    def __init__(self, model, plant, sens, dt, alpha, gamma, z0, rng, gyro=None):
         self.model, self.plant, self.sens, self.dt = model, plant, sens, dt
+        # (the plant's gyro, the design's calibration of it) when either is not identity
+        self.gyro = gyro if gyro and not all(g.identity for g in gyro) else None
         self.alpha, self.gamma, self.rng = alpha, gamma, rng
         self.z = z0.copy()
         self.every = max(1, int(round(1.0 / (sens.rate_hz * dt))))
@@ -69,7 +71,11 @@ class _Estimator:
         if len(self.hist) > self.delay + 2:
             self.hist.pop(0)
         z = self.z[:N_STATE].copy()
-        z[7:10] = z_true[7:10] + self.sens.gyro_noise * self.rng.standard_normal(3)
+        noise = self.sens.gyro_noise * self.rng.standard_normal(3)
+        if self.gyro is None:
+            z[7:10] = z_true[7:10] + noise
+        else:  # what the plant's gyro reads, undone by the design's calibration
+            z[7:10] = self.gyro[1].body_rates(self.gyro[0].readings(z_true[7:10]) + noise)
         return z
 
     def _measure(self, x, xi_near):

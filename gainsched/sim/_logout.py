@@ -27,7 +27,8 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
     control steps: the motion-capture pose with the scenario's position and attitude
     noise, the commanded thrusts (the mean over each sample interval, as held since the
     previous sample), the gyro (the mean body rate over the interval centred on the
-    sample, with the scenario's gyro noise), the accelerometer (the mean specific force
+    sample, read through the plant's gyro calibration ``res.sensors``, with the scenario's
+    gyro noise), the accelerometer (the mean specific force
     at the COG over the same interval, with the scenario's accelerometer noise), the
     load-cell tension and the reference azimuth and its rate; the battery voltage when the
     plant has a battery (the mean over the interval centred on the sample, no noise).
@@ -98,7 +99,7 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
     w = res.z[:, 7:10]
     wsum = np.concatenate([np.zeros((1, 3)), np.cumsum(w, 0)])
     lo, hi = np.maximum(idx - h, 0), np.minimum(idx + h + 1, w.shape[0])
-    gyro = (wsum[hi] - wsum[lo]) / (hi - lo)[:, None]
+    gyro = res.sensors.readings((wsum[hi] - wsum[lo]) / (hi - lo)[:, None])  # its calibration
     gyro = gyro + sens.gyro_noise * rng.standard_normal((idx.size, 3))
     extra = {}
     if res.f_B is not None:  # the accelerometer, anti-aliased the same way, its own noise

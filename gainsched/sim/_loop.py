@@ -209,7 +209,8 @@ def _fly_path(design, scheduler, scenario, plant, P, dmodel, path, progress) -> 
     rng = np.random.default_rng(sens.seed)
     # a design with effect states (motor lag) predicts them too, from the nominal's start
     est = _Estimator(dmodel, P, sens, dt, alpha, scenario.gamma,
-                     np.concatenate([z0, nom.z[0, N_STATE:]]), rng)
+                     np.concatenate([z0, nom.z[0, N_STATE:]]), rng,
+                     gyro=(plant.sensors, design.sensors))
 
     rec = _Record(n_steps, x, P)
     X, Z, Zh, U, TEN, SAT, STAT, HELD = (rec.X, rec.Z, rec.Zh, rec.U, rec.TEN, rec.SAT,
@@ -288,10 +289,13 @@ class _FirmwareSensors:
     ``every`` steps with noise, arriving ``delay`` steps late, the noisy gyro and the
     accelerometer (``FLAG_ACCEL`` unless the scenario flies without it)."""
 
-    def __init__(self, sens, alpha: float, gamma: float, every: int, delay: int, rng):
+    def __init__(self, sens, alpha: float, gamma: float, every: int, delay: int, rng,
+                 gyro=None):
         from ..firmware.controller import INPUT_SLICES, N_INPUT
 
         self.sens, self.every, self.delay, self.rng = sens, every, delay, rng
+        # the plant's gyro (its config's [sensors]): what it reads of the body rates
+        self.gyro = None if gyro is None or gyro.identity else gyro.readings
         self.col = INPUT_SLICES
         self.row = np.zeros(N_INPUT)
         self.row[self.col["alpha"]], self.row[self.col["gamma"]] = alpha, gamma
@@ -305,7 +309,7 @@ class _FirmwareSensors:
         if sens.ideal:
             row[0] = FLAG_KINEMATICS
             row[col["p_I"]], row[col["v_I"]], row[col["q_IB"]] = p_I, v_I, q_IB
-            row[col["gyro"]] = w_B
+            row[col["gyro"]] = w_B if self.gyro is None else self.gyro(w_B)
         else:
             if k % self.every == 0:  # a pose taken now arrives after the latency
                 p_m = p_I + sens.position_noise * rng.standard_normal(3)
@@ -318,7 +322,8 @@ class _FirmwareSensors:
                 flags |= FLAG_POSE
                 row[col["p_I"]], row[col["q_IB"]] = p_m, q_m
             row[0] = flags
-            row[col["gyro"]] = w_B + sens.gyro_noise * rng.standard_normal(3)
+            row[col["gyro"]] = ((w_B if self.gyro is None else self.gyro(w_B))
+                                + sens.gyro_noise * rng.standard_normal(3))
             row[col["accel"]] = f_B + sens.accel_noise * rng.standard_normal(3)
         row[col["ref"]] = ref_k
         return row
@@ -374,7 +379,7 @@ def _fly_firmware(design, scheduler, scenario, plant, P, path, progress) -> SimR
         z0[: len(scenario.initial_error)] += np.asarray(scenario.initial_error)
     x = P.initial(z0, u_d[0])
     inputs = _FirmwareSensors(sens, alpha, gamma, every, delay,
-                              np.random.default_rng(sens.seed))
+                              np.random.default_rng(sens.seed), plant.sensors)
     u_now = u_d[0]
     if not sens.ideal:
         p_I, v_I, q_IB, _, _ = P.sensors(x, u_now, alpha, gamma)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import N_STATE, Config
+from ..config import N_STATE, Config, Sensors
 from ..rotations import matrix_from_quaternion
 from ._plant import _Plant
 from ._scenario import Scenario
@@ -81,6 +81,9 @@ class SimResult:
     vbat : ndarray, shape (N,), or None
         The battery's terminal voltage, V, when the plant has a battery (an effect whose
         ``log_channel`` is ``"vbat"``: ``[effects.thrust_voltage]``, rigid link); else None.
+    sensors : Sensors
+        The plant's on-board sensors (its config's ``[sensors]``): what its gyro reads,
+        ``gyro_scale * omega + gyro_bias`` (:func:`log_from_result` logs that).
     """
 
     t: np.ndarray
@@ -105,6 +108,7 @@ class SimResult:
     f_B: np.ndarray | None = None
     controller_status: np.ndarray | None = None
     vbat: np.ndarray | None = None
+    sensors: Sensors = Sensors()
 
 
 _FALLBACKS_SEEN: set[str] = set()
@@ -152,4 +156,4 @@ class _Record:
                          tension_d[sl], design.feasibility.min_tension,
                          specific_force(PI, QI, dt, plant.g),
                          None if self.CTRL is None else self.CTRL[sl],
-                         self.P.battery_voltage(self.X[sl]))
+                         self.P.battery_voltage(self.X[sl]), plant.sensors)

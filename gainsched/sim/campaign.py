@@ -157,6 +157,12 @@ HIDDEN: dict[str, HiddenEffect] = {
         HiddenEffect("kappa", "rotor reaction-torque coefficient 50 % above the config's: "
                      "kappa = 0.024 instead of 0.016 m",
                      (("vehicle", "kappa", 0.024),), truth=("kappa", "kappa", 0.024)),
+        HiddenEffect("gyro", "an uncalibrated gyroscope: scale 1.03, 0.97, 1.02 and bias "
+                     "0.010, -0.008, 0.012 rad/s on its x, y, z axes (a MEMS gyro's "
+                     "tolerances before calibration)",
+                     (("sensors", "gyro_scale", [1.03, 0.97, 1.02]),
+                      ("sensors", "gyro_bias", [0.01, -0.008, 0.012])),
+                     truth=("gyro_calibration", "gyro_scale_x", 1.03)),
         HiddenEffect("attachment_offset", "attachment offset L_e = 0.12 m instead of 0.10 m",
                      (("tether", "attachment_offset", 0.12),),
                      truth=("attachment_offset", "attachment_offset", 0.12)),

@@ -215,7 +215,8 @@ def _improved(monkeypatch, tmp_path, **keys):
     old = gs.config_from_text(small_config_text(), str(tmp_path / "small.toml"))
     new = gs.config_from_text(small_config_text(**{"effects.motor_lag.tau": 0.03, **keys}),
                               str(tmp_path / "small.toml"))
-    d = SimpleNamespace(accepted=SimpleNamespace(name="motor_lag"), verdict="missing effect")
+    d = SimpleNamespace(accepted=SimpleNamespace(name="motor_lag"), applied=["motor_lag"],
+                        verdict="missing effect")
     rounds = [imp_mod.Round(old, SimpleNamespace(normalized_rms=lambda: 3.0), d),
               imp_mod.Round(new, SimpleNamespace(normalized_rms=lambda: 1.0), None)]
     monkeypatch.setattr(imp_mod, "improve", lambda *a, **k: imp_mod.Improvement(rounds))
@@ -304,7 +305,7 @@ def test_nothing_applied_rebuilds_nothing_and_prints_the_whole_verdict(tmp_path,
     (tmp_path / "small.toml").write_text(small_config_text())
     cfg = gs.load_config(tmp_path / "small.toml")
     verdict = "no library effect explains it: " + "the residual concentrates there; " * 12
-    d = SimpleNamespace(accepted=None, verdict=verdict)
+    d = SimpleNamespace(accepted=None, applied=[], verdict=verdict)
     rounds = [imp_mod.Round(cfg, SimpleNamespace(normalized_rms=lambda: 3.0), d)]
     monkeypatch.setattr(imp_mod, "improve", lambda *a, **k: imp_mod.Improvement(rounds))
     res = CliRunner().invoke(cli, ["improve", "small.toml", *map(str, FLIGHTS[:2]), "-o", "out"])

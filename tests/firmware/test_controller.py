@@ -470,3 +470,53 @@ def test_one_sample_sensor_forms_equal_the_batched_ones(paper_config):
     q_b = quaternion_from_matrix(Rs)
     q_s = np.array([quaternion_from_matrix_scalar(R) for R in Rs])
     np.testing.assert_allclose(q_s, q_b, rtol=0, atol=1e-15)
+
+
+#: a gyro as it comes off the line: scale 3 % off per axis, biases of 0.01 rad/s
+_GYRO = {"gyro_scale": (1.03, 0.97, 1.02), "gyro_bias": (0.01, -0.008, 0.012)}
+
+
+def test_the_gyro_calibration_is_undone_in_c_as_in_python(paper_config, paper_table,
+                                                          tmp_path):
+    """Issue 53: rows whose gyro reads ``s omega + b`` flown by controllers that know
+    that calibration (``[sensors]``, carried by the table's record) give the statuses and
+    thrusts of the true rows flown without one, in C and in the Python reference (within
+    TOL_THRUST: float32); without the calibration the same rows give other thrusts."""
+    from gainsched.firmware.controller import INPUT_SLICES
+
+    res = simulate(paper_config, runtime_scheduler(paper_table, "python"),
+                   dataclasses.replace(load_scenario("tilted40"), duration=0.4))
+    rows = recorded_rows(res)
+    g = INPUT_SLICES["gyro"]
+    read = rows.copy()
+    read[:, g] = rows[:, g] * np.array(_GYRO["gyro_scale"]) + np.array(_GYRO["gyro_bias"])
+    out = {}
+    for key, r, kw in (("true", rows, {}), ("read", read, _GYRO), ("unknown", read, {})):
+        c, py = _pair(paper_config, paper_table, tmp_path / key, pose_delay=0.012, **kw)
+        _start(c, res), _start(py, res)
+        out[key] = (c.run(r)[:2], py.run(r)[:2])
+    for side in (0, 1):  # C, Python
+        (T0, S0), (T1, S1) = out["true"][side], out["read"][side]
+        np.testing.assert_array_equal(S0, S1)
+        assert np.abs(T1 - T0).max() < TOL_THRUST
+        assert np.abs(out["unknown"][side][0] - T0).max() > 10 * TOL_THRUST
+    assert np.abs(out["read"][0][0] - out["read"][1][0]).max() < TOL_THRUST
+
+
+@pytest.mark.parametrize("key,value", [("gyro_scale", 0.0), ("gyro_scale", np.nan),
+                                       ("gyro_bias", np.inf)])
+def test_a_gyro_calibration_that_cannot_be_undone_is_refused(paper_config, paper_table,
+                                                             tmp_path, key, value):
+    """gs_ctrl_init answers GS_BAD_ARG for a gyro scale that is not finite and > 0 or a
+    bias that is not finite; the Python parameters refuse it too."""
+    from gainsched.firmware.sil import build_controller
+
+    good = controller_params(paper_table)
+    lib = build_controller(paper_table, good, tmp_path)
+    bad = (value, 1.0, 1.0) if key == "gyro_scale" else (value, 0.0, 0.0)
+    with pytest.raises(ValueError, match=key):
+        dataclasses.replace(good, **{key: bad})
+    p = dataclasses.replace(good)
+    object.__setattr__(p, key, bad)  # past the Python check: what a C caller could set
+    with pytest.raises(RuntimeError, match="refused"):
+        CController(paper_table, p, lib_path=lib)

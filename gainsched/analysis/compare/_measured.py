@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import savgol_coeffs, savgol_filter
 
-from ...config import Config
+from ...config import Config, Sensors
 from ...errors import InputError
 from ...model.geometry import (
     attachment_from_cog,
@@ -175,6 +175,11 @@ class Measured:
             return self.omega_dot
         return _delayed(self.t, self.gyro_dot, latency)
 
+    def gyro_delayed(self, latency: float) -> np.ndarray:
+        """The gyro's body rates (N, 3), rad/s, delayed by ``latency`` s onto the pose's
+        clock (as :meth:`omega_dot_measured` delays their derivative); needs a gyro."""
+        return _delayed(self.t, self.gyro, latency)
+
     def derived(self, key: str, fn):
         """``fn()`` computed once per segment (kinematics, projections)."""
         if key not in self.cache:
@@ -290,7 +295,7 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
     fit_res = (raw - ch)[:, h : len(log) - h]
     sig = np.sqrt(np.mean(fit_res**2, axis=-1) / max(1e-12, 1 - hc))
     sigma = dict(zip(_CHANNELS, map(float, sig), strict=True))
-    gyro, gyro_dot = _gyro(log, an, n, dt)
+    gyro, gyro_dot = _gyro(log, an, n, dt, config.sensors)
     if gyro is not None:
         sigma.update(zip(("p", "q", "r"), _imu_sigma(gyro, h), strict=True))
     accel = _accelerometer(log, an)
@@ -338,12 +343,17 @@ def _accelerometer(log: FlightLog, an, noise=None):
     return _imu_channel(log, "f_B", an.use_accelerometer, noise)
 
 
-def _gyro(log: FlightLog, an, n: int, dt: float, noise=None):
-    """The logged gyro (N, 3) rad/s and its Savitzky-Golay derivative (N, 3) rad/s^2, or
-    ``(None, None)`` (:func:`_imu_channel`)."""
-    gyro = _imu_channel(log, "omega_B", an.use_gyro, noise)
+def _gyro(log: FlightLog, an, n: int, dt: float, sensors: Sensors, noise=None):
+    """The logged gyro's body rates (N, 3) rad/s, its calibration ``sensors`` undone
+    (``[sensors]``: ``(reading - gyro_bias) / gyro_scale``), and their Savitzky-Golay
+    derivative (N, 3) rad/s^2, or ``(None, None)`` (:func:`_imu_channel`)."""
+    gyro = _imu_channel(log, "omega_B", an.use_gyro)
     if gyro is None:
         return None, None
+    if not sensors.identity:
+        gyro = sensors.body_rates(gyro)
+    if noise is not None:  # the noise-floor estimate's: of the body rates' noise level
+        gyro = gyro + noise
     return gyro, savgol_filter(gyro, deriv=1, delta=dt, window_length=n,
                                polyorder=an.savgol_order, axis=0, mode="interp")
 

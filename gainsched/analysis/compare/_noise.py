@@ -49,7 +49,7 @@ def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None,
     gyro, gyro_dot = None, None
     if meas.gyro is not None:  # the gyro's own noise, once more
         g_sig = np.array([meas.raw_sigma[k] for k in ("p", "q", "r")])
-        gyro, gyro_dot = _gyro(log, an, meas.window, dt,
+        gyro, gyro_dot = _gyro(log, an, meas.window, dt, config.sensors,
                                g_sig * (rng_gyro or rng).standard_normal((n, 3)))
     accel = None
     if meas.accel is not None:  # the accelerometer's own noise, once more

@@ -58,10 +58,13 @@ top to bottom of their imports (a module imports only from those below it):
 - ``_fit``: fitting one candidate (Gauss-Newton or 1-D search) and its held-out scores;
 - ``_problem``: the logs, the noise weights and the weighted residual of a model variant;
 - ``_results``: :data:`THRESHOLDS`, :class:`CandidateResult`, :class:`Diagnosis`;
-- ``_candidates``: the candidate library; ``_lsq``: the bounded least-squares solver.
+- ``_candidates``: the candidate library; ``_lsq``: the bounded least-squares solver;
+- ``_calibration``: the gyro's scale and bias against the motion capture, fitted before
+  the candidates (:func:`gyro_calibration`).
 """
 
-from ._apply import apply_candidate
+from ._apply import apply_candidate, apply_diagnosis
+from ._calibration import GyroCalibration, gyro_calibration
 from ._candidates import (
     CANDIDATES,
     Candidate,
@@ -84,6 +87,9 @@ __all__ = [
     "Diagnosis",
     "diagnose",
     "apply_candidate",
+    "apply_diagnosis",
+    "GyroCalibration",
+    "gyro_calibration",
     "separating_flight",
     "single_parameter_set_candidates",
     "select_candidates",

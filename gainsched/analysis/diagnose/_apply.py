@@ -4,12 +4,16 @@
 :meth:`~gainsched.analysis.diagnose._candidates.Candidate.apply_text`), each with its
 unit, 95 % CI and leave-one-flight-out range as a comment; a parameter the flights did
 not identify (:func:`~gainsched.analysis.diagnose._results.unidentified`) keeps its value.
+:func:`apply_diagnosis`: all a diagnosis accepted, the gyro's calibration (``[sensors]``)
+and the accepted candidate.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 from ...config import Config, config_from_text
-from ...configedit import set_value
+from ...configedit import get_value, set_value
 from ._candidates import candidate_library
 from ._results import CandidateResult, unidentified
 
@@ -71,8 +75,6 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
     >>> f"{before:.1f} -> {after:.1f}"
     '5.3 -> 2.0'
     """
-    from ...configedit import get_value
-
     cand = result.candidate or candidate_library()[result.name]
     why = unidentified(result)
     comments = []
@@ -99,3 +101,61 @@ def apply_candidate(config: Config, result: CandidateResult, *, name: str | None
     cfg = config_from_text(text, "<diagnose --apply>")  # raises if the edit is invalid
     del cfg
     return text
+
+
+def apply_diagnosis(diagnosis, *, name: str | None = None) -> str | None:
+    """Write what a diagnosis accepted into its config: the gyro's calibration
+    (``[sensors]``, when accepted: :attr:`Diagnosis.calibration`) and the accepted
+    candidate (:func:`apply_candidate`); None when it accepted nothing.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+        What :func:`~gainsched.analysis.diagnose.diagnose` returned.
+    name : str, optional
+        As for :func:`apply_candidate`.
+
+    Returns
+    -------
+    str or None
+        The new config text (validated), or None.
+
+    Examples
+    --------
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> logs = ["examples/flights/v3.csv", "examples/flights/v9.csv",
+    ...         "examples/flights/v15.csv"]
+    >>> d = gs.diagnose(cfg, logs, candidates=["thrust_momentum"])
+    >>> d.applied, d.calibration.accepted   # the example gyro needs no calibration
+    (['thrust_momentum'], False)
+    >>> text = gs.apply_diagnosis(d)
+    >>> "[effects.thrust_momentum]" in text, "[sensors]" in text
+    (True, False)
+    """
+    d = diagnosis
+    if not d.applied:
+        return None
+    cfg = d.config
+    cal = d.calibration
+    if cal is not None and cal.accepted:
+        text = _with_calibration(cfg.text, cal)
+        cfg = dataclasses.replace(cfg, text=text)
+    if d.accepted is not None:
+        return apply_candidate(cfg, d.accepted, name=name)
+    if name is not None and get_value(cfg.text, "", "name") is not None:
+        cfg = dataclasses.replace(cfg, text=set_value(cfg.text, "", "name", name))
+    config_from_text(cfg.text, "<diagnose --apply>")  # raises if the edit is invalid
+    return cfg.text
+
+
+def _with_calibration(text: str, cal) -> str:
+    """``text`` with the gyro's calibration ``cal`` in ``[sensors]``, the 95 % intervals
+    and the held-out fall as comments."""
+    s = cal.sensors()
+    ci = lambda v, c: ", ".join(f"{x:.4g} +- {e:.1g}" for x, e in zip(v, c, strict=True))  # noqa: E731
+    header = (f"gainsched diagnose: gyro against the motion capture, held-out residual "
+              f"above noise -{cal.fall:.0%}")
+    text = set_value(text, "sensors", "gyro_scale", list(s.gyro_scale),
+                     f"fitted {ci(cal.scale, cal.scale_ci)} (95%); {header}")
+    return set_value(text, "sensors", "gyro_bias", list(s.gyro_bias),
+                     f"rad/s, fitted {ci(cal.bias, cal.bias_ci)} (95%)")

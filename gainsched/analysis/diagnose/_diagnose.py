@@ -16,6 +16,7 @@ from ..compare import (
     Comparison,
     compare,
 )
+from ._calibration import gyro_calibration
 from ._candidates import _logged, candidate_library, select_candidates
 from ._fit import _fit_candidate
 from ._lsq import _sq
@@ -38,7 +39,8 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     noise floor it explains), by delta-BIC, plausibility and fold stability; the
     candidates are ranked, near-collinear twins are named with the flight that would
     separate them, and the first candidate clearing every threshold of
-    :data:`THRESHOLDS` is the verdict.
+    :data:`THRESHOLDS` is the verdict. First of all, the gyro is calibrated against the
+    motion capture (:func:`_calibrated`): a sensor error is never read as dynamics.
 
     Parameters
     ----------
@@ -109,6 +111,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     'missing effect: thrust_momentum (thrust change with airspeed by momentum theory ...'
     """
     base = comparison or compare(config, logs, channel_map=channel_map, trust=trust)
+    config, base, calibration = _calibrated(config, base)
     prob = _problem(config, base)
     library = candidate_library()
     names = select_candidates(candidates, exclude, library)
@@ -118,8 +121,22 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
         prob, library, names, base, at_floor, base_sq, base_vecs,
         asked=candidates is not None, joint=joint, forward=forward, progress=progress)
     verdict = _verdict(base, results, accepted, twins, at_floor)
+    if calibration is not None and calibration.axes_changed:
+        verdict = f"{calibration.sentence()}. {verdict}"
     return Diagnosis(config, base, results, accepted, twins, verdict, at_floor,
-                     prob.flight_names, int(round(prob.n_evals)), similarity)
+                     prob.flight_names, int(round(prob.n_evals)), similarity, calibration)
+
+
+def _calibrated(config: Config, base: Comparison):
+    """The sensor first, then the dynamics: ``(config, base, calibration)`` with the gyro's
+    calibration fitted against the motion capture
+    (:func:`~gainsched.analysis.diagnose._calibration.gyro_calibration`) and, when it is
+    accepted, in the config and in the measurement (``base`` measured again with it)."""
+    calibration = gyro_calibration(config, base.measured)
+    if calibration is not None and calibration.accepted:
+        config = calibration.applied(config)
+        base = compare(config, base.segs)
+    return config, base, calibration
 
 
 #: the candidates of effects every real flight has a little of (the tether's own stretch):
