@@ -223,6 +223,13 @@ int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params
             return GS_BAD_ARG; /* a gyro calibration that cannot be undone */
         }
     }
+    {
+        const float n2 = (pr->q_MB[0] * pr->q_MB[0]) + (pr->q_MB[1] * pr->q_MB[1]) +
+                         (pr->q_MB[2] * pr->q_MB[2]) + (pr->q_MB[3] * pr->q_MB[3]);
+        if (!(n2 >= 0.9999f) || !(n2 <= 1.0001f)) { /* NaN fails both */
+            return GS_BAD_ARG; /* the marker frame's rotation: a unit quaternion */
+        }
+    }
     if ((pr->n_lag != 0u && pr->n_lag != 4u) ||
         (pr->n_lag == 4u && 10u + pr->n_int + 4u != table->n_state) ||
         !(pr->lag_keep >= 0.0f) || !(pr->lag_keep < 1.0f)) {
@@ -594,10 +601,16 @@ static uint32_t gs_c_estimate(gs_ctrl *c, const gs_ctrl_input *in, const gs_ctrl
     c->fresh = 0u;
     if (pose_ok) {
         float q[4];
-        unsigned j;
-        for (j = 0u; j < 4u; ++j) {
-            q[j] = in->q_IB[j];
-        }
+        const float *m = pr->q_MB;
+        /* the markers' attitude to the body's: q = q_IM (x) q_MB (Hamilton) */
+        q[0] = (in->q_IB[0] * m[0]) - (in->q_IB[1] * m[1]) - (in->q_IB[2] * m[2]) -
+               (in->q_IB[3] * m[3]);
+        q[1] = (in->q_IB[0] * m[1]) + (in->q_IB[1] * m[0]) + (in->q_IB[2] * m[3]) -
+               (in->q_IB[3] * m[2]);
+        q[2] = (in->q_IB[0] * m[2]) - (in->q_IB[1] * m[3]) + (in->q_IB[2] * m[0]) +
+               (in->q_IB[3] * m[1]);
+        q[3] = (in->q_IB[0] * m[3]) + (in->q_IB[1] * m[2]) - (in->q_IB[2] * m[1]) +
+               (in->q_IB[3] * m[0]);
         gs_c_renorm(q);
         gs_c_renorm(q);
         if (c->have_fix != 0u) {

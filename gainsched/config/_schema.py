@@ -307,15 +307,41 @@ class Sensors:
         Scale factor of the gyro's x, y, z axes (body frame B), in [0.5, 2].
     gyro_bias : tuple of 3 float, rad/s
         Bias of the gyro's x, y, z axes, each within +-0.5 rad/s.
+    marker_rotation : tuple of 3 float, rad
+        The body frame B relative to the motion capture's marker frame M (the rigid body
+        defined on the markers, a degree or two off the vehicle's axes), as Z-Y-X Euler
+        angles (roll, pitch, yaw; ``marker_rotation_deg`` in the file, each within +-10
+        deg): ``R_MB = Rz(yaw) Ry(pitch) Rx(roll)``, and the body's attitude is
+        ``R_IB = R_IM R_MB`` for the pose's ``R_IM``.
     """
 
     gyro_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
     gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    marker_rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def identity(self) -> bool:
-        """True when the gyro reads the body rates as they are (scale 1, bias 0)."""
-        return self.gyro_scale == (1.0, 1.0, 1.0) and self.gyro_bias == (0.0, 0.0, 0.0)
+        """True when the gyro reads the body rates as they are (scale 1, bias 0) and the
+        markers' frame is the body's."""
+        return (self.gyro_scale == (1.0, 1.0, 1.0) and self.gyro_bias == (0.0, 0.0, 0.0)
+                and self.marker_rotation == (0.0, 0.0, 0.0))
+
+    @property
+    def R_MB(self) -> np.ndarray:
+        """``R_MB``, (3, 3): body-frame vectors in the marker frame."""
+        from ..rotations import matrix_from_euler_zyx_scalar
+
+        return matrix_from_euler_zyx_scalar(*self.marker_rotation)
+
+    def body_attitude(self, R_IM):
+        """The body's attitudes ``R_IB = R_IM R_MB`` (..., 3, 3) of the poses' ``R_IM``
+        (..., 3, 3)."""
+        return np.asarray(R_IM, dtype=float) @ self.R_MB
+
+    def marker_attitude(self, R_IB):
+        """What the motion capture reports, ``R_IM = R_IB R_MB^T`` (..., 3, 3), of the
+        body's attitudes ``R_IB`` (..., 3, 3)."""
+        return np.asarray(R_IB, dtype=float) @ self.R_MB.T
 
     def body_rates(self, reading):
         """The body rates (..., 3), rad/s, of gyro readings ``reading`` (..., 3), rad/s:

@@ -473,7 +473,12 @@ class Controller:
             self._propagate(*self._acceleration(flags, ref, alpha, gamma))
         self.fresh = False
         if pose_ok:
-            q = row[_COL["q_IB"]].astype(float)
+            w1, x1, y1, z1 = row[_COL["q_IB"]].astype(float)
+            w2, x2, y2, z2 = self.params.q_MB  # the markers' attitude to the body's
+            q = np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+                          w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                          w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                          w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
             q = q / np.linalg.norm(q)
             p = row[_COL["p_I"]].astype(float)
             if self.have_fix:

@@ -38,6 +38,10 @@ INT_RANGE_FRACTION = 1.0
 INT_LIMIT_NO_GAINS = 0.5
 
 
+#: | |q_MB|^2 - 1 | a controller accepts (gs_ctrl_init: GS_BAD_ARG beyond)
+Q_MB_TOLERANCE = 1e-4
+
+
 @dataclass(frozen=True)
 class ControllerParams:
     """What the controller knows of the vehicle, the loop and the sensors (``gs_ctrl_params``,
@@ -76,6 +80,10 @@ class ControllerParams:
         The gyro's calibration (``[sensors]`` of the config): each axis reads
         ``gyro_scale * omega + gyro_bias``; the controller uses
         ``(reading - gyro_bias) / gyro_scale`` (float32, as in C), as the log reader does.
+    q_MB : tuple of 4 float
+        The body frame in the motion capture's marker frame, a unit quaternion (w, x, y,
+        z; ``[sensors] marker_rotation_deg``): each pose's ``q_IM`` becomes the body's
+        ``q_IB = q_IM (x) q_MB``, as the log reader turns it.
     accel_range : float, m/s^2
         The accelerometer's range: an axis beyond it is a bad sample (``CTRL_BAD_IMU``).
         :func:`controller_params` sizes it from the config's grid
@@ -119,6 +127,7 @@ class ControllerParams:
     gyro_range: float = 34.9  # 2000 deg/s
     gyro_scale: tuple[float, ...] = (1.0, 1.0, 1.0)
     gyro_bias: tuple[float, ...] = (0.0, 0.0, 0.0)
+    q_MB: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0)
     accel_range: float = 156.9  # 16 g
     k_pos: float = 0.3
     k_vel: float = 0.04
@@ -150,6 +159,11 @@ class ControllerParams:
             object.__setattr__(self, name, v)
         if not all(x > 0 for x in self.gyro_scale):
             raise ValueError(f"gyro_scale: each > 0, got {self.gyro_scale}")
+        q = tuple(float(np.float32(x)) for x in self.q_MB)
+        if len(q) != 4 or not all(math.isfinite(x) for x in q) or \
+                abs(sum(x * x for x in q) - 1.0) > Q_MB_TOLERANCE:
+            raise ValueError(f"q_MB: a unit quaternion (w, x, y, z), got {q}")
+        object.__setattr__(self, "q_MB", q)
 
     @property
     def delay_steps(self) -> int:

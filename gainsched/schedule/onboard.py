@@ -23,6 +23,7 @@ import numpy as np
 from ..actuators import MOTOR_ORDERS, slots_from_order
 from ..constants import INTEGRATORS
 from ..errors import InputError
+from ..rotations import quaternion_from_matrix
 
 __all__ = [
     "VEHICLE_FIELDS",
@@ -55,7 +56,7 @@ OUTPUT_KEYS = ("motor_slot", "normalized", "thr_mdl_fac", "thrust_full")
 #: config (``int_limit`` the config's ``[control] int_limit``, null: sized from the gains)
 CONTROLLER_KEYS = ("dt", "rho", "L_e", "thrust_min", "thrust_max", "thrust_idle", "int_limit",
                    "int_of", "accel_range", *OUTPUT_KEYS, "n_lag", "lag_keep", "gyro_scale",
-                   "gyro_bias")
+                   "gyro_bias", "q_MB")
 
 #: standard gravity, m/s^2: the unit of accelerometer ranges ("16 g")
 G0 = 9.80665
@@ -83,8 +84,9 @@ class FirmwareRecord:
         thrust_min/max/idle N, int_limit (rad s, a number, one per integral state, or
         None), int_of (reduced-state indices), accel_range m/s^2, motor_slot (4 ints),
         normalized (bool), thr_mdl_fac, thrust_full N, n_lag (0 or 4), lag_keep,
-        gyro_scale and gyro_bias rad/s (3 each: ``[sensors]``; a table without them was
-        built before the gyro's calibration was carried: 1 and 0).
+        gyro_scale and gyro_bias rad/s (3 each) and q_MB (4: the marker frame's
+        rotation, a quaternion), ``[sensors]``; a table without them was built before
+        they were carried: 1, 0 and the identity.
     """
 
     vehicle: np.ndarray
@@ -182,7 +184,8 @@ def controller_from_config(config) -> dict:
            "n_lag": 4 if lag else 0,
            "lag_keep": math.exp(-c.dt / lag[0]["tau"]) if lag else 0.0,
            "gyro_scale": list(config.sensors.gyro_scale),
-           "gyro_bias": list(config.sensors.gyro_bias)}
+           "gyro_bias": list(config.sensors.gyro_bias),
+           "q_MB": [float(x) for x in quaternion_from_matrix(config.sensors.R_MB)]}
     return {k: out[k] for k in CONTROLLER_KEYS}
 
 
@@ -245,15 +248,22 @@ def record_from_datasets(path, vehicle, state_map, controller, n: int) -> Firmwa
     if not isinstance(ctl, dict) or sorted(ctl) != sorted(CONTROLLER_KEYS):
         raise InputError(path, "firmware/controller", "must be a JSON object with the keys "
                          f"{', '.join(CONTROLLER_KEYS)}")
-    for key in _GYRO_UNCALIBRATED:
-        v = np.asarray(ctl[key], dtype=object)
-        if (v.shape != (3,) or not all(isinstance(x, int | float) and not isinstance(x, bool)
-                                       and math.isfinite(x) for x in v)
-                or (key == "gyro_scale" and not all(x > 0 for x in v))):
-            raise InputError(path, "firmware/controller", f"{key} must be 3 finite numbers"
-                             + (" > 0" if key == "gyro_scale" else "") + f", got {ctl[key]!r}")
+    for key, need in _SENSOR_CHECKS.items():
+        v = ctl[key]
+        n = len(_GYRO_UNCALIBRATED[key])
+        if (not isinstance(v, list) or len(v) != n
+                or not all(isinstance(x, int | float) and not isinstance(x, bool)
+                           and math.isfinite(x) for x in v) or not need[0](v)):
+            raise InputError(path, "firmware/controller", f"{key} must be {n} finite "
+                             f"numbers{need[1]}, got {v!r}")
     return FirmwareRecord(vehicle, P, {k: ctl[k] for k in CONTROLLER_KEYS})
 
 
 #: the gyro's calibration of a table whose record has none (built before it was carried)
-_GYRO_UNCALIBRATED = {"gyro_scale": [1.0, 1.0, 1.0], "gyro_bias": [0.0, 0.0, 0.0]}
+_GYRO_UNCALIBRATED = {"gyro_scale": [1.0, 1.0, 1.0], "gyro_bias": [0.0, 0.0, 0.0],
+                      "q_MB": [1.0, 0.0, 0.0, 0.0]}
+#: the sensors' keys of a record: (their check beyond finite, what it asks)
+_SENSOR_CHECKS = {"gyro_scale": (lambda v: all(x > 0 for x in v), " > 0"),
+                  "gyro_bias": (lambda v: True, ""),
+                  "q_MB": (lambda v: abs(sum(x * x for x in v) - 1.0) <= 1e-4,
+                           " of unit norm")}

@@ -91,6 +91,8 @@ class _Estimator:
         p_I = p_I + self.sens.position_noise * self.rng.standard_normal(3)
         rot = self.sens.attitude_noise * self.rng.standard_normal(3)
         R_IB = R_IB @ matrix_from_euler_zyx_scalar(rot[0], rot[1], rot[2])
+        if self.gyro is not None:  # the plant's markers' attitude, turned by the design's
+            R_IB = self.gyro[1].body_attitude(self.gyro[0].marker_attitude(R_IB))
         R_CI = self.R_IC.T
         return pose_angles_from_pose(R_CI @ p_I, R_CI @ R_IB, self.model.p_e, xi_near)[1]
 

@@ -25,7 +25,8 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
 
     In the format of docs/flight-log.md, sampled every ``round(1 / (rate_hz dt))``
     control steps: the motion-capture pose with the scenario's position and attitude
-    noise, the commanded thrusts (the mean over each sample interval, as held since the
+    noise (the attitude of the plant's marker frame, ``res.sensors``), the commanded
+    thrusts (the mean over each sample interval, as held since the
     previous sample), the gyro (the mean body rate over the interval centred on the
     sample, read through the plant's gyro calibration ``res.sensors``, with the scenario's
     gyro noise), the accelerometer (the mean specific force
@@ -80,7 +81,7 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
     p = res.p_I[idx] + sens.position_noise * rng.standard_normal((idx.size, 3))
     rot = sens.attitude_noise * rng.standard_normal((idx.size, 3))
     R = matrix_from_quaternion(res.q_IB[idx]) @ Rz(rot[:, 2]) @ Ry(rot[:, 1]) @ Rx(rot[:, 0])
-    q = quaternion_from_matrix(R)
+    q = quaternion_from_matrix(res.sensors.marker_attitude(R))  # the markers' frame
     # thrust "held since the previous sample": the mean of the commands applied over
     # [t_prev, t) (command k acts on [t_k, t_k+1)); the first row has only u[0]
     ends = np.maximum(idx, 1)

@@ -294,8 +294,10 @@ class _FirmwareSensors:
         from ..firmware.controller import INPUT_SLICES, N_INPUT
 
         self.sens, self.every, self.delay, self.rng = sens, every, delay, rng
-        # the plant's gyro (its config's [sensors]): what it reads of the body rates
+        # the plant's gyro and markers (its config's [sensors]): what the gyro reads of
+        # the body rates, the attitude the motion capture reports of the body's
         self.gyro = None if gyro is None or gyro.identity else gyro.readings
+        self.markers = None if gyro is None or gyro.identity else gyro.marker_attitude
         self.col = INPUT_SLICES
         self.row = np.zeros(N_INPUT)
         self.row[self.col["alpha"]], self.row[self.col["gamma"]] = alpha, gamma
@@ -315,6 +317,8 @@ class _FirmwareSensors:
                 p_m = p_I + sens.position_noise * rng.standard_normal(3)
                 rot = sens.attitude_noise * rng.standard_normal(3)
                 R_m = matrix_from_quaternion(q_IB) @ matrix_from_euler_zyx_scalar(*rot)
+                if self.markers is not None:
+                    R_m = self.markers(R_m)
                 pending.append((k + self.delay, p_m, quaternion_from_matrix_scalar(R_m)))
             flags = FLAG_ACCEL if sens.accelerometer else 0
             if pending and pending[0][0] <= k:

@@ -163,6 +163,17 @@ HIDDEN: dict[str, HiddenEffect] = {
                      (("sensors", "gyro_scale", [1.03, 0.97, 1.02]),
                       ("sensors", "gyro_bias", [0.01, -0.008, 0.012])),
                      truth=("gyro_calibration", "gyro_scale_x", 1.03)),
+        HiddenEffect("marker_rotation", "the motion capture's marker frame turned from the "
+                     "body's by roll 1.0, pitch -1.5, yaw 2.0 deg (a rigid body defined by "
+                     "hand on the markers)",
+                     (("sensors", "marker_rotation_deg", [1.0, -1.5, 2.0]),),
+                     truth=("gyro_calibration", "marker_yaw", 2.0)),
+        HiddenEffect("gyro_and_markers", "both at once: the uncalibrated gyroscope of 'gyro' "
+                     "and the turned marker frame of 'marker_rotation'",
+                     (("sensors", "gyro_scale", [1.03, 0.97, 1.02]),
+                      ("sensors", "gyro_bias", [0.01, -0.008, 0.012]),
+                      ("sensors", "marker_rotation_deg", [1.0, -1.5, 2.0])),
+                     truth=("gyro_calibration", "gyro_scale_x", 1.03)),
         HiddenEffect("attachment_offset", "attachment offset L_e = 0.12 m instead of 0.10 m",
                      (("tether", "attachment_offset", 0.12),),
                      truth=("attachment_offset", "attachment_offset", 0.12)),

@@ -472,26 +472,37 @@ def test_one_sample_sensor_forms_equal_the_batched_ones(paper_config):
     np.testing.assert_allclose(q_s, q_b, rtol=0, atol=1e-15)
 
 
-#: a gyro as it comes off the line: scale 3 % off per axis, biases of 0.01 rad/s
+#: a gyro as it comes off the line (scale 3 % off per axis, biases of 0.01 rad/s) and
+#: markers whose frame is turned from the body's by a degree or two
 _GYRO = {"gyro_scale": (1.03, 0.97, 1.02), "gyro_bias": (0.01, -0.008, 0.012)}
+_MARKERS_DEG = (1.0, -1.5, 2.0)
 
 
-def test_the_gyro_calibration_is_undone_in_c_as_in_python(paper_config, paper_table,
-                                                          tmp_path):
-    """Issue 53: rows whose gyro reads ``s omega + b`` flown by controllers that know
-    that calibration (``[sensors]``, carried by the table's record) give the statuses and
-    thrusts of the true rows flown without one, in C and in the Python reference (within
-    TOL_THRUST: float32); without the calibration the same rows give other thrusts."""
+def test_the_sensors_calibration_is_undone_in_c_as_in_python(paper_config, paper_table,
+                                                             tmp_path):
+    """Issue 53: rows whose gyro reads ``s omega + b`` and whose poses are the markers'
+    attitude ``R_IB R_MB^T``, flown by controllers that know both (``[sensors]``, carried
+    by the table's record as gyro_scale, gyro_bias and q_MB), give the statuses and
+    thrusts of the true rows flown without them, in C and in the Python reference
+    (within TOL_THRUST: float32); without the calibration the same rows give other
+    thrusts."""
+    from gainsched.config import Sensors
     from gainsched.firmware.controller import INPUT_SLICES
+    from gainsched.rotations import matrix_from_quaternion, quaternion_from_matrix
 
     res = simulate(paper_config, runtime_scheduler(paper_table, "python"),
                    dataclasses.replace(load_scenario("tilted40"), duration=0.4))
     rows = recorded_rows(res)
-    g = INPUT_SLICES["gyro"]
+    g, q = INPUT_SLICES["gyro"], INPUT_SLICES["q_IB"]
+    sensors = Sensors(marker_rotation=tuple(np.deg2rad(_MARKERS_DEG)))
     read = rows.copy()
     read[:, g] = rows[:, g] * np.array(_GYRO["gyro_scale"]) + np.array(_GYRO["gyro_bias"])
+    pose = rows[:, 0] != 0
+    read[pose, q] = quaternion_from_matrix(
+        sensors.marker_attitude(matrix_from_quaternion(rows[pose, q])))
+    known = {**_GYRO, "q_MB": tuple(quaternion_from_matrix(sensors.R_MB))}
     out = {}
-    for key, r, kw in (("true", rows, {}), ("read", read, _GYRO), ("unknown", read, {})):
+    for key, r, kw in (("true", rows, {}), ("read", read, known), ("unknown", read, {})):
         c, py = _pair(paper_config, paper_table, tmp_path / key, pose_delay=0.012, **kw)
         _start(c, res), _start(py, res)
         out[key] = (c.run(r)[:2], py.run(r)[:2])
@@ -504,16 +515,19 @@ def test_the_gyro_calibration_is_undone_in_c_as_in_python(paper_config, paper_ta
 
 
 @pytest.mark.parametrize("key,value", [("gyro_scale", 0.0), ("gyro_scale", np.nan),
-                                       ("gyro_bias", np.inf)])
-def test_a_gyro_calibration_that_cannot_be_undone_is_refused(paper_config, paper_table,
-                                                             tmp_path, key, value):
-    """gs_ctrl_init answers GS_BAD_ARG for a gyro scale that is not finite and > 0 or a
-    bias that is not finite; the Python parameters refuse it too."""
+                                       ("gyro_bias", np.inf), ("q_MB", 1.1),
+                                       ("q_MB", np.nan)])
+def test_a_sensors_calibration_that_cannot_be_undone_is_refused(paper_config, paper_table,
+                                                                tmp_path, key, value):
+    """gs_ctrl_init answers GS_BAD_ARG for a gyro scale that is not finite and > 0, a
+    bias that is not finite, or a marker rotation q_MB that is not a unit quaternion; the
+    Python parameters refuse it too."""
     from gainsched.firmware.sil import build_controller
 
     good = controller_params(paper_table)
     lib = build_controller(paper_table, good, tmp_path)
-    bad = (value, 1.0, 1.0) if key == "gyro_scale" else (value, 0.0, 0.0)
+    bad = {"gyro_scale": (value, 1.0, 1.0), "gyro_bias": (value, 0.0, 0.0),
+           "q_MB": (value, 0.0, 0.0, 0.0)}[key]
     with pytest.raises(ValueError, match=key):
         dataclasses.replace(good, **{key: bad})
     p = dataclasses.replace(good)

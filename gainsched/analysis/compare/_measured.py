@@ -202,12 +202,17 @@ class Measured:
         return max(0, len(self.t) - 2 * (self.window // 2))
 
 
-def _raw_channels(log: FlightLog, L_e: float, p_I=None, R_IB=None):
+def _raw_channels(log: FlightLog, L_e: float, sensors: Sensors, p_I=None, R_IM=None):
     """Raw (d, delta, xi, phi, theta, psi), shape (6, N), from the logged pose (or the given
-    p_I (N, 3), R_IB (N, 3, 3)); xi and psi unwrapped, psi on the branch of xi."""
+    p_I (N, 3), R_IM (N, 3, 3)), the markers' attitude turned to the body's by
+    ``sensors`` (``[sensors] marker_rotation_deg``); xi and psi unwrapped, psi on the
+    branch of xi."""
     R_IC = R_IC_from_tilt(log.alpha_c, log.gamma_c)
     p_C = np.einsum("nj,ji->ni", log.p_I if p_I is None else p_I, R_IC)  # rows R_IC^T p
-    R = np.einsum("ji,njk->nik", R_IC, matrix_from_quaternion(log.q) if R_IB is None else R_IB)
+    R_IM = matrix_from_quaternion(log.q) if R_IM is None else R_IM
+    if sensors.marker_rotation != (0.0, 0.0, 0.0):
+        R_IM = sensors.body_attitude(R_IM)
+    R = np.einsum("ji,njk->nik", R_IC, R_IM)
     d, delta, xi = spherical_from_point(attachment_from_cog(p_C, R, np.array([-L_e, 0.0, 0.0])))
     xi = np.unwrap(xi)
     phi, theta, psi = euler_zyx_from_matrix(R)
@@ -287,7 +292,7 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
             f"({n} samples = analysis.savgol_window_s {an.savgol_window_s:g} s) plus one",
         )
     L_e = config.tether.attachment_offset
-    raw = _raw_channels(log, L_e)
+    raw = _raw_channels(log, L_e, config.sensors)
     ch, ch1, ch2 = _smoothed(raw, n, an.savgol_order, dt)
     z, acc, p, v, a, R, w_dot, e, axes = _reconstruct(ch, ch1, ch2, L_e)
     h = n // 2

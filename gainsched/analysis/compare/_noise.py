@@ -42,7 +42,8 @@ def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None,
     from ...rotations import Rx, Ry, Rz
 
     R_IB = matrix_from_quaternion(log.q) @ Rz(rot[:, 2]) @ Ry(rot[:, 1]) @ Rx(rot[:, 0])
-    raw = _raw_channels(log, meas.L_e, log.p_I + sp * rng.standard_normal((n, 3)), R_IB)
+    raw = _raw_channels(log, meas.L_e, config.sensors,
+                        log.p_I + sp * rng.standard_normal((n, 3)), R_IB)
     dt = meas.dt
     ch, ch1, ch2 = _smoothed(raw, meas.window, an.savgol_order, dt)
     z, acc, p, v, a, R, w_dot, e, axes = _reconstruct(ch, ch1, ch2, meas.L_e)

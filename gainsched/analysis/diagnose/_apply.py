@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
+
 from ...config import Config, config_from_text
 from ...configedit import get_value, set_value
 from ._candidates import candidate_library
@@ -149,13 +151,20 @@ def apply_diagnosis(diagnosis, *, name: str | None = None) -> str | None:
 
 
 def _with_calibration(text: str, cal) -> str:
-    """``text`` with the gyro's calibration ``cal`` in ``[sensors]``, the 95 % intervals
-    and the held-out fall as comments."""
+    """``text`` with the calibration ``cal`` in ``[sensors]`` (the gyro's scale and bias,
+    the marker frame's rotation when it turned), the 95 % intervals and the held-out
+    fall as comments."""
     s = cal.sensors()
     ci = lambda v, c: ", ".join(f"{x:.4g} +- {e:.1g}" for x, e in zip(v, c, strict=True))  # noqa: E731
     header = (f"gainsched diagnose: gyro against the motion capture, held-out residual "
               f"above noise -{cal.fall:.0%}")
     text = set_value(text, "sensors", "gyro_scale", list(s.gyro_scale),
                      f"fitted {ci(cal.scale, cal.scale_ci)} (95%); {header}")
-    return set_value(text, "sensors", "gyro_bias", list(s.gyro_bias),
+    text = set_value(text, "sensors", "gyro_bias", list(s.gyro_bias),
                      f"rad/s, fitted {ci(cal.bias, cal.bias_ci)} (95%)")
+    if not cal.rotated:
+        return text
+    return set_value(text, "sensors", "marker_rotation_deg",
+                     [round(float(np.rad2deg(a)), 4) for a in s.marker_rotation],
+                     "deg, roll pitch yaw of the body in the markers' frame; turned by "
+                     f"{ci(np.rad2deg(cal.rotation), np.rad2deg(cal.rotation_ci))} deg (95%)")

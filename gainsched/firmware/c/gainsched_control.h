@@ -107,6 +107,11 @@ typedef struct gs_ctrl_params {
                            * gyro_bias[j]; each finite and > 0 (else GS_BAD_ARG) */
     float gyro_bias[3];   /* rad/s, each finite; the controller uses
                            * omega_j = (gyro_j - gyro_bias[j]) / gyro_scale[j] */
+    float q_MB[4];        /* the body frame in the motion capture's marker frame, a unit
+                           * quaternion (w, x, y, z; | |q_MB|^2 - 1 | <= 1e-4, else
+                           * GS_BAD_ARG): each GS_CTRL_POSE attitude q_IM becomes
+                           * q_IB = q_IM (x) q_MB (gs_ctrl_reset's and GS_CTRL_KINEMATICS'
+                           * are the body's already) */
     float accel_range;    /* m/s^2: the accelerometer's range (the generated default:
                            * 1.5x the largest specific force of the table's circles) */
     float k_pos;          /* position correction per pose: p += k_pos e_p */
