@@ -44,7 +44,7 @@ API = (
     ("Model versus measurement", "analysis.compare", ("compare", "Comparison")),
     ("Which effect is missing", "analysis.diagnose", ("diagnose", "Diagnosis",
                                                       "apply_candidate", "apply_diagnosis",
-                                                      "gyro_calibration")),
+                                                      "sensor_calibration")),
     ("The model loop in one call", "analysis.improve", ("improve", "Improvement",
                                                         "write_improve")),
     ("Reports", "analysis.reports", ("write_compare", "write_diagnose")),

@@ -219,8 +219,9 @@ int gs_ctrl_init(gs_ctrl *c, const gs_table *table, const gs_ctrl_params *params
     }
     for (i = 0u; i < 3u; ++i) {
         if (!(pr->gyro_scale[i] > 0.0f) || gs_nonfinite(pr->gyro_scale[i]) ||
-            gs_nonfinite(pr->gyro_bias[i])) {
-            return GS_BAD_ARG; /* a gyro calibration that cannot be undone */
+            gs_nonfinite(pr->gyro_bias[i]) || !(pr->accel_scale[i] > 0.0f) ||
+            gs_nonfinite(pr->accel_scale[i]) || gs_nonfinite(pr->accel_bias[i])) {
+            return GS_BAD_ARG; /* a sensor calibration that cannot be undone */
         }
     }
     {
@@ -371,7 +372,7 @@ static uint32_t gs_c_imu(gs_ctrl *c, const gs_ctrl_input *in, bool *gyro_bad)
             st |= GS_CTRL_BAD_IMU;
         } else {
             for (j = 0u; j < 3u; ++j) {
-                c->accel[j] = in->accel[j];
+                c->accel[j] = (in->accel[j] - pr->accel_bias[j]) / pr->accel_scale[j];
             }
         }
     }

@@ -41,6 +41,8 @@ static const gs_ctrl_params paper_ctrl_params = {
     34.9f, /* gyro_range: rad/s */
     {1.0f, 1.0f, 1.0f}, /* gyro_scale: gyro reads scale * omega + bias ([sensors]) */
     {0.0f, 0.0f, 0.0f}, /* gyro_bias: rad/s, undone: omega = (gyro - bias) / scale */
+    {1.0f, 1.0f, 1.0f}, /* accel_scale: accelerometer reads scale * f + bias ([sensors]) */
+    {0.0f, 0.0f, 0.0f}, /* accel_bias: m/s^2, undone: f = (accel - bias) / scale */
     {1.0f, 0.0f, 0.0f, 0.0f}, /* q_MB: the body in the markers' frame: q_IB = q_pose (x) q_MB ([sensors]) */
     225.55295f, /* accel_range: m/s^2 = 23 g, 1.5x the table's largest specific force */
     0.3f, /* k_pos: estimator: position per pose */

@@ -313,18 +313,35 @@ class Sensors:
         angles (roll, pitch, yaw; ``marker_rotation_deg`` in the file, each within +-10
         deg): ``R_MB = Rz(yaw) Ry(pitch) Rx(roll)``, and the body's attitude is
         ``R_IB = R_IM R_MB`` for the pose's ``R_IM``.
+    accel_scale : tuple of 3 float
+        Scale factor of the accelerometer's x, y, z axes, in [0.5, 2]: each reads
+        ``accel_scale * f + accel_bias`` for a specific force ``f`` (m/s^2).
+    accel_bias : tuple of 3 float, m/s^2
+        Bias of the accelerometer's axes, each within +-2 m/s^2.
     """
 
     gyro_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
     gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
     marker_rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    accel_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    accel_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def identity(self) -> bool:
-        """True when the gyro reads the body rates as they are (scale 1, bias 0) and the
-        markers' frame is the body's."""
-        return (self.gyro_scale == (1.0, 1.0, 1.0) and self.gyro_bias == (0.0, 0.0, 0.0)
-                and self.marker_rotation == (0.0, 0.0, 0.0))
+        """True when the gyro and the accelerometer read as they are (scale 1, bias 0)
+        and the markers' frame is the body's."""
+        return self == Sensors()
+
+    def accel_readings(self, f):
+        """The accelerometer's readings (..., 3), m/s^2, of specific forces ``f``."""
+        return np.asarray(f, dtype=float) * np.array(self.accel_scale) + np.array(
+            self.accel_bias)
+
+    def specific_force(self, reading):
+        """The specific forces (..., 3), m/s^2, of accelerometer readings ``reading``:
+        ``(reading - accel_bias) / accel_scale``."""
+        return (np.asarray(reading, dtype=float) - np.array(self.accel_bias)) / np.array(
+            self.accel_scale)
 
     @property
     def R_MB(self) -> np.ndarray:

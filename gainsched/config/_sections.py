@@ -332,6 +332,8 @@ def read_analysis(sec: Section) -> Analysis:
 #: the range of a gyro axis's scale factor and of its bias (rad/s) in ``[sensors]``
 GYRO_SCALE_RANGE = (0.5, 2.0)
 GYRO_BIAS_MAX = 0.5
+#: the largest accelerometer bias in ``[sensors]``, m/s^2
+ACCEL_BIAS_MAX = 2.0
 #: the largest marker-frame rotation in ``[sensors]``, deg (a rigid body defined on the
 #: markers is a degree or two off; more is a wrong body, not a calibration)
 MARKER_ROTATION_MAX_DEG = 10.0
@@ -339,7 +341,8 @@ MARKER_ROTATION_MAX_DEG = 10.0
 
 def read_sensors(sec: Section) -> Sensors:
     """``[sensors]`` -> :class:`Sensors`: the gyro's scale factors and biases (rad/s) per
-    body axis, the marker frame's rotation (deg in the file, rad in :class:`Sensors`)."""
+    body axis, the marker frame's rotation (deg in the file, rad in :class:`Sensors`), the
+    accelerometer's scale factors and biases (m/s^2)."""
 
     def axes(key, default, lo, hi, unit):
         a = sec.array(key, list(default))
@@ -354,8 +357,10 @@ def read_sensors(sec: Section) -> Sensors:
     bias = axes("gyro_bias", Sensors.gyro_bias, -GYRO_BIAS_MAX, GYRO_BIAS_MAX, " rad/s")
     rot = axes("marker_rotation_deg", (0.0, 0.0, 0.0), -MARKER_ROTATION_MAX_DEG,
                MARKER_ROTATION_MAX_DEG, " deg")
+    a_scale = axes("accel_scale", Sensors.accel_scale, *GYRO_SCALE_RANGE, "")
+    a_bias = axes("accel_bias", Sensors.accel_bias, -ACCEL_BIAS_MAX, ACCEL_BIAS_MAX, " m/s^2")
     sec.done()
-    return Sensors(scale, bias, tuple(float(np.deg2rad(a)) for a in rot))
+    return Sensors(scale, bias, tuple(float(np.deg2rad(a)) for a in rot), a_scale, a_bias)
 
 
 def read_limits(sec: Section) -> Limits:

@@ -366,6 +366,8 @@ _PARAM_COMMENTS = {
     "quat_tolerance": "| |q|^2 - 1 | of a usable pose", "gyro_range": "rad/s",
     "gyro_scale": "gyro reads scale * omega + bias ([sensors])",
     "gyro_bias": "rad/s, undone: omega = (gyro - bias) / scale",
+    "accel_scale": "accelerometer reads scale * f + bias ([sensors])",
+    "accel_bias": "m/s^2, undone: f = (accel - bias) / scale",
     "q_MB": "the body in the markers' frame: q_IB = q_pose (x) q_MB ([sensors])",
     "accel_range": "m/s^2", "k_pos": "estimator: position per pose",
     "k_vel": "estimator: velocity per pose", "k_att": "estimator: attitude per pose",

@@ -318,6 +318,8 @@ class Controller:
         self.gyro = self.gyro_prev = np.zeros(3)
         self._gyro_scale = np.array(params.gyro_scale)
         self._gyro_bias = np.array(params.gyro_bias)
+        self._accel_scale = np.array(params.accel_scale)
+        self._accel_bias = np.array(params.accel_bias)
         self.accel = self.accel_prev = np.zeros(3)
         self.fresh = False
         self.have_fix = self.have_gains = self.have_az = False
@@ -381,7 +383,7 @@ class Controller:
             if not _sample_ok(f, pr.accel_range):
                 st |= CTRL_BAD_IMU
             else:
-                self.accel = f.astype(float)
+                self.accel = (f - self._accel_bias) / self._accel_scale
         return st, gyro_bad
 
     def _acceleration(self, flags, ref, alpha, gamma):

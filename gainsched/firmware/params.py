@@ -80,6 +80,9 @@ class ControllerParams:
         The gyro's calibration (``[sensors]`` of the config): each axis reads
         ``gyro_scale * omega + gyro_bias``; the controller uses
         ``(reading - gyro_bias) / gyro_scale`` (float32, as in C), as the log reader does.
+    accel_scale, accel_bias : tuple of 3 float (-, m/s^2)
+        The accelerometer's calibration (``[sensors]``): the controller uses
+        ``(reading - accel_bias) / accel_scale``, as the log reader does.
     q_MB : tuple of 4 float
         The body frame in the motion capture's marker frame, a unit quaternion (w, x, y,
         z; ``[sensors] marker_rotation_deg``): each pose's ``q_IM`` becomes the body's
@@ -127,6 +130,8 @@ class ControllerParams:
     gyro_range: float = 34.9  # 2000 deg/s
     gyro_scale: tuple[float, ...] = (1.0, 1.0, 1.0)
     gyro_bias: tuple[float, ...] = (0.0, 0.0, 0.0)
+    accel_scale: tuple[float, ...] = (1.0, 1.0, 1.0)
+    accel_bias: tuple[float, ...] = (0.0, 0.0, 0.0)
     q_MB: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0)
     accel_range: float = 156.9  # 16 g
     k_pos: float = 0.3
@@ -152,13 +157,14 @@ class ControllerParams:
             raise ValueError(f"n_lag {self.n_lag}, lag_keep {self.lag_keep}: a motor lag's "
                              "4 thrusts with 0 <= lag_keep < 1, or none")
         object.__setattr__(self, "lag_keep", float(np.float32(self.lag_keep)))
-        for name in ("gyro_scale", "gyro_bias"):
+        for name in ("gyro_scale", "gyro_bias", "accel_scale", "accel_bias"):
             v = tuple(float(np.float32(x)) for x in getattr(self, name))
             if len(v) != 3 or not all(math.isfinite(x) for x in v):
                 raise ValueError(f"{name}: 3 finite numbers (x, y, z), got {v}")
             object.__setattr__(self, name, v)
-        if not all(x > 0 for x in self.gyro_scale):
-            raise ValueError(f"gyro_scale: each > 0, got {self.gyro_scale}")
+        for name in ("gyro_scale", "accel_scale"):
+            if not all(x > 0 for x in getattr(self, name)):
+                raise ValueError(f"{name}: each > 0, got {getattr(self, name)}")
         q = tuple(float(np.float32(x)) for x in self.q_MB)
         if len(q) != 4 or not all(math.isfinite(x) for x in q) or \
                 abs(sum(x * x for x in q) - 1.0) > Q_MB_TOLERANCE:

@@ -56,7 +56,7 @@ OUTPUT_KEYS = ("motor_slot", "normalized", "thr_mdl_fac", "thrust_full")
 #: config (``int_limit`` the config's ``[control] int_limit``, null: sized from the gains)
 CONTROLLER_KEYS = ("dt", "rho", "L_e", "thrust_min", "thrust_max", "thrust_idle", "int_limit",
                    "int_of", "accel_range", *OUTPUT_KEYS, "n_lag", "lag_keep", "gyro_scale",
-                   "gyro_bias", "q_MB")
+                   "gyro_bias", "accel_scale", "accel_bias", "q_MB")
 
 #: standard gravity, m/s^2: the unit of accelerometer ranges ("16 g")
 G0 = 9.80665
@@ -185,6 +185,8 @@ def controller_from_config(config) -> dict:
            "lag_keep": math.exp(-c.dt / lag[0]["tau"]) if lag else 0.0,
            "gyro_scale": list(config.sensors.gyro_scale),
            "gyro_bias": list(config.sensors.gyro_bias),
+           "accel_scale": list(config.sensors.accel_scale),
+           "accel_bias": list(config.sensors.accel_bias),
            "q_MB": [float(x) for x in quaternion_from_matrix(config.sensors.R_MB)]}
     return {k: out[k] for k in CONTROLLER_KEYS}
 
@@ -261,9 +263,12 @@ def record_from_datasets(path, vehicle, state_map, controller, n: int) -> Firmwa
 
 #: the gyro's calibration of a table whose record has none (built before it was carried)
 _GYRO_UNCALIBRATED = {"gyro_scale": [1.0, 1.0, 1.0], "gyro_bias": [0.0, 0.0, 0.0],
+                      "accel_scale": [1.0, 1.0, 1.0], "accel_bias": [0.0, 0.0, 0.0],
                       "q_MB": [1.0, 0.0, 0.0, 0.0]}
 #: the sensors' keys of a record: (their check beyond finite, what it asks)
 _SENSOR_CHECKS = {"gyro_scale": (lambda v: all(x > 0 for x in v), " > 0"),
                   "gyro_bias": (lambda v: True, ""),
+                  "accel_scale": (lambda v: all(x > 0 for x in v), " > 0"),
+                  "accel_bias": (lambda v: True, ""),
                   "q_MB": (lambda v: abs(sum(x * x for x in v) - 1.0) <= 1e-4,
                            " of unit norm")}

@@ -106,7 +106,7 @@ def log_from_result(res: SimResult, *, rate_hz: float | None = None, seed: int |
     if res.f_B is not None:  # the accelerometer, anti-aliased the same way, its own noise
         fsum = np.concatenate([np.zeros((1, 3)), np.cumsum(res.f_B, 0)])
         f_B = (fsum[hi] - fsum[lo]) / (hi - lo)[:, None]
-        extra["f_B"] = f_B + sens.accel_noise * np.random.default_rng(
+        extra["f_B"] = res.sensors.accel_readings(f_B) + sens.accel_noise * np.random.default_rng(
             (sens.seed + 1000 if seed is None else seed) + 7919).standard_normal((idx.size, 3))
     if res.vbat is not None:  # the battery voltage, averaged over the same interval
         vsum = np.concatenate([[0.0], np.cumsum(res.vbat)])

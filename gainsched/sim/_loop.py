@@ -298,6 +298,7 @@ class _FirmwareSensors:
         # the body rates, the attitude the motion capture reports of the body's
         self.gyro = None if gyro is None or gyro.identity else gyro.readings
         self.markers = None if gyro is None or gyro.identity else gyro.marker_attitude
+        self.accel = None if gyro is None or gyro.identity else gyro.accel_readings
         self.col = INPUT_SLICES
         self.row = np.zeros(N_INPUT)
         self.row[self.col["alpha"]], self.row[self.col["gamma"]] = alpha, gamma
@@ -328,7 +329,8 @@ class _FirmwareSensors:
             row[0] = flags
             row[col["gyro"]] = ((w_B if self.gyro is None else self.gyro(w_B))
                                 + sens.gyro_noise * rng.standard_normal(3))
-            row[col["accel"]] = f_B + sens.accel_noise * rng.standard_normal(3)
+            row[col["accel"]] = ((f_B if self.accel is None else self.accel(f_B))
+                                 + sens.accel_noise * rng.standard_normal(3))
         row[col["ref"]] = ref_k
         return row
 

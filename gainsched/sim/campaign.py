@@ -162,18 +162,23 @@ HIDDEN: dict[str, HiddenEffect] = {
                      "tolerances before calibration)",
                      (("sensors", "gyro_scale", [1.03, 0.97, 1.02]),
                       ("sensors", "gyro_bias", [0.01, -0.008, 0.012])),
-                     truth=("gyro_calibration", "gyro_scale_x", 1.03)),
+                     truth=("sensor_calibration", "gyro_scale_x", 1.03)),
         HiddenEffect("marker_rotation", "the motion capture's marker frame turned from the "
                      "body's by roll 1.0, pitch -1.5, yaw 2.0 deg (a rigid body defined by "
                      "hand on the markers)",
                      (("sensors", "marker_rotation_deg", [1.0, -1.5, 2.0]),),
-                     truth=("gyro_calibration", "marker_yaw", 2.0)),
+                     truth=("sensor_calibration", "marker_yaw", 2.0)),
         HiddenEffect("gyro_and_markers", "both at once: the uncalibrated gyroscope of 'gyro' "
                      "and the turned marker frame of 'marker_rotation'",
                      (("sensors", "gyro_scale", [1.03, 0.97, 1.02]),
                       ("sensors", "gyro_bias", [0.01, -0.008, 0.012]),
                       ("sensors", "marker_rotation_deg", [1.0, -1.5, 2.0])),
-                     truth=("gyro_calibration", "gyro_scale_x", 1.03)),
+                     truth=("sensor_calibration", "gyro_scale_x", 1.03)),
+        HiddenEffect("accel", "an uncalibrated accelerometer: scale 0.98, 1.02, 1.01 and "
+                     "bias 0.10, -0.15, 0.20 m/s^2 on its x, y, z axes",
+                     (("sensors", "accel_scale", [0.98, 1.02, 1.01]),
+                      ("sensors", "accel_bias", [0.1, -0.15, 0.2])),
+                     truth=("sensor_calibration", "accel_scale_x", 0.98)),
         HiddenEffect("attachment_offset", "attachment offset L_e = 0.12 m instead of 0.10 m",
                      (("tether", "attachment_offset", 0.12),),
                      truth=("attachment_offset", "attachment_offset", 0.12)),

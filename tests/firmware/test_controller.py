@@ -474,15 +474,17 @@ def test_one_sample_sensor_forms_equal_the_batched_ones(paper_config):
 
 #: a gyro as it comes off the line (scale 3 % off per axis, biases of 0.01 rad/s) and
 #: markers whose frame is turned from the body's by a degree or two
-_GYRO = {"gyro_scale": (1.03, 0.97, 1.02), "gyro_bias": (0.01, -0.008, 0.012)}
+_GYRO = {"gyro_scale": (1.03, 0.97, 1.02), "gyro_bias": (0.01, -0.008, 0.012),
+         "accel_scale": (0.98, 1.02, 1.01), "accel_bias": (0.1, -0.15, 0.2)}
 _MARKERS_DEG = (1.0, -1.5, 2.0)
 
 
 def test_the_sensors_calibration_is_undone_in_c_as_in_python(paper_config, paper_table,
                                                              tmp_path):
-    """Issue 53: rows whose gyro reads ``s omega + b`` and whose poses are the markers'
-    attitude ``R_IB R_MB^T``, flown by controllers that know both (``[sensors]``, carried
-    by the table's record as gyro_scale, gyro_bias and q_MB), give the statuses and
+    """Issue 53: rows whose gyro reads ``s omega + b``, whose accelerometer reads ``s f +
+    b`` and whose poses are the markers' attitude ``R_IB R_MB^T``, flown by controllers
+    that know all three (``[sensors]``, carried by the table's record as gyro_scale,
+    gyro_bias, accel_scale, accel_bias and q_MB), give the statuses and
     thrusts of the true rows flown without them, in C and in the Python reference
     (within TOL_THRUST: float32); without the calibration the same rows give other
     thrusts."""
@@ -493,10 +495,11 @@ def test_the_sensors_calibration_is_undone_in_c_as_in_python(paper_config, paper
     res = simulate(paper_config, runtime_scheduler(paper_table, "python"),
                    dataclasses.replace(load_scenario("tilted40"), duration=0.4))
     rows = recorded_rows(res)
-    g, q = INPUT_SLICES["gyro"], INPUT_SLICES["q_IB"]
+    g, q, f = INPUT_SLICES["gyro"], INPUT_SLICES["q_IB"], INPUT_SLICES["accel"]
     sensors = Sensors(marker_rotation=tuple(np.deg2rad(_MARKERS_DEG)))
     read = rows.copy()
     read[:, g] = rows[:, g] * np.array(_GYRO["gyro_scale"]) + np.array(_GYRO["gyro_bias"])
+    read[:, f] = rows[:, f] * np.array(_GYRO["accel_scale"]) + np.array(_GYRO["accel_bias"])
     pose = rows[:, 0] != 0
     read[pose, q] = quaternion_from_matrix(
         sensors.marker_attitude(matrix_from_quaternion(rows[pose, q])))
@@ -515,7 +518,8 @@ def test_the_sensors_calibration_is_undone_in_c_as_in_python(paper_config, paper
 
 
 @pytest.mark.parametrize("key,value", [("gyro_scale", 0.0), ("gyro_scale", np.nan),
-                                       ("gyro_bias", np.inf), ("q_MB", 1.1),
+                                       ("gyro_bias", np.inf), ("accel_scale", -1.0),
+                                       ("accel_bias", np.nan), ("q_MB", 1.1),
                                        ("q_MB", np.nan)])
 def test_a_sensors_calibration_that_cannot_be_undone_is_refused(paper_config, paper_table,
                                                                 tmp_path, key, value):
@@ -527,6 +531,7 @@ def test_a_sensors_calibration_that_cannot_be_undone_is_refused(paper_config, pa
     good = controller_params(paper_table)
     lib = build_controller(paper_table, good, tmp_path)
     bad = {"gyro_scale": (value, 1.0, 1.0), "gyro_bias": (value, 0.0, 0.0),
+           "accel_scale": (value, 1.0, 1.0), "accel_bias": (value, 0.0, 0.0),
            "q_MB": (value, 0.0, 0.0, 0.0)}[key]
     with pytest.raises(ValueError, match=key):
         dataclasses.replace(good, **{key: bad})

@@ -180,6 +180,11 @@ class Measured:
         clock (as :meth:`omega_dot_measured` delays their derivative); needs a gyro."""
         return _delayed(self.t, self.gyro, latency)
 
+    def accel_delayed(self, latency: float) -> np.ndarray:
+        """The accelerometer's specific force (N, 3), m/s^2, delayed by ``latency`` s onto
+        the pose's clock; needs an accelerometer."""
+        return _delayed(self.t, self.accel, latency)
+
     def derived(self, key: str, fn):
         """``fn()`` computed once per segment (kinematics, projections)."""
         if key not in self.cache:
@@ -303,7 +308,7 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
     gyro, gyro_dot = _gyro(log, an, n, dt, config.sensors)
     if gyro is not None:
         sigma.update(zip(("p", "q", "r"), _imu_sigma(gyro, h), strict=True))
-    accel = _accelerometer(log, an)
+    accel = _accelerometer(log, an, config.sensors)
     if accel is not None:
         sigma.update(zip(("ax", "ay", "az"), _imu_sigma(accel, h), strict=True))
     tension = log.optional.get("tension")
@@ -333,19 +338,24 @@ def _imu_sigma(x: np.ndarray, h: int) -> list[float]:
     return [float(v) for v in np.sqrt(np.mean(res**2, axis=0) / (1 - hc))]
 
 
-def _imu_channel(log: FlightLog, column: str, enabled: bool, noise=None):
-    """A logged on-board sensor channel (N, 3) plus ``noise`` (N, 3) when given (the
-    noise-floor estimate), or None without one, with its use switched off in
-    ``[analysis]``, or with missing samples."""
+def _imu_channel(log: FlightLog, column: str, enabled: bool):
+    """A logged on-board sensor channel (N, 3), or None without one, with its use
+    switched off in ``[analysis]``, or with missing samples."""
     x = log.optional.get(column)
     if not enabled or x is None or not np.all(np.isfinite(x)):
         return None
-    return np.asarray(x, float) if noise is None else np.asarray(x, float) + noise
+    return np.asarray(x, float)
 
 
-def _accelerometer(log: FlightLog, an, noise=None):
-    """The logged specific force (N, 3) m/s^2 in B, or None (:func:`_imu_channel`)."""
-    return _imu_channel(log, "f_B", an.use_accelerometer, noise)
+def _accelerometer(log: FlightLog, an, sensors: Sensors, noise=None):
+    """The logged specific force (N, 3) m/s^2 in B, its calibration ``sensors`` undone
+    (``(reading - accel_bias) / accel_scale``), or None (:func:`_imu_channel`)."""
+    f = _imu_channel(log, "f_B", an.use_accelerometer)
+    if f is None:
+        return None
+    if sensors.accel_scale != (1.0, 1.0, 1.0) or sensors.accel_bias != (0.0, 0.0, 0.0):
+        f = sensors.specific_force(f)
+    return f if noise is None else f + noise
 
 
 def _gyro(log: FlightLog, an, n: int, dt: float, sensors: Sensors, noise=None):
@@ -355,7 +365,7 @@ def _gyro(log: FlightLog, an, n: int, dt: float, sensors: Sensors, noise=None):
     gyro = _imu_channel(log, "omega_B", an.use_gyro)
     if gyro is None:
         return None, None
-    if not sensors.identity:
+    if sensors.gyro_scale != (1.0, 1.0, 1.0) or sensors.gyro_bias != (0.0, 0.0, 0.0):
         gyro = sensors.body_rates(gyro)
     if noise is not None:  # the noise-floor estimate's: of the body rates' noise level
         gyro = gyro + noise

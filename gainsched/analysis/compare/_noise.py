@@ -55,7 +55,8 @@ def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None,
     accel = None
     if meas.accel is not None:  # the accelerometer's own noise, once more
         a_sig = np.array([meas.raw_sigma[k] for k in ("ax", "ay", "az")])
-        accel = _accelerometer(log, an, a_sig * (rng_accel or rng).standard_normal((n, 3)))
+        accel = _accelerometer(log, an, config.sensors,
+                               a_sig * (rng_accel or rng).standard_normal((n, 3)))
     return Measured(meas.name, meas.source, meas.alpha, meas.gamma, meas.t, meas.t_flight,
                     meas.window, meas.order, z, acc, ch[0], ch1[0], p, v, a, R, w_dot, e, axes,
                     meas.T_cmd, meas.tension, meas.raw_sigma, meas.L_e, gyro=gyro,

@@ -60,11 +60,11 @@ top to bottom of their imports (a module imports only from those below it):
 - ``_results``: :data:`THRESHOLDS`, :class:`CandidateResult`, :class:`Diagnosis`;
 - ``_candidates``: the candidate library; ``_lsq``: the bounded least-squares solver;
 - ``_calibration``: the gyro's scale and bias against the motion capture, fitted before
-  the candidates (:func:`gyro_calibration`).
+  the candidates (:func:`sensor_calibration`).
 """
 
 from ._apply import apply_candidate, apply_diagnosis
-from ._calibration import GyroCalibration, gyro_calibration
+from ._calibration import SensorCalibration, sensor_calibration
 from ._candidates import (
     CANDIDATES,
     Candidate,
@@ -88,8 +88,8 @@ __all__ = [
     "diagnose",
     "apply_candidate",
     "apply_diagnosis",
-    "GyroCalibration",
-    "gyro_calibration",
+    "SensorCalibration",
+    "sensor_calibration",
     "separating_flight",
     "single_parameter_set_candidates",
     "select_candidates",

@@ -151,20 +151,27 @@ def apply_diagnosis(diagnosis, *, name: str | None = None) -> str | None:
 
 
 def _with_calibration(text: str, cal) -> str:
-    """``text`` with the calibration ``cal`` in ``[sensors]`` (the gyro's scale and bias,
-    the marker frame's rotation when it turned), the 95 % intervals and the held-out
-    fall as comments."""
+    """``text`` with the calibration ``cal`` in ``[sensors]``: the gyro's scale and bias,
+    the marker frame's rotation when it turned, the accelerometer's scale and bias when
+    one is off; the 95 % intervals and the held-out fall as comments."""
     s = cal.sensors()
     ci = lambda v, c: ", ".join(f"{x:.4g} +- {e:.1g}" for x, e in zip(v, c, strict=True))  # noqa: E731
-    header = (f"gainsched diagnose: gyro against the motion capture, held-out residual "
+    header = (f"gainsched diagnose: sensors against the motion capture, held-out residual "
               f"above noise -{cal.fall:.0%}")
+    g, off = cal.gyro, cal.off
     text = set_value(text, "sensors", "gyro_scale", list(s.gyro_scale),
-                     f"fitted {ci(cal.scale, cal.scale_ci)} (95%); {header}")
+                     f"fitted {ci(g.scale, g.scale_ci)} (95%); {header}")
     text = set_value(text, "sensors", "gyro_bias", list(s.gyro_bias),
-                     f"rad/s, fitted {ci(cal.bias, cal.bias_ci)} (95%)")
-    if not cal.rotated:
-        return text
-    return set_value(text, "sensors", "marker_rotation_deg",
-                     [round(float(np.rad2deg(a)), 4) for a in s.marker_rotation],
-                     "deg, roll pitch yaw of the body in the markers' frame; turned by "
-                     f"{ci(np.rad2deg(cal.rotation), np.rad2deg(cal.rotation_ci))} deg (95%)")
+                     f"rad/s, fitted {ci(g.bias, g.bias_ci)} (95%)")
+    if cal.rotated:
+        text = set_value(text, "sensors", "marker_rotation_deg",
+                         [round(float(np.rad2deg(a)), 4) for a in s.marker_rotation],
+                         "deg, roll pitch yaw of the body in the markers' frame, fitted "
+                         f"{ci(cal.marker_deg(), np.rad2deg(cal.rotation_ci))} (95%)")
+    a = cal.accel
+    if a is not None and any(v for k, v in off.items() if k.startswith("accel")):
+        text = set_value(text, "sensors", "accel_scale", list(s.accel_scale),
+                         f"fitted {ci(a.scale, a.scale_ci)} (95%)")
+        text = set_value(text, "sensors", "accel_bias", list(s.accel_bias),
+                         f"m/s^2, fitted {ci(a.bias, a.bias_ci)} (95%)")
+    return text

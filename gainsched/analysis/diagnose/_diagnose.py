@@ -16,7 +16,7 @@ from ..compare import (
     Comparison,
     compare,
 )
-from ._calibration import gyro_calibration
+from ._calibration import sensor_calibration
 from ._candidates import _logged, candidate_library, select_candidates
 from ._fit import _fit_candidate
 from ._lsq import _sq
@@ -121,7 +121,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
         prob, library, names, base, at_floor, base_sq, base_vecs,
         asked=candidates is not None, joint=joint, forward=forward, progress=progress)
     verdict = _verdict(base, results, accepted, twins, at_floor)
-    if calibration is not None and calibration.axes_changed:
+    if calibration is not None and calibration.accepted:
         verdict = f"{calibration.sentence()}. {verdict}"
     return Diagnosis(config, base, results, accepted, twins, verdict, at_floor,
                      prob.flight_names, int(round(prob.n_evals)), similarity, calibration)
@@ -130,9 +130,9 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
 def _calibrated(config: Config, base: Comparison):
     """The sensor first, then the dynamics: ``(config, base, calibration)`` with the gyro's
     calibration fitted against the motion capture
-    (:func:`~gainsched.analysis.diagnose._calibration.gyro_calibration`) and, when it is
+    (:func:`~gainsched.analysis.diagnose._calibration.sensor_calibration`) and, when it is
     accepted, in the config and in the measurement (``base`` measured again with it)."""
-    calibration = gyro_calibration(config, base.measured)
+    calibration = sensor_calibration(config, base.measured)
     if calibration is not None and calibration.accepted:
         config = calibration.applied(config)
         base = compare(config, base.segs)

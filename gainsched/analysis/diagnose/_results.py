@@ -228,9 +228,9 @@ class Diagnosis:
     similarity : dict of str to float
         ``|cos|`` of each other candidate's fitted contribution to the accepted one's
         (empty without an accepted candidate).
-    calibration : GyroCalibration or None
+    calibration : SensorCalibration or None
         The gyro's scale and bias fitted against the motion capture's rates, before any
-        dynamics (:func:`~gainsched.analysis.diagnose._calibration.gyro_calibration`);
+        dynamics (:func:`~gainsched.analysis.diagnose._calibration.sensor_calibration`);
         when it is accepted, ``config`` has it and ``base`` was measured with it. None
         without a gyro on two flights.
     """
@@ -245,13 +245,13 @@ class Diagnosis:
     flights: list
     evaluations: int
     similarity: dict = field(default_factory=dict)  # |cos| of each fit to the accepted one
-    calibration: object | None = None  # GyroCalibration
+    calibration: object | None = None  # SensorCalibration
 
     @property
     def applied(self) -> list[str]:
         """What :func:`~gainsched.analysis.diagnose.apply_diagnosis` writes: the gyro's
-        calibration (``"gyro_calibration"``) when accepted, the accepted candidate."""
-        cal = ["gyro_calibration"] if self.calibration is not None and \
+        calibration (``"sensor_calibration"``) when accepted, the accepted candidate."""
+        cal = ["sensor_calibration"] if self.calibration is not None and \
             self.calibration.accepted else []
         return cal + ([] if self.accepted is None else [self.accepted.name])
 
@@ -277,7 +277,7 @@ class Diagnosis:
             "base_where_it_fails": self.base.where["sentence"],
             "model_evaluations": self.evaluations,
             "abs_cos_to_accepted": self.similarity,
-            "gyro_calibration": (None if self.calibration is None
+            "sensor_calibration": (None if self.calibration is None
                                  else self.calibration.to_json()),
             "applied": self.applied,
         }

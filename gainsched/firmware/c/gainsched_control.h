@@ -107,6 +107,10 @@ typedef struct gs_ctrl_params {
                            * gyro_bias[j]; each finite and > 0 (else GS_BAD_ARG) */
     float gyro_bias[3];   /* rad/s, each finite; the controller uses
                            * omega_j = (gyro_j - gyro_bias[j]) / gyro_scale[j] */
+    float accel_scale[3]; /* the accelerometer's calibration: axis j reads accel_scale[j]
+                           * f_j + accel_bias[j]; each finite and > 0 (else GS_BAD_ARG) */
+    float accel_bias[3];  /* m/s^2, each finite; the controller uses
+                           * f_j = (accel_j - accel_bias[j]) / accel_scale[j] */
     float q_MB[4];        /* the body frame in the motion capture's marker frame, a unit
                            * quaternion (w, x, y, z; | |q_MB|^2 - 1 | <= 1e-4, else
                            * GS_BAD_ARG): each GS_CTRL_POSE attitude q_IM becomes

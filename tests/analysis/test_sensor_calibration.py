@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from gainsched.analysis.compare import compare
-from gainsched.analysis.diagnose import apply_diagnosis, gyro_calibration
+from gainsched.analysis.diagnose import apply_diagnosis, sensor_calibration
 from gainsched.config import config_from_text
 from gainsched.errors import InputError
 from gainsched.sim.campaign import HIDDEN
@@ -90,13 +90,44 @@ def test_a_gyro_and_markers_off_are_found_within_10_percent(diagnosed, hidden):
     assert all(off[k] == markers for k in off if k.startswith("marker")), off
 
 
+#: the hidden accelerometer: scale and bias (m/s^2) per axis
+ACCEL_SCALE = np.array([0.98, 1.02, 1.01])
+ACCEL_BIAS = np.array([0.1, -0.15, 0.2])
+
+
+def test_an_accelerometer_off_is_found_and_explains_the_residual(paper_config, diagnosed):
+    """An accelerometer 1-2 % off with biases of 0.1-0.2 m/s^2 reads as 16x the noise
+    (a thrust or mass error, had it been fitted as dynamics). The calibration is accepted
+    alone (the gyro and the markers found right), nothing but the tether's stretch beside
+    it; the parameters these circles excite well (the radial x axis's scale, the x and y
+    biases) within 10 %, the others within their 95 % intervals widened by half the
+    error (the lateral y force and the thrust-axis z force vary little from flight to
+    flight); once applied, every residual axis is at its noise floor."""
+    from gainsched.analysis.compare import AT_NOISE_FLOOR
+
+    logs, d = diagnosed("accel")
+    cal = d.calibration
+    assert cal.accepted and set(d.applied[1:]) <= ALLOWED, d.verdict
+    a = cal.accel
+    assert abs(a.scale[0] - ACCEL_SCALE[0]) <= 0.1 * abs(ACCEL_SCALE[0] - 1), a.scale
+    assert np.all(np.abs(a.bias[:2] - ACCEL_BIAS[:2]) <= 0.1 * np.abs(ACCEL_BIAS[:2])), a.bias
+    assert np.all(np.abs(a.scale - ACCEL_SCALE) <= a.scale_ci + 0.5 * np.abs(ACCEL_SCALE - 1))
+    assert np.all(np.abs(a.bias - ACCEL_BIAS) <= a.bias_ci + 0.5 * np.abs(ACCEL_BIAS))
+    assert not any(v for k, v in cal.off.items() if not k.startswith("accel")), cal.off
+    new = config_from_text(apply_diagnosis(d), "accel.toml")
+    assert compare(paper_config, logs).normalized_rms() > 10
+    after = compare(new, logs)
+    assert all(s.rms_over_noise < AT_NOISE_FLOOR for s in after.stats.values()), \
+        {a: s.rms_over_noise for a, s in after.stats.items()}
+
+
 def test_a_gyro_error_is_not_told_as_a_missing_effect(diagnosed):
     """The dynamics are fitted on the calibrated rates: nothing but the calibration (and
     the real tether's own stretch) is accepted; the verdict starts with the gyro."""
     d = diagnosed("gyro_and_markers")[1]
-    assert d.applied[0] == "gyro_calibration"
+    assert d.applied[0] == "sensor_calibration"
     assert set(d.applied[1:]) <= ALLOWED, d.verdict
-    assert d.verdict.startswith("gyro calibration accepted")
+    assert d.verdict.startswith("sensor calibration accepted")
     assert d.config.sensors.gyro_scale != (1.0, 1.0, 1.0)  # the model diagnosed has it
 
 
@@ -106,7 +137,7 @@ def test_a_calibrated_gyro_is_left_alone(diagnosed):
     d = diagnosed("none")[1]
     assert d.calibration is not None and not d.calibration.axes_changed, \
         d.calibration.sentence()
-    assert "gyro_calibration" not in d.applied
+    assert "sensor_calibration" not in d.applied
     text = apply_diagnosis(d)
     assert text is None or "[sensors]" not in text
 
@@ -125,7 +156,7 @@ def test_the_applied_calibration_explains_the_rates_residual(paper_config, diagn
     rms = {a: (before.stats[a].rms, after.stats[a].rms) for a in ("roll", "pitch", "yaw")}
     assert rms["roll"][1] < rms["roll"][0] and rms["pitch"][1] < rms["pitch"][0], rms
     assert all(a <= 1.01 * b for b, a in rms.values()), rms  # the yaw's is noise there
-    again = gyro_calibration(new, after.measured)
+    again = sensor_calibration(new, after.measured)
     assert not again.axes_changed, again.sentence()  # nothing left to calibrate
 
 
@@ -142,18 +173,21 @@ def test_turned_markers_are_the_whole_residual_and_the_calibration_removes_it(pa
     assert before.normalized_rms() > 10
     assert all(s.rms_over_noise < AT_NOISE_FLOOR for s in after.stats.values()), \
         {a: s.rms_over_noise for a, s in after.stats.items()}
-    assert not gyro_calibration(new, after.measured).axes_changed
+    assert not sensor_calibration(new, after.measured).axes_changed
 
 
 @pytest.mark.parametrize("edit,key", [
     ("gyro_scale = [1.0, 1.0]", "sensors.gyro_scale"),
     ("gyro_scale = [1.0, 0.1, 1.0]", "sensors.gyro_scale"),
     ("gyro_bias = [0.0, 0.0, 0.9]", "sensors.gyro_bias"),
+    ("accel_bias = [0.0, 3.0, 0.0]", "sensors.accel_bias"),
+    ("marker_rotation_deg = [0.0, 12.0, 0.0]", "sensors.marker_rotation_deg"),
     ("gyro_offset = [0.0, 0.0, 0.0]", "sensors.gyro_offset"),
 ])
 def test_a_bad_sensors_section_is_refused_naming_the_key(paper_config, edit, key):
-    """[sensors]: 3 numbers per key, a scale in [0.5, 2], a bias within +-0.5 rad/s, no
-    unknown key: one error naming the file and the key."""
+    """[sensors]: 3 numbers per key, a scale in [0.5, 2], a gyro bias within +-0.5 rad/s,
+    an accelerometer bias within +-2 m/s^2, marker angles within +-10 deg, no unknown
+    key: one error naming the file and the key."""
     with pytest.raises(InputError) as err:
         config_from_text(paper_config.text + f"\n[sensors]\n{edit}\n", "bad.toml")
     assert err.value.source == "bad.toml" and err.value.where == key, str(err.value)
@@ -203,7 +237,7 @@ def test_diagnose_apply_on_the_command_line_writes_the_calibration(diagnosed, tm
     res = CliRunner().invoke(cli, ["diagnose", str(REPO / "configs" / "paper.toml"),
                                    *map(str, logs), "--apply", "-o", str(new)])
     assert res.exit_code == 0, res.output
-    assert "gyro calibration accepted" in res.output
-    assert f"wrote {new} (gyro_calibration" in res.output, res.output
+    assert "sensor calibration accepted" in res.output
+    assert f"wrote {new} (sensor_calibration" in res.output, res.output
     cfg = config_from_text(new.read_text(), str(new))
     assert np.all(np.abs(np.array(cfg.sensors.gyro_scale) - SCALE) < 0.01)
