@@ -15,7 +15,9 @@ under 30 s on 2 cores; issue 16: diagnose with the larger library (the joint fit
 under 20 s, printed as a ratio to the library without them, timed in the same run;
 issue 37: within 1.5x of the library and selection before it (no per-motor
 efficiency, no thrust change with flight time, no empirical terms in time or per
-motor, no forward selection), timed in the same run.
+motor, no forward selection), timed in the same run; issue 53: within 1.5x of the
+library before it (no inertias, no kappa) without its nuisance fit and sensor
+calibration, timed in the same run.
 """
 
 from __future__ import annotations
@@ -47,6 +49,11 @@ def make_logs(out: Path, minutes: float, hidden: str) -> list[Path]:
 ISSUE37_CANDIDATES = frozenset({"motor_efficiency", "thrust_time", "thrust_time_series",
                                 "thrust_motor", "wind", "thrust_voltage",
                                 "force_horizontal", "force_airspeed", "tether_stretch"})
+
+
+#: the candidates issue 53 added to the library (beside the nuisance fit and the sensor
+#: calibration, which its baseline turns off)
+ISSUE53_CANDIDATES = frozenset({"inertia_x", "inertia_y", "inertia_z", "kappa"})
 
 
 def base_candidates() -> list[str]:
@@ -84,6 +91,13 @@ def run(paths, candidates=None) -> dict:
     cmp4 = compare(cfg, paths)
     diagnose(cfg, paths, comparison=cmp4, candidates=before37, forward=False)
     t_37 = time.perf_counter() - t0
+    # issue 53's baseline: the library before it (no inertias, no kappa; asked for by
+    # name, so no nuisance fit) and no sensor calibration
+    before53 = [n for n in candidate_library() if n not in ISSUE53_CANDIDATES]
+    t0 = time.perf_counter()
+    cmp5 = compare(cfg, paths)
+    diagnose(cfg, paths, comparison=cmp5, candidates=before53, sensors=False)
+    t_53 = time.perf_counter() - t0
     n = sum(len(r) for r in cmp.residuals) + sum(2 * (r.window // 2) for r in cmp.residuals)
     return {
         "samples": n,
@@ -96,6 +110,8 @@ def run(paths, candidates=None) -> dict:
         "diagnose_ratio_to_base": t_diag / t_base,
         "diagnose_before_issue37_s": t_37,
         "diagnose_ratio_to_before_issue37": t_diag / t_37,
+        "diagnose_before_issue53_s": t_53,
+        "diagnose_ratio_to_before_issue53": t_diag / t_53,
         "model_evaluations": d.evaluations,
         "accepted": d.accepted.name if d.accepted else None,
         "verdict": d.verdict,
@@ -126,6 +142,9 @@ def main(argv=None) -> dict:
     print(f"mvm: diagnose x{res['diagnose_ratio_to_before_issue37']:.2f} the library and "
           f"selection before issue 37 ({res['diagnose_before_issue37_s']:.1f} s, same run; "
           "target <= 1.5)")
+    print(f"mvm: diagnose x{res['diagnose_ratio_to_before_issue53']:.2f} the library before "
+          f"issue 53 without its nuisance fit and sensor calibration "
+          f"({res['diagnose_before_issue53_s']:.1f} s, same run; target <= 1.5)")
     print(f"mvm: verdict: {res['verdict'][:160]}")
     if args.json:
         args.json.write_text(json.dumps(res, indent=2) + "\n")

@@ -85,7 +85,7 @@ class Improvement:
 
 
 def improve(config: Config, logs, *, rounds: int = 3, exclude=(), channel_map=None,
-            trust=(), progress=None) -> Improvement:
+            trust=(), sensors: bool = True, progress=None) -> Improvement:
     """Diagnose and apply in rounds until no effect is missing.
 
     Parameters
@@ -96,9 +96,10 @@ def improve(config: Config, logs, *, rounds: int = 3, exclude=(), channel_map=No
         Two or more flights (held-out scores need them).
     rounds : int
         The most diagnose rounds (1..10).
-    exclude, channel_map, trust
+    exclude, channel_map, trust, sensors
         As :func:`~gainsched.analysis.diagnose.diagnose` and
-        :func:`~gainsched.analysis.compare.compare` take them.
+        :func:`~gainsched.analysis.compare.compare` take them (``sensors``: calibrate
+        the sensors against the motion capture first, default True).
     progress : callable, optional
         ``progress(name)`` before each candidate fit (diagnose's).
 
@@ -124,7 +125,8 @@ def improve(config: Config, logs, *, rounds: int = 3, exclude=(), channel_map=No
     cmp = compare(cfg, logs, measured=measured, segs=segs)
     out: list[Round] = []
     for _ in range(rounds):
-        d = diagnose(cfg, segs, comparison=cmp, exclude=exclude, progress=progress)
+        d = diagnose(cfg, segs, comparison=cmp, exclude=exclude, progress=progress,
+                     sensors=sensors)
         out.append(Round(cfg, cmp, d))
         text = apply_diagnosis(d)
         if text is None:

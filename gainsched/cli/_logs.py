@@ -129,6 +129,9 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
               help="Also fit the best candidates in pairs and triples when a single one "
                    "passes (they are fitted when none does); a joint fit wins when its "
                    "delta-BIC is lower by 10.")
+@click.option("--no-sensors", "no_sensors", is_flag=True,
+              help="Take the config's [sensors] as they are: no calibration of the gyro, "
+                   "the markers and the accelerometer against the motion capture first.")
 @click.option("--apply", "do_apply", is_flag=True,
               help="Write the accepted effect and its fitted parameters to -o NEWCONFIG.")
 @click.option("-o", "--out", "new_config", type=FilePath(dir_okay=False, path_type=Path),
@@ -138,8 +141,8 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
 @_MAP
 @_TRUST
 @user_errors
-def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, report_dir,
-             map_path, trust):
+def diagnose(config, logs, candidates, exclude, joint, no_sensors, do_apply, new_config,
+             report_dir, map_path, trust):
     """Which physical effect is missing: fit every candidate effect the model lacks to
     the residual on LOGS, score on held-out flights (leave one flight out), rank, check
     identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
@@ -182,7 +185,8 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
 
     with _fit_progress("diagnose") as fitted:
         d = run_diagnose(cfg, logs, candidates=candidates or None, comparison=base,
-                         joint=joint, exclude=exclude, progress=fitted)
+                         joint=joint, exclude=exclude, progress=fitted,
+                         sensors=not no_sensors)
     for line in diagnose_lines(d):
         click.echo(line)
     after = None
@@ -237,11 +241,13 @@ def diagnose(config, logs, candidates, exclude, joint, do_apply, new_config, rep
               show_default=True, help=f"Seconds per standard flight (1..{MAX_FLIGHT_S:g}).")
 @click.option("-j", "--jobs", type=Jobs(), default=-1, show_default=True,
               help=f"Parallel workers of the build, 1..{MAX_JOBS} (-1 = all cores).")
+@click.option("--no-sensors", "no_sensors", is_flag=True,
+              help="Take the config's [sensors] as they are (diagnose --no-sensors).")
 @_MAP
 @_TRUST
 @user_errors
 def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, duration, jobs,
-            map_path, trust):
+            no_sensors, map_path, trust):
     """The model loop in one command: compare CONFIG with LOGS, diagnose and apply in
     rounds until no effect is missing, rebuild the tables from the improved config (its
     name kept: the same C symbols), fly the standard flights on the improved model with
@@ -275,7 +281,7 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
     with _fit_progress("improve") as fitted, _step("compare and diagnose",
                                                    user_errors=False) as step:
         imp = run(cfg, logs, rounds=rounds, exclude=exclude, channel_map=cmap, trust=trust,
-                  progress=fitted)
+                  progress=fitted, sensors=not no_sensors)
     if step.why:  # nothing done before it: nothing to keep
         step.exit()
     for k, r in enumerate(imp.rounds):

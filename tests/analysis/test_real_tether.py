@@ -37,6 +37,16 @@ REAL_TETHER_CASES = {
     # through Jzz - Jyy, and reported as inertia_y's twin: test_the_yaw_inertia_...)
     "inertia_x": ("inertia_x", "Jxx", 3.25e-3, 2.5e-3),
     "kappa": ("kappa", "kappa", 0.024, 0.016),
+    # the rest of the library's physical effects (the whole suite, issue 53)
+    "drag_quadratic": ("drag_quadratic", "mu2", 0.0075, 0.0025),
+    "drag_both": ("drag", "mu2", 0.0045, 0.0025),
+    "thrust_airspeed": ("thrust_airspeed", "c1", -0.01, 0.0),
+    "thrust_momentum": ("thrust_momentum", "disk_area", 0.006, 0.0),
+    "latency": ("latency", "latency_s", 0.015, 0.0),
+    "motor_efficiency": ("motor_efficiency", "eta3", 0.92, 1.0),
+    "battery": ("thrust_voltage", "exponent", 2.0, 0.0),
+    "wind": ("wind", "east", 2.4, 0.0),
+    "mass": ("mass", "mass", 0.55, 0.5),
 }
 
 

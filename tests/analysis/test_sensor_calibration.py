@@ -241,3 +241,32 @@ def test_diagnose_apply_on_the_command_line_writes_the_calibration(diagnosed, tm
     assert f"wrote {new} (sensor_calibration" in res.output, res.output
     cfg = config_from_text(new.read_text(), str(new))
     assert np.all(np.abs(np.array(cfg.sensors.gyro_scale) - SCALE) < 0.01)
+
+
+def test_the_sensor_stage_can_be_turned_off(paper_config, diagnosed):
+    """``diagnose(..., sensors=False)`` takes the config's [sensors] as they are: no
+    calibration is fitted or written (the user who calibrated the sensors on a bench and
+    wants the dynamics alone)."""
+    from gainsched.analysis.diagnose import diagnose
+
+    logs, _ = diagnosed("gyro")
+    d = diagnose(paper_config, logs, candidates=["kappa"], sensors=False)
+    assert d.calibration is None and "sensor_calibration" not in d.applied
+    assert d.config.sensors == paper_config.sensors
+
+
+def test_no_sensors_on_the_command_line_is_the_librarys_switch(diagnosed, tmp_path):
+    """``gainsched diagnose --no-sensors`` is ``diagnose(..., sensors=False)``: on the
+    flights of an uncalibrated gyro, no calibration is named."""
+    from click.testing import CliRunner
+
+    from gainsched.cli import cli
+    from gainsched.sim.campaign import write_campaign
+
+    logs = write_campaign(tmp_path / "logs", diagnosed("gyro")[0])
+    args = ["diagnose", str(REPO / "configs" / "paper.toml"), *map(str, logs),
+            "--candidate", "kappa"]
+    on, off = CliRunner().invoke(cli, args), CliRunner().invoke(cli, [*args, "--no-sensors"])
+    assert on.exit_code == 0 and off.exit_code == 0, (on.output, off.output)
+    assert "sensor calibration accepted" in on.output
+    assert "sensor calibration" not in off.output

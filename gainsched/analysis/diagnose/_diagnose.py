@@ -28,7 +28,7 @@ from ._verdict import _verdict
 
 def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | None = None,
              progress=None, joint: bool = False, forward: bool = True,
-             channel_map=None, exclude=(), trust=()) -> Diagnosis:
+             channel_map=None, exclude=(), trust=(), sensors: bool = True) -> Diagnosis:
     """Find which physical effect the model misses: fit candidates, score them held out.
 
     The whole of ``gainsched diagnose`` (docs/model-vs-measurement.md, the module
@@ -39,8 +39,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     noise floor it explains), by delta-BIC, plausibility and fold stability; the
     candidates are ranked, near-collinear twins are named with the flight that would
     separate them, and the first candidate clearing every threshold of
-    :data:`THRESHOLDS` is the verdict. First of all, the gyro is calibrated against the
-    motion capture (:func:`_calibrated`): a sensor error is never read as dynamics.
+    :data:`THRESHOLDS` is the verdict (the sensors calibrated first: ``sensors``).
 
     Parameters
     ----------
@@ -78,6 +77,8 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
         term.
     trust : iterable of str, optional
         Consistency checks of the log files to skip (:func:`compare`).
+    sensors : bool, default True
+        Calibrate the sensors first (:func:`_calibrated`); False: ``[sensors]`` as it is.
 
     Returns
     -------
@@ -111,7 +112,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     'missing effect: thrust_momentum (thrust change with airspeed by momentum theory ...'
     """
     base = comparison or compare(config, logs, channel_map=channel_map, trust=trust)
-    config, base, calibration = _calibrated(config, base)
+    config, base, calibration = _calibrated(config, base) if sensors else (config, base, None)
     prob = _problem(config, base)
     library = candidate_library()
     names = select_candidates(candidates, exclude, library)
