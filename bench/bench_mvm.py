@@ -92,8 +92,10 @@ def run(paths, candidates=None) -> dict:
     diagnose(cfg, paths, comparison=cmp4, candidates=before37, forward=False)
     t_37 = time.perf_counter() - t0
     # issue 53's baseline: the library before it (no inertias, no kappa; asked for by
-    # name, so no nuisance fit) and no sensor calibration
-    before53 = [n for n in candidate_library() if n not in ISSUE53_CANDIDATES]
+    # name, so no nuisance fit; without thrust_voltage, which the logs cannot feed) and
+    # no sensor calibration
+    before53 = [n for n in candidate_library()
+                if n not in ISSUE53_CANDIDATES and n != "thrust_voltage"]
     t0 = time.perf_counter()
     cmp5 = compare(cfg, paths)
     diagnose(cfg, paths, comparison=cmp5, candidates=before53, sensors=False)
