@@ -149,3 +149,15 @@ def test_a_fit_that_makes_an_axis_worse_fails(paper_config):
     assert any(f.startswith("makes the pitch axis worse held out") for f in worse.failed())
     quiet = dataclasses.replace(r, axis_rms_after={**r.axis_rms_after, "pitch": 1.2})
     assert not quiet.worse_axes() and quiet.passes  # 1.2 < 1.25: noise either way
+
+
+@pytest.mark.slow
+def test_on_a_real_tether_the_twin_is_another_story_not_more_of_the_same(diagnosed):
+    """A 2 cm attachment-offset error on the real tether is named as its twin, a tether
+    length error (both move the radius), fitted beside the tether's stretch: the twin
+    the report names is the attachment offset alone, with the flight that separates the
+    two, not the joint fits that hold the accepted effect or more parts."""
+    d = diagnosed("attachment_offset", real_tether=True)
+    assert d.accepted is not None and "tether_length" in d.accepted.name.split(" + ")
+    assert [t[0] for t in d.twins] == ["attachment_offset"], d.twins
+    assert "restoring torque" in d.twins[0][2]

@@ -419,6 +419,12 @@ def single_parameter_set_candidates(library=None) -> list[str]:
             if not nested(c) and not getattr(c, "empirical", False)]
 
 
+#: the candidates of effects every real flight has a little of (the tether's own stretch):
+#: when one is needed on its own (:func:`_nuisance`), every other candidate is fitted with
+#: it in the model, and the accepted one is fitted together with it
+NUISANCE = ("tether_elasticity",)
+
+
 #: The candidate library of the built-in effects, by name (:func:`candidate_library`).
 CANDIDATES: dict[str, Candidate] = candidate_library()
 

@@ -17,7 +17,7 @@ from ..compare import (
     compare,
 )
 from ._calibration import sensor_calibration
-from ._candidates import _logged, candidate_library, select_candidates
+from ._candidates import NUISANCE, _logged, candidate_library, select_candidates
 from ._fit import _fit_candidate
 from ._lsq import _sq
 from ._problem import _Problem
@@ -140,10 +140,6 @@ def _calibrated(config: Config, base: Comparison):
     return config, base, calibration
 
 
-#: the candidates of effects every real flight has a little of (the tether's own stretch):
-#: when one is needed on its own (:func:`_nuisance`), every other candidate is fitted with
-#: it in the model, and the accepted one is fitted together with it
-NUISANCE = ("tether_elasticity",)
 #: the most a nuisance tether stretches at the flights' highest tension, m: a real
 #: tether's stretch (0.3 mm for 1.5 m of a k = 2e5 N/m line at 60 N, 0.02 %); a larger
 #: one is an effect in its own right (a rubber cord), and a fit of the compliance that

@@ -17,7 +17,7 @@ import itertools
 
 import numpy as np
 
-from ._candidates import JointCandidate, separating_flight
+from ._candidates import NUISANCE, JointCandidate, separating_flight
 from ._fit import _bounds, _choose_order, _fit_candidate
 from ._results import THRESHOLDS, CandidateResult
 
@@ -253,6 +253,19 @@ def _select(prob, library, names, base, at_floor, base_sq, base_vecs, *, asked, 
     return results, accepted
 
 
+def _more_of_the_same(name: str, accepted: str) -> bool:
+    """Fit ``name`` shares a part with fit ``accepted`` (``"tether_length + latency"`` of
+    ``"tether_length"``) or has more parts: the same story with more in it (parsimony
+    weighs it), not another story that explains as much."""
+    parts, mine = set(name.split(" + ")), set(accepted.split(" + "))
+    return bool(parts & mine) or len(parts) > len(mine)
+
+
+def _story(name: str) -> str:
+    """A fit's name without the nuisance parts (:data:`NUISANCE`): the story it tells."""
+    return " + ".join(p for p in name.split(" + ") if p not in NUISANCE) or name
+
+
 def _twins(library, results, accepted):
     """The candidates that cannot be told apart from ``accepted`` on these flights and
     the similarity of every fit to it: ``(twins, similarity)``, ``twins`` a list of
@@ -277,12 +290,15 @@ def _twins(library, results, accepted):
             cos = abs(float(np.sum(ca * cb)) / (na_ * nb))
             similarity[r.name] = cos
             if (_same_effect(library, r.name, accepted.name) or _nested(library, r, accepted)
-                    or _nested(library, accepted, r)):
-                continue  # another fit of the same effect (drag_linear of drag), or one
-                # containing the other (thrust_scale in motor_efficiency): no twin
+                    or _nested(library, accepted, r)
+                    or _more_of_the_same(_story(r.name), _story(accepted.name))):
+                continue  # another fit of the same effect (drag_linear of drag), one
+                # containing the other (thrust_scale in motor_efficiency), or a joint fit
+                # with a part of the accepted one or more parts than it: no twin
             # told apart anyway when the held-out fits differ clearly: the twin leaves more
             # than a tenth of the residual above noise that the accepted one explains
             clear = accepted.excess_explained - r.excess_explained > THRESHOLDS["twin_excess_gap"]
             if cos >= THRESHOLDS["twin_cos"] and not clear:
-                twins.append((r.name, cos, separating_flight(accepted.name, r.name)))
+                twins.append((r.name, cos, separating_flight(_story(accepted.name),
+                                                             _story(r.name))))
     return twins, similarity
