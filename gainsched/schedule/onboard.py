@@ -246,13 +246,13 @@ def record_from_datasets(path, vehicle, state_map, controller, n: int) -> Firmwa
     except (TypeError, ValueError):
         raise InputError(path, "firmware/controller", "not a JSON record") from None
     if isinstance(ctl, dict):  # a table built before the gyro's calibration was carried
-        ctl = {**_GYRO_UNCALIBRATED, **ctl}
+        ctl = {**_SENSORS_UNCALIBRATED, **ctl}
     if not isinstance(ctl, dict) or sorted(ctl) != sorted(CONTROLLER_KEYS):
         raise InputError(path, "firmware/controller", "must be a JSON object with the keys "
                          f"{', '.join(CONTROLLER_KEYS)}")
     for key, need in _SENSOR_CHECKS.items():
         v = ctl[key]
-        n = len(_GYRO_UNCALIBRATED[key])
+        n = len(_SENSORS_UNCALIBRATED[key])
         if (not isinstance(v, list) or len(v) != n
                 or not all(isinstance(x, int | float) and not isinstance(x, bool)
                            and math.isfinite(x) for x in v) or not need[0](v)):
@@ -261,8 +261,8 @@ def record_from_datasets(path, vehicle, state_map, controller, n: int) -> Firmwa
     return FirmwareRecord(vehicle, P, {k: ctl[k] for k in CONTROLLER_KEYS})
 
 
-#: the gyro's calibration of a table whose record has none (built before it was carried)
-_GYRO_UNCALIBRATED = {"gyro_scale": [1.0, 1.0, 1.0], "gyro_bias": [0.0, 0.0, 0.0],
+#: the sensors' calibration of a table whose record has none (built before it was carried)
+_SENSORS_UNCALIBRATED = {"gyro_scale": [1.0, 1.0, 1.0], "gyro_bias": [0.0, 0.0, 0.0],
                       "accel_scale": [1.0, 1.0, 1.0], "accel_bias": [0.0, 0.0, 0.0],
                       "q_MB": [1.0, 0.0, 0.0, 0.0]}
 #: the sensors' keys of a record: (their check beyond finite, what it asks)

@@ -28,10 +28,12 @@ class _Estimator:
     own time (ring buffer) and the correction is applied now.
     """
 
-    def __init__(self, model, plant, sens, dt, alpha, gamma, z0, rng, gyro=None):
+    def __init__(self, model, plant, sens, dt, alpha, gamma, z0, rng, sensors=None):
         self.model, self.plant, self.sens, self.dt = model, plant, sens, dt
-        # (the plant's gyro, the design's calibration of it) when either is not identity
-        self.gyro = gyro if gyro and not all(g.identity for g in gyro) else None
+        # (the plant's sensors, the design's calibration of them) when either is not
+        # identity: what the gyro and the markers report, and how it is undone
+        self.sensors = (sensors if sensors and not all(g.identity for g in sensors)
+                        else None)
         self.alpha, self.gamma, self.rng = alpha, gamma, rng
         self.z = z0.copy()
         self.every = max(1, int(round(1.0 / (sens.rate_hz * dt))))
@@ -72,10 +74,10 @@ class _Estimator:
             self.hist.pop(0)
         z = self.z[:N_STATE].copy()
         noise = self.sens.gyro_noise * self.rng.standard_normal(3)
-        if self.gyro is None:
+        if self.sensors is None:
             z[7:10] = z_true[7:10] + noise
         else:  # what the plant's gyro reads, undone by the design's calibration
-            z[7:10] = self.gyro[1].body_rates(self.gyro[0].readings(z_true[7:10]) + noise)
+            z[7:10] = self.sensors[1].body_rates(self.sensors[0].readings(z_true[7:10]) + noise)
         return z
 
     def _measure(self, x, xi_near):
@@ -91,8 +93,8 @@ class _Estimator:
         p_I = p_I + self.sens.position_noise * self.rng.standard_normal(3)
         rot = self.sens.attitude_noise * self.rng.standard_normal(3)
         R_IB = R_IB @ matrix_from_euler_zyx_scalar(rot[0], rot[1], rot[2])
-        if self.gyro is not None:  # the plant's markers' attitude, turned by the design's
-            R_IB = self.gyro[1].body_attitude(self.gyro[0].marker_attitude(R_IB))
+        if self.sensors is not None:  # the plant's markers' attitude, turned by the design's
+            R_IB = self.sensors[1].body_attitude(self.sensors[0].marker_attitude(R_IB))
         R_CI = self.R_IC.T
         return pose_angles_from_pose(R_CI @ p_I, R_CI @ R_IB, self.model.p_e, xi_near)[1]
 

@@ -210,7 +210,7 @@ def _fly_path(design, scheduler, scenario, plant, P, dmodel, path, progress) -> 
     # a design with effect states (motor lag) predicts them too, from the nominal's start
     est = _Estimator(dmodel, P, sens, dt, alpha, scenario.gamma,
                      np.concatenate([z0, nom.z[0, N_STATE:]]), rng,
-                     gyro=(plant.sensors, design.sensors))
+                     sensors=(plant.sensors, design.sensors))
 
     rec = _Record(n_steps, x, P)
     X, Z, Zh, U, TEN, SAT, STAT, HELD = (rec.X, rec.Z, rec.Zh, rec.U, rec.TEN, rec.SAT,
@@ -290,15 +290,16 @@ class _FirmwareSensors:
     accelerometer (``FLAG_ACCEL`` unless the scenario flies without it)."""
 
     def __init__(self, sens, alpha: float, gamma: float, every: int, delay: int, rng,
-                 gyro=None):
+                 sensors=None):
         from ..firmware.controller import INPUT_SLICES, N_INPUT
 
         self.sens, self.every, self.delay, self.rng = sens, every, delay, rng
         # the plant's gyro and markers (its config's [sensors]): what the gyro reads of
         # the body rates, the attitude the motion capture reports of the body's
-        self.gyro = None if gyro is None or gyro.identity else gyro.readings
-        self.markers = None if gyro is None or gyro.identity else gyro.marker_attitude
-        self.accel = None if gyro is None or gyro.identity else gyro.accel_readings
+        calibrated = sensors is None or sensors.identity
+        self.gyro = None if calibrated else sensors.readings
+        self.markers = None if calibrated else sensors.marker_attitude
+        self.accel = None if calibrated else sensors.accel_readings
         self.col = INPUT_SLICES
         self.row = np.zeros(N_INPUT)
         self.row[self.col["alpha"]], self.row[self.col["gamma"]] = alpha, gamma
