@@ -295,11 +295,12 @@ class Analysis:
 @dataclass(frozen=True)
 class Sensors:
     """The on-board sensors' calibration (``[sensors]``): each gyro axis reads
-    ``gyro_scale * omega + gyro_bias`` for a body rate ``omega``. The log reader
-    (:func:`gainsched.compare`) and the firmware controller undo it,
-    ``omega = (reading - gyro_bias) / gyro_scale``, before using a reading; ``diagnose``
-    estimates it against the motion capture's rates
-    (:mod:`gainsched.analysis.calibration`).
+    ``gyro_scale * omega + gyro_bias`` for a body rate ``omega`` (the accelerometer
+    likewise), and the motion capture reports the markers' attitude, turned from the
+    body's. The log reader (:func:`gainsched.compare`) and the firmware controller undo
+    it, ``omega = (reading - gyro_bias) / gyro_scale``, before using a reading;
+    ``diagnose`` estimates it against the motion capture
+    (:func:`gainsched.analysis.diagnose.sensor_calibration`).
 
     Attributes
     ----------
@@ -331,6 +332,16 @@ class Sensors:
         """True when the gyro and the accelerometer read as they are (scale 1, bias 0)
         and the markers' frame is the body's."""
         return self == Sensors()
+
+    @property
+    def gyro_identity(self) -> bool:
+        """True when the gyro reads the body rates as they are (scale 1, bias 0)."""
+        return self.gyro_scale == (1.0, 1.0, 1.0) and self.gyro_bias == (0.0, 0.0, 0.0)
+
+    @property
+    def accel_identity(self) -> bool:
+        """True when the accelerometer reads the specific force as it is."""
+        return self.accel_scale == (1.0, 1.0, 1.0) and self.accel_bias == (0.0, 0.0, 0.0)
 
     def accel_readings(self, f):
         """The accelerometer's readings (..., 3), m/s^2, of specific forces ``f``."""

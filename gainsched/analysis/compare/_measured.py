@@ -353,7 +353,7 @@ def _accelerometer(log: FlightLog, an, sensors: Sensors, noise=None):
     f = _imu_channel(log, "f_B", an.use_accelerometer)
     if f is None:
         return None
-    if sensors.accel_scale != (1.0, 1.0, 1.0) or sensors.accel_bias != (0.0, 0.0, 0.0):
+    if not sensors.accel_identity:
         f = sensors.specific_force(f)
     return f if noise is None else f + noise
 
@@ -365,7 +365,7 @@ def _gyro(log: FlightLog, an, n: int, dt: float, sensors: Sensors, noise=None):
     gyro = _imu_channel(log, "omega_B", an.use_gyro)
     if gyro is None:
         return None, None
-    if sensors.gyro_scale != (1.0, 1.0, 1.0) or sensors.gyro_bias != (0.0, 0.0, 0.0):
+    if not sensors.gyro_identity:
         gyro = sensors.body_rates(gyro)
     if noise is not None:  # the noise-floor estimate's: of the body rates' noise level
         gyro = gyro + noise
