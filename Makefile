@@ -117,7 +117,8 @@ firmware-size: $(STAMP)
 		TARGET="Cortex-M4F ($(M4F_FLAGS))"; \
 	else \
 		echo "firmware-size: arm-none-eabi-gcc not found (Debian: apt-get install gcc-arm-none-eabi);"; \
-		CC_SIZE="$(CC) $(FW_CFLAGS) -Os"; SIZE=size; TARGET="host ($(CC) -Os)"; \
+		CC_SIZE="$(CC) $(FW_CFLAGS) -Os -ffunction-sections -fdata-sections"; SIZE=size; \
+		TARGET="host ($(CC) -Os)"; \
 	fi; \
 	for fmt in dense compact; do \
 		[ -f $(FW_DIR)/$$fmt/gainsched_runtime.c ] || continue; \

@@ -239,6 +239,12 @@ class Effect:
             return cls.table_refusal
         return _TIME_REFUSAL
 
+    def parameter_refusal(self) -> str:
+        """Why no table can hold the effect at these parameters although one can at others
+        (a centre of mass off the plane of symmetry); "" when one can. :meth:`refusal` is
+        the reason at any parameters."""
+        return ""
+
     @classmethod
     def refits(cls) -> tuple[Refit, ...]:
         """The diagnose candidates of this effect: ``fits``, or one candidate named after

@@ -75,6 +75,7 @@ __all__ = [
     "ThrustPolynomial",
     "ThrustMomentum",
     "MotorLag",
+    "CogOffset",
     "ThrustAzimuth",
     "ThrustTimeSeries",
     "ThrustMotorCurve",
@@ -101,6 +102,7 @@ __all__ = [
     "BUILTIN_KINDS",
     "effects_from_specs",
     "air_velocity",
+    "cog_offset",
     "norm",
 ]
 
@@ -512,11 +514,51 @@ class MotorLag(Effect):
         return lfilter([1 - a], [1, -a], T_cmd, axis=0, zi=(a * T_cmd[0])[None, :])[0]
 
 
+class CogOffset(Effect):
+    """The centre of mass off the frame centre, ``(x, y, z)`` m in B.
+
+    The COG sits there from the point the arms, the tether's attachment point and the
+    motion capture's markers are measured from (a battery slid a few millimetres, a
+    camera on one side).
+
+    It is geometry, not a force: the model measures every lever from the COG, so the
+    rotor hubs sit at ``L_i - d`` and the attachment point at ``p_e - d`` (paper eqs. 6,
+    8: the thrust rolls and pitches the vehicle by ``-d x T``, the tether yaws and
+    pitches it by ``-(p_e - d) x f_t e``), and the pose the motion capture tracks is the
+    frame centre, ``p_q - R_CB d`` (:class:`~gainsched.model.reduced.Model`,
+    ``cog_offset``). The other effects' forces act at the COG, the accelerometer sits at
+    the COG. A lateral offset ``y`` breaks the direction mirror S2 (the mirrored vehicle
+    has its COG on the other side; docs/symmetry.md): simulate and diagnose with it,
+    build tables without it.
+    """
+
+    kind = "cog_offset"
+    params = tuple(Param(a, "m", 0.0, -0.05, 0.05,
+                         f"centre of mass from the frame centre along the body {a} axis",
+                         fit=(-0.02, 0.02)) for a in "xyz")
+
+    def offset(self) -> np.ndarray:
+        """``d = (x, y, z)``, shape (3,), m: the COG in B from the frame centre."""
+        return np.array([self.x, self.y, self.z], dtype=float)
+
+    def parameter_refusal(self) -> str:
+        if self.y != 0.0:
+            return (f"puts the centre of mass off the vehicle's plane of symmetry (y = "
+                    f"{self.y:.4g} m), which breaks the direction symmetry S2 that the "
+                    "table's query maps rely on (docs/symmetry.md)")
+        return ""
+
+    def law(self) -> str:
+        d = self.offset() * 1e3
+        return f"centre of mass ({d[0]:+.2f}, {d[1]:+.2f}, {d[2]:+.2f}) mm from the frame centre"
+
+
 EFFECTS: dict[str, type[Effect]] = {
     cls.kind: cls
     for cls in (Drag, RotorDrag, ThrustScale, MotorEfficiency, ThrustTime, ThrustVoltage,
                 ThrustPolynomial, ThrustMomentum, MotorLag, ThrustAzimuth, ThrustTimeSeries,
-                ThrustMotorCurve, Wind, ForceAirspeed, ForceHorizontal, TetherStretchSeries)
+                ThrustMotorCurve, Wind, ForceAirspeed, ForceHorizontal, TetherStretchSeries,
+                CogOffset)
 }
 
 
@@ -576,6 +618,17 @@ def air_velocity(effects):
     w = np.sum(parts, axis=0).astype(float)
     w.setflags(write=False)
     return w
+
+
+def cog_offset(effects) -> np.ndarray:
+    """The centre of mass in B from the frame centre, shape (3,), m, that ``effects`` set
+    (:class:`CogOffset`; zeros without one: the COG is the frame centre)."""
+    d = np.zeros(3)
+    for e in effects:
+        if isinstance(e, CogOffset):
+            d = d + e.offset()
+    d.setflags(write=False)
+    return d
 
 
 def effects_from_specs(specs) -> tuple[Effect, ...]:

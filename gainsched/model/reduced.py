@@ -32,7 +32,14 @@ from ..rotations import (
     matrix_from_euler_zyx_scalar,
     up_C_from_tilt,
 )
-from .effects import Effect, Kinematics, air_velocity, effects_from_specs, polynomial_drag
+from .effects import (
+    Effect,
+    Kinematics,
+    air_velocity,
+    cog_offset,
+    effects_from_specs,
+    polynomial_drag,
+)
 from .geometry import cog_from_attachment, pose_from_reduced, tether_direction
 
 if TYPE_CHECKING:  # the config imports the effects of this package
@@ -50,12 +57,14 @@ def motor_positions(arm_length: float) -> np.ndarray:
     return arm_length * np.stack([np.cos(b), np.sin(b), np.zeros(4)], axis=-1)
 
 
-def allocation_matrix(arm_length: float, kappa: float) -> np.ndarray:
+def allocation_matrix(arm_length: float, kappa: float, cog_offset=(0.0, 0.0, 0.0)) -> np.ndarray:
     """Map from motor thrusts (N) to (T_C, tau_x, tau_y, tau_z) (N, N m), shape (4, 4).
 
-    ``tau = sum L_i x (0, 0, T_i) + (0, 0, kappa (T1 - T2 + T3 - T4))`` (paper eqs. 6, 8).
+    ``tau = sum (L_i - d) x (0, 0, T_i) + (0, 0, kappa (T1 - T2 + T3 - T4))`` (paper eqs.
+    6, 8) about the COG at ``d`` = ``cog_offset`` (3,), m, in B from the frame centre
+    (:class:`~gainsched.model.effects.CogOffset`).
     """
-    L = motor_positions(arm_length)
+    L = motor_positions(arm_length) - np.asarray(cog_offset, dtype=float)
     return np.stack([np.ones(4), L[:, 1], -L[:, 0], kappa * np.array([1.0, -1.0, 1.0, -1.0])])
 
 
@@ -93,6 +102,14 @@ class Model:
         The velocity of the air in I the effects set (:func:`~gainsched.model.effects.
         air_velocity`, e.g. ``[effects.wind]``); None: still air. With a wind the circle's
         heading ``gamma`` matters: :meth:`evaluate` takes it.
+    cog_offset : ndarray, shape (3,), m
+        The COG in B from the frame centre (:class:`~gainsched.model.effects.CogOffset`;
+        zeros without one).
+    p_e : ndarray, shape (3,), m
+        The attachment point in B from the COG, ``(-L_e, 0, 0) - cog_offset``.
+    p_e_frame : ndarray, shape (3,), m
+        The attachment point in B from the frame centre, ``(-L_e, 0, 0)``: what the
+        motion capture's pose (the frame centre) is turned into reduced coordinates with.
     """
 
     def __init__(self, config: Config, effects: tuple[Effect, ...] | None = None):
@@ -104,11 +121,15 @@ class Model:
         self.L_e = t.attachment_offset
         self.r = t.length + t.attachment_offset
         self.g = config.g
-        self.p_e = np.array([-self.L_e, 0.0, 0.0])
-        self.L = motor_positions(v.arm_length)
-        self.alloc = allocation_matrix(v.arm_length, v.kappa)
-        self.alloc_inv = np.linalg.inv(self.alloc)
         self.effects = tuple(effects_from_specs(config.effects) if effects is None else effects)
+        # every lever is measured from the COG, which sits at cog_offset from the frame
+        # centre (the arms', the attachment's and the markers' origin; effects.CogOffset)
+        self.cog_offset = cog_offset(self.effects)
+        self.p_e_frame = np.array([-self.L_e, 0.0, 0.0])
+        self.p_e = self.p_e_frame - self.cog_offset
+        self.L = motor_positions(v.arm_length) - self.cog_offset
+        self.alloc = allocation_matrix(v.arm_length, v.kappa, self.cog_offset)
+        self.alloc_inv = np.linalg.inv(self.alloc)
         self.wind_I = air_velocity(self.effects)
         self.n_extra = sum(e.n_states for e in self.effects)
         self.n_z = N_STATE + self.n_extra
@@ -380,7 +401,7 @@ class Model:
         R_CB : ndarray, shape (3, 3)
         """
         delta, xi, dd, dx, phi, theta, chi, w0, w1, w2 = np.asarray(z[:10], dtype=float).tolist()
-        _, _, ddd, dxx, _, _, _, _, wd1, wd2 = np.asarray(z_dot[:10], dtype=float).tolist()
+        _, _, ddd, dxx, _, _, _, wd0, wd1, wd2 = np.asarray(z_dot[:10], dtype=float).tolist()
         R = matrix_from_euler_zyx_scalar(phi, theta, chi + xi)
         r = R.tolist()
         sd, cd, sx, cx = math.sin(delta), math.cos(delta), math.sin(xi), math.cos(xi)
@@ -389,15 +410,20 @@ class Model:
         e_x = (-sd * sx, sd * cx, 0.0)
         e_dx = (-cd * sx, cd * cx, 0.0)
         e_xx = (-sd * cx, -sd * sx, 0.0)
-        L, rho = self.L_e, self.rho
-        w_pe = (0.0, -L * w2, L * w1)  # omega x p_e, p_e = (-L_e, 0, 0)
-        w_w_pe = (w1 * w_pe[2] - w2 * w_pe[1], w2 * w_pe[0] - w0 * w_pe[2],
-                  w0 * w_pe[1] - w1 * w_pe[0])
-        arm = (w_w_pe[0], -L * wd2 + w_w_pe[1], L * wd1 + w_w_pe[2])
+        rho = self.rho
+        pe0, pe1, pe2 = (float(v) for v in self.p_e)
+
+        def cross3(a0, a1, a2, b0, b1, b2):
+            return (a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
+
+        w_pe = cross3(w0, w1, w2, pe0, pe1, pe2)  # omega x p_e
+        w_w_pe = cross3(w0, w1, w2, *w_pe)
+        wd_pe = cross3(wd0, wd1, wd2, pe0, pe1, pe2)
+        arm = (wd_pe[0] + w_w_pe[0], wd_pe[1] + w_w_pe[1], wd_pe[2] + w_w_pe[2])
         p_q, v_q, a_q = [], [], []
         for i in range(3):
             ri = r[i]
-            p_q.append(rho * e[i] + L * ri[0])
+            p_q.append(rho * e[i] - (ri[0] * pe0 + ri[1] * pe1 + ri[2] * pe2))
             v_q.append(rho * (e_d[i] * dd + e_x[i] * dx)
                        - (ri[0] * w_pe[0] + ri[1] * w_pe[1] + ri[2] * w_pe[2]))
             a_q.append(rho * (e_d[i] * ddd + e_x[i] * dxx - e[i] * dd * dd
@@ -413,7 +439,7 @@ class Model:
         return mtv(R, f_C)
 
     def cog_position(self, z, alpha=0.0, gamma=0.0, frame="C"):
-        """COG position ``p_q = rho e + L_e x_B`` in C (or I with ``frame="I"``), m."""
+        """COG position ``p_q = rho e - R_CB p_e`` in C (or I with ``frame="I"``), m."""
         p = pose_from_reduced(z, self.rho, self.p_e)[0]
         if frame == "I":
             from ..rotations import R_IC_from_tilt

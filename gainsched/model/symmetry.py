@@ -170,11 +170,11 @@ def table_refusal(effect) -> str:
     """Why no gain table can hold ``effect`` at its parameters, one clause; "" when one can.
 
     The effect's own reason when it gives one (:meth:`Effect.refusal`: flight time, an
-    inertial direction), else the first symmetry it breaks beyond :data:`SYMMETRY_TOL`
-    (:func:`effect_symmetry_errors`): the build refuses such an effect, and diagnose says
-    so of a term it fits.
+    inertial direction; :meth:`Effect.parameter_refusal`: a lateral centre of mass), else
+    the first symmetry it breaks beyond :data:`SYMMETRY_TOL` (:func:`effect_symmetry_errors`):
+    the build refuses such an effect, and diagnose says so of a term it fits.
     """
-    reason = effect.refusal()
+    reason = effect.refusal() or effect.parameter_refusal()
     if reason:
         return reason
     for name, err in effect_symmetry_errors(effect).items():

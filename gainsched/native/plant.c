@@ -48,7 +48,7 @@
 #include <math.h>
 #include <stddef.h>
 
-#define GS_PLANT_LAYOUT 5
+#define GS_PLANT_LAYOUT 6
 #define N_BASE 10
 #define N_MAXIMAL 13 /* the maximal model's rigid-body states */
 #define MAX_Z 64 /* largest state the RK4 scratch holds (10 or 13 + effect states) */
@@ -60,8 +60,9 @@ enum {
     P_NZ,         /* state size: n_z (reduced), n_x (maximal) */
     P_M,          /* mass, kg */
     P_RHO,        /* tether length, m */
-    P_LE,         /* attachment offset L_e, m (p_e = (-L_e, 0, 0) in B) */
-    P_G,          /* gravity, m/s^2 */
+    P_PE,         /* attachment point p_e from the COG in B, m (3 entries: (-L_e, 0, 0)
+                   * minus the COG's offset from the frame centre, effects.CogOffset) */
+    P_G = P_PE + 3, /* gravity, m/s^2 */
     P_J,          /* inertia J, 3x3 row-major, kg m^2 (9 entries) */
     P_ALLOC = P_J + 9, /* rows 1..3 of the allocation matrix, 3x4 row-major (12) */
     P_LINK_K = P_ALLOC + 12, /* spring-damper stiffness k, N/m (maximal model only) */
@@ -86,7 +87,9 @@ enum {
     FX_WIND = 9, /* Wind: a = east, b = north (m/s, the air's velocity in I, ENU) */
     /* ThrustVoltage: a = v_ref (V), b = exponent, c = drain (V/(N s)), d = load (V/N),
      * e = tau (s); 2 states: the open-circuit voltage and the drop under load (V) */
-    FX_THRUST_VOLTAGE = 10
+    FX_THRUST_VOLTAGE = 10,
+    /* CogOffset: geometry only (p_e and the allocation rows carry it), nothing here */
+    FX_COG_OFFSET = 11
 };
 
 /* exported (ctypes, gainsched/sim/fastplant.py) */
@@ -376,12 +379,12 @@ static void effect_rates(const double *p, const double *z, const double *u, doub
 int gs_plant_eval(const double *p, const double *z, const double *u, double alpha,
                   double gamma, double *z_dot, double *tension, double *T_out)
 {
-    const double m = p[P_M], rho = p[P_RHO], L_e = p[P_LE], g = p[P_G];
+    const double m = p[P_M], rho = p[P_RHO], g = p[P_G];
     const double *J = p + P_J, *Al = p + P_ALLOC;
     const double delta = z[0], xi = z[1], dd = z[2], dx = z[3];
     const double phi = z[4], theta = z[5], chi = z[6];
     const double w[3] = {z[7], z[8], z[9]};
-    const double p_e[3] = {-L_e, 0.0, 0.0};
+    const double p_e[3] = {p[P_PE], p[P_PE + 1], p[P_PE + 2]};
     double R[3][3], e[3], e_d[3], e_x[3], e_dx[3], e_xx[3], c2[3];
     double w_x_pe[3], w_w_pe[3], R_wxpe[3], R_wwpe[3], v[3], v_air[3], T[4];
     double F[3] = {0, 0, 0};
@@ -556,11 +559,11 @@ int gs_plant_rk4(const double *p, const double *x, const double *u, double alpha
 int gs_maximal_eval(const double *p, const double *x, const double *u, double alpha,
                     double gamma, double *x_dot, double *tension)
 {
-    const double m = p[P_M], rho = p[P_RHO], L_e = p[P_LE], g = p[P_G];
+    const double m = p[P_M], rho = p[P_RHO], g = p[P_G];
     const double k_link = p[P_LINK_K], c_link = p[P_LINK_C];
     const double *J = p + P_J, *Al = p + P_ALLOC;
     const double *pq = x, *v = x + 3, *q = x + 6, *w = x + 10;
-    const double p_e[3] = {-L_e, 0.0, 0.0};
+    const double p_e[3] = {p[P_PE], p[P_PE + 1], p[P_PE + 2]};
     double R[3][3], T[4], F[3] = {0, 0, 0}, w_pe[3], p_t[3], v_t[3], n[3], f_link[3];
     double F_B[3], pe_FB[3], Jw[3], wJw[3], tau[3], v_air[3], speed = -1.0;
     int i;

@@ -96,7 +96,8 @@ class _Estimator:
         if self.sensors is not None:  # the plant's markers' attitude, turned by the design's
             R_IB = self.sensors[1].body_attitude(self.sensors[0].marker_attitude(R_IB))
         R_CI = self.R_IC.T
-        return pose_angles_from_pose(R_CI @ p_I, R_CI @ R_IB, self.model.p_e, xi_near)[1]
+        return pose_angles_from_pose(R_CI @ p_I, R_CI @ R_IB, self.model.p_e_frame,
+                                     xi_near)[1]
 
     def predict(self, u):
         if self.sens.ideal and self.z.size == N_STATE:

@@ -91,22 +91,29 @@ class _Plant:
         return reduced_from_maximal(self.model, x, xi_ref)
 
     def pose(self, x, alpha, gamma):
-        """COG position in I (m) and R_IB of one state or a batch of states (..., n_x)."""
+        """What the motion capture tracks of one state or a batch of states (..., n_x):
+        the frame centre's position in I (m; the COG unless ``[effects.cog_offset]`` puts
+        it elsewhere) and R_IB."""
         if self.maximal is None:
-            p_C, R_CB = pose_from_reduced(x, self.model.rho, self.model.p_e)
+            p_C, R_CB = pose_from_reduced(x, self.model.rho, self.model.p_e_frame)
         else:
             q = x[..., 6:10]
-            p_C = x[..., 0:3]
             R_CB = matrix_from_quaternion(q / np.linalg.norm(q, axis=-1, keepdims=True))
+            p_C = x[..., 0:3] - self._cog_offset_C(R_CB)
         if np.ndim(x) == 1:  # one state (the pose sensor): scalar math
             R_IC = matrix_from_euler_zyx_scalar(alpha, 0.0, gamma)
         else:
             R_IC = R_IC_from_tilt(alpha, gamma)
         return p_C @ R_IC.T, R_IC @ R_CB
 
+    def _cog_offset_C(self, R_CB):
+        """``R_CB d``, shape (..., 3), m: the COG from the frame centre in C."""
+        return np.einsum("...ij,j->...i", R_CB, self.model.cog_offset)
+
     def sensors(self, x, u, alpha, gamma, accel=True):
-        """What the vehicle's sensors see of one state under the thrusts ``u`` (N): the COG
-        position ``p_I`` (m) and velocity ``v_I`` (m/s) in I, the attitude ``q_IB``, the body
+        """What the vehicle's sensors see of one state under the thrusts ``u`` (N): the frame
+        centre's position ``p_I`` (m) and velocity ``v_I`` (m/s) in I (the COG's unless
+        ``[effects.cog_offset]`` moves it), the attitude ``q_IB``, the body
         rates (rad/s) and the specific force at the COG in B (m/s^2, what an accelerometer
         there senses; None with ``accel=False``, which skips the plant's derivative)."""
         R_IC = matrix_from_euler_zyx_scalar(alpha, 0.0, gamma)
@@ -121,6 +128,10 @@ class _Plant:
             a_C = self.f(x, u, alpha)[0][3:6] if accel else None
         if accel:
             f_B = R_CB.T @ (a_C - self.model.g_C(alpha))
+        if self.model.cog_offset.any():  # the markers track the frame centre
+            d = self.model.cog_offset
+            p_C = p_C - R_CB @ d
+            v_C = v_C - R_CB @ np.cross(w, d)
         return (R_IC @ p_C, R_IC @ v_C, quaternion_from_matrix_scalar(R_IC @ R_CB),
                 np.array(w), f_B)
 

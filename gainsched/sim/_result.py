@@ -150,10 +150,12 @@ class _Record:
         sl = slice(0, n_done)
         PI, QI = self.P.poses(self.X[sl], scenario.tilt, scenario.gamma)
         dt = design.control.dt
+        d = self.P.model.cog_offset  # the accelerometer sits at the COG, the markers' origin
+        cog = PI if not d.any() else PI + matrix_from_quaternion(QI) @ d  # at the frame centre
         return SimResult(t[sl], self.Z[sl].copy(), self.Zh[sl], z_d[sl], self.U[sl], u_d[sl],
                          self.TEN[sl], PI, QI, self.SAT[sl], self.STAT[sl], slack_time,
                          scenario, r, plant.vehicle.mass, plant.g, self.HELD[sl],
                          tension_d[sl], design.feasibility.min_tension,
-                         specific_force(PI, QI, dt, plant.g),
+                         specific_force(cog, QI, dt, plant.g),
                          None if self.CTRL is None else self.CTRL[sl],
                          self.P.battery_voltage(self.X[sl]), plant.sensors)

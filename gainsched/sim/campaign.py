@@ -154,6 +154,11 @@ HIDDEN: dict[str, HiddenEffect] = {
                      "0.00325 instead of 0.0025 kg m^2",
                      (("vehicle", "inertia", [3.25e-3, 2.5e-3, 4.5e-3]),),
                      truth=("inertia_x", "Jxx", 3.25e-3)),
+        HiddenEffect("cog_offset", "the centre of mass 3 mm to the right of the frame centre "
+                     "and 2 mm below it (a battery slid sideways; the motion capture tracks "
+                     "the frame)", (("effects.cog_offset", None, (("x", 0.0), ("y", 0.003),
+                                                                  ("z", -0.002))),),
+                     truth=("cog_offset", "y", 0.003)),
         HiddenEffect("kappa", "rotor reaction-torque coefficient 50 % above the config's: "
                      "kappa = 0.024 instead of 0.016 m",
                      (("vehicle", "kappa", 0.024),), truth=("kappa", "kappa", 0.024)),

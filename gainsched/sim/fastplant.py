@@ -28,6 +28,7 @@ import numpy as np
 
 from ..config import N_STATE, Config
 from ..model.effects import (
+    CogOffset,
     Drag,
     MotorEfficiency,
     MotorLag,
@@ -46,7 +47,7 @@ from ..native import load
 __all__ = ["FastPlant", "FastMaximal", "fast_plant", "fast_plant_supported",
            "SUPPORTED_EFFECTS"]
 
-_LAYOUT = 5  # GS_PLANT_LAYOUT in plant.c
+_LAYOUT = 6  # GS_PLANT_LAYOUT in plant.c
 _EFF_STRIDE = 8  # kind, params a..f, first state index (EFF_STRIDE in plant.c)
 #: effect class -> (kind code in plant.c, names of the parameters a, b, ..., or a function
 #: of the effect giving their values)
@@ -62,6 +63,7 @@ _CODES = {
     Wind: (9, ("east", "north")),
     # v_ref, exponent, the battery's drain V/(N s) and load drop V/N, tau
     ThrustVoltage: (10, lambda e: [e.v_ref, e.exponent, *e.coefficients(), e.tau]),
+    CogOffset: (11, ()),  # geometry: in the head's p_e and the allocation rows
 }
 #: config effect names the compiled plant implements
 SUPPORTED_EFFECTS = frozenset(cls.kind for cls in _CODES)
@@ -85,7 +87,7 @@ def _params(model: Model, maximal: MaximalModel | None = None) -> np.ndarray:
     n_x = model.n_z if maximal is None else maximal.n_x
     link = [0.0, 0.0] if maximal is None else [maximal.link_model.k, maximal.link_model.c]
     J_inv = np.linalg.inv(model.J) if maximal is None else maximal.J_inv
-    head = [_LAYOUT, n_x, model.m, model.rho, model.L_e, model.g]
+    head = [_LAYOUT, n_x, model.m, model.rho, *model.p_e, model.g]
     eff = []
     i = N_STATE if maximal is None else N_MAXIMAL
     for e in model.effects:

@@ -378,7 +378,7 @@ def test_cli_diagnose_apply_and_report(paper_config, fly, tmp_path):
 def test_diagnose_is_fast_enough_per_sample(paper_config, diagnosed):
     """Model evaluations per diagnose stay bounded (the 10-minute benchmark is in bench/)."""
     d = diagnosed("none")
-    assert d.evaluations < 260
+    assert d.evaluations < 280  # 269 with cog_offset (three Gauss-Newton parameters)
     assert np.isfinite([r.rms_reduction for r in d.results]).all()
 
 

@@ -355,3 +355,59 @@ def test_every_library_effect_flies_on_every_link(paper_config, kind):
     np.testing.assert_allclose(x_dot[10:13], ev.z_dot[7:10], rtol=0,
                                atol=1e-9 * np.abs(ev.z_dot[7:10]).max())
     np.testing.assert_array_equal(x_dot[13:], ev.z_dot[N_STATE:])
+
+
+def test_a_cog_offset_moves_every_lever_and_the_markers(paper_config):
+    """Issue 53: the centre of mass d = (2, 3, -2) mm from the frame centre. Closed forms:
+    the thrusts' torque about the COG is ``sum (L_i - d) x T_i e_z`` (np.cross of the hub
+    positions) plus kappa's, i.e. the frame centre's minus ``d x T e_z``; the tether's lever
+    is ``(p_e - d) x n_B``. A second formulation: the rigid maximal model (COG state) has
+    the reduced model's tension and omega' to 1e-9. The compiled plant steps as the numpy
+    one (1e-12 relative), and the pose the sensors see is the frame centre: the COG minus
+    ``R_CB d``, whose attachment point (``p_e_frame`` from it) is the COG's (``p_e`` from
+    it), on the sphere of radius rho on the rigid link."""
+    from gainsched.model.reduced import motor_positions
+
+    d = np.array([0.002, 0.003, -0.002])
+    cfg = dataclasses.replace(paper_config, effects=(*paper_config.effects, EffectSpec(
+        "cog_offset", tuple(zip("xyz", map(float, d), strict=True)))))
+    md, md0 = Model(cfg), Model(paper_config)
+    np.testing.assert_array_equal(md.cog_offset, d)
+    np.testing.assert_allclose(md.p_e, md0.p_e - d, rtol=0, atol=1e-15)
+    T = np.array([1.4, 1.5, 1.6, 1.5])
+    hubs = motor_positions(paper_config.vehicle.arm_length) - d
+    tau = np.cross(hubs, T[:, None] * np.array([0.0, 0.0, 1.0])).sum(0)
+    tau[2] += paper_config.vehicle.kappa * (T[0] - T[1] + T[2] - T[3])
+    np.testing.assert_allclose(T @ md.alloc[1:].T, tau, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(T @ md.alloc[1:].T - T @ md0.alloc[1:].T,
+                               -np.cross(d, [0.0, 0.0, T.sum()]), rtol=0, atol=1e-15)
+    n_B = np.array([0.6, -0.48, 0.64])
+    np.testing.assert_allclose(md.tether_lever(n_B), np.cross(md0.p_e - d, n_B), atol=1e-15)
+
+    z = np.array([np.pi / 2, 0.3, 0.05, 6.0, -0.6, 0.05, 0.02, 0.1, -0.2, 6.0])
+    mx = MaximalModel(md, "rigid")
+    ev = md.evaluate(z, T, 0.3)
+    x_dot, f_t = mx.evaluate(mx.from_reduced(z), T, 0.3)
+    assert abs(f_t - ev.tension) <= 1e-9 * abs(ev.tension)
+    np.testing.assert_allclose(x_dot[10:13], ev.z_dot[7:10], rtol=0,
+                               atol=1e-9 * np.abs(ev.z_dot[7:10]).max())
+    assert np.abs(ev.z_dot[7:10] - md0.evaluate(z, T, 0.3).z_dot[7:10]).max() > 1.0  # rad/s^2
+
+    for link in ("rigid", "spring-damper"):
+        P = _Plant(dataclasses.replace(cfg, tether=dataclasses.replace(cfg.tether, link=link)))
+        if P.fast is None:
+            pytest.skip("no C compiler for the compiled plant")
+        x = P.initial(z, T)
+        fast = P.step(x, T, 0.3, 1e-3)[0]
+        P.fast = None
+        np.testing.assert_allclose(fast, P.step(x, T, 0.3, 1e-3)[0], rtol=1e-12, atol=1e-12)
+        p_I, R_IB = P.pose(x, 0.3, 0.0)
+        R_IC = R_IB @ np.linalg.inv(P.pose(x, 0.0, 0.0)[1])  # the tilt's turn
+        cog_C = md.cog_position(z) if P.maximal is None else x[:3]
+        R_CB = R_IC.T @ R_IB
+        np.testing.assert_allclose(R_IC.T @ p_I, cog_C - R_CB @ d, rtol=0, atol=1e-12)
+        attach = R_IC.T @ p_I + R_CB @ md.p_e_frame  # the one point of both frames
+        np.testing.assert_allclose(attach, cog_C + R_CB @ md.p_e, rtol=0, atol=1e-12)
+        if link == "rigid":
+            assert abs(np.linalg.norm(attach) - md.rho) <= 1e-12
+        np.testing.assert_allclose(P.sensors(x, T, 0.3, 0.0)[0], p_I, rtol=0, atol=1e-12)

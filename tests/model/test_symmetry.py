@@ -17,7 +17,7 @@ import pytest
 from gainsched.config import N_STATE, config_from_text, load_config
 from gainsched.configedit import set_values
 from gainsched.errors import InputError
-from gainsched.model.effects import Drag, MotorLag, RotorDrag, ThrustScale
+from gainsched.model.effects import CogOffset, Drag, MotorLag, RotorDrag, ThrustScale
 from gainsched.model.reduced import Model
 from gainsched.model.symmetry import (
     P_U,
@@ -26,6 +26,7 @@ from gainsched.model.symmetry import (
     mirror_gain,
     mirror_state,
     state_mirror,
+    table_refusal,
 )
 from gainsched.rotations import R_IC_from_tilt, Rz
 from gainsched.schedule.grid import solve_circle
@@ -215,7 +216,10 @@ def _models():
             ThrustScale(k_T=0.9),
         ),
     )
-    return {"paper": Model(cfg), "extended": ext}
+    # a centre of mass off the frame centre in the vehicle's plane of symmetry (x, z): the
+    # levers change, the mirror S2 still holds (a lateral y does not: the test below)
+    cog = Model(cfg, effects=(Drag(mu1=0.172, mu2=0.0025), CogOffset(x=0.004, z=-0.003)))
+    return {"paper": Model(cfg), "extended": ext, "cog_offset_xz": cog}
 
 
 MODELS = _models()
@@ -261,6 +265,25 @@ def test_vector_field_S2_equivariant(name):
     t = model.evaluate(z, u, a).tension
     tm = model.evaluate(zm, u @ P_U.T, a).tension
     np.testing.assert_allclose(tm, t, rtol=0, atol=1e-11 * np.abs(t).max())
+
+
+def test_a_lateral_cog_offset_breaks_S2_as_its_refusal_says():
+    """The vector-field check above with the COG 3 mm off the plane of symmetry: S2 fails
+    by far more than round-off, which is why the build refuses it
+    (``CogOffset.refusal``; x and z alone keep it: ``cog_offset_xz`` above)."""
+    model = Model(load_config(PAPER_TOML), effects=(CogOffset(y=0.003),))
+    rng = np.random.default_rng(2028)
+    z = _random_states(rng, model.n_z, 50)
+    u = rng.uniform(0.3, 3.0, (50, 4))
+    a = rng.uniform(-0.7, 0.7, 50)
+    P = _z_mirror(model)
+    zm = z @ P.T
+    zm[:, :N_STATE] = mirror_state(z[:, :N_STATE])
+    f = model.f(z, u, a)
+    err = np.abs(model.f(zm, u @ P_U.T, a) - f @ P.T).max() / np.abs(f).max()
+    assert err > 1e-4
+    assert "S2" in table_refusal(CogOffset(y=0.003))
+    assert table_refusal(CogOffset(x=0.004, z=-0.003)) == ""
 
 
 @pytest.mark.parametrize("name", list(MODELS))

@@ -66,7 +66,7 @@ from ._comparison import Comparison
 from ._inputs import centred_commands
 from ._inputs import has_channel as has_channel  # not in __all__: analysis.diagnose uses it
 from ._load import load_segments
-from ._measured import Measured, measure, window_samples
+from ._measured import Measured, attachment_from_cog_config, measure, window_samples
 from ._motor_order import MOTOR_ORDER_FACTOR, check_motor_order, motor_order_fits
 from ._noise import noise_floor
 from ._predict import predict
@@ -93,6 +93,7 @@ __all__ = [
     "compare",
     "tracking_summary",
     "window_samples",
+    "attachment_from_cog_config",
     "noise_floor",
     "AT_NOISE_FLOOR",
     "MOTOR_ORDER_FACTOR",

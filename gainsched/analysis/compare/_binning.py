@@ -120,4 +120,8 @@ def where_it_fails(res: list[Residual], noise: dict, n_bins: int = 8, min_count:
         f"{worst_axis} residual {trend} (RMS {rms[k]:.3g} {unit}, bias {bias[k]:+.3g} {unit} "
         f"there vs {r_low:.3g} elsewhere; {ratio[worst_axis]:.1f}x the noise floor overall)"
     )
+    if worst_axis in ("roll", "pitch") and v == "thrust" and trend.startswith("grows"):
+        # a torque in proportion to the thrust: the thrust's line of action misses the COG
+        out["sentence"] += (": a torque in proportion to the thrust, as a centre of mass "
+                            "off the frame centre gives ([effects.cog_offset])")
     return out

@@ -17,6 +17,7 @@ from scipy.signal import savgol_coeffs, savgol_filter
 
 from ...config import Config, Sensors
 from ...errors import InputError
+from ...model.effects import cog_offset, effects_from_specs
 from ...model.geometry import (
     attachment_from_cog,
     cog_from_attachment,
@@ -103,6 +104,10 @@ class Measured:
         the Savitzky-Golay fit residual.
     L_e : float, m
         Attachment offset the reduced coordinates were computed with.
+    p_e : (3,) m
+        The attachment point in B from the COG the COG's kinematics (``p, v, a``) were
+        computed with: ``(-L_e, 0, 0)`` minus the config's centre-of-mass offset
+        (``[effects.cog_offset]``; the pose is the frame centre's).
     gyro : (N, 3) rad/s or None
         The logged gyro (on-board time, like the commands), when the log has one and
         ``analysis.use_gyro`` is on.
@@ -143,6 +148,7 @@ class Measured:
     tension: np.ndarray | None
     raw_sigma: dict = field(default_factory=dict)
     L_e: float = 0.0
+    p_e: np.ndarray = field(default_factory=lambda: np.zeros(3))
     cache: dict = field(default_factory=dict, repr=False)  # model-independent derived arrays
     gyro: np.ndarray | None = None
     gyro_dot: np.ndarray | None = None
@@ -226,8 +232,9 @@ def _raw_channels(log: FlightLog, L_e: float, sensors: Sensors, p_I=None, R_IM=N
     return np.stack([d, delta, xi, phi, theta, psi])
 
 
-def _reconstruct(ch, ch1, ch2, L_e):
-    """Kinematics from the smoothed channels (6, N) and their derivatives (rates, accelerations)."""
+def _reconstruct(ch, ch1, ch2, p_e):
+    """Kinematics from the smoothed channels (6, N) and their derivatives (rates,
+    accelerations); the COG's with the attachment point ``p_e`` (3,), m, in B from it."""
     d, delta, xi, phi, theta, psi = ch
     dd_, ddelta, dxi, dphi, dtheta, dpsi = ch1
     d2, ddelta2, dxi2, dphi2, dtheta2, dpsi2 = ch2
@@ -251,7 +258,6 @@ def _reconstruct(ch, ch1, ch2, L_e):
     col = lambda a: a[:, None]  # noqa: E731
     e_dot = direction.rate(ddelta, dxi)
     e_ddot = direction.acceleration(ddelta, dxi, ddelta2, dxi2)
-    p_e = np.array([-L_e, 0.0, 0.0])
     w_pe = np.cross(w, p_e)
     p_t = col(d) * e
     v_t = col(dd_) * e + col(d) * e_dot
@@ -267,6 +273,13 @@ def _reconstruct(ch, ch1, ch2, L_e):
     )
     acc = np.stack([ddelta2, dxi2, d2], -1)
     return z, acc, p, v, a, R, w_dot, e, axes
+
+
+def attachment_from_cog_config(config: Config) -> np.ndarray:
+    """The attachment point in B from the COG, shape (3,), m, of ``config``:
+    ``(-L_e, 0, 0)`` minus its centre-of-mass offset (``[effects.cog_offset]``)."""
+    d = cog_offset(effects_from_specs(s for s in config.effects if s.name == "cog_offset"))
+    return np.array([-config.tether.attachment_offset, 0.0, 0.0]) - d
 
 
 def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measured:
@@ -299,7 +312,8 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
     L_e = config.tether.attachment_offset
     raw = _raw_channels(log, L_e, config.sensors)
     ch, ch1, ch2 = _smoothed(raw, n, an.savgol_order, dt)
-    z, acc, p, v, a, R, w_dot, e, axes = _reconstruct(ch, ch1, ch2, L_e)
+    p_e = attachment_from_cog_config(config)
+    z, acc, p, v, a, R, w_dot, e, axes = _reconstruct(ch, ch1, ch2, p_e)
     h = n // 2
     hc = savgol_coeffs(n, an.savgol_order)[h]
     fit_res = (raw - ch)[:, h : len(log) - h]
@@ -322,7 +336,7 @@ def measure(log: FlightLog, config: Config, *, name: str | None = None) -> Measu
         base, str(log.source), log.alpha_c, log.gamma_c, np.asarray(log.t, float),
         np.asarray(log.t, float), n, an.savgol_order, z, acc, ch[0], ch1[0], p, v, a,
         R, w_dot, e, axes, np.asarray(log.T_cmd, float),
-        None if tension is None else np.asarray(tension, float), sigma, L_e,
+        None if tension is None else np.asarray(tension, float), sigma, L_e, p_e,
         gyro=gyro, gyro_dot=gyro_dot, accel=accel,
         gravity_C=-config.g * up_C_from_tilt(log.alpha_c),
         vbat=None if vbat is None else np.asarray(vbat, float),

@@ -46,7 +46,7 @@ def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None,
                         log.p_I + sp * rng.standard_normal((n, 3)), R_IB)
     dt = meas.dt
     ch, ch1, ch2 = _smoothed(raw, meas.window, an.savgol_order, dt)
-    z, acc, p, v, a, R, w_dot, e, axes = _reconstruct(ch, ch1, ch2, meas.L_e)
+    z, acc, p, v, a, R, w_dot, e, axes = _reconstruct(ch, ch1, ch2, meas.p_e)
     gyro, gyro_dot = None, None
     if meas.gyro is not None:  # the gyro's own noise, once more
         g_sig = np.array([meas.raw_sigma[k] for k in ("p", "q", "r")])
@@ -59,7 +59,7 @@ def _noisy(log: FlightLog, meas: Measured, config: Config, rng, rng_gyro=None,
                                a_sig * (rng_accel or rng).standard_normal((n, 3)))
     return Measured(meas.name, meas.source, meas.alpha, meas.gamma, meas.t, meas.t_flight,
                     meas.window, meas.order, z, acc, ch[0], ch1[0], p, v, a, R, w_dot, e, axes,
-                    meas.T_cmd, meas.tension, meas.raw_sigma, meas.L_e, gyro=gyro,
+                    meas.T_cmd, meas.tension, meas.raw_sigma, meas.L_e, meas.p_e, gyro=gyro,
                     gyro_dot=gyro_dot, accel=accel, gravity_C=meas.gravity_C,
                     vbat=meas.vbat)
 

@@ -6,7 +6,8 @@ residual of :mod:`gainsched.analysis.compare` (measured minus the prediction of 
 equations of motion, paper eqs. 3, 6, 8, 10, as compare's module docstring says), every
 axis divided by its noise floor (so 1 per axis and sample is pure noise), the segments
 grouped by flight (the folds of the leave-one-flight-out scores). The base model's
-residual is computed once; the pose is re-measured only for another attachment offset.
+residual is computed once; the pose is re-measured only for another attachment point
+(the attachment offset, the centre of mass's offset).
 It also scores the binned structure (:mod:`gainsched.analysis.structure`) that a fit
 leaves or removes.
 """
@@ -22,6 +23,7 @@ from ...model.reduced import Model
 from ..compare import (
     UNITS,
     Comparison,
+    attachment_from_cog_config,
     measure,
     residual_axes,
 )
@@ -36,7 +38,7 @@ class _Problem:
         self.config = config
         self.residuals = residuals  # the base comparison's, for their binning variables
         self.segs = segs
-        self._meas = {config.tether.attachment_offset: measured}
+        self._meas = {_geometry(config): measured}
         self.axes = tuple(a for a in noise if np.isfinite(noise[a]) and noise[a] > 0)
         self.weights = {a: 1.0 / noise[a] for a in self.axes}
         groups: dict[str, list[int]] = {}
@@ -109,35 +111,36 @@ class _Problem:
             self._p_before = (self.structure_power(vecs),)
         return self._p_before[0]
 
-    def measured(self, L_e: float):
-        base_L = self.config.tether.attachment_offset
-        if L_e not in self._meas:
-            for key in [x for x in self._meas if x != base_L]:  # keep the base and one more
-                del self._meas[key]
-            cfg = self.config.with_values({"tether.attachment_offset": L_e})
-            base = self._meas[self.config.tether.attachment_offset]
-            self._meas[L_e] = [measure(s, cfg, name=m.name)
+    def measured(self, config: Config):
+        """The flights measured with ``config``'s attachment point (the base's and one
+        more kept: a fit moves one at a time)."""
+        key, base_key = _geometry(config), _geometry(self.config)
+        if key not in self._meas:
+            for k in [x for x in self._meas if x != base_key]:
+                del self._meas[k]
+            base = self._meas[base_key]
+            self._meas[key] = [measure(s, config, name=m.name)
                                for s, m in zip(self.segs, base, strict=True)]
-        return self._meas[L_e]
+        return self._meas[key]
 
     def _base_residuals(self) -> list[dict]:
         """Unweighted residual axes of the base config per segment (computed once)."""
         if self._base is None:
             model = Model(self.config)
             self._base = [residual_axes(model, m, self.config.analysis.latency_s)
-                          for m in self.measured(self.config.tether.attachment_offset)]
+                          for m in self.measured(self.config)]
         return self._base
 
     def vectors(self, var: CandidateModel, only: int | None = None) -> list[dict]:
         """Weighted residual per flight and axis: list over flights of {axis: (n,)}
         (only flight ``only`` when given: a one-element list)."""
-        meas = self.measured(var.config.tether.attachment_offset)
+        meas = self.measured(var.config)
         model = Model(var.config)
         groups = self.flights if only is None else [self.flights[only]]
         self.n_evals += 1 if only is None else 1 / len(self.flights)
         base = None
         if (var.axes is not None and var.latency == self.config.analysis.latency_s
-                and var.config.tether.attachment_offset == self.config.tether.attachment_offset):
+                and _geometry(var.config) == _geometry(self.config)):
             base = self._base_residuals()
         out = []
         for g in groups:
@@ -160,3 +163,10 @@ class _Problem:
         """One flight's residual per axis: its segments ``g`` concatenated and weighted."""
         return {a: np.concatenate([per_seg[i][a] for i in g]) * self.weights[a]
                 for a in self.axes}
+
+
+def _geometry(config: Config) -> tuple:
+    """What the measured kinematics depend on of a config: its attachment offset (the
+    reduced coordinates') and its attachment point from the COG (the COG's kinematics)."""
+    return (float(config.tether.attachment_offset),
+            *(float(v) for v in attachment_from_cog_config(config)))

@@ -15,7 +15,7 @@ from ...model.symmetry import table_refusal
 from ..compare import (
     AT_NOISE_FLOOR,
 )
-from ._results import CandidateResult, unidentified
+from ._results import THRESHOLDS, CandidateResult, unidentified
 
 
 def _fmt_values(r: CandidateResult) -> str:
@@ -80,7 +80,14 @@ def _no_effect_verdict(base, results, at_floor) -> str:
                 "airspeed, thrust or time bins")
     best = results[0] if results else None
     tail = ""
-    if best is not None:
+    if best is not None and best.passes:
+        # a passing fit left out by the parsimony of the selection (_select: a larger fit
+        # must lower delta-BIC by nested_bic_gain below the fit it extends)
+        tail = (f" The best candidate, {best.name}, removes {best.rms_reduction:.0%} of the "
+                f"held-out RMS and passes every threshold, but its delta-BIC "
+                f"({best.delta_bic:.0f}) is not {THRESHOLDS['nested_bic_gain']:g} below the "
+                "fit it extends: more parameters than these flights ask for.")
+    elif best is not None:
         tail = (f" The best candidate, {best.name}, removes {best.rms_reduction:.0%} of the "
                 f"held-out RMS but fails: {'; '.join(best.failed())}.")
     if base.structure:
