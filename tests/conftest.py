@@ -178,7 +178,7 @@ def fly(paper_config, paper_table):
     sched = table_scheduler(paper_table)
     cache = {}
 
-    def get(hidden="none", scenarios=None, load_cell=True, real_tether=False):
+    def get(hidden="none", scenarios=None, load_cell=True, real_tether=True):
         if scenarios is not None and all(isinstance(s, str) for s in scenarios):
             scenarios = [s for s in default_flights(support.CAMPAIGN_DURATION)
                          if s.name in scenarios]
@@ -202,7 +202,7 @@ def diagnosed(paper_config, fly):
 
     cache = {}
 
-    def get(hidden, scenarios=None, real_tether=False):
+    def get(hidden, scenarios=None, real_tether=True):
         key = (hidden, None if scenarios is None else tuple(
             s if isinstance(s, str) else s.name for s in scenarios), real_tether)
         if key not in cache:

@@ -408,6 +408,26 @@ def on_terminal(args, cwd, *, columns: int = 100, timeout: float = 300) -> tuple
     return p.returncode, b"".join(chunks).decode(errors="replace")
 
 
+def story(result) -> str:
+    """The name of a diagnose fit (a ``CandidateResult``; "" for None) without the real
+    tether's own stretch beside it: the campaigns fly on the elastic tether of a real
+    vehicle (``conftest.fly``), whose stretch diagnose fits as a nuisance with whatever
+    else is missing (``tether_elasticity``), so ``story(d.accepted)`` is what a test's
+    hidden effect should be named."""
+    if result is None:
+        return ""
+    parts = [p for p in result.name.split(" + ") if p != "tether_elasticity"]
+    return " + ".join(parts) or result.name
+
+
+def physical(result) -> bool:
+    """Whether a diagnose fit tells a physical story beyond the tether's own stretch: a
+    part of it that is neither an empirical law nor ``tether_elasticity``."""
+    parts = getattr(result.candidate, "parts", None) or (result.candidate,)
+    return any(not getattr(p, "empirical", False) and p.name != "tether_elasticity"
+               for p in parts if p is not None)
+
+
 def excess_rms_fall(result) -> float:
     """Held-out fall of the residual RMS above the noise floor of a diagnose fit (a
     CandidateResult): ``1 - sqrt(1 - excess_explained)``."""

@@ -526,16 +526,20 @@ class CogOffset(Effect):
     8: the thrust rolls and pitches the vehicle by ``-d x T``, the tether yaws and
     pitches it by ``-(p_e - d) x f_t e``), and the pose the motion capture tracks is the
     frame centre, ``p_q - R_CB d`` (:class:`~gainsched.model.reduced.Model`,
-    ``cog_offset``). The other effects' forces act at the COG, the accelerometer sits at
-    the COG. A lateral offset ``y`` breaks the direction mirror S2 (the mirrored vehicle
-    has its COG on the other side; docs/symmetry.md): simulate and diagnose with it,
-    build tables without it.
+    ``cog_offset``), as does the IMU (its specific force is the frame centre's: the log
+    reader adds the lever ``R_CB (omega' x d + omega x (omega x d))``). The other effects'
+    forces act at the COG. A lateral offset ``y`` breaks the direction mirror S2 (the
+    mirrored vehicle has its COG on the other side; docs/symmetry.md): simulate and
+    diagnose with it, build tables without it.
     """
 
     kind = "cog_offset"
     params = tuple(Param(a, "m", 0.0, -0.05, 0.05,
                          f"centre of mass from the frame centre along the body {a} axis",
                          fit=(-0.02, 0.02)) for a in "xyz")
+    fits = (Refit("cog_offset", ("x", "y", "z"), "centre of mass off the frame centre (the "
+                  "thrust's and the tether's levers; the markers and the IMU at the frame "
+                  "centre)", affine=False),)
 
     def offset(self) -> np.ndarray:
         """``d = (x, y, z)``, shape (3,), m: the COG in B from the frame centre."""

@@ -114,24 +114,27 @@ class _Plant:
         """What the vehicle's sensors see of one state under the thrusts ``u`` (N): the frame
         centre's position ``p_I`` (m) and velocity ``v_I`` (m/s) in I (the COG's unless
         ``[effects.cog_offset]`` moves it), the attitude ``q_IB``, the body
-        rates (rad/s) and the specific force at the COG in B (m/s^2, what an accelerometer
+        rates (rad/s) and the specific force at the frame centre in B (m/s^2, what the IMU
         there senses; None with ``accel=False``, which skips the plant's derivative)."""
         R_IC = matrix_from_euler_zyx_scalar(alpha, 0.0, gamma)
         f_B = None
         if self.maximal is None:
             z_dot = self.f(x, u, alpha)[0] if accel else np.zeros_like(x)
             p_C, v_C, a_C, R_CB = self.model.cog_motion_one(x, z_dot)
-            w = x[7:10]
+            w, w_dot = x[7:10], z_dot[7:10]
         else:
             p_C, v_C, w = x[0:3], x[3:6], x[10:13]
             R_CB = matrix_from_quaternion(x[6:10] / np.linalg.norm(x[6:10]))
-            a_C = self.f(x, u, alpha)[0][3:6] if accel else None
-        if accel:
-            f_B = R_CB.T @ (a_C - self.model.g_C(alpha))
-        if self.model.cog_offset.any():  # the markers track the frame centre
+            x_dot = self.f(x, u, alpha)[0] if accel else None
+            a_C, w_dot = (None, None) if x_dot is None else (x_dot[3:6], x_dot[10:13])
+        if self.model.cog_offset.any():  # the markers and the IMU sit at the frame centre
             d = self.model.cog_offset
             p_C = p_C - R_CB @ d
             v_C = v_C - R_CB @ np.cross(w, d)
+            if accel:
+                a_C = a_C - R_CB @ (np.cross(w_dot, d) + np.cross(w, np.cross(w, d)))
+        if accel:
+            f_B = R_CB.T @ (a_C - self.model.g_C(alpha))
         return (R_IC @ p_C, R_IC @ v_C, quaternion_from_matrix_scalar(R_IC @ R_CB),
                 np.array(w), f_B)
 

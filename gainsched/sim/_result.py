@@ -46,7 +46,8 @@ class SimResult:
     tension : ndarray, shape (N,)
         Tether tension of the plant at each step, N (negative: slack).
     p_I : ndarray, shape (N, 3)
-        COG position in the inertial frame (origin at the anchor, z up), m.
+        What the motion capture tracks, in the inertial frame (origin at the anchor, z up),
+        m: the frame centre (the COG unless ``[effects.cog_offset]`` moves it).
     q_IB : ndarray, shape (N, 4)
         Attitude quaternion (w, x, y, z), Hamilton, body -> inertial.
     saturated : ndarray of bool, shape (N, 4)
@@ -114,8 +115,9 @@ class SimResult:
 _FALLBACKS_SEEN: set[str] = set()
 
 def specific_force(p_I, q_IB, dt: float, g: float) -> np.ndarray:
-    """What an accelerometer at the COG senses, ``f_B = R_IB^T (a_I + g e_z)`` (N, 3) m/s^2,
-    at the control steps: ``a_I`` from second differences of the COG positions ``p_I``
+    """What an accelerometer at the frame centre (the IMU, beside the markers; the COG
+    unless ``[effects.cog_offset]`` moves it) senses, ``f_B = R_IB^T (a_I + g e_z)`` (N, 3)
+    m/s^2, at the control steps: ``a_I`` from second differences of its positions ``p_I``
     (N, 3) m, which the plant integrates at step ``dt`` s (error O(dt^2); the ends repeat
     their neighbours), ``q_IB`` (N, 4) the attitude, ``g`` m/s^2."""
 
@@ -150,12 +152,10 @@ class _Record:
         sl = slice(0, n_done)
         PI, QI = self.P.poses(self.X[sl], scenario.tilt, scenario.gamma)
         dt = design.control.dt
-        d = self.P.model.cog_offset  # the accelerometer sits at the COG, the markers' origin
-        cog = PI if not d.any() else PI + matrix_from_quaternion(QI) @ d  # at the frame centre
         return SimResult(t[sl], self.Z[sl].copy(), self.Zh[sl], z_d[sl], self.U[sl], u_d[sl],
                          self.TEN[sl], PI, QI, self.SAT[sl], self.STAT[sl], slack_time,
                          scenario, r, plant.vehicle.mass, plant.g, self.HELD[sl],
                          tension_d[sl], design.feasibility.min_tension,
-                         specific_force(cog, QI, dt, plant.g),
+                         specific_force(PI, QI, dt, plant.g),
                          None if self.CTRL is None else self.CTRL[sl],
                          self.P.battery_voltage(self.X[sl]), plant.sensors)

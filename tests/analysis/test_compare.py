@@ -32,7 +32,10 @@ from support import PAPER_TOML as PAPER
 
 @pytest.fixture(scope="module")
 def truth(paper_config, fly):
-    return compare(paper_config, fly("none"))
+    """The truth model (the real tether the campaigns fly on) against its own flights."""
+    from gainsched.sim.campaign import plant_config
+
+    return compare(plant_config(paper_config, "none", real_tether=True), fly("none"))
 
 
 def _circle_log(v=8.0, phi=-0.3, accel=0.0, T=10.0, rate=200.0, alpha=0.0, noise=0.0, seed=0):
@@ -109,8 +112,9 @@ def test_hidden_rotor_drag_shows_where_it_fails(paper_config, fly):
     for a in ("tangential", "normal"):
         assert c.stats[a].rms_over_noise > 2.5 and not c.stats[a].white
         assert c.stats[a].fit_percent < 90
-    for a in ("roll", "pitch", "yaw", "stretch"):
+    for a in ("roll", "pitch", "yaw"):
         assert c.stats[a].rms_over_noise < 1.25
+    assert c.stats["stretch"].rms_over_noise < 2.0  # the real tether's own 0.3 mm
     w = c.where["worst"]
     assert w["axis"] == "tangential" and w["variable"] in ("airspeed", "tension")
     assert "grows with" in c.where["sentence"]

@@ -37,7 +37,7 @@ from gainsched.rotations import matrix_from_quaternion, quaternion_from_matrix
 from gainsched.sim.campaign import HIDDEN, write_campaign
 from gainsched.sim.loop import Scenario, Sensing, log_from_result, simulate, table_scheduler
 
-from support import ros_types, write_bag, write_ulog
+from support import ros_types, story, write_bag, write_ulog
 
 #: NED <-> ENU (its own inverse), FLU <-> FRD
 M_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -581,7 +581,7 @@ def test_diagnose_finds_the_hidden_effect_in_ulogs_and_bags_as_in_the_csvs(
         for bag, storage in zip(bags[-1], ("mcap", "sqlite3"), strict=True):
             write_bag(bag, msgs, storage)
     ref = diagnose(paper_config, csvs)
-    assert ref.accepted is not None and ref.accepted.name == HIDDEN[ROUND_TRIP_HIDDEN].truth[0]
+    assert ref.accepted is not None and story(ref.accepted) == HIDDEN[ROUND_TRIP_HIDDEN].truth[0]
     estimate = {"circle.alpha_c_deg": "estimate", "circle.gamma_c_deg": "estimate"}
     for what, paths, cmap in (("ulog", ulogs, px4_map()),
                               ("mcap", [b[0] for b in bags], ros2_map(**estimate)),

@@ -160,7 +160,8 @@ class Measured:
         """The measured COG acceleration on the path axes (``axes``: tangential, normal,
         radial), (N, 3) m/s^2, on the pose's clock: from the accelerometer when there is
         one (its specific force delayed by ``latency`` s like the commands, rotated by the
-        pose's attitude, plus gravity, projected, then smoothed like the prediction: on
+        pose's attitude, plus gravity and :meth:`cog_lever`, projected, then smoothed like
+        the prediction: on
         the path axes a circle's acceleration is constant, in C it turns), else the
         twice-differentiated pose (``a``) projected."""
         if self.accel is None:
@@ -168,10 +169,22 @@ class Measured:
         hit = self.cache.get("acc_imu")
         if hit is None or hit[0] != latency:  # one latency kept: a fit moves it step by step
             f_C = np.einsum("nij,nj->ni", self.R, _delayed(self.t, self.accel, latency))
-            a_path = np.einsum("nij,nj->ni", self.axes, f_C + self.gravity_C)
+            a_path = np.einsum("nij,nj->ni", self.axes, f_C + self.gravity_C + self.cog_lever())
             self.cache["acc_imu"] = (latency, savgol_filter(
                 a_path, self.window, self.order, axis=0, mode="interp"))
         return self.cache["acc_imu"][1]
+
+    def cog_lever(self) -> np.ndarray:
+        """The COG's acceleration relative to the frame centre (where the IMU sits, with
+        the markers), ``R_CB (omega' x d + omega x (omega x d))``, (N, 3) m/s^2 in C, for
+        the COG at ``d = (-L_e, 0, 0) - p_e`` from it (``[effects.cog_offset]``; zeros
+        without one): the IMU's acceleration plus it is the COG's."""
+        d = np.array([-self.L_e, 0.0, 0.0]) - self.p_e
+        if not d.any():
+            return np.zeros_like(self.a)
+        w = self.z[:, 7:10]
+        arm = np.cross(self.omega_dot, d) + np.cross(w, np.cross(w, d))
+        return np.einsum("nij,nj->ni", self.R, arm)
 
     def omega_dot_measured(self, latency: float) -> np.ndarray:
         """The measured body angular acceleration (N, 3), rad/s^2, on the pose's clock:

@@ -348,7 +348,8 @@ def _samples(config: Config, measured):
 
         row = [mean(sens.readings(m.gyro_delayed(lat))), mean(m.z[:, 7:10], smooth=False)]
         if m.accel is not None:
-            force = np.einsum("nji,nj->ni", m.R, m.a - m.gravity_C)  # R_CB^T (a - g)
+            # R_CB^T (a - g) at the IMU (the frame centre: the COG's minus its lever)
+            force = np.einsum("nji,nj->ni", m.R, m.a - m.cog_lever() - m.gravity_C)
             row += [mean(sens.accel_readings(m.accel_delayed(lat))),
                     mean(force, smooth=False)]
         else:

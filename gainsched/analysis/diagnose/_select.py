@@ -97,7 +97,9 @@ def _forward(prob, library, results, start, base_sq, base_vecs, progress):
     residual above noise, or binned structure) and the addition lowers delta-BIC by
     ``THRESHOLDS["nested_bic_gain"]`` and explains ``THRESHOLDS["forward_excess_gain"]``
     more of the residual above noise or removes the structure left; at most
-    :data:`FORWARD_PARTS` parts, the best :data:`JOINT_TOP` tried at each step, a passing
+    :data:`FORWARD_PARTS` parts (and the nuisance fit, :data:`NUISANCE`, beside them: the
+    tether's own stretch is no effect of the story), the best :data:`JOINT_TOP` tried at
+    each step, a passing
     addition preferred. Appends its fits to ``results`` and returns the last passing fit
     (None when ``start`` did not pass and no extension does)."""
     current = start
@@ -121,18 +123,29 @@ def _forward(prob, library, results, start, base_sq, base_vecs, progress):
         cc = float(c @ c)
         return float(c @ left) ** 2 / cc if cc > 0 else 0.0
 
-    while current.name.count(" + ") + 1 < FORWARD_PARTS and (
+    def room(names):  # FORWARD_PARTS effects, and the nuisance fit beside them
+        story = [n for n in names if n not in NUISANCE]
+        return len(story) < FORWARD_PARTS or len(story) == len(names)
+
+    while room(current.name.split(" + ")) and (
             current.excess_explained < 1 - gain or current.structure_left):
         names = current.name.split(" + ")
+        full = len([n for n in names if n not in NUISANCE]) >= FORWARD_PARTS
         left = base - current.contribution.astype(float)
+        # the nuisance fit is tried whatever its own score where the fit leaves structure
+        # on its axes: alone it may explain little beside a large residual elsewhere
         eligible = [r for r in results
-                    if not (" + " in r.name or r.name in names or r.rms_reduction <= 0
+                    if not (" + " in r.name or r.name in names
+                            or (r.rms_reduction <= 0 and r.name not in NUISANCE)
+                            or (full and r.name not in NUISANCE)
                             or r.candidate is None or r.contribution is None
                             or any(_same_effect(library, r.name, n) for n in names)
                             or any(_nested(library, r, t) or _nested(library, t, r)
                                    for t in results if t.name in names))]
         pool = sorted(_physical_first(eligible, library),
                       key=lambda r: -leftover_explained(r, left))[:JOINT_TOP]
+        pool += [r for r in eligible if r.name in NUISANCE and r not in pool
+                 and _leaves_structure_on(current, _axes_of(prob, r))]
         fitted = {frozenset(r.name.split(" + ")): r for r in results}
         tries = [fitted.get(frozenset([*names, r.name]))
                  or _joint_fit(prob, [current, r], base_sq, base_vecs, progress) for r in pool]
@@ -148,6 +161,16 @@ def _forward(prob, library, results, start, base_sq, base_vecs, progress):
             accepted = current
     results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
     return accepted
+
+
+def _axes_of(prob, r: CandidateResult) -> frozenset:
+    """The residual axes fit ``r``'s candidate acts on (all of them when it does not say)."""
+    return r.candidate.variant(prob.config, r.theta).axes or frozenset(r.axis_rms_before)
+
+
+def _leaves_structure_on(r: CandidateResult, axes) -> bool:
+    """Whether fit ``r`` leaves significant binned structure on one of ``axes``."""
+    return any(s.split(" ", 1)[0] in axes for s in r.structure_left)
 
 
 def _same_effect(library, a: str, b: str) -> bool:

@@ -15,6 +15,7 @@ from ...model.symmetry import table_refusal
 from ..compare import (
     AT_NOISE_FLOOR,
 )
+from ._candidates import NUISANCE
 from ._results import THRESHOLDS, CandidateResult, unidentified
 
 
@@ -28,13 +29,17 @@ def _fmt_values(r: CandidateResult) -> str:
 def _table_refusal(result: CandidateResult) -> str:
     """Why no table can hold the effect ``result`` fitted, at its values (the build's
     check, :func:`~gainsched.model.symmetry.table_refusal`); "" when one can or when the
-    candidate is not one effect's."""
-    kind = getattr(result.candidate, "kind", None)
-    if kind not in EFFECTS:
-        return ""
-    cls = EFFECTS[kind]
-    names = {p.name for p in cls.params}
-    return table_refusal(cls(**{k: v for k, v in result.values.items() if k in names}))
+    candidate holds no effect (of a joint fit: the first of its parts' refusals)."""
+    for part in getattr(result.candidate, "parts", (result.candidate,)):
+        kind = getattr(part, "kind", None)
+        if kind not in EFFECTS:
+            continue
+        cls = EFFECTS[kind]
+        names = {p.name for p in cls.params}
+        why = table_refusal(cls(**{k: v for k, v in result.values.items() if k in names}))
+        if why:
+            return why
+    return ""
 
 
 def _verdict(base, results, accepted, twins, at_floor) -> str:
@@ -105,17 +110,23 @@ def _effect_verdict(base, accepted, twins) -> str:
     else:
         score = (f"held-out RMS -{accepted.rms_reduction:.0%}, explains "
                  f"{accepted.excess_explained:.0%} of the residual above noise")
-    if accepted.empirical:
+    parts = getattr(accepted.candidate, "parts", ())
+    story = [q for q in parts if q.name not in NUISANCE]
+    beside = [q.name for q in parts if q.name in NUISANCE]
+    if accepted.empirical or (beside and story
+                              and all(getattr(q, "empirical", False) for q in story)):
+        # an empirical law, alone or with the nuisance fit these flights need beside it
         what = (base.structure[0].sentence() if base.structure
                 else base.where["sentence"])
         refusal = _table_refusal(accepted)
         where = (f"; no table can hold it: it {refusal}" if refusal
                  else " (and, by the table's symmetries, their mirror images)")
+        name = " + ".join(q.name for q in story) if beside else accepted.name
+        with_ = f", fitted together with {' and '.join(beside)}" if beside else ""
         return (f"no physical effect of the library explains the residual ({what}); "
-                f"empirical correction: {accepted.name}, {accepted.law}; "
+                f"empirical correction: {name}{with_}, {accepted.law}; "
                 f"{score}, delta-BIC {accepted.delta_bic:.0f}. It is a fit, not a model: "
                 f"it holds on the circles flown{where}")
-    parts = getattr(accepted.candidate, "parts", ())
     what = "missing effects, fitted together" if parts else "missing effect"
     law = f" ({accepted.law})" if accepted.law else ""
     s = (f"{what}: {accepted.name} ({accepted.doc}), {_fmt_values(accepted)}{law}; "
