@@ -26,7 +26,18 @@ from gainsched.sim.campaign import HIDDEN, campaign, default_flights, write_camp
 from gainsched.sim.loop import table_scheduler
 
 from support import CAMPAIGN_DURATION as DURATION
-from support import PAPER_H5, PAPER_TOML, REPO, excess_rms_fall, on_terminal, physical, story
+from support import (
+    PAPER_H5,
+    PAPER_TOML,
+    REAL_TETHER_CASES,
+    REAL_TETHER_OWN,
+    REPO,
+    assert_named_on_the_real_tether,
+    excess_rms_fall,
+    on_terminal,
+    physical,
+    story,
+)
 
 # one hidden effect each; the candidate that must come first (or its named twin)
 CASES = {
@@ -39,6 +50,15 @@ CASES = {
     "mass": ("mass", "mass", 0.55),
     "tether_elasticity": ("tether_elasticity", "stiffness", 3000.0),
 }
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("hidden", [h for h in REAL_TETHER_CASES if h not in REAL_TETHER_OWN])
+def test_every_physical_effect_is_named_on_the_real_tether(paper_config, diagnosed, hidden):
+    """Issue 53 on this module's campaigns (the real tether, the default flights): the
+    rest of support.REAL_TETHER_CASES (REAL_TETHER_OWN) is checked in
+    tests/analysis/test_real_tether.py."""
+    assert_named_on_the_real_tether(paper_config, diagnosed(hidden), hidden)
 
 
 @pytest.mark.slow

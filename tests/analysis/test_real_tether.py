@@ -17,40 +17,14 @@ import pytest
 from gainsched.analysis.diagnose import apply_candidate, diagnose
 from gainsched.config import config_from_text
 
-from support import REPO, excess_rms_fall, story
-
-#: issue 53: hidden effects flown on the elastic tether of a real vehicle (REAL_TETHER, k =
-#: 2e5 N/m, which stretches ~0.3 mm at the highest tensions): the physical effect named
-#: (with the tether's own stretch beside it, or alone), its parameter within 10 % of the
-#: effect's size, the held-out residual above noise falling >= 80 %. Before the
-#: nuisance fit (gainsched/analysis/diagnose/_diagnose.py) a thrust scale was taken for
-#: the empirical thrust_azimuth, a battery sag for thrust_time_series, and the negative
-#: control found nothing although the tether stretched.
-REAL_TETHER_CASES = {
-    # hidden: (candidate, parameter, truth, the parameter's value without the effect)
-    "thrust_scale": ("thrust_scale", "k_T", 0.92, 1.0),
-    "rotor_drag": ("rotor_drag", "k_rd", 0.015, 0.0),
-    "thrust_time": ("thrust_time", "rate", 0.016, 0.0),
-    "motor_lag": ("motor_lag", "tau", 0.035, 0.0),
-    # what every real quadcopter has: the moments of inertia and the rotors' reaction
-    # torque known to tens of percent (the yaw inertia alone is seen on circles only
-    # through Jzz - Jyy, and reported as inertia_y's twin: test_the_yaw_inertia_...)
-    "inertia_x": ("inertia_x", "Jxx", 3.25e-3, 2.5e-3),
-    "kappa": ("kappa", "kappa", 0.024, 0.016),
-    # the centre of mass 3 mm to the right of the frame centre, 2 mm below it (the tether
-    # yaws and pitches the vehicle about it: test_a_centre_of_mass_off_the_frame_...)
-    "cog_offset": ("cog_offset", "y", 0.003, 0.0),
-    # the rest of the library's physical effects (the whole suite, issue 53)
-    "drag_quadratic": ("drag_quadratic", "mu2", 0.0075, 0.0025),
-    "drag_both": ("drag", "mu2", 0.0045, 0.0025),
-    "thrust_airspeed": ("thrust_airspeed", "c1", -0.01, 0.0),
-    "thrust_momentum": ("thrust_momentum", "disk_area", 0.006, 0.0),
-    "latency": ("latency", "latency_s", 0.015, 0.0),
-    "motor_efficiency": ("motor_efficiency", "eta3", 0.92, 1.0),
-    "battery": ("thrust_voltage", "exponent", 2.0, 0.0),
-    "wind": ("wind", "east", 2.4, 0.0),
-    "mass": ("mass", "mass", 0.55, 0.5),
-}
+from support import (
+    REAL_TETHER_CASES,
+    REAL_TETHER_OWN,
+    REPO,
+    assert_named_on_the_real_tether,
+    excess_rms_fall,
+    story,
+)
 
 
 def test_a_real_tether_is_the_base_truth_under_any_hidden_effect(paper_config):
@@ -68,24 +42,9 @@ def test_a_real_tether_is_the_base_truth_under_any_hidden_effect(paper_config):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("hidden", list(REAL_TETHER_CASES))
+@pytest.mark.parametrize("hidden", REAL_TETHER_OWN)
 def test_on_a_real_tether_the_physical_effect_is_named(paper_config, diagnosed, hidden):
-    name, param, true, none = REAL_TETHER_CASES[hidden]
-    d = diagnosed(hidden, real_tether=True)
-    a = d.accepted
-    assert a is not None, d.verdict
-    parts = set(a.name.split(" + "))
-    assert name in parts and parts <= {name, "tether_elasticity"}, d.verdict
-    assert "empirical" not in d.verdict
-    assert abs((a.values[param] - none) / (true - none) - 1) <= 0.10, (a.values, true)
-    if "tether_elasticity" in parts:
-        assert a.values["stiffness"] == pytest.approx(2e5, rel=0.15)
-    assert excess_rms_fall(a) >= 0.8, a.excess_explained
-    assert not a.worse_axes()
-    new = config_from_text(apply_candidate(paper_config, a), "fitted.toml")
-    written = {"inertia_x": lambda c: c.vehicle.inertia[0, 0], "kappa": lambda c: c.vehicle.kappa}
-    if name in written:  # a vehicle parameter: --apply writes it in [vehicle]
-        assert written[name](new) == pytest.approx(a.values[param], rel=1e-12)
+    assert_named_on_the_real_tether(paper_config, diagnosed(hidden, real_tether=True), hidden)
 
 
 @pytest.mark.slow
