@@ -17,11 +17,12 @@ PYTEST_XDIST = -n $(PYTEST_WORKERS) --dist loadfile
 .PHONY: venv lint test test-fast test-count tables bench paper clean distclean firmware-example firmware-size fuzz \
 	interrupt-trials fresh-machine
 
-# (Re)create the virtualenv whenever the dependency pins change.
-$(STAMP): pyproject.toml
+# (Re)create the virtualenv whenever the dependencies or their tested lock change: the
+# package's ranges (pyproject.toml) at the versions make test ran (.ci/constraints.txt).
+$(STAMP): pyproject.toml .ci/constraints.txt
 	$(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install --upgrade pip
-	$(BIN)/python -m pip install -e '.[dev,dask]'
+	$(BIN)/python -m pip install -c .ci/constraints.txt -e '.[dev,dask]'
 	touch $@
 
 venv: $(STAMP)

@@ -85,3 +85,35 @@ def test_lint_installs_cppcheck_where_the_package_manager_is_usable(tmp_path, ba
     res = _lint({**bare, "GAINSCHED_INSTALL_TOOLS": "0"})
     assert res.returncode == 0 and not calls.exists()
     assert "GAINSCHED_INSTALL_TOOLS=0" in res.stdout
+
+
+def test_dependencies_are_ranges_and_the_lock_is_what_runs():
+    """Issue 54: the package asks for ranges (a lower and an upper bound, never ``==``:
+    a library pinned exactly cannot be installed beside anything else); the tested lock,
+    .ci/constraints.txt, pins every one of them (and of the extras make installs) exactly,
+    inside its range, and is what this environment runs."""
+    import tomllib
+    from importlib.metadata import version
+
+    from packaging.requirements import Requirement
+    from packaging.utils import canonicalize_name
+
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
+    reqs = [Requirement(r) for r in project["dependencies"]]
+    installed = reqs + [Requirement(r) for extra in ("dev", "dask")
+                        for r in project["optional-dependencies"][extra]]
+    for r in reqs + [Requirement(r) for rs in project["optional-dependencies"].values()
+                     for r in rs]:
+        ops = {s.operator for s in r.specifier}
+        assert ops == {">=", "<"}, (r, "a range: a lower and an upper bound")
+    lock = {}
+    for line in (REPO / ".ci" / "constraints.txt").read_text().splitlines():
+        if line.strip() and not line.startswith("#"):
+            name, _, ver = line.partition("==")
+            assert ver, f".ci/constraints.txt: {line!r} is not exact"
+            lock[canonicalize_name(name)] = ver.strip()
+    for r in installed:
+        name = canonicalize_name(r.name)
+        assert name in lock, f"{r.name} is not in the lock"
+        assert r.specifier.contains(lock[name]), (r, lock[name])
+        assert version(r.name) == lock[name], (r.name, version(r.name), lock[name])
