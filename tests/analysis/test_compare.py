@@ -408,3 +408,20 @@ def test_whiteness_test_holds_its_level_on_heteroscedastic_segments():
                                 {"pitch": np.zeros(n)}, {"pitch": e}, {}, {}, "load cell", W))
         rejected += not axis_stats(res, "pitch").white
     assert rejected / 200 <= 0.04, rejected
+
+
+def test_another_centre_of_mass_moves_the_measured_cog_as_measuring_again(paper_config, fly):
+    """A second formulation: ``Measured.with_attachment`` (what diagnose's COG-offset fit
+    uses instead of differentiating the pose again per evaluation) gives the COG's
+    position, velocity and acceleration that ``measure`` gives with the offset in the
+    config, to 1e-12 (the offset itself moves the acceleration by up to 0.3 m/s^2)."""
+    from gainsched.analysis.compare import attachment_from_cog_config
+
+    cfg = config_from_text(paper_config.text + "\n[effects.cog_offset]\nx = 0.002\n"
+                           "y = 0.003\nz = -0.002\n", "cog.toml")
+    for log in fly("cog_offset")[:3]:
+        base, direct = measure(log, paper_config), measure(log, cfg)
+        moved = base.with_attachment(attachment_from_cog_config(cfg))
+        for k in ("p", "v", "a", "p_e"):
+            np.testing.assert_allclose(getattr(moved, k), getattr(direct, k), rtol=0, atol=1e-12)
+        assert np.abs(direct.a - base.a).max() > 0.05

@@ -56,6 +56,18 @@ def lagged(model, tau=0.03):
     return Model(model.config, effects=(*model.effects, MotorLag(tau=tau)))
 
 
+def rigid_maximal_equals_reduced(md, z, u, alpha=0.3):
+    """The rigid maximal model of ``md`` at the reduced state ``z`` has the reduced model's
+    tension and omega' (to 1e-9 of their scale); returns ``(evaluation, x_dot)``."""
+    mx = MaximalModel(md, "rigid")
+    ev = md.evaluate(z, u, alpha)
+    x_dot, f_t = mx.evaluate(mx.from_reduced(z), u, alpha)
+    assert abs(f_t - ev.tension) <= 1e-9 * abs(ev.tension)
+    np.testing.assert_allclose(x_dot[10:13], ev.z_dot[7:10], rtol=0,
+                               atol=1e-9 * np.abs(ev.z_dot[7:10]).max())
+    return ev, x_dot
+
+
 def simulate_both(model, mx, z0, u_fn, alpha, t_end=1.0, method="DOP853", rtol=1e-11):
     """COG positions (m) of the reduced and the maximal run on a common time grid (z0 of
     the model's n_z: the effect states start where the reduced model's do)."""
@@ -348,12 +360,7 @@ def test_every_library_effect_flies_on_every_link(paper_config, kind):
         np.testing.assert_array_equal(x[base:base + md.n_extra], zf[N_STATE:])
         x_next, ten = P.step(x, u, 0.3, 1e-5)  # the chain's stiff nodes: ~1300 substeps/ms
         assert np.all(np.isfinite(x_next)) and ten > 0, link
-    mx = MaximalModel(md, "rigid")
-    ev = md.evaluate(zf, u, 0.3)
-    x_dot, f_t = mx.evaluate(mx.from_reduced(zf), u, 0.3)
-    assert abs(f_t - ev.tension) <= 1e-9 * abs(ev.tension)
-    np.testing.assert_allclose(x_dot[10:13], ev.z_dot[7:10], rtol=0,
-                               atol=1e-9 * np.abs(ev.z_dot[7:10]).max())
+    ev, x_dot = rigid_maximal_equals_reduced(md, zf, u)
     np.testing.assert_array_equal(x_dot[13:], ev.z_dot[N_STATE:])
 
 
@@ -385,12 +392,7 @@ def test_a_cog_offset_moves_every_lever_and_the_markers(paper_config):
     np.testing.assert_allclose(md.tether_lever(n_B), np.cross(md0.p_e - d, n_B), atol=1e-15)
 
     z = np.array([np.pi / 2, 0.3, 0.05, 6.0, -0.6, 0.05, 0.02, 0.1, -0.2, 6.0])
-    mx = MaximalModel(md, "rigid")
-    ev = md.evaluate(z, T, 0.3)
-    x_dot, f_t = mx.evaluate(mx.from_reduced(z), T, 0.3)
-    assert abs(f_t - ev.tension) <= 1e-9 * abs(ev.tension)
-    np.testing.assert_allclose(x_dot[10:13], ev.z_dot[7:10], rtol=0,
-                               atol=1e-9 * np.abs(ev.z_dot[7:10]).max())
+    ev = rigid_maximal_equals_reduced(md, z, T)[0]
     assert np.abs(ev.z_dot[7:10] - md0.evaluate(z, T, 0.3).z_dot[7:10]).max() > 1.0  # rad/s^2
 
     for link in ("rigid", "spring-damper"):

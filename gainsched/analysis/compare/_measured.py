@@ -9,6 +9,7 @@ derivatives and the exact kinematics (paper eq. 9 corrected) per gap-free segmen
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -173,6 +174,20 @@ class Measured:
             self.cache["acc_imu"] = (latency, savgol_filter(
                 a_path, self.window, self.order, axis=0, mode="interp"))
         return self.cache["acc_imu"][1]
+
+    def with_attachment(self, p_e) -> Measured:
+        """The same segment with the COG's kinematics for the attachment point ``p_e`` (3,),
+        m, in B from the COG (another centre-of-mass offset, the attachment offset the
+        same): ``p_q = p_t - R_CB p_e`` and its derivatives move by the difference
+        (:func:`_reconstruct`), the pose's channels stay; what :func:`measure` would give
+        with that offset, without differentiating the pose again."""
+        dp = np.asarray(p_e, dtype=float) - self.p_e
+        w = self.z[:, 7:10]
+        move = lambda v: np.einsum("nij,nj->ni", self.R, v)  # noqa: E731
+        return dataclasses.replace(
+            self, p=self.p - move(np.broadcast_to(dp, w.shape)), v=self.v - move(np.cross(w, dp)),
+            a=self.a - move(np.cross(self.omega_dot, dp) + np.cross(w, np.cross(w, dp))),
+            p_e=np.asarray(p_e, dtype=float), cache={})
 
     def cog_lever(self) -> np.ndarray:
         """The COG's acceleration relative to the frame centre (where the IMU sits, with

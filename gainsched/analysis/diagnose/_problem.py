@@ -119,8 +119,12 @@ class _Problem:
             for k in [x for x in self._meas if x != base_key]:
                 del self._meas[k]
             base = self._meas[base_key]
-            self._meas[key] = [measure(s, config, name=m.name)
-                               for s, m in zip(self.segs, base, strict=True)]
+            if key[0] == base_key[0]:  # the COG moved, the attachment offset the same
+                p_e = np.array(key[1:])
+                self._meas[key] = [m.with_attachment(p_e) for m in base]
+            else:
+                self._meas[key] = [measure(s, config, name=m.name)
+                                   for s, m in zip(self.segs, base, strict=True)]
         return self._meas[key]
 
     def _base_residuals(self) -> list[dict]:
