@@ -101,7 +101,7 @@ BIN_VARIABLES = {
     "time": ("s", "time in flight"),
 }
 
-# ------------------------------------------------------------- input limits (issue 38)
+# ------------------------------------------------------------------------ input limits
 # Every count and duration a user gives is bounded where it comes in (scenario files,
 # command-line options), so that no input asks for more memory or time than a machine has.
 

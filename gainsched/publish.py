@@ -124,7 +124,7 @@ def check_out_dir(out_dir, where: str = "-o", names=()) -> Path:
     creating nothing: the folder is made when its outputs are published.
 
     Call it before long work so that a bad ``-o`` fails in a second, not after the
-    build, and a refused command leaves no folder behind (issue 38). The write test is
+    build, and a refused command leaves no folder behind. The write test is
     a temp file made and removed in the folder, or in its nearest existing parent when
     the folder does not exist yet. Raises InputError naming the folder and ``where``
     (the option or key); ``names``: the files the command will write there, when known

@@ -8,7 +8,7 @@ for the actual thrusts, which are as smooth as the motion they drive, and takes 
 input of the modifiers (``u``, or the lag's ``x``) from them here. Momentum theory's
 floored inflow (paper eq. 29) makes that input turn sharply where the actual thrusts do
 not: solved point by point it costs a few evaluations of the modifiers, where solving
-for it through the whole model cost the model's (issue 39).
+for it through the whole model cost the model's.
 
 No library inverts a batch of these 4-vector maps; the Newton below is a few lines.
 """

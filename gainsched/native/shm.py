@@ -1,4 +1,4 @@
-"""What killed builds leave in ``/dev/shm``, removed by the next run (issue 38).
+"""What killed builds leave in ``/dev/shm``, removed by the next run.
 
 A build's worker pool (loky, :func:`~gainsched.native.reproducible.pinned_executor`)
 makes POSIX named semaphores, ``/dev/shm/sem.loky-PID-XXXXXXXX`` (``PID``: the

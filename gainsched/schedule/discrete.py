@@ -66,7 +66,7 @@ def _discrete_split(model, speed, tilts, N, dt, tol, m0):
     thrusts, smooth along the nominal: its Jacobians are computed at M azimuths and
     interpolated as :func:`discrete_system` does with the discrete system (M doubling
     from ``m0`` to ``tol``); the modifiers' partials, sharp where the inflow is floored,
-    at every step, where they cost a fraction of the whole model's (issue 39). Returns
+    at every step, where they cost a fraction of the whole model's. Returns
     ``(A_d, B_d, err)``, err the last interpolation check (0 if ``g``'s Jacobians were
     computed at every step)."""
     G, _, err = _interpolated(

@@ -28,7 +28,7 @@ their gradients by the chain rule through it (:func:`_inputs_at_nodes`). The bou
 linear in those node values: put on the inverse of the interpolated actual thrusts
 instead, a command near zero thrust moves by tens of newtons per degree of offset
 (momentum theory's thrust goes as the command's 3/2 power there, paper eq. 29), which
-SLSQP does not follow (issue 39, measured).
+SLSQP does not follow (measured).
 scipy's SLSQP is the optimizer; the collocation and its sensitivities are ours because
 no library offers this trim (see :mod:`gainsched.schedule.trim`).
 """
@@ -69,7 +69,7 @@ __all__ = [
 HARMONICS = 3
 #: collocation nodes of the optimisation (the nominal itself is then trimmed with the
 #: trim's own resolution); with the bounds at FINE points per node, 32 nodes give the
-#: offsets of 64 to 3e-6 deg on the paper grid (issue 39)
+#: offsets of 64 to 3e-6 deg on the paper grid
 N_NODES = 32
 #: the commanded thrusts are bounded at FINE points per node (the collocation's
 #: trigonometric interpolant), not at the nodes alone: a thrust bulges past its node
@@ -81,7 +81,7 @@ FINE = 8
 #: ROUNDS in all, each from the last one's offsets) moves the bounds in by ``max(safety,
 #: 1.5 d)`` more: doubling them for an interpolation bulge of a few mN, and in one round
 #: past the dip of a thrust the 32 nodes cannot resolve (momentum theory's floored inflow
-#: on a motor near its minimum: 40-90 mN, issue 39). On the paper grid the check never
+#: on a motor near its minimum: 40-90 mN). On the paper grid the check never
 #: fails: one SLSQP per circle.
 NODE_SAFETY_N = 2e-3
 ROUNDS = 3
@@ -91,7 +91,7 @@ _DEG = np.pi / 180
 #: SLSQP's stopping tolerance (deg^2 in the objective, N in the sum of the bounds'
 #: violations): the offsets to about 1e-5 deg. At 1e-10 it took the rounding-level
 #: violations of its 2048 bounds for ones it could remove, and a circle that had converged
-#: in 5 iterations ran 69 (10 m/s, 40 deg with a motor lag; issue 39)
+#: in 5 iterations ran 69 (10 m/s, 40 deg with a motor lag)
 FTOL = 1e-8
 
 

@@ -13,7 +13,7 @@ motion asks for them, so they are as smooth as it is, and the model's equations 
 thrusts do not go through the modifiers. The commands (with a motor lag, its states and
 the command from the lag's inverse) come point by point from the modifiers' inverse
 (:mod:`gainsched.model.thrustmap`); momentum theory's floored inflow (paper eq. 29) turns
-them sharply where the actual thrusts are smooth (issue 39).
+them sharply where the actual thrusts are smooth.
 
 ``phi`` is represented by its node values with a linear differentiation
 operator: a Fourier (spectral) one for whole periodic circles, a quintic
@@ -46,7 +46,7 @@ __all__ = ["trim_path", "solve_circles", "is_rough", "TrimError"]
 
 #: nodes of the periodic collocation: the interpolated nominal of 64 meets the model to
 #: 1e-11 (relative) at 1024 samples per circle with rotor drag, motor lag or momentum
-#: theory, and its thrusts equal those of 128 nodes to 4e-12 N (issue 39)
+#: theory, and its thrusts equal those of 128 nodes to 4e-12 N
 N_FOURIER = 64
 N_SPLINE_MAX = 600
 #: the largest roll change (rad) one Newton step of a collocation takes at any node (and a
@@ -55,8 +55,8 @@ N_SPLINE_MAX = 600
 #: the command's 3/2 power near zero) a full step is long and heads for a spurious
 #: solution whose roll winds around the circle: inside the offsets' search at 13 m/s, 37 deg
 #: with momentum theory and a motor lag, roll to 96 rad and commands to 3.7e3 N, where
-#: SLSQP stayed for 268 trims (issue 39). The physical nominal is reached in far shorter
-#: steps, which the limit leaves as they are.
+#: SLSQP stays for hundreds of trims without the limit. The physical nominal is reached
+#: in far shorter steps, which the limit leaves as they are.
 MAX_ROLL_STEP = 0.5
 
 #: the interpolated nominal of a whole circle is taken as it is when its node equations
@@ -374,7 +374,7 @@ def solve_circles(model, path: AzimuthPath, alphas) -> None:
     """Solve the Fourier collocations of the whole circle ``path`` starts at the tilts
     ``alphas`` (rad), without offsets, in one batched Newton (:func:`_newton_circles`), into
     the cache :func:`trim_path` reads: a grid's job asks for every tilt of a speed, and
-    the model's cost is per evaluation more than per node (issue 39: a seventh of the
+    the model's cost is per evaluation more than per node (a seventh of the
     evaluations). Each circle stops when its own residual meets the tolerance, as alone;
     one that does not converge is left to :func:`trim_path`, which raises."""
     cache = _NODES.setdefault(model, {})

@@ -387,7 +387,7 @@ def candidate_library() -> dict[str, Candidate]:
                         "attachment offset L_e error", affine=False, bounds_rel=(0.0, 3.0)),
         ConfigCandidate("tether_length", "tether", "length", P("length", "m", 0.0, 0.0),
                         "tether length error", affine=True, bounds_rel=(0.8, 1.2)),
-        # what every real quadcopter has a little of (issue 53): the moments of inertia
+        # what every real quadcopter has a little of: the moments of inertia
         # and the rotors' reaction-torque coefficient, each known to tens of percent
         *(InertiaCandidate(i) for i in range(3)),
         ConfigCandidate("kappa", "vehicle", "kappa", P("kappa", "m", 0.0, 0.0),
@@ -405,8 +405,7 @@ def candidate_library() -> dict[str, Candidate]:
 def single_parameter_set_candidates(library=None) -> list[str]:
     """The physical candidates without the refits that fit a superset of another
     candidate's parameters of the same effect (``drag`` beside ``drag_linear`` and
-    ``drag_quadratic``) and without the empirical ones: the library as it was before
-    issue 16 (the benchmark's baseline)."""
+    ``drag_quadratic``) and without the empirical ones: the benchmark's baseline library."""
     library = candidate_library() if library is None else library
 
     def nested(c):
