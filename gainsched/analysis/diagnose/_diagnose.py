@@ -182,11 +182,11 @@ def _nuisance(prob: _Problem, library, names, base_sq, base_vecs, progress):
         # binned structure the model leaves there goes
         fell = all(r.axis_rms_after[a] <= fall * r.axis_rms_before[a]
                    for a in axes if a in r.axis_rms_before)
-        cleared = bool(base_structure & set(axes))
+        structured = bool(base_structure & set(axes))  # and none left: checked below
         # identified: a parameter's CI within its range, or its own axes falling clearly
         # (a large residual elsewhere, which the CI takes for noise, widens it)
         if ((carried or fell) and stretch <= NUISANCE_MAX_STRETCH and r.rms_reduction > 0
-                and not r.worse_axes() and (fell or cleared)
+                and not r.worse_axes() and (fell or structured)
                 and not any(s.startswith(f"{a} residual") for s in r.structure_left
                             for a in axes)):
             return r, None

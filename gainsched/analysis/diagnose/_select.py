@@ -99,9 +99,8 @@ def _forward(prob, library, results, start, base_sq, base_vecs, progress):
     more of the residual above noise or removes the structure left; at most
     :data:`FORWARD_PARTS` parts (and the nuisance fit, :data:`NUISANCE`, beside them: the
     tether's own stretch is no effect of the story), the best :data:`JOINT_TOP` tried at
-    each step, a passing
-    addition preferred. Appends its fits to ``results`` and returns the last passing fit
-    (None when ``start`` did not pass and no extension does)."""
+    each step, a passing addition preferred. Appends its fits to ``results`` and returns
+    the last passing fit (None when ``start`` did not pass and no extension does)."""
     current = start
     accepted = start if start.passes else None
     gain = THRESHOLDS["forward_excess_gain"]
@@ -123,14 +122,16 @@ def _forward(prob, library, results, start, base_sq, base_vecs, progress):
         cc = float(c @ c)
         return float(c @ left) ** 2 / cc if cc > 0 else 0.0
 
-    def room(names):  # FORWARD_PARTS effects, and the nuisance fit beside them
-        story = [n for n in names if n not in NUISANCE]
-        return len(story) < FORWARD_PARTS or len(story) == len(names)
+    def effects(fit):  # its parts but the nuisance fit beside them, and all its parts
+        names = fit.name.split(" + ")
+        return [n for n in names if n not in NUISANCE], names
 
-    while room(current.name.split(" + ")) and (
+    # room for another effect, or for the nuisance fit beside FORWARD_PARTS of them
+    while (len(effects(current)[0]) < FORWARD_PARTS
+           or len(effects(current)[0]) == len(effects(current)[1])) and (
             current.excess_explained < 1 - gain or current.structure_left):
-        names = current.name.split(" + ")
-        full = len([n for n in names if n not in NUISANCE]) >= FORWARD_PARTS
+        story, names = effects(current)
+        full = len(story) >= FORWARD_PARTS
         left = base - current.contribution.astype(float)
         # the nuisance fit is tried whatever its own score where the fit leaves structure
         # on its axes: alone it may explain little beside a large residual elsewhere
