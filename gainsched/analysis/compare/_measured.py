@@ -186,8 +186,14 @@ class Measured:
         move = lambda v: np.einsum("nij,nj->ni", self.R, v)  # noqa: E731
         return dataclasses.replace(
             self, p=self.p - move(np.broadcast_to(dp, w.shape)), v=self.v - move(np.cross(w, dp)),
-            a=self.a - move(np.cross(self.omega_dot, dp) + np.cross(w, np.cross(w, dp))),
-            p_e=np.asarray(p_e, dtype=float), cache={})
+            a=self.a - self._lever(dp), p_e=np.asarray(p_e, dtype=float), cache={})
+
+    def _lever(self, r) -> np.ndarray:
+        """``R_CB (omega' x r + omega x (omega x r))``, (N, 3) m/s^2 in C: the acceleration
+        of the point at ``r`` (3,), m, in B relative to the body's reference point."""
+        w = self.z[:, 7:10]
+        arm = np.cross(self.omega_dot, r) + np.cross(w, np.cross(w, r))
+        return np.einsum("nij,nj->ni", self.R, arm)
 
     def cog_lever(self) -> np.ndarray:
         """The COG's acceleration relative to the frame centre (where the IMU sits, with
@@ -195,11 +201,7 @@ class Measured:
         the COG at ``d = (-L_e, 0, 0) - p_e`` from it (``[effects.cog_offset]``; zeros
         without one): the IMU's acceleration plus it is the COG's."""
         d = np.array([-self.L_e, 0.0, 0.0]) - self.p_e
-        if not d.any():
-            return np.zeros_like(self.a)
-        w = self.z[:, 7:10]
-        arm = np.cross(self.omega_dot, d) + np.cross(w, np.cross(w, d))
-        return np.einsum("nij,nj->ni", self.R, arm)
+        return self._lever(d) if d.any() else np.zeros_like(self.a)
 
     def omega_dot_measured(self, latency: float) -> np.ndarray:
         """The measured body angular acceleration (N, 3), rad/s^2, on the pose's clock:
