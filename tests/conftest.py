@@ -10,12 +10,14 @@
   skips with the reason in one hook (:func:`pytest_runtest_setup`);
 - the reference circle of the link-model tests;
 - ``fly(hidden)`` and ``diagnosed(hidden)``: the default campaign of
-  :mod:`gainsched.sim.campaign` flown on a plant with a hidden effect, and its
-  diagnosis, once per test module.
+  :mod:`gainsched.sim.campaign` flown on a plant with a hidden effect (once per test
+  run: :func:`support.once`), and its diagnosis (once per test module).
 
 Parallel runs (``make test`` runs pytest-xdist): every fixture here is per worker
-process and writes nothing outside pytest's own temporary folders; compiled kernels go
-to the build's content-keyed cache, which concurrent builders share safely
+process and writes nothing outside pytest's own temporary folders, except the flown
+campaigns, which the workers of one run share (``shared_dir``: the first to need one
+flies it, the others wait for it and read it); compiled kernels go to the build's
+content-keyed cache, which concurrent builders share safely
 (gainsched/native/__init__.py).
 """
 
@@ -162,8 +164,19 @@ def small_config_text():
 # --------------------------------------------------------------------------- campaigns
 
 
+@pytest.fixture(scope="session")
+def shared_dir(tmp_path_factory) -> Path:
+    """A folder all test processes of this run share (under pytest-xdist, the parent of
+    each worker's temporary base; a single process: its own), for :func:`support.once`."""
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    folder = root / "shared"
+    folder.mkdir(exist_ok=True)
+    return folder
+
+
 @pytest.fixture(scope="module")
-def fly(paper_config, paper_table):
+def fly(paper_config, paper_table, shared_dir):
     """The factory ``fly(hidden="none", scenarios=None, load_cell=True,
     real_tether=False)``: the flight logs (list of FlightLog) of
     :func:`gainsched.sim.campaign.campaign` on the plant with the hidden effect ``hidden``
@@ -171,7 +184,8 @@ def fly(paper_config, paper_table):
     :data:`support.CAMPAIGN_DURATION` s: the default flights, or ``scenarios`` (Scenario
     objects, or names of default flights); ``load_cell=False`` drops the tension;
     ``real_tether``: on the elastic tether of a real vehicle (``REAL_TETHER``). Flown
-    once per module."""
+    once per test run, whichever worker needs it first (:func:`support.once`; a
+    campaign is deterministic, so who flies it does not matter), then kept per module."""
     from gainsched.sim.campaign import campaign, default_flights
     from gainsched.sim.loop import table_scheduler
 
@@ -185,9 +199,12 @@ def fly(paper_config, paper_table):
         key = (hidden, None if scenarios is None else tuple(s.name for s in scenarios),
                load_cell, real_tether)
         if key not in cache:
-            cache[key] = campaign(paper_config, sched, hidden, duration=support.CAMPAIGN_DURATION,
-                                  scenarios=scenarios, load_cell=load_cell,
-                                  real_tether=real_tether)
+            cache[key] = support.once(
+                shared_dir, ("campaign", hidden, scenarios, load_cell, real_tether,
+                             support.CAMPAIGN_DURATION),
+                lambda: campaign(paper_config, sched, hidden,
+                                 duration=support.CAMPAIGN_DURATION, scenarios=scenarios,
+                                 load_cell=load_cell, real_tether=real_tether))
         return cache[key]
 
     return get

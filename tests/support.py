@@ -285,6 +285,35 @@ def auto_text(speeds=AUTO_SPEEDS, tilts=AUTO_TILTS, n_xi=16, bound=3, name="auto
 #: s, the flight time of the campaigns the analysis tests fly (conftest ``fly``)
 CAMPAIGN_DURATION = 2.5
 
+#: the default flights a campaign with an effect outside the library flies in the suite: it
+#: flies on the numpy plant (about 15x slower than the compiled one), so on three circles
+OUTSIDE_FLIGHTS = ("v9", "tilt20-v8", "v15")
+
+
+def once(folder: Path, key, make):
+    """``make()``, computed once per test run however many test processes ask: the first
+    to ask for ``key`` (any value whose ``repr`` names it: dataclasses, tuples, floats)
+    computes it and leaves it pickled in ``folder`` (the ``shared_dir`` fixture); the
+    others wait on its lock and read it. For deterministic, expensive test data (a
+    flown campaign: test modules on two workers ask for the same ones)."""
+    import fcntl
+    import hashlib
+    import pickle
+
+    name = hashlib.sha256(repr(key).encode()).hexdigest()[:24]
+    path = folder / f"{name}.pkl"
+    with open(folder / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if path.exists():
+            with open(path, "rb") as f:
+                return pickle.load(f)
+        value = make()
+        tmp = path.with_suffix(".part")
+        with open(tmp, "wb") as f:
+            pickle.dump(value, f, protocol=pickle.HIGHEST_PROTOCOL)
+        tmp.replace(path)
+        return value
+
 
 # --------------------------------------------------------------------------- foreign logs
 

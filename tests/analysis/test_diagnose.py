@@ -27,6 +27,7 @@ from gainsched.sim.loop import table_scheduler
 
 from support import CAMPAIGN_DURATION as DURATION
 from support import (
+    OUTSIDE_FLIGHTS,
     PAPER_H5,
     PAPER_TOML,
     REAL_TETHER_CASES,
@@ -324,8 +325,7 @@ def test_effect_outside_library_gets_an_empirical_law(diagnosed, paper_config):
     at 88 deg, explains 94 % of the residual above noise."""
     from gainsched.model.effects import Kinematics, ThrustAzimuth
 
-    scn = [s for s in default_flights(DURATION) if s.name in ("v9", "tilt20-v8", "v15")]
-    d = diagnosed("azimuth_thrust_loss", scn)
+    d = diagnosed("azimuth_thrust_loss", OUTSIDE_FLIGHTS)
     w = d.base.where["worst"]
     assert w["variable"] == "azimuth"
     assert 60 <= w["bin_center"] <= 120, w

@@ -15,6 +15,18 @@ from gainsched.schedule.viewer import _midpoint_grid, gain_file_name, schedule_f
 from support import PAPER_H5
 
 
+@pytest.fixture(scope="module")
+def figs(paper_table):
+    """The paper table's figures (:func:`schedule_figures`), drawn once for the module's
+    tests (they only read them) and closed after them."""
+    import matplotlib.pyplot as plt
+
+    figures = schedule_figures(paper_table)
+    yield figures
+    for f in figures.values():
+        plt.close(f)
+
+
 def _mesh(fig, gid):
     found = [c for ax in fig.axes for c in ax.collections if c.get_gid() == gid]
     assert len(found) == 1, gid
@@ -65,42 +77,35 @@ def test_cli_plot_writes_the_pngs_and_a_summary_of_the_table(tmp_path, paper_tab
 
 
 @pytest.mark.slow
-def test_plotted_maps_are_the_tables_arrays(paper_table):
+def test_plotted_maps_are_the_tables_arrays(paper_table, figs):
     """Every map draws the table's values at its grid points (no resampling), blank
     exactly where the circle sample is infeasible: every gain entry at two tilts, the
     nominal thrusts and roll at every tilt, the spectral radius, the slowest time constant."""
-    figs = schedule_figures(paper_table)
-    try:
-        ok = paper_table.reasons == 0
-        K = paper_table.K_full()
-        n_v, n_xi = paper_table.speed.size, paper_table.xi.size
-        for i in (0, 3):
-            fig = figs[gain_file_name(paper_table.tilt[i])]
-            for r in range(4):
-                for c in range(K.shape[-1]):
-                    got = _values(_mesh(fig, f"K_{r}_{c}"), (n_v, n_xi))
-                    want = np.where(ok[i], K[i, ..., r, c], np.nan)
-                    np.testing.assert_array_equal(got, want, err_msg=f"tilt {i} K[{r},{c}]")
-        nom = figs["nominal.png"]
-        for i in range(paper_table.tilt.size):
-            for m in range(4):
-                np.testing.assert_array_equal(
-                    _values(_mesh(nom, f"u_d_{i}_{m}"), (n_v, n_xi)),
-                    np.where(ok[i], paper_table.u_d[i, ..., m], np.nan))
-            np.testing.assert_allclose(
-                _values(_mesh(nom, f"phi_d_{i}"), (n_v, n_xi)),
-                np.where(ok[i], np.rad2deg(paper_table.phi_d[i]), np.nan), rtol=1e-15)
-        np.testing.assert_array_equal(
-            _values(_mesh(figs["spectral_radius.png"], "spectral_radius"),
-                    paper_table.spectral_radius.shape), paper_table.spectral_radius)
-        np.testing.assert_array_equal(
-            _values(_mesh(figs["time_constant.png"], "time_constant"),
-                    paper_table.spectral_radius.shape), paper_table.mode_tau[..., 0])
-    finally:
-        import matplotlib.pyplot as plt
-
-        for f in figs.values():
-            plt.close(f)
+    ok = paper_table.reasons == 0
+    K = paper_table.K_full()
+    n_v, n_xi = paper_table.speed.size, paper_table.xi.size
+    for i in (0, 3):
+        fig = figs[gain_file_name(paper_table.tilt[i])]
+        for r in range(4):
+            for c in range(K.shape[-1]):
+                got = _values(_mesh(fig, f"K_{r}_{c}"), (n_v, n_xi))
+                want = np.where(ok[i], K[i, ..., r, c], np.nan)
+                np.testing.assert_array_equal(got, want, err_msg=f"tilt {i} K[{r},{c}]")
+    nom = figs["nominal.png"]
+    for i in range(paper_table.tilt.size):
+        for m in range(4):
+            np.testing.assert_array_equal(
+                _values(_mesh(nom, f"u_d_{i}_{m}"), (n_v, n_xi)),
+                np.where(ok[i], paper_table.u_d[i, ..., m], np.nan))
+        np.testing.assert_allclose(
+            _values(_mesh(nom, f"phi_d_{i}"), (n_v, n_xi)),
+            np.where(ok[i], np.rad2deg(paper_table.phi_d[i]), np.nan), rtol=1e-15)
+    np.testing.assert_array_equal(
+        _values(_mesh(figs["spectral_radius.png"], "spectral_radius"),
+                paper_table.spectral_radius.shape), paper_table.spectral_radius)
+    np.testing.assert_array_equal(
+        _values(_mesh(figs["time_constant.png"], "time_constant"),
+                paper_table.spectral_radius.shape), paper_table.mode_tau[..., 0])
 
 
 def test_midpoint_error_map_takes_the_max_over_azimuth():
@@ -153,7 +158,7 @@ def test_inspect_json_is_the_table_at_a_glance(paper_table):
     assert js["config_sha256"] == paper_table.config_sha256
 
 
-def test_gain_maps_carry_units_colorbars_and_a_map_for_their_sign(paper_table):
+def test_gain_maps_carry_units_colorbars_and_a_map_for_their_sign(paper_table, figs):
     """Issue 39: every gain map has its colorbar and its gain's unit (N per the state's
     unit), a diverging map centred on 0 for gains of both signs and a sequential one for
     one-signed gains."""
@@ -161,25 +166,18 @@ def test_gain_maps_carry_units_colorbars_and_a_map_for_their_sign(paper_table):
 
     assert [gain_unit(n) for n in ("delta", "xi_dot", "omega_x", "int_delta", "motor_lag_0")] \
         == ["N/rad", "N/(rad/s)", "N/(rad/s)", "N/(rad s)", "N/N"]
-    figs = schedule_figures(paper_table)
-    try:
-        fig = figs[gain_file_name(paper_table.tilt[3])]
-        ok = paper_table.reasons[3] == 0
-        K = paper_table.K_full()[3]
-        names = paper_table.state_names
-        for r in range(4):
-            for c in range(K.shape[-1]):
-                mesh = _mesh(fig, f"K_{r}_{c}")
-                assert mesh.colorbar is not None
-                assert gain_unit(names[c]) in mesh.axes.get_title()
-                fin = K[..., r, c][ok]
-                if fin.min() < 0 < fin.max():
-                    lo, hi = mesh.get_clim()
-                    assert mesh.get_cmap().name == "coolwarm" and lo == -hi
-                else:
-                    assert mesh.get_cmap().name == "viridis"
-    finally:
-        import matplotlib.pyplot as plt
-
-        for f in figs.values():
-            plt.close(f)
+    fig = figs[gain_file_name(paper_table.tilt[3])]
+    ok = paper_table.reasons[3] == 0
+    K = paper_table.K_full()[3]
+    names = paper_table.state_names
+    for r in range(4):
+        for c in range(K.shape[-1]):
+            mesh = _mesh(fig, f"K_{r}_{c}")
+            assert mesh.colorbar is not None
+            assert gain_unit(names[c]) in mesh.axes.get_title()
+            fin = K[..., r, c][ok]
+            if fin.min() < 0 < fin.max():
+                lo, hi = mesh.get_clim()
+                assert mesh.get_cmap().name == "coolwarm" and lo == -hi
+            else:
+                assert mesh.get_cmap().name == "viridis"
