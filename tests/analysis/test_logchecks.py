@@ -242,10 +242,11 @@ def test_example_flights_pass(paper_config):
 def test_campaigns_of_every_hidden_effect_pass(tmp_path, fly, paper_config, hidden):
     """Every flight of the campaign, written and read back: CSV with the load cell, HDF5
     without it (the tension column dropped). The campaigns are the ones the diagnosis
-    tests fly (shared: conftest's ``fly``); an azimuth thrust loss or dip, outside the
-    library, flies the three circles of OUTSIDE_FLIGHTS."""
-    dip = hidden in ("azimuth_thrust_loss", "azimuth_thrust_dip")
-    for log in fly(hidden, OUTSIDE_FLIGHTS if dip else None):
+    tests fly (shared: conftest's ``fly``): an azimuth thrust loss, outside the library,
+    flies the three circles of OUTSIDE_FLIGHTS, and a thrust dip the rigid tether of
+    tests/analysis/test_structure.py."""
+    scenarios = OUTSIDE_FLIGHTS if hidden == "azimuth_thrust_loss" else None
+    for log in fly(hidden, scenarios, real_tether=hidden != "azimuth_thrust_dip"):
         name = log.meta["flight_id"]
         cols = log.columns()
         no_cell = {k: v for k, v in cols.items() if k != "tension"}

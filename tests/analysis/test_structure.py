@@ -12,7 +12,7 @@ import pytest
 
 from gainsched.analysis.structure import ALPHA, binned_means, findings
 
-from support import PAPER_H5, PAPER_TOML
+from support import PAPER_TOML
 
 
 def _segments(seed, dip=0.0, center=115.0, width=15.0, n_seg=6, turns=4.0, n=2000):
@@ -86,7 +86,7 @@ def test_noise_alone_gives_no_finding():
 
 
 @pytest.mark.slow
-def test_thrust_dip_in_a_flight_campaign(monkeypatch):
+def test_thrust_dip_in_a_flight_campaign(fly):
     """Issue 16's must-show on the project's simulator: a 5 % thrust dip at 115 deg
     (width 12 deg), outside the library, whose overall residual stays below 1.25x the
     noise floor (the 7 flights of the default campaign, 2.5 s each):
@@ -110,17 +110,10 @@ def test_thrust_dip_in_a_flight_campaign(monkeypatch):
     from gainsched.config import config_from_text, load_config
     from gainsched.model.effects import ThrustAzimuth, registered_effect
     from gainsched.model.reduced import Model
-    from gainsched.schedule.tables import load_table
-    from gainsched.sim import _plant as loop
-    from gainsched.sim.campaign import HIDDEN, campaign, plant_config
-    from gainsched.sim.loop import table_scheduler
+    from gainsched.sim.campaign import HIDDEN, plant_config
 
     paper = load_config(PAPER_TOML).with_values({"analysis.use_accelerometer": False})
-    sched = table_scheduler(load_table(PAPER_H5))
-    # the simulator says once per process that the numpy plant runs: forget earlier tests'
-    monkeypatch.setattr(loop, "_FALLBACKS_SEEN", set())
-    with pytest.warns(Warning, match="compiled plant"):
-        logs = campaign(paper, sched, "azimuth_thrust_dip", duration=2.5)
+    logs = fly("azimuth_thrust_dip", real_tether=False)  # the flights do not read [analysis]
     cmp = compare(paper, logs)
     assert all(s.rms_over_noise < 1.25 for s in cmp.stats.values())
     assert cmp.structure, cmp.where["sentence"]

@@ -10,9 +10,10 @@ import pytest
 from click.testing import CliRunner
 
 from gainsched.cli import cli
+from gainsched.schedule.tables import load_table
 from gainsched.schedule.viewer import _midpoint_grid, gain_file_name, schedule_figures
 
-from support import PAPER_H5
+from support import PAPER_H5, small_config_text
 
 
 @pytest.fixture(scope="module")
@@ -40,13 +41,21 @@ def _values(mesh, shape):
 
 
 @pytest.mark.slow
-def test_cli_plot_writes_the_pngs_and_a_summary_of_the_table(tmp_path, paper_table):
-    """``gainsched plot tables/paper.h5 -o DIR --json``: one gain page per tilt, the
-    envelope, nominal and spectral-radius pages and plots.json, all listed there; the
-    summary's gain ranges are the table's (per tilt, input and state, over the feasible
-    azimuth samples: computed here from ``K_tilt0`` and ``K`` directly)."""
+def test_cli_plot_writes_the_pngs_and_a_summary_of_the_table(tmp_path):
+    """``gainsched plot TABLE -o DIR --json`` (the small grid's table: two tilts, the
+    level one with its gain per speed; the paper table's figures are read back by the
+    tests below): one gain page per tilt, the envelope, nominal and spectral-radius pages
+    and plots.json, all listed there; the summary's gain ranges are the table's (per
+    tilt, input and state, over the feasible azimuth samples: computed here from
+    ``K_tilt0`` and ``K`` directly)."""
+    (tmp_path / "small.toml").write_text(small_config_text())
+    built = CliRunner().invoke(cli, ["build", str(tmp_path / "small.toml"), "-o",
+                                     str(tmp_path / "t")])
+    assert built.exit_code == 0, built.output
+    paper_table = load_table(tmp_path / "t" / "small.h5")
     out = tmp_path / "plots"
-    r = CliRunner().invoke(cli, ["plot", str(PAPER_H5), "-o", str(out), "--json"])
+    r = CliRunner().invoke(cli, ["plot", str(tmp_path / "t" / "small.h5"), "-o", str(out),
+                                 "--json"])
     assert r.exit_code == 0, r.output
     summary = json.loads(r.output)
     assert summary == json.loads((out / "plots.json").read_text())
