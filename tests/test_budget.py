@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import re
-import time
 
 import numpy as np
 import pytest
@@ -93,27 +92,26 @@ def test_effect_states_count(paper_text):
     ],
     ids=lambda x: x if isinstance(x, str) and " " in x else None,
 )
-def test_absurd_builds_refused_quickly(paper_text, tmp_path, case, edit, key, words):
+def test_absurd_builds_refused_when_the_config_loads(paper_text, tmp_path, case, edit, key,
+                                                     words):
+    """Refused by the config's own check (an estimate, no circle solved), naming the key.
+    (How fast: ``make bench`` times builds; a unit test does not time.)"""
     path = tmp_path / "big.toml"
     path.write_text(edit(paper_text))
-    t0 = time.perf_counter()
     with pytest.raises(InputError) as info:
         load_config(path)
-    elapsed = time.perf_counter() - t0
     assert info.value.source == str(path) and info.value.where == key, str(info.value)
     assert words in info.value.message, info.value.message
-    assert elapsed < 1.0, elapsed
 
 
-def test_estimate_is_fast_for_a_million_speeds(paper_config):
-    """The estimate itself is vectorised (the 1 MiB text limit comes first in practice)."""
+def test_estimate_of_a_million_speeds(paper_config):
+    """The estimate of a grid the text limit would refuse first (1 MiB) still names the key
+    and the count: it is arithmetic over the speeds, vectorised."""
     g = paper_config.grid
     speeds = np.linspace(2, 15, 10**6)
     cfg = dataclasses.replace(paper_config, grid=Grid(speeds, g.tilts, g.azimuth_samples))
-    t0 = time.perf_counter()
     with pytest.raises(InputError) as info:
         check_budget(cfg, "million.toml")
-    assert time.perf_counter() - t0 < 0.5
     assert info.value.where == "grid.speeds" and "1000000 speeds" in info.value.message
 
 

@@ -54,3 +54,40 @@ def test_nothing_is_longer_than_the_house_allows(kind):
     assert not stale, f"allow-list entries no longer needed: {stale}"
     for key, (_, why) in allowed.items():
         assert why.strip(), f"{key}: say why"
+
+
+#: the calls that make a container meant to be filled later
+_CONTAINERS = {"dict", "set", "list", "defaultdict", "OrderedDict", "WeakKeyDictionary",
+               "WeakValueDictionary", "WeakSet"}
+
+
+def _module_state(text: str) -> list[str]:
+    """Module-level names bound to an empty mutable container (``{}``, ``[]``, ``set()``,
+    ``weakref.WeakKeyDictionary()``, ...): state a module keeps between calls."""
+    found = []
+    for node in ast.parse(text).body:
+        if not isinstance(node, (ast.Assign, ast.AnnAssign)) or node.value is None:
+            continue
+        v = node.value
+        fn = v.func if isinstance(v, ast.Call) else None
+        name = getattr(fn, "id", None) or getattr(fn, "attr", None)
+        if (isinstance(v, ast.Dict) and not v.keys) or (isinstance(v, ast.List) and not v.elts) \
+                or (name in _CONTAINERS and not v.args and not v.keywords):
+            found.append(f"line {node.lineno}: {ast.unparse(node)}")
+    return found
+
+
+def test_no_module_keeps_state_between_calls():
+    """Issue 54: no module-level cache or registry of what was seen (the trim's solutions
+    live with their model, :class:`gainsched.schedule.trim.Solutions`; a warning is shown
+    once by Python's own filters). A pure function's ``functools.lru_cache`` of its
+    arguments stays allowed (constants computed once). The detector itself finds the
+    forms it names."""
+    found = {path.relative_to(PACKAGE.parent).as_posix(): hits
+             for path in sorted(PACKAGE.rglob("*.py"))
+             if (hits := _module_state(path.read_text()))}
+    assert not found, f"module-level state: {found}"
+    sample = ("import weakref\nA = {}\nB: set[str] = set()\nC = weakref.WeakKeyDictionary()\n"
+              "D = []\nE = {'k': 1}\nF = (1, 2)\nG = dict(a=1)\n")
+    assert [h.split(":")[0] for h in _module_state(sample)] == [
+        "line 2", "line 3", "line 4", "line 5"]

@@ -110,6 +110,10 @@ class Model:
     p_e_frame : ndarray, shape (3,), m
         The attachment point in B from the frame centre, ``(-L_e, 0, 0)``: what the
         motion capture's pose (the frame centre) is turned into reduced coordinates with.
+    memo : dict
+        What the layers above compute from this model and keep with it, for as long as
+        it lives (the schedule's circle solutions:
+        :class:`gainsched.schedule.trim.Solutions`); a new model starts with none.
     """
 
     def __init__(self, config: Config, effects: tuple[Effect, ...] | None = None):
@@ -134,6 +138,7 @@ class Model:
         self.n_extra = sum(e.n_states for e in self.effects)
         self.n_z = N_STATE + self.n_extra
         self._J_inv = np.linalg.inv(self.J)
+        self.memo: dict = {}
 
     # ------------------------------------------------------------------ helpers
     def g_C(self, alpha):

@@ -17,7 +17,6 @@ motors that nominal drives out of range gets pitch and yaw offsets instead
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +25,7 @@ from ..constants import REASONS, Reason
 from .closedform import closed_form
 from .offsets import CHECK_SAMPLES, AttitudeOffsets, solve_offsets
 from .path import AzimuthPath, circle_path, period
-from .trim import is_rough, trim_path
+from .trim import is_rough, solutions, trim_path
 
 __all__ = [
     "Nominal",
@@ -146,9 +145,6 @@ def circle_is_rough(model, speed: float, alpha: float) -> bool:
         return False
     return is_rough(model, circle_path(speed, model.r, np.zeros(1)), alpha, offsets)
 
-# offsets per model and circle: a circle's nominal is asked for at several sample counts
-_OFFSETS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
 
 def circle_offsets(model, speed: float, alpha: float) -> AttitudeOffsets | None:
     """The attitude offsets of a constant-speed circle's nominal, or None for none.
@@ -163,7 +159,7 @@ def circle_offsets(model, speed: float, alpha: float) -> AttitudeOffsets | None:
     f = model.config.feasibility
     if f.attitude_offsets != "free":
         return None
-    cache = _OFFSETS.setdefault(model, {})
+    cache = solutions(model).offsets  # a circle's nominal is asked for at several counts
     key = (float(speed), float(alpha))
     if key not in cache:
         T = period(speed, model.r)

@@ -31,7 +31,7 @@ collocation, hence the hand-written solver.
 
 from __future__ import annotations
 
-import weakref
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import make_interp_spline
@@ -73,28 +73,45 @@ POLISH_TOL = 1e-8
 #: the linearisation is computed at every step (:func:`is_rough`)
 COMMAND_TOL = 1e-8
 
-# the node solution of a whole circle per model and circle (speed, starting azimuth,
-# tilt, offsets): a grid asks for one circle's nominal at several sample counts (the
-# feasibility check, the offsets' check, the table's azimuths, the linearisation), and
-# the collocation on the nodes does not depend on them. The same inputs give the same
-# node values, so the cache changes no bit of a table.
-_NODES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-# per model, circle and samples: the thrusts solved sample by sample of a circle whose
-# interpolant misses the model (the same inputs give the same thrusts: no bit changes)
-_SAMPLES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-# per model, circle and node count: the node rows its samplings interpolate and whether the
-# interpolant meets the model (:func:`_circle`)
-_CIRCLES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-# per model, circle and samples: the thrust modifiers' input (and its rate) from their
-# inverse at the samples of a circle whose commands are rough (the grid's nominal and its
-# linearisation both sample the N control steps; the same inputs give the same input)
-_INPUTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+@dataclass
+class Solutions:
+    """What the trims of one model have solved, kept with the model (:attr:`Model.memo
+    <gainsched.model.reduced.Model>`, :func:`solutions`) for as long as it lives: a grid's
+    job asks for one circle's nominal at several sample counts (the feasibility check,
+    the offsets' check, the table's azimuths, the linearisation), and what is solved on
+    a circle's nodes does not depend on them. The same inputs give the same values, so
+    keeping them changes no bit of a table. A circle's key is :func:`_circle_key` (speed,
+    starting azimuth, tilt, offsets).
+
+    Attributes
+    ----------
+    nodes : dict
+        Per circle: its Fourier collocation's node solution ``(phi (n,), T (n, 4))``.
+    circles : dict
+        Per circle and node count: the node rows its samplings interpolate and whether
+        the interpolant meets the model (:func:`_circle`).
+    samples : dict
+        Per circle and samples: the thrusts solved sample by sample of a circle whose
+        interpolant misses the model.
+    inputs : dict
+        Per circle and samples: the thrust modifiers' input (and its rate) from their
+        inverse at the samples of a circle whose commands are rough (the grid's nominal
+        and its linearisation both sample the N control steps).
+    offsets : dict
+        Per ``(speed, tilt)``: the circle's attitude offsets, or None
+        (:func:`gainsched.schedule.nominal.circle_offsets`).
+    """
+
+    nodes: dict = field(default_factory=dict)
+    circles: dict = field(default_factory=dict)
+    samples: dict = field(default_factory=dict)
+    inputs: dict = field(default_factory=dict)
+    offsets: dict = field(default_factory=dict)
 
 
-def _forget(model) -> None:
-    """Drop every cached solution of ``model`` (tests that solve a circle again)."""
-    for cache in (_NODES, _SAMPLES, _CIRCLES, _INPUTS):
-        cache.pop(model, None)
+def solutions(model) -> Solutions:
+    """The :class:`Solutions` kept with ``model`` (empty on first use)."""
+    return model.memo.setdefault(Solutions, Solutions())
 
 
 class TrimError(GainschedError):
@@ -370,17 +387,19 @@ def _nodes(path: AzimuthPath, n: int | None = None):
     return AzimuthPath(tn, path.xi[0] + xd * (tn - t0), (np.full_like(tn, xd), z0, z0, z0)), Tp
 
 
-def solve_circles(model, path: AzimuthPath, alphas) -> None:
+def solve_circles(model, path: AzimuthPath, alphas) -> Solutions:
     """Solve the Fourier collocations of the whole circle ``path`` starts at the tilts
-    ``alphas`` (rad), without offsets, in one batched Newton (:func:`_newton_circles`), into
-    the cache :func:`trim_path` reads: a grid's job asks for every tilt of a speed, and
-    the model's cost is per evaluation more than per node (a seventh of the
-    evaluations). Each circle stops when its own residual meets the tolerance, as alone;
-    one that does not converge is left to :func:`trim_path`, which raises."""
-    cache = _NODES.setdefault(model, {})
+    ``alphas`` (rad), without offsets, in one batched Newton (:func:`_newton_circles`), and
+    keep them in the model's :class:`Solutions` (returned), which :func:`trim_path` reads:
+    a grid's job asks for every tilt of a speed, and the model's cost is per evaluation
+    more than per node (a seventh of the evaluations). Each circle stops when its own
+    residual meets the tolerance, as alone; one that does not converge is left out (to
+    :func:`trim_path`, which raises)."""
+    kept = solutions(model)
+    cache = kept.nodes
     todo = [float(a) for a in alphas if _circle_key(path, a) not in cache]
     if len(todo) < 2:
-        return
+        return kept
     nodes, Tp = _nodes(path)
     D1, D2 = _fourier_operators(N_FOURIER, Tp)
     guesses = [_initial_guess(model, nodes, a) for a in todo]
@@ -391,6 +410,7 @@ def solve_circles(model, path: AzimuthPath, alphas) -> None:
     for a, sol in zip(todo, solved, strict=True):
         if sol is not None:
             cache[_circle_key(path, a)] = sol
+    return kept
 
 
 def _inputs(model, s, T, alpha, rates=None, start=None, where="samples"):
@@ -430,10 +450,11 @@ def _circle(model, path: AzimuthPath, alpha: float, offsets=None):
     """
     nodes, Tp = _nodes(path)
     key = _circle_key(path, alpha, offsets)
-    cache = _CIRCLES.setdefault(model, {})
+    kept = solutions(model)
+    cache = kept.circles
     if (key, N_FOURIER) in cache:
         return (key, *cache[key, N_FOURIER])
-    solved = _NODES.setdefault(model, {})
+    solved = kept.nodes
     D1, D2 = _fourier_operators(N_FOURIER, Tp)
     off_n = None if offsets is None else offsets.along(nodes)
     if key not in solved:
@@ -503,11 +524,11 @@ def _commands(model, alpha, s, sdot, T, T_dot, start=None, key=None):
     ``T`` (n, 4) N with their rate ``T_dot`` N/s: the thrust modifiers' input from their
     inverse (:func:`~gainsched.model.thrustmap.input_from_thrust`, from ``start`` (n, 4) N
     if given; the actual thrusts themselves without modifiers), computed once per ``key``
-    (a circle's samples: :data:`_INPUTS`) if given. Raises TrimError where the inverse did
+    (a circle's samples: :attr:`Solutions.inputs`) if given. Raises TrimError where the inverse did
     not converge."""
     T0, T0_dot = T, T_dot
     if model.thrust_modifiers:
-        cache = {} if key is None else _INPUTS.setdefault(model, {})
+        cache = {} if key is None else solutions(model).inputs
         if key not in cache:
             rates = (sdot, T_dot) if model.n_extra else None
             cache[key] = _inputs(model, s, T, alpha, rates, start)
@@ -566,7 +587,7 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
                 z, z_dot, u = _lagged(model, z, sdot, start, start_dot)
                 return z, z_dot, u, tension
         else:  # the thrusts sample by sample (cached per circle and samples)
-            cache = _SAMPLES.setdefault(model, {})
+            cache = solutions(model).samples
             if pkey not in cache:
                 cache[pkey] = _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, offsets=off)
             T = cache[pkey]

@@ -21,18 +21,15 @@ from ..rotations import (
 )
 from .fastplant import SUPPORTED_EFFECTS, fast_plant
 
-_FALLBACKS_SEEN: set[str] = set()
-
 
 def _warn_numpy_plant(cfg: Config) -> None:
-    """Say once per reason that the rigid-link plant runs on the numpy model (slower)."""
+    """Say that the rigid-link plant runs on the numpy model (slower), and why: once per
+    reason and caller, as Python's warning filters show a warning by default (a process
+    that flies many flights is told once, with no state kept here)."""
     missing = sorted(s.name for s in cfg.effects if s.name not in SUPPORTED_EFFECTS)
     why = (f"the compiled plant does not implement the effect(s) {', '.join(missing)}"
            if missing else "the compiled plant is not available (no C compiler, or "
            "GAINSCHED_NATIVE=0)")
-    if why in _FALLBACKS_SEEN:
-        return
-    _FALLBACKS_SEEN.add(why)
     warnings.warn(f"{why}: the simulation runs on the numpy model, about 0.3x real time "
                   f"instead of 80x (gainsched/sim/fastplant.py)", GainschedWarning,
                   stacklevel=3)

@@ -112,8 +112,6 @@ class SimResult:
     sensors: Sensors = Sensors()
 
 
-_FALLBACKS_SEEN: set[str] = set()
-
 def specific_force(p_I, q_IB, dt: float, g: float) -> np.ndarray:
     """What an accelerometer at the frame centre (the IMU, beside the markers; the COG
     unless ``[effects.cog_offset]`` moves it) senses, ``f_B = R_IB^T (a_I + g e_z)`` (N, 3)

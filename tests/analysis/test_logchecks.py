@@ -13,7 +13,6 @@ bags: tests/analysis/test_foreign.py reads its converted logs through the same c
 
 from __future__ import annotations
 
-import time
 import warnings
 
 import numpy as np
@@ -260,19 +259,6 @@ def test_campaigns_of_every_hidden_effect_pass(tmp_path, fly, paper_config, hidd
                                mass=paper_config.vehicle.mass, g=paper_config.g))
 
 
-def test_cheap_on_a_long_log(paper_config):
-    """Vectorised: ten minutes at 1 kHz in well under a second."""
-    log = read_log(FLIGHTS / "v9.csv")[0]
-    n = 600_000
-    k = np.arange(n) % len(log)  # the flight repeated (its jumps are gaps)
-    t = np.arange(n) * 1e-3
-    opt = {key: v[k] for key, v in log.optional.items()}
-    start = time.perf_counter()
-    check_log("long.csv", t, log.p_I[k], log.q[k], log.T_cmd[k], opt, log.meta,
-              config=paper_config, trust=CHECKS)
-    figures(t, log.p_I[k], log.q[k], log.T_cmd[k], opt, log.meta,
-            mass=paper_config.vehicle.mass)
-    assert time.perf_counter() - start < 5.0
 
 
 def test_threshold_is_far_from_the_mistakes():

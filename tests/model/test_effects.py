@@ -144,9 +144,6 @@ def test_registered_effect_refuses_a_clash():
 def test_simulator_says_once_when_the_compiled_plant_cannot_run_it(tmp_path):
     """thrust_azimuth (the empirical series) has no compiled form: one warning line, and
     the flight still flies."""
-    import gainsched.sim._plant as loop
-
-    loop._FALLBACKS_SEEN.clear()
     text = paper_config_text(**{"effects.thrust_azimuth.a1": -0.02})
     plant = tmp_path / "plant.toml"
     plant.write_text(text)

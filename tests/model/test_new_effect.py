@@ -120,7 +120,7 @@ def test_new_effect_is_flown_compared_and_diagnosed():
         scns = [Scenario(f"v{v:g}", 0.0, v, 2.0, (), sensing=sens) for v in (4.0, 9.0)]
         sched = table_scheduler(load_table(PAPER_H5))
         with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
+            warnings.simplefilter("default")  # Python's own: once per caller and text
             logs = fly(design, sched, scns, plant, custom=GroundEffect)
         assert sum("ground_effect" in str(w.message) for w in caught) == 1
         lib = candidate_library()

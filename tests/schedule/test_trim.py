@@ -129,7 +129,7 @@ def test_the_64_node_collocation_is_the_128_node_one(effect, values, monkeypatch
         got = {}
         for nodes in (64, 128):
             monkeypatch.setattr(trim, "N_FOURIER", nodes)
-            trim._forget(m)
+            m.memo.clear()
             got[nodes] = trim_path(m, path, a, periodic=True)
         np.testing.assert_allclose(got[64][2], got[128][2], rtol=0, atol=1e-9)
         np.testing.assert_allclose(got[64][0][:, 4], got[128][0][:, 4], rtol=0, atol=1e-10)
@@ -172,11 +172,12 @@ def test_a_speeds_tilts_solved_together_equal_each_alone(effect, values):
     path = circle_path(v, m.r, np.arange(1024) * (period(v, m.r) / 1024))
     alone = []
     for a in tilts:
-        trim._forget(m)
+        m.memo.clear()
         alone.append(trim_path(m, path, a, periodic=True))
-    trim._forget(m)
-    trim.solve_circles(m, path, tilts)
-    assert all(trim._circle_key(path, a) in trim._NODES[m] for a in tilts)
+    m.memo.clear()
+    kept = trim.solve_circles(m, path, tilts)
+    assert kept is trim.solutions(m)
+    assert all(trim._circle_key(path, a) in kept.nodes for a in tilts)
     for a, (z, _, u, tension) in zip(tilts, alone, strict=True):
         z_b, _, u_b, tension_b = trim_path(m, path, a, periodic=True)
         np.testing.assert_allclose(u_b, u, rtol=0, atol=1e-12)
@@ -235,7 +236,7 @@ def test_a_circle_the_interpolant_misses_is_solved_sample_by_sample(monkeypatch)
     path = circle_path(v, m.r, np.arange(n) * (period(v, m.r) / n))
     smooth = trim_path(m, path, a, periodic=True)
     assert not trim.is_rough(m, path, a)
-    trim._forget(m)
+    m.memo.clear()
     monkeypatch.setattr(trim, "POLISH_TOL", 0.0)
     calls = []
     solve = trim._solve_thrust
@@ -263,7 +264,7 @@ def test_a_smooth_circles_commands_are_the_modifiers_inverse(keys, monkeypatch):
     path = circle_path(v, m.r, np.arange(n) * (period(v, m.r) / n))
     assert not trim.is_rough(m, path, a)
     z, z_dot, u, _ = trim_path(m, path, a, periodic=True)
-    trim._forget(m)
+    m.memo.clear()
     monkeypatch.setattr(trim, "COMMAND_TOL", -1.0)  # every circle rough
     assert trim.is_rough(m, path, a)
     z_i, z_dot_i, u_i, _ = trim_path(m, path, a, periodic=True)
