@@ -6,8 +6,9 @@ new config do, repeated: each round diagnoses the current config on the flights,
 the accepted effect into it (:func:`~gainsched.analysis.diagnose.apply_candidate`, the
 config's ``name`` kept, so tables rebuilt from it keep their C symbols) and compares
 again. It stops when nothing is accepted, when an accepted fit no longer lowers the
-residual, or after ``rounds`` rounds. ``gainsched improve`` adds the rebuild of the
-tables, the standard flights flown on the improved model with the old and the new table
+residual, or after ``rounds`` rounds. ``gainsched improve`` and :func:`gainsched.improve`
+(:func:`gainsched.studies.improve`) add the rebuild of the tables, the standard flights
+flown on the improved model with the old and the new table
 (:func:`gainsched.sim.oldnew.fly_old_new`) and the report (:func:`write_improve`).
 """
 
@@ -114,7 +115,8 @@ def improve(config: Config, logs, *, rounds: int = 3, exclude=(), channel_map=No
     >>> cfg = gs.load_config("configs/paper.toml")
     >>> logs = ["examples/flights/v3.csv", "examples/flights/v9.csv",
     ...         "examples/flights/v15.csv"]
-    >>> imp = gs.improve(cfg, logs, rounds=1)
+    >>> from gainsched.analysis.improve import improve
+    >>> imp = improve(cfg, logs, rounds=1)
     >>> imp.applied, imp.config.name
     (['thrust_momentum + motor_lag'], 'paper')
     >>> imp.rounds[-1].rms < 0.5 * imp.rounds[0].rms
@@ -176,7 +178,7 @@ def write_improve(imp: Improvement, out_dir, flights=None, *,
     >>> import tempfile
     >>> cfg = gs.load_config("configs/paper.toml")
     >>> logs = ["examples/flights/v3.csv", "examples/flights/v9.csv"]
-    >>> imp = gs.improve(cfg, logs, rounds=1)
+    >>> imp = gs.improve(cfg, logs, rounds=1).improvement
     >>> [p.name for p in gs.write_improve(imp, tempfile.mkdtemp())]
     ['improve.json', 'improve.md', 'improve.png']
     """

@@ -17,6 +17,7 @@ import numpy as np
 from .. import __version__
 from ..constants import MAX_JOBS, MAX_SEED
 from ..errors import GainschedWarning, InputError
+from ..studies._report import Reporter
 
 
 def user_errors(fn):
@@ -203,6 +204,25 @@ def _note(text: str, bar=None) -> None:
         click.echo(text, err=True)
 
 
+class _Terminal(Reporter):
+    """The studies' reporter of the command line (:class:`gainsched.studies.Reporter`):
+    its progress lines (:func:`_progress`), its notes (:func:`_note`) and the result's
+    lines on stdout as they come."""
+
+    def bar(self, desc, total=None, unit="it", *, show=True):
+        return _progress(desc, total, unit, show=show)
+
+    def note(self, text, bar=None):
+        _note(text, bar)
+
+    def line(self, text):
+        click.echo(text)
+
+
+#: what a command gives the study it calls to show its progress
+TERMINAL = _Terminal()
+
+
 @contextlib.contextmanager
 def _fit_progress(desc: str):
     """A progress line of diagnose's fits (:func:`_progress`): yields the
@@ -313,31 +333,6 @@ _RUNTIME = click.option(
     help="Where the firmware's gains, feed-forward and (--controller firmware) whole "
     "control step come from: compiled C (c: the runtime and controller, in the loop), "
     "their Python reference (python), or C when a C compiler is found (auto).")
-
-
-_REPO = Path(__file__).resolve().parents[2]
-
-
-def _table_of(cfg):
-    """``(table, path)`` of a config when no table is given: the checkout's
-    ``tables/NAME.h5`` when it was built from this config, else the cached table
-    (:mod:`gainsched.schedule.cached`), built there on first use."""
-    from ..schedule.cached import cached_table, cached_table_path
-    from ..schedule.tables import load_table
-
-    local = _REPO / "tables" / f"{cfg.name}.h5"
-    if local.is_file():
-        table = load_table(local)
-        if table.built_from(cfg):
-            return table, local
-    path = cached_table_path(cfg)
-    total = None if cfg.grid.auto else cfg.grid.speeds.size
-    with _progress(f"build {cfg.name} (first use, kept in the cache)", total,
-                   "speed" if total else "circle", show=not path.is_file()) as bar:
-        table, built = cached_table(cfg, progress=bar.update)
-    if built:
-        _note(f"built {path}")
-    return table, path
 
 
 def _load_for_compare(config):

@@ -13,6 +13,7 @@ from ..errors import InputError
 from ._base import (
     CONFIG,
     SEED,
+    TERMINAL,
     FilePath,
     FiniteFloat,
     _cluster_options,
@@ -128,19 +129,6 @@ def nominal(config, speed, tilt, samples, csv_path):
         click.echo(f"wrote {csv_path}")
 
 
-def _build_names(cfg) -> list[str]:
-    """The files ``build`` writes into its folder (firmware.outputs.output_files)."""
-    from ..firmware.codegen import CONTROL_FILES, RUNTIME_FILES
-
-    return [f"{cfg.name}.h5", f"{cfg.name}_gains.h", f"{cfg.name}_control.h", *RUNTIME_FILES,
-            *CONTROL_FILES]
-
-
-def _nanmax(a) -> str:
-    a = np.asarray(a)
-    return f"{np.nanmax(a):.4f}" if np.any(np.isfinite(a)) else "n/a (no feasible circle)"
-
-
 @cli.command()
 @CONFIG
 @click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
@@ -151,77 +139,12 @@ def build(config, out_dir, jobs, backend, scheduler, connect_timeout):
     """Build the gain table OUT/NAME.h5 from CONFIG: nominal, linearisation and periodic
     LQR at every (speed m/s, tilt deg, azimuth) grid point. With --backend dask the
     speeds run on a Dask cluster; the table is byte-identical to the local build."""
-    from ..config import load_config
-    from ..publish import check_out_dir, recover
-    from ..schedule.distributed import check_options
+    from ..studies import build as run
 
-    check_options(backend, scheduler)
-    cfg = load_config(config)
-    check_out_dir(out_dir, names=_build_names(cfg))  # a bad -o fails now, not after the build
-    recover(out_dir)  # finish or clean up after a killed earlier run
-    _build_into(cfg, out_dir, jobs, backend, scheduler, connect_timeout)
-
-
-def _build_into(cfg, out_dir: Path, jobs, backend="local", scheduler=None,
-                connect_timeout=None, shown: Path | None = None) -> None:
-    """What ``build`` does once its arguments are checked: choose or solve the grid, write
-    the output set into ``out_dir`` and print the summary, naming ``shown`` for
-    ``out_dir`` (``improve`` builds into its stage and names its output folder)."""
-    import time
-
-    from ..publish import publish
-    from ..schedule.distributed import DEFAULT_CONNECT_TIMEOUT, executor
-
-    def name(p):
-        return p if shown is None else shown / Path(p).relative_to(out_dir)
-
-    t0 = time.perf_counter()
-    choice = None
-    # the progress line first: the solver's modules take a second or two to import
-    if cfg.grid.auto:  # the build chooses the breakpoints (docs/grid.md)
-        bar = _progress(f"choose the grid of {cfg.name}", unit="circle")
-    else:
-        bar = _progress(f"build {cfg.name}", cfg.grid.speeds.size, "speed")
-    with bar, executor(backend, scheduler, jobs, connect_timeout=DEFAULT_CONNECT_TIMEOUT
-                       if connect_timeout is None else connect_timeout) as ex:
-        from ..schedule.grid import build_grid
-        from ..schedule.refine import refine_grid
-
-        if backend == "dask":
-            _note(f"build {cfg.name} on {ex.description}", bar)
-        if cfg.grid.auto:
-            choice = refine_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update,
-                                 backend=ex.backend)
-            cfg, grid = choice.config, choice.grid
-        else:
-            grid = build_grid(cfg, n_jobs=ex.n_jobs, progress=bar.update, backend=ex.backend)
-    from ..firmware.outputs import certificate_lines, output_set
-    from ..schedule.grid import bound_price
-    n_v = cfg.grid.speeds.size
-    n_mid = max(n_v - 1, 1) if cfg.firmware.format == "compact" else 0
-    with _progress("certify compact table", n_mid, "speed", show=n_mid > 0) as bar:
-        outputs = output_set(cfg, grid, out_dir, progress=bar.update,
-                             grid_auto=None if choice is None else choice.record())
-    out, *c_paths = publish(out_dir, outputs.files)
-    n_pts = grid.reasons.size
-    feas = np.count_nonzero(grid.reasons == 0)
-    click.echo(
-        f"{name(out)}: {n_pts} points ({cfg.grid.tilts.size} tilts x {n_v} speeds x "
-        f"{cfg.grid.azimuth_samples} azimuths), {100 * feas / n_pts:.1f}% feasible, "
-        f"worst closed-loop spectral radius {_nanmax(grid.spectral_radius)}, "
-        f"{time.perf_counter() - t0:.1f} s, {out.stat().st_size / 1024:.0f} KiB"
-    )
-    if choice is not None:
-        for line in choice.lines():
-            click.echo("  " + line)
-    click.echo("  C: " + ", ".join(str(name(p)) for p in c_paths))
-    click.echo(f"  firmware table: {cfg.firmware.format}, {outputs.form.nbytes():,} bytes of data"
-               + (f" (dense: {outputs.form.base.nbytes():,})" if outputs.certificate else ""))
-    if outputs.certificate is not None:
-        for line in certificate_lines(cfg, outputs.certificate):
-            click.echo("  " + line)
-    if cfg.control.max_time_constant_s is not None:
-        click.echo("  " + bound_price(cfg.control.max_time_constant_s, grid))
+    done = run(config, out_dir, jobs=jobs, backend=backend, scheduler=scheduler,
+               connect_timeout=connect_timeout, reporter=TERMINAL)
+    for line in done.lines():
+        click.echo(line)
 
 
 @cli.command()

@@ -14,12 +14,12 @@ from ._base import (
     CONFIG,
     MAX_SPEED,
     SEED,
+    TERMINAL,
     FilePath,
     FiniteFloat,
     Name,
     _load_for_compare,
     _progress,
-    _table_of,
     cli,
     user_errors,
 )
@@ -111,9 +111,9 @@ def _left_the_table(m: dict, table_path) -> list[str]:
               default="paper", show_default="paper, the shipped configs/paper.toml",
               help="Design config (the paper vehicle).")
 @click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
-              help="Gain table built from the config [default: the checkout's "
-              "tables/NAME.h5 when it is the config's, else the config's table from the cache, "
-              "built there on first use].")
+              help="Gain table built from the config [default: tables/NAME.h5 in the "
+              "working folder when it is the config's, else the config's table from the "
+              "cache, built there on first use].")
 @click.option("--plant", "plant_path", type=FilePath(dir_okay=False, path_type=Path),
               help="Truth config for the plant (default: the design config).")
 @click.option("--quick", is_flag=True, help="Short smoke flights (for tests; seconds).")
@@ -127,13 +127,14 @@ def paper(out_dir, config, table_path, plant_path, quick, runtime):
     from ..schedule.tables import load_table
     from ..sim.loop import runtime_scheduler
     from ..sim.paper import experiments, run_paper
+    from ..studies import table_for
 
     cfg = load_config(config)
     plant = load_config(plant_path) if plant_path else None
     # before a first use builds the table (half a minute)
     check_out_dir(out_dir, names=["report.md", "report.json"])
     if table_path is None:
-        table, table_path = _table_of(cfg)
+        table, table_path = table_for(cfg, reporter=TERMINAL)
     else:
         table = load_table(table_path)
     if not table.built_from(cfg):

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import shutil
 import sys
 from pathlib import Path
 
@@ -14,6 +12,7 @@ from ..constants import MAX_FLIGHT_S, MAX_JOBS
 from ..errors import InputError
 from ._base import (
     CONFIG,
+    TERMINAL,
     FilePath,
     FiniteFloat,
     Jobs,
@@ -26,11 +25,9 @@ from ._base import (
     _outputs_apart,
     _progress,
     _same_file,
-    _table_of,
     cli,
     user_errors,
 )
-from ._build import _build_into
 
 _LOGS = click.argument("logs", nargs=-1, required=True,
                        type=FilePath(exists=True, path_type=Path))
@@ -234,9 +231,9 @@ def diagnose(config, logs, candidates, exclude, joint, no_sensors, do_apply, new
 @click.option("--no-build", is_flag=True,
               help="Write the config and the report only (no tables, no flights).")
 @click.option("--tables", "table_path", type=FilePath(dir_okay=False, path_type=Path),
-              help="The old table, built from CONFIG, for the flights [default: the "
-              "checkout's tables/NAME.h5 when it is CONFIG's, else CONFIG's table from the "
-              "cache, built there on first use].")
+              help="The old table, built from CONFIG, for the flights [default: "
+              "tables/NAME.h5 in the working folder when it is CONFIG's, else CONFIG's table "
+              "from the cache, built there on first use].")
 @click.option("--duration", type=FiniteFloat(1.0, MAX_FLIGHT_S, unit="s"), default=3.0,
               show_default=True, help=f"Seconds per standard flight (1..{MAX_FLIGHT_S:g}).")
 @click.option("-j", "--jobs", type=Jobs(), default=-1, show_default=True,
@@ -255,10 +252,8 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
     tracking old against new. Each step is what compare, diagnose --apply, build and
     simulate do."""
 
-    from ..analysis.improve import improve as run
-    from ..analysis.improve import write_improve
-    from ..config import config_from_text
-    from ..publish import check_out_dir, staged
+    from ..publish import check_out_dir
+    from ..studies import improve as run
 
     _check_fit_arguments("improve", logs, (), exclude)
     if no_build and table_path is not None:
@@ -270,123 +265,14 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
     # the improved config and the rebuilt table replace files of these names in DIR
     _not_an_input(out_dir / f"{cfg.name}.toml", "-o", CONFIG=config, LOG=list(logs))
     _not_an_input(out_dir / "tables" / f"{cfg.name}.h5", "-o", **{"--tables": table_path})
-    old_table = None
-    if table_path is not None:
-        from ..schedule.tables import load_table
-
-        old_table = load_table(table_path)
-        if not old_table.built_from(cfg):
-            raise InputError(table_path, "", f"was built from another config than {config}: "
-                             "the old table of the flights must be CONFIG's")
-    with _fit_progress("improve") as fitted, _step("compare and diagnose",
-                                                   user_errors=False) as step:
-        imp = run(cfg, logs, rounds=rounds, exclude=exclude, channel_map=cmap, trust=trust,
-                  progress=fitted, sensors=not no_sensors)
-    if step.why:  # nothing done before it: nothing to keep
-        step.exit()
-    for k, r in enumerate(imp.rounds):
-        verdict = "" if r.diagnosis is None else f": {r.diagnosis.verdict}"
-        click.echo(f"round {k}: normalised RMS {r.rms:.3g}{verdict}")
-    new = imp.config
-    flights = None
-    failed = None  # the _Step that could not be done: what was done before it is kept
-    with staged(out_dir) as stage:
-        path = stage / f"{new.name}.toml"
-        path.write_text(new.text)
-        report = stage / "report"
-        report.mkdir()
-        refusal = None
-        # nothing applied: the tables would be CONFIG's own, and the flights old = new
-        unchanged = not imp.applied
-        if not no_build and not unchanged:
-            from ..schedule.grid import check_effect_symmetries
-
-            try:
-                check_effect_symmetries(config_from_text(new.text, str(path)))
-            except InputError as held:
-                refusal = f"no table can hold {held.where}: {held.message}"
-            else:  # what build does; its lines name the output folder, not the stage
-                (stage / "tables").mkdir()
-                with _step("rebuild the tables", stage / "tables") as step:
-                    _build_into(config_from_text(new.text, str(out_dir / path.name)),
-                                stage / "tables", jobs, shown=out_dir / "tables")
-                failed = step if step.why else None
-            if refusal is None and failed is None:
-                # the standard flights on the improved model, old table and new (simulate's)
-                with _step("fly the old and the new tables") as step:
-                    flights = _fly_old_new(cfg, old_table, table_path, new, stage, out_dir,
-                                           duration)
-                failed = step if step.why else None
-        not_flown = ("--no-build" if no_build else
-                     "nothing was applied: the tables are CONFIG's own" if unchanged else
-                     refusal and f"the tables were not rebuilt: {refusal}" or
-                     failed and f"the step '{failed.name}' failed: {failed.why}")
-        write_improve(imp, report, flights, not_flown=not_flown)
-    if flights is not None:
-        for line in flights.lines():
-            click.echo(line)
-    applied = ", ".join(imp.applied) or "nothing"
-    kept = "" if no_build or unchanged or refusal or (failed and failed.undo) else ", tables/"
-    click.echo(f"{out_dir}: {new.name}.toml ({applied} applied), report/{kept}"
-               + (f"; tables not rebuilt: {refusal}" if refusal else
-                  "; nothing applied, so no tables rebuilt and no flights flown"
-                  if unchanged and not no_build else ""))
-    if failed is not None:
-        failed.exit(f"what was done before it is in {out_dir}")
-
-
-class _Step:
-    """One step of ``improve`` (:func:`_step`): its ``name``, the folder it writes
-    (``undo``, removed when it fails) and ``why`` it failed, in one line (None: it did
-    not)."""
-
-    def __init__(self, name: str, undo: Path | None):
-        self.name, self.undo, self.why = name, undo, None
-
-    def exit(self, kept: str = "") -> None:
-        """Say in one line that the step failed and why (and what was ``kept``), then end
-        the command with exit code 1."""
-        click.echo(f"gainsched: error: improve: the step '{self.name}' failed: {self.why}"
-                   + (f" ({kept})" if kept else ""), err=True)
+    done = run(cfg, logs, out_dir, rounds=rounds, exclude=exclude, build=not no_build,
+               old_table=table_path, duration=duration, jobs=jobs, channel_map=cmap,
+               trust=trust, sensors=not no_sensors, reporter=TERMINAL)
+    if done.failed is not None:  # the study kept what was done before it
+        kept = "" if done.out_dir is None else f" (what was done before it is in {out_dir})"
+        click.echo(f"gainsched: error: improve: the step '{done.failed.name}' failed: "
+                   f"{done.failed.why}{kept}", err=True)
         sys.exit(1)
-
-
-@contextlib.contextmanager
-def _step(name: str, undo: Path | None = None, user_errors: bool = True):
-    """Run one step of ``improve`` whose failure must not lose the steps before it: an
-    error (a bound of the config not met, or any fault of the step) is caught and
-    said in one line (:attr:`_Step.why`, with the exception's type when it is not a user
-    error), and ``undo`` (a folder the step was writing) removed; Ctrl-C still stops the
-    whole command. ``user_errors=False``: an InputError (a bad log) passes through, to
-    the command's one line and exit code 2."""
-    step = _Step(name, undo)
-    try:
-        yield step
-    except Exception as exc:  # noqa: BLE001 - every fault of the step becomes its one line
-        if isinstance(exc, InputError) and not user_errors:
-            raise
-        text = " ".join(str(exc).split()) or "no message"
-        step.why = text if isinstance(exc, InputError) else f"{type(exc).__name__}: {text}"
-        if undo is not None:
-            shutil.rmtree(undo, ignore_errors=True)
-
-
-def _fly_old_new(cfg, old_table, table_path, new, stage, out_dir, duration):
-    """The standard flights on the improved config ``new`` with CONFIG's table (given, or
-    as ``paper`` finds it) and the one rebuilt into ``stage/tables``."""
-    from ..schedule.tables import load_table
-    from ..sim.oldnew import N_FLIGHTS, fly_old_new
-
-    if old_table is None:  # CONFIG's, as paper finds it
-        old_table, table_path = _table_of(cfg)
-    new_table = load_table(stage / "tables" / f"{new.name}.h5")
-    meta = {"old_table": str(table_path),
-            "old_table_config_sha256": old_table.config_sha256,
-            "new_table": str(out_dir / "tables" / f"{new.name}.h5"),
-            "new_table_config_sha256": new_table.config_sha256}
-    with _progress("fly old and new tables", 2 * N_FLIGHTS, "flight") as bar:
-        return fly_old_new(cfg, old_table, new, new_table, duration=duration,
-                           progress=bar.update, meta=meta)
 
 
 @cli.command()

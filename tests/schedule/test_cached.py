@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import shutil
 
-from gainsched import cli
 from gainsched.config import load_config
 from gainsched.model.reduced import Model
 from gainsched.schedule.cached import cached_table, cached_table_path
@@ -45,16 +44,21 @@ def test_a_damaged_cached_table_is_built_again(tmp_path, monkeypatch):
     assert built and path.read_bytes() == good
 
 
-def test_paper_command_prefers_the_checkouts_table_then_the_cache(tmp_path, monkeypatch):
-    """``gainsched paper`` without --tables: tables/paper.h5 of the checkout when it was
-    built from the config; without a checkout (an installed package), the cache's."""
+def test_paper_command_prefers_the_working_folders_table_then_the_cache(tmp_path,
+                                                                       monkeypatch):
+    """``gainsched paper`` without --tables (:func:`gainsched.studies.table_for`):
+    tables/paper.h5 of the working folder (the checkout's, here) when it was built from
+    the config; elsewhere (an installed package), the cache's."""
+    from gainsched.studies import table_for
+
     monkeypatch.setenv("GAINSCHED_CACHE", str(tmp_path / "cache"))
     paper = load_config("paper")
-    table, path = cli._base._table_of(paper)
-    assert path == PAPER_H5 and table.config_sha256 == paper.sha256
-    monkeypatch.setattr(cli._base, "_REPO", tmp_path / "no-checkout")
+    monkeypatch.chdir(PAPER_H5.parents[1])
+    table, path = table_for(paper)
+    assert path.resolve() == PAPER_H5 and table.config_sha256 == paper.sha256
+    monkeypatch.chdir(tmp_path)
     seeded = cached_table_path(paper)
     seeded.parent.mkdir(parents=True)
     shutil.copyfile(PAPER_H5, seeded)  # as a first use would have left it
-    table, path = cli._base._table_of(paper)
+    table, path = table_for(paper)
     assert path == seeded and table.config_sha256 == paper.sha256

@@ -240,12 +240,11 @@ def test_paper_quick_report(tmp_path, monkeypatch):
     cache (seeded with the committed table, as a first use would have left it)."""
     import shutil
 
-    from gainsched import cli as cli_module
     from gainsched.config import load_config
     from gainsched.schedule.cached import cached_table_path
 
     monkeypatch.setenv("GAINSCHED_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(cli_module._base, "_REPO", tmp_path / "no-checkout")
+    monkeypatch.chdir(tmp_path)  # no tables/ here
     seeded = cached_table_path(load_config("paper"))
     seeded.parent.mkdir(parents=True)
     shutil.copyfile(PAPER_H5, seeded)

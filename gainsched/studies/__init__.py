@@ -1,0 +1,41 @@
+"""The workflows of the command line as functions a script calls (docs/architecture.md).
+
+A study does one whole job of a ``gainsched`` command: it takes what the command's
+options say, checks its inputs before any work, publishes its output set at once, shows
+its progress through a :class:`Reporter` (none by default) and returns a named result
+whose ``lines()`` are what the command prints. The command line only parses, calls one
+study and prints (gainsched/cli), so a script gets the same results and files.
+
+- :func:`build`: a config's gain table and C files (``gainsched build``);
+- :func:`improve`: the model loop, the rebuild and the flights old against new
+  (``gainsched improve``);
+- :func:`table_for`: the table a config flies when none is given.
+
+The names are imported on first use (PEP 562, as the package root does): a command
+starts without the modules of the studies it does not run.
+"""
+
+from importlib import import_module
+
+#: name -> its private module: the one list of the studies' public names
+_MODULE_OF = {
+    "Build": "_build", "build": "_build", "build_into": "_build", "output_names": "_build",
+    "Reporter": "_report", "SILENT": "_report",
+    "table_for": "_tables",
+    "improve": "_improve", "Improved": "_improve", "StepFailure": "_improve",
+}
+
+__all__ = list(_MODULE_OF)
+
+
+def __getattr__(name: str):
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -1,0 +1,130 @@
+"""The workflow layer (:mod:`gainsched.studies`, issue 54): what a command does, a script
+does with the same function and gets the same files and lines."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+import gainsched as gs
+from gainsched.cli import cli
+from gainsched.errors import InputError
+from gainsched.studies import Reporter, build, output_names, table_for
+
+from support import REPO, small_config_text
+
+
+class _Recording(Reporter):
+    """A reporter that keeps what it was told: the bars' names, totals and counts, and
+    the notes."""
+
+    def __init__(self):
+        self.bars, self.notes = [], []
+
+    def bar(self, desc, total=None, unit="it", *, show=True):
+        rec = self.bars
+        rec.append([desc, total, 0])
+
+        class Bar:
+            def __enter__(self):
+                return self
+
+            def __exit__(self, *exc):
+                return False
+
+            def update(self, n=1):
+                rec[-1][2] += n
+
+            def set_postfix_str(self, text, refresh=True):
+                pass
+
+        return Bar()
+
+    def note(self, text, bar=None):
+        self.notes.append(text)
+
+
+def test_build_in_python_is_the_command(tmp_path, monkeypatch):
+    """``gs.build(config, out)`` publishes the bytes ``gainsched build CONFIG -o OUT``
+    does (every file of the set) and its ``lines()`` are what the command prints but the
+    build's seconds; its reporter counted every speed of the grid."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "small.toml").write_text(small_config_text())
+    res = CliRunner().invoke(cli, ["build", "small.toml", "-o", "cli"])
+    assert res.exit_code == 0, res.output
+    rec = _Recording()
+    done = gs.build("small.toml", "lib", jobs=1, reporter=rec)
+    names = output_names(done.config)
+    assert sorted(p.name for p in (tmp_path / "cli").iterdir()) == sorted(names)
+    for name in names:
+        assert (tmp_path / "lib" / name).read_bytes() == (tmp_path / "cli" / name).read_bytes()
+    assert [done.table, *done.c_files] == [Path("lib") / n for n in
+                                           done.outputs.files]
+    def timeless(lines):  # the build's seconds differ from run to run
+        return [re.sub(r", [0-9.]+ s, ", ", _ s, ", ln) for ln in lines]
+
+    assert timeless(done.lines(shown=Path("cli"))) == timeless(res.output.splitlines())
+    assert rec.bars[0][:2] == ["build small", 2] and rec.bars[0][2] == 2
+
+
+def test_build_refuses_before_any_work(tmp_path):
+    """A bad output folder is refused naming it, before the grid is solved (nothing
+    written, no bar started)."""
+    (tmp_path / "small.toml").write_text(small_config_text())
+    (tmp_path / "file").write_text("not a folder")
+    rec = _Recording()
+    with pytest.raises(InputError, match="-o"):
+        build(tmp_path / "small.toml", tmp_path / "file", reporter=rec)
+    assert rec.bars == []
+
+
+def test_the_table_of_a_config_is_the_working_folders_when_built_from_it(tmp_path,
+                                                                       monkeypatch):
+    """table_for: ``tables/NAME.h5`` of the working folder when built from the config;
+    another config's table there is not taken (the cache's is built instead, noted)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "small.toml").write_text(small_config_text())
+    cfg = gs.load_config("small.toml")
+    gs.build(cfg, "tables", jobs=1)
+    table, path = table_for(cfg)
+    assert str(path) == "tables/small.h5" and table.built_from(cfg)
+    other = gs.load_config("small.toml").with_values({"vehicle.mass": 0.52})
+    monkeypatch.setenv("GAINSCHED_CACHE", str(tmp_path / "cache"))
+    rec = _Recording()
+    table2, path2 = table_for(other, reporter=rec)
+    assert table2.built_from(other) and path2.is_relative_to(tmp_path / "cache")
+    assert rec.notes == [f"built {path2}"]
+
+
+@pytest.mark.slow
+def test_improve_in_python_is_the_command(tmp_path, monkeypatch):
+    """``gs.improve(config, logs, out)`` (issue 54's must-show): the same improved config,
+    rebuilt table bytes, report figures (the rounds and the flights old against new) and
+    printed lines as ``gainsched improve CONFIG LOGS -o OUT`` (the small grid on the example
+    flights, one round)."""
+    import json
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "small.toml").write_text(small_config_text())
+    logs = [str(p) for p in sorted((REPO / "examples" / "flights").glob("*.csv"))]
+    assert CliRunner().invoke(cli, ["build", "small.toml", "-o", "old"]).exit_code == 0
+    res = CliRunner().invoke(cli, ["improve", "small.toml", *logs, "-o", "cli", "--rounds",
+                                   "1", "--tables", "old/small.h5"])
+    assert res.exit_code == 0, res.output
+    done = gs.improve("small.toml", logs, "lib", rounds=1, old_table="old/small.h5")
+    assert done.applied and done.failed is None and done.build is not None
+    for f in ("small.toml", "tables/small.h5", "tables/small_gains.h"):
+        assert (tmp_path / "lib" / f).read_bytes() == (tmp_path / "cli" / f).read_bytes(), f
+    lib, cli_ = (json.loads((tmp_path / d / "report" / "improve.json").read_text())
+                 for d in ("lib", "cli"))
+    assert lib["rounds"] == cli_["rounds"]
+    assert lib["flights"]["summary"] == cli_["flights"]["summary"]
+    assert lib["flights"]["flights"] == cli_["flights"]["flights"]
+
+    def same(lines, folder):  # the folders' names and the build's seconds aside
+        return [re.sub(r", [0-9.]+ s, ", ", _ s, ", ln).replace(folder, "OUT") for ln in lines]
+
+    assert same(done.lines(), "lib") == same(res.output.splitlines(), "cli")
