@@ -128,3 +128,36 @@ def test_improve_in_python_is_the_command(tmp_path, monkeypatch):
         return [re.sub(r", [0-9.]+ s, ", ", _ s, ", ln).replace(folder, "OUT") for ln in lines]
 
     assert same(done.lines(), "lib") == same(res.output.splitlines(), "cli")
+
+
+def test_sweep_and_campaign_in_python_are_the_commands(tmp_path, monkeypatch):
+    """``gs.sweep`` writes the variants' files and results ``gainsched sweep`` writes (the
+    tables' bytes, sweep.csv), ``gs.campaign`` the logs ``gainsched campaign`` writes,
+    byte for byte; each prints its ``lines()`` (the sweep's seconds aside)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "small.toml").write_text(small_config_text())
+    run = CliRunner().invoke
+    res = run(cli, ["sweep", "small.toml", "--vary", "vehicle.mass=0.45,0.55", "-o", "s_cli",
+                    "-j", "1"])
+    assert res.exit_code == 0, res.output
+    done = gs.sweep("small.toml", "s_lib", vary=["vehicle.mass=0.45,0.55"], jobs=1)
+    files = sorted(p.name for p in (tmp_path / "s_cli").iterdir())
+    assert files == sorted(p.name for p in (tmp_path / "s_lib").iterdir()) and len(files) == 6
+    for f in files:
+        if f != "sweep.json":  # it says where and when
+            assert (tmp_path / "s_lib" / f).read_bytes() == (tmp_path / "s_cli" / f).read_bytes()
+    assert [re.sub(r"[0-9.]+ s$", "", ln) for ln in done.lines()] == \
+        [re.sub(r"[0-9.]+ s$", "", ln.replace("s_cli", "s_lib")) for ln in res.output.splitlines()]
+
+    table = tmp_path / "s_lib" / f"{done.plan.variants[0].name}.h5"
+    cfg = tmp_path / "s_lib" / f"{done.plan.variants[0].name}.toml"
+    res = run(cli, ["campaign", str(cfg), "--tables", str(table), "--duration", "1",
+                    "--hidden", "motor_lag", "-o", "c_cli"])
+    assert res.exit_code == 0, res.output
+    flown = gs.campaign(cfg, table, "c_lib", hidden="motor_lag", duration=1.0)
+    assert sorted(p.name for p in flown.files) == sorted(
+        p.name for p in (tmp_path / "c_cli").iterdir())
+    for p in flown.files:
+        assert p.read_bytes() == (tmp_path / "c_cli" / p.name).read_bytes(), p.name
+    assert flown.lines() == [ln.replace("c_cli", "c_lib") for ln in res.output.splitlines()
+                             if not ln.startswith("gainsched: warning")]

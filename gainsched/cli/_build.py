@@ -18,8 +18,6 @@ from ._base import (
     FiniteFloat,
     _cluster_options,
     _not_an_input,
-    _note,
-    _progress,
     _speed_option,
     cli,
     user_errors,
@@ -170,31 +168,10 @@ def sweep(config, vary, monte_carlo, seed, sigma, out_dir, jobs, backend, schedu
     """Build a gain table per vehicle variant (--vary) or Monte Carlo sample (--monte-carlo,
     --sigma) of CONFIG, and a results table: feasible %, worst monodromy spectral radius,
     max |K|, min tension margin (N) and table SHA-256 per variant."""
-    import time
+    from ..studies import sweep as run
 
-    from ..config import load_config
-    from ..publish import check_out_dir, staged
-    from ..schedule.distributed import check_options, executor
-    from ..schedule.sweep import format_rows, make_sweep, parse_sigma, parse_vary, run_sweep
-
-    check_options(backend, scheduler)
-    base = load_config(config)
-    plan = make_sweep(base, [parse_vary(v) for v in vary], monte_carlo=monte_carlo, seed=seed,
-                      sigma=[parse_sigma(s) for s in sigma])
-    # once every option passed: a refused sweep creates nothing
-    check_out_dir(out_dir, names=["sweep.csv", "sweep.json"])
-    t0 = time.perf_counter()
-    # a grid the build chooses counts circles, of a number known only at the end
-    total = None if base.grid.auto else len(plan.variants) * base.grid.speeds.size
-    with executor(backend, scheduler, jobs, connect_timeout=connect_timeout) as ex:
-        if backend == "dask":
-            _note(f"sweep {base.name} on {ex.description}")
-        with _progress(f"sweep {base.name} ({len(plan.variants)} variants)", total,
-                       "circle" if total is None else "speed") as bar:
-            with staged(out_dir) as stage:  # every variant appears at once, or none
-                rows = run_sweep(plan, stage, n_jobs=ex.n_jobs, backend=ex.backend,
-                                 progress=bar.update)
-    for line in format_rows(plan, rows):
+    done = run(config, out_dir, vary=vary, monte_carlo=monte_carlo, seed=seed, sigma=sigma,
+               jobs=jobs, backend=backend, scheduler=scheduler,
+               connect_timeout=connect_timeout, reporter=TERMINAL)
+    for line in done.lines():
         click.echo(line)
-    click.echo(f"{out_dir}: {len(rows)} variants ({len(rows)} tables + configs), sweep.csv, "
-               f"sweep.json; {time.perf_counter() - t0:.1f} s")

@@ -5,10 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
-import numpy as np
 
 from ..constants import MAX_FLIGHT_S
-from ..errors import InputError
 from ._base import (
     _RUNTIME,
     CONFIG,
@@ -18,7 +16,6 @@ from ._base import (
     FilePath,
     FiniteFloat,
     Name,
-    _load_for_compare,
     _progress,
     cli,
     user_errors,
@@ -122,33 +119,12 @@ def _left_the_table(m: dict, table_path) -> list[str]:
 def paper(out_dir, config, table_path, plant_path, quick, runtime):
     """Fly the paper's experiments (Sec. V.B, Figs. 3-4) in simulation and write a report:
     paper figure, paper value, simulated value."""
-    from ..config import load_config
-    from ..publish import check_out_dir, staged
-    from ..schedule.tables import load_table
-    from ..sim.loop import runtime_scheduler
-    from ..sim.paper import experiments, run_paper
-    from ..studies import table_for
+    from ..studies import paper as run
 
-    cfg = load_config(config)
-    plant = load_config(plant_path) if plant_path else None
-    # before a first use builds the table (half a minute)
-    check_out_dir(out_dir, names=["report.md", "report.json"])
-    if table_path is None:
-        table, table_path = table_for(cfg, reporter=TERMINAL)
-    else:
-        table = load_table(table_path)
-    if not table.built_from(cfg):
-        click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
-    n = len(experiments(quick=quick))
-    meta = {"table": str(table_path), "table_config_sha256": table.config_sha256}
-    with _progress("paper", n, "flight") as bar, \
-            staged(out_dir) as stage:
-        rep = run_paper(cfg, runtime_scheduler(table, runtime), stage, quick=quick, plant=plant,
-                        progress=bar.update, meta=meta, table=table)
-    for r in rep.rows:
-        mark = {True: "ok ", False: "NO ", None: "-  "}[r.agrees]
-        click.echo(f"{mark} {r.figure:16s} {r.quantity}: paper {r.paper}; sim {r.simulated_text}")
-    click.echo(f"wrote {out_dir / 'report.md'} and {out_dir / 'report.json'}")
+    done = run(out_dir, config, table=table_path, plant=plant_path, quick=quick,
+               runtime=runtime, reporter=TERMINAL)
+    for line in done.lines():
+        click.echo(line)
 
 
 class _HiddenOption(click.Option):
@@ -186,33 +162,10 @@ def campaign(config, table_path, hidden, duration, no_load_cell, real_tether, fm
              out_dir):
     """Fly a synthetic test campaign (speeds 3-15 m/s, tilts 0/20/40 deg, a speed-up, a
     braking; motion-capture noise) on a plant with a HIDDEN effect and write the logs."""
-    from ..publish import check_out_dir, staged
-    from ..schedule.tables import load_table
-    from ..sim.campaign import HIDDEN, default_flights, outside_table, write_campaign
-    from ..sim.campaign import campaign as fly
-    from ..sim.loop import check_flight_steps, table_scheduler
+    from ..studies import campaign as run
 
-    if hidden not in HIDDEN:
-        known = ", ".join(HIDDEN)
-        raise InputError("command line", "--hidden",
-                         f"unknown hidden effect {hidden!r} (known: {known})")
-    cfg = _load_for_compare(config)
-    check_flight_steps(duration, cfg.control.rate_hz, "command line", "--duration")
-    table = load_table(table_path)
-    check_out_dir(out_dir)
-    if not table.built_from(cfg):  # as simulate and paper say it, before the work
-        click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
-    flights = default_flights(duration, seed)
-    if outside := outside_table(flights, table):
-        click.echo(f"gainsched: warning: {table_path} covers speeds "
-                   f"{table.speed.min():.3g}-{table.speed.max():.3g} m/s, tilts up to "
-                   f"{np.rad2deg(table.tilt.max()):.0f} deg: {', '.join(outside)} fly outside "
-                   "it, on the gains of its nearest circle", err=True)
-    with _progress(f"campaign {hidden}", len(flights), "flight") as bar:
-        logs = fly(cfg, table_scheduler(table), hidden, scenarios=flights, duration=duration,
-                   load_cell=not no_load_cell, seed=seed, real_tether=real_tether,
-                   progress=bar.update)
-    with staged(out_dir) as stage:
-        paths = write_campaign(stage, logs, fmt)
-    click.echo(f"{out_dir}: {len(paths)} flights, hidden effect: {HIDDEN[hidden].doc}"
-               + ("; on a real (elastic) tether" if real_tether else ""))
+    done = run(config, table_path, out_dir, hidden=hidden, duration=duration,
+               load_cell=not no_load_cell, real_tether=real_tether, fmt=fmt, seed=seed,
+               reporter=TERMINAL)
+    for line in done.lines():
+        click.echo(line)

@@ -7,6 +7,9 @@ whose ``lines()`` are what the command prints. The command line only parses, cal
 study and prints (gainsched/cli), so a script gets the same results and files.
 
 - :func:`build`: a config's gain table and C files (``gainsched build``);
+- :func:`sweep`: a table per vehicle variant and a results table (``gainsched sweep``);
+- :func:`paper`: the paper's experiments flown and their report (``gainsched paper``);
+- :func:`campaign`: a synthetic test campaign's logs (``gainsched campaign``);
 - :func:`improve`: the model loop, the rebuild and the flights old against new
   (``gainsched improve``);
 - :func:`table_for`: the table a config flies when none is given.
@@ -23,6 +26,9 @@ _MODULE_OF = {
     "Reporter": "_report", "SILENT": "_report",
     "table_for": "_tables",
     "improve": "_improve", "Improved": "_improve", "StepFailure": "_improve",
+    "paper": "_flights", "PaperRun": "_flights", "campaign": "_flights",
+    "CampaignRun": "_flights",
+    "sweep": "_sweep", "SweepRun": "_sweep",
 }
 
 __all__ = list(_MODULE_OF)

@@ -1,0 +1,236 @@
+"""Flights in simulation written as a lab would keep them: the paper's experiments with
+their report (``gainsched paper``) and a synthetic test campaign's logs (``gainsched
+campaign``)."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..config import Config, load_config
+from ..errors import GainschedWarning, InputError
+from ._report import SILENT, Reporter
+from ._tables import table_for
+
+__all__ = ["PaperRun", "paper", "CampaignRun", "campaign"]
+
+
+def _config(config) -> Config:
+    return config if isinstance(config, Config) else load_config(config)
+
+
+def _table(table):
+    """``(Table, path)`` of a table or its file (path None for a table in memory)."""
+    from ..schedule.tables import load_table
+
+    if hasattr(table, "built_from"):
+        return table, Path(table.source)
+    return load_table(table), Path(table)
+
+
+def _other_config(path, table, cfg: Config) -> None:
+    """Warn, once every input passed, that ``table`` (at ``path``) was built from another
+    config than ``cfg``: its flights test gains of another model."""
+    if not table.built_from(cfg):
+        warnings.warn(f"{path} was built from another config", GainschedWarning, stacklevel=3)
+
+
+@dataclass(frozen=True, eq=False)
+class PaperRun:
+    """What :func:`paper` flew and wrote.
+
+    Attributes
+    ----------
+    report : PaperReport
+        The rows (paper figure, quantity, paper value, simulated value) and the
+        experiments' results (:func:`gainsched.sim.paper.run_paper`).
+    out_dir : Path
+        The folder of ``report.md``, ``report.json`` and one folder per experiment.
+    table : Path
+        The table flown.
+    """
+
+    report: object
+    out_dir: Path
+    table: Path
+
+    def lines(self) -> list[str]:
+        """What ``gainsched paper`` prints: a line per paper claim (ok, NO, or - for none
+        to judge) and the report's files."""
+        mark = {True: "ok ", False: "NO ", None: "-  "}
+        out = [f"{mark[r.agrees]} {r.figure:16s} {r.quantity}: paper {r.paper}; sim "
+               f"{r.simulated_text}" for r in self.report.rows]
+        return out + [f"wrote {self.out_dir / 'report.md'} and {self.out_dir / 'report.json'}"]
+
+
+def paper(out_dir, config="paper", *, table=None, plant=None, quick: bool = False,
+          runtime: str = "auto", reporter: Reporter = SILENT) -> PaperRun:
+    """Fly the paper's experiments (Sec. V.B, Figs. 3-4) in simulation and write the
+    report: what ``gainsched paper -o OUT_DIR`` does.
+
+    Parameters
+    ----------
+    out_dir : path-like
+        The output folder: ``report.md``, ``report.json``, one folder per experiment.
+    config : Config or path-like, default "paper"
+        The design config (the shipped paper config by default).
+    table : Table or path-like, optional
+        The table built from ``config``; default: as :func:`table_for` finds it (built
+        into the cache on first use).
+    plant : Config or path-like, optional
+        The truth flown (default: the design config).
+    quick : bool, default False
+        Short smoke flights (seconds).
+    runtime : {"auto", "c", "python"}
+        The gain lookup: the compiled C runtime or its Python reference (auto: C when a
+        compiler is found).
+    reporter : Reporter, optional
+        Shows the flights' progress; default: nothing.
+
+    Returns
+    -------
+    PaperRun
+        The report and :meth:`PaperRun.lines`, what the command prints.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> run = gs.paper(tempfile.mkdtemp(), quick=True)  # the paper table of ./tables
+    >>> str(run.table), sorted(p.name for p in run.out_dir.glob("report.*"))
+    ('tables/paper.h5', ['report.json', 'report.md'])
+    >>> run.lines()[-1].startswith("wrote ")
+    True
+    """
+    from ..publish import check_out_dir, staged
+    from ..sim.loop import runtime_scheduler
+    from ..sim.paper import experiments, run_paper
+
+    cfg = _config(config)
+    truth = None if plant is None else _config(plant)
+    out_dir = Path(out_dir)
+    # before a first use builds the table (half a minute)
+    check_out_dir(out_dir, names=["report.md", "report.json"])
+    tab, path = table_for(cfg, reporter=reporter) if table is None else _table(table)
+    _other_config(path, tab, cfg)
+    meta = {"table": str(path), "table_config_sha256": tab.config_sha256}
+    with reporter.bar("paper", len(experiments(quick=quick)), "flight") as bar, \
+            staged(out_dir) as stage:
+        rep = run_paper(cfg, runtime_scheduler(tab, runtime), stage, quick=quick, plant=truth,
+                        progress=bar.update, meta=meta, table=tab)
+    return PaperRun(rep, out_dir, path)
+
+
+@dataclass(frozen=True, eq=False)
+class CampaignRun:
+    """What :func:`campaign` flew and wrote.
+
+    Attributes
+    ----------
+    logs : list of FlightLog
+        The flights' logs, as a lab would have recorded them.
+    files : list of Path
+        Their files, ``OUT_DIR/<flight>.<format>``.
+    out_dir : Path
+    hidden : HiddenEffect
+        The plant's hidden effect (:data:`gainsched.sim.campaign.HIDDEN`).
+    real_tether : bool
+        Flown on the elastic tether of a real vehicle.
+    """
+
+    logs: list
+    files: list
+    out_dir: Path
+    hidden: object
+    real_tether: bool
+
+    def lines(self) -> list[str]:
+        """What ``gainsched campaign`` prints."""
+        return [f"{self.out_dir}: {len(self.files)} flights, hidden effect: {self.hidden.doc}"
+                + ("; on a real (elastic) tether" if self.real_tether else "")]
+
+
+def campaign(config, table, out_dir, *, hidden: str = "none", duration: float = 3.0,
+             load_cell: bool = True, real_tether: bool = False, fmt: str = "csv",
+             seed: int = 1, reporter: Reporter = SILENT) -> CampaignRun:
+    """Fly a synthetic test campaign on a plant with a hidden effect and write its logs:
+    what ``gainsched campaign CONFIG --tables TABLE -o OUT_DIR`` does.
+
+    The default flights (speeds 3-15 m/s, tilts 0/20/40 deg, a speed-up, a braking) flown
+    in closed loop with ``table``'s gains on the plant that differs from ``config`` by
+    ``hidden``, with motion-capture and IMU noise (:mod:`gainsched.sim.campaign`).
+
+    Parameters
+    ----------
+    config : Config or path-like
+        The design config the table was built from.
+    table : Table or path-like
+        Its gain table.
+    out_dir : path-like
+        The folder of the logs (one file per flight), published at once.
+    hidden : str, default "none"
+        The plant's hidden effect, a name of :data:`gainsched.sim.campaign.HIDDEN`.
+    duration : float, default 3.0
+        Seconds per flight.
+    load_cell : bool, default True
+        Log the tether tension.
+    real_tether : bool, default False
+        Fly on the elastic tether of a real vehicle (k = 2e5 N/m, c = 25 N s/m).
+    fmt : {"csv", "h5"}
+        The logs' format.
+    seed : int, default 1
+        Seed of the sensor noise (each flight the next).
+    reporter : Reporter, optional
+        Shows the flights' progress; default: nothing.
+
+    Returns
+    -------
+    CampaignRun
+        The logs, their files and :meth:`CampaignRun.lines`, what the command prints.
+
+    Raises
+    ------
+    InputError
+        An unknown hidden effect or a flight too long for the control rate, before any
+        flight.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> cfg = gs.load_config("configs/paper.toml")
+    >>> run = gs.campaign(cfg, "tables/paper.h5", tempfile.mkdtemp(), hidden="motor_lag",
+    ...                   duration=1.0)
+    >>> [p.name for p in run.files][:3], len(run.logs)
+    (['v3.csv', 'v9.csv', 'v15.csv'], 7)
+    >>> run.lines()[0].split(": ", 1)[1]
+    '7 flights, hidden effect: first-order motor lag tau = 35 ms'
+    """
+    from ..publish import check_out_dir, staged
+    from ..sim.campaign import HIDDEN, default_flights, outside_table, write_campaign
+    from ..sim.campaign import campaign as fly
+    from ..sim.loop import check_flight_steps, table_scheduler
+
+    if hidden not in HIDDEN:
+        raise InputError("command line", "--hidden",
+                         f"unknown hidden effect {hidden!r} (known: {', '.join(HIDDEN)})")
+    cfg = _config(config)
+    check_flight_steps(duration, cfg.control.rate_hz, "command line", "--duration")
+    tab, path = _table(table)
+    out_dir = Path(out_dir)
+    check_out_dir(out_dir)
+    _other_config(path, tab, cfg)  # as simulate and paper say it, before the work
+    flights = default_flights(duration, seed)
+    if outside := outside_table(flights, tab):
+        warnings.warn(f"{path} covers speeds {tab.speed.min():.3g}-{tab.speed.max():.3g} m/s, "
+                      f"tilts up to {np.rad2deg(tab.tilt.max()):.0f} deg: "
+                      f"{', '.join(outside)} fly outside it, on the gains of its nearest "
+                      "circle", GainschedWarning, stacklevel=2)
+    with reporter.bar(f"campaign {hidden}", len(flights), "flight") as bar:
+        logs = fly(cfg, table_scheduler(tab), hidden, scenarios=flights, duration=duration,
+                   load_cell=load_cell, seed=seed, real_tether=real_tether,
+                   progress=bar.update)
+    with staged(out_dir) as stage:
+        files = [out_dir / p.name for p in write_campaign(stage, logs, fmt)]
+    return CampaignRun(logs, files, out_dir, HIDDEN[hidden], real_tether)
