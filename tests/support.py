@@ -541,3 +541,28 @@ def rechecksum(f) -> None:
     for name, ds in _datasets(f).items():
         digests[name] = ds.attrs["sha256"] = _dataset_sha256(ds[()])
     f.attrs["data_sha256"] = _root_sha256(dict(f.attrs), digests)
+
+
+def run_examples(obj, name: str, folder, monkeypatch) -> None:
+    """Run the Examples of ``obj``'s docstring (doctest, ``gs`` and ``np`` given, ellipsis
+    and whitespace as written) in ``folder`` (a working directory like the repository
+    root); a result class without one (a dataclass) passes. Fails naming ``name``."""
+    import dataclasses
+    import doctest
+
+    import gainsched
+
+    tests = doctest.DocTestFinder(recurse=False).find(
+        obj, name, globs={"gs": gainsched, "np": np})
+    examples = [t for t in tests if t.examples]
+    if not examples:
+        assert dataclasses.is_dataclass(obj), f"{name} has no Example"
+        return
+    monkeypatch.chdir(folder)
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    for t in examples:
+        runner.run(t)
+    failed, attempted = runner.summarize(verbose=False)
+    assert attempted > 0
+    assert failed == 0, f"{name}: {failed} of {attempted} example lines failed (output above)"

@@ -10,7 +10,6 @@ fields, and every Example runs (doctest). docs/api.md is generated from the docs
 from __future__ import annotations
 
 import dataclasses
-import doctest
 import inspect
 import os
 import re
@@ -18,12 +17,13 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 from numpydoc.docscrape import ClassDoc
 from numpydoc.validate import validate
 
 import gainsched
+
+from support import run_examples
 
 REPO = Path(__file__).resolve().parents[1]
 API_PAGE = REPO / "docs" / "api.md"
@@ -128,22 +128,7 @@ def example_dir(tmp_path_factory):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_docstring_examples_run(name, example_dir, monkeypatch):
-    obj = getattr(gainsched, name)
-    tests = doctest.DocTestFinder(recurse=False).find(
-        obj, name, globs={"gs": gainsched, "np": np})
-    examples = [t for t in tests if t.examples]
-    if not examples:
-        assert dataclasses.is_dataclass(obj), f"{name} has no Example"
-        return
-    monkeypatch.chdir(example_dir)
-    monkeypatch.setenv("MPLBACKEND", "Agg")
-    runner = doctest.DocTestRunner(
-        optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
-    for t in examples:
-        runner.run(t)
-    failed, attempted = runner.summarize(verbose=False)
-    assert attempted > 0
-    assert failed == 0, f"{name}: {failed} of {attempted} example lines failed (output above)"
+    run_examples(getattr(gainsched, name), name, example_dir, monkeypatch)
 
 
 def test_readme_python_example_runs(example_dir, monkeypatch, capsys):

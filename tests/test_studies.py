@@ -10,11 +10,12 @@ import pytest
 from click.testing import CliRunner
 
 import gainsched as gs
+from gainsched import studies
 from gainsched.cli import cli
 from gainsched.errors import InputError
 from gainsched.studies import Reporter, build, output_names, table_for
 
-from support import REPO, small_config_text
+from support import REPO, run_examples, small_config_text
 
 
 class _Recording(Reporter):
@@ -161,3 +162,15 @@ def test_sweep_and_campaign_in_python_are_the_commands(tmp_path, monkeypatch):
         assert p.read_bytes() == (tmp_path / "c_cli" / p.name).read_bytes(), p.name
     assert flown.lines() == [ln.replace("c_cli", "c_lib") for ln in res.output.splitlines()
                              if not ln.startswith("gainsched: warning")]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [n for n in studies.__all__ if not hasattr(gs, n)])
+def test_the_examples_of_the_studies_the_package_root_does_not_export_run(name, tmp_path,
+                                                                          monkeypatch):
+    """gs.studies.compare and .diagnose (their names at the package root are the analyses'
+    own) and the helpers: every Example runs, in a folder like the repository root (the
+    root's exports run in tests/test_api.py)."""
+    for sub in ("configs", "tables", "examples"):
+        (tmp_path / sub).symlink_to(REPO / sub)
+    run_examples(getattr(studies, name), name, tmp_path, monkeypatch)

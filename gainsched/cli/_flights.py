@@ -16,7 +16,6 @@ from ._base import (
     FilePath,
     FiniteFloat,
     Name,
-    _progress,
     cli,
     user_errors,
 )
@@ -45,59 +44,12 @@ from ._base import (
 @user_errors
 def simulate(config, table_path, scenario, plant_path, speed, runtime, controller, out_dir):
     """Fly a scenario in closed loop on the nonlinear plant with gains from the table."""
-    import dataclasses
+    from ..studies import fly
 
-    from ..config import load_config
-    from ..publish import check_out_dir, staged
-    from ..schedule.tables import load_table
-    from ..sim.loop import check_flight_steps, load_scenario, runtime_scheduler, write_run
-    from ..sim.loop import simulate as run
-
-    cfg = load_config(config)
-    plant = load_config(plant_path) if plant_path else None
-    table = load_table(table_path)
-    scn = load_scenario(scenario)
-    if speed is not None:
-        scn = dataclasses.replace(scn, speed=speed)
-    n = check_flight_steps(scn.duration, cfg.control.rate_hz, scenario, "duration")
-    check_out_dir(out_dir, names=["log.csv", "log.h5", "metrics.json"])
-    if not table.built_from(cfg):  # once every input passed
-        click.echo(f"gainsched: warning: {table_path} was built from another config", err=True)
-    with _progress(f"simulate {scn.name}", n, "step") as bar:
-        res = run(cfg, runtime_scheduler(table, runtime), scn, plant, progress=bar.update,
-                  controller=controller)
-    with staged(out_dir) as stage:
-        m = write_run(res, stage)
-    click.echo(
-        f"{out_dir}: {scn.name} {m['duration_s']:.2f} s, "
-        f"RMS out-of-plane {m['rms_out_of_plane_m']:.4f} m, "
-        f"RMS along-track {m['rms_along_track_m']:.3f} m (lap slips {m['lap_slips']}), "
-        f"RMS speed error {m['rms_speed_error_mps']:.3f} m/s, "
-        f"max tension {m['max_tension_N']:.1f} N, "
-        f"saturation {100 * m['saturation_fraction']:.1f}%, slack events {m['slack_events']}"
-    )
-    for line in _left_the_table(m, table_path):
+    done = fly(config, table_path, scenario, out_dir, plant=plant_path, speed=speed,
+               runtime=runtime, controller=controller, reporter=TERMINAL)
+    for line in done.lines():
         click.echo(line)
-
-
-def _left_the_table(m: dict, table_path) -> list[str]:
-    """What a flight's metrics say about leaving the table (docs/runtime.md, the policy
-    the simulator flies): time on gains clamped to the table's speed range, on held gains,
-    or with the nominal's tension below ``feasibility.min_tension``; none when it stayed
-    inside."""
-    out = []
-    if m["clamped_speed_s"] > 0:
-        out.append(f"  left the table: {m['clamped_speed_s']:.2f} s at speeds outside "
-                   f"{table_path}'s range, flown on the gains of its nearest speed "
-                   "(clamped_speed_s)")
-    if m["held_gains_s"] > 0:
-        out.append(f"  left the table: {m['held_gains_s']:.2f} s on held gains (no usable "
-                   "gains at the lookup; held_gains_s)")
-    if m["below_tension_margin_s"] > 0:
-        out.append(f"  left the table: {m['below_tension_margin_s']:.2f} s with the nominal's "
-                   f"tension below min_tension (lowest {m['min_nominal_tension_N']:.2f} N; "
-                   "below_tension_margin_s)")
-    return out
 
 
 @cli.command()

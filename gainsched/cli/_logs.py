@@ -19,7 +19,6 @@ from ._base import (
     Name,
     _check_fit_arguments,
     _distinct,
-    _fit_progress,
     _load_for_compare,
     _not_an_input,
     _outputs_apart,
@@ -69,16 +68,8 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
     through a channel map): residual per axis
     (path frame m/s^2, body rad/s^2, tether stretch m), RMS, bias, fit %, whiteness,
     input correlation, where it fails; the paper's Sec. V.C analyses."""
-    from ..analysis.compare import compare as run
-    from ..analysis.paperfits import paper_fits
-    from ..analysis.reports import (
-        before_after_lines,
-        compare_lines,
-        write_before_after,
-        write_compare,
-    )
-    from ..publish import check_out_dir, staged
     from ..resources import config_path
+    from ..studies import compare as run
 
     _distinct("LOG", list(logs))
     if before_path is not None and _same_file(config_path(before_path), config_path(config)):
@@ -87,31 +78,8 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
                          "the earlier config")
     cfg = _load_for_compare(config)
     before_cfg = None if before_path is None else _load_for_compare(before_path)
-    cmap = _channel_map(map_path)
-    if out_dir is not None:
-        check_out_dir(out_dir, names=["compare.json", "compare.md"])
-    # steps: each log read and the statistics, per config; the paper's fits
-    steps = (len(logs) + 1) * (1 if before_path is None else 2) + (0 if no_paper else 1)
-    with _progress(f"compare {cfg.name}", steps, "step") as bar:
-        cmp = run(cfg, logs, channel_map=cmap, trust=trust, progress=bar.update)
-        paper = None if no_paper else paper_fits(cfg, cmp.measured)
-        bar.update(0 if no_paper else 1)
-        before = None
-        if before_path is not None:
-            before = run(before_cfg, logs, channel_map=cmap, trust=trust,
-                         progress=bar.update)
-    for line in compare_lines(cmp, paper):
-        click.echo(line)
-    if before is not None:
-        click.echo("")
-        for line in before_after_lines(before, cmp):
-            click.echo(line)
-    if out_dir is not None:
-        with staged(out_dir) as stage:  # the report appears whole, or not at all
-            paths = write_compare(cmp, stage, paper)
-            if before is not None:
-                paths += write_before_after(before, cmp, stage)
-        click.echo(f"wrote {len(paths)} files to {out_dir} ({paths[1].name})")
+    run(cfg, logs, out_dir, before=before_cfg, paper=not no_paper,
+        channel_map=_channel_map(map_path), trust=trust, reporter=TERMINAL)
 
 
 @cli.command()
@@ -143,19 +111,7 @@ def diagnose(config, logs, candidates, exclude, joint, no_sensors, do_apply, new
     """Which physical effect is missing: fit every candidate effect the model lacks to
     the residual on LOGS, score on held-out flights (leave one flight out), rank, check
     identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
-    from ..analysis.compare import compare as run
-    from ..analysis.diagnose import apply_diagnosis
-    from ..analysis.diagnose import diagnose as run_diagnose
-    from ..analysis.reports import (
-        before_after_lines,
-        compare_lines,
-        diagnose_lines,
-        write_before_after,
-        write_compare,
-        write_diagnose,
-    )
-    from ..config import config_from_text
-    from ..publish import check_out_dir, check_out_file, staged, write_atomic
+    from ..studies import diagnose as run
 
     if do_apply and new_config is None:
         raise InputError("command line", "--apply", "needs -o NEWCONFIG")
@@ -170,52 +126,9 @@ def diagnose(config, logs, candidates, exclude, joint, no_sensors, do_apply, new
         _not_an_input(new_config, "-o", CONFIG=config_path(config), LOG=list(logs),
                       **{"--map": map_path})
     cfg = _load_for_compare(config)
-    cmap = _channel_map(map_path)
-    if new_config is not None:
-        check_out_file(new_config, "-o")
-    if report_dir is not None:
-        check_out_dir(report_dir, "--report", names=["diagnose.json", "diagnose.md"])
-    base = run(cfg, logs, channel_map=cmap, trust=trust)
-    for line in compare_lines(base):
-        click.echo(line)
-    click.echo("")
-
-    with _fit_progress("diagnose") as fitted:
-        d = run_diagnose(cfg, logs, candidates=candidates or None, comparison=base,
-                         joint=joint, exclude=exclude, progress=fitted,
-                         sensors=not no_sensors)
-    for line in diagnose_lines(d):
-        click.echo(line)
-    after = None
-    if do_apply:
-        text = apply_diagnosis(d)
-        if text is None:
-            click.echo("nothing applied: no candidate cleared the thresholds")
-        else:
-            from ..schedule.grid import check_effect_symmetries
-
-            what = " + ".join(d.applied)
-            write_atomic(new_config, text.encode(), where="-o")
-            new_cfg = config_from_text(text, str(new_config))
-            try:  # the build's own check: a wind, flight time, unequal motors
-                check_effect_symmetries(new_cfg)
-            except InputError as held:
-                click.echo(f"wrote {new_config} ({what}); no table can hold "
-                           f"{held.where}: {held.message}")
-            else:
-                click.echo(f"wrote {new_config} ({what}); rebuild the tables with "
-                           f"`gainsched build {new_config}`")
-            after = run(new_cfg, logs, channel_map=cmap, trust=trust)
-            click.echo("")
-            for line in before_after_lines(base, after):
-                click.echo(line)
-    if report_dir is not None:
-        with staged(report_dir, where="--report") as stage:
-            paths = write_diagnose(d, stage) + write_compare(base, stage, prefix="before")
-            if after is not None:
-                paths += write_compare(after, stage, prefix="after")
-                paths += write_before_after(base, after, stage, d)
-        click.echo(f"wrote {len(paths)} files to {report_dir}")
+    run(cfg, logs, candidates=candidates, exclude=exclude, joint=joint,
+        sensors=not no_sensors, new_config=new_config, report_dir=report_dir,
+        channel_map=_channel_map(map_path), trust=trust, reporter=TERMINAL)
 
 
 @cli.command()

@@ -8,8 +8,12 @@ study and prints (gainsched/cli), so a script gets the same results and files.
 
 - :func:`build`: a config's gain table and C files (``gainsched build``);
 - :func:`sweep`: a table per vehicle variant and a results table (``gainsched sweep``);
+- :func:`fly`: one scenario flown, its log, metrics and plots (``gainsched simulate``);
 - :func:`paper`: the paper's experiments flown and their report (``gainsched paper``);
 - :func:`campaign`: a synthetic test campaign's logs (``gainsched campaign``);
+- :func:`compare`: a model against flight logs and its report (``gainsched compare``);
+- :func:`diagnose`: the missing effect, the config with it and the report (``gainsched
+  diagnose``);
 - :func:`improve`: the model loop, the rebuild and the flights old against new
   (``gainsched improve``);
 - :func:`table_for`: the table a config flies when none is given.
@@ -22,13 +26,15 @@ from importlib import import_module
 
 #: name -> its private module: the one list of the studies' public names
 _MODULE_OF = {
-    "Build": "_build", "build": "_build", "build_into": "_build", "output_names": "_build",
+    "Build": "_build", "build": "_build", "output_names": "_build",
     "Reporter": "_report", "SILENT": "_report",
     "table_for": "_tables",
     "improve": "_improve", "Improved": "_improve", "StepFailure": "_improve",
-    "paper": "_flights", "PaperRun": "_flights", "campaign": "_flights",
-    "CampaignRun": "_flights",
+    "fly": "_flights", "Flight": "_flights", "paper": "_flights", "PaperRun": "_flights",
+    "campaign": "_flights", "CampaignRun": "_flights",
     "sweep": "_sweep", "SweepRun": "_sweep",
+    "compare": "_logs", "ComparisonReport": "_logs", "diagnose": "_logs",
+    "DiagnosisReport": "_logs",
 }
 
 __all__ = list(_MODULE_OF)

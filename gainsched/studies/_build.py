@@ -11,7 +11,7 @@ import numpy as np
 from ..config import Config, load_config
 from ._report import SILENT, Reporter
 
-__all__ = ["Build", "build", "build_into", "output_names"]
+__all__ = ["Build", "build", "build_into", "output_names"]  # build_into: for the studies
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,7 +83,13 @@ class Build:
 
 def output_names(config: Config) -> list[str]:
     """The files :func:`build` writes into its folder: ``NAME.h5``, ``NAME_gains.h``,
-    ``NAME_control.h``, the runtime's and the controller's."""
+    ``NAME_control.h``, the runtime's and the controller's.
+
+    Examples
+    --------
+    >>> gs.studies.output_names(gs.load_config("configs/paper.toml"))[:3]
+    ['paper.h5', 'paper_gains.h', 'paper_control.h']
+    """
     from ..firmware.codegen import CONTROL_FILES, RUNTIME_FILES
 
     return [f"{config.name}.h5", f"{config.name}_gains.h", f"{config.name}_control.h",

@@ -1,6 +1,6 @@
-"""Flights in simulation written as a lab would keep them: the paper's experiments with
-their report (``gainsched paper``) and a synthetic test campaign's logs (``gainsched
-campaign``)."""
+"""Flights in simulation written as a lab would keep them: one scenario's log, metrics and
+plots (``gainsched simulate``), the paper's experiments with their report (``gainsched
+paper``) and a synthetic test campaign's logs (``gainsched campaign``)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from ..errors import GainschedWarning, InputError
 from ._report import SILENT, Reporter
 from ._tables import table_for
 
-__all__ = ["PaperRun", "paper", "CampaignRun", "campaign"]
+__all__ = ["Flight", "fly", "PaperRun", "paper", "CampaignRun", "campaign"]
 
 
 def _config(config) -> Config:
@@ -36,6 +36,119 @@ def _other_config(path, table, cfg: Config) -> None:
     config than ``cfg``: its flights test gains of another model."""
     if not table.built_from(cfg):
         warnings.warn(f"{path} was built from another config", GainschedWarning, stacklevel=3)
+
+
+@dataclass(frozen=True, eq=False)
+class Flight:
+    """What :func:`fly` flew and wrote.
+
+    Attributes
+    ----------
+    result : SimResult
+        The flight (:func:`gainsched.simulate`).
+    metrics : dict
+        Its metrics (:func:`gainsched.metrics`), as ``metrics.json`` holds them.
+    out_dir : Path
+        The folder of ``log.csv``, ``log.h5``, ``metrics.json`` and the plots.
+    table : Path
+        The table flown.
+    """
+
+    result: object
+    metrics: dict
+    out_dir: Path
+    table: Path
+
+    def lines(self) -> list[str]:
+        """What ``gainsched simulate`` prints: the flight's tracking, tension and saturation,
+        and the time it spent outside the table (docs/runtime.md), if any."""
+        m = self.metrics
+        out = [f"{self.out_dir}: {self.result.scenario.name} {m['duration_s']:.2f} s, "
+               f"RMS out-of-plane {m['rms_out_of_plane_m']:.4f} m, "
+               f"RMS along-track {m['rms_along_track_m']:.3f} m (lap slips {m['lap_slips']}), "
+               f"RMS speed error {m['rms_speed_error_mps']:.3f} m/s, "
+               f"max tension {m['max_tension_N']:.1f} N, "
+               f"saturation {100 * m['saturation_fraction']:.1f}%, "
+               f"slack events {m['slack_events']}"]
+        if m["clamped_speed_s"] > 0:
+            out.append(f"  left the table: {m['clamped_speed_s']:.2f} s at speeds outside "
+                       f"{self.table}'s range, flown on the gains of its nearest speed "
+                       "(clamped_speed_s)")
+        if m["held_gains_s"] > 0:
+            out.append(f"  left the table: {m['held_gains_s']:.2f} s on held gains (no usable "
+                       "gains at the lookup; held_gains_s)")
+        if m["below_tension_margin_s"] > 0:
+            out.append(f"  left the table: {m['below_tension_margin_s']:.2f} s with the "
+                       f"nominal's tension below min_tension (lowest "
+                       f"{m['min_nominal_tension_N']:.2f} N; below_tension_margin_s)")
+        return out
+
+
+def fly(config, table, scenario, out_dir, *, plant=None, speed: float | None = None,
+        runtime: str = "auto", controller: str = "path",
+        reporter: Reporter = SILENT) -> Flight:
+    """Fly a scenario in closed loop on the nonlinear plant with gains from a table and
+    write its log, metrics and plots: what ``gainsched simulate CONFIG --tables TABLE
+    --scenario NAME -o OUT_DIR`` does.
+
+    Parameters
+    ----------
+    config : Config or path-like
+        The design config the table was built from.
+    table : Table or path-like
+        Its gain table.
+    scenario : str or path-like
+        A scenario file, or a shipped scenario's name (``"horizontal"``, ``"tilted40"``,
+        ``"speedup"``, ``"braking"``, ``"staircase"``).
+    out_dir : path-like
+        The folder of ``log.csv``, ``log.h5``, ``metrics.json`` and the plots, published
+        at once.
+    plant : Config or path-like, optional
+        The truth flown (default: the design config).
+    speed : float, optional
+        The scenario's initial speed instead of its own, m/s.
+    runtime : {"auto", "c", "python"}
+        The gain lookup: the compiled C runtime or its Python reference.
+    controller : {"path", "firmware"}
+        The control law in Python along the reference, or the firmware's whole control
+        step (docs/runtime.md).
+    reporter : Reporter, optional
+        Shows the flight's progress; default: nothing.
+
+    Returns
+    -------
+    Flight
+        The flight, its metrics and :meth:`Flight.lines`, what the command prints.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> f = gs.fly("configs/paper.toml", "tables/paper.h5", "braking", tempfile.mkdtemp())
+    >>> f.metrics["slack_events"], sorted(p.name for p in f.out_dir.glob("*.json"))
+    (0, ['metrics.json'])
+    """
+    import dataclasses
+
+    from ..publish import check_out_dir, staged
+    from ..sim.loop import check_flight_steps, load_scenario, runtime_scheduler, write_run
+    from ..sim.loop import simulate as run
+
+    cfg = _config(config)
+    truth = None if plant is None else _config(plant)
+    tab, path = _table(table)
+    scn = load_scenario(scenario)
+    if speed is not None:
+        scn = dataclasses.replace(scn, speed=speed)
+    n = check_flight_steps(scn.duration, cfg.control.rate_hz, scenario, "duration")
+    out_dir = Path(out_dir)
+    check_out_dir(out_dir, names=["log.csv", "log.h5", "metrics.json"])
+    _other_config(path, tab, cfg)  # once every input passed
+    with reporter.bar(f"simulate {scn.name}", n, "step") as bar:
+        res = run(cfg, runtime_scheduler(tab, runtime), scn, truth, progress=bar.update,
+                  controller=controller)
+    with staged(out_dir) as stage:
+        m = write_run(res, stage)
+    return Flight(res, m, out_dir, path)
 
 
 @dataclass(frozen=True, eq=False)

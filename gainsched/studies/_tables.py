@@ -28,6 +28,12 @@ def table_for(config: Config, *, reporter: Reporter = SILENT):
     table : Table
     path : Path
         Where it was read from.
+
+    Examples
+    --------
+    >>> table, path = gs.studies.table_for(gs.load_config("configs/paper.toml"))
+    >>> str(path), table.built_from(gs.load_config("configs/paper.toml"))
+    ('tables/paper.h5', True)
     """
     from ..schedule.cached import cached_table, cached_table_path
     from ..schedule.tables import load_table

@@ -1,0 +1,276 @@
+"""A model against flight logs, as the command line reports it: the comparison with its
+report (``gainsched compare``) and the diagnosis with its report and the config it
+writes (``gainsched diagnose``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..config import Config, load_config
+from ._report import SILENT, Reporter
+
+__all__ = ["ComparisonReport", "compare", "DiagnosisReport", "diagnose"]
+
+
+def _config(config) -> Config:
+    return config if isinstance(config, Config) else load_config(config)
+
+
+@dataclass(frozen=True, eq=False)
+class ComparisonReport:
+    """What :func:`compare` found and wrote.
+
+    Attributes
+    ----------
+    comparison : Comparison
+        The model against the logs (:func:`gainsched.compare`).
+    paper : dict or None
+        The paper's thrust and drag analyses (Sec. V.C; None: not asked for).
+    before : Comparison or None
+        An earlier config against the same logs (before/after).
+    files : list of Path
+        The report's files (none without a report folder).
+    said : tuple of str
+        :meth:`lines`.
+    """
+
+    comparison: object
+    paper: object
+    before: object
+    files: list = field(default_factory=list)
+    said: tuple = ()
+
+    def lines(self) -> list[str]:
+        """What ``gainsched compare`` prints: the residual per axis, where it fails, the
+        paper's analyses, the before/after, and the report's files."""
+        return list(self.said)
+
+
+def compare(config, logs, out_dir=None, *, before=None, paper: bool = True,
+            channel_map=None, trust=(), reporter: Reporter = SILENT) -> ComparisonReport:
+    """Compare a model with flight logs and write the report: what ``gainsched compare
+    CONFIG LOGS -o OUT_DIR`` does (docs/model-vs-measurement.md).
+
+    Parameters
+    ----------
+    config : Config or path-like
+        The model.
+    logs : list of path or FlightLog
+        The flights (CSV, HDF5, PX4 ULog or ROS 2 bag through ``channel_map``).
+    out_dir : path-like, optional
+        The report folder (``compare.json``, ``compare.md``, plots), published at once;
+        None: no report.
+    before : Config or path-like, optional
+        An earlier config: its residual beside ``config``'s.
+    paper : bool, default True
+        The paper's thrust and drag analyses (Sec. V.C).
+    channel_map, trust
+        As :func:`gainsched.compare` takes them.
+    reporter : Reporter, optional
+        Shows the reading's progress and the lines as they come; default: nothing.
+
+    Returns
+    -------
+    ComparisonReport
+        The comparison(s), the report's files and :meth:`ComparisonReport.lines`.
+
+    Examples
+    --------
+    >>> rep = gs.studies.compare("configs/paper.toml", ["examples/flights/v9.csv",
+    ...                                                  "examples/flights/v15.csv"])
+    >>> rep.comparison.normalized_rms() > 1, rep.files
+    (True, [])
+    """
+    from ..analysis.compare import compare as run
+    from ..analysis.paperfits import paper_fits
+    from ..analysis.reports import (
+        before_after_lines,
+        compare_lines,
+        write_before_after,
+        write_compare,
+    )
+    from ..publish import check_out_dir, staged
+
+    cfg = _config(config)
+    before_cfg = None if before is None else _config(before)
+    if out_dir is not None:
+        out_dir = Path(out_dir)
+        check_out_dir(out_dir, names=["compare.json", "compare.md"])
+    said: list[str] = []
+
+    def say(lines):
+        for line in lines:
+            said.append(line)
+            reporter.line(line)
+
+    # steps: each log read and the statistics, per config; the paper's fits
+    steps = (len(logs) + 1) * (1 if before is None else 2) + (1 if paper else 0)
+    with reporter.bar(f"compare {cfg.name}", steps, "step") as bar:
+        cmp = run(cfg, logs, channel_map=channel_map, trust=trust, progress=bar.update)
+        fits = paper_fits(cfg, cmp.measured) if paper else None
+        bar.update(1 if paper else 0)
+        earlier = None if before_cfg is None else run(
+            before_cfg, logs, channel_map=channel_map, trust=trust, progress=bar.update)
+    say(compare_lines(cmp, fits))
+    if earlier is not None:
+        say(["", *before_after_lines(earlier, cmp)])
+    files = []
+    if out_dir is not None:
+        with staged(out_dir) as stage:  # the report appears whole, or not at all
+            files = write_compare(cmp, stage, fits)
+            if earlier is not None:
+                files += write_before_after(earlier, cmp, stage)
+        files = [out_dir / p.name for p in files]
+        say([f"wrote {len(files)} files to {out_dir} ({files[1].name})"])
+    return ComparisonReport(cmp, fits, earlier, files, tuple(said))
+
+
+@dataclass(frozen=True, eq=False)
+class DiagnosisReport:
+    """What :func:`diagnose` found and wrote.
+
+    Attributes
+    ----------
+    diagnosis : Diagnosis
+        The ranked candidates and the verdict (:func:`gainsched.diagnose`).
+    new_config : Path or None
+        The config written with the accepted effect (None: none written).
+    after : Comparison or None
+        The written config against the same logs.
+    files : list of Path
+        The report's files (none without a report folder).
+    said : tuple of str
+        :meth:`lines`.
+    """
+
+    diagnosis: object
+    new_config: Path | None = None
+    after: object = None
+    files: list = field(default_factory=list)
+    said: tuple = ()
+
+    def lines(self) -> list[str]:
+        """What ``gainsched diagnose`` prints: the comparison, the ranking and the verdict,
+        what was written and the before/after."""
+        return list(self.said)
+
+
+def diagnose(config, logs, *, candidates=None, exclude=(), joint: bool = False,
+             sensors: bool = True, new_config=None, report_dir=None, channel_map=None,
+             trust=(), reporter: Reporter = SILENT) -> DiagnosisReport:
+    """Find which physical effect the model misses, write the config with it and the
+    report: what ``gainsched diagnose CONFIG LOGS [--apply -o NEWCONFIG] [--report DIR]``
+    does (docs/model-vs-measurement.md).
+
+    Parameters
+    ----------
+    config : Config or path-like
+        The model.
+    logs : list of path or FlightLog
+        Two or more flights.
+    candidates, exclude, joint, sensors, channel_map, trust
+        As :func:`gainsched.diagnose` takes them.
+    new_config : path-like, optional
+        Where to write the config with the accepted effect (``--apply -o``); None: none
+        written.
+    report_dir : path-like, optional
+        The report folder (``diagnose.json``, ``diagnose.md``, plots; before and after),
+        published at once.
+    reporter : Reporter, optional
+        Shows the fits' progress and the lines as they come; default: nothing.
+
+    Returns
+    -------
+    DiagnosisReport
+        The diagnosis, what was written and :meth:`DiagnosisReport.lines`.
+
+    Examples
+    --------
+    >>> import glob
+    >>> rep = gs.studies.diagnose("configs/paper.toml",
+    ...                           sorted(glob.glob("examples/flights/*.csv")),
+    ...                           candidates=["drag_quadratic", "thrust_momentum"])
+    >>> rep.diagnosis.accepted.name, rep.new_config
+    ('thrust_momentum', None)
+    """
+    from ..analysis.compare import compare as run
+    from ..analysis.diagnose import diagnose as run_diagnose
+    from ..analysis.reports import compare_lines, diagnose_lines
+    from ..publish import check_out_dir, check_out_file
+
+    cfg = _config(config)
+    if new_config is not None:
+        new_config = Path(new_config)
+        check_out_file(new_config, "-o")
+    if report_dir is not None:
+        report_dir = Path(report_dir)
+        check_out_dir(report_dir, "--report", names=["diagnose.json", "diagnose.md"])
+    said: list[str] = []
+
+    def say(lines):
+        for line in lines:
+            said.append(line)
+            reporter.line(line)
+
+    base = run(cfg, logs, channel_map=channel_map, trust=trust)
+    say([*compare_lines(base), ""])
+    with reporter.bar("diagnose", unit="fit") as bar:
+        def fitted(name):
+            bar.set_postfix_str(name, refresh=False)
+            bar.update()
+
+        d = run_diagnose(cfg, logs, candidates=candidates or None, comparison=base,
+                         joint=joint, exclude=exclude, progress=fitted, sensors=sensors)
+    say(diagnose_lines(d))
+    after = (_apply(d, base, new_config, logs, channel_map, trust, say) if new_config
+             else None)
+    files = [] if report_dir is None else _report(d, base, after, report_dir, say)
+    return DiagnosisReport(d, new_config if after is not None else None, after, files,
+                           tuple(said))
+
+
+def _apply(d, base, new_config: Path, logs, channel_map, trust, say):
+    """Write the config with the accepted effect of ``d`` to ``new_config`` (None: nothing
+    accepted) and compare it with the logs (beside ``base``, the comparison before): the
+    new comparison, or None."""
+    from ..analysis.compare import compare as run
+    from ..analysis.diagnose import apply_diagnosis
+    from ..analysis.reports import before_after_lines
+    from ..config import config_from_text
+    from ..errors import InputError
+    from ..publish import write_atomic
+    from ..schedule.grid import check_effect_symmetries
+
+    text = apply_diagnosis(d)
+    if text is None:
+        say(["nothing applied: no candidate cleared the thresholds"])
+        return None
+    what = " + ".join(d.applied)
+    write_atomic(new_config, text.encode(), where="-o")
+    new_cfg = config_from_text(text, str(new_config))
+    try:  # the build's own check: a wind, flight time, unequal motors
+        check_effect_symmetries(new_cfg)
+    except InputError as held:
+        say([f"wrote {new_config} ({what}); no table can hold {held.where}: {held.message}"])
+    else:
+        say([f"wrote {new_config} ({what}); rebuild the tables with "
+             f"`gainsched build {new_config}`"])
+    after = run(new_cfg, logs, channel_map=channel_map, trust=trust)
+    say(["", *before_after_lines(base, after)])
+    return after
+
+
+def _report(d, base, after, report_dir: Path, say) -> list[Path]:
+    """The diagnose report published at once in ``report_dir``: the diagnosis, the
+    comparison before and, with a config written, after."""
+    from ..analysis.reports import write_before_after, write_compare, write_diagnose
+    from ..publish import staged
+
+    with staged(report_dir, where="--report") as stage:
+        paths = write_diagnose(d, stage) + write_compare(base, stage, prefix="before")
+        if after is not None:
+            paths += write_compare(after, stage, prefix="after")
+            paths += write_before_after(base, after, stage, d)
+    say([f"wrote {len(paths)} files to {report_dir}"])
+    return [report_dir / p.name for p in paths]
