@@ -75,6 +75,9 @@ def __getattr__(name: str):
     if name == "__version__":
         value = globals()[name] = _version()
         return value
+    if name == "studies":  # the workflow layer's own namespace (gs.studies.compare, ...)
+        value = globals()[name] = import_module(f"{__name__}.studies")
+        return value
     module = _MODULE_OF.get(name)
     if module is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

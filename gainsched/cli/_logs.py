@@ -22,7 +22,6 @@ from ._base import (
     _load_for_compare,
     _not_an_input,
     _outputs_apart,
-    _progress,
     _same_file,
     cli,
     user_errors,
@@ -202,28 +201,12 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
 def convert(log, out_path, map_path, config_path, trust):
     """Convert a PX4 ULog or a ROS 2 bag to the project's flight-log format
     (docs/flight-log.md) for inspection, and say what was mapped to what."""
-    from ..analysis.logs import convert_log
-    from ..analysis.progress import on_bar, reporting
-    from ..config import load_config
-    from ..publish import check_out_file
     from ..resources import config_path as shipped
+    from ..studies import convert as run
 
     _not_an_input(out_path, "-o", LOG=log, **{"--config": config_path and
                                                shipped(config_path), "--map": map_path})
-    cmap = _channel_map(map_path)
-    cfg = load_config(config_path) if config_path else None
-    thrust_max = cfg.vehicle.thrust_max if cfg is not None else None
-    check_out_file(out_path, "-o")
-    with _progress(f"convert {log.name}") as bar, reporting(on_bar(bar)):
-        report, segs = convert_log(log, out_path, channel_map=cmap, thrust_max=thrust_max,
-                                   config=cfg, trust=trust)
-        bar.set_postfix_str("written")
-    for line in report:
-        click.echo("  " + line)
-    n = sum(len(s) for s in segs)
-    span = (f"{segs[0].duration:.3g} s" if len(segs) == 1 else
-            f"{len(segs)} segments (split at gaps)")
-    meta = segs[0].meta
-    alpha, gamma = float(meta["alpha_c_deg"]), float(meta["gamma_c_deg"])
-    click.echo(f"wrote {out_path}: {n} samples, {span}, alpha_c {alpha:.2f} deg, "
-               f"gamma_c {gamma:.2f} deg")
+    done = run(log, out_path, channel_map=_channel_map(map_path), config=config_path,
+               trust=trust, reporter=TERMINAL)
+    for line in done.lines():
+        click.echo(line)

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..errors import InputError
 from ._base import (
+    TERMINAL,
     FilePath,
     FiniteFloat,
     _progress,
@@ -119,27 +120,11 @@ def plot(table, out_dir, with_check, as_json):
     marked), the feasibility envelope, nominal thrusts and roll, the closed-loop spectral
     radius per circle and, with --check, the midpoint interpolation error; plus a JSON
     summary (plots.json)."""
-    from ..publish import check_out_dir, publish
-    from ..schedule.tables import load_table
-    from ..schedule.viewer import plot_count, schedule_plots
+    from ..studies import plot as run
 
-    check_out_dir(out_dir, "--out", names=["plots.json"])
-    t = load_table(table)
-    midpoints = None
-    if with_check:
-        from ..firmware.check import midpoint_check
-
-        with _progress(f"check {t.name}", max(t.speed.size - 1, 0), "speed") as bar:
-            res = midpoint_check(t, progress=bar.update)
-        midpoints = (res.speed, res.tilt, res.rel_err)
-    with _progress(f"plot {t.name}", plot_count(t, midpoints is not None), "file") as bar:
-        files = schedule_plots(t, midpoints, source=str(table), progress=bar.update)
-    paths = publish(out_dir, files, where="--out")
-    if as_json:
-        click.echo(files["plots.json"].decode(), nl=False)
-    else:
-        click.echo(f"{table}: {len(paths)} files -> {out_dir}/ "
-                   f"({', '.join(sorted(p.name for p in paths))})")
+    done = run(table, out_dir, check=with_check, reporter=TERMINAL)
+    for line in done.lines(as_json):
+        click.echo(line)
 
 
 @cli.command("export-c")
@@ -178,42 +163,13 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     NAME_control.h (from the table's config) and copy the C runtime and controller
     (gainsched_runtime.c/.h, gainsched_control.c/.h) next to them; print the flash
     footprint."""
-    from ..firmware.codegen import CONTROL_FILES, RUNTIME_FILES, c_files, flash_summary
-    from ..firmware.controller import controller_params, outputs_from_config
-    from ..firmware.outputs import certificate_lines, firmware_form, table_config
-    from ..publish import check_out_dir, publish
-    from ..schedule.tables import load_table
+    from ..studies import export_c as run
 
-    out_dir = Path(table).parent if out_dir is None else out_dir
-    t = load_table(table)
-    cfg = table_config(t, fmt)
-    outputs = {k: v for k, v in (("firmware.motor_order", motor_order),
-                                 ("firmware.command", command),
-                                 ("firmware.thr_mdl_fac", thr_mdl_fac),
-                                 ("firmware.thrust_max_N", thrust_max_n))
-               if v not in (None, "config")}
-    if outputs and cfg is None:
-        raise InputError(str(table), "config_text", "the controller's outputs need the "
-                         "table's config, which this installation cannot load")
-    if outputs:
-        cfg = cfg.with_values(outputs, source=f"{table} (export-c options)")
-    fmt = "dense" if cfg is None else cfg.firmware.format
-    # a bad -o fails before the certification
-    check_out_dir(out_dir, names=[*RUNTIME_FILES, *CONTROL_FILES])
-    n_mid = max(t.speed.size - 1, 1) if fmt == "compact" else 0
-    with _progress("certify compact table", n_mid, "speed", show=n_mid > 0) as bar:
-        form, cert = firmware_form(cfg, t, progress=bar.update)
-    params = controller_params(t, **(outputs_from_config(cfg) if outputs else {}))
-    paths = publish(out_dir, c_files(form, params))
-    for p in paths:
-        click.echo(f"wrote {p}")
-    click.echo(f"  {form.name}: {fmt}, CRC-32 0x{form.crc32():08x}, config "
-               f"sha256 {t.config_sha256[:12]}")
-    for line in flash_summary(form, compile_code=not no_code_size):
-        click.echo(f"  {line}")
-    if cert is not None:
-        for line in certificate_lines(cfg, cert):
-            click.echo(f"  {line}")
+    done = run(table, out_dir, fmt=fmt, motor_order=motor_order, command=command,
+               thr_mdl_fac=thr_mdl_fac, thrust_max_n=thrust_max_n, code_size=not no_code_size,
+               reporter=TERMINAL)
+    for line in done.lines():
+        click.echo(line)
 
 
 @cli.command()

@@ -14,8 +14,12 @@ study and prints (gainsched/cli), so a script gets the same results and files.
 - :func:`compare`: a model against flight logs and its report (``gainsched compare``);
 - :func:`diagnose`: the missing effect, the config with it and the report (``gainsched
   diagnose``);
+- :func:`convert`: a PX4 ULog or a ROS 2 bag in the project's log format (``gainsched
+  convert``);
 - :func:`improve`: the model loop, the rebuild and the flights old against new
   (``gainsched improve``);
+- :func:`plot`: a table's pictures and their summary (``gainsched plot``);
+- :func:`export_c`: a table's C files for the firmware (``gainsched export-c``);
 - :func:`table_for`: the table a config flies when none is given.
 
 The names are imported on first use (PEP 562, as the package root does): a command
@@ -28,13 +32,14 @@ from importlib import import_module
 _MODULE_OF = {
     "Build": "_build", "build": "_build", "output_names": "_build",
     "Reporter": "_report", "SILENT": "_report",
-    "table_for": "_tables",
+    "table_for": "_tables", "plot": "_tables", "Plots": "_tables",
+    "export_c": "_firmware", "Export": "_firmware",
     "improve": "_improve", "Improved": "_improve", "StepFailure": "_improve",
     "fly": "_flights", "Flight": "_flights", "paper": "_flights", "PaperRun": "_flights",
     "campaign": "_flights", "CampaignRun": "_flights",
     "sweep": "_sweep", "SweepRun": "_sweep",
     "compare": "_logs", "ComparisonReport": "_logs", "diagnose": "_logs",
-    "DiagnosisReport": "_logs",
+    "DiagnosisReport": "_logs", "convert": "_logs", "Conversion": "_logs",
 }
 
 __all__ = list(_MODULE_OF)

@@ -1,6 +1,6 @@
-"""A model against flight logs, as the command line reports it: the comparison with its
-report (``gainsched compare``) and the diagnosis with its report and the config it
-writes (``gainsched diagnose``)."""
+"""Flight logs, as the command line reports them: the comparison of a model with its
+report (``gainsched compare``), the diagnosis with its report and the config it writes
+(``gainsched diagnose``), and a foreign log converted (``gainsched convert``)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ from pathlib import Path
 from ..config import Config, load_config
 from ._report import SILENT, Reporter
 
-__all__ = ["ComparisonReport", "compare", "DiagnosisReport", "diagnose"]
+__all__ = ["ComparisonReport", "compare", "DiagnosisReport", "diagnose", "Conversion",
+           "convert"]
 
 
 def _config(config) -> Config:
@@ -274,3 +275,89 @@ def _report(d, base, after, report_dir: Path, say) -> list[Path]:
             paths += write_before_after(base, after, stage, d)
     say([f"wrote {len(paths)} files to {report_dir}"])
     return [report_dir / p.name for p in paths]
+
+
+@dataclass(frozen=True, eq=False)
+class Conversion:
+    """What :func:`convert` read and wrote.
+
+    Attributes
+    ----------
+    out_path : Path
+        The converted log (``.csv`` or ``.h5``).
+    segments : list of FlightLog
+        Its segments (split at gaps).
+    mapped : list of str
+        What was mapped to what (the channel map's report).
+    """
+
+    out_path: Path
+    segments: list
+    mapped: list
+
+    def lines(self) -> list[str]:
+        """What ``gainsched convert`` prints: the mapping, then the samples, the span and
+        the circle's plane."""
+        segs = self.segments
+        span = (f"{segs[0].duration:.3g} s" if len(segs) == 1 else
+                f"{len(segs)} segments (split at gaps)")
+        meta = segs[0].meta
+        alpha, gamma = float(meta["alpha_c_deg"]), float(meta["gamma_c_deg"])
+        return [*("  " + line for line in self.mapped),
+                f"wrote {self.out_path}: {sum(len(s) for s in segs)} samples, {span}, "
+                f"alpha_c {alpha:.2f} deg, gamma_c {gamma:.2f} deg"]
+
+
+def convert(log, out_path, *, channel_map=None, config=None, trust=(),
+            reporter: Reporter = SILENT) -> Conversion:
+    """Convert a PX4 ULog or a ROS 2 bag to the project's flight-log format and say what
+    was mapped to what: what ``gainsched convert LOG -o OUT`` does (docs/flight-log.md).
+
+    Parameters
+    ----------
+    log : path-like
+        The ULog or the bag.
+    out_path : path-like
+        The converted log, ``.csv`` or ``.h5``.
+    channel_map : ChannelMap, str or path-like, optional
+        The channel map (a shipped one's name: ``"px4"``, ``"ros2"``; default for a ULog:
+        ``"px4"``).
+    config : Config or path-like, optional
+        A config whose ``vehicle.thrust_max`` is a motor's thrust at full command (for
+        normalised or PWM commands) and whose vehicle the thrust and the load cell are
+        checked against.
+    trust : iterable of str
+        Consistency checks to skip (docs/flight-log.md).
+    reporter : Reporter, optional
+        Shows the reading's progress; default: nothing.
+
+    Returns
+    -------
+    Conversion
+        The segments, the mapping and :meth:`Conversion.lines`, what the command prints.
+
+    Examples
+    --------
+    A ULog of a pose and the commands only (PX4's NED and FRD, the shipped ``px4`` map)
+    is refused in one line when it holds no tethered circle:
+
+    >>> import tempfile
+    >>> try:
+    ...     gs.studies.convert("no-such.ulg", tempfile.mktemp(suffix=".csv"))
+    ... except gs.InputError as e:
+    ...     print(str(e).split(":")[0])
+    no-such.ulg
+    """
+    from ..analysis.logs import convert_log
+    from ..analysis.progress import on_bar, reporting
+    from ..publish import check_out_file
+
+    cfg = None if config is None else _config(config)
+    thrust_max = cfg.vehicle.thrust_max if cfg is not None else None
+    out_path = Path(out_path)
+    check_out_file(out_path, "-o")
+    with reporter.bar(f"convert {Path(log).name}") as bar, reporting(on_bar(bar)):
+        mapped, segs = convert_log(log, out_path, channel_map=channel_map,
+                                   thrust_max=thrust_max, config=cfg, trust=trust)
+        bar.set_postfix_str("written")
+    return Conversion(out_path, segs, list(mapped))

@@ -11,7 +11,10 @@ __all__ = ["Reporter", "SILENT"]
 
 
 class _NoBar:
-    """A progress bar that shows nothing: what :meth:`Reporter.bar` returns by default."""
+    """A progress bar that shows nothing: what :meth:`Reporter.bar` returns by default
+    (``disable``, as tqdm's bar says it)."""
+
+    disable = True
 
     def __enter__(self):
         return self
