@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Config, load_config
-from ._report import SILENT, Reporter
+from ..config import Config
+from ._report import SILENT, Reporter, config_of
 
 __all__ = ["Build", "build", "build_into", "output_names"]  # build_into: for the studies
 
@@ -152,7 +152,7 @@ def build(config, out_dir="tables", *, jobs: int = -1, backend: str = "local",
     from ..schedule.distributed import check_options
 
     check_options(backend, scheduler)
-    cfg = config if isinstance(config, Config) else load_config(config)
+    cfg = config_of(config)
     out_dir = Path(out_dir)
     check_out_dir(out_dir, names=output_names(cfg))  # a bad folder fails now, not after
     recover(out_dir)  # finish or clean up after a killed earlier run

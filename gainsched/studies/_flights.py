@@ -10,16 +10,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Config, load_config
+from ..config import Config
 from ..errors import GainschedWarning, InputError
-from ._report import SILENT, Reporter
+from ._report import SILENT, Reporter, config_of
 from ._tables import table_for
 
 __all__ = ["Flight", "fly", "PaperRun", "paper", "CampaignRun", "campaign"]
-
-
-def _config(config) -> Config:
-    return config if isinstance(config, Config) else load_config(config)
 
 
 def _table(table):
@@ -133,8 +129,8 @@ def fly(config, table, scenario, out_dir, *, plant=None, speed: float | None = N
     from ..sim.loop import check_flight_steps, load_scenario, runtime_scheduler, write_run
     from ..sim.loop import simulate as run
 
-    cfg = _config(config)
-    truth = None if plant is None else _config(plant)
+    cfg = config_of(config)
+    truth = None if plant is None else config_of(plant)
     tab, path = _table(table)
     scn = load_scenario(scenario)
     if speed is not None:
@@ -221,8 +217,8 @@ def paper(out_dir, config="paper", *, table=None, plant=None, quick: bool = Fals
     from ..sim.loop import runtime_scheduler
     from ..sim.paper import experiments, run_paper
 
-    cfg = _config(config)
-    truth = None if plant is None else _config(plant)
+    cfg = config_of(config)
+    truth = None if plant is None else config_of(plant)
     out_dir = Path(out_dir)
     # before a first use builds the table (half a minute)
     check_out_dir(out_dir, names=["report.md", "report.json"])
@@ -328,7 +324,7 @@ def campaign(config, table, out_dir, *, hidden: str = "none", duration: float = 
     if hidden not in HIDDEN:
         raise InputError("command line", "--hidden",
                          f"unknown hidden effect {hidden!r} (known: {', '.join(HIDDEN)})")
-    cfg = _config(config)
+    cfg = config_of(config)
     check_flight_steps(duration, cfg.control.rate_hz, "command line", "--duration")
     tab, path = _table(table)
     out_dir = Path(out_dir)

@@ -11,10 +11,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..analysis.improve import Improvement, write_improve
-from ..config import Config, config_from_text, load_config
+from ..config import Config, config_from_text
 from ..errors import InputError
 from ._build import Build, build_into
-from ._report import SILENT, Reporter
+from ._report import SILENT, Reporter, config_of, teller
 from ._tables import table_for
 
 __all__ = ["Improved", "StepFailure", "improve"]
@@ -170,19 +170,14 @@ def improve(config, logs, out_dir=None, *, rounds: int = 3, exclude=(), build: b
     from ..analysis.improve import improve as improve_rounds
     from ..schedule.tables import load_table
 
-    cfg = config if isinstance(config, Config) else load_config(config)
+    cfg = config_of(config)
     old_path = None
     if old_table is not None and not hasattr(old_table, "built_from"):
         old_path, old_table = Path(old_table), load_table(old_table)
     if old_table is not None and not old_table.built_from(cfg):
         raise InputError(old_path or "old_table", "", f"was built from another config than "
                          f"{cfg.source}: the old table of the flights must be CONFIG's")
-    said: list[str] = []
-
-    def say(lines):
-        for line in lines:
-            said.append(line)
-            reporter.line(line)
+    said, say = teller(reporter)
 
     with _fits(reporter) as fitted, _step("compare and diagnose", user_errors=False) as step:
         imp = improve_rounds(cfg, logs, rounds=rounds, exclude=exclude,

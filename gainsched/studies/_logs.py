@@ -7,15 +7,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..config import Config, load_config
-from ._report import SILENT, Reporter
+from ._report import SILENT, Reporter, config_of, teller
 
 __all__ = ["ComparisonReport", "compare", "DiagnosisReport", "diagnose", "Conversion",
            "convert"]
-
-
-def _config(config) -> Config:
-    return config if isinstance(config, Config) else load_config(config)
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,17 +88,12 @@ def compare(config, logs, out_dir=None, *, before=None, paper: bool = True,
     )
     from ..publish import check_out_dir, staged
 
-    cfg = _config(config)
-    before_cfg = None if before is None else _config(before)
+    cfg = config_of(config)
+    before_cfg = None if before is None else config_of(before)
     if out_dir is not None:
         out_dir = Path(out_dir)
         check_out_dir(out_dir, names=["compare.json", "compare.md"])
-    said: list[str] = []
-
-    def say(lines):
-        for line in lines:
-            said.append(line)
-            reporter.line(line)
+    said, say = teller(reporter)
 
     # steps: each log read and the statistics, per config; the paper's fits
     steps = (len(logs) + 1) * (1 if before is None else 2) + (1 if paper else 0)
@@ -200,19 +190,14 @@ def diagnose(config, logs, *, candidates=None, exclude=(), joint: bool = False,
     from ..analysis.reports import compare_lines, diagnose_lines
     from ..publish import check_out_dir, check_out_file
 
-    cfg = _config(config)
+    cfg = config_of(config)
     if new_config is not None:
         new_config = Path(new_config)
         check_out_file(new_config, "-o")
     if report_dir is not None:
         report_dir = Path(report_dir)
         check_out_dir(report_dir, "--report", names=["diagnose.json", "diagnose.md"])
-    said: list[str] = []
-
-    def say(lines):
-        for line in lines:
-            said.append(line)
-            reporter.line(line)
+    said, say = teller(reporter)
 
     base = run(cfg, logs, channel_map=channel_map, trust=trust)
     say([*compare_lines(base), ""])
@@ -352,7 +337,7 @@ def convert(log, out_path, *, channel_map=None, config=None, trust=(),
     from ..analysis.progress import on_bar, reporting
     from ..publish import check_out_file
 
-    cfg = None if config is None else _config(config)
+    cfg = None if config is None else config_of(config)
     thrust_max = cfg.vehicle.thrust_max if cfg is not None else None
     out_path = Path(out_path)
     check_out_file(out_path, "-o")

@@ -1,4 +1,5 @@
-"""How a study shows what it does while it runs: progress bars and lines of chatter.
+"""How a study shows what it does while it runs (progress bars, lines of chatter, its
+result's lines as they come), and the one way a study takes a config.
 
 A study (:mod:`gainsched.studies`) takes a :class:`Reporter`; the default shows nothing,
 so a script that calls one sees only its result. The command line gives its terminal's
@@ -7,7 +8,7 @@ so a script that calls one sees only its result. The command line gives its term
 
 from __future__ import annotations
 
-__all__ = ["Reporter", "SILENT"]
+__all__ = ["Reporter", "SILENT", "config_of", "teller"]
 
 
 class _NoBar:
@@ -68,3 +69,24 @@ class Reporter:
 
 #: the reporter that tells nothing: the studies' default
 SILENT = Reporter()
+
+
+def config_of(config):
+    """A study's config argument as a :class:`~gainsched.config.Config`: itself, or the
+    TOML file (or shipped config's name) it names, loaded and validated."""
+    from ..config import Config, load_config
+
+    return config if isinstance(config, Config) else load_config(config)
+
+
+def teller(reporter: Reporter):
+    """``(said, say)``: the lines a study has told (a list, its result's ``lines()``) and
+    ``say(lines)``, which tells each line to ``reporter`` as it comes and keeps it."""
+    said: list[str] = []
+
+    def say(lines) -> None:
+        for line in lines:
+            said.append(line)
+            reporter.line(line)
+
+    return said, say

@@ -6,8 +6,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..config import Config, load_config
-from ._report import SILENT, Reporter
+from ._report import SILENT, Reporter, config_of
 
 __all__ = ["SweepRun", "sweep"]
 
@@ -95,7 +94,7 @@ def sweep(config, out_dir, *, vary=(), monte_carlo: int = 0, seed: int = 0, sigm
     from ..schedule.sweep import make_sweep, parse_sigma, parse_vary, run_sweep
 
     check_options(backend, scheduler)
-    base = config if isinstance(config, Config) else load_config(config)
+    base = config_of(config)
     plan = make_sweep(base, [parse_vary(v) for v in vary], monte_carlo=monte_carlo, seed=seed,
                       sigma=[parse_sigma(s) for s in sigma])
     out_dir = Path(out_dir)
