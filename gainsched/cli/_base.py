@@ -4,7 +4,6 @@ apart from inputs and from each other."""
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import os
 import sys
@@ -221,18 +220,6 @@ class _Terminal(Reporter):
 
 #: what a command gives the study it calls to show its progress
 TERMINAL = _Terminal()
-
-
-@contextlib.contextmanager
-def _fit_progress(desc: str):
-    """A progress line of diagnose's fits (:func:`_progress`): yields the
-    ``progress(name)`` callback that counts a fit and names its candidate."""
-    with _progress(desc, unit="fit") as bar:
-        def fitted(name):
-            bar.set_postfix_str(name, refresh=False)
-            bar.update()
-
-        yield fitted
 
 
 def _inside(a, b) -> bool:
