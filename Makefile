@@ -28,7 +28,7 @@ $(STAMP): pyproject.toml .ci/constraints.txt
 venv: $(STAMP)
 
 # ruff, the layer contract, and MISRA C:2012 on the hand-written C (cppcheck's MISRA
-# addon, gainsched/firmware/misra.py). cppcheck is installed first where it is missing and
+# addon, gainsched/firmware/host/misra.py). cppcheck is installed first where it is missing and
 # apt-get is usable (.ci/install-tools, the install step .ci/run has; GAINSCHED_INSTALL_TOOLS=0
 # turns it off); where it cannot be, the MISRA check is skipped in one line, and with
 # CI=true (.ci/run) lint fails in one line instead.
@@ -36,7 +36,7 @@ lint: $(STAMP)
 	@bash .ci/install-tools lint
 	$(BIN)/ruff check gainsched tests bench examples
 	$(BIN)/lint-imports --no-cache
-	$(BIN)/python -m gainsched.firmware.misra
+	$(BIN)/python -m gainsched.firmware.host.misra
 
 test: $(STAMP) lint
 	$(BIN)/python -m pytest $(PYTEST_XDIST) $(PYTEST_ARGS)

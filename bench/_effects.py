@@ -68,7 +68,7 @@ def interleaved(cases, repeat):
 
 
 def _with(text, effects):
-    from gainsched.configedit import set_section
+    from gainsched.config import set_section
 
     for kind, values in effects.items():
         text = set_section(text, f"effects.{kind}", [(k, v, None) for k, v in values.items()])

@@ -30,7 +30,6 @@ import numpy as np
 
 from gainsched import native
 from gainsched.config import load_config
-from gainsched.firmware import codegen
 from gainsched.firmware.compact import compact_data
 from gainsched.firmware.controller import (
     FLAG_ACCEL,
@@ -39,15 +38,16 @@ from gainsched.firmware.controller import (
     N_INPUT,
     controller_params,
 )
-from gainsched.firmware.pil import (
+from gainsched.firmware.host.lookup import CRuntime, build_host
+from gainsched.firmware.host.pil import (
     build_control_pil,
     build_pil,
     instructions_per_lookup,
     instructions_per_step,
     pil_tools,
 )
+from gainsched.firmware.host.sil import CController
 from gainsched.firmware.runtime import runtime_data
-from gainsched.firmware.sil import CController
 from gainsched.schedule.tables import load_table
 from gainsched.sim.loop import load_scenario, runtime_scheduler, simulate
 
@@ -121,7 +121,7 @@ def main(argv=None) -> int:
         with tempfile.TemporaryDirectory() as tmp:
             for name, data in forms.items():
                 ctl = CController(data, params, build_dir=Path(tmp) / name)
-                lib = codegen.CRuntime(codegen.build_host(data, Path(tmp) / f"{name}-rt"), data)
+                lib = CRuntime(build_host(data, Path(tmp) / f"{name}-rt"), data)
                 q = np.ascontiguousarray(np.stack([ref[:, 0], ref[:, 1], alpha], 1))
                 seq = np.tile(rows, (20, 1))  # one call: the ctypes overhead amortised
                 best_c = np.inf

@@ -11,7 +11,7 @@ pose rate (100 Hz). Timed in the same run: ``read_log`` of the CSV (the baseline
 of three) and of the ULog through the shipped ``px4`` map, first with an empty cache of
 converted logs (pyulog's parse, the conversion, the format's checks; best of three, the
 cache off) and then again (the model loop's every later read: the converted columns
-from the cache, :mod:`gainsched.analysis.logcache`; best of three). Target: the ULog
+from the cache, :mod:`gainsched.analysis.logs._cache`; best of three). Target: the ULog
 within 3x of the CSV.
 """
 
@@ -143,9 +143,9 @@ def main(argv=None) -> dict:
 
 def _checks_at_1khz(log, minutes: float) -> None:
     """The reader's consistency checks and the figures they judge
-    (:func:`gainsched.analysis.logchecks.check_log`, :func:`~gainsched.analysis.logchecks.
-    figures`) on ``log``'s flight repeated at 1 kHz for ``minutes`` (its jumps are gaps)."""
-    from gainsched.analysis.logchecks import CHECKS, check_log, figures
+    (:func:`gainsched.analysis.logs.check_log`, :func:`~gainsched.analysis.logs.figures`)
+    on ``log``'s flight repeated at 1 kHz for ``minutes`` (its jumps are gaps)."""
+    from gainsched.analysis.logs import CHECKS, check_log, figures
 
     n = int(60_000 * minutes)
     k = np.arange(n) % len(log)

@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from gainsched import native
-from gainsched.firmware import codegen
 from gainsched.firmware.compact import compact_data
-from gainsched.firmware.pil import build_pil, instructions_per_lookup, pil_tools
+from gainsched.firmware.host.lookup import CRuntime, build_host
+from gainsched.firmware.host.pil import build_pil, instructions_per_lookup, pil_tools
 from gainsched.firmware.runtime import Interpolator, runtime_data
 from gainsched.schedule.tables import load_table
 
@@ -73,7 +73,7 @@ def query_sets(data, interp, m=100_000, seed=0):
     return {"flight": np.ascontiguousarray(flight), "mixed": mixed}
 
 
-def time_c(lib: codegen.CRuntime, q, reps=5, passes=7, nominal=False) -> float:
+def time_c(lib: CRuntime, q, reps=5, passes=7, nominal=False) -> float:
     """Best ns per lookup over ``passes`` of ``reps`` sweeps (``nominal``: with the
     manoeuvre feed-forward, ``gs_lookup_nominal``)."""
     lib.bench(q[:1000], 1, nominal=nominal)  # warm up
@@ -119,8 +119,8 @@ def main(argv=None) -> int:
         with tempfile.TemporaryDirectory() as tmp:
             for opt in ("-O2", "-O3"):
                 wd = Path(tmp) / opt.strip("-")
-                lib = codegen.CRuntime(codegen.build_host(data, wd, opt=opt), data)
-                exe = codegen.build_host(data, wd, opt=opt, shared=False)
+                lib = CRuntime(build_host(data, wd, opt=opt), data)
+                exe = build_host(data, wd, opt=opt, shared=False)
                 for name, q in sets.items():
                     cg_q = q[:20_000]
                     out["c"][f"{opt} {name}"] = {
@@ -177,7 +177,7 @@ def formats(dense, flight) -> dict:
           f"{out['bytes']['compact']:,} B")
     if native.find_cc() is not None:
         with tempfile.TemporaryDirectory() as tmp:
-            ns = {k: time_c(codegen.CRuntime(codegen.build_host(f, Path(tmp) / k), f), flight)
+            ns = {k: time_c(CRuntime(build_host(f, Path(tmp) / k), f), flight)
                   for k, f in forms.items()}
         out["host_ns"] = ns
         print(f"  host -O2 flight lookup: compact {ns['compact']:.0f} ns, dense "

@@ -34,7 +34,7 @@ API = (
     ("Looking up gains", "firmware.runtime", ("Interpolator", "Lookup")),
     ("The compact table format", "firmware.compact", ("compact_data", "CompactData",
                                                       "CompactInterpolator")),
-    ("Checking a table", "firmware.check", ("midpoint_check",)),
+    ("Checking a table", "firmware.host.check", ("midpoint_check",)),
     ("Motor commands", "actuators", ("command_from_thrust", "thrust_from_command")),
     ("Seeing a table", "schedule.viewer", ("schedule_figures", "schedule_plots",
                                            "table_summary")),

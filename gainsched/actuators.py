@@ -14,7 +14,7 @@ every ``f`` in 0..1 without cancellation (``f = 0``: ``u = T / T_full``)::
 
     u = 2 y / ((1 - f) + sqrt((1 - f)^2 + 4 f y)),      y = T / T_full
 
-The log readers (:mod:`gainsched.analysis.foreign`) go one way, the generated controller
+The log readers (:mod:`gainsched.analysis.logs._foreign`) go one way, the generated controller
 (``[firmware] motor_order``, ``command``; docs/runtime.md, "PX4") the other, both with
 these functions.
 """

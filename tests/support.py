@@ -17,9 +17,8 @@ import numpy as np
 import tomlkit
 
 from gainsched import native
-from gainsched.config import Config, config_from_text
-from gainsched.configedit import set_values
-from gainsched.firmware.pil import pil_tools
+from gainsched.config import Config, config_from_text, set_values
+from gainsched.firmware.host.pil import pil_tools
 from gainsched.schedule.onboard import record_from_config
 from gainsched.schedule.tables import Table
 
@@ -57,7 +56,7 @@ def small_config_text(**keys) -> str:
     (``grid__speeds=[3, 9]``, ``control__azimuth_integral=True``) or passed as a dict
     (``**{"effects.motor_lag.tau": 0.03}``); a value of None keeps the paper's value of
     a key the small grid sets (``grid__speeds=None``: the paper's speeds). The text is
-    edited with :func:`gainsched.configedit.set_values`, so comments and layout are kept,
+    edited with :func:`gainsched.config.set_values`, so comments and layout are kept,
     and it is not validated: a test of a refusal writes the bad value this way.
     """
     values = {**SMALL_GRID, **_dotted(keys)}

@@ -5,7 +5,8 @@ modules in layers; these tests keep it honest: every module is in a layer, the
 import graph (lazy imports inside functions included) has no cycle, and an
 injected back-edge breaks the contract. A second contract keeps the firmware off the
 model (issue 40: the firmware comes from the table alone); an injected
-``firmware -> model`` edge breaks it.
+``firmware -> model`` edge breaks it. Inside the firmware, what ships sits below the
+host tools of ``firmware.host`` (issue 54); a shipped module importing one breaks it.
 """
 
 from __future__ import annotations
@@ -50,6 +51,19 @@ def test_every_module_is_in_a_layer():
     assert set(listed) == members
 
 
+@pytest.mark.parametrize("container", ["gainsched.firmware", "gainsched.firmware.host"])
+def test_every_firmware_module_is_in_a_layer(container):
+    """Issue 54: the firmware's two trades (what ships, the host tools) are layers of
+    their own contracts; a new module of either must be placed in them."""
+    (contract,) = [c for c in CONTRACT["contracts"] if c.get("containers") == [container]]
+    package = ROOT.joinpath(*container.split("."))
+    members = {p.stem for p in package.glob("*.py") if p.stem != "__init__"}
+    members |= {p.parent.name for p in package.glob("*/__init__.py")}
+    listed = [m.strip() for layer in contract["layers"] for m in layer.split("|")]
+    assert len(listed) == len(set(listed)), "a member is listed twice"
+    assert set(listed) == members
+
+
 def test_no_import_cycle():
     graph = grimp.build_graph("gainsched", exclude_type_checking_imports=True)
     mods = sorted(m for m in graph.modules if m != "gainsched")
@@ -77,12 +91,12 @@ def test_no_import_cycle():
 
 #: imports made for annotations only (``if TYPE_CHECKING:``): the contract and the cycle
 #: check above do not see them (exclude_type_checking_imports), so each is listed here
-#: with why it stays; none may be added. budget -> config went in issue 40 (budget takes
-#: a structural type of its own, gainsched.budget.BuildConfig).
+#: with why it stays; none may be added (the budget takes a structural type of its own,
+#: gainsched.config.BuildConfig, not the Config).
 TYPE_ONLY_IMPORTS = {
     ("gainsched.model.reduced", "gainsched.config"): "Model is made from a Config",
-    ("gainsched.plausible", "gainsched.config"): "check_circles reads the Config that the "
-    "config reader validates through it",
+    ("gainsched.config._plausible", "gainsched.config._reader"): "check_circles reads the "
+    "Config that the config reader validates through it",
 }
 
 
@@ -98,7 +112,7 @@ def type_only_imports(package: str = "gainsched") -> set[tuple[str, str]]:
 def test_type_only_imports_are_the_listed_ones():
     found = type_only_imports()
     assert found == set(TYPE_ONLY_IMPORTS), sorted(found ^ set(TYPE_ONLY_IMPORTS))
-    assert not any(m == "gainsched.budget" for m, _ in found)
+    assert not any(m == "gainsched.config._budget" for m, _ in found)
 
 
 def _lint(package_parent: Path, cwd: Path) -> subprocess.CompletedProcess:
@@ -118,12 +132,17 @@ def test_contract_is_kept():
     ("constants.py", "from . import cli  # injected\n"),  # the base imports the top
     ("config/_reader.py",
      "def _f():\n    from ..schedule.grid import build_grid  # injected, lazy\n"),
-    ("publish.py", "from . import configedit  # injected: a sibling of one layer\n"),
+    ("publish.py", "from . import resources  # injected: a sibling of one layer\n"),
     ("model/reduced.py", "from ..schedule import grid  # injected: model above schedule\n"),
     # inside the packages of private modules: a lower concept reaching a higher one
     ("analysis/diagnose/_candidates.py", "from . import _fit  # injected\n"),
     ("analysis/compare/_measured.py", "from . import _residual  # injected\n"),
     ("analysis/logs/_schema.py", "from . import _read  # injected\n"),
+    # the firmware: what ships reaching a host tool; a host tool's base reaching PIL
+    ("firmware/header.py", "from .host import lookup  # injected: shipped imports host\n"),
+    ("firmware/cfiles.py",
+     "def _f():\n    from .host.compiler import STRICT_CFLAGS  # injected, lazy\n"),
+    ("firmware/host/compiler.py", "from . import pil  # injected\n"),
 ])
 def test_contract_fails_on_an_injected_back_edge(tmp_path, module, back_edge):
     copy = tmp_path / "gainsched"
@@ -165,7 +184,7 @@ def test_contract_fails_on_an_injected_firmware_to_model_edge(tmp_path, module, 
 
 #: commands whose work is not yet a study of gainsched.studies (issue 54's ratchet: an entry
 #: goes when its study comes; none may be added)
-NOT_YET_STUDIES = {"validate", "nominal", "inspect", "check"}
+NOT_YET_STUDIES: set[str] = set()
 
 
 def _commands() -> dict[str, ast.FunctionDef]:
@@ -216,3 +235,52 @@ def test_every_command_is_a_call_of_one_study():
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.ImportFrom) and node.level == 1:
                 assert node.module in (None, "_base"), f"{path.name} imports {node.module}"
+
+
+#: what opens a file or parses a log format: none of it outside gainsched/analysis/logs
+_LOG_LIBRARIES = {"pyulog", "rosbags", "h5py", "csv"}
+_FILE_CALLS = {"open", "read_text", "read_bytes", "loadtxt", "genfromtxt", "File"}
+
+
+def _log_reading(source: str) -> list[str]:
+    """What in ``source`` (a module's text) reads a file or reaches into the log package's
+    private modules: the import of a log library, a call that opens a file, an import of
+    ``gainsched.analysis.logs._*``."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [a.name for a in node.names if a.name.split(".")[0] in _LOG_LIBRARIES]
+        elif isinstance(node, ast.ImportFrom):
+            parts = (node.module or "").split(".")
+            if node.level == 0 and parts[0] in _LOG_LIBRARIES:
+                found.append(node.module)
+            if "logs" in parts and parts[-1].startswith("_") or (
+                    parts[-1] == "logs" and any(a.name.startswith("_") for a in node.names)):
+                found.append(f"{'.' * node.level}{node.module}")
+        elif isinstance(node, ast.Call):
+            fn = node.func
+            name = fn.attr if isinstance(fn, ast.Attribute) else getattr(fn, "id", None)
+            if name in _FILE_CALLS:
+                found.append(f"{name}() on line {node.lineno}")
+    return found
+
+
+@pytest.mark.parametrize("source", [
+    "import pyulog\n", "from rosbags.highlevel import AnyReader\n", "import h5py\n",
+    "from pathlib import Path\nPath('x.csv').read_text()\n", "open('flight.csv')\n",
+    "import numpy as np\nnp.loadtxt('f.csv')\n", "from ..logs._foreign import read_topics\n",
+    "from ..logs import _cache\n",
+])
+def test_the_log_reading_check_sees_a_reader(source):
+    assert _log_reading(source), source
+
+
+def test_only_the_log_package_reads_log_files():
+    """Issue 54: readers, channel maps, the cache of converted logs and the consistency
+    checks live in gainsched/analysis/logs behind its public names; no other module of
+    analysis/ opens a file, imports a log format's library or a private module of logs."""
+    analysis = PACKAGE / "analysis"
+    for path in sorted(analysis.rglob("*.py")):
+        if (analysis / "logs") in path.parents:
+            continue
+        assert not _log_reading(path.read_text()), (path, _log_reading(path.read_text()))

@@ -1,5 +1,5 @@
-"""Build budget (gainsched.budget): estimates follow the grid sweep, absurd builds are refused
-at validation, quickly, naming the file and the key that drives the estimate."""
+"""Build budget (gainsched.config's ``_budget``): estimates follow the grid sweep, absurd
+builds are refused at validation, quickly, naming the file and the key that drives the estimate."""
 
 from __future__ import annotations
 
@@ -9,15 +9,23 @@ import re
 import numpy as np
 import pytest
 
-from gainsched.budget import GIB, TILT_BATCH, check_budget, estimate_build
-from gainsched.config import Grid, Limits, config_from_text, load_config
-from gainsched.configedit import set_values
+from gainsched.config import (
+    GIB,
+    Grid,
+    Limits,
+    check_budget,
+    config_from_text,
+    estimate_build,
+    load_config,
+    set_values,
+)
+from gainsched.constants import TILT_BATCH
 from gainsched.errors import InputError
 from gainsched.schedule import grid as grid_mod
 
 
 def _set(text: str, values: dict) -> str:
-    """``values`` (dotted keys) set in the config text (gainsched.configedit)."""
+    """``values`` (dotted keys) set in the config text (gainsched.config, ``_edit``)."""
     new = set_values(text, values)
     assert new != text
     return new
@@ -25,7 +33,7 @@ def _set(text: str, values: dict) -> str:
 
 def _sub(text: str, key: str, value: str) -> str:
     """``key = value`` substituted in the text: only for the huge axes (10^4 to 10^6
-    values), which configedit (tomlkit) would take seconds to minutes to write (8 s for
+    values), which the config editor (tomlkit) would take seconds to minutes to write (8 s for
     10^4 floats, growing with the square of the length)."""
     new = re.sub(rf"(?m)^{key} = .*$", f"{key} = {value}", text)
     assert new != text

@@ -1,4 +1,4 @@
-"""Config variants (gainsched.configedit): the TOML document edited, everything else kept."""
+"""Config variants (gainsched.config, ``_edit``): the TOML document edited, everything else kept."""
 
 from __future__ import annotations
 
@@ -6,8 +6,14 @@ import tomllib
 
 import pytest
 
-from gainsched.config import config_from_text
-from gainsched.configedit import get_value, remove_key, set_section, set_value, set_values
+from gainsched.config import (
+    config_from_text,
+    get_value,
+    remove_key,
+    set_section,
+    set_value,
+    set_values,
+)
 
 from support import PAPER_TOML as PAPER
 

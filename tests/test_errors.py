@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from gainsched.errors import GainschedError, InputError
-from gainsched.firmware.codegen import check_runtime_data
+from gainsched.firmware.host.check import check_runtime_data
 from gainsched.schedule.tables import load_table
 
 from support import PAPER_H5, REPO
@@ -70,7 +70,7 @@ def test_checksum_mismatch_keeps_the_dataset(edited_table):
 
 
 def test_check_runtime_data_keeps_the_file_and_key(edited_table, tmp_path):
-    """codegen.check_runtime_data turns a ValueError into an InputError: an InputError
+    """check_runtime_data turns a ValueError into an InputError: an InputError
     from the table reader passes unchanged (re-wrapped, its text would name the file
     twice and lose the key)."""
     with pytest.raises(InputError) as exc:

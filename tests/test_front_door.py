@@ -146,7 +146,8 @@ def test_table_with_three_states_is_refused(table_copy):
 
 def test_inspect_all_infeasible_table(tmp_path, monkeypatch):
     """A table gainsched built itself with no feasible circle (too slow: slack). The config
-    check refuses such a grid now (gainsched.plausible); a table built before it passes."""
+    check refuses such a grid now (gainsched.config's ``_plausible``); a table built before it
+    passes."""
     import gainsched.config._reader
 
     monkeypatch.setattr(gainsched.config._reader, "check_circles", lambda *a: None)
@@ -343,7 +344,7 @@ DEEP = "a = " + "[" * 100_000 + "]" * 100_000 + "\n"  # RecursionError in tomlli
 DEEP_DOTTED = "a" + ".a" * 40 + " = 1\n"  # parses without recursion, 41 tables deep
 LATIN1 = SCENARIO.encode() + '# café\n'.encode("latin-1")  # a bad byte on line 4
 #: a channel map that passes (the shipped px4 map's text)
-PX4_MAP = (REPO / "gainsched" / "analysis" / "maps" / "px4.toml").read_text()
+PX4_MAP = (REPO / "gainsched" / "analysis" / "logs" / "maps" / "px4.toml").read_text()
 
 
 def _scenario(text) -> dict:

@@ -91,3 +91,14 @@ def test_no_module_keeps_state_between_calls():
               "D = []\nE = {'k': 1}\nF = (1, 2)\nG = dict(a=1)\n")
     assert [h.split(":")[0] for h in _module_state(sample)] == [
         "line 2", "line 3", "line 4", "line 5"]
+
+
+#: the most modules the package root holds besides ``__init__`` and ``__main__``: the
+#: public entry points and a small base; everything else lives in a sub-package of its
+#: concept (issue 54: configedit, budget and plausible went into config/)
+MAX_ROOT_MODULES = 8
+
+
+def test_the_package_root_holds_a_small_base():
+    root = sorted(p.stem for p in PACKAGE.glob("*.py") if p.stem not in ("__init__", "__main__"))
+    assert len(root) <= MAX_ROOT_MODULES, f"{len(root)} modules at the root: {root}"

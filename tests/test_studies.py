@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -23,7 +24,7 @@ class _Recording(Reporter):
     the notes."""
 
     def __init__(self):
-        self.bars, self.notes = [], []
+        self.bars, self.notes, self.said = [], [], []
 
     def bar(self, desc, total=None, unit="it", *, show=True):
         rec = self.bars
@@ -46,6 +47,9 @@ class _Recording(Reporter):
 
     def note(self, text, bar=None):
         self.notes.append(text)
+
+    def line(self, text):
+        self.said.append(text)
 
 
 def test_build_in_python_is_the_command(tmp_path, monkeypatch):
@@ -162,6 +166,128 @@ def test_sweep_and_campaign_in_python_are_the_commands(tmp_path, monkeypatch):
         assert p.read_bytes() == (tmp_path / "c_cli" / p.name).read_bytes(), p.name
     assert flown.lines() == [ln.replace("c_cli", "c_lib") for ln in res.output.splitlines()
                              if not ln.startswith("gainsched: warning")]
+
+
+def test_validate_and_nominal_in_python_are_the_commands(tmp_path, monkeypatch):
+    """``gs.studies.validate`` gives the lines ``gainsched validate`` prints;
+    ``gs.studies.nominal`` the lines ``gainsched nominal`` prints, the same CSV bytes, and
+    its arrays are the table's columns."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "small.toml").write_text(small_config_text())
+    run = CliRunner().invoke
+    res = run(cli, ["validate", "small.toml"])
+    assert res.exit_code == 0, res.output
+    v = studies.validate("small.toml")
+    assert v.lines() == res.stdout.splitlines() and v.taut_speeds.shape == (2,)
+    assert studies.validate(gs.load_config("small.toml")).lines()[1:] == v.lines()[1:]
+
+    res = run(cli, ["nominal", "small.toml", "--speed", "-9", "--tilt", "15", "--samples",
+                    "6", "--csv", "cli.csv"])
+    assert res.exit_code == 0, res.output
+    c = studies.nominal("small.toml", -9.0, 15.0, 6, csv="lib.csv")
+    assert c.lines() == res.stdout.replace("cli.csv", "lib.csv").splitlines()
+    assert (tmp_path / "lib.csv").read_bytes() == (tmp_path / "cli.csv").read_bytes()
+    assert c.csv == Path("lib.csv") and c.thrusts.shape == (6, 4)
+    rows = np.loadtxt(tmp_path / "lib.csv", delimiter=",", skiprows=1, usecols=range(9))
+    np.testing.assert_allclose(rows[:, 3:7], c.thrusts, rtol=1e-8)
+    np.testing.assert_allclose(rows[:, 0], c.xi, rtol=1e-8)
+
+
+def test_validate_and_nominal_refuse_before_any_work(tmp_path, monkeypatch):
+    """A bad config, speed, tilt, sample count or CSV file is refused naming it, before the
+    circle is solved (nothing written)."""
+    import gainsched.schedule.nominal as nominal_module
+
+    (tmp_path / "bad.toml").write_text('name = "x"\n')
+    with pytest.raises(InputError, match="bad.toml"):
+        studies.validate(tmp_path / "bad.toml")
+
+    def unsolvable(*args, **kwargs):
+        raise AssertionError("the circle was solved")
+
+    monkeypatch.setattr(nominal_module, "circle_nominal", unsolvable)
+    (tmp_path / "small.toml").write_text(small_config_text())
+    cfg = tmp_path / "small.toml"
+    for kwargs, option in (({"speed": 0.0}, "--speed"), ({"speed": float("nan")}, "--speed"),
+                           ({"speed": 9.0, "tilt": 90.0}, "--tilt"),
+                           ({"speed": 9.0, "samples": 3}, "--samples"),
+                           ({"speed": 9.0, "csv": tmp_path}, "--csv"),
+                           ({"speed": 9.0, "csv": tmp_path / "bad.toml" / "x.csv"}, "--csv")):
+        with pytest.raises(InputError, match=option):
+            studies.nominal(cfg, **kwargs)
+    with pytest.raises(InputError, match="bad.toml"):
+        studies.nominal(tmp_path / "bad.toml", 9.0, csv=tmp_path / "x.csv")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml", "small.toml"]
+
+
+@pytest.fixture(scope="module")
+def small_table(tmp_path_factory):
+    """The small grid's table (2 speeds x 2 tilts x 8 azimuths), built once."""
+    out = tmp_path_factory.mktemp("small")
+    (out / "small.toml").write_text(small_config_text())
+    return gs.build(out / "small.toml", out / "tables", jobs=1).table
+
+
+def test_inspect_in_python_is_the_command(small_table, tmp_path, monkeypatch):
+    """``gs.studies.inspect`` gives the lines ``gainsched inspect`` prints (text, with the
+    runtime's flash footprint and the envelope's files) and, as JSON, the summary
+    ``--json`` prints; its envelope files are the command's, byte for byte."""
+    import json
+
+    monkeypatch.chdir(tmp_path)
+    run = CliRunner().invoke
+    res = run(cli, ["inspect", str(small_table), "-o", "cli"])
+    assert res.exit_code == 0, res.output
+    rec = _Recording()
+    ins = studies.inspect(small_table, "lib", reporter=rec)
+    assert ins.lines() == res.stdout.replace("cli/", "lib/").splitlines()
+    assert ins.flash and rec.bars == [[f"inspect {ins.table.name}", 2, 2]]
+    assert (tmp_path / "lib" / "envelope.png").read_bytes() == (
+        tmp_path / "cli" / "envelope.png").read_bytes()
+    res = run(cli, ["inspect", str(small_table), "--json"])
+    assert res.exit_code == 0, res.output
+    quick = studies.inspect(small_table, code_size=False)
+    assert quick.lines(as_json=True) == [res.stdout.removesuffix("\n")]
+    assert quick.summary() == json.loads(res.stdout) and quick.flash == ()
+    assert quick.summary()["c_prefix"] == "small"
+
+
+def test_inspect_refuses_before_any_work(small_table, tmp_path):
+    """An output folder that is a file, or a file that is no table, is refused naming
+    it before anything is compiled or drawn."""
+    (tmp_path / "file").write_text("not a folder")
+    rec = _Recording()
+    with pytest.raises(InputError, match="--out"):
+        studies.inspect(small_table, tmp_path / "file", reporter=rec)
+    with pytest.raises(InputError, match="not a readable HDF5 table"):
+        studies.inspect(tmp_path / "file", reporter=rec)
+    assert rec.bars == []
+
+
+def test_check_in_python_is_the_command(small_table, tmp_path, monkeypatch):
+    """``gs.studies.check`` tells the lines ``gainsched check`` prints (the seconds
+    aside) as they come, keeps them in ``lines()``, and fails where the command exits 1;
+    a stride past the last midpoint is refused before the check."""
+    def timeless(lines):
+        return [re.sub(r", [0-9.]+ s$", ", _ s", ln) for ln in lines]
+
+    run = CliRunner().invoke
+    for args, ok in ((["--max-error", "0.01"], False), (["--max-error", "50"], True),
+                     (["--compact", "1", "--max-error", "50"], True)):
+        res = run(cli, ["check", str(small_table), *args])
+        assert res.exit_code == (0 if ok else 1), res.output
+        rec = _Recording()
+        values = dict(zip(args[::2], map(float, args[1::2]), strict=True))
+        done = studies.check(small_table, max_error=values["--max-error"],
+                             azimuth_error=values.get("--compact"), reporter=rec)
+        assert done.ok is ok and rec.said == done.lines()
+        assert timeless(done.lines()) == timeless(res.stdout.splitlines())
+        assert (done.compact is not None) == ("--compact" in values)
+        assert rec.bars == [[f"check {small_table.stem}", 1, 1]]
+    rec = _Recording()
+    with pytest.raises(InputError, match="--speed-stride"):
+        studies.check(small_table, speed_stride=2, reporter=rec)
+    assert rec.bars == [] and rec.said == []
 
 
 @pytest.mark.slow

@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gainsched.analysis.channelmap import load_channel_map
-from gainsched.analysis.logs import read_log
+from gainsched.analysis.logs import load_channel_map, read_log
 from gainsched.config import load_config
 from gainsched.rotations import matrix_from_quaternion, quaternion_from_matrix
 from gainsched.schedule.cached import cached_table_path
@@ -49,7 +48,8 @@ def test_wheel_install_runs_from_another_folder(tmp_path):
     (wheel,) = dist.glob("gainsched-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
     assert {f"gainsched/configs/{p.name}" for p in (ROOT / "configs").glob("*.toml")} <= names
-    assert {"gainsched/analysis/maps/px4.toml", "gainsched/analysis/maps/ros2.toml"} <= names
+    maps = "gainsched/analysis/logs/maps"
+    assert {f"{maps}/px4.toml", f"{maps}/ros2.toml"} <= names
     inst = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q",
                            "--target", str(site), str(wheel)], capture_output=True, text=True,
                           timeout=300)

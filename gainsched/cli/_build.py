@@ -6,10 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
-import numpy as np
 
 from ..constants import MAX_SWEEP_VARIANTS
-from ..errors import InputError
 from ._base import (
     CONFIG,
     SEED,
@@ -29,42 +27,10 @@ from ._base import (
 @user_errors
 def validate(config):
     """Check a config file (TOML) and print a summary of the vehicle and grid."""
-    from ..config import load_config
-    from ..schedule.nominal import min_taut_speed
+    from ..studies import validate as run
 
-    cfg = load_config(config)
-    v, t, gr = cfg.vehicle, cfg.tether, cfg.grid
-    click.echo(f"{config}: ok (sha256 {cfg.sha256[:12]})")
-    click.echo(
-        f"  vehicle  m={v.mass:g} kg  "
-        f"J=diag({', '.join(f'{x:g}' for x in np.diag(v.inertia))}) kg m^2"
-    )
-    click.echo(
-        f"           arm {v.arm_length:g} m  kappa {v.kappa:g} m  "
-        f"thrust {v.thrust_min:g}..{v.thrust_max:g} N"
-    )
-    click.echo(f"  tether   rho={t.length:g} m  L_e={t.attachment_offset:g} m  link={t.link}")
-    effects = ", ".join(
-        f"{e.name}({', '.join(f'{k}={x:g}' for k, x in e.params)})" for e in cfg.effects
-    )
-    click.echo(f"  effects  {effects or 'none'}")
-    def axis(values, rng, what, unit):
-        if rng is None:
-            return f"{values.size} {what} {values[0]:g}..{values[-1]:g} {unit}"
-        return f"{what} {rng.lo:g}..{rng.hi:g} {unit} (at most {rng.max_count}, chosen)"
-
-    az = gr.azimuth_auto
-    click.echo(
-        f"  grid     {axis(gr.speeds, gr.speeds_auto, 'speeds', 'm/s')}, "
-        f"{axis(np.rad2deg(gr.tilts), gr.tilts_auto, 'tilts', 'deg')}, "
-        + (f"{gr.azimuth_samples} azimuth samples" if az is None
-           else f"{az.lo}..{az.hi} azimuth samples (chosen)")
-    )
-    if gr.auto:
-        click.echo(f"           chosen by the build for {100 * gr.max_interpolation_error:g} % "
-                   "at the cell midpoints (docs/grid.md)")
-    for a in gr.tilts:
-        click.echo(f"  taut above {min_taut_speed(cfg, a):.2f} m/s at tilt {np.rad2deg(a):g} deg")
+    for line in run(config).lines():
+        click.echo(line)
 
 
 @cli.command()
@@ -82,49 +48,13 @@ def validate(config):
 def nominal(config, speed, tilt, samples, csv_path):
     """Nominal constant-speed circle over the azimuth: roll (deg), collective and motor
     thrusts (N), tether tension (N), centripetal g-load, feasibility."""
-    from ..config import load_config
-    from ..model.reduced import Model
-    from ..publish import check_out_file, write_atomic
     from ..resources import config_path
-    from ..schedule.nominal import REASONS, circle_nominal, min_taut_speed
+    from ..studies import nominal as run
 
     if csv_path is not None:
         _not_an_input(csv_path, "--csv", CONFIG=config_path(config))
-    cfg = load_config(config)
-    if speed == 0 or not np.isfinite(speed):
-        raise InputError("command line", "--speed", "must be a finite non-zero speed in m/s")
-    if not -90 < tilt < 90:
-        raise InputError("command line", "--tilt", "must be in (-90, 90) deg")
-    if csv_path is not None:
-        check_out_file(csv_path, "--csv")  # a bad --csv fails before anything prints
-    model = Model(cfg)
-    nom = circle_nominal(model, speed, np.deg2rad(tilt), samples)
-    g_load = speed**2 / model.r / cfg.g
-    rows = []
-    for k in range(samples):
-        why = "; ".join(txt for bit, txt in REASONS.items() if nom.reasons[k] & bit) or "ok"
-        rows.append(
-            (np.rad2deg(nom.z[k, 1]) % 360, np.rad2deg(nom.phi[k]), nom.collective[k],
-             *nom.u[k], nom.tension[k], g_load, why)
-        )
-    head = ("xi_deg", "roll_deg", "T_C_N", "T1_N", "T2_N", "T3_N", "T4_N", "tension_N", "g_load",
-            "feasibility")
-    click.echo(
-        f"speed {speed:g} m/s (xi_dot {speed / model.r:.4g} rad/s), tilt {tilt:g} deg, "
-        f"period {2 * np.pi * model.r / abs(speed):.3f} s, "
-        f"taut above {min_taut_speed(cfg, np.deg2rad(tilt)):.2f} m/s"
-    )
-    click.echo(" ".join(f"{h:>9s}" for h in head[:-1]) + "  feasibility")
-    for row in rows:
-        click.echo(" ".join(f"{x:9.3f}" for x in row[:-1]) + "  " + row[-1])
-    n_bad = int(np.count_nonzero(nom.reasons))
-    click.echo(f"{samples - n_bad}/{samples} azimuth samples feasible")
-    if csv_path is not None:
-        lines = [",".join(head)] + [
-            ",".join(f"{x:.9g}" for x in row[:-1]) + f",{row[-1]}" for row in rows
-        ]
-        write_atomic(csv_path, ("\n".join(lines) + "\n").encode(), where="--csv")
-        click.echo(f"wrote {csv_path}")
+    for line in run(config, speed, tilt, samples, csv=csv_path).lines():
+        click.echo(line)
 
 
 @cli.command()

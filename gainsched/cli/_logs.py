@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ..analysis.logchecks import CHECKS as LOG_CHECKS
+from ..analysis.logs import CHECKS as LOG_CHECKS
 from ..constants import MAX_FLIGHT_S, MAX_JOBS
 from ..errors import InputError
 from ._base import (
@@ -46,7 +46,7 @@ def _channel_map(map_path):
     """The validated channel map of --map, or None (checked before any work)."""
     if map_path is None:
         return None
-    from ..analysis.channelmap import load_channel_map
+    from ..analysis.logs import load_channel_map
 
     return load_channel_map(map_path)
 

@@ -2,19 +2,15 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import click
-import numpy as np
 
-from ..errors import InputError
 from ._base import (
     TERMINAL,
     FilePath,
     FiniteFloat,
-    _progress,
     cli,
     user_errors,
 )
@@ -38,72 +34,13 @@ from ._base import (
 def inspect(table, out_dir, as_json):
     """Summarise a gain table: grid, feasibility map (speed m/s x tilt deg), gain ranges,
     worst closed-loop spectral radius; with --out, the flight envelope as a PNG and JSON."""
-    from ..analysis.progress import stage
-    from ..firmware.codegen import flash_summary
-    from ..publish import check_out_dir
-    from ..schedule.envelope import write_envelope
-    from ..schedule.nominal import REASONS
-    from ..schedule.refine import grid_auto_lines
-    from ..schedule.tables import load_table
-    from ..schedule.viewer import mode_lines, table_summary
+    from ..studies import inspect as run
 
-    if out_dir is not None:
-        check_out_dir(out_dir, "--out", names=_ENVELOPE)
-    t = load_table(table)
-    if as_json:
-        from ..firmware.runtime import c_identifier
-
-        # c_prefix: the prefix of the C symbols export-c writes (paper_table, PAPER_N_STATE)
-        summary = {**table_summary(t, source=str(table)), "c_prefix": c_identifier(t.name)}
-        click.echo(json.dumps(summary, indent=2, sort_keys=True))
-        if out_dir is not None:
-            write_envelope(t, table, out_dir)
-        return
-    with _progress(f"inspect {t.name}", 1 + (out_dir is not None), "stage") as bar:
-        flash = stage(bar, "runtime code size (compiling)", flash_summary, t)
-        envelope = out_dir and stage(bar, "envelope.png", write_envelope, t, table, out_dir)
-    click.echo(f"{table}: {t.attrs['schema']}, config {t.name} (sha256 {t.config_sha256[:12]}), "
-               f"tool {t.attrs['tool_version']}, terminal cost {t.attrs['terminal']}")
-    tilts = ", ".join(f"{x:g}" for x in np.rad2deg(t.tilt))
-    click.echo(f"  xi: {t.xi.size} samples over 360 deg; speeds {t.speed[0]:g}..{t.speed[-1]:g} "
-               f"m/s ({t.speed.size}); tilts {tilts} deg")
-    if t.grid_auto is not None:
-        for line in grid_auto_lines(t.grid_auto):
-            click.echo(f"  {line}")
-    click.echo("  feasible azimuth fraction (rows: tilt deg, columns: speed m/s)")
-    w = max(6, 1 + max(len(f"{v:g}") for v in t.speed))  # chosen grids have long values
-    click.echo("        " + "".join(f"{v:{w}g}" for v in t.speed))
-    for i, a in enumerate(np.rad2deg(t.tilt)):
-        frac = (t.reasons[i] == 0).mean(-1)
-        click.echo(f"  {a:5g} " + "".join(f"{x:{w}.2f}" for x in frac))
-    for bit, text in REASONS.items():
-        n = np.count_nonzero(t.reasons & bit)
-        if n:
-            click.echo(f"  {n} points: {text}")
-    K = t.K_full()
-    names = list(t.state_names)
-    click.echo("  gain ranges over feasible points (min .. max per state column)")
-    for j, nm in enumerate(names):
-        col = K[..., j][np.isfinite(K[..., j])]
-        if col.size:
-            click.echo(f"    {nm:>10s}: {col.min():9.3f} .. {col.max():9.3f}")
-    for line in flash:
-        click.echo(f"  {line}")
-    rho = t.spectral_radius
-    if not np.any(np.isfinite(rho)):
-        click.echo("  no feasible circle: no gains, no closed loop (see the reasons above)")
-    else:
-        i, j = np.unravel_index(np.nanargmax(rho), rho.shape)
-        click.echo(f"  worst closed-loop monodromy spectral radius {rho[i, j]:.5f} "
-                   f"(speed {t.speed[j]:g} m/s, tilt {np.rad2deg(t.tilt[i]):g} deg); "
-                   f"all < 1: {bool(np.all(rho[np.isfinite(rho)] < 1))}")
-    for line in mode_lines(t):
-        click.echo(f"  {line}")
-    if out_dir is not None:
-        click.echo(envelope)
+    done = run(table, out_dir, code_size=not as_json, reporter=TERMINAL)
+    for line in done.lines(as_json):
+        click.echo(line)
 
 
-_ENVELOPE = ["envelope.png", "envelope.json"]
 
 
 @cli.command()
@@ -201,86 +138,9 @@ def check(table, speed_stride, max_error, azimuth_error):
     interpolated gains (monodromy spectral radius). Exit code 1 if the max error is above
     --max-error or a midpoint closed loop is not stable. With --compact, the same for
     the table's compact form."""
-    import time
+    from ..studies import check as run
 
-    from ..firmware.check import midpoint_check
-    from ..schedule.refine import grid_auto_lines
-    from ..schedule.tables import load_table
-
-    t = load_table(table)
-    n_mid = max(t.speed.size - 1, 1)
-    if speed_stride > n_mid:  # a stride past the last midpoint checks only the first
-        raise InputError("command line", "--speed-stride", f"{speed_stride}: {table} has "
-                         f"{n_mid} speed midpoint{'s' if n_mid > 1 else ''}: give 1..{n_mid}")
-    t0 = time.perf_counter()
-    lookup = None
-    from ..firmware.outputs import table_config
-
-    cfg = table_config(t, "config")
-    if max_error is None:
-        max_error = 2.0 if cfg is None else 100 * cfg.grid.max_interpolation_error
-    if azimuth_error is None and cfg is not None and cfg.firmware.format == "compact":
-        azimuth_error = 100 * cfg.firmware.azimuth_error
-    if azimuth_error is not None:
-        from ..firmware.compact import CompactInterpolator, compact_data
-        from ..firmware.runtime import runtime_data
-
-        dense = runtime_data(t)
-        form = compact_data(dense, azimuth_error / 100, source=str(table), key="--compact")
-        click.echo(f"{table}: compact form at {azimuth_error:g}% on the azimuth samples: "
-                   f"{form.nbytes():,} bytes of table data (dense {dense.nbytes():,}); "
-                   f"{int(form.harmonics.max())} harmonics at most; fit error at the "
-                   f"samples max {100 * np.nanmax(form.fit_error, initial=0):.2f}%")
-        lookup = CompactInterpolator(form)
-    n_v = len(range(0, max(t.speed.size - 1, 0), speed_stride))
-    with _progress(f"check {t.name}", n_v, "speed") as bar:
-        res = midpoint_check(t, speed_stride=speed_stride, progress=bar.update, lookup=lookup)
-    ok_pts = int(np.count_nonzero(np.isfinite(res.rel_err)))
-    n_a = max(t.tilt.size - 1, 1)
-    click.echo(
-        f"{table}: {ok_pts} cell midpoints checked ({n_v} speeds x {n_a} tilts x "
-        f"{t.xi.size} azimuths; {res.skipped} skipped as infeasible), "
-        f"{time.perf_counter() - t0:.1f} s"
-    )
-    if ok_pts:
-        v, a, x, e = res.worst_point()
-        click.echo(
-            f"  relative gain error |K_interp - K|_F / |K|_F: max {100 * e:.2f}% "
-            f"(speed {v:g} m/s, tilt {np.rad2deg(a):g} deg, xi {np.rad2deg(x):g} deg), "
-            f"median {100 * res.median_err:.2f}%"
-        )
-        by_v, by_a = res.by_axis()
-        click.echo(
-            "  max error by speed midpoint (m/s: %): "
-            + ", ".join(f"{k:g}: {100 * e:.2f}" for k, e in by_v.items() if np.isfinite(e))
-        )
-        click.echo(
-            "  max error by tilt midpoint (deg: %): "
-            + ", ".join(
-                f"{np.rad2deg(k):g}: {100 * e:.2f}" for k, e in by_a.items() if np.isfinite(e)
-            )
-        )
-        click.echo(f"  max nominal thrust error {np.nanmax(res.u_err):.4f} N "
-                   f"({100 * np.nanmax(res.u_rel):.2f}% of the circle's largest), roll "
-                   f"{100 * np.nanmax(res.phi_rel):.2f}% of the circle's largest")
-    rho = [(c[2], c) for c in res.circles if np.isfinite(c[2])]
-    if rho:
-        r, c = max(rho)
-        click.echo(
-            f"  closed loop with interpolated gains on {len(rho)} midpoint circles: "
-            f"worst spectral radius {r:.5f} (speed {c[0]:g} m/s, tilt "
-            f"{np.rad2deg(c[1]):g} deg; direct LQR {c[3]:.5f}); all < 1: {res.stable}"
-        )
-    # a grid the build chose promised gains, nominal thrusts and roll (docs/grid.md)
-    nominal = t.grid_auto is not None
-    if nominal:
-        click.echo(f"  {grid_auto_lines(t.grid_auto)[0]}; checked on gains, nominal "
-                   "thrusts and roll")
-    passed = res.passed(max_error / 100, nominal)
-    what = "gain, thrust and roll error" if nominal else "max error"
-    click.echo(
-        f"  {'PASS' if passed else 'FAIL'}: {what} <= {max_error:g}% and every "
-        "midpoint closed loop stable"
-    )
-    if not passed:
+    done = run(table, speed_stride=speed_stride, max_error=max_error,
+               azimuth_error=azimuth_error, reporter=TERMINAL)  # its lines as they come
+    if not done.ok:
         sys.exit(1)

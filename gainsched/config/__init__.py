@@ -12,8 +12,8 @@ collapse in the tables' float32 (:func:`~gainsched.config._checks.check_float32_
 weight Q that leaves the azimuth undetectable, a physically absurd vehicle, a control rate
 that undersamples the fastest circle (:func:`~gainsched.config._checks.check_rate`), a
 build that would need more memory or CPU time than ``[limits]`` allows
-(:func:`gainsched.budget.check_budget`), and a config no build could fly
-(:mod:`gainsched.plausible`: gravity, lengths, hover, a flyable circle).
+(:func:`check_budget`), and a config no build could fly (``_plausible``: gravity,
+lengths, hover, a flyable circle).
 
 One concept per private module, every public name re-exported here:
 
@@ -22,13 +22,22 @@ One concept per private module, every public name re-exported here:
   with the likely meant one) and the ``check_*`` helpers several sections share;
 - ``_sections``: one reader per section of the file (``read_vehicle``, ...);
 - ``_reader``: :class:`Config`, :func:`load_config`, :func:`config_from_text` and the
-  validation pass, with the checks across sections.
+  validation pass, with the checks across sections;
+- ``_budget``: the memory and CPU time a build needs, estimated (:func:`estimate_build`,
+  :func:`check_budget`);
+- ``_plausible``: the physics a config must have for any build to fly (:func:`balance`,
+  :data:`MAX_TETHER_LENGTH`);
+- ``_edit``: a config's text edited as a TOML document, comments and layout kept
+  (:func:`set_values`, :func:`set_section`, ...: config variants).
 """
 
 from __future__ import annotations
 
 from ..constants import N_INPUT, N_STATE
+from ._budget import GIB, BuildConfig, BuildEstimate, check_budget, estimate_build
 from ._checks import Section, check_name
+from ._edit import get_value, has_section, remove_key, set_section, set_value, set_values
+from ._plausible import MAX_TETHER_LENGTH, balance
 from ._reader import Config, config_from_text, load_config
 from ._schema import (
     TERMINAL_COSTS,
@@ -70,4 +79,17 @@ __all__ = [
     "MAX_SPEED",
     "MAX_RATE_HZ",
     "TERMINAL_COSTS",
+    "BuildConfig",
+    "BuildEstimate",
+    "estimate_build",
+    "check_budget",
+    "GIB",
+    "MAX_TETHER_LENGTH",
+    "balance",
+    "get_value",
+    "has_section",
+    "set_value",
+    "set_values",
+    "remove_key",
+    "set_section",
 ]

@@ -4,8 +4,8 @@
 run one validation pass (:func:`_config`): the size and the TOML, every section by its
 reader (:mod:`gainsched.config._sections`), then the checks across sections (lengths,
 hover, control rate, commands, margins), the build budget
-(:func:`gainsched.budget.check_budget`) and a flyable circle
-(:func:`gainsched.plausible.check_circles`). :class:`Config`, the tree of section
+(:func:`gainsched.config.check_budget`) and a flyable circle
+(:func:`gainsched.config._plausible.check_circles`). :class:`Config`, the tree of section
 dataclasses the pass makes, lives here with it: :meth:`Config.with_values` reads its
 edited text again.
 """
@@ -17,12 +17,12 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..budget import check_budget
 from ..errors import InputError
-from ..plausible import G_RANGE, check_circles, check_hover, check_lengths
 from ..resources import config_path, reference_configs
 from ..textinput import parse_toml, read_text
+from ._budget import check_budget
 from ._checks import Section, check_name, check_rate
+from ._plausible import G_RANGE, check_circles, check_hover, check_lengths
 from ._schema import (
     Analysis,
     Control,
@@ -110,7 +110,7 @@ class Config:
         aligned for model versus measurement (:func:`gainsched.compare`).
     limits : Limits
         ``[limits]`` (defaults when absent): the memory (GiB) and CPU time (s) a build
-        may need (:func:`gainsched.budget.check_budget`).
+        may need (:func:`gainsched.config.check_budget`).
     firmware : Firmware
         ``[firmware]`` (defaults when absent): the table format the C header carries and
         the flash budget.
@@ -184,7 +184,7 @@ class Config:
 
     def with_values(self, values: dict, source: str | None = None) -> Config:
         """A variant with some keys changed: the config text edited as a TOML document
-        (comments kept, floats in full precision; :func:`gainsched.configedit.set_values`)
+        (comments kept, floats in full precision; :func:`gainsched.config.set_values`)
         and validated again, so ``text`` and ``sha256`` describe the variant.
 
         Parameters
@@ -200,7 +200,7 @@ class Config:
         >>> cfg.with_values({"vehicle.mass": 0.55}).vehicle.mass  # doctest: +SKIP
         0.55
         """
-        from ..configedit import set_values
+        from ._edit import set_values
 
         return config_from_text(set_values(self.text, values),
                                 self.source if source is None else source)

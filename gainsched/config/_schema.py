@@ -391,7 +391,7 @@ class Sensors:
 
 @dataclass(frozen=True)
 class Limits:
-    """Resource limits of a build (``[limits]``, checked by :func:`gainsched.budget.check_budget`).
+    """Resource limits of a build (``[limits]``, checked by :func:`gainsched.config.check_budget`).
 
     Attributes
     ----------

@@ -65,6 +65,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -93,6 +94,7 @@ from .runtime import (
 )
 
 __all__ = [
+    "ControlOutputs",
     "CTRL_HELD",
     "CTRL_SATURATED",
     "CTRL_BAD_POSE",
@@ -259,6 +261,19 @@ def _rotate_left(a, q):
                     y + a[1] * w + (a[2] * x - a[0] * z),
                     z + a[2] * w + (a[0] * y - a[1] * x)])
     return out / np.linalg.norm(out)
+
+
+class ControlOutputs(NamedTuple):
+    """What a controller step gives (:meth:`Controller.step`; the C one's on the host
+    and on the emulated target, :mod:`gainsched.firmware.host`): one step's, or with a
+    leading axis of m steps a recorded sequence's (``run``)."""
+
+    #: (4,) or (m, 4): the motor outputs T1..T4 (thrusts, N, or normalized commands)
+    out: np.ndarray
+    #: int or (m,) int: the status bits (the lookup's and the ``CTRL_*`` ones)
+    status: int | np.ndarray
+    #: (10,) or (m, 10): the reduced state estimate the step used
+    z: np.ndarray
 
 
 class Controller:
@@ -512,12 +527,10 @@ class Controller:
 
         Returns
         -------
-        outputs : ndarray, shape (4,)
-            The motor outputs (:meth:`ControllerParams.commands_from_thrust`: by default
-            the thrusts of T1..T4, N).
-        status : int
-        z : ndarray, shape (10,)
-            The reduced state estimate the step used.
+        ControlOutputs
+            ``out`` (4,): the motor outputs (:meth:`ControllerParams.commands_from_thrust`:
+            by default the thrusts of T1..T4, N); ``status`` int; ``z`` (10,): the reduced
+            state estimate the step used.
         """
         pr = self.params
         row = np.asarray(row, dtype=float)
@@ -547,7 +560,7 @@ class Controller:
             if self.have_fix and _within(alpha, TILT_LIMIT) and _within(gamma, XI_LIMIT):
                 self._reduced(alpha, gamma)
         u, st, z = self._control(nominal, st, gyro_bad, gamma)
-        return pr.commands_from_thrust(u), st, z
+        return ControlOutputs(pr.commands_from_thrust(u), st, z)
 
     def _reduced(self, alpha, gamma):
         self.z = reduced_from_kinematics(self.hist_p[self.head], self.v, self.hist_q[self.head],
@@ -601,10 +614,10 @@ class Controller:
             st |= CTRL_INT_LIMIT
         return u, st, self.z.copy()
 
-    def run(self, rows):
-        """Run a recorded input sequence (m, N_INPUT) at one tilt: outputs (m, 4; thrusts by
-        default, :meth:`step`), statuses (m,) and the state estimates (m, 10) of every
-        step."""
+    def run(self, rows) -> ControlOutputs:
+        """Run a recorded input sequence (m, N_INPUT) at one tilt: ``out`` (m, 4; thrusts
+        by default, :meth:`step`), ``status`` (m,) and the state estimates ``z`` (m, 10)
+        of every step."""
         rows = np.asarray(rows, dtype=float)
         m = len(rows)
         ref = rows[:, _COL["ref"]]
@@ -626,4 +639,4 @@ class Controller:
         Z = np.empty((m, N_STATE))
         for k, row in enumerate(rows):
             T[k], S[k], Z[k] = self.step(row, (K[k], x_d[k], u_d[k], int(status[k])))
-        return T, S, Z
+        return ControlOutputs(T, S, Z)

@@ -19,10 +19,10 @@ import numpy as np
 from ..errors import GainschedWarning, InputError
 from ..publish import publish
 from ..schedule.tables import config_from_table, table_bytes, table_from_bytes
-from .check import MidpointCheck, midpoint_check
-from .codegen import c_files
+from .cfiles import c_files
 from .compact import CompactData, CompactInterpolator, compact_data
 from .controller import controller_params
+from .host.check import MidpointCheck, midpoint_check
 from .runtime import RuntimeData, runtime_data
 
 __all__ = ["DEFAULT_FLASH_BYTES", "OutputSet", "output_set", "output_files", "firmware_form",
@@ -62,7 +62,7 @@ def firmware_form(config, table, progress=None):
 
     Dense: the runtime data. Compact: the series of :func:`~.compact.compact_data`
     (``firmware.azimuth_error``), certified at every cell midpoint against directly
-    solved gains (:func:`~.check.midpoint_check`): the largest relative gain error must
+    solved gains (:func:`~.host.check.midpoint_check`): the largest relative gain error must
     be within ``grid.max_interpolation_error`` and every midpoint loop closed with the
     table's gains stable. Either format must fit ``firmware.max_table_bytes`` (with none
     stated, a table over :data:`DEFAULT_FLASH_BYTES` is built with a warning).

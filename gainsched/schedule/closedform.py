@@ -11,9 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import N_STATE
+from ..config import N_STATE, balance
 from ..model.effects import polynomial_drag
-from ..plausible import balance
 from .path import AzimuthPath
 
 # polynomial_drag: the drag law the closed form takes (re-exported for the firmware's
@@ -109,7 +108,7 @@ def closed_form(model, path: AzimuthPath, alpha: float, D):
     v, vd, vdd = r * xd, r * xdd, r * xddd
     Dv, D1, D2 = D(v)
     # tangential balance T_C sin(phi) = -m N, normal T_C cos(phi) = m Dn (shared with the
-    # config's plausibility check, gainsched.plausible.balance)
+    # config's plausibility check, gainsched.config.balance)
     N, Dn, H, tension = balance(m, g, r, sa, ca, xi, xd, xdd, Dv)
     N1 = r * xddd - g * sa * np.sin(xi) * xd + D1 * vd / m
     N2 = r * xdddd - g * sa * (np.cos(xi) * xd**2 + np.sin(xi) * xdd) + (D2 * vd**2 + D1 * vdd) / m

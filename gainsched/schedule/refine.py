@@ -409,8 +409,7 @@ class _Refiner:
     def result(self, cells) -> GridChoice:
         """The chosen config (the axes as lists, the ranges kept as comments), the grid
         assembled from the solved circles, and the certificate's figures."""
-        from ..config import config_from_text
-        from ..configedit import set_value
+        from ..config import config_from_text, set_value
 
         text = self.config.text
         for key, value, rng in ((a.key, a.values, a.auto) for a in (self.speeds, self.tilts)):

@@ -43,8 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Config, config_from_text
-from ..configedit import set_values
+from ..config import Config, config_from_text, set_values
 from ..constants import MAX_SEED, MAX_SWEEP_VARIANTS
 from ..errors import InputError
 
@@ -243,7 +242,7 @@ def parse_sigma(spec: str) -> tuple[str, float]:
 
 def variant_text(base: Config, name: str, values: Sequence[tuple[str, float]]) -> str:
     """The TOML text of ``base`` with ``values`` (canonical keys) applied and ``name`` set:
-    the base text edited as a document (:mod:`gainsched.configedit`), comments kept,
+    the base text edited as a document (:mod:`gainsched.config` (``_edit``)), comments kept,
     values in full precision."""
     paths = scalar_parameters(base)
     edits = {".".join(map(str, paths[key])): float(v) for key, v in values}

@@ -25,10 +25,9 @@ import h5py
 import numpy as np
 
 from .. import __version__
-from ..config import MAX_RATE_HZ, N_STATE, TERMINAL_COSTS, check_name
+from ..config import MAX_RATE_HZ, MAX_TETHER_LENGTH, N_STATE, TERMINAL_COSTS, check_name
 from ..constants import CONTROL_LAW, REASONS
 from ..errors import InputError
-from ..plausible import MAX_TETHER_LENGTH
 from ..publish import write_atomic
 from ..textinput import parse_toml
 from .arrays import GainSchedule

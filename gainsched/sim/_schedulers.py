@@ -128,7 +128,8 @@ class CRuntimeScheduler(Scheduler):
         import ctypes
         import tempfile
 
-        from ..firmware.codegen import CRuntime, build_host, firmware_data
+        from ..firmware.header import firmware_data
+        from ..firmware.host.lookup import CRuntime, build_host
 
         data = firmware_data(table)
         self._tmp = None  # a temporary build directory lives as long as the scheduler
@@ -174,7 +175,7 @@ class CRuntimeScheduler(Scheduler):
 
     def controller(self, params):
         """The C controller with ``params`` (gainsched_control.c; compiled once)."""
-        from ..firmware.sil import CController, build_controller
+        from ..firmware.host.sil import CController, build_controller
 
         if self._lib is None:
             self._lib = build_controller(self.data, params, self.build_dir / "control")
@@ -234,7 +235,7 @@ def c_runtime_scheduler(table, build_dir=None):
     -> (K (4, n) float64 of the runtime's float32 gains, status int).
 
     The table, ``gainsched_runtime.c`` and the batch shim are compiled for the host with
-    :func:`gainsched.firmware.codegen.build_host` into ``build_dir`` (default: a temporary
+    :func:`gainsched.firmware.host.lookup.build_host` into ``build_dir`` (default: a temporary
     directory that lives as long as the returned scheduler) and called through ctypes,
     one query per call with preallocated buffers. Raises RuntimeError without a C
     compiler.

@@ -20,8 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.logs import FlightLog, log_from_arrays, write_log
-from ..config import Config, config_from_text
-from ..configedit import set_section, set_value
+from ..config import Config, config_from_text, set_section, set_value
 from ..model.effects import Effect, Param, registered_effect
 from .loop import Maneuver, Scenario, Sensing, log_from_result, simulate
 

@@ -20,6 +20,12 @@ study and prints (gainsched/cli), so a script gets the same results and files.
   (``gainsched improve``);
 - :func:`plot`: a table's pictures and their summary (``gainsched plot``);
 - :func:`export_c`: a table's C files for the firmware (``gainsched export-c``);
+- :func:`validate`: a config checked and summarised (``gainsched validate``);
+- :func:`nominal`: the nominal flight of one circle over the azimuth (``gainsched
+  nominal``);
+- :func:`inspect`: a table's summary and its flight envelope (``gainsched inspect``);
+- :func:`check`: a table's interpolation checked at the cell midpoints (``gainsched
+  check``);
 - :func:`table_for`: the table a config flies when none is given.
 
 The names are imported on first use (PEP 562, as the package root does): a command
@@ -40,6 +46,9 @@ _MODULE_OF = {
     "sweep": "_sweep", "SweepRun": "_sweep",
     "compare": "_logs", "ComparisonReport": "_logs", "diagnose": "_logs",
     "DiagnosisReport": "_logs", "convert": "_logs", "Conversion": "_logs",
+    "validate": "_circles", "Validation": "_circles", "nominal": "_circles",
+    "NominalCircle": "_circles",
+    "inspect": "_inspect", "Inspection": "_inspect", "check": "_inspect", "Check": "_inspect",
 }
 
 __all__ = list(_MODULE_OF)

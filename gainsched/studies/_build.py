@@ -90,7 +90,7 @@ def output_names(config: Config) -> list[str]:
     >>> gs.studies.output_names(gs.load_config("configs/paper.toml"))[:3]
     ['paper.h5', 'paper_gains.h', 'paper_control.h']
     """
-    from ..firmware.codegen import CONTROL_FILES, RUNTIME_FILES
+    from ..firmware.sources import CONTROL_FILES, RUNTIME_FILES
 
     return [f"{config.name}.h5", f"{config.name}_gains.h", f"{config.name}_control.h",
             *RUNTIME_FILES, *CONTROL_FILES]

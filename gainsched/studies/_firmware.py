@@ -80,9 +80,11 @@ def export_c(table, out_dir=None, *, fmt: str = "config", motor_order: str = "co
     >>> sorted(p.name for p in e.files)[:3]
     ['gainsched_control.c', 'gainsched_control.h', 'gainsched_runtime.c']
     """
-    from ..firmware.codegen import CONTROL_FILES, RUNTIME_FILES, c_files, flash_summary
+    from ..firmware.cfiles import c_files
     from ..firmware.controller import controller_params, outputs_from_config
+    from ..firmware.host.size import flash_summary
     from ..firmware.outputs import certificate_lines, firmware_form, table_config
+    from ..firmware.sources import CONTROL_FILES, RUNTIME_FILES
     from ..publish import check_out_dir, publish
     from ..schedule.tables import load_table
 

@@ -132,7 +132,7 @@ def plot(table, out_dir, *, check: bool = False, reporter: Reporter = SILENT) ->
     t = load_table(table)
     midpoints = None
     if check:
-        from ..firmware.check import midpoint_check
+        from ..firmware.host.check import midpoint_check
 
         with reporter.bar(f"check {t.name}", max(t.speed.size - 1, 0), "speed") as bar:
             res = midpoint_check(t, progress=bar.update)

@@ -18,8 +18,7 @@ from gainsched.analysis.compare import AXES, compare, load_segments, measure, re
 from gainsched.analysis.logs import log_from_arrays, write_log
 from gainsched.analysis.paperfits import paper_fits
 from gainsched.cli import cli
-from gainsched.config import config_from_text, load_config
-from gainsched.configedit import set_values
+from gainsched.config import config_from_text, load_config, set_values
 from gainsched.errors import InputError
 from gainsched.rotations import matrix_from_euler_zyx, quaternion_from_matrix
 from gainsched.schedule.tables import load_table

@@ -19,8 +19,7 @@ from click.testing import CliRunner
 from gainsched.analysis.compare import compare
 from gainsched.analysis.diagnose import CANDIDATES, THRESHOLDS, apply_candidate, diagnose
 from gainsched.cli import cli
-from gainsched.config import config_from_text, load_config
-from gainsched.configedit import get_value
+from gainsched.config import config_from_text, get_value, load_config
 from gainsched.schedule.tables import load_table
 from gainsched.sim.campaign import HIDDEN, campaign, default_flights, write_campaign
 from gainsched.sim.loop import table_scheduler
@@ -168,7 +167,7 @@ def test_without_vbat_the_voltage_effect_is_not_offered(paper_config, fly, tmp_p
     model with [effects.thrust_voltage] cannot be compared with them (one line naming
     the file and the column, exit 2 on the command line), nor with a log that misses a
     vbat sample (the row named)."""
-    from gainsched.configedit import set_section
+    from gainsched.config import set_section
     from gainsched.errors import InputError
 
     logs = _without_vbat(fly("battery"))

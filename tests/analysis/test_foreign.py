@@ -20,16 +20,17 @@ import re
 import numpy as np
 import pytest
 
-from gainsched.analysis import foreign, logcache
-from gainsched.analysis.channelmap import (
+from gainsched.analysis.compare import MOTOR_ORDER_FACTOR, compare, motor_order_fits
+from gainsched.analysis.diagnose import diagnose
+from gainsched.analysis.logs import _cache as logcache
+from gainsched.analysis.logs import _foreign as foreign
+from gainsched.analysis.logs import read_log, write_log
+from gainsched.analysis.logs._channelmap import (
     PX4_MOTOR_ORDER,
     channel_map_from_text,
     load_channel_map,
 )
-from gainsched.analysis.compare import MOTOR_ORDER_FACTOR, compare, motor_order_fits
-from gainsched.analysis.diagnose import diagnose
-from gainsched.analysis.logs import read_log, write_log
-from gainsched.configedit import set_values
+from gainsched.config import set_values
 from gainsched.errors import InputError
 from gainsched.model.effects import EFFECTS
 from gainsched.model.reduced import Model
@@ -307,7 +308,7 @@ def test_convert_checks_the_load_cell_against_the_config_and_trust_travels(
         paper_config, flight, tmp_path):
     """A map that leaves the load cell in grams-force (its scale forgotten): ``convert
     --config`` refuses it naming the column and the unit (issue 38; the checks of
-    gainsched/analysis/logchecks.py); ``--trust tension`` converts it and writes the trust
+    gainsched/analysis/logs/_consistency.py); ``--trust tension`` converts it and writes the trust
     into the log's metadata, so the CSV reads as the ULog did."""
     from click.testing import CliRunner
 
@@ -619,7 +620,7 @@ def test_ros2_time_stamps_and_the_pose_clock_offset(paper_config, flight, tmp_pa
                                atol=1e-9)
 
 # ---------------------------------------------------------------- the cache of converted logs
-# gainsched/analysis/logcache.py: a log converted once is read from the cache with the
+# gainsched/analysis/logs/_cache.py: a log converted once is read from the cache with the
 # same columns, and converted again whenever its bytes, the map, the full-command thrust
 # or a cache entry change; errors are not kept.
 

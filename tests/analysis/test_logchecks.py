@@ -1,5 +1,5 @@
 """A log's channels against each other and the model (issue 38, item 4;
-gainsched/analysis/logchecks.py, docs/flight-log.md "Channels that contradict each
+gainsched/analysis/logs/_consistency.py, docs/flight-log.md "Channels that contradict each
 other").
 
 Each conversion mistake a new logging setup makes once, applied to an honest example
@@ -19,8 +19,15 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from gainsched.analysis.logchecks import CHECKS, RATIO_TOL, check_log, figures
-from gainsched.analysis.logs import LogWarning, read_log, write_log
+from gainsched.analysis.logs import (
+    CHECKS,
+    RATIO_TOL,
+    LogWarning,
+    check_log,
+    figures,
+    read_log,
+    write_log,
+)
 from gainsched.cli import cli
 from gainsched.errors import InputError
 from gainsched.sim.campaign import HIDDEN

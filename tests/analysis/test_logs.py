@@ -31,7 +31,7 @@ REQUIRED = ["t", "x", "y", "z", "qw", "qx", "qy", "qz", "T1", "T2", "T3", "T4"]
 def _attitude(R_IC, xi, rng):
     """Quaternions (N, 4) of ``R_IB = R_IC Rz(xi)`` tilted by a small random rotation:
     x_B outward along the tether, z_B along the plane's normal (docs/conventions.md), as
-    the reader's consistency checks (gainsched/analysis/logchecks.py) expect of a flight."""
+    the reader's consistency checks (gainsched/analysis/logs/_consistency.py) expect of a flight."""
     from scipy.spatial.transform import Rotation
 
     tilt = Rotation.from_rotvec(rng.normal(0, 0.02, 3))

@@ -27,8 +27,7 @@ from click.testing import CliRunner
 
 from gainsched.analysis.compare import compare, load_segments
 from gainsched.cli import cli
-from gainsched.config import config_from_text
-from gainsched.configedit import set_section
+from gainsched.config import config_from_text, set_section
 from gainsched.errors import InputError
 from gainsched.model.effects import (
     FORCE_SPEED_UNIT,

@@ -1,4 +1,5 @@
-"""C header generation (gainsched.firmware.codegen) and the export-c / check commands."""
+"""C header generation (gainsched.firmware.header, .cformat, .cfiles; the host builds of
+.host) and the export-c / check commands."""
 
 from __future__ import annotations
 
@@ -15,7 +16,13 @@ from click.testing import CliRunner
 
 from gainsched.cli import cli
 from gainsched.config import config_from_text
-from gainsched.firmware import codegen, runtime
+from gainsched.firmware import runtime
+from gainsched.firmware.cfiles import write_c_outputs, write_header
+from gainsched.firmware.cformat import c_decimal, c_float, c_floats
+from gainsched.firmware.header import render_header
+from gainsched.firmware.host.compiler import STRICT_CFLAGS
+from gainsched.firmware.host.lookup import build_host
+from gainsched.firmware.host.size import code_bytes, flash_summary
 from gainsched.firmware.runtime import MASK_NO_GAINS, c_identifier, runtime_data
 from gainsched.model.reduced import Model
 from gainsched.schedule.linearize import lqr_state_names
@@ -26,7 +33,7 @@ from support import CC, PAPER_H5, synthetic_table
 
 @pytest.fixture(scope="module")
 def paper_header(paper_table):
-    return codegen.render_header(runtime_data(paper_table))
+    return render_header(runtime_data(paper_table))
 
 
 def _array(text: str, name: str) -> np.ndarray:
@@ -43,14 +50,14 @@ def test_c_float_is_exact():
         [0.0, -0.0, 1.0, -1.0, 2.0**-149, 2.0**-126, 3.4e38, np.pi, 1 / 3],
     ].astype(np.float32)
     for v in vals:
-        lit = codegen.c_float(v)
+        lit = c_float(v)
         assert lit.endswith("f")
         back = np.float32(float.fromhex(lit[:-1]) if "x" in lit else float(lit[:-1]))
         assert back == v and np.signbit(back) == np.signbit(v), (v, lit)
     for bad in (np.nan, np.inf, -np.inf):
         with pytest.raises(ValueError):
-            codegen.c_float(bad)
-    assert codegen.c_float(1.5) == "0x1.8p+0f" and codegen.c_decimal(1.6) == "1.6f"
+            c_float(bad)
+    assert c_float(1.5) == "0x1.8p+0f" and c_decimal(1.6) == "1.6f"
 
 
 def test_the_vectorised_literals_are_float_hex_text():
@@ -63,11 +70,11 @@ def test_the_vectorised_literals_are_float_hex_text():
         np.zeros(50), -np.zeros(3), 2.0 ** np.arange(-149, 128),
         [1e-40, -1e-45, 3.4028235e38, np.pi, 1 / 3, 1.5, 1.0009765625],
     ].astype(np.float32)
-    assert codegen.c_floats(vals) == [codegen.c_float(v) for v in vals]
-    assert codegen.c_floats(vals[:21].reshape(3, 7)) == [codegen.c_float(v) for v in vals[:21]]
+    assert c_floats(vals) == [c_float(v) for v in vals]
+    assert c_floats(vals[:21].reshape(3, 7)) == [c_float(v) for v in vals[:21]]
     for bad in (np.nan, np.inf):
         with pytest.raises(ValueError):
-            codegen.c_floats(np.array([1.0, bad]))
+            c_floats(np.array([1.0, bad]))
 
 
 def test_c_identifier():
@@ -78,11 +85,11 @@ def test_c_identifier():
 
 
 def test_header_is_deterministic(paper_table, tmp_path):
-    a = codegen.render_header(runtime_data(paper_table))
-    b = codegen.render_header(runtime_data(load_table(PAPER_H5)))
+    a = render_header(runtime_data(paper_table))
+    b = render_header(runtime_data(load_table(PAPER_H5)))
     assert a == b
-    p1 = codegen.write_header(paper_table, tmp_path / "one")
-    p2 = codegen.write_header(paper_table, tmp_path / "two")
+    p1 = write_header(paper_table, tmp_path / "one")
+    p2 = write_header(paper_table, tmp_path / "two")
     assert p1.read_bytes() == p2.read_bytes() == a.encode()
     assert p1.name == "paper_gains.h"
     assert stat.S_IMODE(p1.stat().st_mode) & 0o044  # readable by others, not 0600
@@ -117,7 +124,7 @@ def test_header_contents(paper_table, paper_header):
 def test_infeasible_gains_are_zero_with_mask():
     t = synthetic_table()
     d = runtime_data(t)
-    h = codegen.render_header(d)
+    h = render_header(d)
     K = _array(h, "synth_K").reshape(t.K.shape)
     assert np.all(K[1, 3] == 0) and np.isnan(t.K[1, 3]).all()
     mask = _array(h, "synth_mask").reshape(t.reasons.shape).astype(int)
@@ -128,7 +135,7 @@ def test_infeasible_gains_are_zero_with_mask():
 
 def test_state_map_emitted_for_stateful_effects():
     d = runtime_data(synthetic_table(5, 7, 12, motor_lag=True, name="lag"))
-    h = codegen.render_header(d)
+    h = render_header(d)
     perm = _array(h, "lag_state_perm").astype(int)
     np.testing.assert_array_equal(perm, list(range(11)) + [14, 13, 12, 11])
     sign = _array(h, "lag_state_sign")
@@ -151,7 +158,7 @@ def test_write_c_outputs(tmp_path):
     table = tmp_path / "tables" / "paper.h5"
     table.parent.mkdir()
     shutil.copy(PAPER_H5, table)
-    paths = codegen.write_c_outputs(table)
+    paths = write_c_outputs(table)
     assert [p.name for p in paths] == [
         "paper_gains.h",
         "paper_control.h",
@@ -162,7 +169,7 @@ def test_write_c_outputs(tmp_path):
         "gainsched_control.c",
     ]
     assert all(p.parent == table.parent and p.stat().st_size > 0 for p in paths)
-    again = codegen.write_c_outputs(table, tmp_path / "out")
+    again = write_c_outputs(table, tmp_path / "out")
     assert [p.read_bytes() for p in again] == [p.read_bytes() for p in paths]
 
 
@@ -171,21 +178,21 @@ def test_generated_header_compiles_and_corruption_fails_verify(tmp_path):
     """A header whose data were changed after generation (one literal: what flash
     corruption looks like) builds fine but fails <name>_verify."""
     d = runtime_data(synthetic_table())
-    exe = codegen.build_host(d, tmp_path / "good", shared=False)
+    exe = build_host(d, tmp_path / "good", shared=False)
     res = subprocess.run([str(exe), "verify"], capture_output=True, text=True)
     assert res.returncode == 0 and f"crc 0x{d.crc32():08x}" in res.stdout
     bad_dir = tmp_path / "bad"
-    codegen.build_host(d, bad_dir, shared=False)
+    build_host(d, bad_dir, shared=False)
     header = bad_dir / "synth_gains.h"
     text = header.read_text()
     head, body = text.split("synth_K[SYNTH_N_TILT_K]", 1)
     lit = re.search(r"-?0x[0-9a-f.]+p[+-]\d+f", body).group(0)
     value = np.float32(float.fromhex(lit[:-1]))
-    tampered = codegen.c_float(np.nextafter(value, np.float32(np.inf)))
+    tampered = c_float(np.nextafter(value, np.float32(np.inf)))
     header.write_text(head + "synth_K[SYNTH_N_TILT_K]" + body.replace(lit, tampered, 1))
     out = bad_dir / "synth_batch_bad"
     subprocess.run(
-        [CC, *codegen.STRICT_CFLAGS, "-O1", "-DGS_BATCH_MAIN", f"-I{bad_dir}",
+        [CC, *STRICT_CFLAGS, "-O1", "-DGS_BATCH_MAIN", f"-I{bad_dir}",
          str(bad_dir / "synth_batch.c"), str(bad_dir / "gainsched_runtime.c"), "-o", str(out)],
         check=True,
     )
@@ -194,12 +201,12 @@ def test_generated_header_compiles_and_corruption_fails_verify(tmp_path):
 
 
 def test_flash_summary(paper_table):
-    lines = codegen.flash_summary(paper_table, compile_code=CC is not None)
+    lines = flash_summary(paper_table, compile_code=CC is not None)
     d = runtime_data(paper_table)
     assert f"{d.nbytes()} bytes" in lines[0]
     if CC is not None:
-        size = codegen.code_bytes(cross=False)
-        assert size is not None and 500 < size[0] < 20000
+        size = code_bytes(cross=False)
+        assert size is not None and 500 < size.nbytes < 20000
         assert "runtime code" in lines[1]
 
 
@@ -241,11 +248,11 @@ def test_cli_check_sample():
 
 
 def _midpoints(err, rho=0.97, u_rel=0.0):
-    from gainsched.firmware.check import MidpointCheck
+    from gainsched.firmware.host.check import MidpointCheck, MidpointCircle
 
     n = len(err)
     return MidpointCheck(np.zeros(n), np.zeros(n), np.zeros(n), np.asarray(err, float),
-                         np.zeros(n), [(5.0, 0.0, rho, 0.96)], 0, np.full(n, u_rel),
+                         np.zeros(n), [MidpointCircle(5.0, 0.0, rho, 0.96)], 0, np.full(n, u_rel),
                          np.zeros(n))
 
 
@@ -271,7 +278,7 @@ def test_header_names_the_state_columns_and_integrals(paper_header):
     t = synthetic_table(3, 4, 8, motor_lag=True, azimuth_integral=True, seed=4, name="hold")
     t = dataclasses.replace(t, attrs={**t.attrs, "state_names": ",".join(
         lqr_state_names(Model(config_from_text(t.config_text))))})
-    h = codegen.render_header(runtime_data(t))
+    h = render_header(runtime_data(t))
     assert "#define HOLD_X_INT_DELTA 10u" in h and "#define HOLD_X_INT_XI 11u" in h
     assert "#define HOLD_HAS_INT_XI 1" in h and "#define HOLD_X_MOTOR_LAG_0 12u" in h
     sign = _array(h, "hold_state_sign")

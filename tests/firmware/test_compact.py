@@ -13,8 +13,7 @@ import pytest
 
 from gainsched.constants import MASK_NO_GAINS
 from gainsched.errors import InputError
-from gainsched.firmware import codegen, runtime
-from gainsched.firmware.check import midpoint_check
+from gainsched.firmware import runtime
 from gainsched.firmware.compact import (
     NOMINAL_SHARE,
     CompactInterpolator,
@@ -22,6 +21,9 @@ from gainsched.firmware.compact import (
     fit_harmonics,
     sincos_f32,
 )
+from gainsched.firmware.header import render_header
+from gainsched.firmware.host.check import midpoint_check
+from gainsched.firmware.host.lookup import CRuntime, build_host
 from gainsched.firmware.runtime import (
     F32,
     PI_F,
@@ -298,7 +300,7 @@ def test_compact_paper_table_is_certified_at_the_cell_midpoints(paper):
     assert comp.skipped == dense.skipped
     assert comp.max_err <= dense.max_err
     assert comp.worst_rho < 1
-    worst_direct = max(x[3] for x in comp.circles if np.isfinite(x[2]))
+    worst_direct = max(x.rho_direct for x in comp.circles if np.isfinite(x.rho_interp))
     assert abs(comp.worst_rho - worst_direct) < 1e-3
 
 
@@ -340,8 +342,8 @@ def compiled(request, tmp_path_factory):
     """(CompactData, CompactInterpolator, CRuntime) per table (its tests are marked
     ``needs_cc``)."""
     data = compact_data(runtime_data(COMPACT_TABLES[request.param]()))
-    lib = codegen.build_host(data, tmp_path_factory.mktemp(request.param))
-    return data, CompactInterpolator(data), codegen.CRuntime(lib, data)
+    lib = build_host(data, tmp_path_factory.mktemp(request.param))
+    return data, CompactInterpolator(data), CRuntime(lib, data)
 
 
 def _same_bits(a, b):
@@ -424,9 +426,9 @@ def test_dialect_optimisation_and_contraction_do_not_change_the_bits(fmt, tmp_pa
     d = runtime_data(load_table(PAPER_H5))
     data = d if fmt == "dense" else compact_data(d)
     x, v, a = query_mix(d, 100_000, seed=12)
-    base = codegen.CRuntime(codegen.build_host(data, tmp_path / "c99"), data)(x, v, a)
+    base = CRuntime(build_host(data, tmp_path / "c99"), data)(x, v, a)
     for name, extra in (("gnu11", ("-std=gnu11", "-march=native", "-O3")), ("os", ("-Os",))):
-        rt = codegen.CRuntime(codegen.build_host(data, tmp_path / name, extra=extra), data)
+        rt = CRuntime(build_host(data, tmp_path / name, extra=extra), data)
         _same_bits(rt(x, v, a), base)
 
 
@@ -492,7 +494,7 @@ def test_build_writes_a_certified_compact_header(tmp_path):
     table = load_table(out / "cmp.h5")
     form = compact_data(runtime_data(table))
     header = (out / "cmp_gains.h").read_text()
-    assert header == codegen.render_header(form)
+    assert header == render_header(form)
     assert "#define CMP_FORMAT GS_FORMAT_COMPACT" in header
     chk = midpoint_check(table, lookup=CompactInterpolator(form))
     assert f"max gain error {100 * chk.max_err:.2f} %" in r.output
@@ -594,7 +596,7 @@ def test_flush_to_zero_does_not_change_the_bits(fmt, tmp_path):
     before the switch: numpy's own conversions would flush them too.)"""
     d = runtime_data(load_table(PAPER_H5))
     data = d if fmt == "dense" else compact_data(d)
-    rt = codegen.CRuntime(codegen.build_host(data, tmp_path), data)
+    rt = CRuntime(build_host(data, tmp_path), data)
     x, v, a = query_mix(d, 100_000, seed=13)
     tiny = -1e-40  # a negative subnormal float32
     # a reversed direction by a subnormal (clamped to the slowest level circle, which has

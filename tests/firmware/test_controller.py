@@ -28,8 +28,8 @@ from gainsched.firmware.controller import (
     ctrl_status_text,
     reduced_from_kinematics,
 )
+from gainsched.firmware.host.sil import CController
 from gainsched.firmware.runtime import BAD_INPUT, Interpolator, runtime_data
-from gainsched.firmware.sil import CController
 from gainsched.model.reduced import Model
 from gainsched.sim._plant import _Plant
 from gainsched.sim.loop import (
@@ -294,7 +294,7 @@ def test_a_bad_integral_bound_is_refused(paper_config, paper_table, tmp_path, bo
     positive (a bound of 0 would hold the integral and INT_LIMIT for ever), and the
     Python reference refuses it too."""
     from gainsched.errors import InputError
-    from gainsched.firmware.sil import build_controller
+    from gainsched.firmware.host.sil import build_controller
 
     good = controller_params(paper_table)
     lib = build_controller(paper_table, good, tmp_path)  # the header's params are good
@@ -399,15 +399,15 @@ def test_example_control_loop_builds_strict_and_runs(paper_config, paper_table, 
     nominal it commands the nominal thrusts within 0.05 N (its own check, exit 0)."""
     if san and not sanitizers_work(tmp_path):
         pytest.skip("compiler without AddressSanitizer/UBSan")
-    from gainsched.firmware import codegen
-    from gainsched.firmware.sil import write_controller
+    from gainsched.firmware.host.compiler import STRICT_CFLAGS
+    from gainsched.firmware.host.sil import write_controller
 
     sources = write_controller(paper_table, controller_params(paper_table),
                                tmp_path)
     flags = (["-g", "-O1", "-fsanitize=address,undefined", "-fno-sanitize-recover=all"]
              if san else ["-O2"])
     exe = tmp_path / "control_loop"
-    compile_c([*codegen.STRICT_CFLAGS, *flags, f"-I{tmp_path}",
+    compile_c([*STRICT_CFLAGS, *flags, f"-I{tmp_path}",
                str(FIRMWARE_EXAMPLES / "control_loop.c"), *map(str, sources), "-o", str(exe)])
     res = subprocess.run([str(exe)], capture_output=True, text=True, env=SAN_ENV, timeout=120)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
@@ -423,15 +423,15 @@ def test_controller_fuzz_driver_bounded_run(paper_config, paper_table, tmp_path,
     step (finite thrusts in range, defined status bits, idle thrusts when idle)."""
     if not sanitizers_work(tmp_path):
         pytest.skip("compiler without AddressSanitizer/UBSan")
-    from gainsched.firmware import codegen
     from gainsched.firmware.compact import compact_data
-    from gainsched.firmware.sil import write_controller
+    from gainsched.firmware.host.compiler import STRICT_CFLAGS
+    from gainsched.firmware.host.sil import write_controller
 
     data = runtime_data(paper_table)
     data = compact_data(data) if fmt == "compact" else data
     sources = write_controller(data, controller_params(paper_table), tmp_path)
     exe = tmp_path / "fuzz_control"
-    compile_c([*codegen.STRICT_CFLAGS, "-g", "-O1", "-fsanitize=address,undefined",
+    compile_c([*STRICT_CFLAGS, "-g", "-O1", "-fsanitize=address,undefined",
                "-fno-sanitize-recover=all", f"-I{tmp_path}",
                str(FIRMWARE_EXAMPLES / "fuzz_control.c"), *map(str, sources), "-o", str(exe)])
     res = subprocess.run([str(exe), "100000", "7"], capture_output=True, text=True,
@@ -526,7 +526,7 @@ def test_a_sensors_calibration_that_cannot_be_undone_is_refused(paper_config, pa
     """gs_ctrl_init answers GS_BAD_ARG for a gyro scale that is not finite and > 0, a
     bias that is not finite, or a marker rotation q_MB that is not a unit quaternion; the
     Python parameters refuse it too."""
-    from gainsched.firmware.sil import build_controller
+    from gainsched.firmware.host.sil import build_controller
 
     good = controller_params(paper_table)
     lib = build_controller(paper_table, good, tmp_path)

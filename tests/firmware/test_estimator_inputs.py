@@ -11,8 +11,7 @@ import warnings
 import numpy as np
 import pytest
 
-from gainsched.config import config_from_text, load_config
-from gainsched.configedit import set_section
+from gainsched.config import config_from_text, load_config, set_section
 from gainsched.errors import GainschedWarning, InputError
 from gainsched.firmware import controller as fc
 from gainsched.firmware.controller import (
@@ -25,8 +24,8 @@ from gainsched.firmware.controller import (
     controller_params,
     largest_specific_force,
 )
+from gainsched.firmware.host.sil import CController
 from gainsched.firmware.runtime import Interpolator, runtime_data
-from gainsched.firmware.sil import CController
 from gainsched.model.reduced import Model
 from gainsched.schedule.grid import build_grid
 from gainsched.schedule.onboard import ACCEL_RANGE_MIN_G, G0, record_from_config
@@ -159,7 +158,7 @@ def test_the_default_accel_range_has_margin_over_the_tables_circles(paper_config
 
 
 def test_the_generated_header_states_the_accel_range(paper_config, paper_table):
-    from gainsched.firmware.codegen import render_control_header
+    from gainsched.firmware.control_header import render_control_header
 
     text = render_control_header(runtime_data(paper_table),
                                  controller_params(paper_table))
@@ -232,8 +231,9 @@ def test_the_integral_bounds_are_sized_from_the_tables_gains(recommended_level, 
     largest command is the motors' range. The dense and compact forms size the same;
     the generated header states them; ``[control] int_limit`` (one number or a list)
     and the ``int_limit`` argument override them."""
-    from gainsched.firmware.codegen import c_decimal, render_control_header
+    from gainsched.firmware.cformat import c_decimal
     from gainsched.firmware.compact import compact_data
+    from gainsched.firmware.control_header import render_control_header
     from gainsched.firmware.controller import int_limits_for
 
     design, table, _ = recommended_level

@@ -9,8 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from gainsched.config import config_from_text, load_config
-from gainsched.configedit import set_section
+from gainsched.config import config_from_text, load_config, set_section
 from gainsched.firmware.feedforward import feedforward
 from gainsched.firmware.runtime import Interpolator
 from gainsched.model.reduced import Model

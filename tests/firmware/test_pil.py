@@ -1,4 +1,4 @@
-"""Processor in the loop (gainsched/firmware/pil.py): the C runtime and the paper table
+"""Processor in the loop (gainsched/firmware/host/pil.py): the C runtime and the paper table
 cross-compiled for Cortex-M4F and run on QEMU mps2-an386, against the host build and
 the Python reference, bit for bit; both formats, -std=c99 and -std=gnu11, flush-to-zero
 off and on. Skipped, saying why, where the cross tools are not installed (.ci/run
@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gainsched.firmware import codegen
 from gainsched.firmware.compact import CompactInterpolator, compact_data
-from gainsched.firmware.pil import build_pil, instructions_per_lookup, run_pil
+from gainsched.firmware.host.lookup import CRuntime, build_host
+from gainsched.firmware.host.pil import build_pil, instructions_per_lookup, run_pil
 from gainsched.firmware.runtime import runtime_data
 
 from support import query_mix
@@ -51,7 +51,7 @@ def test_target_outputs_equal_the_host_bit_for_bit(forms, fmt, std, ftz, tmp_pat
     reference."""
     dense, q = forms
     data = dense if fmt == "dense" else compact_data(dense)
-    host = codegen.CRuntime(codegen.build_host(data, tmp_path / "host"), data)(*q)
+    host = CRuntime(build_host(data, tmp_path / "host"), data)(*q)
     target = run_pil(build_pil(data, tmp_path / "m4f", std=std, ftz=ftz), *q, dense.dims[3])
     assert _bits(target) == _bits(host)
     if fmt == "compact":
@@ -111,8 +111,8 @@ def test_controller_on_the_target_equals_the_host_bit_for_bit(control_run, fmt, 
     status and state estimate on the emulated Cortex-M4F equals the host build (-std=c99,
     -O2) bit for bit, in either dialect and with flush-to-zero."""
     from gainsched.firmware.controller import CTRL_BAD_IMU, CTRL_BAD_POSE, CTRL_STALE_POSE
-    from gainsched.firmware.pil import build_control_pil, run_control_pil
-    from gainsched.firmware.sil import CController
+    from gainsched.firmware.host.pil import build_control_pil, run_control_pil
+    from gainsched.firmware.host.sil import CController
 
     dense, params, rows, reset, _, _ = control_run
     data = dense if fmt == "dense" else compact_data(dense)
@@ -122,7 +122,7 @@ def test_controller_on_the_target_equals_the_host_bit_for_bit(control_run, fmt, 
     elf = build_control_pil(data, params, tmp_path / "m4f", std=std, ftz=ftz)
     got = run_control_pil(elf, params, rows, reset)
     assert [a.tobytes() for a in got] == [a.tobytes() for a in want]
-    seen = np.bitwise_or.reduce(got[1])
+    seen = np.bitwise_or.reduce(got.status)
     assert seen & CTRL_BAD_POSE and seen & CTRL_BAD_IMU and seen & CTRL_STALE_POSE
 
 
@@ -133,7 +133,7 @@ def test_control_step_cost_on_the_emulated_m4(control_run, tmp_path):
     pose (the estimator's correction of its 12-step history); ``make bench`` prints them
     (measured: dense 6,243 without a pose, 7,731 with one; compact 7,618 and 9,106)."""
     from bench.bench_controller import step_kinds
-    from gainsched.firmware.pil import build_control_pil, instructions_per_step
+    from gainsched.firmware.host.pil import build_control_pil, instructions_per_step
 
     dense, params, _, reset, col, clean = control_run
     counts = {}

@@ -22,8 +22,8 @@ from gainsched.actuators import (
 )
 from gainsched.errors import InputError
 from gainsched.firmware.controller import CTRL_IDLE, Controller, controller_params
+from gainsched.firmware.host.sil import CController
 from gainsched.firmware.runtime import Interpolator, runtime_data
-from gainsched.firmware.sil import CController
 from gainsched.schedule.onboard import outputs_from_config
 from gainsched.sim.loop import load_scenario, metrics, runtime_scheduler, simulate
 

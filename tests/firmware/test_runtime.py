@@ -19,8 +19,12 @@ import numpy as np
 import pytest
 
 from gainsched import native
-from gainsched.firmware import codegen, runtime
-from gainsched.firmware.check import midpoint_check
+from gainsched.firmware import runtime
+from gainsched.firmware.cfiles import copy_runtime, write_header
+from gainsched.firmware.host.check import midpoint_check
+from gainsched.firmware.host.compiler import M4F_CFLAGS, STRICT_CFLAGS
+from gainsched.firmware.host.lookup import CRuntime, build_host
+from gainsched.firmware.host.size import code_bytes
 from gainsched.firmware.runtime import (
     BAD_INPUT,
     CLAMPED_SPEED,
@@ -68,8 +72,8 @@ def built(request, tmp_path_factory):
     """(RuntimeData, Interpolator, CRuntime) per table: header + runtime + shim as a .so
     (its tests are marked ``needs_cc``)."""
     data = runtime_data(TABLES[request.param]())
-    lib = codegen.build_host(data, tmp_path_factory.mktemp(request.param))
-    return data, Interpolator(data), codegen.CRuntime(lib, data)
+    lib = build_host(data, tmp_path_factory.mktemp(request.param))
+    return data, Interpolator(data), CRuntime(lib, data)
 
 
 @pytest.fixture(scope="module")
@@ -299,7 +303,7 @@ def test_sanitizer_run_matches_reference(name, fmt, tmp_path):
 
         data = compact_data(data)
         reference = CompactInterpolator(data)
-    exe = codegen.build_host(data, tmp_path, opt="-O1", sanitize=True, shared=False)
+    exe = build_host(data, tmp_path, opt="-O1", sanitize=True, shared=False)
     x, v, a = query_mix(data, 6000, seed=11)
     q = np.stack([x, v, a], 1)
     with np.errstate(over="ignore"):
@@ -340,11 +344,11 @@ def test_fuzz_driver_bounded_run(fmt, tmp_path):
         from gainsched.firmware.compact import compact_data
 
         data = compact_data(data)
-    codegen.write_header(data, tmp_path)
-    rt = codegen.copy_runtime(tmp_path)[1]
+    write_header(data, tmp_path)
+    rt = copy_runtime(tmp_path).runtime_c
     exe = tmp_path / "fuzz"
     san = ["-g", "-O1", "-fsanitize=address,undefined", "-fno-sanitize-recover=all"]
-    compile_c([*codegen.STRICT_CFLAGS, *san, f"-I{tmp_path}",
+    compile_c([*STRICT_CFLAGS, *san, f"-I{tmp_path}",
                str(FIRMWARE_EXAMPLES / "fuzz_lookup.c"), str(rt), "-o", str(exe)])
     res = subprocess.run(
         [str(exe), "300000", "3"], capture_output=True, text=True, env=SAN_ENV, timeout=120
@@ -358,7 +362,7 @@ def test_fuzz_driver_bounded_run(fmt, tmp_path):
         return
     fz = tmp_path / "fuzz_lf"
     build = subprocess.run(
-        [clang, *codegen.STRICT_CFLAGS, *san, "-fsanitize=fuzzer", "-DGS_LIBFUZZER",
+        [clang, *STRICT_CFLAGS, *san, "-fsanitize=fuzzer", "-DGS_LIBFUZZER",
          f"-I{tmp_path}", str(FIRMWARE_EXAMPLES / "fuzz_lookup.c"), str(rt), "-o", str(fz)],
         capture_output=True, text=True,
     )
@@ -375,15 +379,15 @@ def test_fuzz_driver_bounded_run(fmt, tmp_path):
 @pytest.mark.needs_cc
 def test_example_firmware_builds_strict_and_runs(tmp_path):
     """examples/firmware/main.c: -Werror build, plain and under ASan + UBSan."""
-    codegen.write_header(runtime_data(load_table(PAPER_H5)), tmp_path)
-    rt = codegen.copy_runtime(tmp_path)[1]
+    write_header(runtime_data(load_table(PAPER_H5)), tmp_path)
+    rt = copy_runtime(tmp_path).runtime_c
     variants = [("plain", ["-O2"])]
     if sanitizers_work(tmp_path):
         variants.append(("san", ["-g", "-O1", "-fsanitize=address,undefined",
                                  "-fno-sanitize-recover=all"]))
     for tag, flags in variants:
         exe = tmp_path / f"example_{tag}"
-        compile_c([*codegen.STRICT_CFLAGS, *flags, f"-I{tmp_path}",
+        compile_c([*STRICT_CFLAGS, *flags, f"-I{tmp_path}",
                    str(FIRMWARE_EXAMPLES / "main.c"), str(rt), "-o", str(exe)])
         res = subprocess.run([str(exe)], capture_output=True, text=True, env=SAN_ENV, timeout=60)
         assert res.returncode == 0, res.stderr
@@ -394,19 +398,19 @@ def test_example_firmware_builds_strict_and_runs(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.needs_cc
-@pytest.mark.parametrize("which", [1, 3], ids=["runtime", "controller"])
+@pytest.mark.parametrize("which", ["runtime_c", "control_c"], ids=["runtime", "controller"])
 def test_runtime_static_properties(tmp_path, which):
     """Extra warnings clean at several optimisation levels; no data/bss (no mutable
     globals), bounded static stack, no recursion, no calls into libc but mem* helpers
     (and, from the controller, the runtime's own functions)."""
-    src = codegen.copy_runtime(tmp_path)[which]
+    src = getattr(copy_runtime(tmp_path), which)
     extra = ["-Wconversion", "-Wshadow", "-Wdouble-promotion", "-Wcast-qual", "-Wundef",
              "-Wstrict-prototypes", "-Wmissing-prototypes", "-Wfloat-conversion"]
     for opt in ("-O0", "-O2", "-O3", "-Os"):
-        compile_c([*codegen.STRICT_CFLAGS, *extra, opt, "-c", str(src), "-o",
+        compile_c([*STRICT_CFLAGS, *extra, opt, "-c", str(src), "-o",
                    str(tmp_path / f"rt{opt}.o")], cwd=tmp_path)
     obj = tmp_path / "rt_su.o"
-    compile_c([*codegen.STRICT_CFLAGS, "-O2", "-fstack-usage", "-fcallgraph-info", "-c",
+    compile_c([*STRICT_CFLAGS, "-O2", "-fstack-usage", "-fcallgraph-info", "-c",
                str(src), "-o", str(obj)], cwd=tmp_path)
     su = (tmp_path / "rt_su.su").read_text().strip().splitlines()
     assert su
@@ -447,15 +451,15 @@ def test_runtime_compiles_for_cortex_m4f(tmp_path):
     cc = native.find_cc(cross=True)
     if cc is None:
         pytest.skip("arm-none-eabi-gcc not installed")
-    src = codegen.copy_runtime(tmp_path)[1]
+    src = copy_runtime(tmp_path).runtime_c
     res = subprocess.run(
-        [cc, *codegen.STRICT_CFLAGS, *codegen.M4F_CFLAGS, "-O2", "-c", str(src), "-o",
+        [cc, *STRICT_CFLAGS, *M4F_CFLAGS, "-O2", "-c", str(src), "-o",
          str(tmp_path / "rt.o")],
         capture_output=True, text=True,
     )
     assert res.returncode == 0 and not res.stderr, res.stderr
-    size = codegen.code_bytes(cross=True)
-    assert size is not None and 500 < size[0] < 8000
+    size = code_bytes(cross=True)
+    assert size is not None and 500 < size.nbytes < 8000
 
 
 # --------------------------------------------------------------------------- midpoint check
@@ -468,7 +472,7 @@ def test_midpoint_check_sample():
     res = midpoint_check(t, speed_stride=7)  # speed midpoints 2.5 and 9.5 m/s
     e = res.rel_err[np.isfinite(res.rel_err)]
     assert e.size > 100 and 0 < np.median(e) < res.max_err < 0.05
-    rho = [(c[2], c[3]) for c in res.circles if np.isfinite(c[2])]
+    rho = [(c.rho_interp, c.rho_direct) for c in res.circles if np.isfinite(c.rho_interp)]
     assert rho and all(ri < 1 for ri, _ in rho)
     assert all(abs(ri - rd) < 0.02 for ri, rd in rho)
 
@@ -476,7 +480,7 @@ def test_midpoint_check_sample():
 @pytest.mark.slow
 def test_paper_grid_interpolation_error_below_2_percent():
     res = midpoint_check(load_table(PAPER_H5))
-    assert all(c[2] < 1 for c in res.circles if np.isfinite(c[2]))
+    assert all(c.rho_interp < 1 for c in res.circles if np.isfinite(c.rho_interp))
     assert res.max_err < 0.02
 
 
@@ -515,16 +519,16 @@ def test_the_examples_build_for_any_table(my_quad_table, tmp_path):
                         )["c_prefix"]
     assert prefix == "my_quad"
     fw = tmp_path / "fw"
-    codegen.write_header(runtime_data(load_table(table)), fw)
-    rt = codegen.copy_runtime(fw)[1]
+    write_header(runtime_data(load_table(table)), fw)
+    rt = copy_runtime(fw).runtime_c
     names = [f"-DGS_NAME={prefix}", f"-DGS_NAME_UC={prefix.upper()}", f"-I{fw}"]
     exe = tmp_path / "example"
-    compile_c([*codegen.STRICT_CFLAGS, "-O2", *names, str(FIRMWARE_EXAMPLES / "main.c"),
+    compile_c([*STRICT_CFLAGS, "-O2", *names, str(FIRMWARE_EXAMPLES / "main.c"),
                str(rt), "-o", str(exe)])
     res = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0 and res.stdout.startswith("table my_quad: 2 tilts x 2 speeds"), \
         res.stdout + res.stderr
-    compile_c([*codegen.STRICT_CFLAGS, "-O2", *names, "-c",
+    compile_c([*STRICT_CFLAGS, "-O2", *names, "-c",
                str(FIRMWARE_EXAMPLES / "size_probe.c"), "-o", str(tmp_path / "probe.o")])
     make = (REPO / "Makefile").read_text()
     assert make.count("$(FW_NAMES)") == 7  # main, control loop, size probe, 2 fuzzers x 2

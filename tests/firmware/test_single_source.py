@@ -19,7 +19,7 @@ from click.testing import CliRunner
 from gainsched.cli import cli
 from gainsched.config import config_from_text
 from gainsched.errors import InputError
-from gainsched.firmware.codegen import c_files
+from gainsched.firmware.cfiles import c_files
 from gainsched.firmware.controller import controller_params
 from gainsched.firmware.runtime import VehicleConstants, runtime_data
 from gainsched.model import reduced, symmetry

@@ -127,8 +127,7 @@ def test_one_standard_error_rule():
 
 def _wake_config(coefficients):
     """configs/paper.toml on a small grid with an empirical azimuth thrust law."""
-    from gainsched.config import config_from_text
-    from gainsched.configedit import set_section
+    from gainsched.config import config_from_text, set_section
 
     text = small_config_text(name="wake", grid__speeds=[6.0, 9.0], grid__tilts_deg=[0.0, 20.0],
                              grid__azimuth_samples=12)
@@ -144,7 +143,7 @@ def test_tables_hold_an_azimuth_dependent_level_circle():
     solve of the reversed circle (float32, 1e-5), and the header declares the tilt-0
     azimuth count. With the law's coefficients at zero the table keeps one tilt-0 gain
     per speed (the DARE's)."""
-    from gainsched.firmware.codegen import render_header
+    from gainsched.firmware.header import render_header
     from gainsched.firmware.runtime import Interpolator, runtime_data
     from gainsched.model.reduced import Model
     from gainsched.schedule.grid import build_grid, level_circle_invariant, solve_circle

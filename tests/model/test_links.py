@@ -15,8 +15,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from gainsched.config import config_from_text
-from gainsched.configedit import set_values
+from gainsched.config import config_from_text, set_values
 from gainsched.errors import InputError
 from gainsched.model.links import LumpedMassChain, SpringDamper, StandardLinearSolid
 from gainsched.model.maximal import RK4_REACH, MaximalModel, reduced_from_maximal

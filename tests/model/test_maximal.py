@@ -289,8 +289,7 @@ def test_rigid_link_matches_reduced_accelerations_in_a_wind(paper_config):
     """Issue 37: both formulations in a wind (drag, rotor drag, momentum theory beside it)
     at random headings: the same tension, COG acceleration and omega' (the reduced model's
     acceleration through its exact Jacobian-free identity: maximal state rate at z')."""
-    from gainsched.config import config_from_text
-    from gainsched.configedit import set_values
+    from gainsched.config import config_from_text, set_values
     from gainsched.model.reduced import Model
 
     text = set_values(paper_config.text, {"effects.wind.east": 3.0, "effects.wind.north": -2.0,
@@ -320,8 +319,7 @@ def test_rigid_link_matches_reduced_accelerations_in_a_wind(paper_config):
 def test_wind_model_is_complex_step_safe(paper_config):
     """The model in a wind takes complex-step Jacobians (as the linearisation does): they
     equal central differences."""
-    from gainsched.config import config_from_text
-    from gainsched.configedit import set_values
+    from gainsched.config import config_from_text, set_values
     from gainsched.model.reduced import Model
 
     text = set_values(paper_config.text, {"effects.wind.east": 3.0, "effects.wind.north": 1.0})

@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 
 from gainsched.analysis.diagnose import candidate_library, diagnose
-from gainsched.config import config_from_text
-from gainsched.configedit import set_section, set_values
+from gainsched.config import config_from_text, set_section, set_values
 from gainsched.errors import InputError
 from gainsched.model.effects import EFFECTS, Effect, Param, registered_effect
 from gainsched.model.reduced import Model

@@ -70,8 +70,7 @@ def test_a_table_can_hold_it():
 def test_the_build_holds_it_with_the_same_gains():
     """A build with [effects.tether_stretch] is the build without it, bit for bit (the law
     changes no force of the model the table is built on)."""
-    from gainsched.config import config_from_text
-    from gainsched.configedit import set_section
+    from gainsched.config import config_from_text, set_section
     from gainsched.model.reduced import Model
     from gainsched.schedule.grid import build_grid
 

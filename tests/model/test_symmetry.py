@@ -14,8 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gainsched.config import N_STATE, config_from_text, load_config
-from gainsched.configedit import set_values
+from gainsched.config import N_STATE, config_from_text, load_config, set_values
 from gainsched.errors import InputError
 from gainsched.model.effects import CogOffset, Drag, MotorLag, RotorDrag, ThrustScale
 from gainsched.model.reduced import Model

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gainsched.configedit import remove_key, set_values
+from gainsched.config import remove_key, set_values
 from gainsched.errors import InputError
 from gainsched.model.reduced import Model
 from gainsched.model.symmetry import REDUCED_SIGNS
@@ -225,14 +225,14 @@ def test_runtime_offsets_follow_the_symmetries(free_table):
 def test_c_nominal_carries_the_offsets(free_table, tmp_path):
     """C gs_lookup_nominal against the Python reference on a table with offsets: theta, chi
     and the body rates with them, every symmetry branch, inside and between the circles."""
-    from gainsched.firmware import codegen
     from gainsched.firmware.feedforward import feedforward
+    from gainsched.firmware.host.lookup import CRuntime, build_host
     from gainsched.firmware.runtime import Interpolator, runtime_data
     from gainsched.schedule.path import maneuver_path
 
     cfg, t = free_table
     data = runtime_data(t)
-    c = codegen.CRuntime(codegen.build_host(data, tmp_path), data)
+    c = CRuntime(build_host(data, tmp_path), data)
     assert c.verify() == 0 and c.crc32() == data.crc32()
     interp = Interpolator(data)
     T = np.arange(0.0, 2.0, 1e-3)

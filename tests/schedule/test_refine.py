@@ -27,7 +27,7 @@ from click.testing import CliRunner
 from gainsched.cli import cli
 from gainsched.config import config_from_text
 from gainsched.errors import InputError
-from gainsched.firmware.check import midpoint_check
+from gainsched.firmware.host.check import midpoint_check
 from gainsched.firmware.outputs import output_files
 from gainsched.schedule.grid import build_grid
 from gainsched.schedule.refine import ERROR_QUANTUM, midpoint_errors, refine_grid
@@ -116,7 +116,7 @@ def test_chosen_grid_meets_the_bound_where_check_measures_it(chosen):
     assert res.skipped == 0 and res.rel_err.size == 16 * len(choice.config.grid.speeds[1:]) \
         * len(choice.config.grid.tilts[1:])
     assert res.max_err <= bound and res.max_nominal_err <= bound
-    assert all(c[2] < 1 for c in res.circles)
+    assert all(c.rho_interp < 1 for c in res.circles)
     # the build's own certificate is the same measurement in float64
     assert choice.gain_error == pytest.approx(res.max_err, abs=1e-5)
     assert max(choice.thrust_error, choice.roll_error) == pytest.approx(
@@ -263,7 +263,7 @@ def test_sweep_chooses_each_variants_grid(tmp_path):
 
 
 def test_budget_counts_an_automatic_axis_at_its_max_count():
-    from gainsched.budget import estimate_build
+    from gainsched.config import estimate_build
 
     auto = config_from_text(auto_text(), "auto.toml")
     listed = config_from_text(auto_text(

@@ -235,7 +235,7 @@ def test_committed_c_outputs_match_what_the_build_writes():
     """tables/'s C header, controller parameters, runtime and controller are the files a
     build of the committed table writes now (`make tables` leaves `git status` clean):
     a change to the shipped C sources or the templates must be rebuilt and committed."""
-    from gainsched.firmware.codegen import c_files
+    from gainsched.firmware.cfiles import c_files
     from gainsched.firmware.controller import controller_params
     from gainsched.firmware.outputs import firmware_form, table_config
 

@@ -8,8 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from gainsched.config import config_from_text, load_config
-from gainsched.configedit import set_section
+from gainsched.config import config_from_text, load_config, set_section
 from gainsched.model.reduced import Model
 from gainsched.schedule.grid import build_grid
 from gainsched.schedule.tables import load_table, table_bytes, table_from_bytes

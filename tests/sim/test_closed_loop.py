@@ -186,7 +186,7 @@ def _c_scheduler(table, tmp_path):
 
     if hasattr(sim, "c_runtime_scheduler"):
         return sim.c_runtime_scheduler(table, tmp_path)
-    from gainsched.firmware.codegen import CRuntime, build_host  # adapter if sim.py has none
+    from gainsched.firmware.host.lookup import CRuntime, build_host  # adapter if sim.py has none
     from gainsched.firmware.runtime import runtime_data
 
     data = runtime_data(table)

@@ -31,8 +31,7 @@ import numpy as np
 import pytest
 
 from gainsched import native
-from gainsched.config import N_STATE, EffectSpec, config_from_text
-from gainsched.configedit import remove_key, set_values
+from gainsched.config import N_STATE, EffectSpec, config_from_text, remove_key, set_values
 from gainsched.firmware.runtime import Interpolator
 from gainsched.model.effects import EFFECTS
 from gainsched.model.maximal import MaximalModel

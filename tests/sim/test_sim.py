@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from gainsched.analysis.logs import read_log
-from gainsched.config import config_from_text
-from gainsched.configedit import set_values
+from gainsched.config import config_from_text, set_values
 from gainsched.sim.loop import (
     Maneuver,
     Scenario,

@@ -18,7 +18,7 @@ def load_segments(config: Config, logs, channel_map=None, trust=(), progress=Non
     ``channel_map``: for PX4 ULogs and ROS 2 bags (:func:`read_log`); their normalised or
     PWM commands reach newtons through the config's ``vehicle.thrust_max`` unless the
     map gives a thrust. The files are checked against the config's vehicle
-    (:mod:`gainsched.analysis.logchecks`) except for the checks named in ``trust``.
+    (:mod:`gainsched.analysis.logs._consistency`) except for the checks named in ``trust``.
     Returns (measured segments, the log segments, warnings as text: gaps, dropped
     pieces). ``progress(1)`` is called after each log read (a progress bar's increment).
     """

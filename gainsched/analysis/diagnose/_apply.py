@@ -14,8 +14,7 @@ import dataclasses
 
 import numpy as np
 
-from ...config import Config, config_from_text
-from ...configedit import get_value, set_value
+from ...config import Config, config_from_text, get_value, set_value
 from ._candidates import candidate_library
 from ._results import CandidateResult, unidentified
 

@@ -25,8 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config import Config, EffectSpec, Tether
-from ...configedit import remove_key, set_section, set_value
+from ...config import Config, EffectSpec, Tether, remove_key, set_section, set_value
 from ...model.effects import EFFECTS, Param, Refit
 from ..compare import (
     has_channel,

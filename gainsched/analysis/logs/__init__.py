@@ -56,7 +56,7 @@ only (:func:`read_log`); :func:`log_from_arrays` (simulations) is not checked.
 **Consistency of the channels.** Files only, every format: the gyro, the quaternion
 order, the commanded thrust, the load cell, the reference azimuth and the plane
 normal's sign are checked against the pose and the model
-(:mod:`gainsched.analysis.logchecks`; thrust and tension with the ``config`` given);
+(``_consistency``: :func:`check_log`; thrust and tension with the ``config`` given);
 ``trust`` (or the metadata key ``trust``) skips a check by name.
 
 The package's modules, one concept each (private: this namespace is the API), top to
@@ -67,15 +67,28 @@ bottom of their imports (a module imports only from those below it):
 - ``_arrays``: :func:`log_from_arrays`;
 - ``_write``: :func:`write_log`, :func:`log_bytes`;
 - ``_files``: the CSV and HDF5 files read to columns;
+- ``_cache``: a PX4 ULog or a ROS 2 bag converted once (the cache of converted logs);
+- ``_foreign``: PX4 ULogs (pyulog) and ROS 2 bags (rosbags) to the flight-log columns
+  (:data:`FOREIGN_FORMATS`, :func:`foreign_format`);
+- ``_channelmap``: where a ULog or a bag holds each channel (:class:`ChannelMap`,
+  :func:`load_channel_map`; the shipped maps in ``maps/``);
 - ``_checks``: the bad-data rules (metadata, values, quaternions, the circle plane;
   :func:`fitted_plane`);
 - ``_flightlog``: :class:`FlightLog`, :func:`describe`;
+- ``_consistency``: the channels checked against each other and the model
+  (:data:`CHECKS`, :func:`check_log`, :func:`figures`);
 - ``_schema``: :data:`SCHEMA`, the columns, :data:`PLAUSIBLE` and the tolerances.
+
+No other module of the package opens a log file: the readers, the channel maps, the
+cache and the checks are here, behind these names (tests/test_architecture.py).
 """
 
 from ._arrays import log_from_arrays
+from ._channelmap import ChannelMap, load_channel_map
 from ._checks import fitted_plane
+from ._consistency import CHECKS, RATIO_TOL, Figures, check_log, figures
 from ._flightlog import FlightLog, describe
+from ._foreign import FOREIGN_FORMATS, foreign_format
 from ._read import LogWarning, convert_log, read_log
 from ._schema import (
     DEFAULT_MIN_SAMPLES,
@@ -109,4 +122,13 @@ __all__ = [
     "log_from_arrays",
     "describe",
     "fitted_plane",
+    "ChannelMap",
+    "load_channel_map",
+    "FOREIGN_FORMATS",
+    "foreign_format",
+    "CHECKS",
+    "RATIO_TOL",
+    "Figures",
+    "figures",
+    "check_log",
 ]

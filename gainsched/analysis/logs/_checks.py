@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from ...errors import InputError
-from ..logchecks import _plane_angles, _plane_normal
+from ._consistency import _plane_angles, _plane_normal
 from ._schema import (
     _KNOWN,
     _QUAT_EXACT_TOL,

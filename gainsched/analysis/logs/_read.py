@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import GainschedWarning, InputError
-from ..logchecks import _plane_angles, check_log, thrust_units
 from ._checks import _canonical, _check_plane, fitted_plane
+from ._consistency import _plane_angles, check_log, thrust_units
 from ._files import _check_file, _format, _read_file
 from ._flightlog import FlightLog, _make, _readonly
 from ._schema import DEFAULT_MIN_SAMPLES, GAP_FACTOR
@@ -33,7 +33,7 @@ def read_log(
     The format is docs/flight-log.md (``gainsched-flightlog/1``, CSV or HDF5), chosen by
     the file extension; a PX4 ULog (``.ulg``) or a ROS 2 bag (a rosbag2 folder, or its
     ``.mcap`` / ``.db3`` file) is converted to it first through a channel map
-    (:mod:`gainsched.analysis.foreign`). Every bad-data rule of the spec is enforced; the
+    (:mod:`gainsched.analysis.logs._foreign`). Every bad-data rule of the spec is enforced; the
     reader normalises only the quaternions (rows off unit norm by more than 1e-12
     divided by their norm, signs made continuous) and splits the log at gaps, never
     interpolating across them (the docstring of :mod:`gainsched.analysis.logs` has the
@@ -45,7 +45,7 @@ def read_log(
         The log file: ``.csv``, ``.h5``, ``.hdf5``, ``.ulg``, ``.mcap``, ``.db3`` or a
         rosbag2 folder.
     channel_map : ChannelMap, str or path-like, optional
-        How a ULog or a bag holds the channels (:func:`gainsched.analysis.channelmap.
+        How a ULog or a bag holds the channels (:func:`gainsched.analysis.logs._channelmap.
         load_channel_map`: a file or a shipped map's name). Default for a ULog: the
         shipped ``px4``; a bag needs one.
     thrust_max : float, optional
@@ -60,9 +60,9 @@ def read_log(
     config : Config, optional
         The config of the analysis: its vehicle (mass, g, thrust scale) is what the
         commanded thrust and the load cell are checked against
-        (:mod:`gainsched.analysis.logchecks`); without it those two checks are skipped.
+        (:mod:`gainsched.analysis.logs._consistency`); without it those two checks are skipped.
     trust : iterable of str, default ()
-        Consistency checks to skip, by name (:data:`~gainsched.analysis.logchecks.
+        Consistency checks to skip, by name (:data:`~gainsched.analysis.logs._consistency.
         CHECKS`: ``plane``, ``quaternion``, ``gyro``, ``thrust``, ``tension``,
         ``xi_ref``), where the user knows the log is right; the log's metadata ``trust``
         adds to them.
@@ -82,7 +82,7 @@ def read_log(
         column, a value outside the plausible range (:data:`PLAUSIBLE`), time that does not
         strictly increase, a quaternion norm off unit by more than 0.01, a declared
         circle plane the positions do not lie in, channels that contradict each other
-        or the model (:func:`~gainsched.analysis.logchecks.check_log`), fewer than
+        or the model (:func:`~gainsched.analysis.logs._consistency.check_log`), fewer than
         ``min_samples`` samples, or no segment left after splitting.
 
     Warns
@@ -157,12 +157,12 @@ def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None,
 
 def _foreign(path: Path, channel_map, thrust_max):
     """The converted columns of a ULog or a bag (None for the project's own formats)."""
-    from ..foreign import foreign_format
+    from ._foreign import foreign_format
 
     fmt = foreign_format(path)
     if fmt is None:
         return None
-    from ..channelmap import ChannelMap, load_channel_map
+    from ._channelmap import ChannelMap, load_channel_map
 
     if channel_map is None:
         if fmt != "ulog":
@@ -173,7 +173,7 @@ def _foreign(path: Path, channel_map, thrust_max):
         channel_map)
     if not path.exists():
         raise InputError(path, "", "cannot read (No such file or directory)")
-    from ..logcache import converted_log
+    from ._cache import converted_log
 
     conv = converted_log(path, cmap, thrust_max)
     if "alpha_c_deg" in conv.meta:
@@ -190,7 +190,7 @@ def _foreign(path: Path, channel_map, thrust_max):
 def _segments(path, meta, cols, rows, label, min_samples, gap_factor, *, config=None,
               trust=()) -> list[FlightLog]:
     """The common half of reading: the numeric rules, the plane, the channels' consistency
-    (:mod:`.logchecks`), the split at gaps."""
+    (:mod:`._consistency`), the split at gaps."""
     deferred: list[InputError] = []
     arrays, optional, extra = _canonical(path, cols, rows, label, deferred)
     if deferred:  # thrust out of range: in other units? (else the range error as such)

@@ -35,8 +35,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .constants import N_INPUT, TILT_BATCH
-from .errors import InputError
+from ..constants import N_INPUT, TILT_BATCH
+from ..errors import InputError
 
 __all__ = ["BuildEstimate", "BuildConfig", "estimate_build", "check_budget", "GIB"]
 
@@ -128,7 +128,7 @@ class BuildEstimate:
 
 
 def _lqr_states(config: BuildConfig) -> int:
-    from .model.effects import EFFECTS
+    from ..model.effects import EFFECTS
 
     return config.control.n_lqr + sum(EFFECTS[e.name].n_states for e in config.effects
                                       if e.name in EFFECTS)

@@ -1,7 +1,7 @@
 """Logs of the flight stacks users have: PX4 ULog (through ``pyulog``) and ROS 2 bags
 (rosbag2, MCAP or SQLite storage, through ``rosbags``: pure Python, no ROS install),
 turned into the columns of ``gainsched-flightlog/1`` by a channel map
-(:mod:`gainsched.analysis.channelmap`; docs/flight-log.md, "Logs of PX4 and ROS 2").
+(:mod:`gainsched.analysis.logs._channelmap`; docs/flight-log.md, "Logs of PX4 and ROS 2").
 
 What the conversion does, and nothing else:
 
@@ -45,10 +45,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..actuators import thrust_from_command
-from ..errors import InputError
-from .channelmap import ChannelMap
-from .progress import listener, report, watch_file
+from ...actuators import thrust_from_command
+from ...errors import InputError
+from ..progress import listener, report, watch_file
+from ._channelmap import ChannelMap
 
 __all__ = ["Topic", "ConvertedLog", "FOREIGN_FORMATS", "foreign_format", "read_topics",
            "convert_topics"]

@@ -5,7 +5,7 @@ effect was added) parses each log once.
 Parsing is what a ULog costs: pyulog reads it message by message in Python, about
 2 us per message, 3 s for 10 minutes of a 1 kHz log (docs/performance.md); the
 conversion after it takes a tenth of that. The converted columns
-(:class:`~gainsched.analysis.foreign.ConvertedLog`) are kept in the cache folder
+(:class:`~gainsched.analysis.logs._foreign.ConvertedLog`) are kept in the cache folder
 (``$GAINSCHED_CACHE``, default ``~/.cache/gainsched``) as
 ``logs/<key>.npz``, the key a SHA-256 of:
 
@@ -32,16 +32,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from ..native import cache_dir
-from ..publish import write_atomic
-from .channelmap import ChannelMap
-from .foreign import ConvertedLog, convert_topics, read_topics
-from .progress import report
+from ...errors import InputError
+from ...native import cache_dir
+from ...publish import write_atomic
+from ..progress import report
+from ._channelmap import ChannelMap
+from ._foreign import ConvertedLog, convert_topics, read_topics
 
 __all__ = ["converted_log", "log_cache_key"]
 
-_CODE = ("foreign.py", "channelmap.py", "../actuators.py")
+_CODE = ("_foreign.py", "_channelmap.py", "../../actuators.py")
 _BLOCK = 1 << 22
 
 
@@ -114,8 +114,8 @@ def _store(entry: Path, conv: ConvertedLog) -> None:
 
 
 def converted_log(path, cmap: ChannelMap, thrust_max: float | None = None) -> ConvertedLog:
-    """The flight-log columns of a ULog or a bag (:func:`~.foreign.read_topics` and
-    :func:`~.foreign.convert_topics`), from the cache when this log was converted with
+    """The flight-log columns of a ULog or a bag (:func:`~._foreign.read_topics` and
+    :func:`~._foreign.convert_topics`), from the cache when this log was converted with
     this map before.
 
     Parameters
@@ -134,7 +134,7 @@ def converted_log(path, cmap: ChannelMap, thrust_max: float | None = None) -> Co
     Raises
     ------
     InputError
-        As :func:`~.foreign.read_topics` and :func:`~.foreign.convert_topics`.
+        As :func:`~._foreign.read_topics` and :func:`~._foreign.convert_topics`.
     """
     entry = None
     if _enabled():

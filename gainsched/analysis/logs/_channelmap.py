@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..actuators import PX4_MOTOR_ORDER
-from ..errors import InputError
-from ..textinput import parse_toml, read_text
+from ...actuators import PX4_MOTOR_ORDER
+from ...errors import InputError
+from ...textinput import parse_toml, read_text
 
 __all__ = [
     "MAP_SCHEMA",
@@ -150,7 +150,7 @@ class ChannelMap:
 
 
 def _maps_folder() -> Path:
-    return Path(str(resources.files("gainsched.analysis") / "maps"))
+    return Path(str(resources.files("gainsched.analysis.logs") / "maps"))
 
 
 def shipped_maps() -> tuple[str, ...]:

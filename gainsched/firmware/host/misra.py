@@ -1,7 +1,7 @@
 """MISRA C:2012 check of the hand-written C (``c/``): cppcheck's MISRA addon, the rule
 categories, and the documented deviations. ``make lint`` runs ``python -m
-gainsched.firmware.misra``; tests/firmware/test_misra.py runs the same :func:`command` on
-a copy with a rule broken on purpose.
+gainsched.firmware.host.misra``; tests/firmware/test_misra.py runs the same
+:func:`command` on a copy with a rule broken on purpose.
 
 The pass rule: no finding is left after the deviations (``misra_deviations.txt``, next to
 this module), and the deviations name advisory rules only, so a mandatory or required
@@ -31,8 +31,10 @@ __all__ = ["ADVISORY", "MANDATORY", "SOURCES", "DEVIATIONS", "Finding", "categor
            "deviated_rules", "required_here", "run", "main"]
 
 _HERE = Path(__file__).resolve().parent
+#: the shipped C (``gainsched/firmware/c``)
+_C = _HERE.parent / "c"
 #: the translation units checked (their headers come in through their #includes)
-SOURCES = (_HERE / "c" / "gainsched_runtime.c", _HERE / "c" / "gainsched_control.c")
+SOURCES = (_C / "gainsched_runtime.c", _C / "gainsched_control.c")
 #: the documented deviations, a cppcheck suppressions list (one ``misra-c2012-R.N:*/file``
 #: per line, each under a comment saying why)
 DEVIATIONS = _HERE / "misra_deviations.txt"
@@ -147,7 +149,7 @@ def _missing_text(required: bool) -> str:
 
 
 def main(argv=None) -> int:
-    """``make lint``'s MISRA step (``python -m gainsched.firmware.misra [SOURCE.c ...]``,
+    """``make lint``'s MISRA step (``python -m gainsched.firmware.host.misra [SOURCE.c ...]``,
     default :data:`SOURCES`): 0 when clean, 1 with the findings. Without cppcheck: one
     line, and 0 (the check skipped) or, where it is required (:func:`required_here`), 1."""
     argv = sys.argv[1:] if argv is None else list(argv)

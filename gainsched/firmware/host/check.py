@@ -1,4 +1,6 @@
-"""The interpolation check of a built table (``gainsched check``).
+"""The checks of a built table on the host: its interpolation (``gainsched check``,
+:func:`midpoint_check`) and that it loads into the runtime's form
+(:func:`check_runtime_data`).
 
 At every cell midpoint of the (speed, tilt, azimuth) grid the periodic LQR is
 solved directly and compared with what the runtime interpolates from the table
@@ -10,16 +12,54 @@ reported. docs/runtime.md states the accuracy the default grid meets.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-from ..schedule.grid import solve_circle
-from ..schedule.lqr import monodromy, spectral_radius
-from ..schedule.refine import midpoint_errors
-from ..schedule.tables import config_from_table
-from .runtime import Interpolator
+from ...errors import InputError
+from ...schedule.grid import solve_circle
+from ...schedule.lqr import monodromy, spectral_radius
+from ...schedule.refine import midpoint_errors
+from ...schedule.tables import config_from_table, load_table
+from ..runtime import Interpolator, RuntimeData, runtime_data
 
-__all__ = ["MidpointCheck", "midpoint_check"]
+__all__ = ["MidpointCheck", "MidpointCircle", "MidpointPoint", "midpoint_check",
+           "check_runtime_data"]
+
+
+class MidpointCircle(NamedTuple):
+    """One midpoint circle of a :class:`MidpointCheck`: its loop closed at every control
+    step with the interpolated gains and with the directly solved ones."""
+
+    #: m/s
+    speed: float
+    #: rad
+    tilt: float
+    #: monodromy spectral radius with the interpolated gains (NaN: a lookup not OK)
+    rho_interp: float
+    #: with the directly solved gains
+    rho_direct: float
+
+
+class MidpointPoint(NamedTuple):
+    """A checked midpoint and its error (:meth:`MidpointCheck.worst_point`)."""
+
+    #: m/s
+    speed: float
+    #: rad
+    tilt: float
+    #: rad
+    xi: float
+    #: ``||K_interp - K_direct||_F / ||K_direct||_F``
+    rel_err: float
+
+
+class ByAxis(NamedTuple):
+    """The largest error per speed midpoint and per tilt midpoint
+    (:meth:`MidpointCheck.by_axis`): value -> max error."""
+
+    speed: dict
+    tilt: dict
 
 
 @dataclass(frozen=True)
@@ -33,7 +73,7 @@ class MidpointCheck:
     u_err : (m,) max |u_d interp - u_d direct|, N
     u_rel : (m,) that error relative to the circle's largest nominal thrust
     phi_rel : (m,) ``|phi_d interp - phi_d direct|`` relative to the circle's largest roll
-    circles : list of (speed m/s, tilt rad, rho_interp, rho_direct) per midpoint circle
+    circles : list of :class:`MidpointCircle` (speed m/s, tilt rad, rho_interp, rho_direct)
     skipped : number of midpoints skipped (direct solve infeasible or an infeasible corner)
     """
 
@@ -59,7 +99,7 @@ class MidpointCheck:
 
     @property
     def worst_rho(self) -> float:
-        r = [c[2] for c in self.circles if np.isfinite(c[2])]
+        r = [c.rho_interp for c in self.circles if np.isfinite(c.rho_interp)]
         return float(max(r)) if r else float("nan")
 
     @property
@@ -74,7 +114,7 @@ class MidpointCheck:
     def stable(self) -> bool:
         """Every midpoint circle closed with the interpolated gains is stable (spectral
         radius < 1; circles without one are not counted)."""
-        return all(c[2] < 1 for c in self.circles if np.isfinite(c[2]))
+        return all(c.rho_interp < 1 for c in self.circles if np.isfinite(c.rho_interp))
 
     def passed(self, max_error: float, nominal: bool = False) -> bool:
         """The pass rule of ``gainsched check``: some midpoint checked, the largest
@@ -86,21 +126,22 @@ class MidpointCheck:
         Example
         -------
         >>> res = MidpointCheck(np.zeros(1), np.zeros(1), np.zeros(1), np.array([0.01]),
-        ...                     np.zeros(1), [(5.0, 0.0, 0.97, 0.96)], 0)
+        ...                     np.zeros(1), [MidpointCircle(5.0, 0.0, 0.97, 0.96)], 0)
         >>> res.passed(0.02), res.passed(0.005)
         (True, False)
         """
         worst = max(self.max_err, self.max_nominal_err) if nominal else self.max_err
         return bool(np.isfinite(self.rel_err).any() and worst <= max_error and self.stable)
 
-    def worst_point(self):
-        """``(speed, tilt, xi, rel_err)`` of the largest error."""
+    def worst_point(self) -> MidpointPoint:
+        """The midpoint of the largest error: ``speed``, ``tilt``, ``xi``, ``rel_err``."""
         e = np.where(np.isfinite(self.rel_err), self.rel_err, -1)
         i = int(np.argmax(e))
-        return self.speed[i], self.tilt[i], self.xi[i], self.rel_err[i]
+        return MidpointPoint(self.speed[i], self.tilt[i], self.xi[i], self.rel_err[i])
 
-    def by_axis(self):
-        """Max error per speed-midpoint and per tilt-midpoint: two dicts value -> max."""
+    def by_axis(self) -> ByAxis:
+        """Max error per speed-midpoint and per tilt-midpoint: ``speed`` and ``tilt``, two
+        dicts value -> max."""
         out = []
         for ax in (self.speed, self.tilt):
             d = {}
@@ -108,7 +149,7 @@ class MidpointCheck:
                 e = self.rel_err[(ax == v) & np.isfinite(self.rel_err)]
                 d[float(v)] = float(e.max()) if e.size else float("nan")
             out.append(d)
-        return out
+        return ByAxis(*out)
 
 
 def midpoint_check(table, *, speed_stride: int = 1, progress=None,
@@ -147,11 +188,11 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
         skipped) and ``u_err`` (m,) the largest nominal-thrust error, N; ``u_rel`` and
         ``phi_rel`` (m,) the nominal thrust and roll errors relative to the circle's
         largest (:func:`gainsched.schedule.refine.midpoint_errors`); ``circles``:
-        ``(speed m/s, tilt rad, rho_interp, rho_direct)`` closed-loop spectral radii per
-        midpoint circle; ``skipped``: midpoints without a comparison (the direct solve
-        infeasible or a lookup not OK); summaries ``max_err``, ``median_err``,
-        ``worst_rho``, ``worst_point()``, ``by_axis()``
-        (:class:`gainsched.firmware.check.MidpointCheck`).
+        :class:`MidpointCircle` ``(speed m/s, tilt rad, rho_interp, rho_direct)``, the
+        closed-loop spectral radii per midpoint circle; ``skipped``: midpoints without a
+        comparison (the direct solve infeasible or a lookup not OK); summaries
+        ``max_err``, ``median_err``, ``worst_rho``, ``worst_point()``, ``by_axis()``
+        (:class:`gainsched.firmware.host.check.MidpointCheck`).
 
     Raises
     ------
@@ -234,10 +275,10 @@ def _midpoint_rows(rows: dict, interp, sol, v: float, r: float, a_mid, xi_mid) -
     return skipped
 
 
-def _midpoint_circles(interp, sol, steps, v: float, r: float, a_mid) -> list[tuple]:
-    """``(speed m/s, tilt rad, rho_interp, rho_direct)`` of every feasible midpoint
-    circle at the speed ``v``: the loop closed at every control step with the
-    interpolated gains (NaN where a lookup is not OK) and with the direct ones."""
+def _midpoint_circles(interp, sol, steps, v: float, r: float, a_mid) -> list[MidpointCircle]:
+    """The :class:`MidpointCircle` (speed m/s, tilt rad, rho_interp, rho_direct) of every
+    feasible midpoint circle at the speed ``v``: the loop closed at every control step
+    with the interpolated gains (NaN where a lookup is not OK) and with the direct ones."""
     Ad, Bd, _ = steps
     N = Ad.shape[-3]
     xs = 2 * np.pi * np.arange(N) / N
@@ -246,8 +287,16 @@ def _midpoint_circles(interp, sol, steps, v: float, r: float, a_mid) -> list[tup
         look = interp(xs, v / r, a_mid[i])
         direct = float(sol.spectral_radius[i])
         if np.any(look.status != 0):
-            out.append((v, float(a_mid[i]), np.nan, direct))
+            out.append(MidpointCircle(v, float(a_mid[i]), np.nan, direct))
             continue
         interpolated = float(spectral_radius(monodromy(Ad[b], Bd[b], look.K)))
-        out.append((v, float(a_mid[i]), interpolated, direct))
+        out.append(MidpointCircle(v, float(a_mid[i]), interpolated, direct))
     return out
+
+
+def check_runtime_data(table_path) -> RuntimeData:
+    """Load a table file and convert it, raising InputError for problems."""
+    try:
+        return runtime_data(load_table(table_path))
+    except ValueError as exc:  # an InputError (a ValueError too) keeps its file and key
+        raise exc if isinstance(exc, InputError) else InputError(table_path, "", f"{exc}") from None

@@ -31,10 +31,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 if TYPE_CHECKING:  # the config module calls this one: no import at run time
-    from .config import Config
+    from ._reader import Config
 
 __all__ = ["G_RANGE", "MAX_TETHER_LENGTH", "MAX_THRUST_TO_WEIGHT", "balance", "check_lengths",
            "check_hover", "check_circles"]
@@ -105,7 +105,7 @@ def check_circles(config: Config, source) -> None:
     the lowest taut speed) and ``vehicle.thrust_max`` (or ``vehicle.thrust_min``) when
     every taut circle needs a collective thrust outside the motors' range.
     """
-    from .model.reduced import Model  # the drag of the config's effects
+    from ..model.reduced import Model  # the drag of the config's effects
 
     model = Model(config)
     coeffs = model.drag_coefficients()

@@ -18,24 +18,22 @@ from __future__ import annotations
 import shutil
 import subprocess
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .codegen import (
-    M4F_CFLAGS,
-    STRICT_CFLAGS,
-    _resource,
-    _write,
-    copy_runtime,
-    firmware_data,
-    render,
-    write_header,
-)
-from .runtime import Lookup
+from ..cfiles import copy_runtime, write_file, write_header
+from ..controller import ControlOutputs
+from ..header import firmware_data
+from ..runtime import Lookup
+from ..sources import render, resource
+from .compiler import M4F_CFLAGS, STRICT_CFLAGS, compile_or_raise
+from .sil import driver_values, write_controller
 
-__all__ = ["QEMU_MACHINE", "pil_tools", "build_pil", "run_pil", "instructions_per_lookup",
-           "build_control_pil", "run_control_pil", "instructions_per_step"]
+__all__ = ["QEMU_MACHINE", "PilTools", "pil_tools", "build_pil", "run_pil",
+           "instructions_per_lookup", "build_control_pil", "run_control_pil",
+           "instructions_per_step"]
 
 #: the emulated board: an MPS2 FPGA image with a Cortex-M4F
 QEMU_MACHINE = "mps2-an386"
@@ -43,10 +41,27 @@ QEMU_MACHINE = "mps2-an386"
 TOOLS = {"arm-none-eabi-gcc": "gcc-arm-none-eabi", "qemu-system-arm": "qemu-system-arm"}
 
 
-def pil_tools() -> tuple[str, str] | None:
-    """``(arm-none-eabi-gcc, qemu-system-arm)`` paths, or None when either is missing."""
-    found = [shutil.which(t) for t in TOOLS]
-    return (found[0], found[1]) if all(found) else None
+@dataclass(frozen=True)
+class PilTools:
+    """The tools of processor in the loop, as :func:`pil_tools` found them.
+
+    Attributes
+    ----------
+    gcc : str
+        The cross compiler, ``arm-none-eabi-gcc``.
+    qemu : str
+        The emulator, ``qemu-system-arm``.
+    """
+
+    gcc: str
+    qemu: str
+
+
+def pil_tools() -> PilTools | None:
+    """The paths of ``arm-none-eabi-gcc`` and ``qemu-system-arm``, or None when either is
+    missing."""
+    gcc, qemu = (shutil.which(t) for t in TOOLS)
+    return PilTools(gcc, qemu) if gcc and qemu else None
 
 
 def _cross_build(out: Path, elf: Path, sources, *, std: str, ftz: bool, opt: str,
@@ -56,17 +71,15 @@ def _cross_build(out: Path, elf: Path, sources, *, std: str, ftz: bool, opt: str
     tools = pil_tools()
     if tools is None:
         raise RuntimeError("arm-none-eabi-gcc or qemu-system-arm not found")
-    ld = _write(out / "pil.ld", render("pil.ld"))
-    _write(out / "pil_board.h", _resource("templates", "pil_board.h"))
-    board = _write(out / "pil_board.c", _resource("templates", "pil_board.c"))
+    ld = write_file(out / "pil.ld", render("pil.ld"))
+    write_file(out / "pil_board.h", resource("templates", "pil_board.h"))
+    board = write_file(out / "pil_board.c", resource("templates", "pil_board.c"))
     flags = [f for f in STRICT_CFLAGS if not f.startswith("-std=")]
     flags = [f"-std={std}", *flags, *M4F_CFLAGS, opt, "-ffreestanding", "-nostdlib",
              "-nostartfiles", f"-I{out}", *(["-DGS_PIL_FTZ"] if ftz else []), *extra]
-    cmd = [tools[0], *flags, "-T", str(ld), "-o", str(elf), *map(str, sources), str(board),
+    cmd = [tools.gcc, *flags, "-T", str(ld), "-o", str(elf), *map(str, sources), str(board),
            "-lgcc"]
-    res = subprocess.run(cmd, capture_output=True, text=True)
-    if res.returncode:
-        raise RuntimeError(f"{' '.join(cmd)} failed:\n{res.stderr}")
+    compile_or_raise(cmd)
     return elf
 
 
@@ -103,8 +116,8 @@ def build_pil(table, out_dir, *, std: str = "c99", ftz: bool = False, opt: str =
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_header(data, out)
-    runtime_c = copy_runtime(out)[1]
-    driver = _write(out / f"{data.name}_pil.c",
+    runtime_c = copy_runtime(out).runtime_c
+    driver = write_file(out / f"{data.name}_pil.c",
                     render("pil_driver.in.c", name=data.name, NAME=data.name.upper(),
                            tool_version=data.meta.get("tool_version", "?")))
     return _cross_build(out, out / f"{data.name}_pil.elf", [driver, runtime_c], std=std,
@@ -118,23 +131,20 @@ def build_control_pil(table, params, out_dir, *, std: str = "c99", ftz: bool = F
     Parameters as :func:`build_pil`; ``params`` the
     :class:`~gainsched.firmware.controller.ControllerParams` of ``<name>_control.h``
     (the driver sets its own at run time)."""
-    from .sil import driver_values, write_controller
-
     data = firmware_data(table)
     out = Path(out_dir)
     sources = write_controller(data, params, out)
     values = driver_values(data, params)
-    shim = _write(out / f"{data.name}_control_sil.c", render("control_sil.in.c", **values))
-    driver = _write(out / f"{data.name}_control_pil.c", render("control_pil.in.c", **values))
+    shim = write_file(out / f"{data.name}_control_sil.c", render("control_sil.in.c", **values))
+    driver = write_file(out / f"{data.name}_control_pil.c", render("control_pil.in.c", **values))
     return _cross_build(out, out / f"{data.name}_control_pil.elf", [driver, shim, *sources],
                         std=std, ftz=ftz, opt=opt, extra=extra)
 
 
 def _qemu(elf: Path, cwd: Path, extra=(), timeout: float = 600.0):
     """Run an image on the emulated board with semihosting (files relative to ``cwd``)."""
-    qemu = pil_tools()[1]
-    cmd = [qemu, "-M", QEMU_MACHINE, "-nographic", "-monitor", "none", "-serial", "none",
-           "-semihosting-config", "enable=on,target=native", *extra, "-kernel", str(elf)]
+    cmd = [pil_tools().qemu, "-M", QEMU_MACHINE, "-nographic", "-monitor", "none", "-serial",
+           "none", "-semihosting-config", "enable=on,target=native", *extra, "-kernel", str(elf)]
     return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout)
 
 
@@ -206,7 +216,7 @@ def _control_files(params, rows, reset) -> dict:
             "q.bin": np.ascontiguousarray(rows, dtype=np.float32).tobytes()}
 
 
-def run_control_pil(elf, params, rows, reset=None):
+def run_control_pil(elf, params, rows, reset=None) -> ControlOutputs:
     """Run the controller on the emulated Cortex-M4F over recorded input rows.
 
     Parameters
@@ -221,10 +231,9 @@ def run_control_pil(elf, params, rows, reset=None):
 
     Returns
     -------
-    thrust : ndarray, shape (m, 4), float32
-    status : ndarray, shape (m,), int32
-    z : ndarray, shape (m, 10), float32
-        As :meth:`gainsched.firmware.sil.CController.run` on the host.
+    ControlOutputs
+        ``out`` (m, 4) float32, ``status`` (m,) int32, ``z`` (m, 10) float32: as
+        :meth:`gainsched.firmware.host.sil.CController.run` on the host.
     """
     with tempfile.TemporaryDirectory(prefix="gainsched-pil-") as tmp:
         for name, data in _control_files(params, rows, reset).items():
@@ -236,7 +245,7 @@ def run_control_pil(elf, params, rows, reset=None):
     if o.shape[0] != len(rows):
         raise RuntimeError(f"the emulated target returned {o.shape[0]} of {len(rows)} steps "
                            f"(qemu exit {res.returncode}: {res.stderr.strip()[-300:]})")
-    return o[:, :4].copy(), o[:, 4].copy().view(np.int32), o[:, 5:].copy()
+    return ControlOutputs(o[:, :4].copy(), o[:, 4].copy().view(np.int32), o[:, 5:].copy())
 
 
 def instructions_per_step(elf, params, rows, reset=None) -> float:

@@ -12,25 +12,17 @@ recorded input sequence per call (the tests, against the Python reference
 from __future__ import annotations
 
 import ctypes
-import subprocess
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from ..native import find_cc
-from .codegen import (
-    STRICT_CFLAGS,
-    _write,
-    control_header_name,
-    copy_runtime,
-    firmware_data,
-    render,
-    render_control_header,
-    write_header,
-)
-from .controller import MAX_INT, N_INPUT, ControllerParams
-from .runtime import BAD_ARG
+from ..cfiles import copy_runtime, write_control_header, write_file, write_header
+from ..controller import MAX_INT, N_INPUT, ControllerParams, ControlOutputs
+from ..header import firmware_data
+from ..runtime import BAD_ARG
+from ..sources import render
+from .compiler import STRICT_CFLAGS, compile_or_raise, require_cc
 
 __all__ = ["N_OUTPUT", "write_controller", "driver_values", "build_controller",
            "CController"]
@@ -39,17 +31,17 @@ __all__ = ["N_OUTPUT", "write_controller", "driver_values", "build_controller",
 N_OUTPUT = 15
 
 
-def write_controller(table, params: ControllerParams, out_dir) -> list[Path]:
+def write_controller(table, params: ControllerParams, out_dir) -> tuple[Path, Path]:
     """Write the firmware's controller sources for ``table`` into ``out_dir``: the table
     header, ``<name>_control.h`` with ``params``, the runtime and the controller. Returns
-    the C files to compile (runtime, controller)."""
+    the C files to compile (:attr:`~gainsched.firmware.cfiles.RuntimeFiles.sources`: the
+    runtime's, the controller's)."""
     data = firmware_data(table)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_header(data, out)
-    _write(out / control_header_name(data), render_control_header(data, params))
-    paths = copy_runtime(out)
-    return [p for p in paths if p.suffix == ".c"]
+    write_control_header(data, params, out)
+    return copy_runtime(out).sources
 
 
 def driver_values(data, params: ControllerParams) -> dict:
@@ -77,19 +69,15 @@ def build_controller(table, params: ControllerParams, out_dir, *, cc=None, opt="
     warning set, -Werror); returns its path. Raises RuntimeError without a C compiler
     or when the build fails."""
     data = firmware_data(table)
-    cc = cc or find_cc()
-    if cc is None:
-        raise RuntimeError("no C compiler found (set CC)")
+    cc = require_cc(cc)
     out = Path(out_dir)
     sources = write_controller(data, params, out)
-    shim = _write(out / f"{data.name}_control_sil.c",
+    shim = write_file(out / f"{data.name}_control_sil.c",
                   render("control_sil.in.c", **driver_values(data, params)))
     lib = out / f"lib{data.name}_control.so"
     cmd = [cc, *STRICT_CFLAGS, opt, f"-I{out}", "-shared", "-fPIC", *extra, "-o", str(lib),
            str(shim), *map(str, sources)]
-    res = subprocess.run(cmd, capture_output=True, text=True)
-    if res.returncode:
-        raise RuntimeError(f"{' '.join(cmd)} failed:\n{res.stderr}")
+    compile_or_raise(cmd)
     return lib
 
 
@@ -167,17 +155,19 @@ class CController:
         pvq = np.concatenate([p_I, v_I, q_IB]).astype(np.float32)
         return int(self._reset(self._mem, pvq.ctypes.data_as(ctypes.POINTER(ctypes.c_float))))
 
-    def step(self, row):
-        """One ``gs_ctrl_update``: inputs (N_INPUT,) -> thrust (4,) N, status int, z (10,)."""
+    def step(self, row) -> ControlOutputs:
+        """One ``gs_ctrl_update``: inputs (N_INPUT,) -> ``out`` (4,) (thrusts, N, or
+        commands), ``status`` int, ``z`` (10,)."""
         self._row[:] = row
         self._run(self._mem, 1, self._row_p, self._out_p)
         o = self._out
-        return o[:4].astype(np.float64), int(o[4:5].view(np.int32)[0]), o[5:].astype(np.float64)
+        return ControlOutputs(o[:4].astype(np.float64), int(o[4:5].view(np.int32)[0]),
+                              o[5:].astype(np.float64))
 
-    def run(self, rows):
-        """A recorded input sequence (m, N_INPUT) in one call: thrusts (m, 4) float32,
-        statuses (m,) int32, state estimates (m, 10) float32."""
+    def run(self, rows) -> ControlOutputs:
+        """A recorded input sequence (m, N_INPUT) in one call: ``out`` (m, 4) float32,
+        ``status`` (m,) int32, state estimates ``z`` (m, 10) float32."""
         rows = np.ascontiguousarray(rows, dtype=np.float32)
         out = np.zeros((len(rows), N_OUTPUT), dtype=np.float32)
         self._run(self._mem, len(rows), rows.ctypes.data, out.ctypes.data)
-        return out[:, :4], out[:, 4].copy().view(np.int32), out[:, 5:]
+        return ControlOutputs(out[:, :4], out[:, 4].copy().view(np.int32), out[:, 5:])

@@ -59,9 +59,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
-from ..rotations import matrix_from_quaternion
-from .progress import report
+from ...errors import InputError
+from ...rotations import matrix_from_quaternion
+from ..progress import report
 
 __all__ = ["CHECKS", "RATIO_TOL", "QUAT_ALONG_MIN", "Figures", "figures", "check_log",
            "thrust_units", "trusted"]
