@@ -284,3 +284,57 @@ def test_only_the_log_package_reads_log_files():
         if (analysis / "logs") in path.parents:
             continue
         assert not _log_reading(path.read_text()), (path, _log_reading(path.read_text()))
+
+
+def _private_imports(module: str, source: str, is_package: bool = False) -> list[str]:
+    """The underscore names that ``module`` (dotted, its text ``source``) imports from a
+    module other than a private sibling: ``from .trim import _newton`` in a module of
+    ``schedule/`` is one, ``from ._checks import _canonical`` in ``logs/_read.py`` is not
+    (private modules of one package share their helpers)."""
+    package = module if is_package else module.rpartition(".")[0]
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.ImportFrom):
+            continue
+        if node.level:
+            base = package.split(".")[:len(package.split(".")) - node.level + 1]
+            source_mod = ".".join(base + ([node.module] if node.module else []))
+        else:
+            source_mod = node.module or ""
+        if not source_mod.startswith("gainsched"):
+            continue
+        home, _, leaf = source_mod.rpartition(".")
+        for alias in node.names:
+            name = alias.name
+            if not name.startswith("_") or name.startswith("__"):
+                continue
+            if (PACKAGE.parent / Path(*source_mod.split("."), f"{name}.py")).exists():
+                continue  # a private module, imported by its name
+            if not (leaf.startswith("_") and home == package):
+                found.append(f"{source_mod}.{name}")
+    return found
+
+
+@pytest.mark.parametrize("module, source", [
+    ("gainsched.schedule.offsets", "from .trim import _newton\n"),
+    ("gainsched.studies._build", "from ..schedule.grid import _solve_speed\n"),
+    ("gainsched.studies._build", "from ..analysis.logs._read import _canonical\n"),
+    ("gainsched.cli._tables", "from gainsched.schedule.certificate import _quanta\n"),
+])
+def test_the_private_name_check_sees_a_reach_in(module, source):
+    assert _private_imports(module, source), source
+
+
+def test_no_module_imports_another_modules_private_names():
+    """Issue 54: a leading underscore means "this module's own"; such a name is imported
+    only between the private modules of one package (logs/_read.py from logs/_checks.py),
+    never from a public module (schedule/offsets.py from schedule/trim.py) nor across
+    packages."""
+    found = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE.parent).with_suffix("")
+        is_package = rel.name == "__init__"
+        module = ".".join(rel.parent.parts if is_package else rel.parts)
+        if hits := _private_imports(module, path.read_text(), is_package):
+            found[module] = hits
+    assert not found, found

@@ -20,7 +20,9 @@ from ..native.reproducible import ensure_blas_single_thread
 from .grid import solve_circle
 from .lqr import monodromy, spectral_radius
 
-__all__ = ["ERROR_QUANTUM", "STABLE_RADIUS", "midpoint_errors"]
+__all__ = ["ERROR_QUANTUM", "STABLE_RADIUS", "midpoint_errors",
+           # the checks of cell centres the refinement runs (schedule/refine.py)
+           "Centre", "check_centres", "quanta"]
 
 #: decisions compare errors rounded to this (a fraction: 0.01 %) with the bound less one
 #: quantum, so that last-bit differences never change the grid
@@ -58,13 +60,13 @@ def midpoint_errors(K, K_d, u, u_d, phi, phi_d, u_scale, phi_scale):
     return gain, thrust, roll
 
 
-def _quanta(err: float) -> float:
+def quanta(err: float) -> float:
     """An error in quanta of :data:`ERROR_QUANTUM`, rounded (inf stays inf)."""
     return round(err / ERROR_QUANTUM) if math.isfinite(err) else math.inf
 
 
 @dataclass(frozen=True)
-class _Centre:
+class Centre:
     """The certificate of one cell: worst errors over its azimuth midpoints, the closed
     loop along its centre circle with interpolated (``rho``) and direct gains, and the
     error of the azimuth interpolation alone (direct gains at the grid azimuths)."""
@@ -95,12 +97,12 @@ def _xi_linear(X, xs):
     return (1 - w) * X[j] + w * X[(j + 1) % n_xi]
 
 
-def _check_centres(config2, speed, tilts, corners, effects=(), dare_tilt0=True):
+def check_centres(config2, speed, tilts, corners, effects=(), dare_tilt0=True):
     """One certificate job: the centre circles of the cells at one mid speed.
 
     ``config2`` has twice the table's azimuth samples; ``tilts`` (rad) are the cells' mid
     tilts; ``corners[i]`` the four corner circles' ``(K (4, n_xi, 4, n), u_d (4, n_xi,
-    4), phi_d (4, n_xi))``. Returns one :class:`_Centre` per tilt (all NaN when the direct
+    4), phi_d (4, n_xi))``. Returns one :class:`Centre` per tilt (all NaN when the direct
     solve is infeasible)."""
     ensure_blas_single_thread()
     with registered_effects_context(effects):
@@ -109,7 +111,7 @@ def _check_centres(config2, speed, tilts, corners, effects=(), dare_tilt0=True):
     out = []
     for i in range(len(tilts)):
         if i not in ok:
-            out.append(_Centre())
+            out.append(Centre())
             continue
         K4, u4, phi4 = corners[i]
         K_d, u_d, phi_d = sol.K[i, 1::2], sol.u_d[i, 1::2], sol.phi_d[i, 1::2]
@@ -122,7 +124,7 @@ def _check_centres(config2, speed, tilts, corners, effects=(), dare_tilt0=True):
                                              u_scale, phi_scale)
         az = midpoint_errors(mid(sol.K[i, None, 0::2]), K_d, mid(sol.u_d[i, None, 0::2]), u_d,
                              mid(sol.phi_d[i, None, 0::2]), phi_d, u_scale, phi_scale)
-        out.append(_Centre(float(gain.max()), float(thrust.max()), float(roll.max()),
+        out.append(Centre(float(gain.max()), float(thrust.max()), float(roll.max()),
                            float(max(e.max() for e in az)), math.nan,
                            float(sol.spectral_radius[i])))
     if ok:  # the loops closed with the interpolated gains, all tilts at once

@@ -20,13 +20,13 @@ from ..model.thrustmap import thrust_partials
 from .linearize import discretize, jacobians, lqr_system
 from .nominal import circle_is_rough, circle_nominal
 
-__all__ = ["LIN_TOL", "discrete_system", "periodic_interp"]
+__all__ = ["LIN_TOL", "discrete_system", "periodic_interp", "discrete_at"]
 
 #: relative accuracy demanded of the interpolated linearisation (see discrete_system)
 LIN_TOL = 1e-10
 
 
-def _discrete_at(model, speed, tilts, n, dt, odd=False):
+def discrete_at(model, speed, tilts, n, dt, odd=False):
     """Zero-order-hold LQR system at ``n`` equally spaced steps of the circle, all tilts;
     with ``odd`` at the odd ones alone (those the ``n / 2`` steps lack)."""
     zs, us = [], []
@@ -178,11 +178,11 @@ def discrete_system(model, speed, tilts, N, dt, *, tol=LIN_TOL, m0=32):
         Ad, Bd, err = _discrete_split(model, speed, tilts, N, dt, tol, m0)
         return Ad, Bd, N, err
     if rough.all():
-        Ad, Bd = _discrete_at(model, speed, tilts, N, dt)
+        Ad, Bd = discrete_at(model, speed, tilts, N, dt)
         return Ad, Bd, N, 0.0
 
     def at(n_steps, odd=False):  # [A_d | B_d] side by side: one interpolation carries both
-        return np.concatenate(_discrete_at(model, speed, tilts, n_steps, dt, odd), axis=-1)
+        return np.concatenate(discrete_at(model, speed, tilts, n_steps, dt, odd), axis=-1)
 
     def error(AB, AB_exact):  # relative to |A_d - I| and |B_d|
         n = AB.shape[-2]

@@ -29,7 +29,7 @@ from ..model.effects import registered_effects, registered_effects_context
 from ..model.reduced import Model
 from ..model.symmetry import SYMMETRY_TOL, azimuth_invariance_error, table_refusal
 from ..native.reproducible import blas_single_thread, ensure_blas_single_thread
-from .discrete import LIN_TOL, _discrete_at, discrete_system, periodic_interp
+from .discrete import LIN_TOL, discrete_at, discrete_system, periodic_interp
 from .jobs import run_jobs
 from .lqr import dlqr, periodic_lqr, spectral_radius, stability_scale
 from .modes import MODE_COUNT, floquet_modes
@@ -38,8 +38,8 @@ from .offsets import HARMONICS
 from .path import circle_path, period
 from .trim import TrimError, solve_circles
 
-__all__ = ["CircleSolution", "solve_circle", "build_grid", "GridResult", "bound_price",
-           "grid_from_solutions",
+__all__ = ["CircleSolution", "solve_circle", "solve_speed", "build_grid", "GridResult",
+           "bound_price", "grid_from_solutions",
            "check_gain_cap",
            "steps_per_period",
            "discrete_system", "periodic_interp", "check_effect_symmetries",
@@ -253,7 +253,7 @@ def _tilt0(model, config, speed, N, dt, Qx):
     exactly. Returns ``K (4, n), S (n, n), spectral radius``, the modes of ``A - B K``
     (:func:`~gainsched.schedule.modes.floquet_modes` with the step ``dt``) and max |K|
     without the config's ``max_time_constant_s`` (the same K without one)."""
-    Ad, Bd = _discrete_at(model, speed, [0.0], 1, dt)
+    Ad, Bd = discrete_at(model, speed, [0.0], 1, dt)
     A, B = Ad[0, 0], Bd[0, 0]
     scale = stability_scale(dt, config.control.max_time_constant_s)
     K, S, E = dlqr(A, B, Qx, config.control.R)
@@ -495,7 +495,7 @@ class GridResult(_Circles):
         return np.where(finite.any(axis=(2, 3, 4)), k_max, np.nan)
 
 
-def _solve_speed(config, speed: float, tilts, effects=(), dare_tilt0=True) -> CircleSolution:
+def solve_speed(config, speed: float, tilts, effects=(), dare_tilt0=True) -> CircleSolution:
     """One job of :func:`build_grid`: all tilts of one speed, on one BLAS thread.
     ``effects``: the registered (not built-in) effect classes the config names, which a
     worker process does not know otherwise (they travel with the job, by value)."""
@@ -571,7 +571,7 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
     args = [(config, float(v), tilts, extra, invariant) for v in speeds]
     sols = []
     with blas_single_thread():
-        for s in run_jobs(args, n_jobs, backend, _solve_speed):
+        for s in run_jobs(args, n_jobs, backend, solve_speed):
             sols.append(s)
             if progress is not None:
                 progress(1)

@@ -46,14 +46,14 @@ from .closedform import state_from_attitude
 from .path import AzimuthPath, circle_path, period
 from .trim import (
     TrimError,
-    _fourier_operators,
-    _fourier_samples,
-    _initial_guess,
-    _inputs,
-    _local_jacobians,
-    _newton,
-    _newton_step,
-    _sub_path,
+    fourier_operators,
+    fourier_samples,
+    initial_guess,
+    local_jacobians,
+    newton,
+    newton_step,
+    sub_path,
+    thrust_inputs,
 )
 
 __all__ = [
@@ -249,7 +249,7 @@ def _inputs_at_nodes(model, nodes, alpha, D1, D2, phi, T, off, dphi_dp, dT_dp, t
     roll = (phi, D1 @ phi, D2 @ phi)
     angles = [roll, *off]  # roll, pitch, yaw: each (value, rate, acceleration)
     s, _ = state_from_attitude(nodes, *angles)
-    T0 = _inputs(model, s, T, alpha, start=start, where="nodes")[0]
+    T0 = thrust_inputs(model, s, T, alpha, start=start, where="nodes")[0]
     F_s, F_T0 = thrust_partials(model, s, T0, alpha)
     n, nb = phi.size, trip[0].shape[1]
     # d s / d (each angle and its derivatives): 9 complex steps in one evaluation, the
@@ -259,7 +259,7 @@ def _inputs_at_nodes(model, nodes, alpha, D1, D2, phi, T, off, dphi_dp, dT_dp, t
     moved = [[np.asarray(x, dtype=complex)[tile] for x in angle] for angle in angles]
     for k in range(9):
         moved[k // 3][k % 3][k * n:(k + 1) * n] += 1j * h
-    s_c = state_from_attitude(_sub_path(nodes, tile), *map(tuple, moved))[0]
+    s_c = state_from_attitude(sub_path(nodes, tile), *map(tuple, moved))[0]
     ds_dq = (np.imag(s_c) / h).reshape(9, n, -1).transpose(1, 2, 0)
     # d (angles) / dp (n, 9, 2 nb): the roll's through the trim, each offset's own series
     dq_dp = np.zeros((n, 9, 2 * nb))
@@ -278,15 +278,15 @@ def _solve(model, speed, alpha, bound, harmonics, n_nodes, lo, hi, start=None):
     Tp = period(speed, model.r)
     t = np.arange(n_nodes) * (Tp / n_nodes)
     nodes = circle_path(speed, model.r, t)
-    D1, D2 = _fourier_operators(n_nodes, Tp)
+    D1, D2 = fourier_operators(n_nodes, Tp)
     # the commands between the nodes: the collocation's own trigonometric interpolant at
     # FINE times the nodes (a smooth thrust bulges past its node values by about
     # A k^2 h^2 / 8, several mN at 32 nodes, more than the safety)
-    P, P1, _ = _fourier_samples(np.eye(n_nodes), Tp, FINE * n_nodes)
+    P, P1, _ = fourier_samples(np.eye(n_nodes), Tp, FINE * n_nodes)
     command = _command_map(model, P, P1)
     B, _, _ = _basis(nodes.xi, harmonics)
     nb = B.shape[1]
-    state = dict(zip(("phi", "T"), _initial_guess(model, nodes, alpha), strict=True), T0=None)
+    state = dict(zip(("phi", "T"), initial_guess(model, nodes, alpha), strict=True), T0=None)
     cache: dict[bytes, tuple] = {}
 
     def offsets_of(x):
@@ -304,17 +304,17 @@ def _solve(model, speed, alpha, bound, harmonics, n_nodes, lo, hi, start=None):
             off = offsets_of(p).along(nodes)
             # the trim in actual thrusts (the model at given thrusts never goes through the
             # modifiers; without modifiers they are the commands)
-            phi, T = _newton(model, nodes, alpha, D1, D2, state["phi"], state["T"],
+            phi, T = newton(model, nodes, alpha, D1, D2, state["phi"], state["T"],
                              offsets=off)
             state["phi"], state["T"] = phi, T
             # implicit function theorem: R(y(p), p) = 0  ->  dy/dp = -R_y^-1 R_p
-            Jl = _local_jacobians(model, nodes, alpha, phi, D1 @ phi, D2 @ phi, T, off,
+            Jl = local_jacobians(model, nodes, alpha, phi, D1 @ phi, D2 @ phi, T, off,
                                   wrt_offsets=True)
             Rp = np.zeros((n_nodes, 5, 2 * nb))
             for a in range(2):
                 Rp[:, :, a * nb:(a + 1) * nb] = sum(
                     Jl[:, :, 7 + 3 * a + j, None] * trip[j][:, None] for j in range(3))
-            d_phi, d_T = _newton_step(Jl, D1, D2, Rp)  # (n, 2 nb), (n, 4, 2 nb), negated
+            d_phi, d_T = newton_step(Jl, D1, D2, Rp)  # (n, 2 nb), (n, 4, 2 nb), negated
             T0, dT0 = (T, -d_T) if not modifiers else _inputs_at_nodes(
                 model, nodes, alpha, D1, D2, phi, T, off, -d_phi, -d_T, trip, state["T0"])
             state["T0"] = T0

@@ -58,19 +58,19 @@ from ..native.reproducible import blas_single_thread
 from .certificate import (
     ERROR_QUANTUM,
     STABLE_RADIUS,
-    _Centre,
-    _check_centres,
-    _quanta,
+    Centre,
+    check_centres,
     midpoint_errors,
+    quanta,
 )
 from .choice import GridChoice, grid_auto_lines
 from .grid import (
     CircleSolution,
-    _solve_speed,
     check_effect_symmetries,
     check_gain_cap,
     grid_from_solutions,
     level_circle_invariant,
+    solve_speed,
 )
 from .jobs import run_jobs
 
@@ -149,7 +149,7 @@ class _Refiner:
         g = config.grid
         self.config, self.n_jobs, self.progress, self.backend = config, n_jobs, progress, backend
         self.bound = g.max_interpolation_error
-        self.limit = _quanta(self.bound) - 1  # one quantum of margin to the bound
+        self.limit = quanta(self.bound) - 1  # one quantum of margin to the bound
         self.speeds = _Axis("speeds", [float(v) for v in g.speeds], g.speeds_auto)
         tilt_deg = g.tilts_auto.seeds() if g.tilts_auto else np.rad2deg(g.tilts)
         self.tilts = _Axis("tilts_deg", [float(a) for a in tilt_deg], g.tilts_auto)
@@ -180,7 +180,7 @@ class _Refiner:
         self.config2 = self.config.with_values({"grid.azimuth_samples": 2 * n_xi})
         self.points = {}  # (v, a_deg) -> CircleSolution of one tilt
         self.meta = {}  # v -> (steps, dt)
-        self.centres = {}  # (v_lo, v_hi, a_lo, a_hi) -> _Centre
+        self.centres = {}  # (v_lo, v_hi, a_lo, a_hi) -> Centre
         self.surpluses = {}  # (axis key, parent interval, other breakpoint) -> error
 
     # ------------------------------------------------------------------ solving
@@ -206,7 +206,7 @@ class _Refiner:
                 todo[v].append(a)
         args = [(self.solve_config, v, np.array([self.rad(a) for a in ts]), self.effects,
                  self.invariant) for v, ts in todo.items()]
-        for (_, v, _, _, _), sol in self._run(_solve_speed, args):
+        for (_, v, _, _, _), sol in self._run(solve_speed, args):
             self.meta[v] = (sol.steps, sol.dt)
             for i, a in enumerate(todo[v]):
                 self.points[v, a] = _one(sol, i)
@@ -220,7 +220,7 @@ class _Refiner:
                 continue
             cs = [self.points[p] for p in _corners(cell)]
             if not all(_feasible(c) for c in cs):
-                self.centres[cell] = _Centre()
+                self.centres[cell] = Centre()
                 continue
             data = tuple(np.stack([getattr(c, k)[0] for c in cs]) for k in ("K", "u_d", "phi_d"))
             todo[0.5 * (cell[0] + cell[1])].append((cell, data))
@@ -228,13 +228,13 @@ class _Refiner:
         args = [(self.config2, v, np.array([self.rad(0.5 * (c[2] + c[3])) for c, _ in items]),
                  [d for _, d in items], self.effects, self.invariant)
                 for v, items in todo.items()]
-        for (_, v, _, _, _, _), res in self._run(_check_centres, args):
+        for (_, v, _, _, _, _), res in self._run(check_centres, args):
             for (cell, _), centre in zip(todo[v], res, strict=True):
                 self.centres[cell] = centre
 
     def fails(self, cell) -> bool:
         c = self.centres[cell]
-        return c.usable and (_quanta(c.error) > self.limit or not c.rho < STABLE_RADIUS)
+        return c.usable and (quanta(c.error) > self.limit or not c.rho < STABLE_RADIUS)
 
     # ------------------------------------------------------------------ estimates
 
@@ -298,7 +298,7 @@ class _Refiner:
                 if ax.auto is not None and ax.room() > 0]
         if not opts:
             return None
-        return max(opts, key=lambda t: (_quanta(t[0]), t[1] is self.speeds))
+        return max(opts, key=lambda t: (quanta(t[0]), t[1] is self.speeds))
 
     # ------------------------------------------------------------------ rounds
 
@@ -319,7 +319,7 @@ class _Refiner:
                     want["speeds"].setdefault(edge, 1)
                 continue
             if (not all(_feasible(self.points[p]) for p in _corners(cell))
-                    or _quanta(sum(self.cell_estimates(cell))) <= self.limit):
+                    or quanta(sum(self.cell_estimates(cell))) <= self.limit):
                 continue
             pick = self.choose(cell)
             if pick is None:
@@ -346,7 +346,7 @@ class _Refiner:
     def mend(self, failing) -> None:
         """Halve every failing cell along its :meth:`choose` axis; raise when no axis has
         room or a split would exceed ``max_count`` or collapse in float32."""
-        worst = max(failing, key=lambda c: (_quanta(self.centres[c].error), c))
+        worst = max(failing, key=lambda c: (quanta(self.centres[c].error), c))
         pick = {"speeds": set(), "tilts_deg": set()}
         for cell in failing:
             _check_azimuth(self.config, self.n_xi, cell, self.centres[cell], self.bound,
@@ -373,7 +373,7 @@ class _Refiner:
             return False
         target = AZIMUTH_SHARE * self.limit * ERROR_QUANTUM
         top = self.azimuth.lo * 2 ** int(math.log2(self.azimuth.hi // self.azimuth.lo))
-        if _quanta(worst) <= math.floor(AZIMUTH_SHARE * self.limit) or self.n_xi >= top:
+        if quanta(worst) <= math.floor(AZIMUTH_SHARE * self.limit) or self.n_xi >= top:
             return False
         self.set_azimuth(min(self.n_xi * 2 ** _halvings(worst, target), top))
         return True
@@ -526,10 +526,10 @@ def _where(cell) -> str:
     return f"the cell {v0:g}-{v1:g} m/s x {a0:g}-{a1:g} deg"
 
 
-def _check_azimuth(config, n_xi: int, cell, c: _Centre, bound: float, limit: int) -> None:
+def _check_azimuth(config, n_xi: int, cell, c: Centre, bound: float, limit: int) -> None:
     """Refuse a cell that no speed or tilt breakpoint can mend: the azimuth interpolation
     alone exceeds the bound there."""
-    if _quanta(c.azimuth) > limit:
+    if quanta(c.azimuth) > limit:
         key = "azimuth_samples" + (".max" if config.grid.azimuth_auto else "")
         raise InputError(config.source, f"grid.{key}",
                          f"{n_xi} samples are too few for {100 * bound:g} %: the "
@@ -537,13 +537,13 @@ def _check_azimuth(config, n_xi: int, cell, c: _Centre, bound: float, limit: int
                          f"% at the centre of {_where(cell)}; raise grid.{key}")
 
 
-def _why(cell, c: _Centre) -> str:
+def _why(cell, c: Centre) -> str:
     return (f"{_where(cell)} has {100 * c.error:.2f} % at its centre (gains "
             f"{100 * c.gain:.2f}, thrusts {100 * c.thrust:.2f}, roll {100 * c.roll:.2f}; "
             f"closed loop {c.rho:.5f})")
 
 
-def _refuse_count(config, axis: _Axis, cell, c: _Centre, bound: float) -> None:
+def _refuse_count(config, axis: _Axis, cell, c: Centre, bound: float) -> None:
     """The error when a cell fails and its axes are at their ``max_count`` (or lists)."""
     if axis.auto is None:
         raise InputError(config.source, f"grid.{axis.key}",
@@ -554,7 +554,7 @@ def _refuse_count(config, axis: _Axis, cell, c: _Centre, bound: float) -> None:
                      f"%: {_why(cell, c)}; raise max_count or grid.max_interpolation_error")
 
 
-def _check_split(config, axis: _Axis, new, worst, c: _Centre, bound: float) -> None:
+def _check_split(config, axis: _Axis, new, worst, c: Centre, bound: float) -> None:
     """Refuse a split beyond ``max_count`` or one that collapses in float32."""
     why = _why(worst, c)
     if len(axis.values) + len(new) > axis.auto.max_count:

@@ -42,7 +42,10 @@ from ..model.thrustmap import input_from_thrust
 from .closedform import closed_form, state_from_attitude
 from .path import AzimuthPath
 
-__all__ = ["trim_path", "solve_circles", "is_rough", "TrimError"]
+__all__ = ["trim_path", "solve_circles", "is_rough", "TrimError",
+           # the collocation kernels the attitude offsets reuse (schedule/offsets.py)
+           "fourier_operators", "fourier_samples", "sub_path", "local_jacobians",
+           "newton_step", "newton", "initial_guess", "thrust_inputs"]
 
 #: nodes of the periodic collocation: the interpolated nominal of 64 meets the model to
 #: 1e-11 (relative) at 1024 samples per circle with rotor drag, motor lag or momentum
@@ -118,7 +121,7 @@ class TrimError(GainschedError):
     """The trim did not converge."""
 
 
-def _fourier_operators(n: int, T: float):
+def fourier_operators(n: int, T: float):
     """Spectral first and second derivative matrices on n equispaced nodes of period T."""
     k = np.fft.fftfreq(n, d=T / n) * 2 * np.pi
     if n % 2 == 0:
@@ -158,7 +161,7 @@ def _fourier_eval(values, T: float, t):
     return f, f1, f2
 
 
-def _fourier_samples(values, T: float, n_out: int):
+def fourier_samples(values, T: float, n_out: int):
     """:func:`_fourier_eval` at the ``n_out`` equally spaced times ``j T / n_out`` of one
     period, shapes (n_out, ...) like it, by one inverse FFT of length ``n_out``: at those
     times ``exp(i w_k t_j)`` depends on ``k mod n_out`` alone, so the coefficients are
@@ -173,7 +176,8 @@ def _fourier_samples(values, T: float, n_out: int):
     return tuple(out)
 
 
-def _sub_path(path: AzimuthPath, idx) -> AzimuthPath:
+def sub_path(path: AzimuthPath, idx) -> AzimuthPath:
+    """The samples ``idx`` (index or mask over the samples) of ``path``."""
     return AzimuthPath(path.t[idx], path.xi[idx], tuple(d[idx] for d in path.d))
 
 
@@ -205,7 +209,7 @@ def _local(model, path: AzimuthPath, alpha, phi, dphi, ddphi, T, offsets=None):
     return res, z, sdot, ev
 
 
-def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets=None, *,
+def local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets=None, *,
                      wrt_offsets=False, thrust_only=False):
     """d res / d(phi, phi', phi'', T1..T4) per node by complex steps, shape (n, 5, 7); with
     ``wrt_offsets`` six more columns, d res / d(theta, theta', theta'', chi, chi', chi'');
@@ -231,11 +235,11 @@ def _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets=None, *,
             off[j][(7 + j - first) * n:(8 + j - first) * n] += 1j * h
     o = (tuple(off[:3]), tuple(off[3:]))
     a = alpha if np.ndim(alpha) == 0 else np.asarray(alpha)[tile]  # a tilt per node
-    res = np.imag(_local(model, _sub_path(path, tile), a, *roll, Tc, o)[0]) / h
+    res = np.imag(_local(model, sub_path(path, tile), a, *roll, Tc, o)[0]) / h
     return res.reshape(m, n, 5).transpose(1, 2, 0)
 
 
-def _newton_step(Jl, D1, D2, res, circles=1):
+def newton_step(Jl, D1, D2, res, circles=1):
     """The solution ``(d phi (n, ...), d T (n, 4, ...))`` of the collocation system
     ``J x = res`` by eliminating the thrusts. J is the (5n, 5n) Jacobian of all node
     residuals in (phi nodes, T1 nodes, ..., T4 nodes) from the local partials ``Jl``
@@ -271,7 +275,7 @@ def _newton_step(Jl, D1, D2, res, circles=1):
 
 
 def _newton_circles(model, nodes, alphas, D1, D2, phi, T, tol=1e-11, max_iter=40):
-    """:func:`_newton` of the zero-offset circles at the tilts ``alphas`` (m,) rad on the
+    """:func:`newton` of the zero-offset circles at the tilts ``alphas`` (m,) rad on the
     same ``nodes``, from ``phi`` (m, n) and ``T`` (m, n, 4), in one model evaluation per
     step: a circle leaves the batch once its own residual meets ``tol``. Returns one
     ``(phi, T)`` per circle, None for a circle that did not converge."""
@@ -280,7 +284,7 @@ def _newton_circles(model, nodes, alphas, D1, D2, phi, T, tol=1e-11, max_iter=40
     out = [None] * m
     live = np.arange(m)
     for _ in range(max_iter):
-        flat = _sub_path(nodes, np.tile(np.arange(n), live.size))
+        flat = sub_path(nodes, np.tile(np.arange(n), live.size))
         a = np.repeat(alphas[live], n)
         roll = (phi[live], phi[live] @ D1.T, phi[live] @ D2.T)
         res = _local(model, flat, a, *(x.reshape(-1) for x in roll), T[live].reshape(-1, 4))[0]
@@ -291,11 +295,11 @@ def _newton_circles(model, nodes, alphas, D1, D2, phi, T, tol=1e-11, max_iter=40
             break
         keep = np.repeat(~done, n)
         live = live[~done]
-        flat = _sub_path(flat, np.flatnonzero(keep))
+        flat = sub_path(flat, np.flatnonzero(keep))
         roll = [x[~done] for x in roll]
-        Jl = _local_jacobians(model, flat, a[keep], *(x.reshape(-1) for x in roll),
+        Jl = local_jacobians(model, flat, a[keep], *(x.reshape(-1) for x in roll),
                               T[live].reshape(-1, 4))
-        d_phi, d_T = _limited(model, *_newton_step(Jl, D1, D2, res[keep], circles=live.size))
+        d_phi, d_T = _limited(model, *newton_step(Jl, D1, D2, res[keep], circles=live.size))
         phi[live] -= d_phi
         T[live] -= d_T
     return out
@@ -312,21 +316,24 @@ def _limited(model, d_phi, d_T):
     return d_phi * f[..., None], d_T * f[..., None, None]
 
 
-def _newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40, offsets=None):
+def newton(model, path, alpha, D1, D2, phi, T, tol=1e-11, max_iter=40, offsets=None):
+    """Newton's method on the collocation residual of one circle: the roll angle ``phi``
+    (n,) rad and thrusts ``T`` (n, 4) N at the n nodes from a guess, or TrimError after
+    ``max_iter`` steps (tolerance ``tol`` on the residual, relative to the path's speed)."""
     scale = max(1.0, float(np.abs(path.d[0]).max()) ** 2)
     for _ in range(max_iter):
         dphi, ddphi = D1 @ phi, D2 @ phi
         res = _local(model, path, alpha, phi, dphi, ddphi, T, offsets)[0]
         if np.abs(res).max() < tol * scale:
             return phi, T
-        Jl = _local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets)
-        d_phi, d_T = _limited(model, *_newton_step(Jl, D1, D2, res))
+        Jl = local_jacobians(model, path, alpha, phi, dphi, ddphi, T, offsets)
+        d_phi, d_T = _limited(model, *newton_step(Jl, D1, D2, res))
         phi = phi - d_phi
         T = T - d_T
     raise TrimError(f"trim did not converge (residual {np.abs(res).max():.3g})")
 
 
-def _initial_guess(model, path, alpha):
+def initial_guess(model, path, alpha):
     """Closed-form nominal of the drag-like effects alone."""
     base = model.drag_part()
     s, _, u, _ = closed_form(base, path, alpha, base.closed_form_drag())
@@ -344,7 +351,7 @@ def _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, tol=1e-12, max_iter=2
     idx = np.arange(T.shape[0])
 
     def at(i):  # the arguments of the points i
-        return (_sub_path(path, i), alpha, phi[i], dphi[i], ddphi[i], T[i],
+        return (sub_path(path, i), alpha, phi[i], dphi[i], ddphi[i], T[i],
                 None if offsets is None else tuple(tuple(x[i] for x in o) for o in offsets))
 
     for step in range(max_iter + 1):
@@ -355,7 +362,7 @@ def _solve_thrust(model, path, alpha, phi, dphi, ddphi, T, tol=1e-12, max_iter=2
         idx, res = idx[moving], res[moving]
         if step == max_iter:
             break
-        Jl = _local_jacobians(model, *at(idx), thrust_only=True)[:, 1:]
+        Jl = local_jacobians(model, *at(idx), thrust_only=True)[:, 1:]
         T[idx] -= np.linalg.solve(Jl, res[..., None])[..., 0]
         res = None
     raise TrimError(f"per-sample thrust trim did not converge at {idx.size} samples "
@@ -401,8 +408,8 @@ def solve_circles(model, path: AzimuthPath, alphas) -> Solutions:
     if len(todo) < 2:
         return kept
     nodes, Tp = _nodes(path)
-    D1, D2 = _fourier_operators(N_FOURIER, Tp)
-    guesses = [_initial_guess(model, nodes, a) for a in todo]
+    D1, D2 = fourier_operators(N_FOURIER, Tp)
+    guesses = [initial_guess(model, nodes, a) for a in todo]
     phi = np.stack([g[0] for g in guesses])
     T = np.stack([g[1] for g in guesses])
     with np.errstate(all="ignore"):  # a diverging circle is left out, not raised here
@@ -413,7 +420,7 @@ def solve_circles(model, path: AzimuthPath, alphas) -> Solutions:
     return kept
 
 
-def _inputs(model, s, T, alpha, rates=None, start=None, where="samples"):
+def thrust_inputs(model, s, T, alpha, rates=None, start=None, where="samples"):
     """:func:`~gainsched.model.thrustmap.input_from_thrust` ``(T0, T0_dot)``, or TrimError
     naming how many of the ``where`` it did not converge at."""
     T0, T0_dot, ok = input_from_thrust(model, s, T, alpha, rates, start=start)
@@ -455,15 +462,15 @@ def _circle(model, path: AzimuthPath, alpha: float, offsets=None):
     if (key, N_FOURIER) in cache:
         return (key, *cache[key, N_FOURIER])
     solved = kept.nodes
-    D1, D2 = _fourier_operators(N_FOURIER, Tp)
+    D1, D2 = fourier_operators(N_FOURIER, Tp)
     off_n = None if offsets is None else offsets.along(nodes)
     if key not in solved:
-        phi0, u0 = _initial_guess(model, nodes, alpha)
-        solved[key] = _newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
+        phi0, u0 = initial_guess(model, nodes, alpha)
+        solved[key] = newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
     phi_n, T_n = solved[key]
     n = _smooth_samples()
     check = _nodes(path, n)[0]
-    f, f1, f2 = _fourier_samples(np.vstack([phi_n, T_n.T]), Tp, n)
+    f, f1, f2 = fourier_samples(np.vstack([phi_n, T_n.T]), Tp, n)
     off = None if offsets is None else offsets.along(check)
     res, z, sdot, ev = _local(model, check, alpha, f[:, 0], f1[:, 0], f2[:, 0], f[:, 1:], off)
     rows = [phi_n, T_n.T, ev.tension[:: n // N_FOURIER]]
@@ -471,8 +478,8 @@ def _circle(model, path: AzimuthPath, alpha: float, offsets=None):
     if model.thrust_modifiers:
         s_n, _ = state_from_attitude(nodes, (phi_n, D1 @ phi_n, D2 @ phi_n),
                                      *((None, None) if off_n is None else off_n))
-        rows.append(_inputs(model, s_n, T_n, alpha, where="nodes")[0].T)
-        g, g1, _ = _fourier_samples(rows[-1], Tp, n)
+        rows.append(thrust_inputs(model, s_n, T_n, alpha, where="nodes")[0].T)
+        g, g1, _ = fourier_samples(rows[-1], Tp, n)
         s = z[:, :N_STATE]
         exact = _commands(model, alpha, s, sdot, f[:, 1:], f1[:, 1:], start=g)
         interpolated = _lagged(model, s, sdot, g, g1)
@@ -500,7 +507,7 @@ def _periodic_guess(model, path: AzimuthPath, alpha: float, offsets=None):
     if np.allclose(tt, np.arange(t.size) * (Tp / t.size), rtol=0.0, atol=1e-12 * Tp):
         # one period in equal steps (to rounding: the steps' times come from the period
         # the caller computed)
-        f, f1, f2 = _fourier_samples(rows, Tp, t.size)
+        f, f1, f2 = fourier_samples(rows, Tp, t.size)
     else:
         f, f1, f2 = _fourier_eval(rows, Tp, tt)
     T0, T0_dot = (f[:, 6:], f1[:, 6:]) if model.thrust_modifiers else (None, None)
@@ -531,7 +538,7 @@ def _commands(model, alpha, s, sdot, T, T_dot, start=None, key=None):
         cache = {} if key is None else solutions(model).inputs
         if key not in cache:
             rates = (sdot, T_dot) if model.n_extra else None
-            cache[key] = _inputs(model, s, T, alpha, rates, start)
+            cache[key] = thrust_inputs(model, s, T, alpha, rates, start)
         T0, T0_dot = (None if x is None else x.copy() for x in cache[key])  # callers own
     return _lagged(model, s, sdot, T0, T0_dot)
 
@@ -596,12 +603,12 @@ def trim_path(model, path: AzimuthPath, alpha: float, *, periodic: bool | None =
     else:
         start = pkey = None
         idx = np.unique(np.linspace(0, t.size - 1, min(t.size, N_SPLINE_MAX)).round().astype(int))
-        nodes = _sub_path(path, idx)
+        nodes = sub_path(path, idx)
         spl = make_interp_spline(nodes.t, np.eye(idx.size), k=5)
         D1, D2 = spl(nodes.t, nu=1), spl(nodes.t, nu=2)
-        phi0, u0 = _initial_guess(model, nodes, alpha)
+        phi0, u0 = initial_guess(model, nodes, alpha)
         off_n = None if offsets is None else offsets.along(nodes)
-        phi_n, T_n = _newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
+        phi_n, T_n = newton(model, nodes, alpha, D1, D2, phi0, u0, offsets=off_n)
         phi, dphi, ddphi = (spl(t, nu=k) @ phi_n for k in range(3))
         T = spl(t) @ T_n
         T_dot = spl(t, nu=1) @ T_n

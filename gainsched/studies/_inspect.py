@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ._report import SILENT, Reporter, teller
+from ._report import SILENT, Reporter, stage, teller
 
 __all__ = ["Inspection", "inspect", "Check", "check"]
 
@@ -139,7 +139,6 @@ def inspect(table, out_dir=None, *, code_size: bool = True,
     >>> ins.summary()["c_prefix"], ins.lines()[0].startswith("tables/paper.h5: ")
     ('paper', True)
     """
-    from ..analysis.progress import stage
     from ..firmware.host.size import flash_summary
     from ..publish import check_out_dir
     from ..schedule.envelope import write_envelope

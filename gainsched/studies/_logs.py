@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ._report import SILENT, Reporter, config_of, teller
+from ._report import SILENT, Reporter, config_of, on_bar, teller
 
 __all__ = ["ComparisonReport", "compare", "DiagnosisReport", "diagnose", "Conversion",
            "convert"]
@@ -333,8 +333,7 @@ def convert(log, out_path, *, channel_map=None, config=None, trust=(),
     ...     print(str(e).split(":")[0])
     no-such.ulg
     """
-    from ..analysis.logs import convert_log
-    from ..analysis.progress import on_bar, reporting
+    from ..analysis.logs import convert_log, reporting
     from ..publish import check_out_file
 
     cfg = None if config is None else config_of(config)

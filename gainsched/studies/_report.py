@@ -8,7 +8,7 @@ so a script that calls one sees only its result. The command line gives its term
 
 from __future__ import annotations
 
-__all__ = ["Reporter", "SILENT", "config_of", "teller"]
+__all__ = ["Reporter", "SILENT", "config_of", "teller", "on_bar", "stage"]
 
 
 class _NoBar:
@@ -90,3 +90,30 @@ def teller(reporter: Reporter):
             reporter.line(line)
 
     return said, say
+
+
+def on_bar(bar):
+    """The :func:`~gainsched.analysis.logs.reporting` callback that draws on a progress
+    ``bar`` (tqdm's, or :meth:`Reporter.bar`'s): the stage as its label, a read's bytes or
+    messages as its count; None for a disabled bar (off the terminal, ``--quiet``: nothing
+    to watch)."""
+    if bar.disable:
+        return None
+
+    def show(stage, done=None, total=None, unit=None):
+        if total is not None and (bar.total != total or bar.unit != unit):
+            bar.unit, bar.unit_scale = unit, unit == "B"
+            bar.reset(total=total)
+        if done is not None:
+            bar.n = done
+        bar.set_postfix_str(stage)
+
+    return show
+
+
+def stage(bar, name: str, fn, *args):
+    """``fn(*args)`` as one counted step of a tqdm ``bar`` labelled ``name``: its result."""
+    bar.set_postfix_str(name)
+    out = fn(*args)
+    bar.update()
+    return out

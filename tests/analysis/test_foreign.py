@@ -788,11 +788,11 @@ def test_ros2_battery_state_gives_vbat(paper_config, flight, tmp_path):
 
 def test_reading_reports_its_stages_to_a_listener(paper_config, flight, ulog_file, tmp_path,
                                                    monkeypatch):
-    """Issue 39, progress of ``convert``: with a listener (gainsched.analysis.progress) a
+    """Issue 39, progress of ``convert``: with a listener (gainsched.analysis.logs.reporting) a
     ULog's read reports its bytes from 0 to the file's size, a bag's its messages from 0
     to the count written, then the conversion and the channel checks, in that order; the
     log read is the one read without a listener."""
-    from gainsched.analysis.progress import reporting
+    from gainsched.analysis.logs import reporting
 
     monkeypatch.setenv("GAINSCHED_LOG_CACHE", "0")
     bag = tmp_path / "bag"

@@ -14,10 +14,10 @@ from gainsched.config import config_from_text
 from gainsched.model.reduced import Model
 from gainsched.schedule.grid import (
     TILT_BATCH,
-    _solve_speed,
     build_grid,
     discrete_system,
     solve_circle,
+    solve_speed,
     steps_per_period,
 )
 from gainsched.schedule.jobs import run_jobs
@@ -54,7 +54,7 @@ def test_grid_points_equal_single_point_solves(small):
         for j, v in enumerate(cfg.grid.speeds):
             # on the numerics the grid ran on (pinned workers if this process is not pinned:
             # other BLAS kernels move the tilt-0 DARE by ~1e-12)
-            (s,) = run_jobs([(cfg, float(v), np.array([a]))], 1, None, _solve_speed)
+            (s,) = run_jobs([(cfg, float(v), np.array([a]))], 1, None, solve_speed)
             for name, X in (("K", g.K), ("S", g.S), ("u_d", g.u_d), ("phi_d", g.phi_d),
                             ("tension", g.tension)):
                 ref = getattr(s, name)[0]

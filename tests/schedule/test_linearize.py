@@ -211,9 +211,9 @@ def test_a_rough_circles_system_through_the_thrust_modifiers_is_the_whole_models
     """Issue 39: a circle whose commands are rough (momentum theory's floored inflow, 9 m/s
     and 40 deg) is linearised at every step by the chain rule through the thrust modifiers,
     the model at given thrusts interpolated from a few azimuths: its discrete system equals
-    the whole model's complex steps at every step (``_discrete_at``) to 1e-9 relative, with
+    the whole model's complex steps at every step (``discrete_at``) to 1e-9 relative, with
     momentum theory alone and with a motor lag whose states are the modifiers' input."""
-    from gainsched.schedule.discrete import _discrete_at, discrete_system
+    from gainsched.schedule.discrete import discrete_at, discrete_system
     from gainsched.schedule.grid import steps_per_period
     from gainsched.schedule.nominal import circle_is_rough
 
@@ -224,7 +224,7 @@ def test_a_rough_circles_system_through_the_thrust_modifiers_is_the_whole_models
     dt = 2 * np.pi * m.r / v / N
     assert circle_is_rough(m, v, a)
     Ad, Bd, M, err = discrete_system(m, v, [a], N, dt)
-    Ad0, Bd0 = _discrete_at(m, v, [a], N, dt)
+    Ad0, Bd0 = discrete_at(m, v, [a], N, dt)
     assert M == N and 0.0 < err < 1e-10  # the smooth part interpolated
     I = np.eye(Ad.shape[-1])
     assert np.abs(Ad - Ad0).max() < 1e-9 * np.abs(Ad0 - I).max()

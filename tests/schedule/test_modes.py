@@ -14,7 +14,7 @@ from scipy.linalg import solve_discrete_are
 import gainsched as gs
 from gainsched.cli import cli
 from gainsched.model.reduced import Model
-from gainsched.schedule.grid import _discrete_at
+from gainsched.schedule.grid import discrete_at
 from gainsched.schedule.lqr import monodromy
 from gainsched.schedule.modes import dominant_states, floquet_modes
 from gainsched.schedule.path import period
@@ -84,7 +84,7 @@ def test_stored_modes_equal_a_fresh_monodromy_and_the_dare(paper_config, speed):
     # tilt 0 by the DARE: the per-step closed loop
     model = Model(paper_config)
     n = sol.K.shape[-1]
-    A, B = _discrete_at(model, speed, [0.0], 1, sol.dt)
+    A, B = discrete_at(model, speed, [0.0], 1, sol.dt)
     Q, R = paper_config.control.Q, paper_config.control.R
     S = solve_discrete_are(A[0, 0], B[0, 0], Q, R)
     Kd = np.linalg.solve(R + B[0, 0].T @ S @ B[0, 0], B[0, 0].T @ S @ A[0, 0])
@@ -166,7 +166,7 @@ def test_bound_holds_on_a_fresh_monodromy_and_the_dare(paper_config, bounded, sp
         lam = lam[lam.imag >= 0]
         np.testing.assert_allclose(sol.mode_tau[i], np.sort(-T / np.log(np.abs(lam)))[::-1][:4],
                                    rtol=1e-9)
-    A, B = (x[0, 0] for x in _discrete_at(Model(bounded), speed, [0.0], 1, sol.dt))
+    A, B = (x[0, 0] for x in discrete_at(Model(bounded), speed, [0.0], 1, sol.dt))
     c = np.exp(sol.dt / TAU_MAX)
     S = solve_discrete_are(c * A, c * B, bounded.control.Q, bounded.control.R)
     Kd = np.linalg.solve(bounded.control.R + c * c * B.T @ S @ B, c * c * B.T @ S @ A)

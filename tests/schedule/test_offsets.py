@@ -372,8 +372,8 @@ def test_a_long_newton_step_of_the_search_is_shortened(improved, monkeypatch):
     that trim does not converge, the search ends at once, and the circle has no offsets, as
     before."""
     calls = []
-    newton = offsets_mod._newton
-    monkeypatch.setattr(offsets_mod, "_newton",
+    newton = offsets_mod.newton
+    monkeypatch.setattr(offsets_mod, "newton",
                         lambda *a, **k: calls.append(1) or newton(*a, **k))
     cfg = improved.config
     assert offsets_mod.solve_offsets(improved, 13.0, np.deg2rad(37.0),

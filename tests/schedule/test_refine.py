@@ -164,10 +164,10 @@ def test_same_bytes_with_one_or_two_workers(chosen):
 def test_decisions_use_rounded_errors():
     """One quantum of margin: a grid whose worst error is at the bound to the last bits
     still fails (so check's float32 lookups cannot land above it)."""
-    from gainsched.schedule.refine import _quanta
+    from gainsched.schedule.refine import quanta
 
-    assert _quanta(0.019951) == 200 and _quanta(0.0199499) == 199
-    assert _quanta(math.inf) == math.inf
+    assert quanta(0.019951) == 200 and quanta(0.0199499) == 199
+    assert quanta(math.inf) == math.inf
     assert ERROR_QUANTUM == 1e-4
 
 

@@ -79,15 +79,15 @@ def test_the_eliminated_newton_step_is_the_dense_solve(k):
     """Issue 39: the Newton step with the thrusts eliminated node by node equals the dense
     (5n, 5n) solve of the collocation Jacobian (a second formulation, to 1e-9 relative),
     for one right-hand side and for several (the offsets' sensitivities)."""
-    from gainsched.schedule.trim import _fourier_operators, _newton_step
+    from gainsched.schedule.trim import fourier_operators, newton_step
 
     rng = np.random.default_rng(0)
     n = 32
-    D1, D2 = _fourier_operators(n, 0.7)
+    D1, D2 = fourier_operators(n, 0.7)
     Jl = rng.normal(size=(n, 5, 7))
     Jl[:, :, 0] += 5.0  # a well-posed system, as the trim's
     res = rng.normal(size=(n, 5) if k is None else (n, 5, k))
-    d_phi, d_T = _newton_step(Jl, D1, D2, res)
+    d_phi, d_T = newton_step(Jl, D1, D2, res)
     dense = np.linalg.solve(_collocation_jacobian(Jl, D1, D2),
                             res.transpose(1, 0, *range(2, res.ndim)).reshape(5 * n, -1))
     scale = np.abs(dense).max()
@@ -99,16 +99,16 @@ def test_the_eliminated_newton_step_is_the_dense_solve(k):
 @pytest.mark.parametrize("n_out", [7, 36, 128, 1024])
 def test_equal_step_samples_of_the_interpolant_are_its_general_evaluation(n_out):
     """Issue 39: the interpolant at the equal steps of one period by one folded inverse FFT
-    (`_fourier_samples`, aliasing exactly where the steps are fewer than the nodes)
+    (`fourier_samples`, aliasing exactly where the steps are fewer than the nodes)
     equals its evaluation as a sum of complex exponentials at those times, value and two
     derivatives, to 1e-13 relative."""
-    from gainsched.schedule.trim import _fourier_eval, _fourier_samples
+    from gainsched.schedule.trim import _fourier_eval, fourier_samples
 
     rng = np.random.default_rng(2)
     T = 1.7
     values = rng.normal(size=(5, 128))
     ref = _fourier_eval(values, T, np.arange(n_out) * (T / n_out))
-    for got, want in zip(_fourier_samples(values, T, n_out), ref, strict=True):
+    for got, want in zip(fourier_samples(values, T, n_out), ref, strict=True):
         assert got.shape == want.shape == (n_out, 5)
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-13 * np.abs(want).max())
 
@@ -289,8 +289,8 @@ def test_a_rough_circles_commands_are_inverted_once_per_sampling(keys, monkeypat
     path = circle_path(v, m.r, np.arange(n) * (period(v, m.r) / n))
     assert trim.is_rough(m, path, a)
     calls = []
-    inputs = trim._inputs
-    monkeypatch.setattr(trim, "_inputs", lambda *a, **k: calls.append(1) or inputs(*a, **k))
+    inputs = trim.thrust_inputs
+    monkeypatch.setattr(trim, "thrust_inputs", lambda *a, **k: calls.append(1) or inputs(*a, **k))
     z, z_dot, u, _ = trim_path(m, path, a, periodic=True)
     assert len(calls) == 1
     first = [x.copy() for x in (z, z_dot, u)]

@@ -77,7 +77,9 @@ bottom of their imports (a module imports only from those below it):
 - ``_flightlog``: :class:`FlightLog`, :func:`describe`;
 - ``_consistency``: the channels checked against each other and the model
   (:data:`CHECKS`, :func:`check_log`, :func:`figures`);
-- ``_schema``: :data:`SCHEMA`, the columns, :data:`PLAUSIBLE` and the tolerances.
+- ``_schema``: :data:`SCHEMA`, the columns, :data:`PLAUSIBLE` and the tolerances;
+- ``_progress``: the stages of a foreign log's read and conversion, told to the
+  callback of :func:`reporting` (``gainsched convert``'s progress line).
 
 No other module of the package opens a log file: the readers, the channel maps, the
 cache and the checks are here, behind these names (tests/test_architecture.py).
@@ -89,6 +91,7 @@ from ._checks import fitted_plane
 from ._consistency import CHECKS, RATIO_TOL, Figures, check_log, figures
 from ._flightlog import FlightLog, describe
 from ._foreign import FOREIGN_FORMATS, foreign_format
+from ._progress import reporting
 from ._read import LogWarning, convert_log, read_log
 from ._schema import (
     DEFAULT_MIN_SAMPLES,
@@ -131,4 +134,5 @@ __all__ = [
     "Figures",
     "figures",
     "check_log",
+    "reporting",
 ]

@@ -35,9 +35,9 @@ import numpy as np
 from ...errors import InputError
 from ...native import cache_dir
 from ...publish import write_atomic
-from ..progress import report
 from ._channelmap import ChannelMap
 from ._foreign import ConvertedLog, convert_topics, read_topics
+from ._progress import report
 
 __all__ = ["converted_log", "log_cache_key"]
 

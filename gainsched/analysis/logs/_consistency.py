@@ -61,7 +61,7 @@ import numpy as np
 
 from ...errors import InputError
 from ...rotations import matrix_from_quaternion
-from ..progress import report
+from ._progress import report
 
 __all__ = ["CHECKS", "RATIO_TOL", "QUAT_ALONG_MIN", "Figures", "figures", "check_log",
            "thrust_units", "trusted"]

@@ -47,8 +47,8 @@ import numpy as np
 
 from ...actuators import thrust_from_command
 from ...errors import InputError
-from ..progress import listener, report, watch_file
 from ._channelmap import ChannelMap
+from ._progress import listener, report, watch_file
 
 __all__ = ["Topic", "ConvertedLog", "FOREIGN_FORMATS", "foreign_format", "read_topics",
            "convert_topics"]

@@ -1,5 +1,5 @@
 """Progress of reading and converting a foreign log (PX4 ULog, ROS 2 bag), for a caller
-that shows it (``gainsched convert``'s progress line).
+that shows it (``gainsched convert``'s progress line: gainsched.studies' ``on_bar``).
 
 A callback in a context variable, so that the library functions keep their signatures
 and report nothing when no one listens: the ULog parse reports the bytes read (watched
@@ -13,7 +13,7 @@ import contextlib
 import threading
 from contextvars import ContextVar
 
-__all__ = ["reporting", "report", "listener", "watch_file", "on_bar", "stage"]
+__all__ = ["reporting", "report", "listener", "watch_file"]
 
 _LISTENER: ContextVar = ContextVar("gainsched_log_progress", default=None)
 
@@ -77,29 +77,3 @@ def watch_file(handle, total: int, stage: str, every: float = 0.1):
         stop.set()
         thread.join()
     cb(stage, total, total, "B")
-
-
-def on_bar(bar):
-    """The :func:`reporting` callback that draws on a tqdm ``bar``: the stage as its
-    label, a read's bytes or messages as its count; None for a disabled bar (off the
-    terminal, ``--quiet``: nothing to watch)."""
-    if bar.disable:
-        return None
-
-    def show(stage, done=None, total=None, unit=None):
-        if total is not None and (bar.total != total or bar.unit != unit):
-            bar.unit, bar.unit_scale = unit, unit == "B"
-            bar.reset(total=total)
-        if done is not None:
-            bar.n = done
-        bar.set_postfix_str(stage)
-
-    return show
-
-
-def stage(bar, name: str, fn, *args):
-    """``fn(*args)`` as one counted step of a tqdm ``bar`` labelled ``name``: its result."""
-    bar.set_postfix_str(name)
-    out = fn(*args)
-    bar.update()
-    return out
