@@ -15,7 +15,7 @@ PYTEST_WORKERS ?= auto
 PYTEST_XDIST = -n $(PYTEST_WORKERS) --dist loadfile
 
 .PHONY: venv lint test test-fast test-count tables bench paper clean distclean firmware-example firmware-size fuzz \
-	interrupt-trials fresh-machine
+	interrupt-trials fresh-machine test-wheel
 
 # (Re)create the virtualenv whenever the dependencies or their tested lock change: the
 # package's ranges (pyproject.toml) at the versions make test ran (.ci/constraints.txt).
@@ -44,6 +44,11 @@ test: $(STAMP) lint
 # The fast tier for iterating: the suite without the tests marked slow (README, Tests).
 test-fast: $(STAMP) lint
 	$(BIN)/python -m pytest $(PYTEST_XDIST) -m "not slow" $(PYTEST_ARGS)
+
+# The wheel a user installs, beside numpy and scipy at the low ends of the package's
+# ranges (not the lock), passes the fast tier from a clean clone (.ci/test-wheel).
+test-wheel:
+	PY=$(PY) bash .ci/test-wheel
 
 # The README's promise on a machine with only Python, a C compiler and make: a fresh clone
 # of HEAD, `make tables`, then `make test-fast` with cppcheck, arm-none-eabi-* and qemu-*

@@ -6,7 +6,8 @@
 - ``small_config(**keys)``: configs/paper.toml on a 2 x 2 x 8 grid with keys set on top
   (:mod:`support`), the one way a test makes a variant config;
 - the markers ``needs_cc`` (a host C compiler), ``needs_arm`` (the Cortex-M4F cross
-  compiler and QEMU) and ``needs_cppcheck`` (cppcheck with its MISRA addon), turned into
+  compiler and QEMU), ``needs_cppcheck`` (cppcheck with its MISRA addon) and
+  ``needs_dask`` (the dask extra, for a wheel installed without it), turned into
   skips with the reason in one hook (:func:`pytest_runtest_setup`);
 - the reference circle of the link-model tests;
 - ``fly(hidden)`` and ``diagnosed(hidden)``: the default campaign of
@@ -23,6 +24,7 @@ content-keyed cache, which concurrent builders share safely
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import shutil
 from pathlib import Path
@@ -64,6 +66,8 @@ _TOOL_SKIPS = {
     "needs_cppcheck": None if shutil.which("cppcheck") else (
         "cppcheck not found: the MISRA C:2012 check cannot run (Debian: apt-get install "
         "cppcheck, or `bash .ci/install-tools lint` as root)"),
+    "needs_dask": None if importlib.util.find_spec("distributed") else (
+        "dask is not installed (pip install 'gainsched[dask]'; make installs it)"),
 }
 
 
@@ -72,6 +76,8 @@ def pytest_configure(config: pytest.Config) -> None:
     would rebuild every checkout's venv)."""
     config.addinivalue_line(
         "markers", "needs_cppcheck: needs cppcheck and its MISRA addon (skipped, saying so)")
+    config.addinivalue_line(
+        "markers", "needs_dask: needs the dask extra (skipped, saying so)")
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:

@@ -195,8 +195,8 @@ def _check_workers(client, where: str, timeout: float) -> str:
         theirs = client.run(environment)
     except Exception as exc:
         raise InputError(_SRC, "--scheduler", f"{where}: a worker cannot run gainsched "
-                         f"({type(exc).__name__}: {exc}); install it there: pip install -e .[dask]"
-                         ) from None
+                         f"({type(exc).__name__}: {exc}); install it there: "
+                         "pip install 'gainsched[dask]'") from None
     ours = environment()
     pin = reproducible.pin_available()
     for worker in sorted(theirs):
@@ -222,15 +222,14 @@ def _check_workers(client, where: str, timeout: float) -> str:
 
 @contextmanager
 def _dask(scheduler: str, n_jobs: int, timeout: float) -> Iterator[Execution]:
+    address = parse_scheduler(scheduler)  # a malformed address is wrong with or without dask
     try:
         from dask.distributed import Client, KilledWorker
         from distributed.comm.core import CommClosedError
         from joblib import parallel_config
     except ImportError:
         raise InputError(_SRC, "--backend dask", "dask is not installed; install the extra: "
-                         "pip install -e .[dask]  (or pip install 'dask[distributed]')"
-                         ) from None
-    address = parse_scheduler(scheduler)
+                         "pip install 'gainsched[dask]'") from None
     try:
         client = Client(address, timeout=timeout)
     except OSError as exc:  # refused, unresolvable, silent: dask retries until the timeout

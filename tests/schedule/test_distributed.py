@@ -244,7 +244,7 @@ def test_dask_not_installed(small_path, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "dask.distributed", None)  # import raises ImportError
     res = _invoke("build", small_path, "-o", tmp_path, "--backend", "dask", "--scheduler",
                   "tcp://127.0.0.1:8786")
-    _one_line_error(res, "--backend dask", "dask is not installed", "pip install")
+    _one_line_error(res, "--backend dask", "dask is not installed", "pip install 'gainsched[dask]'")
 
 
 def test_mismatched_worker_is_refused(scheduler, monkeypatch):
