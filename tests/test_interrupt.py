@@ -167,8 +167,11 @@ def test_kill_9_of_the_whole_group_leaves_nothing_after_the_next_run(tmp_path):
                                      grid__tilts_deg=[0, 10, 20, 30, 40],
                                      grid__azimuth_samples=12))
     p = _build(cfg, tmp_path / "killed")
-    deadline = time.monotonic() + 120  # until the pool runs: its semaphores are there
-    while not _theirs({p.pid}) and p.poll() is None and time.monotonic() < deadline:
+    # until the pool runs: its semaphores are there (the run's own entry, made before the
+    # pool starts, is not enough: a kill then leaves no semaphore to sweep)
+    deadline = time.monotonic() + 120
+    while (not any(e.startswith("sem.loky-") for e in _theirs({p.pid}))
+           and p.poll() is None and time.monotonic() < deadline):
         time.sleep(0.05)
     pids = {p.pid, *_group(p.pid)}
     os.killpg(p.pid, signal.SIGKILL)

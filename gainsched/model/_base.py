@@ -202,6 +202,28 @@ class Kinematics:
         return dot(self.p_C, self.up_C)
 
 
+#: the motor (0-based) whose place each motor takes under the direction mirror S2: the
+#: mirror image of motor 1 (+,+) sits at motor 4 (+,-), of 2 at 3 (docs/symmetry.md)
+MIRROR_MOTOR = (3, 2, 1, 0)
+
+
+def mirrored_motors(values: dict, *prefixes: str) -> dict[str, float]:
+    """``values`` on the mirror image of the vehicle for per-motor parameters named
+    ``<prefix>1`` .. ``<prefix>4``: each takes the value of the motor the mirror puts in
+    its place (:data:`MIRROR_MOTOR`); other parameters are kept.
+
+    Examples
+    --------
+    >>> mirrored_motors({"eta1": 0.9, "eta2": 1.0, "eta3": 1.0, "eta4": 1.1}, "eta")
+    {'eta1': 1.1, 'eta2': 1.0, 'eta3': 1.0, 'eta4': 0.9}
+    """
+    out = dict(values)
+    for prefix in prefixes:
+        for i, j in enumerate(MIRROR_MOTOR):
+            out[f"{prefix}{i + 1}"] = values[f"{prefix}{j + 1}"]
+    return out
+
+
 class Effect:
     """Base class. Subclasses set ``kind``, ``params`` and override hooks."""
 
@@ -239,11 +261,19 @@ class Effect:
             return cls.table_refusal
         return _TIME_REFUSAL
 
-    def parameter_refusal(self) -> str:
-        """Why no table can hold the effect at these parameters although one can at others
-        (a centre of mass off the plane of symmetry); "" when one can. :meth:`refusal` is
-        the reason at any parameters."""
-        return ""
+    def mirror_values(self) -> dict[str, float]:
+        """The parameters of this effect on the direction mirror's image of the vehicle
+        (S2, docs/symmetry.md: reflected across the body x-z plane, motors relabelled
+        1 <-> 4, 2 <-> 3): its own values for an effect the mirror keeps; a per-motor
+        parameter swaps with the mirrored motor's, a lateral offset changes sign. A
+        vehicle whose image differs from itself needs both flight directions in its table
+        (:meth:`mirror_image`)."""
+        return dict(self.values)
+
+    def mirror_image(self) -> Effect:
+        """This effect on the mirror image of the vehicle (:meth:`mirror_values`); equal
+        to ``self`` when the mirror keeps it."""
+        return type(self)(**self.mirror_values())
 
     @classmethod
     def refits(cls) -> tuple[Refit, ...]:

@@ -19,6 +19,7 @@ from ._base import (
     Refit,
     _FlightTime,
     circle_to_inertial,
+    mirrored_motors,
     norm,
     wind_in_circle_frame,
 )
@@ -157,8 +158,8 @@ class ThrustMotorCurve(Effect):
     No physical model behind it: each motor's static-test map corrected by a line in its
     own thrust, for a body-torque residual that follows one motor when no effect of the
     library explains it. Its first order (``a_i`` only) is one constant factor per
-    motor. Unequal motors break the direction mirror S2 (docs/symmetry.md): the build
-    refuses it; simulate and diagnose with it.
+    motor. Unequal motors break the direction mirror S2: the mirror image of the vehicle
+    swaps them (:meth:`mirror_values`; docs/symmetry.md).
     """
 
     kind = "thrust_motor"
@@ -171,6 +172,9 @@ class ThrustMotorCurve(Effect):
     fits = (Refit("thrust_motor", tuple(p.name for p in params),
                   "empirical thrust curve per motor, 1 + a_i + b_i T_i", orders=(4, 8),
                   contains=("motor_efficiency", "thrust_scale")),)
+
+    def mirror_values(self) -> dict[str, float]:
+        return mirrored_motors(self.values, "a", "b")
 
     def modify_thrust(self, T, kin, x):
         a = np.array([self.values[f"a{i}"] for i in range(1, 5)])

@@ -36,6 +36,7 @@ from ._base import (
     Refit,
     _FlightTime,
     circle_to_inertial,
+    mirrored_motors,
     norm,
     tether_stretch_of,
     wind_in_circle_frame,
@@ -181,8 +182,9 @@ class MotorEfficiency(Effect):
     operating point; a damaged or worn propeller, a weak ESC or motor).
 
     ``thrust_scale`` is the case of four equal efficiencies. Unequal ones break the
-    direction mirror S2 (the mirrored vehicle swaps motors 1 <-> 4 and 2 <-> 3;
-    docs/symmetry.md): simulate and diagnose with them, build tables without them.
+    direction mirror S2 (the mirror image of the vehicle swaps motors 1 <-> 4 and
+    2 <-> 3; docs/symmetry.md): its reversed circles are the image's forward ones
+    (:meth:`mirror_values`).
     """
 
     kind = "motor_efficiency"
@@ -191,6 +193,9 @@ class MotorEfficiency(Effect):
     fits = (Refit("motor_efficiency", tuple(f"eta{i}" for i in range(1, 5)),
                   "one efficiency per motor: thrust and reaction torque (the body torques "
                   "tell the motors apart)", contains=("thrust_scale",)),)
+
+    def mirror_values(self) -> dict[str, float]:
+        return mirrored_motors(self.values, "eta")
 
     def factors(self) -> np.ndarray:
         """``(eta1, eta2, eta3, eta4)``, shape (4,)."""
@@ -528,9 +533,9 @@ class CogOffset(Effect):
     frame centre, ``p_q - R_CB d`` (:class:`~gainsched.model.reduced.Model`,
     ``cog_offset``), as does the IMU (its specific force is the frame centre's: the log
     reader adds the lever ``R_CB (omega' x d + omega x (omega x d))``). The other effects'
-    forces act at the COG. A lateral offset ``y`` breaks the direction mirror S2 (the
-    mirrored vehicle has its COG on the other side; docs/symmetry.md): simulate and
-    diagnose with it, build tables without it.
+    forces act at the COG. A lateral offset ``y`` breaks the direction mirror S2: the
+    mirror image of the vehicle has its COG on the other side (:meth:`mirror_values`;
+    docs/symmetry.md).
     """
 
     kind = "cog_offset"
@@ -545,12 +550,8 @@ class CogOffset(Effect):
         """``d = (x, y, z)``, shape (3,), m: the COG in B from the frame centre."""
         return np.array([self.x, self.y, self.z], dtype=float)
 
-    def parameter_refusal(self) -> str:
-        if self.y != 0.0:
-            return (f"puts the centre of mass off the vehicle's plane of symmetry (y = "
-                    f"{self.y:.4g} m), which breaks the direction symmetry S2 that the "
-                    "table's query maps rely on (docs/symmetry.md)")
-        return ""
+    def mirror_values(self) -> dict[str, float]:
+        return {"x": self.x, "y": -self.y, "z": self.z}
 
     def law(self) -> str:
         d = self.offset() * 1e3

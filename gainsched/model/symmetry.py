@@ -23,6 +23,7 @@ from scipy.linalg import block_diag
 
 from ..constants import INTEGRATORS
 from ..rotations import matrix_from_euler_zyx
+from ._base import MIRROR_MOTOR
 from .effects import Kinematics
 
 __all__ = [
@@ -37,6 +38,7 @@ __all__ = [
     "effect_symmetry_errors",
     "azimuth_invariance_error",
     "table_refusal",
+    "mirror_effects",
     "SYMMETRY_TOL",
 ]
 
@@ -44,7 +46,8 @@ __all__ = [
 #: symmetry (round-off of its hooks)
 SYMMETRY_TOL = 1e-9
 
-P_U = np.eye(4)[[3, 2, 1, 0]]
+#: the S2 map of the motor thrusts (motor 1 <-> 4, 2 <-> 3)
+P_U = np.eye(4)[list(MIRROR_MOTOR)]
 #: signs of the 10 reduced-state errors under S2
 #: (delta, xi, delta', xi', phi, theta, chi, wx, wy, wz)
 REDUCED_SIGNS = np.array([1, -1, 1, -1, -1, 1, -1, -1, 1, -1], dtype=float)
@@ -120,7 +123,10 @@ def effect_symmetry_errors(effect, n: int = 64, seed: int = 0) -> dict[str, floa
     ``omega_B -> -N omega_B``, motors ``P_U``, states :meth:`Effect.mirror`) thrusts
     permute, forces mirror with M and torques map like ``omega_B``. An effect of
     speed, thrust, body rates or height keeps both; one tied to a heading or an
-    azimuth in the inertial frame does not.
+    azimuth in the inertial frame does not. S2 is checked against the effect's mirror
+    image (:meth:`Effect.mirror_image`: itself, unless a per-motor or lateral
+    parameter makes the mirrored vehicle another one): a vehicle whose image is
+    another is served reversed circles from its image's (:func:`mirror_effects`).
 
     Parameters
     ----------
@@ -154,13 +160,14 @@ def effect_symmetry_errors(effect, n: int = 64, seed: int = 0) -> dict[str, floa
     out = {}
     for name, (kin2, P_T, P_s, F_map, tau_map) in maps.items():
         T2, x2 = T @ P_T.T, x @ P_s.T
-        errs = [_relative(effect.modify_thrust(T2, kin2, x2),
+        mapped = effect if name == "S1" else effect.mirror_image()
+        errs = [_relative(mapped.modify_thrust(T2, kin2, x2),
                           effect.modify_thrust(T, kin, x) @ P_T.T)]
-        w1, w2 = effect.wrench(T, kin), effect.wrench(T2, kin2)
+        w1, w2 = effect.wrench(T, kin), mapped.wrench(T2, kin2)
         if w1 is not None:
             errs += [_relative(w2[0], w1[0] @ F_map.T), _relative(w2[1], w1[1] @ tau_map.T)]
         if effect.n_states:
-            errs.append(_relative(effect.state_derivative(x2, T2, kin2),
+            errs.append(_relative(mapped.state_derivative(x2, T2, kin2),
                                   effect.state_derivative(x, T, kin) @ P_s.T))
         out[name] = max(errs)
     return out
@@ -170,11 +177,12 @@ def table_refusal(effect) -> str:
     """Why no gain table can hold ``effect`` at its parameters, one clause; "" when one can.
 
     The effect's own reason when it gives one (:meth:`Effect.refusal`: flight time, an
-    inertial direction; :meth:`Effect.parameter_refusal`: a lateral centre of mass), else
-    the first symmetry it breaks beyond :data:`SYMMETRY_TOL` (:func:`effect_symmetry_errors`):
-    the build refuses such an effect, and diagnose says so of a term it fits.
+    inertial direction), else the first symmetry it breaks beyond :data:`SYMMETRY_TOL`
+    (:func:`effect_symmetry_errors`; S2 against its mirror image), else, for an effect
+    whose mirror image is another (:func:`mirror_effects`), that a table holds one flight
+    direction: the build refuses such an effect, and diagnose says so of a term it fits.
     """
-    reason = effect.refusal() or effect.parameter_refusal()
+    reason = effect.refusal()
     if reason:
         return reason
     for name, err in effect_symmetry_errors(effect).items():
@@ -182,7 +190,30 @@ def table_refusal(effect) -> str:
             what = "tilt-sign" if name == "S1" else "direction"
             return (f"breaks the {what} symmetry {name} that the table's query maps rely on "
                     f"(relative error {err:.1e} > {SYMMETRY_TOL:g}; docs/symmetry.md)")
+    if effect.mirror_image() != effect:
+        values = ", ".join(f"{k} = {v:.6g}" for k, v in effect.mirror_values().items())
+        return ("breaks the direction symmetry S2: the vehicle's mirror image is another "
+                f"({values}), and a table holds one flight direction (docs/symmetry.md)")
     return ""
+
+
+def mirror_effects(effects) -> dict[str, dict[str, float]]:
+    """The effects that make the vehicle's mirror image another vehicle, with the image's
+    parameters: ``{kind: {name: value}}`` of each effect whose :meth:`Effect.mirror_image`
+    differs from itself (a centre of mass off the plane of symmetry, unequal motors);
+    empty when the vehicle is its own mirror image.
+
+    S2 then maps the vehicle's circles flown one way onto its image's flown the other
+    (docs/symmetry.md): ``K(pi - xi, -xi', a) = P_u K_image(xi, xi', a) P_x``, so the
+    reversed circles need the image's solution, not the vehicle's own.
+
+    Examples
+    --------
+    >>> from gainsched.model.effects import CogOffset, Drag
+    >>> mirror_effects([Drag(mu1=0.17), CogOffset(x=0.004, y=0.003)])
+    {'cog_offset': {'x': 0.004, 'y': -0.003, 'z': 0.0}}
+    """
+    return {e.kind: e.mirror_values() for e in effects if e.mirror_image() != e}
 
 
 def azimuth_invariance_error(effect, n: int = 64, seed: int = 0) -> float:

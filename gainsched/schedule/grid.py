@@ -27,7 +27,12 @@ from ..constants import N_STATE, TILT_BATCH, Reason
 from ..errors import InputError
 from ..model.effects import registered_effects, registered_effects_context
 from ..model.reduced import Model
-from ..model.symmetry import SYMMETRY_TOL, azimuth_invariance_error, table_refusal
+from ..model.symmetry import (
+    SYMMETRY_TOL,
+    azimuth_invariance_error,
+    mirror_effects,
+    table_refusal,
+)
 from ..native.reproducible import blas_single_thread, ensure_blas_single_thread
 from .discrete import LIN_TOL, discrete_at, discrete_system, periodic_interp
 from .jobs import run_jobs
@@ -42,7 +47,7 @@ __all__ = ["CircleSolution", "solve_circle", "solve_speed", "build_grid", "GridR
            "bound_price", "grid_from_solutions",
            "check_gain_cap",
            "steps_per_period",
-           "discrete_system", "periodic_interp", "check_effect_symmetries",
+           "discrete_system", "periodic_interp", "check_effect_symmetries", "mirror_config",
            "level_circle_invariant", "LIN_TOL",
            "SYMMETRY_TOL"]
 
@@ -63,6 +68,31 @@ def check_effect_symmetries(config) -> None:
         if reason:
             raise InputError(config.source, f"effects.{eff.kind}",
                              f"{reason}: simulate and diagnose with it, build tables without it")
+
+
+def mirror_config(config):
+    """The config of the vehicle's mirror image under S2 (docs/symmetry.md), or None when
+    the vehicle is its own image: ``config`` with the parameters of the effects that
+    differ on the image (:func:`~gainsched.model.symmetry.mirror_effects`: a lateral
+    centre of mass changes sign, per-motor parameters swap 1 <-> 4, 2 <-> 3). Its
+    circles flown forwards are the vehicle's flown backwards, mirrored:
+    ``K(pi - xi, -xi', a) = P_u K_image(xi, xi', a) P_x``.
+
+    Parameters
+    ----------
+    config : Config
+
+    Returns
+    -------
+    Config or None
+        The image's config (errors point at ``config``'s source), or None.
+    """
+    image = mirror_effects(Model(config).effects)
+    if not image:
+        return None
+    return config.with_values({f"effects.{kind}.{name}": value
+                               for kind, values in image.items()
+                               for name, value in values.items()})
 
 
 def check_gain_cap(config, grid) -> None:

@@ -16,19 +16,29 @@ import pytest
 
 from gainsched.config import N_STATE, config_from_text, load_config, set_values
 from gainsched.errors import InputError
-from gainsched.model.effects import CogOffset, Drag, MotorLag, RotorDrag, ThrustScale
+from gainsched.model.effects import (
+    CogOffset,
+    Drag,
+    MotorEfficiency,
+    MotorLag,
+    RotorDrag,
+    ThrustMotorCurve,
+    ThrustScale,
+)
 from gainsched.model.reduced import Model
 from gainsched.model.symmetry import (
     P_U,
     STATE_SIGNS,
+    effect_symmetry_errors,
     fundamental_from_query,
+    mirror_effects,
     mirror_gain,
     mirror_state,
     state_mirror,
     table_refusal,
 )
 from gainsched.rotations import R_IC_from_tilt, Rz
-from gainsched.schedule.grid import solve_circle
+from gainsched.schedule.grid import mirror_config, solve_circle
 from gainsched.schedule.nominal import circle_nominal
 
 from support import PAPER_TOML, paper_config_text
@@ -266,11 +276,25 @@ def test_vector_field_S2_equivariant(name):
     np.testing.assert_allclose(tm, t, rtol=0, atol=1e-11 * np.abs(t).max())
 
 
-def test_a_lateral_cog_offset_breaks_S2_as_its_refusal_says():
-    """The vector-field check above with the COG 3 mm off the plane of symmetry: S2 fails
-    by far more than round-off, which is why the build refuses it
-    (``CogOffset.refusal``; x and z alone keep it: ``cog_offset_xz`` above)."""
-    model = Model(load_config(PAPER_TOML), effects=(CogOffset(y=0.003),))
+#: vehicles whose mirror image under S2 is another vehicle: a centre of mass off the plane
+#: of symmetry, unequal motors (each with the drag of the paper)
+ASYMMETRIC = {
+    "cog_lateral": (CogOffset(x=0.004, y=0.003, z=-0.002),),
+    "motor_efficiency": (MotorEfficiency(eta1=0.93, eta2=1.0, eta3=1.02, eta4=0.98),),
+    "thrust_motor": (ThrustMotorCurve(a1=-0.05, a3=0.03, b2=0.004),),
+}
+
+
+@pytest.mark.parametrize("name", list(ASYMMETRIC))
+def test_an_asymmetric_vehicle_is_S2_equivariant_with_its_mirror_image(name):
+    """The vector-field check of S2 between the vehicle and its mirror image
+    (``Effect.mirror_image``: the COG's y negated, motors 1 <-> 4 and 2 <-> 3 swapped):
+    ``f_image(mirror(z), P_U u) = mirror(f(z, u))`` to round-off, while the vehicle
+    against itself misses by far more (why its reversed circles need the image)."""
+    cfg = load_config(PAPER_TOML)
+    effects = (Drag(mu1=0.172, mu2=0.0025), *ASYMMETRIC[name])
+    model = Model(cfg, effects=effects)
+    image = Model(cfg, effects=tuple(e.mirror_image() for e in effects))
     rng = np.random.default_rng(2028)
     z = _random_states(rng, model.n_z, 50)
     u = rng.uniform(0.3, 3.0, (50, 4))
@@ -279,10 +303,48 @@ def test_a_lateral_cog_offset_breaks_S2_as_its_refusal_says():
     zm = z @ P.T
     zm[:, :N_STATE] = mirror_state(z[:, :N_STATE])
     f = model.f(z, u, a)
-    err = np.abs(model.f(zm, u @ P_U.T, a) - f @ P.T).max() / np.abs(f).max()
-    assert err > 1e-4
-    assert "S2" in table_refusal(CogOffset(y=0.003))
-    assert table_refusal(CogOffset(x=0.004, z=-0.003)) == ""
+    scale = np.abs(f).max()
+    np.testing.assert_allclose(image.f(zm, u @ P_U.T, a), f @ P.T, rtol=0, atol=1e-11 * scale)
+    assert np.abs(model.f(zm, u @ P_U.T, a) - f @ P.T).max() / scale > 1e-4
+    assert list(mirror_effects(effects)) == [ASYMMETRIC[name][0].kind]
+    # the hooks' check takes S2 against the image; the build refuses the vehicle because
+    # a table holds one flight direction, and says which image it would need
+    assert effect_symmetry_errors(ASYMMETRIC[name][0])["S2"] <= 1e-12
+    assert "S2: the vehicle's mirror image is another" in table_refusal(ASYMMETRIC[name][0])
+
+
+def test_a_symmetric_vehicle_is_its_own_mirror_image():
+    """x and z of the COG, equal motors: no image to build (``mirror_config`` None)."""
+    assert mirror_effects([CogOffset(x=0.004, z=-0.003), ThrustScale(k_T=0.9),
+                           MotorEfficiency(eta1=0.95, eta2=0.95, eta3=0.95, eta4=0.95)]) == {}
+    assert mirror_config(load_config(PAPER_TOML)) is None
+
+
+def test_reversed_circles_of_an_asymmetric_vehicle_are_its_images_mirrored():
+    """Direct solves: the reversed circle of a vehicle with its COG 3 mm to the side and a
+    weak motor equals its mirror image's forward circle mapped by S2 (``K -> P_u K P_x``,
+    ``u_d -> P_u u_d``, ``phi_d -> -phi_d``) to 1e-8, and differs from the vehicle's own
+    forward circle mapped so (the symmetric table's answer) by far more."""
+    text = set_values(paper_config_text(grid__azimuth_samples=N_XI), {
+        "effects.cog_offset.y": 0.003, "effects.cog_offset.x": 0.002,
+        "effects.motor_efficiency.eta1": 0.94})
+    cfg = config_from_text(text, "asymmetric.toml")
+    image = mirror_config(cfg)
+    spec = {e.name: e.param_dict() for e in image.effects}
+    assert spec["cog_offset"]["y"] == -0.003 and spec["cog_offset"]["x"] == 0.002
+    assert spec["motor_efficiency"]["eta4"] == 0.94 and spec["motor_efficiency"]["eta1"] == 1.0
+    rev = solve_circle(cfg, -SPEED, [TILT])
+    fwd_image = solve_circle(image, SPEED, [TILT])
+    fwd_own = solve_circle(cfg, SPEED, [TILT])
+    assert np.all(rev.reasons == 0) and np.all(fwd_image.reasons == 0)
+    P_x = state_mirror(Model(cfg).effects, cfg.control.integrators)
+    assert _rel(rev.K[0], mirror_gain(_shift(fwd_image.K[0]), P_x)) <= 1e-8
+    np.testing.assert_allclose(rev.u_d[0], _shift(fwd_image.u_d[0]) @ P_U.T, rtol=0,
+                               atol=1e-10)
+    np.testing.assert_allclose(rev.phi_d[0], -_shift(fwd_image.phi_d[0]), rtol=0, atol=1e-10)
+    # the vehicle's own forward circle, mirrored: 2.2 N and 26 % off (measured)
+    assert np.abs(rev.u_d[0] - _shift(fwd_own.u_d[0]) @ P_U.T).max() > 1.0  # N
+    assert _rel(rev.K[0], mirror_gain(_shift(fwd_own.K[0]), P_x)) > 0.1
 
 
 @pytest.mark.parametrize("name", list(MODELS))
