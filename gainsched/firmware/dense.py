@@ -108,6 +108,9 @@ class RuntimeData(GainSchedule):
     (:data:`gainsched.schedule.onboard.CONTROLLER_KEYS`), None when not known.
     ``offsets``: the nominal's pitch and yaw offsets per circle, float32 (n_a, n_v, 2,
     2 H + 1), Fourier coefficients in the azimuth; None when the table has none.
+    ``reverse``: the same of the vehicle's mirror image, whose data serve the reversed
+    circles (:attr:`Table.reverse <gainsched.schedule.tables.Table>`); None when the
+    vehicle is its own mirror image.
     """
 
     name: str
@@ -121,6 +124,7 @@ class RuntimeData(GainSchedule):
     vehicle: np.ndarray | None = None
     offsets: np.ndarray | None = None
     controller: dict | None = None
+    reverse: RuntimeData | None = None
 
     @property
     def dims(self) -> tuple[int, int, int, int]:
@@ -288,5 +292,6 @@ def runtime_data(table) -> RuntimeData:
         vehicle=np.asarray(record.vehicle, dtype=np.float64).astype(np.float32),
         offsets=_offsets(table, src),
         controller=dict(record.controller),
+        reverse=None if getattr(table, "reverse", None) is None else runtime_data(table.reverse),
         **axes,
     )

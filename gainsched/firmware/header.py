@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
 from .cformat import c_decimal, c_float, c_floats, c_initializer, c_uints
 from .compact import CompactData
 from .runtime import (
@@ -31,8 +32,16 @@ __all__ = ["firmware_data", "header_name", "render_header"]
 def firmware_data(table):
     """What a firmware holds of ``table``: its :class:`RuntimeData` or
     :class:`~gainsched.firmware.compact.CompactData` as given, else the dense form of a
-    loaded table (:func:`runtime.runtime_data`)."""
-    return table if isinstance(table, RuntimeData | CompactData) else runtime_data(table)
+    loaded table (:func:`runtime.runtime_data`). Raises InputError for a table of both
+    flight directions (a vehicle that is not its own mirror image, docs/symmetry.md): the
+    C runtime holds one."""
+    data = table if isinstance(table, RuntimeData | CompactData) else runtime_data(table)
+    base = data.base if isinstance(data, CompactData) else data
+    if base.reverse is not None:
+        raise InputError(getattr(table, "source", "") or base.name, "reverse",
+                         "holds both flight directions (the vehicle is not its own mirror "
+                         "image, docs/symmetry.md), and the firmware's C runtime holds one")
+    return data
 
 
 def header_name(data) -> str:

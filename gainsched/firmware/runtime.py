@@ -23,6 +23,7 @@ this module re-exports.
 
 from __future__ import annotations
 
+import dataclasses
 from bisect import bisect_right
 from dataclasses import dataclass
 
@@ -202,6 +203,28 @@ def map_back(K, U, P, mirrored, status, perm, sign) -> None:
     K[dead], U[dead], P[dead] = 0.0, 0.0, 0.0
 
 
+def _both_offsets(halves):
+    """The attitude offsets of the table's halves as one :class:`RuntimeData`-like holder
+    (``offsets`` (n_halves n_a, n_v, 2, 2 H + 1) or None): the mirror image's circles
+    after the vehicle's, zeros for a half without."""
+    d = halves[0]
+    if len(halves) == 1 or all(h.offsets is None for h in halves):
+        return d
+    nb = max(h.offsets.shape[-1] for h in halves if h.offsets is not None)
+    n_a, n_v = d.tilt.size, d.xi_dot.size
+
+    def padded(h):
+        out = np.zeros((n_a, n_v, 2, nb), dtype=np.float32)
+        if h.offsets is not None:
+            k = h.offsets.shape[-1] // 2  # [c0, a_1..a_H, b_1..b_H]: pad each half
+            K = nb // 2
+            out[..., : 1 + k] = h.offsets[..., : 1 + k]
+            out[..., 1 + K : 1 + K + k] = h.offsets[..., 1 + k :]
+        return out
+
+    return dataclasses.replace(d, offsets=np.concatenate([padded(h) for h in halves]))
+
+
 def attitude_offsets(d, xi, alpha, circles, weights, mirrored, status) -> np.ndarray:
     """The nominal's attitude offsets at queries (m,), from the cell's circles: ``(m, 4)``
     = theta rad, d theta / d xi, chi rad, d chi / d xi (zero without offsets or where
@@ -361,14 +384,20 @@ class Interpolator:
         self.data = d
         n_a, n_v, n_xi, n = d.dims
         self.n = n
-        Kg = np.empty((n_a, n_v, n_xi, 4 * n))
-        Kg[0] = d.K_tilt0.reshape(n_v, d.n_xi_tilt0, 4 * n)  # broadcast when 1
-        if n_a > 1:
-            Kg[1:] = d.K.reshape(n_a - 1, n_v, n_xi, 4 * n)
+        # the regular grid's points, then (a vehicle that is not its own mirror image)
+        # those of its image, which the mirrored queries read: point index + n_points
+        halves = (d,) if d.reverse is None else (d, d.reverse)
+        self._n_points = n_a * n_v * n_xi if d.reverse is not None else 0
+        Kg = np.empty((len(halves), n_a, n_v, n_xi, 4 * n))
+        for h, half in zip(Kg, halves, strict=True):
+            h[0] = half.K_tilt0.reshape(n_v, half.n_xi_tilt0, 4 * n)  # broadcast when 1
+            if n_a > 1:
+                h[1:] = half.K.reshape(n_a - 1, n_v, n_xi, 4 * n)
         self._K = Kg.reshape(-1, 4 * n)
-        self._U = d.u_d.astype(np.float64).reshape(-1, 4)
-        self._P = d.phi_d.astype(np.float64).reshape(-1)
-        self._mask = d.mask.reshape(-1)
+        self._U = np.concatenate([h.u_d.astype(np.float64).reshape(-1, 4) for h in halves])
+        self._P = np.concatenate([h.phi_d.astype(np.float64).reshape(-1) for h in halves])
+        self._mask = np.concatenate([h.mask.reshape(-1) for h in halves])
+        self._offsets = _both_offsets(halves)
         self._perm = d.state_perm.astype(np.intp)
         self._sign = d.state_sign.astype(np.float64)
         # single-query path (:meth:`query`): the gains and u_d of a point in one row,
@@ -405,6 +434,8 @@ class Interpolator:
             bt, bv, bx = (c >> 2) & 1, (c >> 1) & 1, c & 1
             pts[:, c] = (ia[bt] * n_v + iv[bv]) * n_xi + ix[bx]
             w[:, c] = wa[bt] * wv[bv] * wx[bx]
+        if self._n_points:  # the mirrored queries read the mirror image's points
+            pts += np.where(mirrored, self._n_points, 0)[:, None]
         # only corners with non-zero weight count
         m = np.bitwise_or.reduce(np.where(w != 0, self._mask[pts], 0), axis=1)
         status |= np.where(m != 0, INFEASIBLE, 0).astype(np.uint8)
@@ -450,7 +481,7 @@ class Interpolator:
         pts, w, status, mirrored = self.cells(xi, xi_dot, alpha)
         circ = pts[:, ::2] // self.data.xi.size  # (m, 4) flat (tilt, speed) circles
         wc = (w[:, ::2].astype(np.float64) + w[:, 1::2])  # (m, 4)
-        return attitude_offsets(self.data, xi, alpha, circ, wc, mirrored, status)
+        return attitude_offsets(self._offsets, xi, alpha, circ, wc, mirrored, status)
 
     def roll_slope(self, xi, xi_dot, alpha) -> np.ndarray:
         """Slope along xi of the interpolated ``phi_d`` at queries (m,), rad/rad: the
@@ -502,12 +533,13 @@ class Interpolator:
         ia, iv, ix = (i0, i1), (k0, k1), (j0, j1)
         wa, wv, wx = (one - fa, fa), (one - fv, fv), (one - fx, fx)
         n_v = d.xi_dot.size
+        base = self._n_points if mirrored else 0  # the mirror image's points, if any
         pts = [0] * 8
         w = [0.0] * 8
         m = 0
         for c in range(8):
             bt, bv, bx = (c >> 2) & 1, (c >> 1) & 1, c & 1
-            p = (ia[bt] * n_v + iv[bv]) * n_xi + ix[bx]
+            p = base + (ia[bt] * n_v + iv[bv]) * n_xi + ix[bx]
             wc = wa[bt] * wv[bv] * wx[bx]
             pts[c], w[c] = p, float(wc)
             if wc != 0:

@@ -178,9 +178,10 @@ def table_refusal(effect) -> str:
 
     The effect's own reason when it gives one (:meth:`Effect.refusal`: flight time, an
     inertial direction), else the first symmetry it breaks beyond :data:`SYMMETRY_TOL`
-    (:func:`effect_symmetry_errors`; S2 against its mirror image), else, for an effect
-    whose mirror image is another (:func:`mirror_effects`), that a table holds one flight
-    direction: the build refuses such an effect, and diagnose says so of a term it fits.
+    (:func:`effect_symmetry_errors`; S2 against its mirror image): the build refuses
+    such an effect, and diagnose says so of a term it fits. An effect whose mirror image
+    is another (:func:`mirror_effects`) is no reason: the table holds the image's circles
+    for the reversed ones.
     """
     reason = effect.refusal()
     if reason:
@@ -190,10 +191,6 @@ def table_refusal(effect) -> str:
             what = "tilt-sign" if name == "S1" else "direction"
             return (f"breaks the {what} symmetry {name} that the table's query maps rely on "
                     f"(relative error {err:.1e} > {SYMMETRY_TOL:g}; docs/symmetry.md)")
-    if effect.mirror_image() != effect:
-        values = ", ".join(f"{k} = {v:.6g}" for k, v in effect.mirror_values().items())
-        return ("breaks the direction symmetry S2: the vehicle's mirror image is another "
-                f"({values}), and a table holds one flight direction (docs/symmetry.md)")
     return ""
 
 

@@ -19,6 +19,7 @@ no gains: NaN in K, and the reason bits say why.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -53,7 +54,7 @@ __all__ = ["CircleSolution", "solve_circle", "solve_speed", "build_grid", "GridR
 
 
 
-def check_effect_symmetries(config) -> None:
+def check_effect_symmetries(config, *, firmware: bool = True) -> None:
     """Refuse effects that break the symmetries the table relies on.
 
     The table stores ``alpha >= 0, xi' > 0`` and the runtime maps every other query
@@ -62,12 +63,25 @@ def check_effect_symmetries(config) -> None:
     ``table_refusal`` (flight time, a wind) is refused with that reason. Raises
     :class:`InputError` naming the config file and ``effects.<kind>``
     (:func:`~gainsched.model.symmetry.table_refusal`).
+
+    A vehicle that is not its own mirror image (:func:`mirror_config`) gets a table of
+    both flight directions (:attr:`GridResult.reverse`), which the Python runtime and the
+    simulator fly; with ``firmware`` (the build's outputs: the C runtime, which holds one
+    direction) it is refused, naming the effect.
     """
-    for eff in Model(config).effects:
+    effects = Model(config).effects
+    for eff in effects:
         reason = table_refusal(eff)
         if reason:
             raise InputError(config.source, f"effects.{eff.kind}",
                              f"{reason}: simulate and diagnose with it, build tables without it")
+    for kind, image in mirror_effects(effects).items() if firmware else ():
+        values = ", ".join(f"{k} = {v:.6g}" for k, v in image.items())
+        raise InputError(config.source, f"effects.{kind}",
+                         f"makes the vehicle's mirror image another ({values}): its table "
+                         "holds both flight directions, and the firmware's C runtime holds "
+                         "one (docs/symmetry.md); build it with gainsched.build_grid and fly "
+                         "it in Python, or leave the effect out of the firmware's build")
 
 
 def mirror_config(config):
@@ -509,9 +523,14 @@ class GridResult(_Circles):
         Tilt 0 was solved by the DARE, one gain per speed independent of the azimuth
         (:func:`level_circle_invariant`); False when an effect changes with the azimuth
         of a level circle (the table then stores tilt-0 gains per azimuth).
+    reverse : GridResult or None
+        The same grid of the vehicle's mirror image (:func:`mirror_config`), whose
+        forward circles are the vehicle's reversed ones mirrored (docs/symmetry.md); None
+        when the vehicle is its own mirror image.
     """
 
     level_invariant: bool = True
+    reverse: GridResult | None = None
 
     def gain_max(self) -> np.ndarray:
         """Largest gain magnitude per circle, N per state unit; NaN where infeasible.
@@ -593,22 +612,38 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
         raise InputError(config.source, config.grid.auto_key, "is a range the build chooses "
                          "breakpoints in: build it with gainsched.refine_grid (gainsched "
                          "build does)")
-    check_effect_symmetries(config)
+    check_effect_symmetries(config, firmware=False)
     speeds = config.grid.speeds
     tilts = config.grid.tilts
     extra = registered_effects({s.name for s in config.effects})
     invariant = level_circle_invariant(Model(config))  # once per build, not per job
+    image = mirror_config(config)
     args = [(config, float(v), tilts, extra, invariant) for v in speeds]
+    if image is not None:  # each speed's job solves the vehicle and its mirror image
+        args = [(image, *a) for a in args]
     sols = []
     with blas_single_thread():
-        for s in run_jobs(args, n_jobs, backend, solve_speed):
+        for s in run_jobs(args, n_jobs, backend,
+                          solve_speed if image is None else _solve_speed_and_image):
             sols.append(s)
             if progress is not None:
                 progress(1)
-
-    grid = grid_from_solutions(sols, invariant)
+    if image is None:
+        grid = grid_from_solutions(sols, invariant)
+    else:
+        grid = dataclasses.replace(
+            grid_from_solutions([s[0] for s in sols], invariant),
+            reverse=grid_from_solutions([s[1] for s in sols], invariant))
+        check_gain_cap(config, grid.reverse)
     check_gain_cap(config, grid)
     return grid
+
+
+def _solve_speed_and_image(image, config, speed, tilts, effects=(), dare_tilt0=True):
+    """One job of a build whose vehicle is not its own mirror image: :func:`solve_speed`
+    of ``config`` and of its mirror image ``image`` (:func:`mirror_config`)."""
+    return (solve_speed(config, speed, tilts, effects, dare_tilt0),
+            solve_speed(image, speed, tilts, effects, dare_tilt0))
 
 
 def grid_from_solutions(sols, level_invariant: bool) -> GridResult:

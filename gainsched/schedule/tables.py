@@ -17,7 +17,6 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,14 +24,17 @@ import h5py
 import numpy as np
 
 from .. import __version__
-from ..config import MAX_RATE_HZ, MAX_TETHER_LENGTH, N_STATE, TERMINAL_COSTS, check_name
+from ..config import N_STATE
 from ..constants import CONTROL_LAW, REASONS
 from ..errors import InputError
+from ..model.reduced import Model
+from ..model.symmetry import mirror_effects
 from ..publish import write_atomic
-from ..textinput import parse_toml
 from .arrays import GainSchedule
+from .grid import mirror_config
 from .linearize import INPUT_NAMES, lqr_state_names
 from .onboard import FirmwareRecord, record_from_config, record_from_datasets
+from .tablechecks import check_feasible_finite, check_meaning
 
 __all__ = ["SCHEMA", "Table", "table_bytes", "write_table", "load_table", "table_from_bytes",
            "config_from_table"]
@@ -127,6 +129,12 @@ class Table(GainSchedule):
         (``firmware/`` in the file; :class:`~gainsched.schedule.onboard.FirmwareRecord`):
         the feed-forward's vehicle constants, the S2 state map, the controller's design
         parameters. Every loaded table has it; None only in a Table made by hand.
+    reverse : Table or None
+        For a vehicle that is not its own mirror image (a centre of mass off its plane of
+        symmetry, unequal motors; docs/symmetry.md): the same table of its mirror image
+        (``reverse/`` in the file), whose forward circles are the vehicle's reversed ones
+        mirrored; its axes, weights, config and attributes are this table's. None when
+        the vehicle is its own mirror image.
     name : str
         Property: the config's name (``attrs["config_name"]``).
     per_azimuth_tilt0 : bool
@@ -166,6 +174,7 @@ class Table(GainSchedule):
     mode_shape: np.ndarray | None = None
     grid_auto: dict | None = None
     firmware: FirmwareRecord | None = None
+    reverse: Table | None = None
 
     @property
     def name(self) -> str:
@@ -264,8 +273,6 @@ def table_bytes(config, grid, model=None, grid_auto: dict | None = None) -> byte
     ``grid_auto``: the record of axes the build chose
     (:meth:`~gainsched.schedule.refine.GridChoice.record`), stored as sorted-key JSON."""
     if model is None:
-        from ..model.reduced import Model
-
         model = Model(config)
     speeds, tilts = config.grid.speeds, config.grid.tilts
     n_xi = config.grid.azimuth_samples
@@ -300,56 +307,78 @@ def table_bytes(config, grid, model=None, grid_auto: dict | None = None) -> byte
         _create(ax, "speed", speeds, "m/s", "tangential COG speed")
         _create(ax, "xi_dot", speeds / config.radius, "rad/s", "azimuth rate = speed / (rho + L_e)")
         _create(ax, "tilt", tilts, "rad", "circle tilt alpha_C; tilt[0] = 0")
-        g = _group(f, "gains")
-        if grid.level_invariant:
-            K0, S0, doc = grid.K[0, :, 0], grid.S[0, :, 0], "xi-independent), (speed, 4, n)"
-        else:  # an effect changes with the azimuth of a level circle
-            K0, S0, doc = grid.K[0], grid.S[0], "per azimuth), (speed, xi, 4, n)"
-        _create(g, "K_tilt0", K0, "SI", f"gains at tilt 0 ({doc}")
-        _create(g, "K", grid.K[1:], "SI", "gains at tilt[1:], (tilt-1, speed, xi, 4, n)")
-        _create(g, "S_tilt0", S0, "SI", "Riccati cost-to-go at tilt 0")
-        _create(g, "S", grid.S[1:], "SI", "Riccati cost-to-go at tilt[1:]")
-        nm = _group(f, "nominal")
-        _create(nm, "u_d", grid.u_d, "N", "nominal motor thrusts (tilt, speed, xi, 4)")
-        _create(nm, "phi_d", grid.phi_d, "rad", "nominal roll")
-        _create(nm, "tension", grid.tension, "N", "nominal tether tension")
-        if np.any(grid.offsets):
-            _create(nm, "attitude_offsets", grid.offsets, "rad",
-                    "pitch and yaw offsets per circle: Fourier coefficients in the azimuth "
-                    "(tilt, speed, [theta, chi], [1, cos k xi, sin k xi])")
-        fe = _group(f, "feasibility")
-        ds = _create(fe, "reasons", grid.reasons, None, "bit mask, 0 = feasible")
-        for bit, text in REASONS.items():
-            ds.attrs[f"bit_{bit}"] = text
-        cl = _group(f, "closed_loop")
-        _create(cl, "spectral_radius", grid.spectral_radius, "-",
-                "monodromy spectral radius per circle")
-        _create(cl, "periods", grid.sweeps, "-", "periods in the periodic terminal cost")
-        _create(cl, "steps", grid.steps, "-", "control steps per period")
-        _create(cl, "linearization_samples", grid.lin_samples, "-",
-                "azimuths of exact linearisation per circle (1: time-invariant, tilt 0)")
-        _create(cl, "linearization_error", grid.lin_error, "-",
-                "relative error check of the interpolated linearisation per circle")
-        _create(cl, "dt", grid.dt, "s", "discretisation step, period / steps")
-        _create(cl, "mode_tau", grid.mode_tau, "s",
-                "time constants -T/ln|lambda| of the slowest closed-loop Floquet modes, "
-                "slowest first (tilt, speed, mode)")
-        _create(cl, "mode_frequency", grid.mode_frequency, "rad/s",
-                "their frequencies |arg lambda|/T (periodic loops: principal value)")
-        _create(cl, "mode_damping", grid.mode_damping, "-", "their damping ratios")
-        _create(cl, "mode_shape", grid.mode_shape, "-",
-                "their eigenvector magnitudes in the states' units, largest entry 1 "
-                "(tilt, speed, mode, state)")
+        _write_solution(f, grid)
         w = _group(f, "weights")
         _create(w, "Q", Qx)
         _create(w, "R", np.asarray(config.control.R))
         _write_firmware(_group(f, "firmware"), record_from_config(config))
+        if grid.reverse is not None:
+            _write_reverse(_group(f, "reverse"), config, model, grid.reverse)
         digests = {}
         for name, ds in _datasets(f).items():
             digests[name] = ds.attrs["sha256"] = _dataset_sha256(ds[()])
         a["data_sha256"] = _root_sha256(dict(a), digests)
         f.flush()
         return f.id.get_file_image()
+
+
+def _write_solution(parent, grid) -> None:
+    """The solved grid's groups under ``parent`` (the file's root, or ``reverse/`` for
+    the mirror image's): gains, nominal, feasibility and closed loop
+    (docs/table-format.md)."""
+    g = _group(parent, "gains")
+    if grid.level_invariant:
+        K0, S0, doc = grid.K[0, :, 0], grid.S[0, :, 0], "xi-independent), (speed, 4, n)"
+    else:  # an effect changes with the azimuth of a level circle
+        K0, S0, doc = grid.K[0], grid.S[0], "per azimuth), (speed, xi, 4, n)"
+    _create(g, "K_tilt0", K0, "SI", f"gains at tilt 0 ({doc}")
+    _create(g, "K", grid.K[1:], "SI", "gains at tilt[1:], (tilt-1, speed, xi, 4, n)")
+    _create(g, "S_tilt0", S0, "SI", "Riccati cost-to-go at tilt 0")
+    _create(g, "S", grid.S[1:], "SI", "Riccati cost-to-go at tilt[1:]")
+    nm = _group(parent, "nominal")
+    _create(nm, "u_d", grid.u_d, "N", "nominal motor thrusts (tilt, speed, xi, 4)")
+    _create(nm, "phi_d", grid.phi_d, "rad", "nominal roll")
+    _create(nm, "tension", grid.tension, "N", "nominal tether tension")
+    if np.any(grid.offsets):
+        _create(nm, "attitude_offsets", grid.offsets, "rad",
+                "pitch and yaw offsets per circle: Fourier coefficients in the azimuth "
+                "(tilt, speed, [theta, chi], [1, cos k xi, sin k xi])")
+    fe = _group(parent, "feasibility")
+    ds = _create(fe, "reasons", grid.reasons, None, "bit mask, 0 = feasible")
+    for bit, text in REASONS.items():
+        ds.attrs[f"bit_{bit}"] = text
+    cl = _group(parent, "closed_loop")
+    _create(cl, "spectral_radius", grid.spectral_radius, "-",
+            "monodromy spectral radius per circle")
+    _create(cl, "periods", grid.sweeps, "-", "periods in the periodic terminal cost")
+    _create(cl, "steps", grid.steps, "-", "control steps per period")
+    _create(cl, "linearization_samples", grid.lin_samples, "-",
+            "azimuths of exact linearisation per circle (1: time-invariant, tilt 0)")
+    _create(cl, "linearization_error", grid.lin_error, "-",
+            "relative error check of the interpolated linearisation per circle")
+    _create(cl, "dt", grid.dt, "s", "discretisation step, period / steps")
+    _create(cl, "mode_tau", grid.mode_tau, "s",
+            "time constants -T/ln|lambda| of the slowest closed-loop Floquet modes, "
+            "slowest first (tilt, speed, mode)")
+    _create(cl, "mode_frequency", grid.mode_frequency, "rad/s",
+            "their frequencies |arg lambda|/T (periodic loops: principal value)")
+    _create(cl, "mode_damping", grid.mode_damping, "-", "their damping ratios")
+    _create(cl, "mode_shape", grid.mode_shape, "-",
+            "their eigenvector magnitudes in the states' units, largest entry 1 "
+            "(tilt, speed, mode, state)")
+
+
+def _write_reverse(r, config, model, grid) -> None:
+    """The mirror image's grid under ``reverse/``: a vehicle that is not its own mirror
+    image has its reversed circles served from its image's forward ones
+    (docs/symmetry.md, docs/table-format.md)."""
+    image = mirror_config(config)
+    _create(r, "mirror_image", json.dumps(mirror_effects(model.effects),
+                                          sort_keys=True), None,
+            "the effect parameters of the vehicle's mirror image under S2 that differ from "
+            "its own, {kind: {name: value}}, JSON")
+    _write_solution(r, grid)
+    _write_firmware(_group(r, "firmware"), record_from_config(image))
 
 
 def config_from_table(table, *, unknown_effect_ok: bool = False):
@@ -403,6 +432,11 @@ _REQUIRED = {
     "closed_loop/dt": 1, "weights/Q": 2, "weights/R": 2, "config_text": 0,
     "firmware/vehicle": 1, "firmware/state_map": 2, "firmware/controller": 0,
 }
+#: the datasets of a solved grid: at the root, and again under :data:`_REVERSE` for the
+#: mirror image of a vehicle that is not its own (docs/table-format.md)
+_SOLUTION = {k: v for k, v in _REQUIRED.items()
+             if k.split("/")[0] in ("gains", "nominal", "feasibility", "closed_loop", "firmware")}
+_REVERSE = "reverse/"
 
 
 #: root attributes every table carries (written by :func:`table_bytes`)
@@ -523,29 +557,69 @@ def _read(f, path) -> Table:
     for key in _ATTRS:
         if key not in f.attrs:
             raise InputError(path, key, "missing root attribute")
-    d = {}
-    for key, ndim in _REQUIRED.items():
-        if key not in f:
-            raise InputError(path, key, "missing dataset")
-        v = f[key][()]
-        if np.ndim(v) not in np.atleast_1d(ndim):
-            want = " or ".join(map(str, np.atleast_1d(ndim)))
-            raise InputError(path, key, f"must have {want} dimensions, has {np.ndim(v)}")
-        d[key] = _decoded(v)
+    d = _read_datasets(f, path, "", _REQUIRED)
     attrs = {k: _decoded(v) for k, v in f.attrs.items()}
     xi, speed, tilt = d["axes/xi"], d["axes/speed"], d["axes/tilt"]
-    n_xi, n_v, n_a = xi.size, speed.size, tilt.size
     for key, arr in (("axes/xi", xi), ("axes/speed", speed), ("axes/tilt", tilt)):
         if arr.size == 0 or not np.all(np.isfinite(arr)) or np.any(np.diff(arr) <= 0):
             raise InputError(path, key, "must be finite and strictly increasing")
-    if not np.allclose(xi, 2 * np.pi * np.arange(n_xi) / n_xi, rtol=0, atol=1e-12):
+    if not np.allclose(xi, 2 * np.pi * np.arange(xi.size) / xi.size, rtol=0, atol=1e-12):
         raise InputError(path, "axes/xi", "must be uniform on [0, 2 pi)")
     if tilt[0] != 0:
         raise InputError(path, "axes/tilt", "must start at 0")
     if speed[0] <= 0:
         raise InputError(path, "axes/speed", "must be positive")
-    K0, K = d["gains/K_tilt0"], d["gains/K"]
-    n = K0.shape[-1]
+    n = d["gains/K_tilt0"].shape[-1]
+    names = str(attrs["state_names"]).split(",")
+    if n < N_STATE or len(names) != n:
+        raise InputError(path, "gains/K_tilt0", f"{n} state columns; need >= {N_STATE} and one per "
+                         f"name in state_names ({len(names)})")
+    s = _solution(f, path, "", d, n)
+    grid_auto = None
+    if "grid_auto" in f:
+        try:
+            grid_auto = json.loads(_decoded(f["grid_auto"][()]))
+        except (TypeError, ValueError):
+            raise InputError(path, "grid_auto", "not a JSON record") from None
+        if not isinstance(grid_auto, dict) or not isinstance(grid_auto.get("bound"), float):
+            raise InputError(path, "grid_auto", "must be a JSON object with a bound")
+    reverse = None
+    if "reverse" in f:
+        rd = _read_datasets(f, path, _REVERSE, _SOLUTION)
+        reverse = _solution(f, path, _REVERSE, {**d, **rd}, n)
+    _verify(f, path)  # after the structure, so that a missing dataset is named as such
+    check_meaning(path, attrs, d)
+    check_feasible_finite(path, d, tilt, speed, xi)
+    common = (xi, speed, d["axes/xi_dot"], tilt)
+    rest = (d["weights/Q"], d["weights/R"])
+    if reverse is not None:
+        check_feasible_finite(path, {**d, **rd}, tilt, speed, xi, _REVERSE)
+        reverse = _table(common, reverse, rest, d, attrs, f"{path} ({_REVERSE})", None, None)
+    return _table(common, s, rest, d, attrs, str(path), grid_auto, reverse)
+
+
+def _read_datasets(f, path, prefix: str, keys: dict) -> dict:
+    """The datasets ``keys`` (name -> allowed ndims) under ``prefix``, by their names
+    without it; InputError naming the first missing one or one of the wrong rank."""
+    d = {}
+    for key, ndim in keys.items():
+        if prefix + key not in f:
+            raise InputError(path, prefix + key, "missing dataset")
+        v = f[prefix + key][()]
+        if np.ndim(v) not in np.atleast_1d(ndim):
+            want = " or ".join(map(str, np.atleast_1d(ndim)))
+            raise InputError(path, prefix + key,
+                             f"must have {want} dimensions, has {np.ndim(v)}")
+        d[key] = _decoded(v)
+    return d
+
+
+def _solution(f, path, prefix: str, d: dict, n: int) -> dict:
+    """The solved grid under ``prefix`` (the root's, or ``reverse/``), checked against the
+    axes of ``d``: its arrays by their names without the prefix, the attitude offsets
+    (``"offsets"``, None without) and the closed-loop modes (``"modes"``, {} without)."""
+    n_xi, n_v, n_a = d["axes/xi"].size, d["axes/speed"].size, d["axes/tilt"].size
+    K0 = d["gains/K_tilt0"]
     shapes = {
         "gains/K_tilt0": (n_v, 4, n) if K0.ndim == 3 else (n_v, n_xi, 4, n),
         "gains/K": (n_a - 1, n_v, n_xi, 4, n),
@@ -556,136 +630,40 @@ def _read(f, path) -> Table:
     }
     for key, shape in shapes.items():
         if d[key].shape != shape:
-            raise InputError(path, key, f"shape {d[key].shape} does not match the axes {shape}")
-    names = str(attrs["state_names"]).split(",")
-    if n < N_STATE or len(names) != n:
-        raise InputError(path, "gains/K_tilt0", f"{n} state columns; need >= {N_STATE} and one per "
-                         f"name in state_names ({len(names)})")
+            where = prefix + key if key in _SOLUTION else key
+            raise InputError(path, where, f"shape {d[key].shape} does not match the axes {shape}")
     offsets = None
-    if "nominal/attitude_offsets" in f:
-        offsets = np.asarray(f["nominal/attitude_offsets"][()], dtype=float)
+    if prefix + "nominal/attitude_offsets" in f:
+        offsets = np.asarray(f[prefix + "nominal/attitude_offsets"][()], dtype=float)
         nb = offsets.shape[-1] if offsets.ndim == 4 else 0
         if offsets.shape != (n_a, n_v, 2, nb) or nb % 2 != 1 or not np.all(np.isfinite(offsets)):
-            raise InputError(path, "nominal/attitude_offsets",
+            raise InputError(path, prefix + "nominal/attitude_offsets",
                              f"shape {offsets.shape} does not match the axes ({n_a}, {n_v}, 2, "
                              "2 H + 1), or not finite")
     modes = {}
-    if "closed_loop/mode_tau" in f:  # tables before the modes have none
+    if prefix + "closed_loop/mode_tau" in f:  # tables before the modes have none
         for key in ("mode_tau", "mode_frequency", "mode_damping", "mode_shape"):
-            v = f.get(f"closed_loop/{key}")
+            v = f.get(f"{prefix}closed_loop/{key}")
             m = v.shape[-1 if key != "mode_shape" else -2] if v is not None and v.ndim else 0
             want = (n_a, n_v, m) if key != "mode_shape" else (n_a, n_v, m, n)
             if v is None or v.shape != want:
-                raise InputError(path, f"closed_loop/{key}", "missing, or its shape does not "
-                                 f"match the axes {want}")
+                raise InputError(path, f"{prefix}closed_loop/{key}", "missing, or its shape "
+                                 f"does not match the axes {want}")
             modes[key] = np.asarray(v[()], dtype=float)
-    grid_auto = None
-    if "grid_auto" in f:
-        try:
-            grid_auto = json.loads(_decoded(f["grid_auto"][()]))
-        except (TypeError, ValueError):
-            raise InputError(path, "grid_auto", "not a JSON record") from None
-        if not isinstance(grid_auto, dict) or not isinstance(grid_auto.get("bound"), float):
-            raise InputError(path, "grid_auto", "must be a JSON object with a bound")
-    _verify(f, path)  # after the structure, so that a missing dataset is named as such
-    _check_meaning(path, attrs, d)
-    _check_feasible_finite(path, d, tilt, speed, xi)
     record = record_from_datasets(path, d["firmware/vehicle"], d["firmware/state_map"],
                                   d["firmware/controller"], n)
+    return {key: d[key] for key in _SOLUTION} | {"offsets": offsets, "modes": modes,
+                                                 "record": record}
+
+
+def _table(axes, s, weights, d, attrs, source, grid_auto, reverse) -> Table:
+    """A :class:`Table` of the ``axes``, the solution ``s`` (:func:`_solution`) and the
+    root's ``weights``, config and attributes."""
     return Table(
-        xi, speed, d["axes/xi_dot"], tilt, K0, K, d["nominal/u_d"], d["nominal/phi_d"],
-        d["nominal/tension"], d["feasibility/reasons"].astype(np.uint8),
-        d["closed_loop/spectral_radius"], d["weights/Q"], d["weights/R"], d["closed_loop/dt"],
-        str(d["config_text"]), str(attrs.get("config_sha256", "")), attrs, str(path),
-        offsets, **modes, grid_auto=grid_auto, firmware=record,
+        *axes, s["gains/K_tilt0"], s["gains/K"], s["nominal/u_d"], s["nominal/phi_d"],
+        s["nominal/tension"], s["feasibility/reasons"].astype(np.uint8),
+        s["closed_loop/spectral_radius"], *weights, s["closed_loop/dt"],
+        str(d["config_text"]), str(attrs.get("config_sha256", "")), attrs, source,
+        s["offsets"], **s["modes"], grid_auto=grid_auto, firmware=s["record"],
+        reverse=reverse,
     )
-
-
-def _number_attr(path, attrs, key, lo, hi, unit) -> float:
-    """A root attribute that must be a finite number in ``(lo, hi]``, as the config key."""
-    v = attrs[key]
-    if isinstance(v, bool | str | bytes) or np.ndim(v) != 0:
-        raise InputError(path, key, f"must be a number, got {v!r:.40}")
-    try:
-        x = float(v)
-    except (TypeError, ValueError):
-        raise InputError(path, key, f"must be a number, got {v!r:.40}") from None
-    if not (math.isfinite(x) and lo < x <= hi):
-        raise InputError(path, key, f"must be in ({lo:g}, {hi:g}] {unit}, got {x:g}")
-    return x
-
-
-def _check_meaning(path, attrs, d) -> None:
-    """What the checksums cannot vouch for (a hand edit with the checksums recomputed):
-    the root attributes range-checked as the config keys they come from, ``config_sha256``
-    the SHA-256 of ``config_text``, the text TOML, and the attributes it determines
-    (``rate_hz``, ``radius_m``, ``terminal``, ``config_name``) equal to its values."""
-    rate = _number_attr(path, attrs, "rate_hz", 0.0, MAX_RATE_HZ, "Hz")
-    radius = _number_attr(path, attrs, "radius_m", 0.0, 2 * MAX_TETHER_LENGTH, "m")
-    terminal = str(attrs["terminal"])
-    if terminal not in TERMINAL_COSTS:
-        raise InputError(path, "terminal", f"must be one of {', '.join(TERMINAL_COSTS)}; got "
-                         f"{terminal!r:.40}")
-    check_name(path, str(attrs["config_name"]))
-    if not np.allclose(d["axes/xi_dot"], d["axes/speed"] / radius, rtol=1e-12, atol=0):
-        raise InputError(path, "radius_m", f"{radius:g} m is not the radius of the axes "
-                         "(axes/xi_dot = axes/speed / radius_m)")
-    dt = d["closed_loop/dt"]
-    if not np.all(np.isfinite(dt) & (dt > 0)):
-        raise InputError(path, "closed_loop/dt", "must be finite and > 0")
-    text = d["config_text"]
-    text = text.decode("utf-8", "replace") if isinstance(text, bytes) else str(text)
-    want = hashlib.sha256(text.encode()).hexdigest()
-    if str(attrs["config_sha256"]) != want:
-        raise InputError(path, "config_sha256", f"{str(attrs['config_sha256'])[:12]}... is not "
-                         f"the SHA-256 of config_text ({want[:12]}...): the embedded config "
-                         "is not the one the table was built from; rebuild the table")
-    try:
-        cfg = parse_toml(text, path)
-    except InputError as exc:
-        raise InputError(path, "config_text", f"the embedded config {exc.message}") from None
-    # the attributes the embedded config determines (its full validation: table_config)
-    tether, control = cfg.get("tether"), cfg.get("control")
-    if isinstance(control, dict) and _is_number(control.get("rate_hz")):
-        if float(control["rate_hz"]) != rate:
-            raise InputError(path, "rate_hz", f"{rate:g} Hz, but the embedded config's "
-                             f"control.rate_hz is {float(control['rate_hz']):g}")
-    if isinstance(control, dict) and control.get("terminal", "periodic") != terminal:
-        raise InputError(path, "terminal", f"{terminal!r}, but the embedded config's "
-                         f"control.terminal is {control.get('terminal', 'periodic')!r:.40}")
-    if (isinstance(tether, dict) and _is_number(tether.get("length"))
-            and _is_number(tether.get("attachment_offset"))):
-        r = float(tether["length"]) + float(tether["attachment_offset"])
-        if r != radius:
-            raise InputError(path, "radius_m", f"{radius:g} m, but the embedded config's "
-                             f"tether.length + attachment_offset is {r:g} m")
-    if "name" in cfg and cfg["name"] != str(attrs["config_name"]):
-        raise InputError(path, "config_name", f"{str(attrs['config_name'])!r}, but the "
-                         f"embedded config's name is {cfg['name']!r:.70}")
-
-
-def _is_number(v) -> bool:
-    return isinstance(v, int | float) and not isinstance(v, bool)
-
-
-def _check_feasible_finite(path, d, tilt, speed, xi) -> None:
-    """Gains, nominal thrusts and roll must be finite at every feasible point (reasons 0)."""
-    ok = d["feasibility/reasons"] == 0  # (n_a, n_v, n_xi)
-    checks = (
-        ("gains/K_tilt0", d["gains/K_tilt0"], ok[0].any(-1), lambda i: (0, i[0], 0))
-        if d["gains/K_tilt0"].ndim == 3 else
-        ("gains/K_tilt0", d["gains/K_tilt0"], ok[0], lambda i: (0, i[0], i[1])),
-        ("gains/K", d["gains/K"], ok[1:], lambda i: (i[0] + 1, i[1], i[2])),
-        ("nominal/u_d", d["nominal/u_d"], ok, tuple),
-        ("nominal/phi_d", d["nominal/phi_d"], ok, tuple),
-    )
-    for key, x, feasible, point in checks:
-        extra = x.ndim - feasible.ndim
-        bad = feasible & ~np.all(np.isfinite(x), axis=tuple(range(-extra, 0)) if extra else ())
-        if np.any(bad):
-            idx = tuple(int(i) for i in np.argwhere(bad)[0])
-            a, v, k = point(idx)
-            raise InputError(path, f"{key}[{', '.join(map(str, idx))}]",
-                             f"non-finite value at a feasible point (tilt "
-                             f"{np.rad2deg(tilt[a]):g} deg, speed {speed[v]:g} m/s, azimuth "
-                             f"{np.rad2deg(xi[k]):g} deg); the table is corrupt")

@@ -150,9 +150,11 @@ def build(config, out_dir="tables", *, jobs: int = -1, backend: str = "local",
     """
     from ..publish import check_out_dir, recover
     from ..schedule.distributed import check_options
+    from ..schedule.grid import check_effect_symmetries
 
     check_options(backend, scheduler)
     cfg = config_of(config)
+    check_effect_symmetries(cfg)  # what no table, or the firmware's, holds: before any work
     out_dir = Path(out_dir)
     check_out_dir(out_dir, names=output_names(cfg))  # a bad folder fails now, not after
     recover(out_dir)  # finish or clean up after a killed earlier run
