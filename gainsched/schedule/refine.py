@@ -70,6 +70,7 @@ from .grid import (
     check_gain_cap,
     grid_from_solutions,
     level_circle_invariant,
+    mirror_config,
     solve_speed,
 )
 from .jobs import run_jobs
@@ -509,6 +510,11 @@ def refine_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridChoice:
         raise InputError(config.source, "grid.speeds", "refine_grid needs an axis given as "
                          "a range {min, max, max_count}; a list grid is built by build_grid")
     check_effect_symmetries(config)
+    if mirror_config(config) is not None:  # the certificate covers one direction
+        raise InputError(config.source, config.grid.auto_key, "is a range the build chooses "
+                         "breakpoints in, which it does not yet for a vehicle that is not its "
+                         "own mirror image (docs/symmetry.md): give grid.speeds and "
+                         "grid.tilts_deg as lists, and the table holds both flight directions")
     return _Refiner(config, n_jobs, progress, backend).run()
 
 

@@ -192,8 +192,11 @@ def _speed_tilt_figure(plt, table, values, title, label, gid, speeds=None, tilts
 
 
 def _midpoint_grid(midpoints):
-    """(speeds, tilts, max error (n_a, n_v)) of a midpoint check's points."""
+    """(speeds, tilts, max error (n_a, n_v)) of a midpoint check's points; a reversed
+    circle's (negative speed: a table of both flight directions) counts at its speed, the
+    worse of the two directions shown."""
     speed, tilt, err = (np.asarray(x, dtype=float) for x in midpoints)
+    speed = np.abs(speed)
     vs, ts = np.unique(speed), np.unique(tilt)
     grid = np.full((ts.size, vs.size), np.nan)
     for k in range(err.size):

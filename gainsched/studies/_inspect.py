@@ -72,6 +72,11 @@ def _inspect_lines(ins: Inspection) -> list[str]:
            f"{t.attrs['terminal']}",
            f"  xi: {t.xi.size} samples over 360 deg; speeds {t.speed[0]:g}..{t.speed[-1]:g} "
            f"m/s ({t.speed.size}); tilts {tilts} deg"]
+    if t.reverse is not None:
+        worse = (t.reverse.reasons != 0).sum() - (t.reasons != 0).sum()
+        out.append(f"  both flight directions: the vehicle is not its own mirror image, its "
+                   f"reversed circles read the image's half (reverse/; {worse:+d} infeasible "
+                   "points against the forward half; docs/symmetry.md)")
     if t.grid_auto is not None:
         out += [f"  {line}" for line in grid_auto_lines(t.grid_auto)]
     out.append("  feasible azimuth fraction (rows: tilt deg, columns: speed m/s)")
@@ -264,6 +269,7 @@ def check(table, *, speed_stride: int = 1, max_error: float | None = None,
         say([line])
         lookup = CompactInterpolator(form)
     n_v = len(range(0, max(t.speed.size - 1, 0), speed_stride))
+    n_v *= 1 if t.reverse is None else 2  # and the reversed circles' midpoints
     with reporter.bar(f"check {t.name}", n_v, "speed") as bar:
         res = midpoint_check(t, speed_stride=speed_stride, progress=bar.update, lookup=lookup)
     seconds = time.perf_counter() - t0

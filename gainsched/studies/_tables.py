@@ -134,7 +134,8 @@ def plot(table, out_dir, *, check: bool = False, reporter: Reporter = SILENT) ->
     if check:
         from ..firmware.host.check import midpoint_check
 
-        with reporter.bar(f"check {t.name}", max(t.speed.size - 1, 0), "speed") as bar:
+        n_mid = max(t.speed.size - 1, 0) * (1 if t.reverse is None else 2)  # both ways
+        with reporter.bar(f"check {t.name}", n_mid, "speed") as bar:
             res = midpoint_check(t, progress=bar.update)
         midpoints = (res.speed, res.tilt, res.rel_err)
     with reporter.bar(f"plot {t.name}", plot_count(t, midpoints is not None), "file") as bar:

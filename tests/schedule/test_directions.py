@@ -22,12 +22,13 @@ from click.testing import CliRunner
 from gainsched.cli import cli
 from gainsched.errors import InputError
 from gainsched.firmware.cfiles import c_files
+from gainsched.firmware.host.check import midpoint_check
 from gainsched.firmware.runtime import Interpolator
 from gainsched.schedule.grid import build_grid, check_effect_symmetries, mirror_config, solve_circle
 from gainsched.schedule.tables import table_bytes, table_from_bytes
 from gainsched.sim.loop import Scenario, simulate, table_scheduler
 
-from support import rechecksum, small_config, small_config_text
+from support import PAPER_H5, rechecksum, small_config, small_config_text
 
 #: the COG 3 mm to the side and 2 mm forward, motor 1 at 94 %
 ASYMMETRY = {"effects.cog_offset.y": 0.003, "effects.cog_offset.x": 0.002,
@@ -152,3 +153,39 @@ def test_the_firmware_controller_flies_reversed_circles_on_the_two_direction_tab
     np.testing.assert_array_equal(errors(one, 8.0), fwd)
     assert np.all(rev <= 1.5 * fwd), (rev, fwd)
     assert np.all(rev_one > 5 * rev), (rev_one, rev)
+
+
+def test_the_midpoint_check_covers_the_reversed_circles(asymmetric):
+    """``midpoint_check`` of a two-direction table checks the reversed circles too
+    (negative speeds: the direct solve run backwards against the lookups that read the
+    mirror image), each direction within the small grid's accuracy and stable; the same
+    check of the one-direction table finds its reversed circles far off."""
+    _, _, _, table = asymmetric
+    chk = midpoint_check(table)
+    back = chk.speed < 0
+    assert back.any() and (~back).any()
+    np.testing.assert_array_equal(np.unique(np.abs(chk.speed[back])),
+                                  np.unique(chk.speed[~back]))
+    worst = {d: float(np.nanmax(chk.rel_err[m])) for d, m in (("fwd", ~back), ("rev", back))}
+    assert worst["rev"] <= 2 * worst["fwd"] and worst["rev"] < 0.2, worst
+    assert all(c.rho_interp < 1 for c in chk.circles if c.speed < 0)
+    # the same reversed lookups on the one-direction table: the asymmetry, not the grid
+    one = Interpolator(dataclasses.replace(table, reverse=None))
+    xi, v, a = chk.xi[back], chk.speed[back] / table.attrs["radius_m"], chk.tilt[back]
+    ok = np.isfinite(chk.u_err[back])
+    u_one = one(xi[ok], v[ok], a[ok]).u_d
+    u_two = Interpolator(table)(xi[ok], v[ok], a[ok]).u_d
+    assert np.abs(u_one - u_two).max() > 1.0 > float(np.nanmax(chk.u_err[back]))  # N
+
+
+def test_inspect_says_the_table_holds_both_directions(asymmetric, tmp_path):
+    """``inspect`` of a two-direction table says so in one line (the study without the
+    flash footprint, which needs the C header); a symmetric table's lines do not."""
+    from gainsched.studies import inspect
+
+    _, _, data, _ = asymmetric
+    (tmp_path / "asym.h5").write_bytes(data)
+    lines = inspect(tmp_path / "asym.h5", code_size=False).lines()
+    assert sum("both flight directions" in line for line in lines) == 1, lines
+    assert not any("both flight directions" in line
+                   for line in inspect(PAPER_H5, code_size=False).lines())

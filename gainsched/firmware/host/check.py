@@ -183,7 +183,8 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
     Returns
     -------
     MidpointCheck
-        The checked midpoints ``speed`` (m/s), ``tilt`` (rad), ``xi`` (rad), each (m,);
+        The checked midpoints ``speed`` (m/s; negative: reversed, see Notes), ``tilt``
+        (rad), ``xi`` (rad), each (m,);
         ``rel_err`` (m,) ``||K_interp - K_direct||_F / ||K_direct||_F`` (NaN where
         skipped) and ``u_err`` (m,) the largest nominal-thrust error, N; ``u_rel`` and
         ``phi_rel`` (m,) the nominal thrust and roll errors relative to the circle's
@@ -208,7 +209,8 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
     -----
     One :func:`gainsched.solve_circle` per speed midpoint, all tilt midpoints batched,
     with ``2 n_xi`` azimuth samples so that the odd ones are the azimuth midpoints: the
-    cost of a check is about that of a build, divided by ``speed_stride``.
+    cost of a check is about that of a build, divided by ``speed_stride``. A table of
+    both flight directions (``Table.reverse``) is checked on the reversed circles too.
 
     Examples
     --------
@@ -235,11 +237,12 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
     xi_mid = (np.arange(n_xi) + 0.5) * (2 * np.pi / n_xi)
     rows = {k: [] for k in ("speed", "tilt", "xi", "err", "uerr", "urel", "phirel")}
     circles, skipped = [], 0
-    for v in v_mid:
-        sol, steps = solve_circle(cfg2, float(v), a_mid, keep_steps=True)
-        skipped += _midpoint_rows(rows, interp, sol, float(v), r, a_mid, xi_mid)
+    directions = (1.0,) if getattr(table, "reverse", None) is None else (1.0, -1.0)
+    for v in (sign * float(v) for sign in directions for v in v_mid):
+        sol, steps = solve_circle(cfg2, v, a_mid, keep_steps=True)
+        skipped += _midpoint_rows(rows, interp, sol, v, r, a_mid, np.copysign(xi_mid, v))
         if steps is not None:
-            circles += _midpoint_circles(interp, sol, steps, float(v), r, a_mid)
+            circles += _midpoint_circles(interp, sol, steps, v, r, a_mid)
         if progress is not None:
             progress(1)
     cat = {k: np.concatenate(x) if x else np.zeros(0) for k, x in rows.items()}
@@ -251,8 +254,9 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
 
 def _midpoint_rows(rows: dict, interp, sol, v: float, r: float, a_mid, xi_mid) -> int:
     """The errors at the azimuth midpoints of every tilt midpoint of the speed midpoint
-    ``v`` (m/s), appended to ``rows``: the lookup at ``xi_mid`` (rad), ``v / r`` (rad/s)
-    against the direct solve ``sol`` (odd samples of its ``2 n_xi``). Returns how many
+    ``v`` (m/s; negative: reversed), appended to ``rows``: the lookup at ``xi_mid`` (rad;
+    negative on a reversed circle), ``v / r`` (rad/s) against the direct solve ``sol``
+    (odd samples of its ``2 n_xi``). Returns how many
     midpoints have no comparison (direct solve infeasible or lookup not OK)."""
     n_xi, skipped = xi_mid.size, 0
     for i, a in enumerate(a_mid):
@@ -278,10 +282,11 @@ def _midpoint_rows(rows: dict, interp, sol, v: float, r: float, a_mid, xi_mid) -
 def _midpoint_circles(interp, sol, steps, v: float, r: float, a_mid) -> list[MidpointCircle]:
     """The :class:`MidpointCircle` (speed m/s, tilt rad, rho_interp, rho_direct) of every
     feasible midpoint circle at the speed ``v``: the loop closed at every control step
-    with the interpolated gains (NaN where a lookup is not OK) and with the direct ones."""
+    with the interpolated gains (NaN where a lookup is not OK) and with the direct ones;
+    a reversed circle (``v < 0``) runs through ``-xi``."""
     Ad, Bd, _ = steps
     N = Ad.shape[-3]
-    xs = 2 * np.pi * np.arange(N) / N
+    xs = np.copysign(2 * np.pi * np.arange(N) / N, v)
     out = []
     for b, i in enumerate(np.flatnonzero(np.isfinite(sol.spectral_radius))):
         look = interp(xs, v / r, a_mid[i])
