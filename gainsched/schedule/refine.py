@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import astuple, dataclass, field, fields, replace
 
 import numpy as np
 
@@ -66,6 +66,7 @@ from .certificate import (
 from .choice import GridChoice, grid_auto_lines
 from .grid import (
     CircleSolution,
+    GridResult,
     check_effect_symmetries,
     check_gain_cap,
     grid_from_solutions,
@@ -163,6 +164,9 @@ class _Refiner:
                 axis.parent[lo, mid] = axis.parent[mid, hi] = (lo, hi)
         self.effects = registered_effects({s.name for s in config.effects})
         self.invariant = level_circle_invariant(Model(config))
+        # a vehicle that is not its own mirror image: its image is solved and certified
+        # beside it, circle for circle, and a cell holds when both halves hold
+        self.image = mirror_config(config)
         self.azimuth = g.azimuth_auto  # AzimuthRange or None
         self.reused = self.centre_solves = self.rounds = self.restarts = self.dropped = 0
         self._start(g.azimuth_samples)
@@ -179,7 +183,12 @@ class _Refiner:
         self.n_xi = n_xi
         self.solve_config = self.config.with_values({"grid.azimuth_samples": n_xi})
         self.config2 = self.config.with_values({"grid.azimuth_samples": 2 * n_xi})
+        image = self.image
+        self.image_config = None if image is None else (
+            image.with_values({"grid.azimuth_samples": n_xi}),
+            image.with_values({"grid.azimuth_samples": 2 * n_xi}))
         self.points = {}  # (v, a_deg) -> CircleSolution of one tilt
+        self.image_points = {}  # the same of the mirror image (self.image)
         self.meta = {}  # v -> (steps, dt)
         self.centres = {}  # (v_lo, v_hi, a_lo, a_hi) -> Centre
         self.surpluses = {}  # (axis key, parent interval, other breakpoint) -> error
@@ -207,10 +216,16 @@ class _Refiner:
                 todo[v].append(a)
         args = [(self.solve_config, v, np.array([self.rad(a) for a in ts]), self.effects,
                  self.invariant) for v, ts in todo.items()]
-        for (_, v, _, _, _), sol in self._run(solve_speed, args):
-            self.meta[v] = (sol.steps, sol.dt)
+        if self.image_config is not None:
+            args = [(*a, self.image_config[0]) for a in args]
+        for (_, v, *_), sol in self._run(solve_speed if self.image is None else _with_image,
+                                         args):
+            own, img = (sol, None) if self.image is None else sol
+            self.meta[v] = (own.steps, own.dt)
             for i, a in enumerate(todo[v]):
-                self.points[v, a] = _one(sol, i)
+                self.points[v, a] = _one(own, i)
+                if img is not None:
+                    self.image_points[v, a] = _one(img, i)
 
     def certify(self, cells) -> None:
         """Solve the centres of the cells not certified yet (a cell with an infeasible
@@ -219,19 +234,29 @@ class _Refiner:
         for cell in cells:
             if cell in self.centres:
                 continue
-            cs = [self.points[p] for p in _corners(cell)]
-            if not all(_feasible(c) for c in cs):
+            if not all(self.feasible(p) for p in _corners(cell)):
                 self.centres[cell] = Centre()
                 continue
-            data = tuple(np.stack([getattr(c, k)[0] for c in cs]) for k in ("K", "u_d", "phi_d"))
+            data = [tuple(np.stack([getattr(pts[p], k)[0] for p in _corners(cell)])
+                          for k in ("K", "u_d", "phi_d"))
+                    for pts in ((self.points,) if self.image is None
+                                else (self.points, self.image_points))]
             todo[0.5 * (cell[0] + cell[1])].append((cell, data))
             self.centre_solves += 1
         args = [(self.config2, v, np.array([self.rad(0.5 * (c[2] + c[3])) for c, _ in items]),
-                 [d for _, d in items], self.effects, self.invariant)
+                 [d[0] for _, d in items], self.effects, self.invariant)
                 for v, items in todo.items()]
-        for (_, v, _, _, _, _), res in self._run(check_centres, args):
+        if self.image_config is not None:
+            args = [(*a, self.image_config[1], [d[1] for _, d in todo[a[1]]]) for a in args]
+        job = check_centres if self.image is None else _centres_with_image
+        for (_, v, *_), res in self._run(job, args):
             for (cell, _), centre in zip(todo[v], res, strict=True):
                 self.centres[cell] = centre
+
+    def feasible(self, p) -> bool:
+        """Whether the circle ``p`` ((v, a_deg)) is feasible, for the mirror image too."""
+        return _feasible(self.points[p]) and (self.image is None
+                                               or _feasible(self.image_points[p]))
 
     def fails(self, cell) -> bool:
         c = self.centres[cell]
@@ -242,13 +267,17 @@ class _Refiner:
     def edge_error(self, p_lo, p_hi, p_mid) -> float:
         """Largest error of the linear interpolation between two circles at the middle
         one, at the grid azimuths (NaN when one of them is infeasible)."""
-        a, b, m = self.points[p_lo], self.points[p_hi], self.points[p_mid]
-        if not all(_feasible(c) for c in (a, b, m)):
+        if not all(self.feasible(p) for p in (p_lo, p_hi, p_mid)):
             return math.nan
-        errs = midpoint_errors(0.5 * (a.K[0] + b.K[0]), m.K[0], 0.5 * (a.u_d[0] + b.u_d[0]),
-                               m.u_d[0], 0.5 * (a.phi_d[0] + b.phi_d[0]), m.phi_d[0],
-                               np.abs(m.u_d[0]).max(), np.abs(m.phi_d[0]).max())
-        return float(max(e.max() for e in errs))
+        out = []
+        for pts in (self.points,) if self.image is None else (self.points, self.image_points):
+            a, b, m = pts[p_lo], pts[p_hi], pts[p_mid]
+            errs = midpoint_errors(0.5 * (a.K[0] + b.K[0]), m.K[0],
+                                   0.5 * (a.u_d[0] + b.u_d[0]), m.u_d[0],
+                                   0.5 * (a.phi_d[0] + b.phi_d[0]), m.phi_d[0],
+                                   np.abs(m.u_d[0]).max(), np.abs(m.phi_d[0]).max())
+            out.append(float(max(e.max() for e in errs)))
+        return out[0] if len(out) == 1 else float(np.fmax(*out))
 
     def estimate(self, axis, iv, others) -> float:
         """Estimated error at the midpoint of the interval ``iv`` of ``axis`` along the
@@ -286,7 +315,7 @@ class _Refiner:
         v0, v1, a0, a1 = cell
         if self.speeds.auto is None:
             return None
-        f = {p: _feasible(self.points[p]) for p in _corners(cell)}
+        f = {p: self.feasible(p) for p in _corners(cell)}
         if any(f[v0, a] != f[v1, a] for a in (a0, a1)):
             return v0, v1
         return None
@@ -319,7 +348,7 @@ class _Refiner:
                 if edge[1] - edge[0] > EDGE_SHARE * (rng.hi - rng.lo):
                     want["speeds"].setdefault(edge, 1)
                 continue
-            if (not all(_feasible(self.points[p]) for p in _corners(cell))
+            if (not all(self.feasible(p) for p in _corners(cell))
                     or quanta(sum(self.cell_estimates(cell))) <= self.limit):
                 continue
             pick = self.choose(cell)
@@ -407,6 +436,17 @@ class _Refiner:
 
     # ------------------------------------------------------------------ the result
 
+    def grid(self, points) -> GridResult:
+        """The grid of the chosen axes assembled from the solved circles ``points``."""
+        sols = []
+        for v in self.speeds.values:
+            parts = [points[v, a] for a in self.tilts.values]
+            steps, dt = self.meta[v]
+            sols.append(CircleSolution(
+                **{k: np.concatenate([getattr(p, k) for p in parts]) for k in _PER_TILT},
+                steps=steps, dt=dt))
+        return grid_from_solutions(sols, self.invariant)
+
     def result(self, cells) -> GridChoice:
         """The chosen config (the axes as lists, the ranges kept as comments), the grid
         assembled from the solved circles, and the certificate's figures."""
@@ -424,14 +464,10 @@ class _Refiner:
         assert chosen.grid.azimuth_samples == self.n_xi
         assert chosen.grid.speeds.tolist() == self.speeds.values
         assert chosen.grid.tilts.tolist() == [self.rad(a) for a in self.tilts.values]
-        sols = []
-        for v in self.speeds.values:
-            parts = [self.points[v, a] for a in self.tilts.values]
-            steps, dt = self.meta[v]
-            sols.append(CircleSolution(
-                **{k: np.concatenate([getattr(p, k) for p in parts]) for k in _PER_TILT},
-                steps=steps, dt=dt))
-        grid = grid_from_solutions(sols, self.invariant)
+        grid = self.grid(self.points)
+        if self.image is not None:
+            grid = replace(grid, reverse=self.grid(self.image_points))
+            check_gain_cap(chosen, grid.reverse)
         check_gain_cap(chosen, grid)
         live = [(c, self.centres[c]) for c in cells if self.centres[c].usable]
 
@@ -509,13 +545,25 @@ def refine_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridChoice:
     if not config.grid.auto:
         raise InputError(config.source, "grid.speeds", "refine_grid needs an axis given as "
                          "a range {min, max, max_count}; a list grid is built by build_grid")
-    check_effect_symmetries(config)
-    if mirror_config(config) is not None:  # the certificate covers one direction
-        raise InputError(config.source, config.grid.auto_key, "is a range the build chooses "
-                         "breakpoints in, which it does not yet for a vehicle that is not its "
-                         "own mirror image (docs/symmetry.md): give grid.speeds and "
-                         "grid.tilts_deg as lists, and the table holds both flight directions")
+    check_effect_symmetries(config, firmware=False)  # both halves, as build_grid
     return _Refiner(config, n_jobs, progress, backend).run()
+
+
+def _with_image(config, speed, tilts, effects, dare_tilt0, image):
+    """One job of a vehicle that is not its own mirror image: :func:`solve_speed` of
+    ``config`` and of its image."""
+    return (solve_speed(config, speed, tilts, effects, dare_tilt0),
+            solve_speed(image, speed, tilts, effects, dare_tilt0))
+
+
+def _centres_with_image(config2, speed, tilts, corners, effects, dare_tilt0, image2,
+                        image_corners):
+    """One certificate job of a vehicle and its mirror image: per tilt, the worse of
+    the two :class:`Centre` (each error and loop; unusable when either is)."""
+    own = check_centres(config2, speed, tilts, corners, effects, dare_tilt0)
+    img = check_centres(image2, speed, tilts, image_corners, effects, dare_tilt0)
+    return [Centre(*(float(np.fmax(x, y)) for x, y in zip(astuple(a), astuple(b), strict=True)))
+            if a.usable and b.usable else Centre() for a, b in zip(own, img, strict=True)]
 
 
 def _halvings(estimate: float, target: float) -> int:
