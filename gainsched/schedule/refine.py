@@ -70,6 +70,7 @@ from .grid import (
     check_gain_cap,
     grid_from_solutions,
     level_circle_invariant,
+    mirror_config,
     solve_speed,
 )
 from .jobs import run_jobs
@@ -509,6 +510,11 @@ def refine_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridChoice:
         raise InputError(config.source, "grid.speeds", "refine_grid needs an axis given as "
                          "a range {min, max, max_count}; a list grid is built by build_grid")
     check_effect_symmetries(config)
+    if mirror_config(config) is not None:  # the refiner solves one flight direction
+        raise InputError(config.source, config.grid.auto_key,
+                         "chooses breakpoints for one flight direction, and this vehicle is "
+                         "not its own mirror image (docs/symmetry.md): give the axes as lists "
+                         "(build_grid solves both directions)")
     return _Refiner(config, n_jobs, progress, backend).run()
 
 
