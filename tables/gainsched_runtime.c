@@ -151,6 +151,8 @@ typedef struct gs_cell {
     float fv;
     bool mirrored; /* S2 applied */
     bool shifted;  /* S1 applied */
+    const gs_table *half; /* the table whose values the query read: table->reverse for a
+                           * mirrored query when it has one, else the table */
     float dphi_dxi; /* slope of the interpolated phi_d along xi (rad/rad), original frame */
 } gs_cell;
 
@@ -522,7 +524,8 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
     bool shifted = false;
     int status = GS_OK;
 
-    if (t == NULL || K == NULL || u_d == NULL || phi_d == NULL || !gs_table_usable(t)) {
+    if (t == NULL || K == NULL || u_d == NULL || phi_d == NULL || !gs_table_usable(t) ||
+        (t->reverse != NULL && !gs_table_usable(t->reverse))) {
         return GS_BAD_ARG;
     }
 
@@ -545,6 +548,9 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
         xi_dot = -xi_dot;
         mirrored = true;
     }
+    if (mirrored && t->reverse != NULL) { /* the mirror image's half: same axes, state map */
+        t = t->reverse;
+    }
 
     /* 4. speed (xi_dot) and tilt axes: clamp, bracket (xi is wrapped by the dense
      * lookup); alpha >= 0 == tilt[0] here, so only the top of the tilts can clamp */
@@ -555,6 +561,7 @@ static int gs_lookup_cell(const gs_table *table, float xi, float xi_dot, float a
     here.mirrored = mirrored;
     here.shifted = shifted;
     here.dphi_dxi = 0.0f;
+    here.half = t;
 
     /* 5. the values at (xi, xi_dot, alpha) */
     {
@@ -925,8 +932,8 @@ int gs_lookup_nominal(const gs_table *table, const float ref[5], float alpha, fl
         phi = phi_tab + gs_atan2f(sc[0] * sc_st[1] - sc[1] * sc_st[0],
                                   sc[1] * sc_st[1] + sc[0] * sc_st[0]);
         gs_sincosf(phi, &sphi, &cphi);
-        if (t->offsets != NULL) {
-            gs_offsets(t, &cell, sx, cx, off);
+        if (cell.half->offsets != NULL) { /* the offsets of the half the values came from */
+            gs_offsets(cell.half, &cell, sx, cx, off);
             gs_sincosf(off[0], &st, &ct);
         }
     } else { /* the closed form alone */
@@ -1072,15 +1079,17 @@ uint32_t gs_table_crc32(const gs_table *t)
                             (size_t)t->n_tilt * t->n_speed * 2u *
                                 (2u * t->n_offset_harmonics + 1u));
     }
+    if (t->reverse != NULL) { /* a reverse half: its CRC-32, whose own gs_verify checks */
+        crc = gs_crc_u32(crc, t->reverse->crc32);
+    }
     return crc ^ 0xffffffffu;
 }
 
-int gs_verify(const gs_table *t)
+/* gs_verify of one half (t not NULL): structure, vehicle constants, compact series,
+ * state map, CRC */
+static int gs_verify_half(const gs_table *t)
 {
     uint32_t i;
-    if (t == NULL) {
-        return GS_BAD_ARG;
-    }
     if (!gs_table_usable(t) || t->xi == NULL || t->speed == NULL || t->n_xi > 4096u ||
         t->n_state < GS_N_BASE_STATES ||
         t->tilt[0] != 0.0f || !(t->xi_dot[0] > 0.0f) || !(t->xi_scale > 0.0f)) {
@@ -1147,4 +1156,43 @@ int gs_verify(const gs_table *t)
         }
     }
     return gs_table_crc32(t) == t->crc32 ? GS_OK : GS_BAD_TABLE;
+}
+
+/* the reverse half r of t matches it: no reverse of its own, the same format, dims,
+ * bit-identical xi_dot, tilt and xi_scale, the same state map (both usable) */
+static bool gs_same_axes(const gs_table *t, const gs_table *r)
+{
+    uint32_t i;
+    bool same = r->reverse == NULL && r->format == t->format && r->n_tilt == t->n_tilt &&
+                r->n_speed == t->n_speed && r->n_xi == t->n_xi && r->n_state == t->n_state &&
+                gs_bits(r->xi_scale) == gs_bits(t->xi_scale);
+    for (i = 0u; same && i < t->n_speed; ++i) {
+        same = gs_bits(r->xi_dot[i]) == gs_bits(t->xi_dot[i]);
+    }
+    for (i = 0u; same && i < t->n_tilt; ++i) {
+        same = gs_bits(r->tilt[i]) == gs_bits(t->tilt[i]);
+    }
+    for (i = 0u; same && i < t->n_state; ++i) {
+        same = gs_bits(r->state_sign[i]) == gs_bits(t->state_sign[i]) &&
+               r->state_perm[i] == t->state_perm[i];
+    }
+    return same;
+}
+
+int gs_verify(const gs_table *t)
+{
+    const gs_table *r;
+    if (t == NULL) {
+        return GS_BAD_ARG;
+    }
+    r = t->reverse;
+    if (r == NULL) {
+        return gs_verify_half(t);
+    }
+    /* both flight directions: the reverse half checked on its own, then the pair */
+    if (r->reverse != NULL || gs_verify_half(r) != GS_OK || !gs_table_usable(t) ||
+        !gs_same_axes(t, r)) {
+        return GS_BAD_TABLE;
+    }
+    return gs_verify_half(t);
 }

@@ -340,7 +340,8 @@ def compact_data(d: RuntimeData, bound: float = DEFAULT_AZIMUTH_ERROR, *,
     InputError
         A feasible circle that :data:`MAX_HARMONICS` harmonics do not fit within the
         bound (its values change too fast along the azimuth for the samples), naming
-        the circle.
+        the circle. A table of both flight directions (``d.reverse``): naming
+        ``firmware.format`` (the compact format holds one).
 
     Examples
     --------
@@ -351,6 +352,10 @@ def compact_data(d: RuntimeData, bound: float = DEFAULT_AZIMUTH_ERROR, *,
     >>> dense.nbytes(), gs.compact_data(dense).nbytes(), gs.compact_data(dense, 0.005).nbytes()
     (834147, 121937, 139065)
     """
+    if d.reverse is not None:  # both flight directions: the C runtime reads them dense
+        raise InputError(d.name if source is None else source, "firmware.format",
+                         "\"compact\" holds one flight direction; this table holds both (the "
+                         "vehicle is not its own mirror image, docs/symmetry.md): use \"dense\"")
     n_a, n_v, n_xi, n = d.dims
     n_value = 4 * n + 5
     mask = np.bitwise_or.reduce(d.mask.reshape(n_a, n_v, n_xi), axis=-1)

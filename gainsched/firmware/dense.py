@@ -91,7 +91,10 @@ def vehicle_fields(a) -> dict[str, np.ndarray]:
 
 #: the chunks of :meth:`RuntimeData.crc_chunks` that describe the table (sizes, scale)
 #: rather than hold its data arrays
-DESCRIPTOR_CHUNKS = ("dims", "xi_scale", "n_xi_tilt0", "offset_harmonics")
+DESCRIPTOR_CHUNKS = ("dims", "xi_scale", "n_xi_tilt0", "offset_harmonics", "reverse")
+#: the chunks a reverse half shares with its table in a header (the same axes and state
+#: map, bit for bit): stored once
+SHARED_CHUNKS = ("xi", "speed", "xi_dot", "tilt", "state_sign", "state_perm")
 
 
 @dataclass(frozen=True)
@@ -110,7 +113,8 @@ class RuntimeData(GainSchedule):
     2 H + 1), Fourier coefficients in the azimuth; None when the table has none.
     ``reverse``: the same of the vehicle's mirror image, whose data serve the reversed
     circles (:attr:`Table.reverse <gainsched.schedule.tables.Table>`); None when the
-    vehicle is its own mirror image.
+    vehicle is its own mirror image. Its CRC-32 is the last chunk of this one's (as
+    ``gs_table_crc32`` reads ``gs_table.reverse``), and :meth:`nbytes` counts its data.
     """
 
     name: str
@@ -155,14 +159,21 @@ class RuntimeData(GainSchedule):
             H = (self.offsets.shape[-1] - 1) // 2
             yield "offset_harmonics", np.array([H], dtype="<u4").tobytes()
             yield "offsets", np.ascontiguousarray(self.offsets, dtype="<f4").tobytes()
+        if self.reverse is not None:  # the reverse half's CRC-32 (gs_table.reverse)
+            yield "reverse", np.array([self.reverse.crc32()], dtype="<u4").tobytes()
 
     def crc32(self) -> int:
         """CRC-32 (zlib, IEEE) of :meth:`crc_chunks`, as ``gs_table_crc32`` computes it."""
         return crc32_of(self.crc_chunks())
 
     def nbytes(self) -> int:
-        """Bytes of table data the firmware stores (all arrays, without padding)."""
-        return sum(len(b) for k, b in self.crc_chunks() if k not in DESCRIPTOR_CHUNKS)
+        """Bytes of table data the firmware stores (all arrays, without padding): with a
+        reverse half, its arrays too, but for the axes and state map it shares."""
+        own = sum(len(b) for k, b in self.crc_chunks() if k not in DESCRIPTOR_CHUNKS)
+        if self.reverse is None:
+            return own
+        return own + sum(len(b) for k, b in self.reverse.crc_chunks()
+                         if k not in DESCRIPTOR_CHUNKS + SHARED_CHUNKS)
 
 
 def crc32_of(chunks) -> int:

@@ -3,14 +3,17 @@
 The header holds the table as C99 ``static const`` data: float32 values written as
 hexadecimal float literals (:mod:`.cformat`: exact, so every compiler reproduces the same
 bytes and the embedded CRC-32 holds), dimensions as macros, every symbol prefixed with
-the table name. Infeasible points have zero gains and a non-zero mask entry. Output is
-deterministic: the same table gives the same bytes. A table in either format: the dense
-runtime data (:func:`~.runtime.runtime_data`) or the compact series
-(:class:`~.compact.CompactData`); :func:`firmware_data` is what a firmware holds of a
-table.
+the table name; a table of both flight directions adds its reverse half's arrays and
+``gs_table`` (``<name>_reverse_table``). Infeasible points have zero gains and a non-zero
+mask entry. Output is deterministic: the same table gives the same bytes. A table in
+either format: the dense runtime data (:func:`~.runtime.runtime_data`) or the compact
+series (:class:`~.compact.CompactData`); :func:`firmware_data` is what a firmware holds
+of a table.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -32,15 +35,10 @@ __all__ = ["firmware_data", "header_name", "render_header"]
 def firmware_data(table):
     """What a firmware holds of ``table``: its :class:`RuntimeData` or
     :class:`~gainsched.firmware.compact.CompactData` as given, else the dense form of a
-    loaded table (:func:`runtime.runtime_data`). Raises InputError for a table of both
-    flight directions (a vehicle that is not its own mirror image, docs/symmetry.md): the
-    C runtime holds one."""
+    loaded table (:func:`runtime.runtime_data`). A table of both flight directions (a
+    vehicle that is not its own mirror image, docs/symmetry.md) keeps its ``reverse``
+    half (``gs_table.reverse``)."""
     data = table if isinstance(table, RuntimeData | CompactData) else runtime_data(table)
-    base = data.base if isinstance(data, CompactData) else data
-    if base.reverse is not None:
-        raise InputError(getattr(table, "source", "") or base.name, "reverse",
-                         "holds both flight directions (the vehicle is not its own mirror "
-                         "image, docs/symmetry.md), and the firmware's C runtime holds one")
     return data
 
 
@@ -95,16 +93,62 @@ def render_header(data) -> str:
     values.update(_compact_values(data) if compact else _dense_values(base))
     values.update(_vehicle_values(base))
     values.update(_offsets_values(base))
+    values.update(_reverse_values(base))
     return render("gains.in.h", **values)
 
 
-def _dense_values(data: RuntimeData) -> dict:
-    """Template values of a dense table's per-azimuth arrays."""
-    n_a, n_v, n_xi, n = data.dims
+def _reverse_values(data: RuntimeData) -> dict:
+    """Template values of a dense table's reverse half (both flight directions,
+    ``gs_table.reverse``): its arrays and its ``gs_table`` (the table's axes and state
+    map, which it shares bit for bit), or nothing."""
+    r = data.reverse
+    if r is None:
+        return dict(directions_note="", reverse_data="",
+                    reverse_ref="    NULL, /* reverse: the vehicle is its own mirror image */\n")
     name, NAME = data.name, data.name.upper()
+    for key in ("xi", "speed", "xi_dot", "tilt", "state_sign", "state_perm"):
+        if getattr(r, key).tobytes() != getattr(data, key).tobytes():
+            raise InputError(name, f"reverse/{key}", "differs from the table's: the two "
+                             "flight directions share their axes and state map")
+    rname, RNAME = f"{name}_reverse", f"{NAME}_REVERSE"
+    half = dataclasses.replace(r, name=rname)
+    dense = _dense_values(half, NAME, f"{RNAME}_N_XI_TILT0")
+    vehicle = _vehicle_values(half)
+    offsets = _offsets_values(half, NAME)
+    H = offsets["offset_harmonics"]
+    fields = [f"{NAME}_FORMAT", f"{NAME}_N_TILT", f"{NAME}_N_SPEED", f"{NAME}_N_XI",
+              f"{NAME}_N_STATE", f"{NAME}_XI_SCALE", f"{name}_xi", f"{name}_speed",
+              f"{name}_xi_dot", f"{name}_tilt", f"{name}_state_sign", f"{name}_state_perm",
+              f"&{rname}_mask[0][0][0]",
+              "{ /* dense part */\n" + dense["dense_part"] + "\n    }",
+              "{ /* compact part */\n" + dense["compact_part"] + "\n    }",
+              vehicle["vehicle_ref"], f"{H}u", offsets["offsets_ref"], f"{RNAME}_CRC32",
+              "NULL /* the reverse half has none */"]
+    body = "".join([
+        "\n/* ---- the reverse half: the same table of the vehicle's mirror image (docs/"
+        "symmetry.md),\n * read for xi_dot < 0 before the S2 output map; the table's axes "
+        "and state map ---- */\n",
+        f"#define {RNAME}_N_XI_TILT0 {r.n_xi_tilt0}u /* azimuths of {rname}_K_tilt0 */\n",
+        f"#define {RNAME}_CRC32 0x{r.crc32():08x}u /* CRC-32 of the reverse half's data */\n\n",
+        dense["value_arrays"], vehicle["vehicle_data"], offsets["offsets_data"],
+        f"\nstatic const gs_table {rname}_table = {{\n",
+        "".join(f"    {f},\n" for f in fields), "};\n"])
+    return dict(directions_note=(
+        "\n * both flight directions: the vehicle is not its own mirror image (docs/"
+        f"symmetry.md);\n * {rname}_table (its mirror image's) serves xi_dot < 0"),
+        reverse_data=body, reverse_ref=f"    &{rname}_table,\n")
+
+
+def _dense_values(data: RuntimeData, NAME: str | None = None,
+                  n_xi_tilt0: str | None = None) -> dict:
+    """Template values of a dense table's per-azimuth arrays (``NAME``: the prefix of the
+    dimension macros, the table's own by default)."""
+    n_a, n_v, n_xi, n = data.dims
+    name, NAME = data.name, NAME or data.name.upper()
     K = data.K if n_a > 1 else np.zeros((1, n_v, n_xi, 4, n), dtype=np.float32)
     arrays = render(
         "dense_values.in.h", name=name, NAME=NAME,
+        N_XI_TILT0=n_xi_tilt0 or f"{NAME}_N_XI_TILT0",
         tilt0_note=("independent of xi" if data.n_xi_tilt0 == 1
                     else "per azimuth: an effect changes with the azimuth"),
         K_tilt0=c_initializer(data.K_tilt0.reshape(n_v, data.n_xi_tilt0, 4, n), c_floats),
@@ -112,7 +156,7 @@ def _dense_values(data: RuntimeData) -> dict:
         u_d=c_initializer(data.u_d, c_floats, per_line=4),
         phi_d=c_initializer(data.phi_d, c_floats),
         mask=c_initializer(data.mask, c_uints, per_line=18))
-    dense = (f"{NAME}_N_XI_TILT0", f"&{name}_K_tilt0[0][0][0][0]",
+    dense = (n_xi_tilt0 or f"{NAME}_N_XI_TILT0", f"&{name}_K_tilt0[0][0][0][0]",
              f"&{name}_K[0][0][0][0][0]", f"&{name}_u_d[0][0][0][0]", f"&{name}_phi_d[0][0][0]")
     return dict(
         format_macros=f"#define {NAME}_FORMAT GS_FORMAT_DENSE /* values at every azimuth */",
@@ -191,11 +235,11 @@ def _vehicle_values(data: RuntimeData) -> dict:
                 vehicle_ref=f"&{name}_vehicle")
 
 
-def _offsets_values(data: RuntimeData) -> dict:
+def _offsets_values(data: RuntimeData, NAME: str | None = None) -> dict:
     """Template values of the nominal's attitude offsets (or their absence)."""
     if data.offsets is None:
         return dict(offset_harmonics=0, offsets_data="", offsets_ref="NULL")
-    name, NAME = data.name, data.name.upper()
+    name, NAME = data.name, NAME or data.name.upper()
     H = (data.offsets.shape[-1] - 1) // 2
     body = (f"/* pitch and yaw offsets of the nominal per circle, rad: Fourier coefficients "
             f"in the\n * azimuth [1, cos k xi, sin k xi], k = 1..{H}: "

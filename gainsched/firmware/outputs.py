@@ -18,7 +18,6 @@ import numpy as np
 
 from ..errors import GainschedWarning, InputError
 from ..publish import publish
-from ..schedule.grid import check_effect_symmetries
 from ..schedule.tables import config_from_table, table_bytes, table_from_bytes
 from .cfiles import c_files
 from .compact import CompactData, CompactInterpolator, compact_data
@@ -188,8 +187,6 @@ def output_set(config, grid, out_dir=".", progress=None, grid_auto=None) -> Outp
     compact, :func:`firmware_form`) and the runtime. ``out_dir`` only names the table
     in error messages; ``progress`` goes to the certificate; ``grid_auto`` is the record
     of axes the build chose (:meth:`gainsched.schedule.refine.GridChoice.record`)."""
-    if grid.reverse is not None:  # both flight directions: the C runtime holds one
-        check_effect_symmetries(config)
     name = f"{config.name}.h5"
     data = table_bytes(config, grid, grid_auto=grid_auto)
     table = table_from_bytes(data, Path(out_dir) / name)

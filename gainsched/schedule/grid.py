@@ -54,7 +54,7 @@ __all__ = ["CircleSolution", "solve_circle", "solve_speed", "build_grid", "GridR
 
 
 
-def check_effect_symmetries(config, *, firmware: bool = True) -> None:
+def check_effect_symmetries(config) -> None:
     """Refuse effects that break the symmetries the table relies on.
 
     The table stores ``alpha >= 0, xi' > 0`` and the runtime maps every other query
@@ -64,24 +64,15 @@ def check_effect_symmetries(config, *, firmware: bool = True) -> None:
     :class:`InputError` naming the config file and ``effects.<kind>``
     (:func:`~gainsched.model.symmetry.table_refusal`).
 
-    A vehicle that is not its own mirror image (:func:`mirror_config`) gets a table of
-    both flight directions (:attr:`GridResult.reverse`), which the Python runtime and the
-    simulator fly; with ``firmware`` (the build's outputs: the C runtime, which holds one
-    direction) it is refused, naming the effect.
+    A vehicle that is not its own mirror image (:func:`mirror_config`) is not refused: its
+    table holds both flight directions (:attr:`GridResult.reverse`), which the Python
+    runtime, the simulator and the C runtime (``gs_table.reverse``) fly.
     """
-    effects = Model(config).effects
-    for eff in effects:
+    for eff in Model(config).effects:
         reason = table_refusal(eff)
         if reason:
             raise InputError(config.source, f"effects.{eff.kind}",
                              f"{reason}: simulate and diagnose with it, build tables without it")
-    for kind, image in mirror_effects(effects).items() if firmware else ():
-        values = ", ".join(f"{k} = {v:.6g}" for k, v in image.items())
-        raise InputError(config.source, f"effects.{kind}",
-                         f"makes the vehicle's mirror image another ({values}): its table "
-                         "holds both flight directions, and the firmware's C runtime holds "
-                         "one (docs/symmetry.md); build it with gainsched.build_grid and fly "
-                         "it in Python, or leave the effect out of the firmware's build")
 
 
 def mirror_config(config):
@@ -612,7 +603,7 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
         raise InputError(config.source, config.grid.auto_key, "is a range the build chooses "
                          "breakpoints in: build it with gainsched.refine_grid (gainsched "
                          "build does)")
-    check_effect_symmetries(config, firmware=False)
+    check_effect_symmetries(config)
     speeds = config.grid.speeds
     tilts = config.grid.tilts
     extra = registered_effects({s.name for s in config.effects})

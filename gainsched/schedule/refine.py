@@ -545,7 +545,7 @@ def refine_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridChoice:
     if not config.grid.auto:
         raise InputError(config.source, "grid.speeds", "refine_grid needs an axis given as "
                          "a range {min, max, max_count}; a list grid is built by build_grid")
-    check_effect_symmetries(config, firmware=False)  # both halves, as build_grid
+    check_effect_symmetries(config)  # the refiner solves both halves, as build_grid
     return _Refiner(config, n_jobs, progress, backend).run()
 
 

@@ -202,22 +202,29 @@ def test_every_library_effect_keeps_both_symmetries(kind):
 
 @pytest.mark.parametrize("kind, values, what", [
     ("thrust_time_series", [("c1", -0.1, None)], "changes with flight time"),
-    ("thrust_motor", [("a3", -0.08, None)], "makes the vehicle's mirror image another"),
     ("force_horizontal", [("e0", 0.4, None)], "comes from an inertial direction"),
 ])
 def test_build_refuses_the_empirical_terms_a_table_cannot_hold(kind, values, what):
-    """Issue 37: the empirical terms in flight time and per motor are for simulate and
-    diagnose; the build refuses each in one line before any work (one in time; the other
-    because its mirror image is another vehicle, whose table of both flight directions
-    the firmware's C runtime cannot hold: gainsched.build_grid builds it for Python,
-    tests/schedule/test_directions.py)."""
+    """Issue 37: the empirical terms in flight time and from an inertial direction are for
+    simulate and diagnose; the build refuses each in one line before any work."""
     cfg = config_from_text(set_section(PAPER_TOML.read_text(), f"effects.{kind}", values),
                            "fit.toml")
     with pytest.raises(InputError, match=rf"^fit.toml: effects.{kind}: {what}"):
         check_effect_symmetries(cfg)
-    if kind != "thrust_motor":
-        with pytest.raises(InputError, match=rf"^fit.toml: effects.{kind}: {what}"):
-            build_grid(cfg)
+    with pytest.raises(InputError, match=rf"^fit.toml: effects.{kind}: {what}"):
+        build_grid(cfg)
+
+
+def test_a_per_motor_term_is_built_for_both_flight_directions():
+    """A per-motor term (thrust_motor) makes the vehicle's mirror image another vehicle:
+    not refused, its table holds both flight directions, which the C runtime holds too
+    (gs_table.reverse; tests/schedule/test_directions.py)."""
+    from gainsched.schedule.grid import mirror_config
+
+    cfg = config_from_text(set_section(PAPER_TOML.read_text(), "effects.thrust_motor",
+                                       [("a3", -0.08, None)]), "fit.toml")
+    check_effect_symmetries(cfg)  # no refusal
+    assert mirror_config(cfg) is not None
 
 
 def test_the_airspeed_series_of_orders_one_and_two_is_the_papers_drag():

@@ -6,8 +6,9 @@ image another vehicle: its reversed circles are its image's forward circles, mir
 The build solves the image on the same axes (``GridResult.reverse``), the table holds it
 under ``reverse/`` and the runtime reads it for the mirrored queries. Checked against
 direct solves of the reversed circles and against the one-direction table, which misses
-by the asymmetry; the firmware's C runtime, which holds one direction, refuses the table
-in one line.
+by the asymmetry; the firmware's C runtime (``gs_table.reverse``) against the Python
+reference, ``gs_verify`` of the pair, ``gainsched build`` of such a vehicle and the C
+controller flown in the loop.
 """
 
 from __future__ import annotations
@@ -21,15 +22,17 @@ from click.testing import CliRunner
 
 from gainsched.cli import cli
 from gainsched.errors import InputError
-from gainsched.firmware.cfiles import c_files
+from gainsched.firmware.feedforward import feedforward
 from gainsched.firmware.host.check import midpoint_check
-from gainsched.firmware.runtime import Interpolator
-from gainsched.schedule.grid import build_grid, check_effect_symmetries, mirror_config, solve_circle
+from gainsched.firmware.host.lookup import CRuntime, build_host
+from gainsched.firmware.runtime import BAD_TABLE, OK, UNUSABLE, Interpolator, runtime_data
+from gainsched.schedule.grid import build_grid, mirror_config, solve_circle
+from gainsched.schedule.path import circle_path
 from gainsched.schedule.refine import refine_grid
-from gainsched.schedule.tables import table_bytes, table_from_bytes
-from gainsched.sim.loop import Scenario, simulate, table_scheduler
+from gainsched.schedule.tables import load_table, table_bytes, table_from_bytes
+from gainsched.sim.loop import Scenario, c_runtime_scheduler, metrics, simulate, table_scheduler
 
-from support import PAPER_H5, rechecksum, small_config, small_config_text
+from support import PAPER_H5, REPO, rechecksum, small_config, small_config_text
 
 #: the COG 3 mm to the side and 2 mm forward, motor 1 at 94 %
 ASYMMETRY = {"effects.cog_offset.y": 0.003, "effects.cog_offset.x": 0.002,
@@ -116,22 +119,173 @@ def test_reversed_queries_read_the_mirror_image(asymmetric):
         assert P == float(ref.phi_d) and status == int(ref.status)
 
 
-def test_the_firmware_refuses_a_two_direction_table_in_one_line(asymmetric, tmp_path):
-    """The C runtime holds one flight direction: the C files of such a table, and
-    ``gainsched build`` of such a vehicle (before any work), are refused naming the
-    table's ``reverse`` or the config's effect."""
-    cfg, _, _, table = asymmetric
-    with pytest.raises(InputError, match=r"^asymmetric.h5: reverse: holds both flight"):
-        c_files(table)
-    with pytest.raises(InputError, match=r"effects.cog_offset: makes the vehicle's mirror"):
-        check_effect_symmetries(cfg)
+@pytest.fixture(scope="module")
+def compiled(asymmetric, tmp_path_factory):
+    """The two-direction table's runtime data, its Python reference and its C runtime, and
+    the C runtime of the one-direction table (``reverse`` dropped)."""
+    _, _, _, table = asymmetric
+    data = runtime_data(table)
+    one = dataclasses.replace(data, reverse=None)
+    c = CRuntime(build_host(data, tmp_path_factory.mktemp("both")), data)
+    c_one = CRuntime(build_host(one, tmp_path_factory.mktemp("one")), one)
+    return data, Interpolator(data), c, c_one
+
+
+def _quadrants(d, m, seed):
+    """``m`` queries inside and a little beyond the table, a quarter in each quadrant of
+    (sign of xi_dot, sign of alpha)."""
+    rng = np.random.default_rng(seed)
+    vmax, amax = float(d.xi_dot[-1]), float(d.tilt[-1])
+    xi = rng.uniform(-2 * np.pi, 2 * np.pi, m)
+    v = np.resize([1.0, -1.0, 1.0, -1.0], m) * rng.uniform(0.8 * float(d.xi_dot[0]),
+                                                              1.1 * vmax, m)
+    a = np.resize([1.0, 1.0, -1.0, -1.0], m) * rng.uniform(0.0, 1.1 * amax, m)
+    return xi, v, a
+
+
+@pytest.mark.needs_cc
+def test_the_c_runtime_reads_the_mirror_image_as_the_python_reference(compiled):
+    """The compiled C runtime on the two-direction table: 800 queries, 200 in each quadrant
+    of (xi_dot, alpha) signs: the status of the Python reference, K and u_d within 1e-5
+    relative and phi_d within 1e-5 rad (tests/firmware/test_runtime.py's bounds;
+    measured 7e-8, 1.1e-7, 7.7e-8); the nominal (gs_lookup_nominal) on a reversed circle
+    as the Python feed-forward (tests/firmware/test_feedforward_c.py's bounds). On the
+    reversed queries the one-direction runtime differs by more than 1 N; on the forward
+    ones it gives the same bits."""
+    data, ref, c, c_one = compiled
+    # the flash budget counts both halves (the axes and state map once; measured: 8487
+    # bytes against 4299)
+    assert 1.9 * c_one.data.nbytes() < data.nbytes() < 2 * c_one.data.nbytes()
+    xi, v, a = _quadrants(data, 800, seed=53)
+    r_py, r_c = ref(xi, v, a), c(xi, v, a)
+    np.testing.assert_array_equal(r_c.status, r_py.status.astype(np.int32))
+    live = (r_py.status & UNUSABLE) == 0
+    assert np.count_nonzero(live & (v < 0)) > 200
+    nrm = np.linalg.norm(r_py.K.reshape(v.size, -1), axis=1)[live]
+    relK = np.abs(r_py.K - r_c.K).reshape(v.size, -1).max(1)[live] / nrm
+    relU = (np.abs(r_py.u_d - r_c.u_d).max(1)[live]
+            / np.linalg.norm(r_py.u_d, axis=1)[live])
+    absP = np.abs(r_py.phi_d - r_c.phi_d)[live]
+    assert relK.max() <= 1e-5 and relU.max() <= 1e-5 and absP.max() <= 1e-5, (
+        relK.max(), relU.max(), absP.max())
+    one = c_one(xi, v, a)
+    fwd, rev = v > 0, (v < 0) & live & ((one.status & UNUSABLE) == 0)
+    for f in ("K", "u_d", "phi_d", "status"):
+        np.testing.assert_array_equal(getattr(one, f)[fwd], getattr(r_c, f)[fwd])
+    assert np.abs(one.u_d[rev] - r_c.u_d[rev]).max() > 1.0  # N
+    r = float(data.vehicle[2])
+    for alpha in (TILT, -TILT):
+        path = circle_path(-SPEED, r, np.arange(0.0, 1.0, 1e-2), 0.3)
+        ff = feedforward(ref, path, alpha)
+        K, U, X, ten, S = c.nominal(np.stack([path.xi, *path.d], axis=1), alpha)
+        np.testing.assert_array_equal(S, ff.status)
+        np.testing.assert_allclose(U, ff.u_d, rtol=1e-5, atol=1e-5)
+        err = np.abs(X - ff.x_d) / (1 + np.abs(ff.x_d))
+        assert err.max() <= 1e-5, err.max(0)
+        assert np.abs(ff.x_d[:, 6]).max() > 1e-4  # the image's yaw offset is flown
+        _, U1, X1, _, _ = c_one.nominal(np.stack([path.xi, *path.d], axis=1), alpha)
+        assert np.abs(U1 - U).max() > 1.0
+
+
+#: gs_verify of the pair, edited copies of the generated tables (their CRCs recomputed
+#: where the edit is not the data's own: only the pair rule can refuse those)
+PAIR_CHECKS = r"""
+#include <stdlib.h>
+#include <string.h>
+#include "asym_gains.h"
+
+int pair_verify(int which)
+{
+    gs_table t = asym_table;
+    gs_table r = asym_reverse_table;
+    gs_table rr = asym_reverse_table;
+    float tilt[ASYM_N_TILT];
+    float u_d[ASYM_N_TILT * ASYM_N_SPEED * ASYM_N_XI * 4u];
+    t.reverse = &r;
+    memcpy(tilt, asym_tilt, sizeof tilt);
+    memcpy(u_d, asym_reverse_u_d, sizeof u_d);
+    switch (which) {
+    case 0: break;                          /* the copy as generated */
+    case 1: u_d[7] += 0.25f; r.dense.u_d = u_d; break; /* a reverse value */
+    case 2: tilt[ASYM_N_TILT - 1u] *= 1.01f; r.tilt = tilt; break; /* another tilt axis */
+    case 3: r.reverse = &rr; break;         /* the reverse has a reverse */
+    default: break;
+    }
+    if (which >= 2) { /* every CRC right: the pair rule alone can refuse */
+        r.crc32 = gs_table_crc32(&r);
+        t.crc32 = gs_table_crc32(&t);
+    }
+    return gs_verify(&t);
+}
+
+int pair_verify_generated(void) { return asym_verify(); }
+"""
+
+
+@pytest.mark.needs_cc
+def test_gs_verify_checks_each_half_and_the_pair(asymmetric, tmp_path):
+    """``gs_verify`` of the two-direction table is GS_OK, and GS_BAD_TABLE for a corrupted
+    value of the reverse half (its own CRC), a reverse half with another tilt axis and one
+    with a reverse of its own (both with every CRC recomputed: the pair check refuses)."""
+    import ctypes
+
+    from gainsched.firmware.cfiles import copy_runtime, write_header
+    from gainsched.firmware.host.compiler import STRICT_CFLAGS
+
+    from support import compile_c
+
+    _, _, _, table = asymmetric
+    data = dataclasses.replace(runtime_data(table), name="asym")
+    data = dataclasses.replace(data, reverse=dataclasses.replace(data.reverse, name="asym"))
+    write_header(data, tmp_path)
+    runtime_c = copy_runtime(tmp_path).runtime_c
+    (tmp_path / "pair.c").write_text(PAIR_CHECKS)
+    lib = tmp_path / "libpair.so"
+    compile_c([*STRICT_CFLAGS, "-shared", "-fPIC", f"-I{tmp_path}", "-o", str(lib),
+               str(tmp_path / "pair.c"), str(runtime_c)])
+    so = ctypes.CDLL(str(lib))
+    assert so.pair_verify_generated() == OK
+    assert [so.pair_verify(k) for k in range(4)] == [OK, BAD_TABLE, BAD_TABLE, BAD_TABLE]
+
+
+def test_gainsched_build_writes_the_two_direction_table_and_its_c_files(tmp_path):
+    """``gainsched build`` of the asymmetric vehicle: exit 0, the table with its reverse
+    half and the C files, whose header holds both halves (the reverse table first, the
+    table pointing at it); the compact format, which holds one direction, is refused in
+    one line naming firmware.format, before any work."""
     (tmp_path / "asym.toml").write_text(small_config_text(name="asym", **ASYMMETRY))
-    res = CliRunner().invoke(cli, ["build", str(tmp_path / "asym.toml"), "-o",
-                                   str(tmp_path / "out")])
+    out = tmp_path / "out"
+    res = CliRunner().invoke(cli, ["build", str(tmp_path / "asym.toml"), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert load_table(out / "asym.h5").reverse is not None
+    h = (out / "asym_gains.h").read_text()
+    assert h.index("static const gs_table asym_reverse_table") < h.index(
+        "static const gs_table asym_table")
+    assert "    &asym_reverse_table,\n};" in h and "both flight directions" in h
+    assert (out / "gainsched_runtime.c").exists() and (out / "asym_control.h").exists()
+    (tmp_path / "c.toml").write_text(small_config_text(name="c", firmware__format="compact",
+                                                       **ASYMMETRY))
+    res = CliRunner().invoke(cli, ["build", str(tmp_path / "c.toml"), "-o",
+                                   str(tmp_path / "c")])
     assert res.exit_code == 2, res.output
     lines = res.output.strip().splitlines()
-    assert len(lines) == 1 and "asym.toml: effects.cog_offset: makes the vehicle's" in lines[0]
-    assert not (tmp_path / "out").exists()
+    assert len(lines) == 1 and "c.toml: firmware.format: \"compact\" holds one" in lines[0]
+    assert not (tmp_path / "c").exists()
+
+
+@pytest.mark.slow
+def test_the_header_of_a_symmetric_table_is_the_committed_one(tmp_path):
+    """``make tables`` into a temporary folder: every file equals the committed tables/
+    (the paper vehicle is its own mirror image: its table and header are unchanged by the
+    reverse member)."""
+    res = CliRunner().invoke(cli, ["build", str(REPO / "configs/paper.toml"), "-o",
+                                   str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    names = sorted(p.name for p in (REPO / "tables").iterdir() if p.is_file())
+    assert names == sorted(p.name for p in tmp_path.iterdir() if p.is_file())
+    for name in names:
+        assert (tmp_path / name).read_bytes() == (REPO / "tables" / name).read_bytes(), name
+    assert "reverse_table" not in (tmp_path / "paper_gains.h").read_text()
 
 
 def test_the_firmware_controller_flies_reversed_circles_on_the_two_direction_table(
@@ -210,3 +364,29 @@ def test_an_automatic_grid_is_chosen_for_both_directions():
     assert back.any() and (~back).any()
     assert float(np.nanmax(chk.rel_err)) <= 0.02, float(np.nanmax(chk.rel_err))
     assert max(c.rho_interp for c in chk.circles) < 1
+
+
+@pytest.mark.needs_cc
+def test_the_c_controller_flies_reversed_circles_as_the_python_reference(asymmetric, tmp_path):
+    """Software in the loop: the C runtime and controller (``c_runtime_scheduler``) fly the
+    asymmetric vehicle's reversed circle, 8 m/s at 15 deg for 3 s, as the Python reference
+    (``table_scheduler``, controller "firmware"): positions within 1e-6 m and the same
+    statuses (tests/sim/test_closed_loop.py), tracking metrics within 5 %
+    (tests/firmware/test_controller.py; measured: 6.3e-8 m, |xi error| 0.0053 rad both);
+    the C runtime of the one-direction table misses the circle (measured: 0.28 rad)."""
+    cfg, _, _, table = asymmetric
+    scn = Scenario("d", np.deg2rad(15.0), -8.0, 3.0)
+    one = dataclasses.replace(table, reverse=None)
+    r_c = simulate(cfg, c_runtime_scheduler(table, tmp_path / "both"), scn,
+                   controller="firmware")
+    r_py = simulate(cfg, table_scheduler(table), scn, controller="firmware")
+    r_one = simulate(cfg, c_runtime_scheduler(one, tmp_path / "one"), scn, controller="firmware")
+    assert r_c.t.size == r_py.t.size == 3001
+    assert np.abs(r_c.p_I - r_py.p_I).max() <= 1e-6
+    np.testing.assert_array_equal(r_c.status, r_py.status)
+    m_c, m_py = metrics(r_c), metrics(r_py)
+    for k in ("rms_out_of_plane_m", "rms_along_track_m", "rms_speed_error_mps"):
+        assert abs(m_c[k] - m_py[k]) <= 0.05 * m_py[k] + 1e-6, (k, m_c[k], m_py[k])
+    err = np.abs(r_c.z[:, :2] - r_c.z_d[:, :2]).max(axis=0)
+    err_one = np.abs(r_one.z[:, :2] - r_one.z_d[:, :2]).max(axis=0)
+    assert np.all(err_one > 5 * err), (err_one, err)

@@ -147,7 +147,9 @@ typedef struct gs_compact_part {
 
 /* A gain table in the fundamental domain (alpha >= 0, xi_dot > 0): the axes and the
  * symmetry map every format has, then the format's part. All arrays are row-major;
- * generated headers fill this in, firmware never needs to. */
+ * generated headers fill this in, firmware never needs to. A vehicle that is not its
+ * own mirror image (centre of mass off its plane of symmetry, unequal motors) has two
+ * halves: this table for xi_dot > 0 and `reverse` for xi_dot < 0. */
 typedef struct gs_table {
     uint32_t format;            /* GS_FORMAT_DENSE or GS_FORMAT_COMPACT: which part holds
                                  * the values */
@@ -171,7 +173,14 @@ typedef struct gs_table {
     const float *offsets;       /* [n_tilt][n_speed][2][2H+1] rad: Fourier coefficients of
                                  * the nominal's pitch and yaw offsets per circle; NULL:
                                  * none */
-    uint32_t crc32;             /* CRC-32 of the table data (docs/runtime.md) */
+    uint32_t crc32;             /* CRC-32 of the table data (docs/runtime.md); with a
+                                 * reverse half, its crc32 is the last word in */
+    const struct gs_table *reverse; /* the same table of the vehicle's mirror image
+                                 * (docs/symmetry.md): a query with xi_dot < 0 reads its
+                                 * values, attitude offsets and mask before the S2 output
+                                 * map (same axes, state map and format; its own reverse
+                                 * NULL); NULL: the vehicle is its own mirror image. Last,
+                                 * so that a one-direction initializer may end at crc32 */
 } gs_table;
 
 /*
@@ -251,9 +260,14 @@ uint32_t gs_table_crc32(const gs_table *table);
 
 /*
  * GS_OK when the structure is consistent and the CRC matches, else GS_BAD_TABLE
- * (GS_BAD_ARG for NULL). Run once at boot: it reads every byte of the table. A NaN or
- * infinite vehicle constant, a non-increasing axis, a state map that is not a signed
- * involution and a compact series outside coef are GS_BAD_TABLE.
+ * (GS_BAD_ARG for NULL). Run once at boot: it reads every byte of the table (and of its
+ * reverse half). A NaN or infinite vehicle constant, a non-increasing axis, a state map
+ * that is not a signed involution and a compact series outside coef are GS_BAD_TABLE.
+ * With a reverse half (table->reverse != NULL) each half is checked so, against its own
+ * CRC, and the pair is GS_BAD_TABLE unless reverse->reverse is NULL and both halves have
+ * the same format, n_tilt, n_speed, n_xi and n_state, bit-identical xi_dot, tilt and
+ * xi_scale and the same state map (state_sign bits, state_perm). No recursion: the
+ * reverse half's own reverse is never followed.
  *
  * @param table  the table
  * @return       GS_OK, GS_BAD_TABLE or GS_BAD_ARG

@@ -1,5 +1,5 @@
 /* gains at tilt 0 (${tilt0_note}): [speed][xi][input][state] */
-static const float ${name}_K_tilt0[${NAME}_N_SPEED][${NAME}_N_XI_TILT0][4][${NAME}_N_STATE] = {
+static const float ${name}_K_tilt0[${NAME}_N_SPEED][${N_XI_TILT0}][4][${NAME}_N_STATE] = {
 ${K_tilt0}
 };
 
