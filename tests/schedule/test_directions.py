@@ -334,13 +334,15 @@ def test_the_midpoint_check_covers_the_reversed_circles(asymmetric):
 
 
 def test_inspect_says_the_table_holds_both_directions(asymmetric, tmp_path):
-    """``inspect`` of a two-direction table says so in one line (the study without the
-    flash footprint, which needs the C header); a symmetric table's lines do not."""
+    """``gainsched inspect`` of a two-direction table says so in one line (its flash
+    footprint compiled with both halves); a symmetric table's lines do not."""
     from gainsched.studies import inspect
 
     _, _, data, _ = asymmetric
     (tmp_path / "asym.h5").write_bytes(data)
-    lines = inspect(tmp_path / "asym.h5", code_size=False).lines()
+    res = CliRunner().invoke(cli, ["inspect", str(tmp_path / "asym.h5")])
+    assert res.exit_code == 0, res.output
+    lines = res.output.splitlines()
     assert sum("both flight directions" in line for line in lines) == 1, lines
     assert not any("both flight directions" in line
                    for line in inspect(PAPER_H5, code_size=False).lines())
