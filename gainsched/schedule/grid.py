@@ -44,7 +44,8 @@ from .offsets import HARMONICS
 from .path import circle_path, period
 from .trim import TrimError, solve_circles
 
-__all__ = ["CircleSolution", "solve_circle", "solve_speed", "build_grid", "GridResult",
+__all__ = ["CircleSolution", "solve_circle", "solve_speed", "solve_speed_and_image",
+           "build_grid", "GridResult",
            "bound_price", "grid_from_solutions",
            "check_gain_cap",
            "steps_per_period",
@@ -611,11 +612,11 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
     image = mirror_config(config)
     args = [(config, float(v), tilts, extra, invariant) for v in speeds]
     if image is not None:  # each speed's job solves the vehicle and its mirror image
-        args = [(image, *a) for a in args]
+        args = [(*a, image) for a in args]
     sols = []
     with blas_single_thread():
         for s in run_jobs(args, n_jobs, backend,
-                          solve_speed if image is None else _solve_speed_and_image):
+                          solve_speed if image is None else solve_speed_and_image):
             sols.append(s)
             if progress is not None:
                 progress(1)
@@ -630,9 +631,10 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
     return grid
 
 
-def _solve_speed_and_image(image, config, speed, tilts, effects=(), dare_tilt0=True):
-    """One job of a build whose vehicle is not its own mirror image: :func:`solve_speed`
-    of ``config`` and of its mirror image ``image`` (:func:`mirror_config`)."""
+def solve_speed_and_image(config, speed, tilts, effects, dare_tilt0, image):
+    """One job of a build whose vehicle is not its own mirror image (:func:`build_grid`,
+    the automatic grid's refinement): :func:`solve_speed` of ``config`` and of its mirror
+    image ``image`` (:func:`mirror_config`), a pair."""
     return (solve_speed(config, speed, tilts, effects, dare_tilt0),
             solve_speed(image, speed, tilts, effects, dare_tilt0))
 

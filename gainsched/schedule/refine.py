@@ -73,6 +73,7 @@ from .grid import (
     level_circle_invariant,
     mirror_config,
     solve_speed,
+    solve_speed_and_image,
 )
 from .jobs import run_jobs
 
@@ -218,8 +219,8 @@ class _Refiner:
                  self.invariant) for v, ts in todo.items()]
         if self.image_config is not None:
             args = [(*a, self.image_config[0]) for a in args]
-        for (_, v, *_), sol in self._run(solve_speed if self.image is None else _with_image,
-                                         args):
+        job = solve_speed if self.image is None else solve_speed_and_image
+        for (_, v, *_), sol in self._run(job, args):
             own, img = (sol, None) if self.image is None else sol
             self.meta[v] = (own.steps, own.dt)
             for i, a in enumerate(todo[v]):
@@ -547,13 +548,6 @@ def refine_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridChoice:
                          "a range {min, max, max_count}; a list grid is built by build_grid")
     check_effect_symmetries(config)  # the refiner solves both halves, as build_grid
     return _Refiner(config, n_jobs, progress, backend).run()
-
-
-def _with_image(config, speed, tilts, effects, dare_tilt0, image):
-    """One job of a vehicle that is not its own mirror image: :func:`solve_speed` of
-    ``config`` and of its image."""
-    return (solve_speed(config, speed, tilts, effects, dare_tilt0),
-            solve_speed(image, speed, tilts, effects, dare_tilt0))
 
 
 def _centres_with_image(config2, speed, tilts, corners, effects, dare_tilt0, image2,
