@@ -18,6 +18,7 @@ import numpy as np
 
 from ..errors import GainschedWarning, InputError
 from ..publish import publish
+from ..schedule.grid import check_effect_symmetries, mirror_config
 from ..schedule.tables import config_from_table, table_bytes, table_from_bytes
 from .cfiles import c_files
 from .compact import CompactData, CompactInterpolator, compact_data
@@ -25,8 +26,8 @@ from .controller import controller_params
 from .host.check import MidpointCheck, midpoint_check
 from .runtime import RuntimeData, runtime_data
 
-__all__ = ["DEFAULT_FLASH_BYTES", "OutputSet", "output_set", "output_files", "firmware_form",
-           "certificate_lines", "table_config", "write_outputs"]
+__all__ = ["DEFAULT_FLASH_BYTES", "OutputSet", "output_set", "check_outputs", "output_files",
+           "firmware_form", "certificate_lines", "table_config", "write_outputs"]
 
 
 #: the flash budget of a table's data when the config states none
@@ -179,6 +180,20 @@ def certificate_lines(config, cert: MidpointCheck) -> list[str]:
                    f"{math.degrees(worst[1]):g} deg; slowest mode {tau(slow[0], slow[2]):.3g} s "
                    f"(direct {tau(slow[0], slow[3]):.3g} s)")
     return out
+
+
+def check_outputs(config) -> None:
+    """Refuse, before any work, a config whose build outputs cannot be written: an effect
+    no table holds (:func:`~gainsched.schedule.grid.check_effect_symmetries`: a wind,
+    flight time) and the compact firmware format for a vehicle that is not its own mirror
+    image (its table holds both flight directions, the compact form one;
+    docs/symmetry.md). Raises InputError naming the config and the key; the check of
+    ``gainsched build`` and of the rebuilds of ``improve`` and ``diagnose --apply``."""
+    check_effect_symmetries(config)
+    if config.firmware.format == "compact" and mirror_config(config) is not None:
+        raise InputError(config.source, "firmware.format",
+                         "\"compact\" holds one flight direction; this vehicle is not its own "
+                         "mirror image, its table holds both (docs/symmetry.md): use \"dense\"")
 
 
 def output_set(config, grid, out_dir=".", progress=None, grid_auto=None) -> OutputSet:

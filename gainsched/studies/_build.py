@@ -148,18 +148,13 @@ def build(config, out_dir="tables", *, jobs: int = -1, backend: str = "local",
     ...     print(b.table.name, b.grid.reasons.shape, len(b.c_files))
     paper.h5 (2, 2, 8) 7
     """
-    from ..errors import InputError
+    from ..firmware.outputs import check_outputs
     from ..publish import check_out_dir, recover
     from ..schedule.distributed import check_options
-    from ..schedule.grid import check_effect_symmetries, mirror_config
 
     check_options(backend, scheduler)
     cfg = config_of(config)
-    check_effect_symmetries(cfg)  # what no table, or the firmware's, holds: before any work
-    if cfg.firmware.format == "compact" and mirror_config(cfg) is not None:
-        raise InputError(cfg.source, "firmware.format",
-                         "\"compact\" holds one flight direction; this vehicle is not its own "
-                         "mirror image, its table holds both (docs/symmetry.md): use \"dense\"")
+    check_outputs(cfg)  # what no table, or the firmware's, holds: before any work
     out_dir = Path(out_dir)
     check_out_dir(out_dir, names=output_names(cfg))  # a bad folder fails now, not after
     recover(out_dir)  # finish or clean up after a killed earlier run

@@ -237,12 +237,12 @@ def _rebuild_and_fly(cfg, old_table, old_path, new, stage, out_dir, duration, jo
     """The rebuild of the tables from the improved config ``new`` into ``stage/tables`` and
     the flights old against new, each a step (:func:`_step`); what each gave (or why it
     did not) into ``done``, the build's lines to ``say``."""
-    from ..schedule.grid import check_effect_symmetries
+    from ..firmware.outputs import check_outputs
     from ..schedule.tables import load_table
     from ..sim.oldnew import N_FLIGHTS, fly_old_new
 
     try:
-        check_effect_symmetries(new)
+        check_outputs(new)
     except InputError as held:
         done["refusal"] = f"no table can hold {held.where}: {held.message}"
         return

@@ -225,8 +225,8 @@ def _apply(d, base, new_config: Path, logs, channel_map, trust, say):
     from ..analysis.reports import before_after_lines
     from ..config import config_from_text
     from ..errors import InputError
+    from ..firmware.outputs import check_outputs
     from ..publish import write_atomic
-    from ..schedule.grid import check_effect_symmetries
 
     text = apply_diagnosis(d)
     if text is None:
@@ -236,7 +236,7 @@ def _apply(d, base, new_config: Path, logs, channel_map, trust, say):
     write_atomic(new_config, text.encode(), where="-o")
     new_cfg = config_from_text(text, str(new_config))
     try:  # the build's own check: a wind, flight time, unequal motors
-        check_effect_symmetries(new_cfg)
+        check_outputs(new_cfg)
     except InputError as held:
         say([f"wrote {new_config} ({what}); no table can hold {held.where}: {held.message}"])
     else:

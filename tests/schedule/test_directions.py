@@ -392,3 +392,16 @@ def test_the_c_controller_flies_reversed_circles_as_the_python_reference(asymmet
     err = np.abs(r_c.z[:, :2] - r_c.z_d[:, :2]).max(axis=0)
     err_one = np.abs(r_one.z[:, :2] - r_one.z_d[:, :2]).max(axis=0)
     assert np.all(err_one > 5 * err), (err_one, err)
+
+
+def test_the_outputs_check_refuses_a_compact_two_direction_table_before_any_work():
+    """``check_outputs``, which ``gainsched build`` and the rebuilds of ``improve`` and
+    ``diagnose --apply`` run first: the compact format of a vehicle that is not its own
+    mirror image is refused naming firmware.format; the dense one, and the compact one of
+    a symmetric vehicle, pass."""
+    from gainsched.firmware.outputs import check_outputs
+
+    with pytest.raises(InputError, match=r"^small.toml: firmware.format: \"compact\" holds one"):
+        check_outputs(small_config(firmware__format="compact", **ASYMMETRY))
+    check_outputs(small_config(**ASYMMETRY))
+    check_outputs(small_config(firmware__format="compact"))
