@@ -21,6 +21,7 @@ from ..rotations import (
 )
 from ..schedule.nominal import circle_offsets, nominal_from_path
 from ..schedule.path import AzimuthPath
+from ..schedule.trim import TrimError
 from ._estimator import _Estimator
 from ._plant import _Plant
 from ._result import SimResult, _Record
@@ -95,8 +96,8 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     Raises
     ------
     InputError
-        No usable gains in the table where the flight starts (a firmware would refuse to
-        engage), or ``controller="firmware"`` on a C runtime without closed-form constants.
+        No usable gains where the flight starts or no nominal along it (no trim), or
+        ``controller="firmware"`` on a C runtime without closed-form constants.
     ValueError
         ``controller`` is neither ``"path"`` nor ``"firmware"``, or ``"firmware"`` with a
         scheduler that is no :class:`Scheduler` (a plain callable).
@@ -197,7 +198,13 @@ def _fly_path(design, scheduler, scenario, plant, P, dmodel, path, progress) -> 
     # a constant-speed circle flies the table's nominal, attitude offsets included
     offsets = (circle_offsets(dmodel, scenario.speed, alpha) if not scenario.maneuvers
                else None)
-    nom = nominal_from_path(dmodel, path, alpha, offsets=offsets)
+    try:
+        nom = nominal_from_path(dmodel, path, alpha, offsets=offsets)
+    except TrimError as e:  # the design model cannot fly the reference: refuse, one line
+        raise InputError(
+            scenario.origin, "maneuvers" if scenario.maneuvers else "speed",
+            f"the design model `{design.name}` has no nominal along this flight ({e}): "
+            "the flight may ask more than the vehicle can fly") from None
     z_d, u_d, tension_d = nom.z[:, :N_STATE], nom.u, nom.tension
     u_min, u_max = plant.vehicle.thrust_min, plant.vehicle.thrust_max
 

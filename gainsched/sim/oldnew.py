@@ -14,7 +14,10 @@ the gains through :func:`gainsched.sim.loop.table_scheduler` as ``gainsched camp
 looks them up) and is scored by :func:`gainsched.sim.loop.metrics` (what
 ``metrics.json`` holds). Flights outside either table's speeds or tilts are not flown
 (they would test the gains of the table's edge, not the table), and neither is a flight
-where a table has no usable gains at the start; both are listed with the reason.
+where a table has no usable gains at the start or the design model no nominal; a flight
+whose nominal under either model needs a motor thrust outside the vehicle's range over
+more than :data:`BEYOND_SHARE` of it is flown but not compared (both controllers
+saturate: it tells nothing of the tables). All are listed with the reason.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ from ..errors import InputError
 from .campaign import default_flights, outside_table
 from .loop import metrics, simulate, table_scheduler
 
-__all__ = ["METRICS", "N_FLIGHTS", "FlightPair", "OldNewFlights", "fly_old_new"]
+__all__ = ["BEYOND_SHARE", "METRICS", "N_FLIGHTS", "FlightPair", "OldNewFlights", "fly_old_new"]
 
 #: how many standard flights there are (each flown twice)
 N_FLIGHTS = len(default_flights())
@@ -43,6 +46,11 @@ METRICS = {
     "saturation_fraction": ("saturated", "%", 100.0),
     "slack_events": ("slack", "", 1.0),
 }
+#: the share of a flight over which a nominal may need a motor thrust beyond the vehicle's
+#: range and the flight still be compared: a few control steps (a motor lag's lead at the
+#: start of a manoeuvre) saturate briefly and leave the tracking to the gains; beyond it
+#: the errors are the saturation's, whichever table flies
+BEYOND_SHARE = 0.05
 #: the metrics whose all-flight figure is the RMS over the flights (the others: the largest
 #: magnitude, except slack events: their count)
 _RMS_OVER_FLIGHTS = ("rms_along_track_m", "rms_out_of_plane_m", "rms_speed_error_mps",
@@ -91,7 +99,7 @@ class OldNewFlights:
     flights : tuple of FlightPair
         The flights flown, in the order of the standard set.
     skipped : tuple of (str, str)
-        The flights not flown and why.
+        The flights not flown, or flown but not compared, and why.
     meta : dict
         What the report says about the tables (paths, config hashes).
     """
@@ -148,7 +156,7 @@ class OldNewFlights:
             out.append(f"  {label} {s[key]['old'] * f:.3g} -> {s[key]['new'] * f:.3g} {unit}"
                        + ("" if r is None else f" (x{r:.3g})"))
         if self.skipped:
-            out.append("  not flown: " + ", ".join(n for n, _ in self.skipped))
+            out.append("  not compared: " + ", ".join(n for n, _ in self.skipped))
         return out
 
     def _plant_text(self) -> str:
@@ -213,6 +221,19 @@ class OldNewFlights:
         ax.legend(fontsize=6, ncol=2)
 
 
+def _beyond_the_motors(side: str, design, res) -> str | None:
+    """Why a flight is not compared when ``design``'s nominal along it (the feed-forward
+    ``res.u_d`` of its flight ``res``) needs a motor thrust outside the design vehicle's
+    range over more than :data:`BEYOND_SHARE` of the flight; None otherwise."""
+    v = design.vehicle
+    out = np.any((res.u_d < v.thrust_min) | (res.u_d > v.thrust_max), axis=-1)
+    if out.mean() <= BEYOND_SHARE:
+        return None
+    return (f"beyond the vehicle under the {side} model: its nominal needs motor thrust "
+            f"outside {v.thrust_min:g}-{v.thrust_max:g} N over {100 * out.mean():.0f} % of "
+            "the flight (both tables saturate)")
+
+
 def fly_old_new(old_design, old_table, new_design, new_table, plant=None, *,
                 duration: float = 3.0, seed: int = 1, progress=None,
                 meta: dict | None = None) -> OldNewFlights:
@@ -260,14 +281,20 @@ def fly_old_new(old_design, old_table, new_design, new_table, plant=None, *,
             skipped.append((scn.name, "outside the tables' speeds or tilts"))
             step(2)
             continue
-        flown = []
+        flown, beyond = [], None
         try:
-            for design, sched in ((old_design, old_sched), (new_design, new_sched)):
-                flown.append(metrics(simulate(design, sched, scn, plant)))
+            for side, design, sched in (("old", old_design, old_sched),
+                                        ("new", new_design, new_sched)):
+                res = simulate(design, sched, scn, plant)
+                flown.append(metrics(res))
+                beyond = beyond or _beyond_the_motors(side, design, res)
                 step(1)
-        except InputError as e:  # no usable gains where the flight starts
+        except InputError as e:  # no usable gains where it starts, or no nominal along it
             skipped.append((scn.name, e.message))
             step(2 - len(flown))
+            continue
+        if beyond:  # a comparison of two saturating flights says nothing of the tables
+            skipped.append((scn.name, beyond))
             continue
         old, new = flown
         pairs.append(FlightPair(scn.name, {k: old[k] for k in METRICS},

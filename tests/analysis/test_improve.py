@@ -126,10 +126,20 @@ USER_VEHICLE = {"name": "user", "vehicle.mass": 0.8, "vehicle.arm_length": 0.15,
 #:   simulator flies in maximal coordinates). Measured (2 s flights): along track
 #:   0.037, out of the plane 0.019 (speed-up 21 -> 0.34 mm, braking 26 -> 0.77 mm); at
 #:   3 m/s both tables fly within the motion-capture noise (0.2 and 0.3 mm along track).
+#: - "cog_offset" (issue 53: the centre of mass 3 mm to the right, 2 mm below the frame
+#:   centre, HIDDEN). The tether's 44 N tension at 12 m/s on that lever needs a roll
+#:   torque beyond the 0.8 kg vehicle's 5 N motors: the improved model's braking needs
+#:   thrusts outside 0.1-5 N over 47 % of the flight (flown, not compared: both tables
+#:   saturate), and it has no nominal along the speed-up at all (its trim does not
+#:   converge; not flown); both say why. On the rest, measured: along track 0.18 ->
+#:   0.0003-0.0012 m per flight.
 #: (Flying the old table twice gives 1.0: the test fails.)
+#: Per case: (what improve applies, the largest ratio, the standard flights inside the
+#: tables' speeds that are not flown or not compared, each saying why)
 IMPROVE_CASES = {
-    "example": ("thrust_momentum + motor_lag", 0.05),
-    "lag_on_stiff_tether": ("motor_lag + tether_elasticity", 0.1),
+    "example": ("thrust_momentum + motor_lag", 0.05, ()),
+    "lag_on_stiff_tether": ("motor_lag + tether_elasticity", 0.1, ()),
+    "cog_offset": ("cog_offset", 0.05, ("speedup", "braking")),
 }
 #: a flight's RMS error (m) below which old and new are both at the motion-capture noise
 #: (0.5 mm, gainsched.sim.campaign.default_flights): "lower on every flight" above it
@@ -150,7 +160,7 @@ def test_rebuilt_tables_fly_the_hidden_effect_plant_better_than_the_old(tmp_path
     from gainsched.sim.campaign import HIDDEN, plant_config
     from gainsched.sim.oldnew import fly_old_new
 
-    applied, better_by = IMPROVE_CASES[hidden]
+    applied, better_by, not_flown = IMPROVE_CASES[hidden]
     monkeypatch.chdir(tmp_path)
     (tmp_path / "user.toml").write_text(small_config_text(**USER_VEHICLE))
     run = CliRunner().invoke
@@ -172,7 +182,11 @@ def test_rebuilt_tables_fly_the_hidden_effect_plant_better_than_the_old(tmp_path
     # the report's flights: on the improved model
     data = json.loads((tmp_path / "imp" / "report" / "improve.json").read_text())
     flown = [f["name"] for f in data["flights"]["flights"]]
-    assert flown == ["v3", "v9", "tilt20-v8", "speedup", "braking"], data["flights"]
+    assert flown == [n for n in ("v3", "v9", "tilt20-v8", "speedup", "braking")
+                     if n not in not_flown], data["flights"]
+    why = {f["name"]: f["reason"] for f in data["flights"]["not_flown"]}
+    assert all(why[n].startswith(("the design model `user` has no nominal along this flight",
+                                  "beyond the vehicle under the new model")) for n in not_flown)
     for key in ("rms_along_track_m", "rms_out_of_plane_m"):
         assert data["flights"]["summary"][key]["ratio"] <= better_by, data["flights"]["summary"]
 

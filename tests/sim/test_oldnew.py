@@ -5,7 +5,8 @@
   None where the old is 0;
 - the report's lines (Markdown, the command's) and JSON carry them;
 - flown on small tables: flights outside the tables are not flown and said so, each
-  flight is scored by simulate's metrics, and the same table twice gives ratios of 1.
+  flight is scored by simulate's metrics, and the same table twice gives ratios of 1;
+- a flight whose nominal needs a thrust beyond the motors is not compared, and says so.
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ def test_the_figures_over_all_flights():
     assert len(md) == 2 + 2 + 1 and md[-1].startswith("| **all** | 0.354 / 0.0354 | 0.1 |")
     assert fl.lines()[0].startswith("flights on the improved model `p`, old -> new table (2 ")
     assert "  RMS along-track 0.354 -> 0.0354 m (x0.1)" in fl.lines()
-    assert fl.lines()[-1] == "  not flown: c"
+    assert fl.lines()[-1] == "  not compared: c"
     assert OldNewFlights("p", False, 2.0, ()).summary() == {}
 
 
@@ -73,3 +74,26 @@ def test_the_same_table_twice_flies_the_same_inside_the_tables(small):
         assert f.old == f.new and f.ratio("rms_along_track_m") == 1.0
         assert 0 < f.old["rms_along_track_m"] < 0.01  # the design plant: tracked
     assert fl.plant == cfg.name and fl.plant_is_new and fl.duration == 1.0
+
+
+def test_a_flight_beyond_the_motors_is_not_compared(small):
+    """A new model under which a flight's nominal needs more thrust than the motors give
+    (here: the same vehicle with weaker motors) is flown but not compared: two saturating
+    flights say nothing of the tables; the flights inside the motors' range still are."""
+    from gainsched.config import config_from_text
+    from gainsched.sim.campaign import default_flights
+    from gainsched.sim.loop import simulate, table_scheduler
+
+    cfg, table = small
+    v9 = next(s for s in default_flights(1.0) if s.name == "v9")
+    need = simulate(cfg, table_scheduler(table), v9).u_d.max()
+    weak = config_from_text(cfg.text.replace(f"thrust_max = {cfg.vehicle.thrust_max:g}",
+                                             f"thrust_max = {need - 0.05:.3f}"), "weak")
+    assert weak.vehicle.thrust_max < need
+    fl = fly_old_new(cfg, table, weak, table, duration=1.0)
+    why = dict(fl.skipped)
+    assert why["v9"].startswith("beyond the vehicle under the new model: its nominal needs "
+                                f"motor thrust outside {weak.vehicle.thrust_min:g}-")
+    for f in fl.flights:  # what is compared stays inside the weaker motors
+        scn = next(s for s in default_flights(1.0) if s.name == f.name)
+        assert simulate(weak, table_scheduler(table), scn).u_d.max() <= weak.vehicle.thrust_max
