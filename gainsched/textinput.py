@@ -6,6 +6,8 @@ at once, :func:`load_toml`), so each gets the same front door, each fault as one
 
 - the size is bounded by the bytes actually read (at most ``limit + 1``), not by
   ``st_size``: a device such as ``/dev/zero`` says 0 and never ends;
+- a binary file a user may mix up with it (a ULog, a bag, an HDF5 table or log) is named
+  as what it is;
 - the bytes must be UTF-8 (a UTF-8 byte-order mark is dropped); UTF-16, UTF-32,
   NUL bytes and any other encoding are refused with the line (and column) of the
   first bad byte; newlines are normalised to ``\\n``;
@@ -32,6 +34,12 @@ MAX_TEXT_BYTES = 2**20
 #: room for anything written by hand and stays far below Python's recursion limit
 MAX_NESTING = 32
 
+#: the files a user may give where text belongs, by their first bytes: what each is
+_BINARY = ((b"ULog\x01\x12\x35", "a PX4 ULog flight log"),
+           (b"\x89MCAP", "an MCAP file (a ROS 2 bag)"),
+           (b"SQLite format 3\x00", "an SQLite database (a ROS 2 bag's .db3)"),
+           (b"\x89HDF\r\n\x1a\n", "an HDF5 file (a gain table or a flight log)"),
+           (b"PK\x03\x04", "a ZIP archive"), (b"\x7fELF", "a program (ELF)"))
 _UTF32_BOMS = (b"\xff\xfe\x00\x00", b"\x00\x00\xfe\xff")
 _UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
 
@@ -61,8 +69,9 @@ def read_text(path, *, what: str = "file", limit: int = MAX_TEXT_BYTES,
     Raises
     ------
     InputError
-        Naming the file: it cannot be read, is larger than ``limit`` or is not UTF-8
-        text (:func:`decode_text`).
+        Naming the file: it cannot be read, is a binary file of a known kind (a ULog, a
+        bag, HDF5: named), is larger than ``limit`` or is not UTF-8 text
+        (:func:`decode_text`).
     """
     p = Path(path)
     try:
@@ -70,6 +79,9 @@ def read_text(path, *, what: str = "file", limit: int = MAX_TEXT_BYTES,
             data = f.read(limit + 1)
     except OSError as exc:
         raise InputError(p, "", f"cannot read ({exc.strerror or exc}){hint}") from None
+    for magic, kind in _BINARY:  # a log given for a map: say so, not "too large"
+        if data.startswith(magic):
+            raise InputError(p, "", f"{kind}, not a {what} (a {what} is TOML text)")
     if len(data) > limit:
         advice = advice or f"a {what} may have at most {allowed or _size(limit)}"
         raise InputError(p, "", f"larger than {_size(limit)}: too large for a {what} "

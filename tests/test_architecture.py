@@ -215,6 +215,11 @@ def _studies_called(fn: ast.FunctionDef) -> list[str]:
             if isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id in names]
 
 
+#: the studies a command calls in a mode of its own, besides its one study: ``convert
+#: --list`` lists the topics (studies.topics) instead of converting
+MODES = {"convert": ("topics",)}
+
+
 def test_every_command_is_a_call_of_one_study():
     """Issue 54: the command line only parses, calls one public function of the workflow
     layer and prints; the commands not yet there are listed (a ratchet). No command
@@ -229,6 +234,7 @@ def test_every_command_is_a_call_of_one_study():
         if name in NOT_YET_STUDIES:
             assert not called, f"{name} calls {called}: take it off NOT_YET_STUDIES"
             continue
+        called = [c for c in called if c not in MODES.get(name, ())]  # another mode's
         assert len(called) == 1 and called[0] in studies.__all__, (name, called)
     assert NOT_YET_STUDIES <= set(commands), NOT_YET_STUDIES - set(commands)
     for path in sorted((PACKAGE / "cli").glob("_*.py")):

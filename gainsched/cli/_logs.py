@@ -189,8 +189,16 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
 
 @cli.command()
 @click.argument("log", type=FilePath(exists=True, path_type=Path))
+@click.argument("pose", type=FilePath(exists=True, path_type=Path), required=False)
 @click.option("-o", "--out", "out_path", type=FilePath(dir_okay=False, path_type=Path),
-              required=True, help="The converted log: OUT.csv or OUT.h5.")
+              help="The converted log: OUT.csv or OUT.h5 (required but with --list).")
+@click.option("--pose-map", "pose_map", type=Name(),
+              help="With POSE: the channel map of the motion capture's recording (position "
+                   "and attitude, their frames and anchor; time.pose_offset_s to give the "
+                   "clock offset instead of estimating it).")
+@click.option("--list", "listing", is_flag=True,
+              help="List the log's topics, their types, samples, rates and fields (what a "
+                   "channel map can name), and convert nothing.")
 @_MAP
 @click.option("--config", "config_path", type=FilePath(dir_okay=False, path_type=Path),
               help="A config whose vehicle.thrust_max is a motor's thrust at full command "
@@ -198,15 +206,29 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
                    "its vehicle is what the thrust and the load cell are checked against.")
 @_TRUST
 @user_errors
-def convert(log, out_path, map_path, config_path, trust):
+def convert(log, pose, out_path, pose_map, listing, map_path, config_path, trust):
     """Convert a PX4 ULog or a ROS 2 bag to the project's flight-log format
-    (docs/flight-log.md) for inspection, and say what was mapped to what."""
+    (docs/flight-log.md) for inspection, and say what was mapped to what; or list its
+    topics (--list) to write its channel map. With POSE, LOG is the flight controller's
+    log and POSE the motion capture's recording of the same flight on another clock:
+    the clocks are aligned from the motion both hold, and the offset reported."""
     from ..resources import config_path as shipped
     from ..studies import convert as run
+    from ..studies import topics
 
-    _not_an_input(out_path, "-o", LOG=log, **{"--config": config_path and
-                                               shipped(config_path), "--map": map_path})
+    if listing:
+        for line in topics(log).lines():
+            click.echo(line)
+        return
+    if out_path is None:
+        raise click.UsageError("Missing option '-o' / '--out' (or --list).")
+    if pose is None and pose_map is not None:
+        raise click.UsageError("--pose-map is the map of POSE, the second file: give it.")
+
+    _not_an_input(out_path, "-o", LOG=log, POSE=pose, **{
+        "--config": config_path and shipped(config_path), "--map": map_path,
+        "--pose-map": pose_map})
     done = run(log, out_path, channel_map=_channel_map(map_path), config=config_path,
-               trust=trust, reporter=TERMINAL)
+               trust=trust, pose=pose, pose_map=pose_map, reporter=TERMINAL)
     for line in done.lines():
         click.echo(line)

@@ -16,6 +16,8 @@ study and prints (gainsched/cli), so a script gets the same results and files.
   diagnose``);
 - :func:`convert`: a PX4 ULog or a ROS 2 bag in the project's log format (``gainsched
   convert``);
+- :func:`topics`: what a ULog or a bag holds, for writing its channel map (``gainsched
+  convert --list``);
 - :func:`improve`: the model loop, the rebuild and the flights old against new
   (``gainsched improve``);
 - :func:`plot`: a table's pictures and their summary (``gainsched plot``);
@@ -46,6 +48,7 @@ _MODULE_OF = {
     "sweep": "_sweep", "SweepRun": "_sweep",
     "compare": "_logs", "ComparisonReport": "_logs", "diagnose": "_logs",
     "DiagnosisReport": "_logs", "convert": "_logs", "Conversion": "_logs",
+    "topics": "_logs",
     "validate": "_circles", "Validation": "_circles", "nominal": "_circles",
     "NominalCircle": "_circles",
     "inspect": "_inspect", "Inspection": "_inspect", "check": "_inspect", "Check": "_inspect",

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ._report import SILENT, Reporter, config_of, on_bar, teller
 
-__all__ = ["ComparisonReport", "compare", "DiagnosisReport", "diagnose", "Conversion",
+__all__ = ["ComparisonReport", "compare", "DiagnosisReport", "diagnose", "Conversion", "topics",
            "convert"]
 
 
@@ -293,8 +293,8 @@ class Conversion:
                 f"alpha_c {alpha:.2f} deg, gamma_c {gamma:.2f} deg"]
 
 
-def convert(log, out_path, *, channel_map=None, config=None, trust=(),
-            reporter: Reporter = SILENT) -> Conversion:
+def convert(log, out_path, *, channel_map=None, config=None, trust=(), pose=None,
+            pose_map=None, reporter: Reporter = SILENT) -> Conversion:
     """Convert a PX4 ULog or a ROS 2 bag to the project's flight-log format and say what
     was mapped to what: what ``gainsched convert LOG -o OUT`` does (docs/flight-log.md).
 
@@ -313,6 +313,11 @@ def convert(log, out_path, *, channel_map=None, config=None, trust=(),
         checked against.
     trust : iterable of str
         Consistency checks to skip (docs/flight-log.md).
+    pose : path-like, optional
+        The motion capture's recording of the flight on a clock of its own (``log`` is
+        then the flight controller's); the clocks are aligned from the motion both hold.
+    pose_map : ChannelMap, str or path-like
+        With ``pose``: where it holds the position and the attitude (``--pose-map``).
     reporter : Reporter, optional
         Shows the reading's progress; default: nothing.
 
@@ -333,15 +338,47 @@ def convert(log, out_path, *, channel_map=None, config=None, trust=(),
     ...     print(str(e).split(":")[0])
     no-such.ulg
     """
-    from ..analysis.logs import convert_log, reporting
+    from ..analysis.logs import convert_log, log_format, reporting
     from ..publish import check_out_file
 
     cfg = None if config is None else config_of(config)
     thrust_max = cfg.vehicle.thrust_max if cfg is not None else None
     out_path = Path(out_path)
+    log_format(out_path, "-o")
     check_out_file(out_path, "-o")
     with reporter.bar(f"convert {Path(log).name}") as bar, reporting(on_bar(bar)):
         mapped, segs = convert_log(log, out_path, channel_map=channel_map,
-                                   thrust_max=thrust_max, config=cfg, trust=trust)
+                                   thrust_max=thrust_max, config=cfg, trust=trust, pose=pose,
+                                   pose_map=pose_map)
         bar.set_postfix_str("written")
     return Conversion(out_path, segs, list(mapped))
+
+
+def topics(log):
+    """What a PX4 ULog or a ROS 2 bag holds, for writing its channel map: what
+    ``gainsched convert --list LOG`` prints (docs/flight-log.md).
+
+    Parameters
+    ----------
+    log : path-like
+        The ULog, a bag's ``.mcap`` or ``.db3``, or a rosbag2 folder.
+
+    Returns
+    -------
+    LogListing
+        Per topic its type, samples, rate and the fields a map can name;
+        :meth:`~gainsched.analysis.logs.LogListing.lines` is what the command prints.
+
+    Examples
+    --------
+    A text file is no log to list:
+
+    >>> try:
+    ...     gs.studies.topics("flight.csv")
+    ... except gs.InputError as e:
+    ...     print(str(e))
+    flight.csv: --list reads a PX4 ULog (.ulg) or a ROS 2 bag (.mcap, .db3 or a rosbag2 folder)
+    """
+    from ..analysis.logs import list_topics
+
+    return list_topics(log)

@@ -301,6 +301,9 @@ def test_cli_convert_writes_the_log_and_says_what_it_mapped(paper_config, flight
         r = CliRunner().invoke(cli, ["convert", *args])
         assert r.exit_code == 2 and key in r.output and "Traceback" not in r.output, r.output
         assert len(r.output.strip().splitlines()) == 1
+    r = CliRunner().invoke(cli, ["convert", str(ulg), "-o", str(tmp_path / "f.txt")])
+    assert r.output.strip().endswith("f.txt: -o: unknown log format (.txt): use .csv, .h5 or "
+                                     ".hdf5"), r.output  # the option named (issue 55)
     assert not (tmp_path / "g.csv").exists() and not (tmp_path / "f.txt").exists()
 
 
@@ -823,8 +826,12 @@ def test_cli_convert_shows_progress_on_a_terminal_only(ulog_file, tmp_path, monk
     from support import on_terminal
 
     monkeypatch.setenv("GAINSCHED_LOG_CACHE", "0")
+    mp = tmp_path / "mine.toml"  # the anchor where the flight's is (else off the sphere)
+    mp.write_text(set_values(open(load_channel_map("px4").source).read(),
+                             {"frames.anchor_m": ANCHOR_NED.tolist()}))
     args = lambda i: [sys.executable, "-m", "gainsched", *(["--quiet"] if i == 3 else []),  # noqa: E731
-                      "convert", str(ulog_file), "-o", f"out{i}.csv", "--config", "paper"]
+                      "convert", str(ulog_file), "-o", f"out{i}.csv", "--config", "paper",
+                      "--map", str(mp)]
     code, shown = on_terminal(args(1), tmp_path)
     assert code == 0 and re.search(r"convert flight\.ulg: 100%\|.*\| ([\d.]+[kM])/\1 "
                                    r"\[.*B/s, written\]", shown), shown
@@ -832,3 +839,174 @@ def test_cli_convert_shows_progress_on_a_terminal_only(ulog_file, tmp_path, monk
     assert piped.returncode == 0 and piped.stderr == "", piped.stderr
     code, shown = on_terminal(args(3), tmp_path)
     assert code == 0 and shown == "", shown
+
+
+# --------------------------------------------------------------------------- what a lab gives
+# issue 55: the files a new user gives as they are, and files made to hurt
+
+
+def test_a_ulog_that_declares_more_than_a_message_can_carry_is_refused_unparsed(
+        tmp_path, monkeypatch):
+    """148 bytes whose formats declare a topic of 65535 x 65535 bytes (pyulog builds it
+    field by field and never answers): refused in one line naming the format, before
+    pyulog sees the file."""
+    import struct
+
+    import pyulog
+
+    def msg(kind, payload):
+        return struct.pack("<HB", len(payload), ord(kind)) + payload
+
+    forged = (b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0) + msg("B", bytes(40))
+              + msg("F", b"inner:uint8_t[65535] a;")
+              + msg("F", b"big:uint64_t timestamp;inner[65535] b;")
+              + msg("A", struct.pack("<BH", 0, 1) + b"big") + msg("D", bytes(18)))
+    ulg = tmp_path / "forged.ulg"
+    ulg.write_bytes(forged)
+
+    def never(*a, **k):
+        raise AssertionError("pyulog parsed a file the scan refuses")
+
+    monkeypatch.setattr(pyulog, "ULog", never)
+    with pytest.raises(InputError, match=r"forged.ulg: format inner: declares more than 65,533 "
+                                         r"bytes per sample, more than a ULog message can"):
+        read_log(ulg, channel_map=px4_map(), thrust_max=3.5)
+    ulg.write_bytes(forged.replace(b"uint8_t[65535]", b"uint8_t[65533]"))  # inner fits,
+    with pytest.raises(InputError, match=r"format big: declares more than 65,533"):  # big not
+        read_log(ulg, channel_map=px4_map(), thrust_max=3.5)
+
+
+def test_an_honest_ulog_passes_the_scan(paper_config, flight, tmp_path):
+    """The scan reads the formats pyulog's writer wrote, with their sizes, and lets the
+    file through."""
+    from gainsched.analysis.logs._ulogscan import check_ulog_formats, ulog_formats
+
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max)
+    ulg = tmp_path / "f.ulg"
+    write_ulog(ulg, topics, params)
+    formats = ulog_formats(ulg)
+    assert set(formats) == set(topics)
+    assert ("float", "q", 4) in formats["vehicle_attitude"]
+    check_ulog_formats(ulg)
+
+
+def test_a_log_given_where_text_belongs_is_named_as_what_it_is(paper_config, flight,
+                                                                 tmp_path):
+    """A ULog given as the channel map, a gain table as the config: each named as what
+    it is (not "UTF-16 text" or "larger than 1 MiB"), one line, exit 2."""
+    from click.testing import CliRunner
+
+    from gainsched.cli import cli
+
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max)
+    ulg = tmp_path / "f.ulg"
+    write_ulog(ulg, topics, params)
+    h5 = tmp_path / "t.h5"
+    import h5py
+    with h5py.File(h5, "w") as f:
+        f["x"] = np.zeros(3)
+    for args, expect in (
+            (["convert", str(ulg), "-o", str(tmp_path / "o.csv"), "--map", str(ulg)],
+             f"{ulg}: a PX4 ULog flight log, not a channel map (a channel map is TOML text)"),
+            (["validate", str(h5)],
+             f"{h5}: an HDF5 file (a gain table or a flight log), not a config (a config is "
+             "TOML text)")):
+        r = CliRunner().invoke(cli, args)
+        assert r.exit_code == 2 and r.output.strip() == f"gainsched: error: {expect}", r.output
+
+
+def test_a_bag_folder_without_its_metadata_says_what_to_give(flight, tmp_path):
+    """A folder of MCAP files without rosbag2's metadata.yaml: the refusal names the file
+    to give instead, and that file alone reads; a folder of neither says so."""
+    bag = tmp_path / "bag"
+    write_bag(bag, ros2_messages(flight, ros_types()))
+    (bag / "metadata.yaml").unlink()
+    (mcap,) = bag.glob("*.mcap")
+    with pytest.raises(InputError, match=rf"^{bag}: a folder of bag files without the rosbag2 "
+                                         rf"metadata.yaml: give the file itself \({mcap}\)"):
+        read_log(bag, channel_map=ros2_map())
+    (log,) = read_log(mcap, channel_map=ros2_map())
+    assert log.t.size > 100
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match=r"empty: a folder, not a log"):
+        read_log(tmp_path / "empty", channel_map=ros2_map())
+
+
+def test_convert_list_gives_each_topic_its_type_rate_and_fields(paper_config, flight,
+                                                                 tmp_path):
+    """``convert --list``: a ULog's topics with their samples, rates (the writer's: pose
+    100 Hz, attitude 250 Hz, motors 400 Hz) and fields as a map names them; a bag's with
+    the message type and the numeric field paths; no -o needed, and none given without
+    --list is one line."""
+    from click.testing import CliRunner
+
+    from gainsched.analysis.logs import list_topics
+    from gainsched.cli import cli
+
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max)
+    ulg = tmp_path / "f.ulg"
+    write_ulog(ulg, topics, params)
+    listing = list_topics(ulg)
+    by = {t.name: t for t in listing.topics}
+    assert set(by) == set(topics)
+    for name, rate in (("vehicle_local_position", 100.0), ("vehicle_attitude", 250.0),
+                       ("actuator_motors", 400.0)):
+        assert by[name].rate_hz == pytest.approx(rate, rel=1e-3), name
+        assert by[name].samples == topics[name]["timestamp"].size
+    assert by["vehicle_attitude"].fields == ("q[0..3]",)
+    assert by["actuator_motors"].fields == ("control[0..11]",)
+    assert by["vehicle_local_position"].fields == ("x", "y", "z")
+    r = CliRunner().invoke(cli, ["convert", str(ulg), "--list"])
+    assert r.exit_code == 0 and r.output.splitlines() == listing.lines(), r.output
+    assert r.output.splitlines()[0] == f"{ulg}: PX4 ULog, 6 topics over 2.5 s"
+
+    bag = tmp_path / "bag"
+    write_bag(bag, ros2_messages(flight, ros_types()))
+    by = {t.name: t for t in list_topics(bag).topics}
+    assert by["/mocap/pose"].kind == "geometry_msgs/msg/PoseStamped"
+    assert by["/mocap/pose"].rate_hz == pytest.approx(100.0, rel=1e-3)
+    assert "pose.position.x" in by["/mocap/pose"].fields
+    assert "angular_velocity.z" in by["/imu"].fields
+    assert "orientation_covariance[0..8]" in by["/imu"].fields
+    r = CliRunner().invoke(cli, ["convert", str(ulg)])
+    assert r.exit_code == 2 and "Missing option '-o'" in r.output
+    assert len(r.output.strip().splitlines()) == 1
+
+
+def test_rc_values_mapped_as_thrust_name_their_topic_and_look_like_pwm(paper_config, flight,
+                                                                        tmp_path):
+    """Pulse widths (1000-2000 us: RC sticks, PWM outputs) mapped as newtons: the refusal
+    names the topic the value came from (not the pose topic whose samples number the
+    rows) and says the values look like PWM."""
+    topics, params = px4_topics(flight, paper_config.vehicle.thrust_max, legacy=True)
+    ulg = tmp_path / "rc.ulg"
+    write_ulog(ulg, topics, params)
+    cmap = px4_map("px4_legacy", **{"motors.unit": "N"})
+    with pytest.raises(InputError, match=r"column T\d \(from topic actuator_outputs\), "
+                                         r"vehicle_local_position sample \d+: 1\d\d\d\.\d+ N "
+                                         r"is not plausible .*looks like a PWM pulse width in "
+                                         r"microseconds"):
+        read_log(ulg, channel_map=cmap)
+
+
+def test_a_log_off_the_tethers_sphere_is_refused(paper_config, flight, tmp_path):
+    """Positions 1.6x as far from the anchor as the tether holds the vehicle (an anchor
+    elsewhere, motion capture of a vehicle that is not tethered): one line naming the
+    check, the distances and the tether; ``--trust radius`` lets it through to the
+    other checks."""
+    log = log_from_result(flight, rate_hz=100.0)
+    cols = dict(log.columns())
+    for c in "xyz":
+        cols[c] = 1.6 * cols[c]
+    csv = tmp_path / "far.csv"
+    write_log(csv, cols, log.meta)
+    r = paper_config.tether.length + paper_config.tether.attachment_offset
+    with pytest.raises(InputError, match=rf"far.csv: columns x, y, z: the positions are "
+                                         rf"{1.6 * r:.3g} m from the anchor .* where the tether "
+                                         rf"holds the vehicle {r:g} m from it .*--trust radius"):
+        read_log(csv, config=paper_config)
+    try:
+        read_log(csv, config=paper_config, trust=("radius",))
+    except InputError as e:  # another check may see the scaled motion: not this one
+        assert "radius" not in str(e) and "from the anchor" not in str(e)
+    (same,) = read_log(csv)  # without a config: no tether to hold it to

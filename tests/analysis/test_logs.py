@@ -481,6 +481,34 @@ def test_short_segment_dropped_with_warning(tmp_path):
     assert len(logs) == 1 and len(logs[0]) == 70 and logs[0].n_segments == 2
 
 
+def test_many_gaps_are_one_line(tmp_path):
+    """A day's log with many dropouts (issue 55: 78 warnings, one per gap): up to 3 are
+    warned of one by one, more in one line with their count, lengths and the first; the
+    segments too short to keep likewise."""
+    cols = _columns(n=410)
+    cols["t"] = cols["t"].copy()
+    for k in range(40, 401, 40):  # 10 gaps of 0.05 s: 10 pieces of 40 samples and one of
+        cols["t"][k:] += 0.05  # 10, too short
+    path = tmp_path / "day.csv"
+    write_log(path, cols, META)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        logs = read_log(path)
+    msgs = [str(w.message) for w in rec if issubclass(w.category, LogWarning)]
+    assert len(msgs) == 2 and len(logs) == 10, msgs
+    assert "segment 10 has 10 samples" in msgs[1]
+    assert msgs[0].startswith(f"{path}: column t: 10 gaps of 0.055-0.055 s (median interval ")
+    assert msgs[0].endswith("log split there into 11 segments") and "the first at line " in msgs[0]
+    for k in range(0, 40, 5):  # 8 more short pieces: one line for those too
+        cols["t"][k + 1:] += 0.05
+    write_log(path, cols, META)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        read_log(path)
+    msgs = [str(w.message) for w in rec if issubclass(w.category, LogWarning)]
+    assert len(msgs) == 2 and msgs[1].endswith("samples in all; dropped"), msgs
+
+
 def test_all_segments_too_short_is_an_error(tmp_path):
     cols = _columns(n=50)
     cols["t"] = cols["t"].copy()

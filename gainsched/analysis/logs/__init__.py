@@ -68,6 +68,10 @@ bottom of their imports (a module imports only from those below it):
 - ``_write``: :func:`write_log`, :func:`log_bytes`;
 - ``_files``: the CSV and HDF5 files read to columns;
 - ``_cache``: a PX4 ULog or a ROS 2 bag converted once (the cache of converted logs);
+- ``_ulogscan``: what a ULog declares, checked before pyulog parses it;
+- ``_listing``: the topics of a ULog or a bag, for writing a map (``convert --list``);
+- ``_clocks``: the offset and drift between two files' clocks, from the motion both hold;
+- ``_pair``: a flight controller's log and a pose recorded apart made one log;
 - ``_foreign``: PX4 ULogs (pyulog) and ROS 2 bags (rosbags) to the flight-log columns
   (:data:`FOREIGN_FORMATS`, :func:`foreign_format`);
 - ``_channelmap``: where a ULog or a bag holds each channel (:class:`ChannelMap`,
@@ -89,8 +93,10 @@ from ._arrays import log_from_arrays
 from ._channelmap import ChannelMap, load_channel_map
 from ._checks import fitted_plane
 from ._consistency import CHECKS, RATIO_TOL, Figures, check_log, figures
+from ._files import log_format
 from ._flightlog import FlightLog, describe
 from ._foreign import FOREIGN_FORMATS, foreign_format
+from ._listing import LogListing, TopicInfo, list_topics
 from ._progress import reporting
 from ._read import LogWarning, convert_log, read_log
 from ._schema import (
@@ -129,6 +135,10 @@ __all__ = [
     "load_channel_map",
     "FOREIGN_FORMATS",
     "foreign_format",
+    "log_format",
+    "list_topics",
+    "LogListing",
+    "TopicInfo",
     "CHECKS",
     "RATIO_TOL",
     "Figures",

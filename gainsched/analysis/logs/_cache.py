@@ -93,7 +93,7 @@ def _load(entry: Path) -> ConvertedLog | None:
             head = json.loads(bytes(z["head"]).decode())
             columns = {k: z[f"c_{k}"] for k in head["columns"]}
             return ConvertedLog(columns, head["meta"], z["rows"], head["label"],
-                                tuple(head["report"]))
+                                tuple(head["report"]), head["sources"])
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
         return None
 
@@ -102,7 +102,8 @@ def _store(entry: Path, conv: ConvertedLog) -> None:
     from io import BytesIO
 
     head = json.dumps({"columns": list(conv.columns), "meta": conv.meta,
-                       "label": conv.label, "report": list(conv.report)}).encode()
+                       "label": conv.label, "report": list(conv.report),
+                       "sources": conv.sources}).encode()
     buf = BytesIO()
     np.savez(buf, head=np.frombuffer(head, dtype=np.uint8), rows=conv.rows,
              **{f"c_{k}": v for k, v in conv.columns.items()})

@@ -84,8 +84,9 @@ class ChannelMap:
         The tether anchor in the log's world frame.
     alpha_c_deg, gamma_c_deg : float or None, deg
         The circle plane; None: estimated from the flown positions (and said so).
-    pose_offset_s : float, s
-        Added to the pose channels' times to put them on the on-board clock.
+    pose_offset_s : float or None, s
+        Added to the pose channels' times to put them on the on-board clock; None: not
+        given (0 for one log; a pose recorded apart has its offset estimated).
     stamp : str
         ROS 2 bags: ``"header"`` (the messages' ``header.stamp``) or ``"log"`` (the time
         the bag recorded them); ULog: always the message's ``timestamp``.
@@ -100,8 +101,9 @@ class ChannelMap:
         Optional: the battery voltage (V, times ``scale``), the column ``vbat``; with
         ``optional = true`` a log without its topic converts without it (PX4's
         ``battery_status``, sensor_msgs/BatteryState).
-    motors : Channel
-        The commands of the log's motors (at least the four ``motor_order`` names).
+    motors : Channel or None
+        The commands of the log's motors (at least the four ``motor_order`` names); None
+        in the map of a pose recorded apart (``pose_only``).
     motor_order : tuple of int
         For the tool's motors 1..4: which of the ``motors`` fields (1-based).
     unit : str
@@ -115,6 +117,9 @@ class ChannelMap:
         0..1; ``"log"``: the value the ULog's parameters hold.
     pwm_min, pwm_max : float or str, us
         The PWM range (``"log"``: ``PWM_MAIN_MIN`` / ``PWM_MAIN_MAX`` of the ULog).
+    sensor_body : str or None
+        The body frame of the gyro and the accelerometer when it is not ``body`` (a pose
+        recorded apart, whose map gives the attitude's); None: ``body``.
     """
 
     name: str
@@ -124,14 +129,14 @@ class ChannelMap:
     anchor_m: np.ndarray
     alpha_c_deg: float | None
     gamma_c_deg: float | None
-    pose_offset_s: float
+    pose_offset_s: float | None
     stamp: str
     position: Channel
     attitude: Channel
     attitude_order: str
     gyro: Channel | None
     accelerometer: Channel | None
-    motors: Channel
+    motors: Channel | None
     motor_order: tuple[int, int, int, int]
     unit: str
     thrust_max_N: float | None
@@ -140,6 +145,12 @@ class ChannelMap:
     pwm_max: float | str
     tension: Channel | None
     battery: Channel | None = None
+    sensor_body: str | None = None
+
+    @property
+    def imu_body(self) -> str:
+        """The body frame of the gyro and the accelerometer."""
+        return self.sensor_body or self.body
 
     def channels(self) -> dict[str, Channel]:
         """The channels the map names, by channel name."""
@@ -158,8 +169,10 @@ def shipped_maps() -> tuple[str, ...]:
     return tuple(sorted(p.stem for p in _maps_folder().glob("*.toml")))
 
 
-def load_channel_map(path) -> ChannelMap:
-    """Load and validate a channel map: a TOML file, or the name of a shipped map.
+def load_channel_map(path, *, pose_only: bool = False) -> ChannelMap:
+    """Load and validate a channel map: a TOML file, or the name of a shipped map;
+    ``pose_only``: the map of a motion-capture recording apart from the flight
+    controller's log (position and attitude only, :func:`channel_map_from_text`).
 
     Raises
     ------
@@ -172,7 +185,7 @@ def load_channel_map(path) -> ChannelMap:
         p = _maps_folder() / f"{p}.toml"
     hint = f"; the shipped maps are {', '.join(shipped_maps())}" if not p.suffix else ""
     text = read_text(p, what="channel map", hint=hint)
-    return channel_map_from_text(text, str(p), default_name=p.stem)
+    return channel_map_from_text(text, str(p), default_name=p.stem, pose_only=pose_only)
 
 
 def _get(src, data: dict, section: str, key: str, kind, required=True, default=None):
@@ -244,9 +257,14 @@ def _channel(src, data: dict, name: str, n_fields: int | None, required: bool):
     return Channel(topic, tuple(fields), scale, optional)
 
 
-def channel_map_from_text(text: str, source: str = "<map>", default_name: str = "map"
-                          ) -> ChannelMap:
-    """Parse and validate channel-map TOML held in a string (see :func:`load_channel_map`)."""
+def channel_map_from_text(text: str, source: str = "<map>", default_name: str = "map", *,
+                          pose_only: bool = False) -> ChannelMap:
+    """Parse and validate channel-map TOML held in a string (see :func:`load_channel_map`).
+
+    ``pose_only``: a pose recorded apart (``gainsched convert FC_LOG POSE_LOG``): the map
+    names ``position`` and ``attitude`` (with its frames, anchor, circle and time) and
+    no channel of the flight controller's.
+    """
     data = parse_toml(text, source)
     for key in data:
         if key not in _SECTIONS:
@@ -266,10 +284,17 @@ def channel_map_from_text(text: str, source: str = "<map>", default_name: str = 
             for a in anchor)):
         raise InputError(source, "frames.anchor_m", f"must be 3 finite numbers (m), got "
                          f"{anchor!r}")
+    if pose_only:
+        for sec in ("gyro", "accelerometer", "motors", "tension", "battery"):
+            if sec in data:
+                raise InputError(source, sec, "a pose map names position and attitude only "
+                                 "(the flight controller's map, --map, names the rest)")
+        data = {**data, "motors": {"unit": "N"}}  # no motors: their defaults
     motors = data.get("motors")
-    mot = _channel(source, data, "motors", None, True)
-    order = motors.get("order", [1, 2, 3, 4])
-    if (not isinstance(order, list) or len(order) != 4 or sorted(order) != sorted(set(order))
+    mot = _channel(source, data, "motors", None, True) if not pose_only else None
+    order = motors.get("order", [1, 2, 3, 4]) if not pose_only else [1, 2, 3, 4]
+    if mot is not None and (
+            not isinstance(order, list) or len(order) != 4 or sorted(order) != sorted(set(order))
             or not all(isinstance(i, int) and not isinstance(i, bool) and
                        1 <= i <= len(mot.fields) for i in order)):
         raise InputError(source, "motors.order", f"must be 4 different field numbers "
@@ -298,7 +323,7 @@ def channel_map_from_text(text: str, source: str = "<map>", default_name: str = 
         anchor_m=np.array(anchor, dtype=float),
         alpha_c_deg=_number_or(source, circle, "circle", "alpha_c_deg", "estimate", None),
         gamma_c_deg=_number_or(source, circle, "circle", "gamma_c_deg", "estimate", None),
-        pose_offset_s=_get(source, time, "time", "pose_offset_s", float, False, 0.0),
+        pose_offset_s=_get(source, time, "time", "pose_offset_s", float, False, None),
         stamp=_choice(source, time, "time", "stamp", ("header", "log"), "header"),
         position=_channel(source, data, "position", 3, True),
         attitude=att,

@@ -25,6 +25,9 @@ from ._schema import (
     SCHEMA,
 )
 
+#: the pulse widths of an RC or PWM channel, us: a "thrust" in this range is one
+PWM_US = (800.0, 2200.0)
+
 
 def _check_meta(path, meta: dict[str, str]) -> None:
     for key in REQUIRED_META:
@@ -41,7 +44,8 @@ def _check_meta(path, meta: dict[str, str]) -> None:
             raise InputError(path, f"metadata {key}", f"must be a finite number, got {meta[key]!r}")
 
 
-def _check_values(path, cols: dict[str, np.ndarray], rows, label, deferred=None) -> None:
+def _check_values(path, cols: dict[str, np.ndarray], rows, label, deferred=None,
+                  sources=None) -> None:
     """The bad-data rules of the columns' values (module docstring of
     :mod:`gainsched.analysis.logs`), in this order: required columns present, groups of
     optional columns complete, required columns finite, every known column plausible,
@@ -51,8 +55,15 @@ def _check_values(path, cols: dict[str, np.ndarray], rows, label, deferred=None)
     (N,) the file position of each sample, ``label`` its kind (``"line"`` or
     ``"sample"``). With a list ``deferred``, the range error of a thrust column is
     appended to it instead of raised (the reader first asks whether the thrust is in
-    other units).
+    other units). ``sources``: per column of a converted log the topic it came from,
+    named in its errors (the rows are the position topic's samples).
     """
+    sources = sources or {}
+
+    def where(name: str, k: int) -> str:
+        src = f" (from topic {sources[name]})" if name in sources else ""
+        return f"column {name}{src}, {label} {rows[k]}"
+
     for name in REQUIRED_COLUMNS:
         if name not in cols:
             raise InputError(path, f"column {name}", "missing required column")
@@ -69,23 +80,17 @@ def _check_values(path, cols: dict[str, np.ndarray], rows, label, deferred=None)
         bad = np.flatnonzero(~np.isfinite(cols[name]))
         if bad.size:
             k = bad[0]
-            raise InputError(
-                path,
-                f"column {name}, {label} {rows[k]}",
-                f"{float(cols[name][k])!r} in a required column",
-            )
+            raise InputError(path, where(name, k),
+                             f"{float(cols[name][k])!r} in a required column")
     for name, (limit, unit) in PLAUSIBLE.items():
         if name in cols:
             with np.errstate(invalid="ignore"):
                 bad = np.flatnonzero(np.abs(cols[name]) > limit)  # NaN (optional) passes
             if bad.size:
                 k = bad[0]
-                err = InputError(
-                    path,
-                    f"column {name}, {label} {rows[k]}",
-                    f"{float(cols[name][k])!r} {unit} is not plausible (|{name}| <= {limit:g} "
-                    f"{unit})",
-                )
+                v = float(cols[name][k])
+                err = InputError(path, where(name, k), f"{v!r} {unit} is not plausible "
+                                 f"(|{name}| <= {limit:g} {unit})" + _pwm_hint(name, v))
                 if deferred is None or name[0] != "T" or not np.all(np.isfinite(cols[name])):
                     raise err
                 if not deferred:
@@ -97,12 +102,8 @@ def _check_values(path, cols: dict[str, np.ndarray], rows, label, deferred=None)
             if bad.size:
                 k = bad[0]
                 limit, unit = PLAUSIBLE[name]
-                raise InputError(
-                    path,
-                    f"column {name}, {label} {rows[k]}",
-                    f"{float(cols[name][k])!r} {unit} is not plausible (0 < {name} <= "
-                    f"{limit:g} {unit})",
-                )
+                raise InputError(path, where(name, k), f"{float(cols[name][k])!r} {unit} is "
+                                 f"not plausible (0 < {name} <= {limit:g} {unit})")
     t = cols["t"]
     dt = np.diff(t)
     bad = np.flatnonzero(dt <= 0)
@@ -114,6 +115,15 @@ def _check_values(path, cols: dict[str, np.ndarray], rows, label, deferred=None)
             f"time {float(t[k])!r} does not increase (previous sample, {label} {rows[k - 1]}: "
             f"{float(t[k - 1])!r})",
         )
+
+
+def _pwm_hint(name: str, value: float) -> str:
+    """For a thrust of 800-2200: it looks like a PWM pulse width in microseconds."""
+    if name[0] != "T" or not PWM_US[0] <= value <= PWM_US[1]:
+        return ""
+    return (f": it looks like a PWM pulse width in microseconds ({PWM_US[0]:g}-{PWM_US[1]:g}"
+            " us), not newtons: a channel map reads PWM with [motors] unit = \"pwm\" "
+            "(pwm_min, pwm_max)")
 
 
 def _unit_quaternions(path, cols: dict[str, np.ndarray], rows, label) -> np.ndarray:
@@ -145,14 +155,15 @@ def _unit_quaternions(path, cols: dict[str, np.ndarray], rows, label) -> np.ndar
     return q
 
 
-def _canonical(path, cols: dict[str, np.ndarray], rows, label, deferred=None):
+def _canonical(path, cols: dict[str, np.ndarray], rows, label, deferred=None, sources=None):
     """Check the numeric bad-data rules and build the arrays -> dict of arrays.
 
     ``cols`` holds float arrays by column name (all columns the same length). With a
     list ``deferred``, the range error of a thrust column is appended to it instead of
-    raised (the reader first asks whether the thrust is in other units).
+    raised (the reader first asks whether the thrust is in other units). ``sources``:
+    per column of a converted log the topic it came from.
     """
-    _check_values(path, cols, rows, label, deferred)
+    _check_values(path, cols, rows, label, deferred, sources)
     t = cols["t"]
     q = _unit_quaternions(path, cols, rows, label)
     out = {

@@ -39,6 +39,13 @@ ratio is far from 1, naming the file, the column and the likely cause:
 ``xi_ref``
     The reference azimuth (and its rate ``xi_dot_ref``) against the azimuth flown in
     the declared circle frame: their advances over the flight. Degrees read as 57.3x.
+``radius``
+    The distance of the positions from the anchor (the inertial origin) against the
+    config's tether, ``tether.length + attachment_offset``: the median over the log
+    within a factor 1.25 of it, and its 5-95 % spread within 25 % of it. A taut tether
+    holds the vehicle on its sphere to millimetres (the stretch of a real one is
+    0.3 mm); motion capture of a vehicle that is not tethered, or a map's anchor
+    metres off, is neither.
 
 The checks are a few vectorised passes over the arrays (no model evaluation per
 sample): a few milliseconds on a 1 kHz log of minutes. Each check runs only when its
@@ -67,7 +74,7 @@ __all__ = ["CHECKS", "RATIO_TOL", "QUAT_ALONG_MIN", "Figures", "figures", "check
            "thrust_units", "trusted"]
 
 #: the checks, by the name ``trust`` takes
-CHECKS = ("plane", "quaternion", "gyro", "thrust", "tension", "xi_ref")
+CHECKS = ("plane", "quaternion", "gyro", "thrust", "tension", "xi_ref", "radius")
 #: a ratio (gyro, thrust, tension, xi_ref) is accepted within [1 / RATIO_TOL, RATIO_TOL]:
 #: honest logs stay within 0.87-1.30 (the example flights and the campaigns of every
 #: hidden effect: momentum-theory thrust at 15 m/s is the largest), and the mistakes are
@@ -76,6 +83,11 @@ RATIO_TOL = 2.0
 #: the body x axis must point along the tether by at least this mean cosine (honest
 #: flights: 0.99 and more; a quaternion in the wrong order: about 0)
 QUAT_ALONG_MIN = 0.5
+#: the positions' median distance from the anchor must be within this factor of the
+#: tether's radius, and their 5-95 % spread within RADIUS_SPREAD of it (honest flights:
+#: within 0.1 % and 0.1 %; an anchor a metre off on a 2 m tether: 1.5x)
+RADIUS_TOL = 1.25
+RADIUS_SPREAD = 0.25
 #: the mean of z_B . n (declared plane normal) must be above this (honest: 0.79 and
 #: more; the normal upside down: about -0.9)
 PLANE_UP_MIN = 0.0
@@ -115,7 +127,9 @@ class Figures:
     (moving axes together), ``gyro_sign``: per axis p, q, r the correlation with the
     pose's rate (nan where the axis does not move); ``thrust_ratio``: commanded over
     needed thrust; ``tension_ratio``: load cell over the radial equation;
-    ``xi_ref_ratio``, ``xi_dot_ref_ratio``: reference over flown azimuth advance / rate.
+    ``xi_ref_ratio``, ``xi_dot_ref_ratio``: reference over flown azimuth advance / rate;
+    ``radius_m``: the positions' median distance from the anchor, m, and
+    ``radius_range_m`` their 5 and 95 % points.
     """
 
     plane_up: float = math.nan
@@ -126,6 +140,8 @@ class Figures:
     tension_ratio: float = math.nan
     xi_ref_ratio: float = math.nan
     xi_dot_ref_ratio: float = math.nan
+    radius_m: float = math.nan
+    radius_range_m: tuple[float, float] = (math.nan, math.nan)
 
 
 def trusted(meta: dict, trust=()) -> frozenset[str]:
@@ -232,6 +248,8 @@ def figures(t, p_I, q, T_cmd, optional: dict, meta: dict, *, mass: float | None 
     out["plane_up"] = float(np.mean(z_B @ normal))
 
     radius = np.linalg.norm(p[sel], axis=-1)
+    out["radius_m"] = float(np.median(radius))
+    out["radius_range_m"] = tuple(float(v) for v in np.percentile(radius, [5.0, 95.0]))
     far = radius > 0.5 * float(np.median(radius))
     if np.count_nonzero(far) >= 3:
         e = p[sel][far] / radius[far, None]
@@ -401,6 +419,8 @@ def check_log(path, t, p_I, q, T_cmd, optional: dict, meta: dict, *, config=None
         raise InputError(path, where, f"{message} (if the log is right: --trust {check}, "
                          "docs/flight-log.md)")
 
+    if "radius" not in skip and config is not None:  # first: off the sphere, all else fails
+        _check_radius(fig, config, fail)
     if "quaternion" not in skip and fig.x_along < QUAT_ALONG_MIN:
         where = "columns qw, qx, qy, qz"
         qa = np.asarray(q, float)
@@ -472,6 +492,18 @@ def check_log(path, t, p_I, q, T_cmd, optional: dict, meta: dict, *, config=None
                 fail("xi_ref", f"column {col}",
                      f"{what}: {_x(r)} the {flown} flown in the declared circle plane")
     return fig
+
+
+def _check_radius(fig: Figures, config, fail) -> None:
+    """The ``radius`` check: the positions on the sphere the config's tether holds."""
+    r = config.tether.length + config.tether.attachment_offset
+    lo, hi = fig.radius_range_m
+    if not (r / RADIUS_TOL <= fig.radius_m <= r * RADIUS_TOL) or hi - lo > RADIUS_SPREAD * r:
+        fail("radius", "columns x, y, z",
+             f"the positions are {fig.radius_m:.3g} m from the anchor (5-95 %: {lo:.3g}-"
+             f"{hi:.3g} m), where the tether holds the vehicle {r:g} m from it "
+             f"(tether.length + attachment_offset of {config.source}): not a tethered "
+             "flight of this vehicle, or the anchor (the origin) is elsewhere")
 
 
 def thrust_units(path, arrays: dict, optional: dict, meta: dict, *, config=None, trust=(),

@@ -30,14 +30,18 @@ def _check_file(path: Path) -> None:
         raise InputError(path, "", f"{kind}, not a log file: give a file")
 
 
-def _format(path) -> str:
+def log_format(path, where: str = "") -> str:
+    """The project's flight-log format a file name asks for, ``"csv"`` or ``"hdf5"``.
+
+    Raises
+    ------
+    InputError
+        Naming ``path`` and ``where`` (an option: ``"-o"``): an extension of neither.
+    """
     fmt = _EXTENSIONS.get(Path(path).suffix.lower())
     if fmt is None:
-        raise InputError(
-            path,
-            "",
-            f"unknown log format ({Path(path).suffix or 'no extension'}): use .csv, .h5 or .hdf5",
-        )
+        ext = Path(path).suffix or "no extension"
+        raise InputError(path, where, f"unknown log format ({ext}): use .csv, .h5 or .hdf5")
     return fmt
 
 
@@ -167,7 +171,7 @@ def _read_file(path: Path):
     if path.is_dir() and path.suffix.lower() not in _EXTENSIONS:
         raise InputError(path, "", "a folder, not a log: give a log file (.csv, .h5, .ulg) "
                          "or a ROS 2 bag folder (with its metadata.yaml)")
-    fmt = _format(path)
+    fmt = log_format(path)
     if fmt == "csv":
         meta, raw, rows, label = _read_csv(path)
     else:

@@ -38,6 +38,9 @@ interpolated; plausible values; the declared plane).
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
+import io
 import math
 import re
 from dataclasses import dataclass
@@ -49,6 +52,7 @@ from ...actuators import thrust_from_command
 from ...errors import InputError
 from ._channelmap import ChannelMap
 from ._progress import listener, report, watch_file
+from ._ulogscan import check_ulog_formats
 
 __all__ = ["Topic", "ConvertedLog", "FOREIGN_FORMATS", "foreign_format", "read_topics",
            "convert_topics"]
@@ -78,7 +82,8 @@ class ConvertedLog:
     ``alpha_c_deg`` and ``gamma_c_deg`` when the map says ``"estimate"``: the reader
     fits them to the positions); ``rows``: 1-based sample numbers of the position topic;
     ``label``: how a row is named in errors; ``report``: lines saying what was mapped to
-    what. The metadata name the source: ``source_format``, ``channel_map`` (its name)
+    what; ``sources``: per column the topic it came from, for errors. The metadata name
+    the source: ``source_format``, ``channel_map`` (its name)
     and ``motors_order`` (its ``motors.order``, ``"[3, 2, 4, 1]"``: the compare's motor
     order check, :func:`~gainsched.analysis.compare.check_motor_order`, names it).
     """
@@ -88,6 +93,7 @@ class ConvertedLog:
     rows: np.ndarray
     label: str
     report: tuple[str, ...]
+    sources: dict[str, str] = dataclasses.field(default_factory=dict)
 
 
 def foreign_format(path) -> str | None:
@@ -139,16 +145,7 @@ def _missing_field(path, topic, field, have) -> InputError:
 
 def _ulog_topics(path: Path, wanted: dict[str, set[str]], optional=frozenset()
                  ) -> tuple[dict[str, Topic], dict[str, float]]:
-    from pyulog import ULog
-
-    try:
-        if listener() is None:
-            ulog = ULog(str(path), message_name_filter_list=sorted(wanted))
-        else:  # the bytes parsed, watched on the open file
-            with open(path, "rb") as fh, watch_file(fh, path.stat().st_size, "read ULog"):
-                ulog = ULog(fh, message_name_filter_list=sorted(wanted))
-    except Exception as exc:  # pyulog raises several types for a damaged file
-        raise InputError(path, "", f"not a readable ULog ({type(exc).__name__}: {exc})") from None
+    ulog = open_ulog(path, sorted(wanted))
     have = {d.name: d for d in ulog.data_list if d.multi_id == 0}
     out = {}
     for topic, fields in wanted.items():
@@ -165,6 +162,29 @@ def _ulog_topics(path: Path, wanted: dict[str, set[str]], optional=frozenset()
     return out, {k: float(v) for k, v in ulog.initial_parameters.items()}
 
 
+def open_ulog(path: Path, topics=None):
+    """``pyulog.ULog`` of ``path`` (only ``topics``, default all), its declared formats
+    checked first (:func:`~gainsched.analysis.logs._ulogscan.check_ulog_formats`), what
+    pyulog prints about a damaged file kept off the terminal.
+
+    Raises
+    ------
+    InputError
+        The formats no real ULog can hold, or pyulog cannot read the file.
+    """
+    from pyulog import ULog
+
+    check_ulog_formats(path)
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            if listener() is None:
+                return ULog(str(path), message_name_filter_list=topics)
+            with open(path, "rb") as fh, watch_file(fh, path.stat().st_size, "read ULog"):
+                return ULog(fh, message_name_filter_list=topics)  # the bytes parsed, watched
+    except Exception as exc:  # pyulog raises several types for a damaged file
+        raise InputError(path, "", f"not a readable ULog ({type(exc).__name__}: {exc})") from None
+
+
 def _field_of(msg, path: str):
     v = msg
     for part in path.split("."):
@@ -176,20 +196,34 @@ def _field_of(msg, path: str):
     return float(v)
 
 
-def _bag_topics(path: Path, wanted: dict[str, set[str]], stamp: str,
-                optional=frozenset()) -> dict[str, Topic]:
+def open_bag(path: Path):
+    """An opened ``rosbags.highlevel.AnyReader`` of the bag ``path`` (its folder when
+    given its ``.mcap`` or ``.db3`` beside ``metadata.yaml``; the file alone otherwise),
+    the standard ROS 2 messages known for bags that do not embed their definitions
+    (SQLite). The caller closes it.
+
+    Raises
+    ------
+    InputError
+        rosbags cannot open it.
+    """
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
     bag = path.parent if path.is_file() and path.suffix in (".mcap", ".db3") and (
         path.parent / "metadata.yaml").is_file() else path
     try:
-        # the standard messages for bags that do not embed their definitions (SQLite)
         reader = AnyReader([bag], default_typestore=get_typestore(Stores.LATEST))
         reader.open()
     except Exception as exc:  # rosbags raises its own error types
         raise InputError(path, "", f"not a readable ROS 2 bag ({type(exc).__name__}: "
                          f"{exc})") from None
+    return reader
+
+
+def _bag_topics(path: Path, wanted: dict[str, set[str]], stamp: str,
+                optional=frozenset()) -> dict[str, Topic]:
+    reader = open_bag(path)
     try:
         have = {c.topic for c in reader.connections}
         wanted = {t: f for t, f in wanted.items() if t in have or t not in optional}
@@ -349,7 +383,21 @@ def convert_topics(path, topics: dict[str, Topic], params: dict[str, float],
         meta["alpha_c_deg"] = repr(float(cmap.alpha_c_deg))
         meta["gamma_c_deg"] = repr(float(cmap.gamma_c_deg))
         meta["plane_source"] = f"channel map {cmap.name}"
-    return ConvertedLog(cols, meta, rows, f"{cmap.position.topic} sample", tuple(report))
+    return ConvertedLog(cols, meta, rows, f"{cmap.position.topic} sample", tuple(report),
+                        _sources(cmap, cols))
+
+
+#: the columns each channel of a map gives
+_COLUMNS_OF = {"position": "xyz", "attitude": ("qw", "qx", "qy", "qz"), "gyro": "pqr",
+               "accelerometer": ("ax", "ay", "az"), "motors": ("T1", "T2", "T3", "T4"),
+               "tension": ("tension",), "battery": ("vbat",)}
+
+
+def _sources(cmap: ChannelMap, cols: dict) -> dict[str, str]:
+    """Column -> the topic it came from, for the columns not of the position's topic
+    (whose sample numbers the errors give)."""
+    return {c: ch.topic for name, ch in cmap.channels().items() for c in _COLUMNS_OF[name]
+            if c in cols and ch.topic != cmap.position.topic}
 
 
 def _pose(topics, cmap: ChannelMap, report: list) -> tuple:
@@ -361,7 +409,7 @@ def _pose(topics, cmap: ChannelMap, report: list) -> tuple:
 
     pos_ch, att_ch = cmap.position, cmap.attitude
     pos = topics[pos_ch.topic]
-    t = pos.t + cmap.pose_offset_s
+    t = pos.t + (cmap.pose_offset_s or 0.0)
     rows = np.arange(1, t.size + 1)
     p = np.stack([pos.fields[f] for f in pos_ch.fields], -1)
     att = topics[att_ch.topic]
@@ -371,7 +419,7 @@ def _pose(topics, cmap: ChannelMap, report: list) -> tuple:
     report.append(f"position: {pos_ch.topic} {', '.join(pos_ch.fields)} ({t.size} samples, "
                   f"{_rate(pos.t)}), {cmap.world} -> ENU at the anchor "
                   f"{cmap.anchor_m.tolist()} m")
-    t_att = att.t + cmap.pose_offset_s
+    t_att = att.t + (cmap.pose_offset_s or 0.0)
     if att_ch.topic == pos_ch.topic:
         R_wb = Rotation.from_quat(q_raw, scalar_first=True).as_matrix()
     else:
@@ -431,7 +479,7 @@ def _commanded(path, topics, cmap: ChannelMap, params, thrust_max, pose, report:
 def _add_imu(topics, cmap: ChannelMap, t, cols: dict, report: list) -> None:
     """The gyro (p, q, r) and accelerometer (ax, ay, az) columns the map names, in FLU,
     each the mean over a pose interval centred on each pose sample."""
-    C_b = _FRD_TO_FLU if cmap.body == "FRD" else np.eye(3)
+    C_b = _FRD_TO_FLU if cmap.imu_body == "FRD" else np.eye(3)
     for ch, names in ((cmap.gyro, ("p", "q", "r")), (cmap.accelerometer, ("ax", "ay", "az"))):
         if ch is None:
             continue
@@ -441,7 +489,7 @@ def _add_imu(topics, cmap: ChannelMap, t, cols: dict, report: list) -> None:
         cols.update({n: mean[:, j] for j, n in enumerate(names)})
         report.append(f"{'gyro' if names[0] == 'p' else 'accelerometer'}: {ch.topic} "
                       f"{', '.join(ch.fields)} ({_rate(src.t)}, the mean over a pose "
-                      f"interval centred on each pose sample), {cmap.body} -> FLU")
+                      f"interval centred on each pose sample), {cmap.imu_body} -> FLU")
 
 
 def _add_tension_battery(topics, cmap: ChannelMap, t, cols: dict, report: list) -> None:

@@ -13,7 +13,7 @@ import numpy as np
 from ...errors import GainschedWarning, InputError
 from ._checks import _canonical, _check_plane, fitted_plane
 from ._consistency import _plane_angles, check_log, thrust_units
-from ._files import _check_file, _format, _read_file
+from ._files import _check_file, _read_file, log_format
 from ._flightlog import FlightLog, _make, _readonly
 from ._schema import DEFAULT_MIN_SAMPLES, GAP_FACTOR
 from ._write import write_log
@@ -108,14 +108,16 @@ def read_log(
     foreign = _foreign(path, channel_map, thrust_max)
     if foreign is not None:
         return _segments(path, foreign.meta, foreign.columns, foreign.rows, foreign.label,
-                         min_samples, gap_factor, config=config, trust=trust)
+                         min_samples, gap_factor, config=config, trust=trust,
+                         sources=foreign.sources)
     meta, cols, rows, label = _read_file(path)
     return _segments(path, meta, cols, rows, label, min_samples, gap_factor, config=config,
                      trust=trust)
 
 
 def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None,
-                config=None, trust=()) -> tuple[tuple[str, ...], list[FlightLog]]:
+                config=None, trust=(), pose=None, pose_map=None,
+                ) -> tuple[tuple[str, ...], list[FlightLog]]:
     """Convert a PX4 ULog or a ROS 2 bag to ``gainsched-flightlog/1`` at ``out``.
 
     The whole converted log is written (gaps included, as the format allows), after it
@@ -132,17 +134,25 @@ def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None,
     trust : iterable of str, default ()
         Consistency checks to skip (:func:`read_log`); written to the converted log's
         metadata ``trust``, so that it is read as it was converted.
+    pose : str or path-like, optional
+        The motion capture's recording of the same flight, on a clock of its own: ``path``
+        is then the flight controller's log, and the pose comes from this file, its clock
+        aligned to the flight controller's (:mod:`._pair`).
+    pose_map : ChannelMap, str or path-like
+        With ``pose``: where it holds the position and the attitude (a ``pose_only`` map).
 
     Returns
     -------
     (tuple of str, list of FlightLog)
-        What was mapped to what (one line per channel, the plane, the left-out samples),
-        and the segments as :func:`read_log` gives them.
+        What was mapped to what (one line per channel, the plane, the left-out samples;
+        the clocks first with ``pose``), and the segments as :func:`read_log` gives them.
     """
     path, out = Path(path), Path(out)
-    _format(out)  # a bad output name fails before any reading
+    log_format(out)  # a bad output name fails before any reading
     _check_file(path)
-    conv = _foreign(path, channel_map, thrust_max)
+    if pose is not None:
+        _check_file(Path(pose))
+    conv = _foreign(path, channel_map, thrust_max, pose, pose_map)
     if conv is None:
         raise InputError(path, "", "not a PX4 ULog (.ulg) or a ROS 2 bag (.mcap, .db3, or a "
                          "rosbag2 folder): nothing to convert")
@@ -150,16 +160,83 @@ def convert_log(path, out, *, channel_map=None, thrust_max: float | None = None,
     if trust:
         meta["trust"] = ", ".join(dict.fromkeys(trust))
     segs = _segments(path, meta, conv.columns, conv.rows, conv.label,
-                     DEFAULT_MIN_SAMPLES, GAP_FACTOR, config=config, trust=trust)
+                     DEFAULT_MIN_SAMPLES, GAP_FACTOR, config=config, trust=trust,
+                     sources=conv.sources)
     write_log(out, conv.columns, meta)
     return conv.report, segs
 
 
-def _foreign(path: Path, channel_map, thrust_max):
-    """The converted columns of a ULog or a bag (None for the project's own formats)."""
+#: most gaps (and dropped segments) warned of one by one; more are one summary line
+MAX_EACH = 3
+
+
+def _warn_gaps(path, t, rows, label, cuts, med: float, n_pieces: int) -> None:
+    """A warning per gap where the log is split, or one line for more than
+    :data:`MAX_EACH` of them."""
+    if cuts.size > MAX_EACH:
+        lengths = t[cuts] - t[cuts - 1]
+        k = cuts[0]
+        warnings.warn(
+            f"{path}: column t: {cuts.size} gaps of {lengths.min():.3g}-{lengths.max():.3g} s "
+            f"(median interval {med:.6g} s), the first at {label} {rows[k]} (t = "
+            f"{float(t[k - 1])!r}); log split there into {n_pieces} segments",
+            LogWarning, stacklevel=3)
+        return
+    for k in cuts:
+        warnings.warn(
+            f"{path}: column t, {label} {rows[k]}: gap of {t[k] - t[k - 1]:.6g} s "
+            f"(median interval {med:.6g} s) from t = {float(t[k - 1])!r} to {float(t[k])!r}; "
+            "log split there",
+            LogWarning,
+            stacklevel=3,
+        )
+
+
+def _pair(path: Path, pose: Path, cmap, pose_map, thrust_max):
+    """The converted columns of a flight controller's log and a pose recorded apart."""
+    from ._channelmap import ChannelMap, load_channel_map
+    from ._foreign import foreign_format
+    from ._pair import convert_pair
+
+    if foreign_format(pose) is None:
+        if pose.is_dir():
+            raise _not_a_bag_folder(pose)
+        raise InputError(pose, "", "a pose recording is a ROS 2 bag (.mcap, .db3, a rosbag2 "
+                         "folder) or a ULog (.ulg)")
+    if pose_map is None:
+        raise InputError(pose, "", "a pose recorded apart needs its channel map (--pose-map: "
+                         "position and attitude, its frames and anchor)")
+    pmap = pose_map if isinstance(pose_map, ChannelMap) else load_channel_map(
+        pose_map, pose_only=True)
+    return convert_pair(path, pose, cmap, pmap, thrust_max=thrust_max)[0]
+
+
+def _bag_files(path: Path) -> list[str]:
+    """The names of the bag files (``.mcap``, ``.db3``) in the folder ``path``."""
+    return sorted(p.name for p in path.iterdir() if p.suffix.lower() in (".mcap", ".db3"))
+
+
+def _not_a_bag_folder(path: Path) -> InputError:
+    """The refusal of a folder that is no rosbag2 (no ``metadata.yaml``), saying what it
+    holds and what can be given instead."""
+    files = _bag_files(path)
+    if not files:
+        return InputError(path, "", "a folder without a rosbag2 metadata.yaml or a .mcap or "
+                          ".db3 file: nothing to convert (give a log file or a bag)")
+    first = path / files[0]
+    more = f" (and {len(files) - 1} more)" if len(files) > 1 else ""
+    return InputError(path, "", f"a folder of bag files without the rosbag2 metadata.yaml: "
+                      f"give the file itself ({first}{more}), or restore metadata.yaml")
+
+
+def _foreign(path: Path, channel_map, thrust_max, pose=None, pose_map=None):
+    """The converted columns of a ULog or a bag (None for the project's own formats);
+    with ``pose``, of the flight controller's ``path`` and the pose recorded apart."""
     from ._foreign import foreign_format
 
     fmt = foreign_format(path)
+    if fmt is None and path.is_dir() and _bag_files(path):
+        raise _not_a_bag_folder(path)
     if fmt is None:
         return None
     from ._channelmap import ChannelMap, load_channel_map
@@ -173,9 +250,12 @@ def _foreign(path: Path, channel_map, thrust_max):
         channel_map)
     if not path.exists():
         raise InputError(path, "", "cannot read (No such file or directory)")
-    from ._cache import converted_log
+    if pose is not None:
+        conv = _pair(path, Path(pose), cmap, pose_map, thrust_max)
+    else:
+        from ._cache import converted_log
 
-    conv = converted_log(path, cmap, thrust_max)
+        conv = converted_log(path, cmap, thrust_max)
     if "alpha_c_deg" in conv.meta:
         return conv
     alpha, gamma = _plane_angles(fitted_plane(np.stack([conv.columns[c] for c in "xyz"],
@@ -188,11 +268,12 @@ def _foreign(path: Path, channel_map, thrust_max):
 
 
 def _segments(path, meta, cols, rows, label, min_samples, gap_factor, *, config=None,
-              trust=()) -> list[FlightLog]:
+              trust=(), sources=None) -> list[FlightLog]:
     """The common half of reading: the numeric rules, the plane, the channels' consistency
-    (:mod:`._consistency`), the split at gaps."""
+    (:mod:`._consistency`), the split at gaps. ``sources``: per column of a converted
+    log the topic it came from (errors name it)."""
     deferred: list[InputError] = []
-    arrays, optional, extra = _canonical(path, cols, rows, label, deferred)
+    arrays, optional, extra = _canonical(path, cols, rows, label, deferred, sources)
     if deferred:  # thrust out of range: in other units? (else the range error as such)
         thrust_units(path, arrays, optional, meta, config=config, trust=trust,
                      gap_factor=gap_factor)
@@ -214,16 +295,9 @@ def _segments(path, meta, cols, rows, label, min_samples, gap_factor, *, config=
     med = float(np.median(dt)) if dt.size else 0.0
     cuts = np.flatnonzero(dt > gap_factor * med) + 1
     gaps = tuple((float(t[k - 1]), float(t[k])) for k in cuts)
-    for k in cuts:
-        warnings.warn(
-            f"{path}: column t, {label} {rows[k]}: gap of {t[k] - t[k - 1]:.6g} s "
-            f"(median interval {med:.6g} s) from t = {float(t[k - 1])!r} to {float(t[k])!r}; "
-            "log split there",
-            LogWarning,
-            stacklevel=2,
-        )
     bounds = [0, *cuts.tolist(), n]
     pieces = list(zip(bounds[:-1], bounds[1:], strict=True))
+    _warn_gaps(path, t, rows, label, cuts, med, len(pieces))
     keep = [(i, a, b) for i, (a, b) in enumerate(pieces) if b - a >= min_samples]
     if not keep:
         i, (a, b) = max(enumerate(pieces), key=lambda p: p[1][1] - p[1][0])
@@ -233,15 +307,21 @@ def _segments(path, meta, cols, rows, label, min_samples, gap_factor, *, config=
             f"after splitting at {len(gaps)} gap(s) no segment has {min_samples} samples "
             f"(the differentiation window); the longest has {b - a}",
         )
-    for i, (a, b) in enumerate(pieces):
-        if b - a < min_samples:
-            warnings.warn(
-                f"{path}: column t, {label}s {rows[a]}-{rows[b - 1]}: segment {i} has "
-                f"{b - a} samples, fewer than the differentiation window ({min_samples}); "
-                "dropped",
-                LogWarning,
-                stacklevel=2,
-            )
+    short = [(i, a, b) for i, (a, b) in enumerate(pieces) if b - a < min_samples]
+    if len(short) > MAX_EACH:  # one line for many (a day's log has hundreds)
+        warnings.warn(f"{path}: column t: {len(short)} segments between gaps have fewer "
+                      f"samples than the differentiation window ({min_samples}), "
+                      f"{sum(b - a for _, a, b in short)} samples in all; dropped",
+                      LogWarning, stacklevel=2)
+        short = []
+    for i, a, b in short:
+        warnings.warn(
+            f"{path}: column t, {label}s {rows[a]}-{rows[b - 1]}: segment {i} has "
+            f"{b - a} samples, fewer than the differentiation window ({min_samples}); "
+            "dropped",
+            LogWarning,
+            stacklevel=2,
+        )
     return [
         _make(
             arrays,

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._files import _format
+from ._files import log_format
 from ._flightlog import FlightLog
 from ._schema import _KEY_RE, _META_ORDER, OPTIONAL_COLUMNS, REQUIRED_COLUMNS, SCHEMA
 
@@ -100,6 +100,6 @@ def write_log(path, log_or_columns, meta=None) -> int:
     """
     from ...publish import write_atomic
 
-    data = log_bytes(_format(path), log_or_columns, meta, name=Path(path).name)
+    data = log_bytes(log_format(path), log_or_columns, meta, name=Path(path).name)
     write_atomic(path, data)
     return len(data)
