@@ -156,14 +156,14 @@ def _distinct(what: str, paths) -> None:
                 raise InputError("command line", what, f"{b} {same}: each file once")
 
 
-def _check_fit_arguments(command: str, logs, candidates, exclude) -> None:
+def _check_fit_arguments(command: str, logs, candidates, exclude, day: bool = False) -> None:
     """The checks diagnose and improve make of their arguments before any work: each log
-    once and at least two (held-out scores), each --candidate and --exclude name once,
-    and something left to fit."""
+    once and at least two (held-out scores; one day of several flights will do, --day),
+    each --candidate and --exclude name once, and something left to fit."""
     from ..analysis.diagnose import select_candidates
 
     _distinct("LOG", list(logs))
-    if len(logs) < 2:
+    if len(logs) < 2 and not day:
         raise InputError("command line", "LOG", f"{command} needs at least two flights (log "
                          "files) for held-out scores")
     for option, names in (("--candidate", candidates), ("--exclude", exclude)):

@@ -42,6 +42,20 @@ _TRUST = click.option("--trust", "trust", multiple=True, type=click.Choice(LOG_C
                       "each other\").")
 
 
+def _day_options(fn):
+    """``--pose``, ``--pose-map`` and ``--day``: a flight day, or a pose recorded apart,
+    read as the analysis takes it (docs/flight-log.md)."""
+    fn = click.option("--day", "day", is_flag=True,
+                      help="Each LOG is a whole flight day: cut into its steady circles and "
+                           "manoeuvres, the ground, take-offs, landings and transitions "
+                           "dropped.")(fn)
+    fn = click.option("--pose-map", "pose_map", type=Name(),
+                      help="The channel map of --pose (position and attitude).")(fn)
+    return click.option("--pose", "pose", type=FilePath(exists=True, path_type=Path),
+                        help="The motion capture's recording of the flight on a clock of its "
+                             "own; the one LOG is then the flight controller's log.")(fn)
+
+
 def _channel_map(map_path):
     """The validated channel map of --map, or None (checked before any work)."""
     if map_path is None:
@@ -61,8 +75,9 @@ def _channel_map(map_path):
 @click.option("--no-paper", is_flag=True, help="Skip the paper's thrust/drag analyses.")
 @_MAP
 @_TRUST
+@_day_options
 @user_errors
-def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
+def compare(config, logs, out_dir, before_path, no_paper, map_path, trust, pose, pose_map, day):
     """Compare the model of CONFIG with flight LOGS (CSV, HDF5, PX4 ULog or ROS 2 bag
     through a channel map): residual per axis
     (path frame m/s^2, body rad/s^2, tether stretch m), RMS, bias, fit %, whiteness,
@@ -78,7 +93,8 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
     cfg = _load_for_compare(config)
     before_cfg = None if before_path is None else _load_for_compare(before_path)
     run(cfg, logs, out_dir, before=before_cfg, paper=not no_paper,
-        channel_map=_channel_map(map_path), trust=trust, reporter=TERMINAL)
+        channel_map=_channel_map(map_path), trust=trust, pose=pose, pose_map=pose_map,
+        day=day, reporter=TERMINAL)
 
 
 @cli.command()
@@ -104,9 +120,10 @@ def compare(config, logs, out_dir, before_path, no_paper, map_path, trust):
               help="Report folder: diagnose.json/.md, ranking.png, before/after.")
 @_MAP
 @_TRUST
+@_day_options
 @user_errors
 def diagnose(config, logs, candidates, exclude, joint, no_sensors, do_apply, new_config,
-             report_dir, map_path, trust):
+             report_dir, map_path, trust, pose, pose_map, day):
     """Which physical effect is missing: fit every candidate effect the model lacks to
     the residual on LOGS, score on held-out flights (leave one flight out), rank, check
     identifiability; --apply -o NEWCONFIG writes the accepted one (CIs as comments)."""
@@ -117,7 +134,7 @@ def diagnose(config, logs, candidates, exclude, joint, no_sensors, do_apply, new
     if new_config is not None and not do_apply:
         raise InputError("command line", "-o", "is the new config of --apply: give --apply "
                          "too (or --report DIR for a report)")
-    _check_fit_arguments("diagnose", logs, candidates, exclude)
+    _check_fit_arguments("diagnose", logs, candidates, exclude, day)
     _outputs_apart(**{"-o": new_config, "--report": report_dir})
     if new_config is not None:
         from ..resources import config_path
@@ -127,7 +144,8 @@ def diagnose(config, logs, candidates, exclude, joint, no_sensors, do_apply, new
     cfg = _load_for_compare(config)
     run(cfg, logs, candidates=candidates, exclude=exclude, joint=joint,
         sensors=not no_sensors, new_config=new_config, report_dir=report_dir,
-        channel_map=_channel_map(map_path), trust=trust, reporter=TERMINAL)
+        channel_map=_channel_map(map_path), trust=trust, pose=pose, pose_map=pose_map,
+        day=day, reporter=TERMINAL)
 
 
 @cli.command()
@@ -154,9 +172,10 @@ def diagnose(config, logs, candidates, exclude, joint, no_sensors, do_apply, new
               help="Take the config's [sensors] as they are (diagnose --no-sensors).")
 @_MAP
 @_TRUST
+@_day_options
 @user_errors
 def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, duration, jobs,
-            no_sensors, map_path, trust):
+            no_sensors, map_path, trust, pose, pose_map, day):
     """The model loop in one command: compare CONFIG with LOGS, diagnose and apply in
     rounds until no effect is missing, rebuild the tables from the improved config (its
     name kept: the same C symbols), fly the standard flights on the improved model with
@@ -167,7 +186,7 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
     from ..publish import check_out_dir
     from ..studies import improve as run
 
-    _check_fit_arguments("improve", logs, (), exclude)
+    _check_fit_arguments("improve", logs, (), exclude, day)
     if no_build and table_path is not None:
         raise InputError("command line", "--tables", "is the old table of the flights, and "
                          "--no-build flies none: give one of them")
@@ -179,7 +198,8 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
     _not_an_input(out_dir / "tables" / f"{cfg.name}.h5", "-o", **{"--tables": table_path})
     done = run(cfg, logs, out_dir, rounds=rounds, exclude=exclude, build=not no_build,
                old_table=table_path, duration=duration, jobs=jobs, channel_map=cmap,
-               trust=trust, sensors=not no_sensors, reporter=TERMINAL)
+               trust=trust, sensors=not no_sensors, pose=pose, pose_map=pose_map, day=day,
+               reporter=TERMINAL)
     if done.failed is not None:  # the study kept what was done before it
         kept = "" if done.out_dir is None else f" (what was done before it is in {out_dir})"
         click.echo(f"gainsched: error: improve: the step '{done.failed.name}' failed: "
@@ -190,12 +210,17 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
 @cli.command()
 @click.argument("log", type=FilePath(exists=True, path_type=Path))
 @click.argument("pose", type=FilePath(exists=True, path_type=Path), required=False)
-@click.option("-o", "--out", "out_path", type=FilePath(dir_okay=False, path_type=Path),
-              help="The converted log: OUT.csv or OUT.h5 (required but with --list).")
+@click.option("-o", "--out", "out_path", type=FilePath(path_type=Path),
+              help="The converted log: OUT.csv or OUT.h5 (required but with --list); with "
+                   "--day, the folder of the day's flights.")
 @click.option("--pose-map", "pose_map", type=Name(),
               help="With POSE: the channel map of the motion capture's recording (position "
                    "and attitude, their frames and anchor; time.pose_offset_s to give the "
                    "clock offset instead of estimating it).")
+@click.option("--day", "day", is_flag=True,
+              help="LOG is a whole flight day: cut into its circles and manoeuvres, each "
+                   "written to -o DIR as NN-KIND.csv with day.json, day.md and day.png "
+                   "(needs --config).")
 @click.option("--list", "listing", is_flag=True,
               help="List the log's topics, their types, samples, rates and fields (what a "
                    "channel map can name), and convert nothing.")
@@ -206,7 +231,7 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
                    "its vehicle is what the thrust and the load cell are checked against.")
 @_TRUST
 @user_errors
-def convert(log, pose, out_path, pose_map, listing, map_path, config_path, trust):
+def convert(log, pose, out_path, pose_map, day, listing, map_path, config_path, trust):
     """Convert a PX4 ULog or a ROS 2 bag to the project's flight-log format
     (docs/flight-log.md) for inspection, and say what was mapped to what; or list its
     topics (--list) to write its channel map. With POSE, LOG is the flight controller's
@@ -229,6 +254,6 @@ def convert(log, pose, out_path, pose_map, listing, map_path, config_path, trust
         "--config": config_path and shipped(config_path), "--map": map_path,
         "--pose-map": pose_map})
     done = run(log, out_path, channel_map=_channel_map(map_path), config=config_path,
-               trust=trust, pose=pose, pose_map=pose_map, reporter=TERMINAL)
+               trust=trust, pose=pose, pose_map=pose_map, day=day, reporter=TERMINAL)
     for line in done.lines():
         click.echo(line)

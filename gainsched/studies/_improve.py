@@ -14,6 +14,7 @@ from ..analysis.improve import Improvement, write_improve
 from ..config import Config, config_from_text
 from ..errors import InputError
 from ._build import Build, build_into
+from ._logs import _as_read
 from ._report import SILENT, Reporter, config_of, teller
 from ._tables import table_for
 
@@ -107,7 +108,8 @@ _NO_BUILD = "--no-build"  # the report says it as the command line does (build=F
 
 def improve(config, logs, out_dir=None, *, rounds: int = 3, exclude=(), build: bool = True,
             old_table=None, duration: float = 3.0, jobs: int = -1, channel_map=None,
-            trust=(), sensors: bool = True, reporter: Reporter = SILENT) -> Improved:
+            trust=(), sensors: bool = True, pose=None, pose_map=None, day: bool = False,
+            reporter: Reporter = SILENT) -> Improved:
     """The model loop in one call: what ``gainsched improve CONFIG LOGS -o OUT_DIR`` does.
 
     Compare and diagnose in rounds, applying each accepted fit, until no effect is
@@ -142,6 +144,9 @@ def improve(config, logs, out_dir=None, *, rounds: int = 3, exclude=(), build: b
         Parallel workers of the rebuild (-1: every core).
     channel_map, trust, sensors
         As :func:`gainsched.diagnose` takes them.
+    pose, pose_map, day
+        A flight day, or a pose recorded apart, as :func:`~gainsched.studies.compare`
+        takes them.
     reporter : Reporter, optional
         Shows the fits', the build's and the flights' progress; default: nothing.
 
@@ -177,6 +182,7 @@ def improve(config, logs, out_dir=None, *, rounds: int = 3, exclude=(), build: b
     if old_table is not None and not old_table.built_from(cfg):
         raise InputError(old_path or "old_table", "", f"was built from another config than "
                          f"{cfg.source}: the old table of the flights must be CONFIG's")
+    logs = _as_read(cfg, logs, channel_map, trust, pose, pose_map, day)
     said, say = teller(reporter)
 
     with _fits(reporter) as fitted, _step("compare and diagnose", user_errors=False) as step:

@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..errors import InputError
 from ._report import SILENT, Reporter, config_of, on_bar, teller
 
 __all__ = ["ComparisonReport", "compare", "DiagnosisReport", "diagnose", "Conversion", "topics",
@@ -43,8 +44,25 @@ class ComparisonReport:
         return list(self.said)
 
 
+def _as_read(cfg, logs, channel_map, trust, pose, pose_map, day: bool) -> list:
+    """The logs as the analysis takes them: the paths as given, or, for a flight day or a
+    pose recorded apart (``--day``, ``--pose``), the segments of its flights read here
+    (:func:`gainsched.analysis.logs.read_log`)."""
+    if pose is None and not day:
+        return list(logs)
+    if pose is not None and len(logs) != 1:
+        raise InputError("command line", "--pose", f"goes with one LOG, the flight "
+                         f"controller's log of the flight the pose recorded ({len(logs)} given)")
+    from ..analysis.logs import read_log
+
+    return [seg for item in logs for seg in read_log(
+        item, channel_map=channel_map, thrust_max=cfg.vehicle.thrust_max, config=cfg,
+        trust=trust, pose=pose, pose_map=pose_map, day=day)]
+
+
 def compare(config, logs, out_dir=None, *, before=None, paper: bool = True,
-            channel_map=None, trust=(), reporter: Reporter = SILENT) -> ComparisonReport:
+            channel_map=None, trust=(), pose=None, pose_map=None, day: bool = False,
+            reporter: Reporter = SILENT) -> ComparisonReport:
     """Compare a model with flight logs and write the report: what ``gainsched compare
     CONFIG LOGS -o OUT_DIR`` does (docs/model-vs-measurement.md).
 
@@ -63,6 +81,11 @@ def compare(config, logs, out_dir=None, *, before=None, paper: bool = True,
         The paper's thrust and drag analyses (Sec. V.C).
     channel_map, trust
         As :func:`gainsched.compare` takes them.
+    pose, pose_map : path-like, optional
+        The motion capture's recording on a clock of its own and its map (the one LOG
+        is then the flight controller's; :func:`gainsched.analysis.logs.read_log`).
+    day : bool
+        The logs are whole flight days: each cut into its circles and manoeuvres.
     reporter : Reporter, optional
         Shows the reading's progress and the lines as they come; default: nothing.
 
@@ -93,6 +116,7 @@ def compare(config, logs, out_dir=None, *, before=None, paper: bool = True,
     if out_dir is not None:
         out_dir = Path(out_dir)
         check_out_dir(out_dir, names=["compare.json", "compare.md"])
+    logs = _as_read(cfg, logs, channel_map, trust, pose, pose_map, day)
     said, say = teller(reporter)
 
     # steps: each log read and the statistics, per config; the paper's fits
@@ -149,7 +173,8 @@ class DiagnosisReport:
 
 def diagnose(config, logs, *, candidates=None, exclude=(), joint: bool = False,
              sensors: bool = True, new_config=None, report_dir=None, channel_map=None,
-             trust=(), reporter: Reporter = SILENT) -> DiagnosisReport:
+             trust=(), pose=None, pose_map=None, day: bool = False,
+             reporter: Reporter = SILENT) -> DiagnosisReport:
     """Find which physical effect the model misses, write the config with it and the
     report: what ``gainsched diagnose CONFIG LOGS [--apply -o NEWCONFIG] [--report DIR]``
     does (docs/model-vs-measurement.md).
@@ -168,6 +193,8 @@ def diagnose(config, logs, *, candidates=None, exclude=(), joint: bool = False,
     report_dir : path-like, optional
         The report folder (``diagnose.json``, ``diagnose.md``, plots; before and after),
         published at once.
+    pose, pose_map, day
+        A flight day, or a pose recorded apart, as :func:`compare` takes them.
     reporter : Reporter, optional
         Shows the fits' progress and the lines as they come; default: nothing.
 
@@ -197,6 +224,7 @@ def diagnose(config, logs, *, candidates=None, exclude=(), joint: bool = False,
     if report_dir is not None:
         report_dir = Path(report_dir)
         check_out_dir(report_dir, "--report", names=["diagnose.json", "diagnose.md"])
+    logs = _as_read(cfg, logs, channel_map, trust, pose, pose_map, day)
     said, say = teller(reporter)
 
     base = run(cfg, logs, channel_map=channel_map, trust=trust)
@@ -274,16 +302,23 @@ class Conversion:
         Its segments (split at gaps).
     mapped : list of str
         What was mapped to what (the channel map's report).
+    day : DayCut or None
+        With ``day``: the day's pieces (``out_path`` is then the folder of its flights).
     """
 
     out_path: Path
     segments: list
     mapped: list
+    day: object = None
 
     def lines(self) -> list[str]:
         """What ``gainsched convert`` prints: the mapping, then the samples, the span and
-        the circle's plane."""
+        the circle's plane (with ``--day``: the day's pieces and the files written)."""
         segs = self.segments
+        if self.day is not None:
+            return [*("  " + line for line in self.mapped), *self.day.lines(),
+                    f"wrote {self.out_path}: {len(self.day.kept)} flights (NN-KIND.csv), "
+                    "day.json, day.md, day.png"]
         span = (f"{segs[0].duration:.3g} s" if len(segs) == 1 else
                 f"{len(segs)} segments (split at gaps)")
         meta = segs[0].meta
@@ -294,7 +329,7 @@ class Conversion:
 
 
 def convert(log, out_path, *, channel_map=None, config=None, trust=(), pose=None,
-            pose_map=None, reporter: Reporter = SILENT) -> Conversion:
+            pose_map=None, day: bool = False, reporter: Reporter = SILENT) -> Conversion:
     """Convert a PX4 ULog or a ROS 2 bag to the project's flight-log format and say what
     was mapped to what: what ``gainsched convert LOG -o OUT`` does (docs/flight-log.md).
 
@@ -318,6 +353,11 @@ def convert(log, out_path, *, channel_map=None, config=None, trust=(), pose=None
         then the flight controller's); the clocks are aligned from the motion both hold.
     pose_map : ChannelMap, str or path-like
         With ``pose``: where it holds the position and the attitude (``--pose-map``).
+    day : bool
+        The log is a whole flight day: cut into its circles and manoeuvres
+        (:func:`gainsched.analysis.logs.read_day`, needs ``config``); ``out_path`` is a
+        folder, published at once with ``NN-KIND.csv`` per kept flight, ``day.json``,
+        ``day.md`` and ``day.png``.
     reporter : Reporter, optional
         Shows the reading's progress; default: nothing.
 
@@ -344,6 +384,8 @@ def convert(log, out_path, *, channel_map=None, config=None, trust=(), pose=None
     cfg = None if config is None else config_of(config)
     thrust_max = cfg.vehicle.thrust_max if cfg is not None else None
     out_path = Path(out_path)
+    if day:
+        return _convert_day(log, out_path, channel_map, cfg, trust, pose, pose_map, reporter)
     log_format(out_path, "-o")
     check_out_file(out_path, "-o")
     with reporter.bar(f"convert {Path(log).name}") as bar, reporting(on_bar(bar)):
@@ -352,6 +394,26 @@ def convert(log, out_path, *, channel_map=None, config=None, trust=(), pose=None
                                    pose_map=pose_map)
         bar.set_postfix_str("written")
     return Conversion(out_path, segs, list(mapped))
+
+
+def _convert_day(log, out_dir: Path, channel_map, cfg, trust, pose, pose_map,
+                 reporter) -> Conversion:
+    """``convert --day``: the day read and cut, its flights and report published in
+    ``out_dir`` at once."""
+    from ..analysis.dayreport import day_files
+    from ..analysis.logs import read_day, reporting
+    from ..publish import check_out_dir, publish
+
+    if cfg is None:
+        raise InputError("command line", "--day", "needs --config CONFIG (the tether and the "
+                         "weight the day is cut with)")
+    check_out_dir(out_dir, "-o", names=["day.json", "day.md", "day.png"])
+    with reporter.bar(f"convert {Path(log).name}") as bar, reporting(on_bar(bar)):
+        d = read_day(log, config=cfg, channel_map=channel_map, pose=pose, pose_map=pose_map,
+                     trust=trust)
+        publish(out_dir, day_files(d))
+        bar.set_postfix_str("written")
+    return Conversion(out_dir, d.logs, list(d.report), d.cut)
 
 
 def topics(log):

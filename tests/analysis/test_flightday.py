@@ -13,6 +13,7 @@ and the converted log against the one converted with the true offset given by ha
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -239,3 +240,134 @@ def test_cli_convert_takes_the_two_files(files, paper_config, tmp_path):
     assert r.exit_code == 2 and r.output.strip() == (
         f"gainsched: error: {mp}: gyro: a pose map names position and attitude only (the "
         "flight controller's map, --map, names the rest)"), r.output
+
+
+# --------------------------------------------------------------------------- a whole day
+
+
+def _hermite(p0, p1, v0, v1, t):
+    """A cubic Hermite path from (p0, v0) to (p1, v1) at the times ``t`` (from 0)."""
+    h = t[-1] + (t[1] - t[0])
+    s = (t + (t[1] - t[0])) / h
+    return ((2 * s**3 - 3 * s**2 + 1)[:, None] * p0 + (s**3 - 2 * s**2 + s)[:, None] * h * v0
+            + (-2 * s**3 + 3 * s**2)[:, None] * p1 + (s**3 - s**2)[:, None] * h * v1)
+
+
+@pytest.fixture(scope="module")
+def whole_day(day, paper_config):
+    """The flight of ``day`` inside a lab's day at 1 kHz: 6 s on the ground (disarmed), a
+    4 s take-off onto the sphere, the 30 s flight, a 4 s landing, 6 s on the ground; on
+    the ground and the bridges the attitude held, the rates 0, the specific force from
+    the path, the thrust the weight's quarter (disarmed on the ground: NaN)."""
+    from types import SimpleNamespace
+
+    dt = 1e-3
+    ground = np.array([1.0, 0.0, -0.2])
+    g = np.array([0.0, 0.0, -paper_config.g])
+    w4 = paper_config.vehicle.mass * paper_config.g / 4
+
+    def still(n, p, q, T):
+        return (np.repeat(p[None], n, 0), np.repeat(q[None], n, 0), np.full((n, 4), T))
+
+    v0 = (day.p_I[1] - day.p_I[0]) / dt
+    v1 = (day.p_I[-1] - day.p_I[-2]) / dt
+    tb = np.arange(4000) * dt
+    parts = [still(6000, ground, day.q_IB[0], np.nan),  # disarmed: PX4 logs NaN
+             (_hermite(ground, day.p_I[0], np.zeros(3), v0, tb),
+              np.repeat(day.q_IB[:1], 4000, 0), np.full((4000, 4), w4)),
+             (day.p_I, day.q_IB, day.u),
+             (_hermite(day.p_I[-1], ground, v1, np.zeros(3), tb),
+              np.repeat(day.q_IB[-1:], 4000, 0), np.full((4000, 4), w4)),
+             still(6000, ground, day.q_IB[-1], np.nan)]
+    p = np.concatenate([a for a, _, _ in parts])
+    q = np.concatenate([b for _, b, _ in parts])
+    u = np.concatenate([c for _, _, c in parts])
+    t = np.arange(p.shape[0]) * dt
+    R = Rotation.from_quat(q, scalar_first=True)
+    f_B = R.inv().apply(np.gradient(np.gradient(p, dt, axis=0), dt, axis=0) - g)
+    rates = np.zeros((t.size, 3))
+    k0 = 10000  # where the flight starts
+    f_B[k0:k0 + day.t.size] = day.f_B
+    rates[k0:k0 + day.t.size] = day.z[:, 7:10]
+    z = np.zeros((t.size, 10))
+    z[:, 7:10] = rates
+    return SimpleNamespace(t=t, p_I=p, q_IB=q, u=u, f_B=f_B, z=z, flight=(k0 * dt, (
+        k0 + day.t.size) * dt))
+
+
+def test_a_whole_day_in_two_files_gives_its_flights(whole_day, paper_config, tmp_path):
+    """The day as a lab records it (the ULog from boot, disarmed on the ground; the bag
+    in Unix time): its three circles and two manoeuvres found inside the flight, the
+    ground, take-off and landing dropped; ``convert --day -o DIR`` writes each kept
+    flight, a summary (JSON, Markdown) and a picture of the day; ``compare --day`` takes
+    the same two files, holds the five flights apart and finds the residual at the noise
+    (the design model is the truth here)."""
+    import json
+
+    from click.testing import CliRunner
+
+    from gainsched.cli import cli
+
+    thrust_max = paper_config.vehicle.thrust_max
+    fc, bag = tmp_path / "fc.ulg", tmp_path / "mocap"
+    whole = whole_day
+    fc_ulog(fc, whole, thrust_max)
+    mocap_bag(bag, whole)
+    mp = tmp_path / "mocap.toml"
+    mp.write_text(POSE_MAP.replace("alpha_c_deg = 20.0", 'alpha_c_deg = "estimate"')
+                  .replace("gamma_c_deg = 0.0", 'gamma_c_deg = "estimate"'))
+    from gainsched.analysis.logs import read_day
+
+    d = read_day(fc, config=paper_config, channel_map="px4", pose=bag, pose_map=str(mp))
+    kinds = [q.kind for q in d.cut.kept]
+    assert kinds == ["circle", "manoeuvre", "circle", "manoeuvre", "circle"], d.cut.lines()
+    t0, t1 = whole.flight
+    assert all(t0 + BOOT - 0.05 <= q.t0 and q.t1 <= t1 + BOOT + 0.05 for q in d.cut.kept)
+    assert [q.kind for q in d.cut.pieces if not q.kept] == ["ground", "off the sphere",
+                                                           "off the sphere", "ground"]
+    assert [round(q.speed) for q in d.cut.kept] == [6, 6, 10, 10, 5]
+    assert len(d.logs) == 5 and d.logs[1].meta["day_piece"] == "manoeuvre 6.0->10.0 m/s"
+
+    out = tmp_path / "day"
+    r = CliRunner().invoke(cli, ["convert", str(fc), str(bag), "--day", "-o", str(out),
+                                 "--pose-map", str(mp), "--config", "paper"])
+    assert r.exit_code == 0, r.output
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["01-circle.csv", "02-manoeuvre.csv", "03-circle.csv",
+                     "04-manoeuvre.csv", "05-circle.csv", "day.json", "day.md", "day.png"]
+    summary = json.loads((out / "day.json").read_text())
+    assert [p["kind"] for p in summary["pieces"]][:2] == ["ground", "off the sphere"]
+    (first,) = read_log(out / "01-circle.csv", config=paper_config)
+    assert first.t.size == d.logs[0].t.size
+
+    r = CliRunner().invoke(cli, ["compare", "paper", str(fc), "--pose", str(bag),
+                                 "--pose-map", str(mp), "--day"])
+    assert r.exit_code == 0, r.output
+    assert "on 5 flight(s), 5 segment(s)" in r.output, r.output
+    rms = float(re.search(r"normalised RMS \(1 = noise\): ([\d.]+)", r.output).group(1))
+    assert rms < 1.2, r.output  # the model of the truth, read through two clocks: noise
+
+
+def test_day_options_refused_in_one_line(files, tmp_path):
+    """``convert --day`` without the config it is cut with, ``--pose`` beside two logs:
+    one line each, exit 2, nothing written."""
+    from click.testing import CliRunner
+
+    from gainsched.cli import cli
+
+    fc, bag = files
+    mp = tmp_path / "mocap.toml"
+    mp.write_text(POSE_MAP)
+    r = CliRunner().invoke(cli, ["convert", str(fc), str(bag), "--day", "-o",
+                                 str(tmp_path / "d"), "--pose-map", str(mp)])
+    assert r.exit_code == 2 and r.output.strip() == (
+        "gainsched: error: command line: --day: needs --config CONFIG (the tether and the "
+        "weight the day is cut with)"), r.output
+    r = CliRunner().invoke(cli, ["compare", "paper", str(fc), str(fc.with_name("x.ulg")),
+                                 "--pose", str(bag), "--pose-map", str(mp)])
+    assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1, r.output
+    fc.with_name("x.ulg").write_bytes(fc.read_bytes())
+    r = CliRunner().invoke(cli, ["compare", "paper", str(fc), str(fc.with_name("x.ulg")),
+                                 "--pose", str(bag), "--pose-map", str(mp)])
+    assert r.exit_code == 2 and "--pose: goes with one LOG" in r.output, r.output
+    assert not (tmp_path / "d").exists()

@@ -72,6 +72,7 @@ bottom of their imports (a module imports only from those below it):
 - ``_listing``: the topics of a ULog or a bag, for writing a map (``convert --list``);
 - ``_clocks``: the offset and drift between two files' clocks, from the motion both hold;
 - ``_pair``: a flight controller's log and a pose recorded apart made one log;
+- ``_daycut``: a flight day cut into its circles and manoeuvres, the rest dropped;
 - ``_foreign``: PX4 ULogs (pyulog) and ROS 2 bags (rosbags) to the flight-log columns
   (:data:`FOREIGN_FORMATS`, :func:`foreign_format`);
 - ``_channelmap``: where a ULog or a bag holds each channel (:class:`ChannelMap`,
@@ -93,12 +94,13 @@ from ._arrays import log_from_arrays
 from ._channelmap import ChannelMap, load_channel_map
 from ._checks import fitted_plane
 from ._consistency import CHECKS, RATIO_TOL, Figures, check_log, figures
+from ._daycut import DayCut, Piece, cut_day
 from ._files import log_format
 from ._flightlog import FlightLog, describe
 from ._foreign import FOREIGN_FORMATS, foreign_format
 from ._listing import LogListing, TopicInfo, list_topics
 from ._progress import reporting
-from ._read import LogWarning, convert_log, read_log
+from ._read import Day, LogWarning, convert_log, read_day, read_log
 from ._schema import (
     DEFAULT_MIN_SAMPLES,
     OPTIONAL_COLUMNS,
@@ -125,6 +127,11 @@ __all__ = [
     "LogWarning",
     "FlightLog",
     "read_log",
+    "read_day",
+    "Day",
+    "DayCut",
+    "Piece",
+    "cut_day",
     "convert_log",
     "write_log",
     "log_bytes",

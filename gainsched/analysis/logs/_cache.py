@@ -55,7 +55,7 @@ def _hash_file(h, path: Path) -> None:
             h.update(block)
 
 
-def log_cache_key(path, cmap: ChannelMap, thrust_max: float | None) -> str:
+def log_cache_key(path, cmap: ChannelMap, thrust_max: float | None, day: bool = False) -> str:
     """The cache key of a log converted with a map (module docstring): 64 hex digits.
 
     Parameters
@@ -78,7 +78,7 @@ def log_cache_key(path, cmap: ChannelMap, thrust_max: float | None) -> str:
     for dist in ("pyulog", "rosbags"):
         h.update(metadata.version(dist).encode())
     h.update(repr(dataclasses.replace(cmap, source="")).encode())
-    h.update(repr(thrust_max).encode())
+    h.update(repr(thrust_max).encode() + (b"day" if day else b""))
     path = Path(path)
     files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
     for p in files:
@@ -114,7 +114,8 @@ def _store(entry: Path, conv: ConvertedLog) -> None:
         pass
 
 
-def converted_log(path, cmap: ChannelMap, thrust_max: float | None = None) -> ConvertedLog:
+def converted_log(path, cmap: ChannelMap, thrust_max: float | None = None,
+                  day: bool = False) -> ConvertedLog:
     """The flight-log columns of a ULog or a bag (:func:`~._foreign.read_topics` and
     :func:`~._foreign.convert_topics`), from the cache when this log was converted with
     this map before.
@@ -139,12 +140,12 @@ def converted_log(path, cmap: ChannelMap, thrust_max: float | None = None) -> Co
     """
     entry = None
     if _enabled():
-        entry = cache_dir() / "logs" / f"{log_cache_key(path, cmap, thrust_max)}.npz"
+        entry = cache_dir() / "logs" / f"{log_cache_key(path, cmap, thrust_max, day)}.npz"
         if entry.is_file() and (conv := _load(entry)) is not None:
             return conv
     topics, params = read_topics(path, cmap)
     report("convert")
-    conv = convert_topics(path, topics, params, cmap, thrust_max=thrust_max)
+    conv = convert_topics(path, topics, params, cmap, thrust_max=thrust_max, day=day)
     if entry is not None:
         _store(entry, conv)
     return conv

@@ -355,8 +355,11 @@ def _thrust(path, cmap: ChannelMap, cmd: np.ndarray, params: dict, thrust_max):
 
 
 def convert_topics(path, topics: dict[str, Topic], params: dict[str, float],
-                   cmap: ChannelMap, *, thrust_max: float | None = None) -> ConvertedLog:
-    """The flight-log columns of the topics a map names (the module docstring says how).
+                   cmap: ChannelMap, *, thrust_max: float | None = None,
+                   day: bool = False) -> ConvertedLog:
+    """The flight-log columns of the topics a map names (the module docstring says how);
+    ``day``: a whole flight day, its disarmed stretches kept with no thrust (the day is
+    cut into flights afterwards, :mod:`._daycut`).
 
     ``params``: the log's parameters (ULog; ``"log"`` values of the map read them);
     ``thrust_max`` (N): a motor's thrust at full command when the map does not give it
@@ -367,7 +370,7 @@ def convert_topics(path, topics: dict[str, Topic], params: dict[str, float],
     report: list[str] = []
     t, rows, p_I, R_IB = _pose(topics, cmap, report)
     t, rows, p_I, R_IB, T = _commanded(path, topics, cmap, params, thrust_max,
-                                       (t, rows, p_I, R_IB), report)
+                                       (t, rows, p_I, R_IB), report, day)
     q_IB = Rotation.from_matrix(R_IB).as_quat(scalar_first=True)
     cols = {"t": t}
     cols.update({n: p_I[:, j] for j, n in enumerate("xyz")})
@@ -435,16 +438,27 @@ def _pose(topics, cmap: ChannelMap, report: list) -> tuple:
     return t, rows, (p - cmap.anchor_m) @ C_w.T, C_w @ R_wb @ C_b
 
 
-def _commanded(path, topics, cmap: ChannelMap, params, thrust_max, pose, report: list):
+def _commanded(path, topics, cmap: ChannelMap, params, thrust_max, pose, report: list,
+               day: bool = False):
     """The pose samples ``pose = (t, rows, p_I, R_IB)`` while the motors were commanded,
     with ``T`` (n, 4) N, the motor thrusts T1..T4 held and averaged over each pose
     interval; a command outside the thrust curve's range inside that span is an error
-    naming its field and sample."""
+    naming its field and sample. ``day``: a whole day, disarmed stretches (a command
+    outside the range: NaN, PWM below its minimum) included with no thrust."""
     t, rows, p_I, R_IB = pose
     mot = topics[cmap.motors.topic]
     fields = [cmap.motors.fields[i - 1] for i in cmap.motor_order]
     cmd = np.stack([mot.fields[f] for f in fields], -1)
     T_all, valid = _thrust(path, cmap, cmd, params, thrust_max)
+    if day:
+        off = int(np.count_nonzero(~valid.all(-1)))
+        T_all = np.where(valid, T_all, 0.0)
+        inside = t - _edges(t)[1] >= mot.t[0]
+        t, rows, p_I, R_IB = t[inside], rows[inside], p_I[inside], R_IB[inside]
+        report.append(f"motors: {cmap.motors.topic} {', '.join(fields)} as T1..T4 "
+                      f"({cmap.unit}, {_rate(mot.t)}, held, the mean over each pose interval; "
+                      f"the whole day: {off} samples disarmed, no thrust)")
+        return t, rows, p_I, R_IB, _held_mean(mot.t, T_all, t)
     ok = np.flatnonzero(valid.all(-1))
     if ok.size == 0:
         raise InputError(path, f"topic {cmap.motors.topic}", "no sample with every motor "

@@ -66,7 +66,8 @@ def clock_signals(fc_topics: dict, fc_map: ChannelMap, pose_topics: dict,
 
 
 def convert_pair(fc_path, pose_path, fc_map: ChannelMap, pose_map: ChannelMap, *,
-                 thrust_max: float | None = None) -> tuple[ConvertedLog, ClockFit | None]:
+                 thrust_max: float | None = None, day: bool = False,
+                 ) -> tuple[ConvertedLog, ClockFit | None]:
     """One flight log of a flight controller's log and a pose recorded apart.
 
     Parameters
@@ -82,6 +83,8 @@ def convert_pair(fc_path, pose_path, fc_map: ChannelMap, pose_map: ChannelMap, *
         offset (no estimate).
     thrust_max : float, optional
         A motor's thrust at full command, N, when the map does not give it.
+    day : bool
+        A whole flight day: disarmed stretches kept with no thrust.
 
     Returns
     -------
@@ -126,7 +129,7 @@ def convert_pair(fc_path, pose_path, fc_map: ChannelMap, pose_map: ChannelMap, *
         position=dataclasses.replace(pose_map.position, topic=key(pose_map.position.topic)),
         attitude=dataclasses.replace(pose_map.attitude, topic=key(pose_map.attitude.topic)),
         attitude_order=pose_map.attitude_order)
-    conv = convert_topics(fc_path, topics, params, merged, thrust_max=thrust_max)
+    conv = convert_topics(fc_path, topics, params, merged, thrust_max=thrust_max, day=day)
     meta = {**conv.meta, "pose_source": pose_path.name, "pose_channel_map": pose_map.name}
     if fit is not None:
         meta.update(clock_offset_s=repr(fit.offset_s), clock_drift=repr(fit.drift),

@@ -13,6 +13,7 @@ import numpy as np
 from ...errors import GainschedWarning, InputError
 from ._checks import _canonical, _check_plane, fitted_plane
 from ._consistency import _plane_angles, check_log, thrust_units
+from ._daycut import DayCut
 from ._files import _check_file, _read_file, log_format
 from ._flightlog import FlightLog, _make, _readonly
 from ._schema import DEFAULT_MIN_SAMPLES, GAP_FACTOR
@@ -26,7 +27,7 @@ class LogWarning(GainschedWarning):
 def read_log(
     path, *, channel_map=None, thrust_max: float | None = None,
     min_samples: int = DEFAULT_MIN_SAMPLES, gap_factor: float = GAP_FACTOR,
-    config=None, trust=(),
+    config=None, trust=(), pose=None, pose_map=None, day: bool = False,
 ) -> list[FlightLog]:
     """Read a flight log file into its gap-free segments, checked against the spec.
 
@@ -64,8 +65,14 @@ def read_log(
     trust : iterable of str, default ()
         Consistency checks to skip, by name (:data:`~gainsched.analysis.logs._consistency.
         CHECKS`: ``plane``, ``quaternion``, ``gyro``, ``thrust``, ``tension``,
-        ``xi_ref``), where the user knows the log is right; the log's metadata ``trust``
-        adds to them.
+        ``xi_ref``, ``radius``), where the user knows the log is right; the log's
+        metadata ``trust`` adds to them.
+    pose, pose_map : path-like, optional
+        The motion capture's recording of the flight on a clock of its own and its map
+        (:func:`convert_log`): ``path`` is then the flight controller's log.
+    day : bool, default False
+        ``path`` is a whole flight day: cut into its circles and manoeuvres first
+        (:func:`read_day`, needs ``config``), the segments of those returned.
 
     Returns
     -------
@@ -104,8 +111,12 @@ def read_log(
     mean COG speed 8.9 m/s, tension 25 N
     """
     path = Path(path)
+    if day:
+        return read_day(path, config=config, channel_map=channel_map, pose=pose,
+                        pose_map=pose_map, trust=trust, min_samples=min_samples,
+                        gap_factor=gap_factor).logs
     _check_file(path)
-    foreign = _foreign(path, channel_map, thrust_max)
+    foreign = _foreign(path, channel_map, thrust_max, pose, pose_map)
     if foreign is not None:
         return _segments(path, foreign.meta, foreign.columns, foreign.rows, foreign.label,
                          min_samples, gap_factor, config=config, trust=trust,
@@ -192,7 +203,7 @@ def _warn_gaps(path, t, rows, label, cuts, med: float, n_pieces: int) -> None:
         )
 
 
-def _pair(path: Path, pose: Path, cmap, pose_map, thrust_max):
+def _pair(path: Path, pose: Path, cmap, pose_map, thrust_max, day=False):
     """The converted columns of a flight controller's log and a pose recorded apart."""
     from ._channelmap import ChannelMap, load_channel_map
     from ._foreign import foreign_format
@@ -208,7 +219,7 @@ def _pair(path: Path, pose: Path, cmap, pose_map, thrust_max):
                          "position and attitude, its frames and anchor)")
     pmap = pose_map if isinstance(pose_map, ChannelMap) else load_channel_map(
         pose_map, pose_only=True)
-    return convert_pair(path, pose, cmap, pmap, thrust_max=thrust_max)[0]
+    return convert_pair(path, pose, cmap, pmap, thrust_max=thrust_max, day=day)[0]
 
 
 def _bag_files(path: Path) -> list[str]:
@@ -229,9 +240,10 @@ def _not_a_bag_folder(path: Path) -> InputError:
                       f"give the file itself ({first}{more}), or restore metadata.yaml")
 
 
-def _foreign(path: Path, channel_map, thrust_max, pose=None, pose_map=None):
+def _foreign(path: Path, channel_map, thrust_max, pose=None, pose_map=None, day=False):
     """The converted columns of a ULog or a bag (None for the project's own formats);
-    with ``pose``, of the flight controller's ``path`` and the pose recorded apart."""
+    with ``pose``, of the flight controller's ``path`` and the pose recorded apart;
+    ``day``: a whole day (disarmed stretches kept, no thrust)."""
     from ._foreign import foreign_format
 
     fmt = foreign_format(path)
@@ -251,11 +263,11 @@ def _foreign(path: Path, channel_map, thrust_max, pose=None, pose_map=None):
     if not path.exists():
         raise InputError(path, "", "cannot read (No such file or directory)")
     if pose is not None:
-        conv = _pair(path, Path(pose), cmap, pose_map, thrust_max)
+        conv = _pair(path, Path(pose), cmap, pose_map, thrust_max, day)
     else:
         from ._cache import converted_log
 
-        conv = converted_log(path, cmap, thrust_max)
+        conv = converted_log(path, cmap, thrust_max, day)
     if "alpha_c_deg" in conv.meta:
         return conv
     alpha, gamma = _plane_angles(fitted_plane(np.stack([conv.columns[c] for c in "xyz"],
@@ -338,3 +350,98 @@ def _segments(path, meta, cols, rows, label, min_samples, gap_factor, *, config=
         )
         for i, a, b in keep
     ]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Day:
+    """A flight day read (:func:`read_day`).
+
+    Attributes
+    ----------
+    cut : DayCut
+        Its pieces, kept and dropped, with their reasons.
+    logs : list of FlightLog
+        The segments of the kept flights, each read and checked as a log of its own (its
+        plane the piece's; ``flight_id`` ``STEM-NN``, metadata ``day_piece`` the piece).
+    columns : dict
+        The day's columns (the converted ones of a ULog or a bag), for a picture.
+    meta : dict
+        The day's metadata.
+    report : tuple of str
+        What was mapped to what (a ULog's or a bag's conversion; empty for a log of the
+        project's format).
+    """
+
+    cut: DayCut
+    logs: list
+    columns: dict
+    meta: dict
+    report: tuple = ()
+
+
+def read_day(path, *, config, channel_map=None, pose=None, pose_map=None, trust=(),
+             min_samples: int = DEFAULT_MIN_SAMPLES, gap_factor: float = GAP_FACTOR) -> Day:
+    """Read a whole flight day and cut it into the flights the analysis can use.
+
+    The day's columns (a log of the project's format, a ULog or a bag, or a flight
+    controller's log with the pose recorded apart, ``pose``) are cut by
+    :func:`~gainsched.analysis.logs._daycut.cut_day` with the config's tether radius and
+    weight; each kept circle and manoeuvre is then read as :func:`read_log` reads a log
+    (every rule, the consistency checks), with the plane it flew.
+
+    Parameters
+    ----------
+    path : path-like
+        The day's log (or the flight controller's, with ``pose``).
+    config : Config
+        The analysis config: the tether's radius and the weight the cut needs, the
+        vehicle the checks need.
+    channel_map, pose, pose_map, trust, min_samples, gap_factor
+        As for :func:`read_log`.
+
+    Returns
+    -------
+    Day
+
+    Raises
+    ------
+    InputError
+        As :func:`read_log`, and when no flight of the day is left to keep.
+    """
+    from ._daycut import cut_day
+
+    path = Path(path)
+    if config is None:
+        raise InputError(path, "", "a flight day is cut with the config's tether and weight: "
+                         "give the config")
+    _check_file(path)
+    conv = _foreign(path, channel_map, config.vehicle.thrust_max, pose, pose_map, day=True)
+    report: tuple = ()
+    if conv is None:
+        meta, cols, rows, label = _read_file(path)
+        sources = {}
+    else:
+        report = conv.report
+        meta, cols, rows, label, sources = (conv.meta, conv.columns, conv.rows, conv.label,
+                                            conv.sources)
+    radius = config.tether.length + config.tether.attachment_offset
+    cut = cut_day(cols["t"], np.stack([cols[c] for c in "xyz"], -1),
+                  np.stack([cols[f"T{j}"] for j in range(1, 5)], -1),
+                  radius=radius, weight=config.vehicle.mass * config.g)
+    if not cut.kept:
+        raise InputError(path, "", f"no circle or manoeuvre in the day ({len(cut.pieces)} "
+                         "pieces, none on the tether's sphere at a steady speed for "
+                         "3 s): " + "; ".join(f"{q.kind} {q.t1 - q.t0:.1f} s" for q in
+                                              cut.pieces[:6]))
+    logs = []
+    for i, piece in enumerate(cut.kept, 1):
+        sl = slice(piece.start, piece.stop)
+        pm = {**meta, "alpha_c_deg": repr(piece.tilt_deg),
+              "gamma_c_deg": repr(piece.heading_deg), "plane_source": "the day's cut",
+              "flight_id": f"{path.stem}-{i:02d}", "day_piece": piece.name}
+        # each flight its own source (``DAY#NN``): the analysis holds out flights by it,
+        # and an error names the flight of the day
+        logs += _segments(Path(f"{path}#{i:02d}"), pm, {k: v[sl] for k, v in cols.items()},
+                          rows[sl], label, min_samples, gap_factor, config=config,
+                          trust=trust, sources=sources)
+    return Day(cut, logs, cols, meta, report)
