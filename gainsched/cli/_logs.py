@@ -257,3 +257,26 @@ def convert(log, pose, out_path, pose_map, day, listing, map_path, config_path, 
                trust=trust, pose=pose, pose_map=pose_map, day=day, reporter=TERMINAL)
     for line in done.lines():
         click.echo(line)
+
+
+@cli.command()
+@CONFIG
+@click.argument("report", type=FilePath(exists=True, path_type=Path))
+@click.option("-o", "--out", "out_dir", type=FilePath(file_okay=False, path_type=Path),
+              help="Folder: plan.md, plan.json, and per flight NN.toml (a scenario "
+                   "gainsched simulate flies) and NN-reference.csv (the reference a "
+                   "firmware controller is given).")
+@click.option("--duration", type=FiniteFloat(2.0, MAX_FLIGHT_S, unit="s"), default=10.0,
+              show_default=True, help=f"Seconds per flight (2..{MAX_FLIGHT_S:g}).")
+@user_errors
+def plan(config, report, out_dir, duration):
+    """The next flight: from a diagnose REPORT (diagnose.json, or its folder), the flights
+    that would tell its look-alike candidates apart or shrink its widest interval the
+    most, each flown in simulation on the fitted model and diagnosed, with the interval
+    it is expected to give; best first."""
+    from ..studies import plan as run
+
+    cfg = _load_for_compare(config)
+    done = run(cfg, report, out_dir, duration=duration, reporter=TERMINAL)
+    for line in done.lines():
+        click.echo(line)

@@ -16,6 +16,9 @@ from ..textinput import load_toml
 
 __all__ = [
     "Maneuver",
+    "Sine",
+    "MAX_TONES",
+    "scenario_text",
     "Sensing",
     "Scenario",
     "MAX_MANEUVERS",
@@ -37,6 +40,16 @@ class Maneuver:
     t_start: float
     speed: float
     a: float
+
+
+@dataclass(frozen=True)
+class Sine:
+    """One tone of a speed excitation: ``amplitude`` (m/s) ``sin(2 pi frequency t +
+    phase)``, frequency in Hz, phase in rad, t from the flight's start."""
+
+    amplitude: float
+    frequency: float
+    phase: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -92,6 +105,10 @@ class Scenario:
         noise. In firmware mode ``latency_compensation = false`` leaves the controller's
         ``pose_delay`` at 0 (with a warning when the poses are late) and
         ``accelerometer = false`` flies it without its accelerometer.
+    excitation : tuple of Sine
+        A multisine added to the along-track speed over the whole flight (identification
+        flights, ``gainsched plan``): the speed is ``speed + sum A sin(2 pi f t + phi)``
+        (``[[excitation]]`` tables of ``amplitude_mps``, ``frequency_hz``, ``phase_deg``).
     initial_error : tuple of float
         Offset of the initial state from the nominal, on the first entries of the reduced
         state (delta, xi, delta', xi', phi, theta, chi, omega_x, omega_y, omega_z), rad and
@@ -121,6 +138,7 @@ class Scenario:
     sensing: Sensing = field(default_factory=Sensing)
     initial_error: tuple[float, ...] = ()
     source: str = field(default="", compare=False, repr=False)
+    excitation: tuple[Sine, ...] = ()
 
     @property
     def origin(self) -> str:
@@ -130,6 +148,10 @@ class Scenario:
 
 #: most speed changes of one scenario (each is evaluated over the whole flight)
 MAX_MANEUVERS = 100
+#: most tones of a speed excitation, and their frequencies, Hz (above 5 Hz the loop does
+#: not follow a reference: the closed loop's bandwidth is a few Hz)
+MAX_TONES = 16
+TONE_HZ = (0.01, 5.0)
 #: motion-capture rates, Hz: a pose a second is the least a flight of seconds can use;
 #: above the fastest control rate a config may set no sample is ever used
 SENSING_RATE_HZ = (1.0, 1.0e5)
@@ -187,6 +209,7 @@ def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
             raise sec.error("t_start", "manoeuvres must not overlap")
         t_free = man.t_start + abs(man.speed - (mans[-1].speed if mans else speed)) / man.a
         mans.append(man)
+    tones = _excitation(top, source)
     sens = top.sub("sensing", {})
     lo, hi = SENSING_RATE_HZ
     sensing = Sensing(
@@ -212,7 +235,24 @@ def scenario_from_dict(d: dict, source="<scenario>") -> Scenario:
         init = tuple(float(x) for x in a)
     top.done()
     return Scenario(name, np.deg2rad(tilt_deg), speed, duration, tuple(mans), gamma, sensing, init,
-                    source=str(source))
+                    source=str(source), excitation=tones)
+
+
+def _excitation(top: Section, source) -> tuple[Sine, ...]:
+    """The ``[[excitation]]`` tones of a scenario table."""
+    raw = top.get("excitation", [])
+    if not isinstance(raw, list):
+        raise top.error("excitation", "must be a list of tables")
+    if len(raw) > MAX_TONES:
+        raise top.error("excitation", f"at most {MAX_TONES} tones, got {len(raw)}")
+    tones = []
+    for i in range(len(raw)):
+        sec = Section(str(source), f"excitation[{i}]", raw[i])
+        tones.append(Sine(sec.number("amplitude_mps", positive=True),
+                          sec.bounded("frequency_hz", lo=TONE_HZ[0], hi=TONE_HZ[1], unit="Hz"),
+                          np.deg2rad(sec.number("phase_deg", 0.0))))
+        sec.done()
+    return tuple(tones)
 
 
 #: The shipped scenarios (package data): horizontal, tilted40, speedup, braking, staircase.
@@ -254,7 +294,8 @@ def load_scenario(path) -> Scenario:
 
 
 def profile_path(scn: Scenario, r: float, t) -> AzimuthPath:
-    """The reference azimuth path of a scenario: initial speed plus sequential manoeuvres."""
+    """The reference azimuth path of a scenario: initial speed plus sequential manoeuvres,
+    plus its speed excitation."""
     t = np.asarray(t, dtype=float)
     v_prev = scn.speed
     xi = scn.speed * t / r
@@ -266,4 +307,40 @@ def profile_path(scn: Scenario, r: float, t) -> AzimuthPath:
         for j in (1, 2, 3):
             d[j] = d[j] + p.d[j]
         v_prev = m.speed
+    for tone in scn.excitation:  # v += A sin(w t + phi): xi and its four derivatives
+        w = 2 * np.pi * tone.frequency
+        ph = w * t + tone.phase
+        amp = tone.amplitude / r
+        xi = xi - amp / w * (np.cos(ph) - np.cos(tone.phase))
+        d[0] = d[0] + amp * np.sin(ph)
+        d[1] = d[1] + amp * w * np.cos(ph)
+        d[2] = d[2] - amp * w**2 * np.sin(ph)
+        d[3] = d[3] - amp * w**3 * np.cos(ph)
     return AzimuthPath(t, xi, tuple(d))
+
+
+def scenario_text(scn: Scenario) -> str:
+    """The TOML of a scenario, as :func:`load_scenario` reads it back (the same flight:
+    angles in deg, the sensing's keys; ``initial_error`` when set)."""
+    g = lambda x: repr(float(x))  # noqa: E731  (round-trips exactly)
+    out = [f"name = {scn.name!r}".replace("'", '"'), f"tilt_deg = {g(np.rad2deg(scn.tilt))}",
+           f"gamma_deg = {g(np.rad2deg(scn.gamma))}", f"speed = {g(scn.speed)}",
+           f"duration = {g(scn.duration)}"]
+    if scn.initial_error:
+        out.append(f"initial_error = [{', '.join(g(x) for x in scn.initial_error)}]")
+    for m in scn.maneuvers:
+        out += ["", "[[maneuvers]]", f"t_start = {g(m.t_start)}", f"speed = {g(m.speed)}",
+                f"a = {g(m.a)}"]
+    for tone in scn.excitation:
+        out += ["", "[[excitation]]", f"amplitude_mps = {g(tone.amplitude)}",
+                f"frequency_hz = {g(tone.frequency)}",
+                f"phase_deg = {g(np.rad2deg(tone.phase))}"]
+    s = scn.sensing
+    out += ["", "[sensing]", f"ideal = {str(s.ideal).lower()}", f"rate_hz = {g(s.rate_hz)}",
+            f"position_noise = {g(s.position_noise)}",
+            f"attitude_noise_deg = {g(np.rad2deg(s.attitude_noise))}",
+            f"gyro_noise = {g(s.gyro_noise)}", f"latency = {g(s.latency)}",
+            f"seed = {int(s.seed)}", f"accel_noise = {g(s.accel_noise)}",
+            f"latency_compensation = {str(s.latency_compensation).lower()}",
+            f"accelerometer = {str(s.accelerometer).lower()}"]
+    return "\n".join(out) + "\n"

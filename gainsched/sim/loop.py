@@ -42,10 +42,12 @@ from ._scenario import (
     Maneuver,
     Scenario,
     Sensing,
+    Sine,
     check_flight_steps,
     load_scenario,
     profile_path,
     scenario_from_dict,
+    scenario_text,
 )
 from ._schedulers import (
     RUNTIMES,
@@ -61,6 +63,8 @@ __all__ = [
     "Scenario",
     "Sensing",
     "Maneuver",
+    "Sine",
+    "scenario_text",
     "SimResult",
     "SCENARIO_DIR",
     "load_scenario",

@@ -18,6 +18,7 @@ study and prints (gainsched/cli), so a script gets the same results and files.
   convert``);
 - :func:`topics`: what a ULog or a bag holds, for writing its channel map (``gainsched
   convert --list``);
+- :func:`plan`: the flights that would settle a diagnosis (``gainsched plan``);
 - :func:`improve`: the model loop, the rebuild and the flights old against new
   (``gainsched improve``);
 - :func:`plot`: a table's pictures and their summary (``gainsched plot``);
@@ -49,6 +50,7 @@ _MODULE_OF = {
     "compare": "_logs", "ComparisonReport": "_logs", "diagnose": "_logs",
     "DiagnosisReport": "_logs", "convert": "_logs", "Conversion": "_logs",
     "topics": "_logs",
+    "plan": "_plan", "Planned": "_plan",
     "validate": "_circles", "Validation": "_circles", "nominal": "_circles",
     "NominalCircle": "_circles",
     "inspect": "_inspect", "Inspection": "_inspect", "check": "_inspect", "Check": "_inspect",

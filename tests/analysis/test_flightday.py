@@ -371,3 +371,22 @@ def test_day_options_refused_in_one_line(files, tmp_path):
                                  "--pose", str(bag), "--pose-map", str(mp)])
     assert r.exit_code == 2 and "--pose: goes with one LOG" in r.output, r.output
     assert not (tmp_path / "d").exists()
+
+
+def test_diagnose_takes_the_days_two_files(whole_day, paper_config, tmp_path):
+    """``diagnose CONFIG FC --pose BAG --pose-map MAP --day``: one day of five flights is
+    enough for held-out scores; on the model's own truth nothing is missing."""
+    from click.testing import CliRunner
+
+    from gainsched.cli import cli
+
+    fc, bag = tmp_path / "fc.ulg", tmp_path / "mocap"
+    fc_ulog(fc, whole_day, paper_config.vehicle.thrust_max)
+    mocap_bag(bag, whole_day)
+    mp = tmp_path / "mocap.toml"
+    mp.write_text(POSE_MAP)
+    r = CliRunner().invoke(cli, ["diagnose", "paper", str(fc), "--pose", str(bag),
+                                 "--pose-map", str(mp), "--day", "--candidate", "motor_lag",
+                                 "--candidate", "mass"])
+    assert r.exit_code == 0, r.output
+    assert "on 5 flight(s)" in r.output and "verdict: no effect needed" in r.output, r.output

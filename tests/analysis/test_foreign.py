@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -1010,3 +1011,29 @@ def test_a_log_off_the_tethers_sphere_is_refused(paper_config, flight, tmp_path)
     except InputError as e:  # another check may see the scaled motion: not this one
         assert "radius" not in str(e) and "from the anchor" not in str(e)
     (same,) = read_log(csv)  # without a config: no tether to hold it to
+
+
+#: real PX4 logs no one here wrote (tests/data/real_px4/README.md)
+REAL_PX4 = sorted((Path(__file__).parents[1] / "data" / "real_px4").glob("*.ulg"))
+
+
+@pytest.mark.parametrize("ulg", REAL_PX4, ids=[p.stem for p in REAL_PX4])
+def test_real_px4_logs_are_listed_and_refused_in_one_line(ulg, tmp_path):
+    """A real PX4 log (not a tethered flight): ``convert --list`` lists its topics with
+    their rates and fields; converting it is one line naming the topic the map needs
+    and the log lacks, exit 2, nothing written."""
+    from click.testing import CliRunner
+
+    from gainsched.cli import cli
+
+    r = CliRunner().invoke(cli, ["convert", str(ulg), "--list"])
+    assert r.exit_code == 0, r.output
+    head, *rows = r.output.splitlines()
+    assert re.fullmatch(rf"{re.escape(str(ulg))}: PX4 ULog, \d+ topics over [\d.]+ s", head)
+    assert any(row.split()[0] == "vehicle_attitude" and "q[0..3]" in row for row in rows)
+    out = tmp_path / "o.csv"
+    r = CliRunner().invoke(cli, ["convert", str(ulg), "-o", str(out), "--config", "paper"])
+    assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1, r.output
+    assert re.match(rf"gainsched: error: {re.escape(str(ulg))}: topic \w+: not in the log "
+                    r"\(it has: ", r.output), r.output
+    assert not out.exists()
