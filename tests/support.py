@@ -565,3 +565,34 @@ def run_examples(obj, name: str, folder, monkeypatch) -> None:
     failed, attempted = runner.summarize(verbose=False)
     assert attempted > 0
     assert failed == 0, f"{name}: {failed} of {attempted} example lines failed (output above)"
+
+
+def text_problems(fig) -> list[tuple]:
+    """What makes a figure hard to read at its saved size: each text (titles, labels,
+    tick and colorbar labels, the values printed in cells) drawn partly outside the
+    figure (``("cut", text)``), and each pair of texts whose boxes overlap by more than a
+    pixel (``("overlap", text, text)``). Empty: legible."""
+    from matplotlib.text import Text
+
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    hidden = set()  # the labels of ticks outside the view: matplotlib keeps, never draws them
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            lo, hi = sorted(axis.get_view_interval())
+            for tick in axis.get_major_ticks() + axis.get_minor_ticks():
+                if not lo - 1e-9 * (hi - lo) <= tick.get_loc() <= hi + 1e-9 * (hi - lo):
+                    hidden.update({id(tick.label1), id(tick.label2)})
+    texts = [t for t in fig.findobj(Text) if t.get_visible() and t.get_text().strip()
+             and id(t) not in hidden]
+    boxes = np.array([t.get_window_extent(renderer).extents for t in texts]).reshape(-1, 4)
+    W, H = fig.canvas.get_width_height()
+    out = [("cut", t.get_text()) for t, b in zip(texts, boxes, strict=True)
+           if b[0] < -1 or b[1] < -1 or b[2] > W + 1 or b[3] > H + 1]
+    x = np.clip(np.minimum(boxes[:, None, 2], boxes[None, :, 2])
+                - np.maximum(boxes[:, None, 0], boxes[None, :, 0]), 0, None)
+    y = np.clip(np.minimum(boxes[:, None, 3], boxes[None, :, 3])
+                - np.maximum(boxes[:, None, 1], boxes[None, :, 1]), 0, None)
+    i, j = np.nonzero(np.triu(x * y > 1.0, k=1))
+    return out + [("overlap", texts[a].get_text(), texts[b].get_text())
+                  for a, b in zip(i, j, strict=True)]

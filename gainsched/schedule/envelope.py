@@ -15,7 +15,8 @@ import numpy as np
 
 from ..constants import Reason
 
-__all__ = ["CATEGORIES", "Envelope", "envelope_from_table", "envelope_png", "write_envelope"]
+__all__ = ["CATEGORIES", "Envelope", "envelope_from_table", "envelope_png", "envelope_figure",
+           "write_envelope"]
 
 #: circle categories, in the order of :attr:`Envelope.category`; a circle without gains
 #: takes the first reason of the last four that any of its azimuths has
@@ -137,14 +138,26 @@ def envelope_from_table(table) -> Envelope:
 
 
 def envelope_png(env: Envelope) -> bytes:
-    """The envelope as a PNG image: one marker per circle of the grid over speed x tilt,
-    coloured by category, with the lowest taut speed (paper eq. 19) as a line."""
+    """The envelope as a PNG image (:func:`envelope_figure`)."""
+    import matplotlib.pyplot as plt
+
+    fig = envelope_figure(env)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100, metadata={"Software": None})
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def envelope_figure(env: Envelope):
+    """The envelope as a figure: one marker per circle of the grid over speed x tilt,
+    coloured by category, with the lowest taut speed (paper eq. 19) as a line. The
+    caller closes it."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    fig, ax = plt.subplots(figsize=(8, 4.5), dpi=100)
     tilt_deg = np.rad2deg(env.tilt)
     V, A = np.meshgrid(env.speed, tilt_deg)
     counts = env.counts()
@@ -164,10 +177,7 @@ def envelope_png(env: Envelope) -> bytes:
     ax.grid(True, lw=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100, metadata={"Software": None})
-    plt.close(fig)
-    return buf.getvalue()
+    return fig
 
 
 def write_envelope(table, source, out_dir) -> str:

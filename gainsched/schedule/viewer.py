@@ -29,6 +29,7 @@ from __future__ import annotations
 import functools
 import io
 import json
+import textwrap
 from collections import Counter
 
 import numpy as np
@@ -76,6 +77,18 @@ def _map(ax, xi_deg, speed, values, title, cmap="viridis"):
     return mesh
 
 
+def _colorbar(fig, mesh, ax, labelsize: int = 6, label: str = "", bins: int = 4) -> None:
+    """A slim colorbar beside ``ax`` with at most ``bins`` ticks (their labels, beside ~50
+    maps, would otherwise crowd into the next map), none at its ends (a label there runs
+    past the bar, over the next map or off the figure)."""
+    from matplotlib.ticker import MaxNLocator
+
+    bar = fig.colorbar(mesh, ax=ax, pad=0.01, fraction=0.08, aspect=15, label=label)
+    bar.locator = MaxNLocator(bins, prune="both")
+    bar.update_ticks()
+    bar.ax.tick_params(labelsize=labelsize, length=1.5)
+
+
 def _outer_labels(axes) -> None:
     """Axis labels on the outer maps only, tick labels on the left column and bottom row."""
     for (r, c), ax in np.ndenumerate(axes):
@@ -114,8 +127,10 @@ def _gain_figure(plt, table, i: int):
     names = list(table.state_names)
     n = K.shape[-1]
     xi_deg = np.rad2deg(table.xi)
-    # not shared axes: sharing 44 maps makes every limit change visit all of them
-    fig, axes = plt.subplots(4, n, figsize=(1.6 * n + 1, 7.5), squeeze=False)
+    # not shared axes: sharing 44 maps makes every limit change visit all of them; a fixed
+    # layout (the constrained one doubles the drawing time of 44 maps) with room between
+    # the columns for each colorbar's labels
+    fig, axes = plt.subplots(4, n, figsize=(1.9 * n + 1, 7.8), squeeze=False)
     for r in range(4):
         for c in range(n):
             vals = np.where(ok, K[..., r, c], np.nan)
@@ -130,15 +145,14 @@ def _gain_figure(plt, table, i: int):
                 top = float(np.abs(fin).max())
                 mesh.set_clim(-top, top)
             mesh.set_gid(f"K_{r}_{c}")
-            bar = plt.colorbar(mesh, ax=axes[r, c], pad=0.02, fraction=0.08)
-            bar.ax.tick_params(labelsize=5, length=1.5)
+            _colorbar(fig, mesh, axes[r, c], labelsize=5)
     _outer_labels(axes)
     tilt = np.rad2deg(table.tilt[i])
     fig.suptitle(f"{table.name}: gains K (u = u_d - K (x - x_d)) at tilt {tilt:g} deg, "
                  f"{int(ok.any(-1).sum())} of {ok.shape[0]} speeds with gains "
                  "(blank: infeasible; dots: grid points)", fontsize=9)
-    fig.subplots_adjust(left=0.04, right=0.995, bottom=0.06, top=0.9, wspace=0.12,
-                        hspace=0.5)
+    fig.subplots_adjust(left=0.035, right=0.975, bottom=0.065, top=0.9, wspace=0.5,
+                        hspace=0.55)
     return fig
 
 
@@ -146,7 +160,8 @@ def _nominal_figure(plt, table):
     n_a = table.tilt.size
     xi_deg = np.rad2deg(table.xi)
     ok = _feasible(table)
-    fig, axes = plt.subplots(n_a, 5, figsize=(13, 2.4 * n_a + 0.8), squeeze=False)
+    fig, axes = plt.subplots(n_a, 5, figsize=(14, 2.4 * n_a + 0.8), squeeze=False,
+                             layout="constrained")
     for i in range(n_a):
         tilt = np.rad2deg(table.tilt[i])
         for m in range(4):
@@ -154,17 +169,15 @@ def _nominal_figure(plt, table):
                         np.where(ok[i], table.u_d[i, ..., m], np.nan),
                         f"tilt {tilt:g} deg: nominal {INPUT_NAMES[m]} (N)")
             mesh.set_gid(f"u_d_{i}_{m}")
-            plt.colorbar(mesh, ax=axes[i, m]).ax.tick_params(labelsize=6)
+            _colorbar(fig, mesh, axes[i, m])
         mesh = _map(axes[i, 4], xi_deg, table.speed,
                     np.where(ok[i], np.rad2deg(table.phi_d[i]), np.nan),
                     f"tilt {tilt:g} deg: nominal roll phi_d (deg)", cmap="coolwarm")
         mesh.set_gid(f"phi_d_{i}")
-        plt.colorbar(mesh, ax=axes[i, 4]).ax.tick_params(labelsize=6)
+        _colorbar(fig, mesh, axes[i, 4])
     _outer_labels(axes)
     fig.suptitle(f"{table.name}: nominal motor thrusts and roll (blank: infeasible)",
                  fontsize=9)
-    fig.subplots_adjust(left=0.05, right=0.97, bottom=0.04, top=0.95, wspace=0.3,
-                        hspace=0.45)
     return fig
 
 
@@ -174,20 +187,22 @@ def _speed_tilt_figure(plt, table, values, title, label, gid, speeds=None, tilts
     speeds = table.speed if speeds is None else speeds
     tilts = np.rad2deg(table.tilt if tilts is None else tilts)
     # one equal cell per grid point (the breakpoints are not uniform), labelled by value
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.6 * speeds.size + 2), 0.45 * tilts.size + 1.6))
+    fig, ax = plt.subplots(figsize=(max(7.0, 0.6 * speeds.size + 2.5),
+                                    0.45 * tilts.size + 2.2), layout="constrained")
     mesh = ax.pcolormesh(np.arange(speeds.size), np.arange(tilts.size),
                          np.ma.masked_invalid(values), shading="nearest", cmap="magma_r")
     mesh.set_gid(gid)
     for (a, v), x in np.ndenumerate(values):
-        if np.isfinite(x):
-            ax.text(v, a, f"{x:.3g}", ha="center", va="center", fontsize=6, color="tab:cyan")
-    plt.colorbar(mesh, ax=ax, label=label)
+        if np.isfinite(x):  # black on a light cell, white on a dark one
+            r, g, b, _ = mesh.cmap(mesh.norm(x))
+            ink = "black" if 0.299 * r + 0.587 * g + 0.114 * b > 0.5 else "white"
+            ax.text(v, a, f"{x:.3g}", ha="center", va="center", fontsize=6, color=ink)
+    _colorbar(fig, mesh, ax, labelsize=8, label=label, bins=6)
     ax.set_xticks(np.arange(speeds.size), [f"{v:g}" for v in speeds], fontsize=7)
     ax.set_yticks(np.arange(tilts.size), [f"{a:g}" for a in tilts], fontsize=7)
     ax.set_xlabel("speed (m/s)")
     ax.set_ylabel("circle tilt alpha_C (deg)")
-    ax.set_title(title, fontsize=9)
-    fig.tight_layout()
+    ax.set_title("\n".join(textwrap.wrap(title, 80)), fontsize=9)
     return fig
 
 

@@ -190,3 +190,25 @@ def test_gain_maps_carry_units_colorbars_and_a_map_for_their_sign(paper_table, f
                 assert mesh.get_cmap().name == "coolwarm" and lo == -hi
             else:
                 assert mesh.get_cmap().name == "viridis"
+
+
+def test_every_picture_is_legible_at_its_saved_size(paper_table, figs):
+    """Issue 56: rendered at its saved size, no text of any picture of ``gainsched plot``
+    and ``inspect`` (the gain maps, the nominal, the spectral radius and time-constant
+    maps, the envelope) runs off the figure or over another text (a colorbar's labels
+    over the next map, a title over its colorbar's label); the values printed in the
+    cells are black on light cells and white on dark ones, never a hue on a hue."""
+    import matplotlib.pyplot as plt
+
+    from gainsched.schedule.envelope import envelope_figure, envelope_from_table
+
+    from support import text_problems
+
+    env = envelope_figure(envelope_from_table(paper_table))
+    try:
+        for name, fig in [*figs.items(), ("envelope.png", env)]:
+            assert text_problems(fig) == [], name
+    finally:
+        plt.close(env)
+    cells = [t for t in figs["spectral_radius.png"].axes[0].texts]
+    assert cells and {t.get_color() for t in cells} <= {"black", "white"}
