@@ -465,16 +465,21 @@ def test_gap_splits_without_inventing_samples(tmp_path):
     assert "100 samples" in text and "2 of 2 segments kept" in text and "1 gap," in text
 
 
+def _read_warned(path):
+    """``(segments, the LogWarning messages)`` of reading the log at ``path``."""
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        logs = read_log(path)
+    return logs, [str(w.message) for w in rec if issubclass(w.category, LogWarning)]
+
+
 def test_short_segment_dropped_with_warning(tmp_path):
     cols = _columns(n=80)
     cols["t"] = cols["t"].copy()
     cols["t"][70:] += 0.1  # last piece: 10 samples, too short
     path = tmp_path / "f.h5"
     write_log(path, cols, META)
-    with warnings.catch_warnings(record=True) as rec:
-        warnings.simplefilter("always")
-        logs = read_log(path)
-    msgs = [str(w.message) for w in rec if issubclass(w.category, LogWarning)]
+    logs, msgs = _read_warned(path)
     assert len(msgs) == 2
     assert "gap" in msgs[0] and "sample 71" in msgs[0]
     assert "segment 1 has 10 samples" in msgs[1] and "dropped" in msgs[1]
@@ -491,10 +496,7 @@ def test_many_gaps_are_one_line(tmp_path):
         cols["t"][k:] += 0.05  # 10, too short
     path = tmp_path / "day.csv"
     write_log(path, cols, META)
-    with warnings.catch_warnings(record=True) as rec:
-        warnings.simplefilter("always")
-        logs = read_log(path)
-    msgs = [str(w.message) for w in rec if issubclass(w.category, LogWarning)]
+    logs, msgs = _read_warned(path)
     assert len(msgs) == 2 and len(logs) == 10, msgs
     assert "segment 10 has 10 samples" in msgs[1]
     assert msgs[0].startswith(f"{path}: column t: 10 gaps of 0.055-0.055 s (median interval ")
@@ -502,10 +504,7 @@ def test_many_gaps_are_one_line(tmp_path):
     for k in range(0, 40, 5):  # 8 more short pieces: one line for those too
         cols["t"][k + 1:] += 0.05
     write_log(path, cols, META)
-    with warnings.catch_warnings(record=True) as rec:
-        warnings.simplefilter("always")
-        read_log(path)
-    msgs = [str(w.message) for w in rec if issubclass(w.category, LogWarning)]
+    msgs = _read_warned(path)[1]
     assert len(msgs) == 2 and msgs[1].endswith("samples in all; dropped"), msgs
 
 
