@@ -95,6 +95,6 @@ def day_files(day: Day) -> dict[str, bytes]:
 def _logs_by_piece(day: Day) -> list:
     """The first segment read of each kept piece (its metadata: the piece's plane)."""
     first = {}
-    for log in day.logs:
-        first.setdefault(log.meta["day_piece"] + log.meta["flight_id"], log)
+    for log in day.logs:  # each piece its own flight_id
+        first.setdefault(log.meta["flight_id"], log)
     return list(first.values())

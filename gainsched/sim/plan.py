@@ -259,15 +259,15 @@ def named(scn: Scenario) -> Scenario:
     return dataclasses.replace(scn, name=f"{what} {tilt}")
 
 
-def _feasible(truth, scn: Scenario) -> Scenario | str:
-    """``scn``, its excitation halved (at most twice) until the truth's nominal along it
-    keeps the tension margin and the motors' range; else why it cannot be flown."""
-    from ..model.reduced import Model
+def _feasible(model, scn: Scenario) -> Scenario | str:
+    """``scn``, its excitation halved (at most twice) until the nominal of ``model`` (the
+    truth's) along it keeps the tension margin and the motors' range; else why it cannot
+    be flown."""
     from ..schedule.nominal import nominal_from_path
     from ..schedule.trim import TrimError
 
-    model = Model(truth)
-    t = np.arange(int(round(scn.duration / truth.control.dt)) + 1) * truth.control.dt
+    dt = model.config.control.dt
+    t = np.arange(int(round(scn.duration / dt)) + 1) * dt
     for _ in range(3):
         try:
             nom = nominal_from_path(model, profile_path(scn, model.r, t), scn.tilt)
@@ -311,17 +311,19 @@ def plan_flights(config, report: dict, table, *, duration: float = 10.0, source=
         The report holds no fit, or its focus is no library candidate.
     """
     from ..analysis.diagnose import diagnose
+    from ..model.reduced import Model
     from .loop import table_scheduler
 
     focus, params, alike = _focus(report, source)
     truth = truth_config(config, focus, [v for v, _, _ in params.values()])
+    model = Model(truth)  # its nominals: one model for the whole menu
     sched = table_scheduler(table)
     step = progress or (lambda n: None)
     names = [*focus.split(" + "), *alike]
     joint = " + " in focus
     flights, skipped = [], []
     for k, scn0 in enumerate(menu(table, duration)):
-        scn = _feasible(truth, scn0)
+        scn = _feasible(model, scn0)
         if isinstance(scn, str):
             skipped.append((scn0.name, scn))
             step(1)

@@ -35,7 +35,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ._checks import fitted_plane
-from ._consistency import _plane_angles
+from ._consistency import _plane_angles, _plane_normal
 
 __all__ = ["SPHERE_TOL", "MIN_SPEED", "STEADY_ACCEL", "MIN_CIRCLE_S", "Piece", "DayCut",
            "cut_day"]
@@ -283,8 +283,6 @@ def _flying(t, p, speed, accel, a: int, b: int) -> list[Piece]:
 
 def _angle(a: Piece, b: Piece) -> float:
     """Angle between the planes of two pieces, deg."""
-    from ._consistency import _plane_normal
-
     na, nb = _plane_normal(a.tilt_deg, a.heading_deg), _plane_normal(b.tilt_deg, b.heading_deg)
     return math.degrees(math.acos(min(1.0, abs(float(na @ nb)))))
 
