@@ -35,6 +35,8 @@ API = (
     ("The compact table format", "firmware.compact", ("compact_data", "CompactData",
                                                       "CompactInterpolator")),
     ("Checking a table", "firmware.host.check", ("midpoint_check",)),
+    ("Stability margins", "schedule.margins", ("loop_margins", "LoopMargins",
+                                               "worst_margins")),
     ("Motor commands", "actuators", ("command_from_thrust", "thrust_from_command")),
     ("Seeing a table", "schedule.viewer", ("schedule_figures", "schedule_plots",
                                            "table_summary")),

@@ -534,12 +534,12 @@ def rechecksum(f) -> None:
     """Recompute the checksums of an open table file ``f`` (h5py, writable) after an
     edit: what a tool that "repairs" them would do, so that the check after the
     checksums is the one a test reaches."""
-    from gainsched.schedule.tables import _dataset_sha256, _datasets, _root_sha256
+    from gainsched.schedule.h5io import dataset_sha256, datasets, root_sha256
 
     digests = {}
-    for name, ds in _datasets(f).items():
-        digests[name] = ds.attrs["sha256"] = _dataset_sha256(ds[()])
-    f.attrs["data_sha256"] = _root_sha256(dict(f.attrs), digests)
+    for name, ds in datasets(f).items():
+        digests[name] = ds.attrs["sha256"] = dataset_sha256(ds[()])
+    f.attrs["data_sha256"] = root_sha256(dict(f.attrs), digests)
 
 
 def run_examples(obj, name: str, folder, monkeypatch) -> None:

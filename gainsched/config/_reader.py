@@ -91,7 +91,8 @@ class Config:
         integral states (``integrator``: delta, paper Sec. IV.B; ``azimuth_integral``:
         xi), the terminal cost (``"periodic"`` or ``"single-period"``) and the firmware's
         bounds on the integral states (``int_limit``, rad s; default: sized from the
-        table's gains).
+        table's gains) and whether the build computes every circle's stability margins
+        (``margins``, default true; docs/margins.md).
     grid : Grid
         ``[grid]``: the schedule's axes: tangential COG speeds ``speeds`` (n_v,) m/s,
         circle tilts ``tilts`` (n_a,) rad (``tilts_deg`` in the file, starting at 0), and

@@ -96,13 +96,16 @@ class Control:
     #: :func:`gainsched.schedule.lqr.stability_scale`)
     max_time_constant_s: float | None = None
     #: the largest gain magnitude a build may produce, N per state unit (None: no cap;
-    #: :func:`gainsched.schedule.grid.check_gain_cap`)
+    #: :func:`gainsched.schedule.bounds.check_gain_cap`)
     max_gain: float | None = None
     #: rad s; the firmware controller's bound on each integral state, one per entry of
     #: :attr:`integrators` (``int_limit`` in the file: one number for all of them, or a
     #: list); None: sized from the table's gains
     #: (:func:`gainsched.firmware.controller.int_limits_for`). The LQR does not use it.
     int_limit: tuple[float, ...] | None = None
+    #: compute the stability margins of every circle's loop at the build
+    #: (:mod:`gainsched.schedule.margins`; docs/margins.md)
+    margins: bool = True
 
     @property
     def integrators(self) -> tuple[str, ...]:

@@ -178,10 +178,11 @@ def read_control(sec: Section) -> Control:
     if "max_gain" in sec.data:
         max_gain = sec.number("max_gain", positive=True)
     int_limit = _int_limit(sec, integrators) if "int_limit" in sec.data else None
+    margins = sec.boolean("margins", True)
     sec.done()
     Q.setflags(write=False)
     R.setflags(write=False)
-    return Control(rate, Q, R, integ, term, az_integ, tau_max, max_gain, int_limit)
+    return Control(rate, Q, R, integ, term, az_integ, tau_max, max_gain, int_limit, margins)
 
 
 def _int_limit(sec: Section, integrators: tuple[str, ...]) -> tuple[float, ...]:

@@ -287,6 +287,10 @@ def runtime_data(table) -> RuntimeData:
                   "control_law")
         if k in table.attrs
     }
+    if getattr(table, "loop_margins", None) is not None:  # the header's comment
+        from ..schedule.viewer import margin_lines
+
+        meta["margins"] = "\n".join(margin_lines(table, maps=False))
     return RuntimeData(
         name=c_identifier(table.name if "config_name" in table.attrs else "table"),
         xi_scale=F32(n_xi / (2 * np.pi)),

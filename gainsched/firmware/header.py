@@ -79,6 +79,8 @@ def render_header(data) -> str:
         data_bytes=data.nbytes(),
         runtime_version=RUNTIME_VERSION,
         control_law=str(meta.get("control_law", "u = u_d - K (x - x_d)")),
+        margins_note="\n * ".join(str(meta.get("margins", "stability margins: not in this "
+                                   "table ([control] margins = false)")).splitlines()),
         state_names=", ".join(base.state_names) if base.state_names else "?",
         mask_bits=f"{bits}; {MASK_NO_GAINS:#04x} no gains stored (zeros)",
         xi=c_initializer(base.xi, c_floats),

@@ -106,7 +106,8 @@ def check_centres(config2, speed, tilts, corners, effects=(), dare_tilt0=True):
     solve is infeasible)."""
     ensure_blas_single_thread()
     with registered_effects_context(effects):
-        sol, steps = solve_circle(config2, speed, tilts, keep_steps=True, dare_tilt0=dare_tilt0)
+        sol, steps = solve_circle(config2, speed, tilts, keep_steps=True, dare_tilt0=dare_tilt0,
+                                  margins=False)
     ok = list(np.flatnonzero(np.isfinite(sol.spectral_radius)))
     out = []
     for i in range(len(tilts)):

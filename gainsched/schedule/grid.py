@@ -24,7 +24,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..constants import N_STATE, TILT_BATCH, Reason
+from ..constants import N_INPUT, N_STATE, TILT_BATCH, Reason
 from ..errors import InputError
 from ..model.effects import registered_effects, registered_effects_context
 from ..model.reduced import Model
@@ -35,9 +35,11 @@ from ..model.symmetry import (
     table_refusal,
 )
 from ..native.reproducible import blas_single_thread, ensure_blas_single_thread
+from .bounds import check_gain_cap
 from .discrete import LIN_TOL, discrete_at, discrete_system, periodic_interp
 from .jobs import run_jobs
 from .lqr import dlqr, periodic_lqr, spectral_radius, stability_scale
+from .margins import MARGIN_XTOL, loop_margins
 from .modes import MODE_COUNT, floquet_modes
 from .nominal import circle_nominal, circle_offsets
 from .offsets import HARMONICS
@@ -46,8 +48,7 @@ from .trim import TrimError, solve_circles
 
 __all__ = ["CircleSolution", "solve_circle", "solve_speed", "solve_speed_and_image",
            "build_grid", "GridResult",
-           "bound_price", "grid_from_solutions",
-           "check_gain_cap",
+           "grid_from_solutions",
            "steps_per_period",
            "discrete_system", "periodic_interp", "check_effect_symmetries", "mirror_config",
            "level_circle_invariant", "LIN_TOL",
@@ -101,38 +102,6 @@ def mirror_config(config):
                                for name, value in values.items()})
 
 
-def check_gain_cap(config, grid) -> None:
-    """Refuse a grid whose gains exceed ``[control] max_gain`` anywhere.
-
-    The price of a closed-loop bound (``max_time_constant_s``) or of large weights is
-    gain: a cap says how much the vehicle can take (motor-command noise, saturation on
-    the first error). Raises :class:`InputError` naming the config file, the key and the
-    circle with the largest gain.
-
-    Parameters
-    ----------
-    config : Config
-        The config built (its ``control.max_gain``, N per state unit, or None: no cap).
-    grid : GridResult
-        The built grid.
-    """
-    cap = config.control.max_gain
-    if cap is None:
-        return
-    k_max = grid.gain_max()
-    if not np.nanmax(k_max, initial=0.0) > cap:
-        return
-    i, j = np.unravel_index(np.nanargmax(k_max), k_max.shape)
-    bound = config.control.max_time_constant_s
-    why = (f" with max_time_constant_s {bound:g} s ({grid.gain_max_free[i, j]:.3g} without "
-           "the bound): raise max_gain or the bound" if bound is not None
-           else ": raise max_gain or lower Q / raise R")
-    raise InputError(config.source, "control.max_gain",
-                     f"{cap:g} is exceeded: max |K| {k_max[i, j]:.3g} at "
-                     f"{config.grid.speeds[j]:g} m/s, tilt {np.rad2deg(config.grid.tilts[i]):g} "
-                     f"deg{why}")
-
-
 def level_circle_invariant(model) -> bool:
     """Whether every effect of ``model`` looks the same at every azimuth of a level circle
     (:func:`~gainsched.model.symmetry.azimuth_invariance_error` within
@@ -172,6 +141,9 @@ class _Circles:
     mode_damping: np.ndarray
     mode_shape: np.ndarray
     gain_max_free: np.ndarray
+    gain_margin: np.ndarray
+    input_margin: np.ndarray
+    delay_margin: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -239,6 +211,17 @@ class CircleSolution(_Circles):
         Largest gain magnitude at the grid azimuths of the LQR without
         ``[control] max_time_constant_s`` (the price of the bound is ``max |K|`` against
         it; the same as ``max |K|`` without a bound), N per state unit; NaN if infeasible.
+    gain_margin : ndarray, shape (n_a, 2)
+        The loop's gain margins, down and up, broken at the thrust commands of all four
+        motors at once: the factors on the commands at which a Floquet multiplier reaches
+        the unit circle (:mod:`gainsched.schedule.margins`; 0: stable with the feedback
+        off, inf: stable beyond :data:`~gainsched.schedule.margins.G_MAX`); NaN if
+        infeasible or ``[control] margins = false``.
+    input_margin : ndarray, shape (n_a, 4, 2)
+        The same for each motor's command alone (T1..T4; down, up).
+    delay_margin : ndarray, shape (n_a,)
+        The extra delay on the commands that puts a multiplier on the unit circle, s
+        (inf: beyond :data:`~gainsched.schedule.margins.TAU_MAX_S`); NaN as above.
     """
 
     @classmethod
@@ -260,7 +243,7 @@ class CircleSolution(_Circles):
                    np.zeros(n_a, dtype=np.int32), np.zeros(n_a, dtype=np.int32), nan(n_a),
                    steps, dt, np.zeros((n_a, 2, 2 * HARMONICS + 1)), nan(n_a, MODE_COUNT),
                    nan(n_a, MODE_COUNT), nan(n_a, MODE_COUNT), nan(n_a, MODE_COUNT, n),
-                   nan(n_a))
+                   nan(n_a), nan(n_a, 2), nan(n_a, N_INPUT, 2), nan(n_a))
 
 
 def _sample_steps(N, n_xi):
@@ -287,8 +270,9 @@ def _tilt0(model, config, speed, N, dt, Qx):
     (:func:`level_circle_invariant`): the circle's linearisation is the same at every
     azimuth, so the periodic problem is time-invariant and its solution is the DARE's,
     exactly. Returns ``K (4, n), S (n, n), spectral radius``, the modes of ``A - B K``
-    (:func:`~gainsched.schedule.modes.floquet_modes` with the step ``dt``) and max |K|
-    without the config's ``max_time_constant_s`` (the same K without one)."""
+    (:func:`~gainsched.schedule.modes.floquet_modes` with the step ``dt``), max |K|
+    without the config's ``max_time_constant_s`` (the same K without one) and the step's
+    ``A (n, n), B (n, 4)``."""
     Ad, Bd = discrete_at(model, speed, [0.0], 1, dt)
     A, B = Ad[0, 0], Bd[0, 0]
     scale = stability_scale(dt, config.control.max_time_constant_s)
@@ -297,10 +281,12 @@ def _tilt0(model, config, speed, N, dt, Qx):
     if scale != 1.0:  # the prescribed degree of stability: the DARE of the scaled system
         K, S, _ = dlqr(scale * A, scale * B, Qx, config.control.R)
         E = np.linalg.eigvals(A - B @ K)
-    return K, S, float(np.abs(E).max()) ** N, floquet_modes(A - B @ K, dt), gain_max_free
+    return (K, S, float(np.abs(E).max()) ** N, floquet_modes(A - B @ K, dt), gain_max_free,
+            A, B)
 
 
-def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=None):
+def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=None,
+                 margins=None):
     """Solve the periodic LQR of one circle speed at several tilts (one batch).
 
     For each tilt the nominal (paper eqs. 15-18, with pitch and yaw offsets where
@@ -329,6 +315,10 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=No
         every azimuth is time-invariant, and its periodic solution is the DARE's,
         exactly. ``None``: when the effects allow it (:func:`level_circle_invariant`), the
         decision :func:`build_grid` takes once per build.
+    margins : bool or None, default None
+        Compute each loop's stability margins (:mod:`gainsched.schedule.margins`);
+        ``None``: as ``[control] margins`` says. Checks that only need the gains pass
+        False.
 
     Returns
     -------
@@ -379,6 +369,7 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=No
     if dare_tilt0 is None:
         dare_tilt0 = level_circle_invariant(model)
     tilts = np.asarray(tilts, dtype=float)
+    margins = config.control.margins if margins is None else margins
     N = steps_per_period(speed, model.r, config.control.dt)
     n_lqr = config.control.n_lqr  # reduced state and integrals; effect states follow
     n = model.n_z - N_STATE + n_lqr
@@ -389,9 +380,9 @@ def solve_circle(config, speed: float, tilts, *, keep_steps=False, dare_tilt0=No
     Qx[:n_lqr, :n_lqr] = config.control.Q
     if dare_tilt0 and not keep_steps and config.control.terminal == "periodic":
         for i in ok[tilts[ok] == 0.0]:
-            _fill_tilt0(out, i, model, config, speed, Qx)
+            _fill_tilt0(out, i, model, config, speed, Qx, margins)
         ok = ok[tilts[ok] != 0.0]
-    steps = _fill_periodic(out, ok, model, config, speed, tilts, Qx, keep_steps)
+    steps = _fill_periodic(out, ok, model, config, speed, tilts, Qx, keep_steps, margins)
     return (out, steps) if keep_steps else out
 
 
@@ -420,21 +411,31 @@ def _fill_nominals(out: CircleSolution, model, speed, tilts) -> np.ndarray:
     return bad
 
 
+def _put_margins(out: CircleSolution, idx, lm) -> None:
+    out.gain_margin[idx] = np.stack([lm.gain_down, lm.gain_up], axis=-1)
+    out.input_margin[idx] = np.stack([lm.input_down, lm.input_up], axis=-1)
+    out.delay_margin[idx] = lm.delay
+
+
 def _put_modes(out: CircleSolution, idx, m) -> None:
     out.mode_tau[idx], out.mode_frequency[idx], out.mode_damping[idx], out.mode_shape[idx] = (
         m.tau, m.frequency, m.damping, m.shape)
 
 
-def _fill_tilt0(out: CircleSolution, i: int, model, config, speed, Qx) -> None:
+def _fill_tilt0(out: CircleSolution, i: int, model, config, speed, Qx, margins) -> None:
     """Tilt ``i`` (0) by the DARE (:func:`_tilt0`): infinite horizon, one linearisation."""
-    K, S, out.spectral_radius[i], modes, out.gain_max_free[i] = _tilt0(
+    K, S, out.spectral_radius[i], modes, out.gain_max_free[i], A, B = _tilt0(
         model, config, speed, out.steps, out.dt, Qx)
     out.K[i], out.S[i] = K, S
     _put_modes(out, i, modes)
+    if margins:  # one step: the period's product is its N-th power
+        _put_margins(out, [i], loop_margins(A[None, None], B[None, None], K[None, None],
+                                            out.dt, xtol=MARGIN_XTOL))
     out.lin_samples[i], out.lin_error[i], out.sweeps[i] = 1, 0.0, -1  # infinite horizon
 
 
-def _fill_periodic(out: CircleSolution, ok, model, config, speed, tilts, Qx, keep_steps):
+def _fill_periodic(out: CircleSolution, ok, model, config, speed, tilts, Qx, keep_steps,
+                   margins):
     """The periodic Riccati recursion (paper eq. 23) of the feasible tilts ``ok``, in
     batches of :data:`~gainsched.constants.TILT_BATCH`, into ``out``; returns the steps
     ``(A_d, B_d, K)`` with ``keep_steps`` (see :func:`solve_circle`), else None."""
@@ -447,14 +448,18 @@ def _fill_periodic(out: CircleSolution, ok, model, config, speed, tilts, Qx, kee
         Ad, Bd, M, err = discrete_system(model, speed, tilts[idx], N, dt)
         out.lin_samples[idx], out.lin_error[idx] = M, err
         As, Bs = (Ad, Bd) if scale == 1.0 else (scale * Ad, scale * Bd)
+        every = keep_steps or margins  # the gains of every step
         sol = periodic_lqr(As, Bs, Qx, ctrl.R, terminal=ctrl.terminal,
-                           keep_S=True, steps=None if keep_steps else keep)
+                           keep_S=True, steps=None if every else keep)
         # the monodromy of the real loop: prod (A_k - B_k K_k) = scale^-N prod (scaled)
         Phi = sol.Phi if scale == 1.0 else sol.Phi * scale ** -N
         Ks, Ss = sol.K, sol.S
-        if keep_steps:  # every step was kept: pick the grid's bracketing steps
+        if every:  # pick the grid's bracketing steps
             Ks, Ss = Ks[:, keep], Ss[:, keep]
+        if keep_steps:
             kept.append((Ad, Bd, sol.K))
+        if margins:  # the real loop's: the model's A_k, B_k (not the scaled ones)
+            _put_margins(out, idx, loop_margins(Ad, Bd, sol.K, dt, xtol=MARGIN_XTOL))
         out.K[idx] = _sample(Ks, lo, hi, w)
         out.S[idx] = _sample(Ss, lo, hi, w)
         out.spectral_radius[idx] = spectral_radius(Phi)
@@ -511,6 +516,13 @@ class GridResult(_Circles):
     gain_max_free : ndarray, shape (n_a, n_v)
         Largest gain magnitude of the LQR without ``max_time_constant_s`` per circle, N
         per state unit (as in :class:`CircleSolution`).
+    gain_margin : ndarray, shape (n_a, n_v, 2)
+        Gain margins (down, up factors) of all four motors per circle (as in
+        :class:`CircleSolution`; NaN without ``[control] margins``).
+    input_margin : ndarray, shape (n_a, n_v, 4, 2)
+        Those of each motor alone.
+    delay_margin : ndarray, shape (n_a, n_v)
+        The delay margin per circle, s.
     level_invariant : bool
         Tilt 0 was solved by the DARE, one gain per speed independent of the azimuth
         (:func:`level_circle_invariant`); False when an effect changes with the azimuth
@@ -646,29 +658,3 @@ def grid_from_solutions(sols, level_invariant: bool) -> GridResult:
                 for f in fields(CircleSolution) if f.name not in ("steps", "dt")}
     return GridResult(**per_tilt, steps=np.array([s.steps for s in sols]),
                       dt=np.array([s.dt for s in sols]), level_invariant=level_invariant)
-
-
-def bound_price(max_time_constant_s: float, grid: GridResult) -> str:
-    """One line: what ``[control] max_time_constant_s`` bought and what it cost.
-
-    Parameters
-    ----------
-    max_time_constant_s : float
-        The config's bound, s.
-    grid : GridResult
-        A grid built with it.
-
-    Returns
-    -------
-    str
-        The slowest closed-loop time constant of the grid against the bound, and the
-        largest gain against the largest without the bound (N per state unit).
-    """
-    tau = grid.mode_tau[..., 0]
-    if not np.any(np.isfinite(tau)):
-        return f"max_time_constant_s {max_time_constant_s:g} s: no feasible circle"
-    k_max = float(np.nanmax(grid.gain_max()))
-    k_free = float(np.nanmax(grid.gain_max_free))
-    return (f"max_time_constant_s {max_time_constant_s:g} s: slowest closed-loop mode "
-            f"{np.nanmax(tau):.3g} s; the price: max |K| {k_max:.3g}, {k_free:.3g} without "
-            f"the bound (x{k_max / k_free:.2f})")

@@ -17,29 +17,42 @@ from instability, broken where the controller meets the vehicle, the thrust comm
   held commands (exact at whole samples, first order in between: the ZOH integral of a
   shift inside one sample is split in proportion to time, not through ``exp(A s)``).
 
-Each margin is a root of ``rho(Phi(p)) - 1`` in the parameter p (g or tau), found for
-every circle of a batch at once: a scan of the parameter on a grid (the first crossing,
-which the nearest instability is) and bisection inside the bracket it finds (vectorised:
-one monodromy product per step for the whole batch). Why by hand: python-control and
-MATLAB's ``margin``/``diskmargin`` give these for time-invariant loops only; the periodic
-loop's margins are those of its monodromy, which no library forms.
+Each margin is a root of ``log rho(Phi(p))`` in the parameter p (g or tau), found for
+every circle and every margin of a batch at once: a scan of the parameter (the first
+crossing, which the nearest instability is) and the Illinois variant of false position
+inside the bracket it finds (superlinear; the monodromies of all unfinished margins in
+one call of the compiled kernel ``gainsched/native/loops.c``, with a numpy fallback). The
+products are kept as ``M 2^e`` (exact power-of-two rescaling every few steps), so a
+loop far beyond its margin does not overflow. Why by hand: python-control and MATLAB's
+``margin``/``diskmargin`` give these for time-invariant loops only; the periodic loop's
+margins are those of its monodromy, which no library forms.
 """
 
 from __future__ import annotations
 
+import ctypes
+from dataclasses import dataclass, fields
+
 import numpy as np
 
-__all__ = ["monodromy_with", "spectral_radius", "gain_margins", "delay_margin", "G_MAX",
-           "TAU_MAX_STEPS"]
+from .. import native
+from ..errors import GainschedError
+
+__all__ = ["monodromy_with", "spectral_radius", "gain_margins", "delay_margin", "loop_margins",
+           "LoopMargins", "worst_margins", "G_MAX", "TAU_MAX_S", "XTOL",
+           "MARGIN_XTOL"]
 
 #: the largest gain factor searched (+20 dB); no crossing below it: margin reported inf
 G_MAX = 10.0
-#: the longest extra delay searched, in samples of the period
-TAU_MAX_STEPS = 8
-#: the scan's points per bracket before the bisection
-_SCAN = 48
-#: bisection steps (2^-40 of the bracket)
-_BISECT = 40
+#: the longest extra delay searched, s; no crossing below it: margin reported inf
+TAU_MAX_S = 0.05
+#: refinement steps at most, and the default tolerance on the parameter (relative to
+#: max(1, parameter))
+_REFINE, XTOL = 60, 1e-10
+#: the build's tolerance: 1e-6 of a factor (1e-5 dB) or of a sample (1 ns at 1 kHz)
+MARGIN_XTOL = 1e-6
+#: steps between the numpy fallback's rescalings (the kernel's RENORM)
+_RENORM = 16
 
 
 def spectral_radius(M):
@@ -69,34 +82,268 @@ def monodromy_with(Ad, Bd, K, gain):
     return M
 
 
-def _first_crossing(rho_of, lo, hi, n_batch):
-    """The first p in [lo, hi] (arrays, per batch entry; searched from ``lo``) where
-    ``rho_of(p) >= 1``, by a scan and bisection; inf where none (the loop stays stable
-    over the whole range), NaN where already unstable at ``lo``."""
-    lo, hi = np.broadcast_to(lo, n_batch).astype(float), np.broadcast_to(hi, n_batch).astype(float)
-    s = np.linspace(0.0, 1.0, _SCAN + 1)
-    P = lo[..., None] + (hi - lo)[..., None] * s  # (*b, S)
-    R = rho_of(P)
-    unstable = R >= 1.0
-    first = np.argmax(unstable, axis=-1)
-    found = unstable.any(-1)
-    out = np.full(n_batch, np.inf)
-    out[np.asarray(unstable[..., 0])] = np.nan
-    todo = found & ~unstable[..., 0]
-    if not todo.any():
-        return out
-    idx = np.where(todo, first, 1)
-    a = np.take_along_axis(P, (idx - 1)[..., None], -1)[..., 0]
-    b = np.take_along_axis(P, idx[..., None], -1)[..., 0]
-    for _ in range(_BISECT):
-        m = 0.5 * (a + b)
-        bad = rho_of(m[..., None])[..., 0] >= 1.0
-        a, b = np.where(bad, a, m), np.where(bad, m, b)
-    out[todo] = 0.5 * (a + b)[todo]
-    return out
+def _rescaled(M, e):
+    """``M 2^-p``, ``e + p`` with 2^p the power of two above max |M| per matrix."""
+    mx = np.abs(M).max(axis=(-2, -1))
+    p = np.where((mx > 0) & np.isfinite(mx), np.frexp(np.where(mx > 0, mx, 1.0))[1], 0)
+    return np.ldexp(M, -p[..., None, None]), e + p
 
 
-def gain_margins(Ad, Bd, K, *, inputs=None, g_max: float = G_MAX):
+def _log_rho(M, e):
+    """``log rho(M 2^e)``; -inf for a nilpotent product."""
+    with np.errstate(divide="ignore"):
+        return np.log(spectral_radius(M)) + e * np.log(2.0)
+
+
+def _lib():
+    lib = native.load("loops")
+    if lib is not None and not hasattr(lib, "_gs_ready"):
+        dp, sp, i, z = (ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_ssize_t),
+                        ctypes.c_int, ctypes.c_ssize_t)
+        ip = ctypes.POINTER(ctypes.c_int)
+        lib.gs_gain_loops.argtypes = [i, i, i, z, z, z, ip, dp, sp, dp, sp, dp, sp, dp, dp, dp]
+        lib.gs_delay_loops.argtypes = [i, i, i, i, i, z, z, z, ip, dp, sp, dp, sp, dp, sp, dp,
+                                       dp, dp, dp]
+        lib._gs_ready = True
+    return lib
+
+
+def _c(X):
+    """X as float64 with whole-element strides: (array, pointer, strides)."""
+    X = np.asarray(X, dtype=float)
+    if any(s % X.itemsize for s in X.strides):
+        X = np.ascontiguousarray(X)
+    return X, X.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), (
+        ctypes.c_ssize_t * X.ndim)(*(s // X.itemsize for s in X.strides))
+
+
+def _out(*shape):
+    X = np.empty(shape)
+    return X, X.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+
+def _gain_loops(Ad, Bd, K, circle, G):
+    """``log rho`` of the lanes: loop ``circle`` (L,) with the factors G (L, m): (L,)."""
+    _, N, n, m = Bd.shape
+    L = circle.size
+    lib = _lib()
+    if lib is None:
+        M, e = np.broadcast_to(np.eye(n), (L, n, n)).copy(), np.zeros(L)
+        for k in range(N):
+            BG = Bd[circle, k] * G[:, None, :]
+            M = (Ad[circle, k] - BG @ K[circle, k]) @ M
+            if (k + 1) % _RENORM == 0:
+                M, e = _rescaled(M, e)
+        return _log_rho(M, e)
+    (Ad, pa, sa), (Bd, pb, sb), (K, pk, sk) = _c(Ad), _c(Bd), _c(K)
+    G, pg, _ = _c(np.ascontiguousarray(G, dtype=float))
+    circle = np.ascontiguousarray(circle, dtype=np.intc)
+    (M, pm), (e, pe) = _out(L, n, n), _out(L)
+    if lib.gs_gain_loops(n, m, N, L, 0, L, circle.ctypes.data_as(ctypes.POINTER(ctypes.c_int)),
+                         pa, sa, pb, sb, pk, sk, pg, pm, pe) != 0:
+        raise GainschedError(f"loop kernel: size n={n}, m={m} beyond its limits")
+    return _log_rho(M, e)
+
+
+def _delayed_monodromy(Ad, Bd, K, tau_steps):
+    """The monodromy of the loop with the commands delayed by ``tau_steps`` samples
+    (array (*b, S)), on the state ``[x, u_{k-1}, .., u_{k-D}]`` (module docstring), as
+    ``(M, e)``: ``M 2^e``."""
+    n, m = Ad.shape[-1], Bd.shape[-1]
+    tau = np.asarray(tau_steps, float)
+    D = int(np.floor(np.max(tau))) + 1
+    d = np.floor(tau).astype(int)
+    f = tau - d
+    na = n + D * m
+    batch = np.broadcast_shapes(Ad.shape[:-3], tau.shape)
+    M = np.broadcast_to(np.eye(na), batch + (na, na)).copy()
+    e = np.zeros(batch)
+    # weights of the held commands u_{k-j}, j = 0..D, on the applied input
+    j = np.arange(D + 1)
+    w = (np.where(j == d[..., None], 1.0 - f[..., None], 0.0)
+         + np.where(j == d[..., None] + 1, f[..., None], 0.0))  # (*batch, D + 1)
+    for k in range(Ad.shape[-3]):
+        A, B, Kk = Ad[..., k, :, :], Bd[..., k, :, :], K[..., k, :, :]
+        T = np.zeros(batch + (na, na))
+        # applied = w0 u_k + sum_{j>=1} w_j u_{k-j}, u_k = -K x
+        T[..., :n, :n] = A - w[..., 0, None, None] * (B @ Kk)
+        for jj in range(1, D + 1):
+            cols = slice(n + (jj - 1) * m, n + jj * m)
+            T[..., :n, cols] = w[..., jj, None, None] * B
+        T[..., n:n + m, :n] = -Kk  # the register: u_k enters, the rest shift down
+        for jj in range(1, D):
+            T[..., n + jj * m:n + (jj + 1) * m, n + (jj - 1) * m:n + jj * m] = np.eye(m)
+        M = T @ M
+        if (k + 1) % _RENORM == 0:
+            M, e = _rescaled(M, e)
+    return M, e
+
+
+#: columns the delayed loop's monodromy is applied to (above its numerical rank over a
+#: period, 12-13 on the paper's circles)
+_RANK = 14
+
+
+def _delay_pass_numpy(Ad, Bd, K, circle, tau, D, X0):
+    """The recursion of ``gs_delay_loops`` in ``native/loops.c`` with numpy (the fallback):
+    the lanes' columns propagated over the period with a ring of the last commands."""
+    _, N, n, m = Bd.shape
+    L, p, R = tau.size, X0.shape[-1], D + 1
+    d = np.floor(tau).astype(int)
+    f = (tau - d)[:, None, None]
+    X = X0[:, :n].copy()
+    ring = np.zeros((R, L, m, p))
+    for j in range(1, D + 1):
+        ring[R - j] = X0[:, n + (j - 1) * m:n + j * m]
+    e, lanes = np.zeros(L), np.arange(L)
+    for k in range(N):
+        ring[k % R] = -(K[circle, k] @ X)
+        app = (1.0 - f) * ring[(k - d) % R, lanes] + f * ring[(k - d - 1) % R, lanes]
+        X = Ad[circle, k] @ X + Bd[circle, k] @ app
+        if (k + 1) % _RENORM == 0:
+            mx = np.maximum(np.abs(X).max(axis=(1, 2)), np.abs(ring).max(axis=(0, 2, 3)))
+            q = np.where((mx > 0) & np.isfinite(mx), np.frexp(np.where(mx > 0, mx, 1.0))[1], 0)
+            X, ring, e = np.ldexp(X, -q[:, None, None]), np.ldexp(ring, -q[:, None, None]), e + q
+    regs = [ring[(N - j) % R] for j in range(1, D + 1)]
+    return np.concatenate([X, *regs], axis=1), e
+
+
+def _delay_pass(lib, Ad, Bd, K, circle, tau, D, X0):
+    """The delayed monodromy of each lane applied to X0 (L, na, p): ``(Y, e)``,
+    ``M X0 = Y 2^e`` (the compiled kernel, or :func:`_delay_pass_numpy` without it)."""
+    if lib is None:
+        return _delay_pass_numpy(Ad, Bd, K, circle, tau, D, X0)
+    _, N, n, m = Bd.shape
+    L, p = tau.size, X0.shape[-1]
+    (Ad, pa, sa), (Bd, pb, sb), (K, pk, sk) = _c(Ad), _c(Bd), _c(K)
+    (tau, pt, _), (X0, px, _) = _c(np.ascontiguousarray(tau)), _c(np.ascontiguousarray(X0))
+    circle = np.ascontiguousarray(circle, dtype=np.intc)
+    (Y, py), (e, pe) = _out(*X0.shape), _out(L)
+    rc = lib.gs_delay_loops(n, m, N, D, p, L, 0, L,
+                            circle.ctypes.data_as(ctypes.POINTER(ctypes.c_int)),
+                            pa, sa, pb, sb, pk, sk, pt, px, py, pe)
+    if rc != 0:
+        raise GainschedError(f"loop kernel: delay of {tau.max():g} samples failed ({rc})")
+    return Y, e
+
+
+def _delay_loops(Ad, Bd, K, circle, tau):
+    """``log rho`` of the lanes: loop ``circle`` (L,) with the delays tau (L,) in samples.
+
+    The delayed loop's monodromy has n + D m rows, but over a period its fast modes have
+    decayed: it is numerically of low rank. It is applied to :data:`_RANK` columns (a
+    fixed random start, then the orthonormal basis of its image: one step of subspace
+    iteration) and its multipliers are those of ``Q' M Q``; where ``M Q`` leaves the span
+    of Q by more than 1e-9 of its norm, the whole monodromy is formed instead."""
+    n, m = Ad.shape[-1], Bd.shape[-1]
+    D = int(np.floor(tau.max())) + 1
+    na, L = n + D * m, tau.size
+    lib = _lib()
+    if na > _RANK:
+        omega = np.linalg.qr(np.random.default_rng(0).standard_normal((na, _RANK)))[0]
+        start = np.broadcast_to(omega, (L,) + omega.shape)
+        Y, _ = _delay_pass(lib, Ad, Bd, K, circle, tau, D, start)
+        Q = np.linalg.qr(Y)[0]
+        Z, e = _delay_pass(lib, Ad, Bd, K, circle, tau, D, Q)
+        QB = np.swapaxes(Q, -1, -2) @ Z
+        off = np.linalg.norm(Z - Q @ QB, axis=(-2, -1))
+        if np.all(off <= 1e-9 * np.linalg.norm(Z, axis=(-2, -1))):
+            return _log_rho(QB, e)
+    M, e = _delay_pass(lib, Ad, Bd, K, circle, tau, D, np.broadcast_to(np.eye(na), (L, na, na)))
+    return _log_rho(M, e)
+
+
+#: the scan's points, as fractions of the search range, evaluated in rounds from the
+#: nominal outward (a margin whose crossing is bracketed stops scanning)
+_SCAN = np.array([1, 2, 4, 8]) / 8.0
+
+
+def _first_crossings(log_rho, hi, rho0, xtol):
+    """The first p in [0, hi] where ``log_rho(pair, p) >= 0``, searched from 0, for every
+    (loop, margin) pair of ``hi`` (b, J) at once: inf where none, NaN where the loop is
+    unstable at p = 0 (``rho0`` (b,), its log rho there).
+
+    ``log_rho(pair, P)``: flat pair indices and parameters (L,) to log rho (L,). The scan
+    :data:`_SCAN` brackets the first crossing; Illinois false position on log rho refines
+    it to ``xtol`` relative to max(1, p)."""
+    hi = np.asarray(hi, float)
+    b, J = hi.shape
+    h = hi.reshape(-1)
+    a, fa = np.zeros(b * J), np.repeat(rho0, J)
+    b_, fb = np.full(b * J, np.inf), np.full(b * J, np.nan)
+    scan = np.flatnonzero(fa < 0.0)
+    for s in _SCAN:
+        if scan.size == 0:
+            break
+        P = s * h[scan]
+        R = log_rho(scan, P)
+        hit = R >= 0.0
+        b_[scan[hit]], fb[scan[hit]] = P[hit], R[hit]
+        a[scan[~hit]], fa[scan[~hit]] = P[~hit], R[~hit]
+        scan = scan[~hit]
+    todo = np.flatnonzero(np.isfinite(b_))
+    side = np.zeros(b * J)
+    for _ in range(_REFINE):
+        if todo.size == 0:
+            break
+        lo, up, flo, fup = a[todo], b_[todo], fa[todo], fb[todo]
+        c = np.where(np.isfinite(flo) & (fup > flo), up - fup * (up - lo) / (fup - flo),
+                     0.5 * (lo + up))
+        c = np.where((c > lo) & (c < up), c, 0.5 * (lo + up))
+        fc = log_rho(todo, c)
+        left = fc < 0.0  # c is stable: it becomes the lower end
+        sd = side[todo]
+        fb[todo] = np.where(left & (sd == -1), 0.5 * fup, fup)
+        fa[todo] = np.where(~left & (sd == 1), 0.5 * flo, flo)
+        a[todo[left]], fa[todo[left]] = c[left], fc[left]
+        b_[todo[~left]], fb[todo[~left]] = c[~left], fc[~left]
+        side[todo] = np.where(left, -1, 1)
+        todo = todo[(b_[todo] - a[todo]) > xtol * np.maximum(1.0, b_[todo])]
+    out = np.where(np.isfinite(b_), 0.5 * (a + b_), np.inf)
+    out[np.repeat(rho0, J) >= 0.0] = np.nan
+    return out.reshape(b, J)
+
+
+def _gain_kinds(m):
+    """Masks (J, m) and directions (J,) of the gain margins: all inputs down and up,
+    then each input down and up."""
+    masks = np.concatenate([np.ones((2, m), bool), np.repeat(np.eye(m, dtype=bool), 2, 0)])
+    return masks, np.tile([-1.0, 1.0], m + 1)
+
+
+def _nominal(Ad, Bd, K):
+    """log rho of each loop (b,) as it is."""
+    b, m = Ad.shape[0], Bd.shape[-1]
+    return _gain_loops(Ad, Bd, K, np.arange(b), np.ones((b, m)))
+
+
+def _gain_crossings(Ad, Bd, K, masks, sign, g_max, rho0, xtol):
+    """The first crossing of each gain margin (J kinds) from 1, as ``p = |g - 1|``: (b, J)."""
+    J = sign.size
+    hi = np.broadcast_to(np.where(sign < 0, 1.0, g_max - 1.0), (Ad.shape[0], J))
+
+    def log_rho(pair, P):
+        circle, kind = np.divmod(pair, J)
+        G = np.where(masks[kind], (1.0 + sign[kind] * P)[:, None], 1.0)
+        return _gain_loops(Ad, Bd, K, circle, G)
+
+    return _first_crossings(log_rho, hi, rho0, xtol)
+
+
+def _delay_crossings(Ad, Bd, K, hi_steps, rho0, xtol):
+    """The first crossing of the delay margin, samples: (b,)."""
+    def log_rho(pair, P):
+        return _delay_loops(Ad, Bd, K, pair, P)
+
+    return _first_crossings(log_rho, hi_steps[:, None], rho0, xtol)[:, 0]
+
+
+def _flat(Ad, Bd, K):
+    b = Ad.shape[:-3]
+    return b, tuple(X.reshape((-1,) + X.shape[-3:]) for X in (Ad, Bd, K))
+
+
+def gain_margins(Ad, Bd, K, *, inputs=None, g_max: float = G_MAX, xtol: float = XTOL):
     """The gain margins of periodic closed loops: ``(down, up)``, the factors on the
     commanded inputs nearest to 1 at which a Floquet multiplier reaches the unit circle.
 
@@ -108,6 +355,8 @@ def gain_margins(Ad, Bd, K, *, inputs=None, g_max: float = G_MAX):
         The inputs the factor acts on (default: all at once; ``[j]``: input j alone).
     g_max : float
         The largest factor searched upward.
+    xtol : float
+        Tolerance on ``|g - 1|``, relative to max(1, |g - 1|).
 
     Returns
     -------
@@ -127,54 +376,17 @@ def gain_margins(Ad, Bd, K, *, inputs=None, g_max: float = G_MAX):
     >>> bool(np.allclose([down[0], up[0]], [(a - 1) / (b * k), (a + 1) / (b * k)]))
     True
     """
+    shape, (Ad, Bd, K) = _flat(Ad, Bd, K)
     m = Bd.shape[-1]
     mask = np.zeros(m, bool)
     mask[list(range(m)) if inputs is None else list(inputs)] = True
-    b = Ad.shape[:-3]
-
-    def rho_of(G):  # G (*b, S): the factor on the chosen inputs
-        gain = np.where(mask, G[..., None], 1.0)  # (*b, S, m)
-        M = monodromy_with(Ad[..., None, :, :, :], Bd[..., None, :, :, :],
-                           K[..., None, :, :, :], gain)
-        return spectral_radius(M)
-
-    up = _first_crossing(rho_of, 1.0, g_max, b)
-    down_from_1 = _first_crossing(lambda G: rho_of(1.0 - G), 0.0, 1.0, b)  # 1 - g from 0
-    down = np.where(np.isinf(down_from_1), 0.0, 1.0 - down_from_1)
-    return down, up
+    p = _gain_crossings(Ad, Bd, K, np.stack([mask, mask]), np.array([-1.0, 1.0]), g_max,
+                        _nominal(Ad, Bd, K), xtol)
+    down = np.where(np.isinf(p[:, 0]), 0.0, 1.0 - p[:, 0])
+    return down.reshape(shape), (1.0 + p[:, 1]).reshape(shape)
 
 
-def _delayed_monodromy(Ad, Bd, K, tau_steps):
-    """The monodromy of the loop with the commands delayed by ``tau_steps`` samples
-    (array (*b, S)), on the state ``[x, u_{k-1}, .., u_{k-D}]`` (module docstring)."""
-    n, m = Ad.shape[-1], Bd.shape[-1]
-    tau = np.asarray(tau_steps, float)
-    D = int(np.ceil(np.max(tau))) + 1
-    d = np.floor(tau).astype(int)
-    f = tau - d
-    na = n + D * m
-    batch = np.broadcast_shapes(Ad.shape[:-3], tau.shape)
-    M = np.broadcast_to(np.eye(na), batch + (na, na)).copy()
-    # weights of the held commands u_{k-j}, j = 0..D, on the applied input
-    j = np.arange(D + 1)
-    w = (np.where(j == d[..., None], 1.0 - f[..., None], 0.0)
-         + np.where(j == d[..., None] + 1, f[..., None], 0.0))  # (*batch, D + 1)
-    for k in range(Ad.shape[-3]):
-        A, B, Kk = Ad[..., k, :, :], Bd[..., k, :, :], K[..., k, :, :]
-        T = np.zeros(batch + (na, na))
-        # applied = w0 u_k + sum_{j>=1} w_j u_{k-j}, u_k = -K x
-        T[..., :n, :n] = A - w[..., 0, None, None] * (B @ Kk)
-        for jj in range(1, D + 1):
-            cols = slice(n + (jj - 1) * m, n + jj * m)
-            T[..., :n, cols] = w[..., jj, None, None] * B
-        T[..., n:n + m, :n] = -Kk  # the register: u_k enters, the rest shift down
-        for jj in range(1, D):
-            T[..., n + jj * m:n + (jj + 1) * m, n + (jj - 1) * m:n + jj * m] = np.eye(m)
-        M = T @ M
-    return M
-
-
-def delay_margin(Ad, Bd, K, h, *, tau_max_steps: float = TAU_MAX_STEPS):
+def delay_margin(Ad, Bd, K, h, *, tau_max: float = TAU_MAX_S, xtol: float = XTOL):
     """The delay margin of periodic closed loops: the extra delay on the commands, s, at
     which a Floquet multiplier first reaches the unit circle.
 
@@ -184,14 +396,15 @@ def delay_margin(Ad, Bd, K, h, *, tau_max_steps: float = TAU_MAX_STEPS):
         As :func:`monodromy_with`.
     h : float or ndarray, shape (*b,)
         The sample step of each loop's period (its period over N), s.
-    tau_max_steps : float
-        The longest delay searched, in samples.
+    tau_max : float
+        The longest delay searched, s.
+    xtol : float
+        Tolerance on the delay in samples, relative to max(1, samples).
 
     Returns
     -------
     ndarray, shape (*b,)
-        The margin, s (inf: stable up to ``tau_max_steps`` samples; NaN: unstable as it
-        is).
+        The margin, s (inf: stable up to ``tau_max``; NaN: unstable as it is).
 
     Examples
     --------
@@ -205,12 +418,148 @@ def delay_margin(Ad, Bd, K, h, *, tau_max_steps: float = TAU_MAX_STEPS):
     >>> bool(0.02 < tau[0] < 0.03)
     True
     """
-    b = Ad.shape[:-3]
+    shape, (Ad, Bd, K) = _flat(Ad, Bd, K)
+    h = np.broadcast_to(np.asarray(h, float), shape).reshape(-1)
+    steps = _delay_crossings(Ad, Bd, K, tau_max / h, _nominal(Ad, Bd, K), xtol)
+    return (steps * h).reshape(shape)
 
-    def rho_of(T):  # T (*b, S) delays in samples
-        return spectral_radius(_delayed_monodromy(Ad[..., None, :, :, :],
-                                                  Bd[..., None, :, :, :],
-                                                  K[..., None, :, :, :], T))
 
-    steps = _first_crossing(rho_of, 0.0, tau_max_steps, b)
-    return steps * np.broadcast_to(np.asarray(h, float), b)
+@dataclass(frozen=True)
+class LoopMargins:
+    """The margins of periodic closed loops broken at the plant input
+    (:func:`loop_margins`); shapes over the batch ``*b`` of loops.
+
+    Attributes
+    ----------
+    gain_down, gain_up : ndarray, shape (*b,)
+        Factors on all inputs at once: ``gain_down`` in [0, 1) (0: stable with the
+        feedback off), ``gain_up`` in (1, :data:`G_MAX`] or inf (stable up to it); NaN
+        where the loop is unstable as it is.
+    input_down, input_up : ndarray, shape (*b, m)
+        The same for each input alone (the others at 1).
+    delay : ndarray, shape (*b,)
+        Extra delay on the commands, s (inf: stable up to :data:`TAU_MAX_S`).
+    """
+
+    gain_down: np.ndarray
+    gain_up: np.ndarray
+    input_down: np.ndarray
+    input_up: np.ndarray
+    delay: np.ndarray
+
+    def at(self, *index) -> LoopMargins:
+        """The margins of one loop (or a slice): every array indexed by ``index``."""
+        return LoopMargins(*(getattr(self, f.name)[index] for f in fields(self)))
+
+    def db(self, factor):
+        """A factor in dB, ``20 log10``; -inf for 0 (no lower margin), inf for inf."""
+        with np.errstate(divide="ignore"):
+            return 20.0 * np.log10(np.asarray(factor, float))
+
+
+def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX_S,
+                 xtol: float = XTOL) -> LoopMargins:
+    """Every margin of periodic closed loops at once: the gain margins of all inputs
+    together and of each alone, and the delay margin (module docstring).
+
+    Parameters
+    ----------
+    Ad, Bd, K : ndarray
+        As :func:`monodromy_with`: shapes (*b, N, n, n), (*b, N, n, m), (*b, N, m, n).
+    h : float or ndarray, shape (*b,)
+        The sample step of each loop, s.
+    g_max : float
+        The largest factor searched upward.
+    tau_max : float
+        The longest delay searched, s.
+    xtol : float
+        Tolerance on each margin's parameter (``|g - 1|``, the delay in samples), relative
+        to max(1, parameter).
+
+    Returns
+    -------
+    LoopMargins
+
+    Examples
+    --------
+    The scalar loop of :func:`gain_margins` (a = 1.1, b k = 0.6): the factor's margins
+    (0.1 / 0.6 and 2.1 / 0.6), which with one input are also that input's:
+
+    >>> Ad, Bd, K = np.full((1, 4, 1, 1), 1.1), np.full((1, 4, 1, 1), 0.6), np.ones((1, 4, 1, 1))
+    >>> lm = gs.loop_margins(Ad, Bd, K, 0.001)
+    >>> np.round([lm.gain_down[0], lm.gain_up[0], lm.input_up[0, 0]], 4).tolist()
+    [0.1667, 3.5, 3.5]
+    """
+    shape, (Ad, Bd, K) = _flat(Ad, Bd, K)
+    m = Bd.shape[-1]
+    masks, sign = _gain_kinds(m)
+    rho0 = _nominal(Ad, Bd, K)
+    p = _gain_crossings(Ad, Bd, K, masks, sign, g_max, rho0, xtol)
+    g = np.where(sign < 0, np.where(np.isinf(p), 0.0, 1.0 - p), 1.0 + p)
+    h = np.broadcast_to(np.asarray(h, float), shape).reshape(-1)
+    delay = _delay_crossings(Ad, Bd, K, tau_max / h, rho0, xtol) * h
+    per = g[:, 2:].reshape(-1, m, 2)
+    return LoopMargins(g[:, 0].reshape(shape), g[:, 1].reshape(shape),
+                       per[..., 0].reshape(shape + (m,)), per[..., 1].reshape(shape + (m,)),
+                       delay.reshape(shape))
+
+
+def worst_margins(lm: LoopMargins, speeds, tilts) -> dict:
+    """The worst margins of a grid of loops and where they are, as JSON data.
+
+    Parameters
+    ----------
+    lm : LoopMargins
+        Margins over (tilt, speed): arrays (n_a, n_v), per input (n_a, n_v, m).
+    speeds : ndarray, shape (n_v,)
+        The speed axis, m/s.
+    tilts : ndarray, shape (n_a,)
+        The tilt axis, rad.
+
+    Returns
+    -------
+    dict
+        ``circles`` (loops with margins) and, for ``gain_down``, ``gain_up``,
+        ``input_down``, ``input_up`` (factors) and ``delay`` (s), the worst loop's
+        ``value``, ``db`` (factors), ``speed_mps``, ``tilt_deg`` and, per input,
+        ``input`` (its index). The worst is the value nearest to 1 (factors) or the
+        smallest delay. ``value`` None: no crossing anywhere in the range searched (down:
+        stable with the feedback off everywhere; up: beyond :data:`G_MAX`; delay: beyond
+        :data:`TAU_MAX_S`); ``db`` None with it. An empty dict entry where no loop has
+        margins.
+
+    Examples
+    --------
+    >>> lm = gs.LoopMargins(np.array([[0.2, 0.5]]), np.array([[np.inf, 4.0]]),
+    ...                     np.zeros((1, 2, 1)), np.full((1, 2, 1), np.inf),
+    ...                     np.array([[0.02, 0.01]]))
+    >>> w = gs.worst_margins(lm, np.array([5.0, 10.0]), np.array([0.0]))
+    >>> w["gain_down"]["value"], round(w["gain_down"]["db"], 2), w["gain_down"]["speed_mps"]
+    (0.5, -6.02, 10.0)
+    >>> w["gain_up"]["value"], w["input_down"]["value"], w["delay"]["value"]
+    (4.0, None, 0.01)
+    """
+    ok = np.isfinite(lm.gain_down)
+    out = {"circles": int(ok.sum())}
+    for key, worse_is_larger, absent in (("gain_down", True, 0.0), ("gain_up", False, np.inf),
+                                         ("input_down", True, 0.0), ("input_up", False, np.inf),
+                                         ("delay", False, np.inf)):
+        a = np.asarray(getattr(lm, key), float)
+        mask = ok if a.ndim == 2 else ok[..., None] & np.ones(a.shape, bool)
+        if not mask.any():
+            out[key] = {}
+            continue
+        v = np.where(mask, a, -np.inf if worse_is_larger else np.inf)
+        idx = np.unravel_index(np.argmax(v) if worse_is_larger else np.argmin(v), a.shape)
+        x = float(a[idx])
+        if x == absent:
+            out[key] = {"value": None} | ({} if key == "delay" else {"db": None})
+            continue
+        entry = {"value": x, "speed_mps": float(speeds[idx[1]]),
+                 "tilt_deg": float(np.rad2deg(tilts[idx[0]]))}
+        if key != "delay":
+            entry["db"] = float(20 * np.log10(x))
+        if a.ndim == 3:
+            entry["input"] = int(idx[2])
+        out[key] = entry
+    return out

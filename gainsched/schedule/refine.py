@@ -55,6 +55,7 @@ from ..errors import InputError
 from ..model.effects import registered_effects
 from ..model.reduced import Model
 from ..native.reproducible import blas_single_thread
+from .bounds import check_gain_cap
 from .certificate import (
     ERROR_QUANTUM,
     STABLE_RADIUS,
@@ -68,7 +69,6 @@ from .grid import (
     CircleSolution,
     GridResult,
     check_effect_symmetries,
-    check_gain_cap,
     grid_from_solutions,
     level_circle_invariant,
     mirror_config,

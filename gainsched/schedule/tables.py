@@ -14,7 +14,6 @@ feasible point.
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 from dataclasses import dataclass
@@ -32,7 +31,9 @@ from ..model.symmetry import mirror_effects
 from ..publish import write_atomic
 from .arrays import GainSchedule
 from .grid import mirror_config
+from .h5io import create_dataset, create_group, dataset_sha256, datasets, root_sha256
 from .linearize import INPUT_NAMES, lqr_state_names
+from .margins import LoopMargins
 from .onboard import FirmwareRecord, record_from_config, record_from_datasets
 from .tablechecks import check_feasible_finite, check_meaning
 
@@ -129,6 +130,10 @@ class Table(GainSchedule):
         (``firmware/`` in the file; :class:`~gainsched.schedule.onboard.FirmwareRecord`):
         the feed-forward's vehicle constants, the S2 state map, the controller's design
         parameters. Every loaded table has it; None only in a Table made by hand.
+    loop_margins : LoopMargins or None
+        The stability margins of every circle's loop, arrays (n_a, n_v) (``(n_a, n_v, 4)``
+        per motor; :meth:`margins`); None in a table built with ``[control] margins =
+        false``.
     reverse : Table or None
         For a vehicle that is not its own mirror image (a centre of mass off its plane of
         symmetry, unequal motors; docs/symmetry.md): the same table of its mirror image
@@ -175,6 +180,7 @@ class Table(GainSchedule):
     grid_auto: dict | None = None
     firmware: FirmwareRecord | None = None
     reverse: Table | None = None
+    loop_margins: LoopMargins | None = None
 
     @property
     def name(self) -> str:
@@ -211,6 +217,27 @@ class Table(GainSchedule):
         """Whether the tilt-0 gains are stored per azimuth (``K_tilt0`` (n_v, n_xi, 4, n))."""
         return self.K_tilt0.ndim == 4
 
+    def margins(self, speed: float | None = None, tilt_deg: float | None = None) -> LoopMargins:
+        """The stability margins of the table's loops (docs/margins.md): every circle's,
+        arrays (n_a, n_v), or the grid circle's at ``speed`` (m/s) and ``tilt_deg``.
+
+        Raises
+        ------
+        ValueError
+            The table was built with ``[control] margins = false`` (or before margins
+            were stored), or the speed or tilt is not on the grid.
+        """
+        if self.loop_margins is None:
+            raise ValueError(f"{self.source or self.name}: no margins in this table (built "
+                             "with [control] margins = false, or before they were stored)")
+        if speed is None and tilt_deg is None:
+            return self.loop_margins
+        if speed is None or tilt_deg is None:
+            raise ValueError("give both speed and tilt_deg (one circle), or neither")
+        i = _axis_index(np.rad2deg(self.tilt), tilt_deg, "tilt_deg")
+        j = _axis_index(self.speed, speed, "speed")
+        return self.loop_margins.at(i, j)
+
     def K_full(self) -> np.ndarray:
         """Gains on the regular grid (n_a, n_v, n_xi, 4, n), a tilt-0 slice independent of
         xi broadcast over it."""
@@ -219,51 +246,12 @@ class Table(GainSchedule):
         return np.concatenate([k0, self.K], axis=0)
 
 
-def _create(group, name, data, units=None, doc=None):
-    ds = group.create_dataset(name, data=data, track_times=False)
-    if units is not None:
-        ds.attrs["units"] = units
-    if doc is not None:
-        ds.attrs["description"] = doc
-    return ds
-
-
-def _group(parent, name):
-    """A group without modification times (h5py's create_group always tracks them)."""
-    gcpl = h5py.h5p.create(h5py.h5p.GROUP_CREATE)
-    gcpl.set_obj_track_times(False)
-    gid = h5py.h5g.create(parent.id, name.encode(), gcpl=gcpl)
-    return h5py.Group(gid)
-
-
-def _dataset_sha256(value) -> str:
-    """SHA-256 of a dataset's value: a header (dtype and shape), then the bytes."""
-    if isinstance(value, str | bytes):
-        head, raw = "bytes", value.encode() if isinstance(value, str) else value
-    else:
-        a = np.asarray(value)
-        a = np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<"))
-        head, raw = f"{a.dtype.str}{a.shape}", a.tobytes()
-    return hashlib.sha256(head.encode() + b"\0" + raw).hexdigest()
-
-
-def _root_sha256(attrs, digests) -> str:
-    """SHA-256 over the root attributes (but data_sha256) and every dataset's digest."""
-    h = hashlib.sha256()
-    for k in sorted(attrs):
-        if k != "data_sha256":
-            v = attrs[k]
-            h.update(f"{k}={v.decode() if isinstance(v, bytes) else v!r}\0".encode())
-    for name in sorted(digests):
-        h.update(f"{name}:{digests[name]}\0".encode())
-    return h.hexdigest()
-
-
-def _datasets(f) -> dict:
-    out = {}
-    f.visititems(lambda name, obj: out.__setitem__(name, obj) if isinstance(obj, h5py.Dataset)
-                 else None)
-    return out
+def _axis_index(axis, value, name):
+    """The index of ``value`` on a grid axis (to 1e-9), or ValueError listing the axis."""
+    hit = np.flatnonzero(np.isclose(axis, value, rtol=0, atol=1e-9))
+    if len(hit) != 1:
+        raise ValueError(f"{name} = {value} is not on the grid: {np.round(axis, 6).tolist()}")
+    return int(hit[0])
 
 
 def table_bytes(config, grid, model=None, grid_auto: dict | None = None) -> bytes:
@@ -298,26 +286,28 @@ def table_bytes(config, grid, model=None, grid_auto: dict | None = None) -> byte
         a["state_names"] = ",".join(lqr_state_names(model))
         a["input_names"] = ",".join(INPUT_NAMES)
         a["control_law"] = CONTROL_LAW
-        _create(f, "config_text", config.text)
+        create_dataset(f, "config_text", config.text)
         if grid_auto is not None:
-            _create(f, "grid_auto", json.dumps(grid_auto, sort_keys=True), None,
+            create_dataset(f, "grid_auto", json.dumps(grid_auto, sort_keys=True), None,
                     "how the build chose the speed and tilt axes (docs/grid.md), JSON")
-        ax = _group(f, "axes")
-        _create(ax, "xi", 2 * np.pi * np.arange(n_xi) / n_xi, "rad", "azimuth, uniform, periodic")
-        _create(ax, "speed", speeds, "m/s", "tangential COG speed")
-        _create(ax, "xi_dot", speeds / config.radius, "rad/s", "azimuth rate = speed / (rho + L_e)")
-        _create(ax, "tilt", tilts, "rad", "circle tilt alpha_C; tilt[0] = 0")
+        ax = create_group(f, "axes")
+        create_dataset(ax, "xi", 2 * np.pi * np.arange(n_xi) / n_xi, "rad",
+                       "azimuth, uniform, periodic")
+        create_dataset(ax, "speed", speeds, "m/s", "tangential COG speed")
+        create_dataset(ax, "xi_dot", speeds / config.radius, "rad/s",
+                       "azimuth rate = speed / (rho + L_e)")
+        create_dataset(ax, "tilt", tilts, "rad", "circle tilt alpha_C; tilt[0] = 0")
         _write_solution(f, grid)
-        w = _group(f, "weights")
-        _create(w, "Q", Qx)
-        _create(w, "R", np.asarray(config.control.R))
-        _write_firmware(_group(f, "firmware"), record_from_config(config))
+        w = create_group(f, "weights")
+        create_dataset(w, "Q", Qx)
+        create_dataset(w, "R", np.asarray(config.control.R))
+        _write_firmware(create_group(f, "firmware"), record_from_config(config))
         if grid.reverse is not None:
-            _write_reverse(_group(f, "reverse"), config, model, grid.reverse)
+            _write_reverse(create_group(f, "reverse"), config, model, grid.reverse)
         digests = {}
-        for name, ds in _datasets(f).items():
-            digests[name] = ds.attrs["sha256"] = _dataset_sha256(ds[()])
-        a["data_sha256"] = _root_sha256(dict(a), digests)
+        for name, ds in datasets(f).items():
+            digests[name] = ds.attrs["sha256"] = dataset_sha256(ds[()])
+        a["data_sha256"] = root_sha256(dict(a), digests)
         f.flush()
         return f.id.get_file_image()
 
@@ -326,46 +316,53 @@ def _write_solution(parent, grid) -> None:
     """The solved grid's groups under ``parent`` (the file's root, or ``reverse/`` for
     the mirror image's): gains, nominal, feasibility and closed loop
     (docs/table-format.md)."""
-    g = _group(parent, "gains")
+    g = create_group(parent, "gains")
     if grid.level_invariant:
         K0, S0, doc = grid.K[0, :, 0], grid.S[0, :, 0], "xi-independent), (speed, 4, n)"
     else:  # an effect changes with the azimuth of a level circle
         K0, S0, doc = grid.K[0], grid.S[0], "per azimuth), (speed, xi, 4, n)"
-    _create(g, "K_tilt0", K0, "SI", f"gains at tilt 0 ({doc}")
-    _create(g, "K", grid.K[1:], "SI", "gains at tilt[1:], (tilt-1, speed, xi, 4, n)")
-    _create(g, "S_tilt0", S0, "SI", "Riccati cost-to-go at tilt 0")
-    _create(g, "S", grid.S[1:], "SI", "Riccati cost-to-go at tilt[1:]")
-    nm = _group(parent, "nominal")
-    _create(nm, "u_d", grid.u_d, "N", "nominal motor thrusts (tilt, speed, xi, 4)")
-    _create(nm, "phi_d", grid.phi_d, "rad", "nominal roll")
-    _create(nm, "tension", grid.tension, "N", "nominal tether tension")
+    create_dataset(g, "K_tilt0", K0, "SI", f"gains at tilt 0 ({doc}")
+    create_dataset(g, "K", grid.K[1:], "SI", "gains at tilt[1:], (tilt-1, speed, xi, 4, n)")
+    create_dataset(g, "S_tilt0", S0, "SI", "Riccati cost-to-go at tilt 0")
+    create_dataset(g, "S", grid.S[1:], "SI", "Riccati cost-to-go at tilt[1:]")
+    nm = create_group(parent, "nominal")
+    create_dataset(nm, "u_d", grid.u_d, "N", "nominal motor thrusts (tilt, speed, xi, 4)")
+    create_dataset(nm, "phi_d", grid.phi_d, "rad", "nominal roll")
+    create_dataset(nm, "tension", grid.tension, "N", "nominal tether tension")
     if np.any(grid.offsets):
-        _create(nm, "attitude_offsets", grid.offsets, "rad",
+        create_dataset(nm, "attitude_offsets", grid.offsets, "rad",
                 "pitch and yaw offsets per circle: Fourier coefficients in the azimuth "
                 "(tilt, speed, [theta, chi], [1, cos k xi, sin k xi])")
-    fe = _group(parent, "feasibility")
-    ds = _create(fe, "reasons", grid.reasons, None, "bit mask, 0 = feasible")
+    fe = create_group(parent, "feasibility")
+    ds = create_dataset(fe, "reasons", grid.reasons, None, "bit mask, 0 = feasible")
     for bit, text in REASONS.items():
         ds.attrs[f"bit_{bit}"] = text
-    cl = _group(parent, "closed_loop")
-    _create(cl, "spectral_radius", grid.spectral_radius, "-",
+    cl = create_group(parent, "closed_loop")
+    create_dataset(cl, "spectral_radius", grid.spectral_radius, "-",
             "monodromy spectral radius per circle")
-    _create(cl, "periods", grid.sweeps, "-", "periods in the periodic terminal cost")
-    _create(cl, "steps", grid.steps, "-", "control steps per period")
-    _create(cl, "linearization_samples", grid.lin_samples, "-",
+    create_dataset(cl, "periods", grid.sweeps, "-", "periods in the periodic terminal cost")
+    create_dataset(cl, "steps", grid.steps, "-", "control steps per period")
+    create_dataset(cl, "linearization_samples", grid.lin_samples, "-",
             "azimuths of exact linearisation per circle (1: time-invariant, tilt 0)")
-    _create(cl, "linearization_error", grid.lin_error, "-",
+    create_dataset(cl, "linearization_error", grid.lin_error, "-",
             "relative error check of the interpolated linearisation per circle")
-    _create(cl, "dt", grid.dt, "s", "discretisation step, period / steps")
-    _create(cl, "mode_tau", grid.mode_tau, "s",
+    create_dataset(cl, "dt", grid.dt, "s", "discretisation step, period / steps")
+    create_dataset(cl, "mode_tau", grid.mode_tau, "s",
             "time constants -T/ln|lambda| of the slowest closed-loop Floquet modes, "
             "slowest first (tilt, speed, mode)")
-    _create(cl, "mode_frequency", grid.mode_frequency, "rad/s",
+    create_dataset(cl, "mode_frequency", grid.mode_frequency, "rad/s",
             "their frequencies |arg lambda|/T (periodic loops: principal value)")
-    _create(cl, "mode_damping", grid.mode_damping, "-", "their damping ratios")
-    _create(cl, "mode_shape", grid.mode_shape, "-",
+    create_dataset(cl, "mode_damping", grid.mode_damping, "-", "their damping ratios")
+    create_dataset(cl, "mode_shape", grid.mode_shape, "-",
             "their eigenvector magnitudes in the states' units, largest entry 1 "
             "(tilt, speed, mode, state)")
+    if not np.all(np.isnan(grid.gain_margin)):  # [control] margins (docs/margins.md)
+        create_dataset(cl, "gain_margin", grid.gain_margin, "-", "factors on all motors' commands "
+                "where a multiplier reaches the unit circle, (tilt, speed, [down, up])")
+        create_dataset(cl, "input_gain_margin", grid.input_margin, "-",
+                "the same for each motor alone, (tilt, speed, motor, [down, up])")
+        create_dataset(cl, "delay_margin", grid.delay_margin, "s", "extra delay on the commands "
+                "where a multiplier reaches the unit circle (tilt, speed)")
 
 
 def _write_reverse(r, config, model, grid) -> None:
@@ -373,12 +370,12 @@ def _write_reverse(r, config, model, grid) -> None:
     image has its reversed circles served from its image's forward ones
     (docs/symmetry.md, docs/table-format.md)."""
     image = mirror_config(config)
-    _create(r, "mirror_image", json.dumps(mirror_effects(model.effects),
+    create_dataset(r, "mirror_image", json.dumps(mirror_effects(model.effects),
                                           sort_keys=True), None,
             "the effect parameters of the vehicle's mirror image under S2 that differ from "
             "its own, {kind: {name: value}}, JSON")
     _write_solution(r, grid)
-    _write_firmware(_group(r, "firmware"), record_from_config(image))
+    _write_firmware(create_group(r, "firmware"), record_from_config(image))
 
 
 def config_from_table(table, *, unknown_effect_ok: bool = False):
@@ -410,11 +407,11 @@ def config_from_table(table, *, unknown_effect_ok: bool = False):
 
 def _write_firmware(g, record: FirmwareRecord) -> None:
     """The firmware record's datasets (docs/table-format.md, "The firmware record")."""
-    _create(g, "vehicle", record.vehicle, "SI", "the feed-forward's gs_vehicle constants: "
+    create_dataset(g, "vehicle", record.vehicle, "SI", "the feed-forward's gs_vehicle constants: "
             "mass, g, radius, min_tension, drag_mu1, drag_mu2, J (3x3), alloc_inv (4x4)")
-    _create(g, "state_map", record.state_map, "-",
+    create_dataset(g, "state_map", record.state_map, "-",
             "S2 map of the LQR state P_x (signed permutation, n x n)")
-    _create(g, "controller", record.controller_json(), None,
+    create_dataset(g, "controller", record.controller_json(), None,
             "the controller's design parameters (gs_ctrl_params less sensing), JSON")
 
 
@@ -525,9 +522,9 @@ def _verify(f, path) -> None:
                          "(built by gainsched < 0.2, or not by gainsched): rebuild it")
     digests = {}
     try:
-        for name, ds in _datasets(f).items():
+        for name, ds in datasets(f).items():
             want = ds.attrs.get("sha256")
-            got = digests[name] = _dataset_sha256(ds[()])
+            got = digests[name] = dataset_sha256(ds[()])
             if want is None:
                 raise InputError(path, name, "missing its sha256 attribute")
             if (want.decode() if isinstance(want, bytes) else str(want)) != got:
@@ -537,7 +534,7 @@ def _verify(f, path) -> None:
         raise
     except (OSError, ValueError, KeyError) as exc:
         raise InputError(path, "", f"unreadable dataset ({exc})") from None
-    if _root_sha256(dict(f.attrs), digests) != _decoded(f.attrs["data_sha256"]):
+    if root_sha256(dict(f.attrs), digests) != _decoded(f.attrs["data_sha256"]):
         raise InputError(path, "data_sha256", "checksum mismatch: attributes or datasets were "
                          "added, removed or edited after the build; rebuild the table")
 
@@ -653,7 +650,25 @@ def _solution(f, path, prefix: str, d: dict, n: int) -> dict:
     record = record_from_datasets(path, d["firmware/vehicle"], d["firmware/state_map"],
                                   d["firmware/controller"], n)
     return {key: d[key] for key in _SOLUTION} | {"offsets": offsets, "modes": modes,
-                                                 "record": record}
+                                                 "record": record,
+                                                 "margins": _margins(f, path, prefix, n_a, n_v)}
+
+
+def _margins(f, path, prefix, n_a, n_v) -> LoopMargins | None:
+    """The stored margins (:class:`~gainsched.schedule.margins.LoopMargins` over (tilt,
+    speed)), or None in a table built without them."""
+    if prefix + "closed_loop/gain_margin" not in f:
+        return None
+    d = {}
+    for key, want in (("gain_margin", (n_a, n_v, 2)), ("input_gain_margin", (n_a, n_v, 4, 2)),
+                      ("delay_margin", (n_a, n_v))):
+        v = f.get(f"{prefix}closed_loop/{key}")
+        if v is None or v.shape != want:
+            raise InputError(path, f"{prefix}closed_loop/{key}", "missing, or its shape does "
+                             f"not match the axes {want}")
+        d[key] = np.asarray(v[()], dtype=float)
+    g, i = d["gain_margin"], d["input_gain_margin"]
+    return LoopMargins(g[..., 0], g[..., 1], i[..., 0], i[..., 1], d["delay_margin"])
 
 
 def _table(axes, s, weights, d, attrs, source, grid_auto, reverse) -> Table:
@@ -665,5 +680,5 @@ def _table(axes, s, weights, d, attrs, source, grid_auto, reverse) -> Table:
         s["closed_loop/spectral_radius"], *weights, s["closed_loop/dt"],
         str(d["config_text"]), str(attrs.get("config_sha256", "")), attrs, source,
         s["offsets"], **s["modes"], grid_auto=grid_auto, firmware=s["record"],
-        reverse=reverse,
+        reverse=reverse, loop_margins=s["margins"],
     )

@@ -35,6 +35,7 @@ from collections import Counter
 import numpy as np
 
 from .envelope import envelope_from_table, envelope_png
+from .margins import G_MAX, TAU_MAX_S, worst_margins
 from .modes import dominant_states
 
 __all__ = ["schedule_figures", "schedule_plots", "table_summary", "slowest_mode",
@@ -228,7 +229,9 @@ def schedule_figures(table, midpoints=None) -> dict:
     azimuth and speed, infeasible circles blank), ``nominal.png`` (the nominal motor
     thrusts and roll), ``spectral_radius.png`` (closed-loop monodromy spectral radius per
     speed x tilt circle), ``time_constant.png`` (the slowest closed-loop time constant per
-    circle, when the table has modes) and, given a midpoint check, ``midpoint_error.png`` (the
+    circle, when the table has modes), ``gain_margin.png`` and ``delay_margin.png`` (the
+    all-motor gain margin down, dB, and the delay margin, ms, per circle, when the table
+    has margins: docs/margins.md) and, given a midpoint check, ``midpoint_error.png`` (the
     largest relative gain error of the interpolation per speed x tilt midpoint). Every
     map draws the table's own arrays, no resampling.
 
@@ -246,7 +249,8 @@ def schedule_figures(table, midpoints=None) -> dict:
     dict of str to matplotlib.figure.Figure
         File name -> figure (the envelope, already a PNG, is left to
         :func:`schedule_plots`). The maps' ``QuadMesh`` carry gids (``K_r_c``,
-        ``u_d_i_m``, ``phi_d_i``, ``spectral_radius``, ``midpoint_error``) so that their
+        ``u_d_i_m``, ``phi_d_i``, ``spectral_radius``, ``time_constant``, ``gain_margin``,
+        ``delay_margin``, ``midpoint_error``) so that their
         values can be read back. The figures stay open: close them
         (``matplotlib.pyplot.close``) when done.
 
@@ -268,8 +272,8 @@ def schedule_figures(table, midpoints=None) -> dict:
     >>> chk = gs.midpoint_check(table)
     >>> figs = gs.schedule_figures(table, (chk.speed, chk.tilt, chk.rel_err))
     >>> sorted(figs)
-    ['gains_tilt0.png', 'gains_tilt20.png', 'midpoint_error.png', 'nominal.png',
-     'spectral_radius.png', 'time_constant.png']
+    ['delay_margin.png', 'gain_margin.png', 'gains_tilt0.png', 'gains_tilt20.png',
+     'midpoint_error.png', 'nominal.png', 'spectral_radius.png', 'time_constant.png']
     >>> len(figs["gains_tilt20.png"].axes)        # 4 inputs x 11 states, a colorbar each
     88
     >>> figs["spectral_radius.png"].savefig(f"{out}/spectral_radius.png")
@@ -305,6 +309,8 @@ def _figure_makers(plt, table, midpoints) -> dict:
             plt, table, table.mode_tau[..., 0], f"{table.name}: slowest closed-loop time "
             f"constant per circle, s\n({worst}; blank: infeasible)",
             "tau = -T / ln|lambda| (s)", "time_constant")
+    makers.update(_margin_makers(plt, table))
+    makers.update(_margin_makers(plt, table))
     if midpoints is not None:
         vs, ts, grid = _midpoint_grid(midpoints)
         fin = grid[np.isfinite(grid)]
@@ -315,6 +321,27 @@ def _figure_makers(plt, table, midpoints) -> dict:
             f"max over azimuth ({worst})", "|K_interp - K|_F / |K|_F (%)",
             "midpoint_error", speeds=vs, tilts=ts)
     return makers
+
+
+def _margin_makers(plt, table) -> dict:
+    """The margin maps of :func:`schedule_figures` (none for a table without margins):
+    the all-motor gain margin down (dB) and the delay margin (ms) per circle."""
+    lm = table.loop_margins
+    if lm is None:
+        return {}
+    w = worst_margins(lm, table.speed, table.tilt)
+    down, delay = (_worst_text(w[k], "worst", "none", unit=u).removeprefix("worst ")
+                   for k, u in (("gain_down", "dB"), ("delay", "ms")))
+    return {
+        "gain_margin.png": functools.partial(
+            _speed_tilt_figure, plt, table, lm.db(lm.gain_down),
+            f"{table.name}: gain margin down per circle, all motors' commands (worst "
+            f"{down}; blank: infeasible)", "20 log10 g_down (dB)", "gain_margin"),
+        "delay_margin.png": functools.partial(
+            _speed_tilt_figure, plt, table, 1e3 * lm.delay,
+            f"{table.name}: delay margin per circle, extra delay on the commands (worst "
+            f"{delay}; blank: infeasible)", "delay margin (ms)", "delay_margin"),
+    }
 
 
 def _png(fig) -> bytes:
@@ -389,12 +416,8 @@ def mode_lines(table) -> list[str]:
     slow = slowest_mode(table)
     if slow is None:
         return []
-    tau = table.mode_tau[..., 0]
-    out = ["slowest closed-loop time constant per circle, s (rows: tilt deg, columns: "
-           "speed m/s; -: infeasible)", "        " + "".join(f"{v:6g}" for v in table.speed)]
-    for i, a in enumerate(np.rad2deg(table.tilt)):
-        out.append(f"  {a:5g} " + "".join(f"{x:6.3g}" if np.isfinite(x) else "     -"
-                                          for x in tau[i]))
+    out = _text_map(table, table.mode_tau[..., 0],
+                    "slowest closed-loop time constant per circle, s")
     states = Counter(", ".join(circle[0]) for row in _mode_states(table) for circle in row
                      if circle[0] is not None)
     out.append("  the slowest mode lives in: " + "; ".join(
@@ -402,6 +425,87 @@ def mode_lines(table) -> list[str]:
     out.append(f"  slowest of all: {slow['time_constant_s']:.3g} s at {slow['speed_mps']:g} m/s, "
                f"{slow['tilt_deg']:g} deg ({', '.join(slow['dominant_states'])})")
     return out
+
+
+def _text_map(table, values, title: str) -> list[str]:
+    """A speed x tilt map of ``values`` (n_a, n_v) as text lines: a title, the speeds,
+    one row per tilt (NaN: -)."""
+    out = [f"{title} (rows: tilt deg, columns: speed m/s; -: infeasible)",
+           "        " + "".join(f"{v:6g}" for v in table.speed)]
+    for i, a in enumerate(np.rad2deg(table.tilt)):
+        out.append(f"  {a:5g} " + "".join(f"{x:6.3g}" if np.isfinite(x) else "     -"
+                                          for x in values[i]))
+    return out
+
+
+def _worst_text(entry: dict, what: str, none: str, unit: str = "dB") -> str:
+    """One worst margin of :func:`~gainsched.schedule.margins.worst_margins` as text."""
+    if not entry:
+        return f"{what} -"
+    if entry["value"] is None:
+        return f"{what} {none}"
+    where = [f"x{entry['value']:.3g}"] if unit == "dB" else []
+    if "input" in entry:
+        where.append(f"T{entry['input'] + 1}")
+    where.append(f"{entry['speed_mps']:g} m/s, tilt {entry['tilt_deg']:g} deg")
+    value = f"{entry['db']:+.1f} dB" if unit == "dB" else f"{1e3 * entry['value']:.2f} ms"
+    return f"{what} {value} ({'; '.join(where)})"
+
+
+def margin_lines(table, maps: bool = True) -> list[str]:
+    """The table's stability margins as text (docs/margins.md): the worst of each and
+    where, and (``maps``) the all-motor down margin (dB) and the delay margin (ms) per
+    circle; one line asking for a rebuild when the table stores none.
+
+    Parameters
+    ----------
+    table : Table
+        A loaded table.
+    maps : bool, default True
+        Also the speed x tilt maps.
+
+    Returns
+    -------
+    list of str
+    """
+    if table.loop_margins is None:
+        return ["no stability margins stored (built with [control] margins = false, or "
+                "before they were): rebuild the table to see them"]
+    lm = table.loop_margins
+    w = worst_margins(lm, table.speed, table.tilt)
+    if not w["circles"]:
+        return []
+    up = f"up beyond +{20 * np.log10(G_MAX):.0f} dB"
+    out = [f"stability margins at the thrust commands, worst over the {w['circles']} "
+           "circles (docs/margins.md):",
+           "  all motors: " + _worst_text(w["gain_down"], "down", "none (stable with the "
+                                          "feedback off)") + "; "
+           + _worst_text(w["gain_up"], "up", up[3:]),
+           "  one motor alone: " + _worst_text(w["input_down"], "down", "none (stable with "
+                                               "its feedback off)") + "; "
+           + _worst_text(w["input_up"], "up", up[3:]),
+           "  " + _worst_text(w["delay"], "extra delay", f"beyond {1e3 * TAU_MAX_S:g} ms",
+                              unit="ms")]
+    if maps:
+        out += _text_map(table, lm.db(lm.gain_down), "gain margin down, all motors, dB")
+        out += _text_map(table, 1e3 * lm.delay, "delay margin, ms")
+    return out
+
+
+def _margins_summary(table) -> dict | None:
+    """The margins as JSON data: every circle's and the worst (None: a table without)."""
+    lm = table.loop_margins
+    if lm is None:
+        return None
+    def grid(a):  # NaN (infeasible) None, inf (beyond the search) "inf"
+        return np.where(np.isnan(a), None, np.where(np.isinf(a), "inf", a.astype(object))
+                        ).tolist()
+
+    return {"gain_down": grid(lm.gain_down), "gain_up": grid(lm.gain_up),
+            "input_down": grid(lm.input_down), "input_up": grid(lm.input_up),
+            "delay_s": grid(lm.delay), "search": {"gain_max": G_MAX,
+                                                        "delay_max_s": TAU_MAX_S},
+            "worst": worst_margins(lm, table.speed, table.tilt)}
 
 
 def _modes_summary(table) -> dict | None:
@@ -442,7 +546,11 @@ def table_summary(table, *, source: str = "") -> dict:
         max]`` over the feasible samples (N per state unit; None without any);
         ``nominal_thrust_N`` and ``nominal_roll_deg``: ``[min, max]``;
         ``spectral_radius`` (n_a, n_v) per circle (None: infeasible) and its
-        ``worst_spectral_radius``.
+        ``worst_spectral_radius``; ``modes``; ``margins`` (None: not stored): the gain
+        margins ``gain_down``, ``gain_up`` (n_a, n_v) and per motor ``input_down``,
+        ``input_up`` (n_a, n_v, 4) as factors, ``delay_s`` (n_a, n_v), s (None where
+        infeasible, ``"inf"`` beyond the range searched), the ``search`` ranges and the
+        ``worst`` of each (:func:`~gainsched.schedule.margins.worst_margins`).
 
     See Also
     --------
@@ -498,6 +606,7 @@ def table_summary(table, *, source: str = "") -> dict:
         "spectral_radius": _json_grid(rho),
         "worst_spectral_radius": float(fin.max()) if fin.size else None,
         "modes": _modes_summary(table),
+        "margins": _margins_summary(table),
     }
 
 
@@ -505,7 +614,7 @@ def plot_count(table, midpoints: bool = False) -> int:
     """How many PNG files :func:`schedule_plots` renders for ``table`` (with the
     midpoint-error figure when ``midpoints``): the length of its progress."""
     return (table.tilt.size + 2 + (table.mode_tau is not None) + bool(midpoints)
-            + 1)  # + envelope.png
+            + 2 * (table.loop_margins is not None) + 1)  # + envelope.png
 
 
 def schedule_plots(table, midpoints=None, *, source: str = "",
@@ -558,8 +667,8 @@ def schedule_plots(table, midpoints=None, *, source: str = "",
     >>> table = gs.load_table(gs.write_outputs(out, small, gs.build_grid(small))[0])
     >>> files = gs.schedule_plots(table)
     >>> sorted(files)
-    ['envelope.png', 'gains_tilt0.png', 'nominal.png', 'plots.json', 'spectral_radius.png',
-     'time_constant.png']
+    ['delay_margin.png', 'envelope.png', 'gain_margin.png', 'gains_tilt0.png', 'nominal.png',
+     'plots.json', 'spectral_radius.png', 'time_constant.png']
     >>> summary = json.loads(files["plots.json"])
     >>> summary["speeds_mps"], [round(x, 3) for x in summary["spectral_radius"][0]]
     ([6.0, 9.0], [0.84, 0.952])

@@ -55,7 +55,7 @@ class Build:
         ``shown`` instead of their folder when given (``improve`` builds into its stage
         and names its output folder)."""
         from ..firmware.outputs import certificate_lines
-        from ..schedule.grid import bound_price
+        from ..schedule.bounds import bound_price
 
         cfg, grid, outputs = self.config, self.grid, self.outputs
 

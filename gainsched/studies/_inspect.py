@@ -51,8 +51,9 @@ class Inspection:
 
     def lines(self, as_json: bool = False) -> list[str]:
         """What ``gainsched inspect`` prints: the table's record, grid, feasibility map,
-        gain ranges, flash footprint, worst spectral radius and slowest modes, and the
-        envelope's files; or (``as_json``) the summary as indented JSON, one string."""
+        gain ranges, flash footprint, worst spectral radius, slowest modes and stability
+        margins (docs/margins.md), and the envelope's files; or (``as_json``) the summary
+        as indented JSON, one string."""
         import json
 
         if as_json:
@@ -63,7 +64,7 @@ class Inspection:
 def _inspect_lines(ins: Inspection) -> list[str]:
     from ..schedule.nominal import REASONS
     from ..schedule.refine import grid_auto_lines
-    from ..schedule.viewer import mode_lines
+    from ..schedule.viewer import margin_lines, mode_lines
 
     t = ins.table
     tilts = ", ".join(f"{x:g}" for x in np.rad2deg(t.tilt))
@@ -105,6 +106,7 @@ def _inspect_lines(ins: Inspection) -> list[str]:
                    f"(speed {t.speed[j]:g} m/s, tilt {np.rad2deg(t.tilt[i]):g} deg); "
                    f"all < 1: {bool(np.all(rho[np.isfinite(rho)] < 1))}")
     out += [f"  {line}" for line in mode_lines(t)]
+    out += [f"  {line}" for line in margin_lines(t)]
     if ins.envelope is not None:
         out.append(ins.envelope)
     return out
@@ -296,8 +298,10 @@ def _compact_form(t, table, azimuth_error: float):
 
 def _check_lines(t, table, res, n_v: int, seconds: float, max_error: float,
                  passed: bool) -> list[str]:
-    """The lines of :func:`check` after the midpoint check."""
+    """The lines of :func:`check` after the midpoint check: the errors, the closed
+    loops, the table's stability margins and PASS or FAIL."""
     from ..schedule.refine import grid_auto_lines
+    from ..schedule.viewer import margin_lines
 
     ok_pts = int(np.count_nonzero(np.isfinite(res.rel_err)))
     n_a = max(t.tilt.size - 1, 1)
@@ -327,6 +331,7 @@ def _check_lines(t, table, res, n_v: int, seconds: float, max_error: float,
     if nominal:
         out.append(f"  {grid_auto_lines(t.grid_auto)[0]}; checked on gains, nominal "
                    "thrusts and roll")
+    out += [f"  {line}" for line in margin_lines(t, maps=False)]
     what = "gain, thrust and roll error" if nominal else "max error"
     out.append(f"  {'PASS' if passed else 'FAIL'}: {what} <= {max_error:g}% and every "
                "midpoint closed loop stable")

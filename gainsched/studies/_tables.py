@@ -112,7 +112,7 @@ def plot(table, out_dir, *, check: bool = False, reporter: Reporter = SILENT) ->
 
     Examples
     --------
-    A table of two tilts (the paper's has seven: twelve files, half a minute):
+    A table of two tilts (the paper's has seven: fourteen files, half a minute):
 
     >>> import tempfile
     >>> cfg = gs.load_config("configs/paper.toml").with_values(
@@ -121,7 +121,7 @@ def plot(table, out_dir, *, check: bool = False, reporter: Reporter = SILENT) ->
     >>> out = tempfile.mkdtemp()
     >>> p = gs.studies.plot(gs.build(cfg, out, jobs=1).table, f"{out}/plots")
     >>> len(p.files), "plots.json" in [f.name for f in p.files]
-    (7, True)
+    (9, True)
     """
     from ..publish import check_out_dir, publish
     from ..schedule.tables import load_table

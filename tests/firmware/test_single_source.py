@@ -29,7 +29,7 @@ from gainsched.schedule import tables as tb
 from gainsched.schedule.grid import build_grid
 from gainsched.schedule.tables import load_table, table_bytes, table_from_bytes
 
-from support import PAPER_H5, REPO, small_config, small_config_text
+from support import PAPER_H5, REPO, rechecksum, small_config, small_config_text
 
 
 @pytest.fixture(scope="module")
@@ -110,10 +110,7 @@ def _rewrite(path, edit) -> None:
     would have written the edited file."""
     with h5py.File(path, "r+") as f:
         edit(f)
-        digests = {}
-        for name, ds in tb._datasets(f).items():
-            digests[name] = ds.attrs["sha256"] = tb._dataset_sha256(ds[()])
-        f.attrs["data_sha256"] = tb._root_sha256(dict(f.attrs), digests)
+        rechecksum(f)
 
 
 @pytest.fixture

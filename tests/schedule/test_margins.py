@@ -10,21 +10,39 @@ Checked against answers found another way:
   just inside it below 1 (the definition);
 - the delay margin of a scalar loop: the delay at which the characteristic polynomial of
   the interpolated-hold loop, ``z^(d+2) - a z^(d+1) + b k ((1 - f) z + f)``, has a root
-  on the unit circle (numpy's roots and brentq on f), to 1e-6 of a sample.
+  on the unit circle (numpy's roots and brentq on f), to 1e-6 of a sample;
+- the compiled kernel against its numpy fallback, its vector variants bit for bit, and
+  the delayed loop's low-rank image against its whole monodromy on a paper circle;
+- the build: the level circle of the paper vehicle solved by the periodic solver over its
+  N constant steps has the margins of its one-step LTI loop found by brentq on the
+  eigenvalues of ``A - g B K`` (to 1e-6), and the DARE path stores the same.
 """
 
 from __future__ import annotations
 
+import ctypes
+import io
+from concurrent.futures import ThreadPoolExecutor
+
+import h5py
 import numpy as np
 import pytest
 from scipy.optimize import brentq
 
+from gainsched import native
+from gainsched.errors import InputError
+from gainsched.schedule import margins as mg
+from gainsched.schedule.grid import build_grid, solve_circle
 from gainsched.schedule.margins import (
     delay_margin,
     gain_margins,
     monodromy_with,
     spectral_radius,
 )
+from gainsched.schedule.tables import table_bytes, table_from_bytes
+from gainsched.schedule.viewer import margin_lines
+
+from support import small_config
 
 
 @pytest.mark.parametrize("N", [1, 5, 36])
@@ -113,3 +131,148 @@ def test_the_delay_margin_of_a_scalar_loop_is_where_its_polynomial_crosses(a, bk
     Ad, Bd, K = np.full((1, 7, 1, 1), a), np.full((1, 7, 1, 1), bk), np.ones((1, 7, 1, 1))
     tau = delay_margin(Ad, Bd, K, h)
     assert tau[0] / h == pytest.approx(ref, abs=1e-6)
+
+
+def _periodic_loop(seed=1, b=3, N=40, n=11, m=4):
+    """Random stable-ish periodic loops (b, N): A_k near I, small B_k, K_k."""
+    rng = np.random.default_rng(seed)
+    ph = 2 * np.pi * np.arange(N) / N
+    A0 = np.eye(n) + 0.02 * rng.standard_normal((b, n, n))
+    Ad = A0[:, None] + 0.01 * np.sin(ph)[None, :, None, None] * rng.standard_normal((b, 1, n, n))
+    Bd = 0.05 * rng.standard_normal((b, 1, n, m)) * (1 + 0.3 * np.cos(ph))[None, :, None, None]
+    K = rng.standard_normal((b, N, m, n))
+    return Ad, Bd, K
+
+
+def _lanes(Ad, Bd, K):
+    """A gain and a delay evaluation of every loop: (log rho of gains, (Y, e) of delays)."""
+    b, m = Ad.shape[0], Bd.shape[-1]
+    circle = np.repeat(np.arange(b), 3)
+    G = np.tile([[0.5] * m, [1.0] * m, [3.0, 1.0, 1.0, 0.2][:m]], (b, 1))
+    tau = np.tile([0.0, 2.5, 6.0], b)
+    D = 7
+    X0 = np.random.default_rng(2).standard_normal((circle.size, Ad.shape[-1] + D * m, 5))
+    return mg._gain_loops(Ad, Bd, K, circle, G), mg._delay_pass(
+        mg._lib(), Ad, Bd, K, circle, tau, D, X0)
+
+
+@pytest.mark.skipif(not native.available("loops"), reason="no C compiler")
+def test_the_loop_kernel_and_its_numpy_fallback_agree(monkeypatch):
+    Ad, Bd, K = _periodic_loop()
+    g_c, (Y_c, e_c) = _lanes(Ad, Bd, K)
+    monkeypatch.setattr(mg, "_lib", lambda: None)
+    g_n, (Y_n, e_n) = _lanes(Ad, Bd, K)
+    np.testing.assert_allclose(g_c, g_n, rtol=1e-11, atol=1e-11)
+    np.testing.assert_allclose(Y_c * 2.0 ** e_c[:, None, None], Y_n * 2.0 ** e_n[:, None, None],
+                               rtol=1e-10, atol=1e-12 * np.abs(Y_n).max())
+
+
+def test_the_loop_kernel_bits_do_not_depend_on_vector_width(monkeypatch):
+    """Every vector variant this CPU runs gives the same bits (the margins are stored in
+    the table, which is byte-identical on every machine); sizes 11 x 4 (specialised) and
+    5 x 2 (generic)."""
+    variants = native.vector_variants()
+    with ThreadPoolExecutor(2) as ex:
+        paths = list(ex.map(lambda f: native.build("loops", f), variants))
+    if any(p is None for p in paths):
+        pytest.skip("no C compiler")
+    if len(paths) == 1:
+        pytest.skip("this CPU runs only the baseline variant")
+    results = []
+    for path in paths:
+        lib = ctypes.CDLL(str(path))
+        monkeypatch.setattr(native, "load", lambda name, lib=lib: lib)
+        out = []
+        for sizes in ((11, 4), (5, 2)):
+            g, (Y, e) = _lanes(*_periodic_loop(n=sizes[0], m=sizes[1]))
+            out += [g, Y, e]
+        results.append(out)
+    for other in results[1:]:
+        for a, b in zip(results[0], other, strict=True):
+            assert np.array_equal(a, b)
+
+
+@pytest.fixture(scope="module")
+def paper_circle(paper_config):
+    """The paper vehicle's 15 m/s circle at 20 deg: its steps and solution."""
+    sol, steps = solve_circle(paper_config, 15.0, np.radians([20.0]), keep_steps=True)
+    return sol, steps
+
+
+def test_the_delayed_loops_low_rank_image_has_the_whole_monodromys_multipliers(paper_circle):
+    """The delayed loop's multipliers from its image on 14 columns (the build's) are those
+    of the whole (n + D m)-square monodromy, to 1e-9, below, near and beyond the margin."""
+    sol, (Ad, Bd, K) = paper_circle
+    tau = np.array([4.0, 12.5, 13.0, 20.25])
+    circle = np.zeros(tau.size, int)
+    low = mg._delay_loops(Ad, Bd, K, circle, tau)
+    whole = [mg._log_rho(*mg._delayed_monodromy(Ad[0], Bd[0], K[0], np.array(t)))
+             for t in tau]
+    np.testing.assert_allclose(low, whole, atol=1e-9)
+    assert low[0] < 0 < low[-1]  # a stable and an unstable delay
+
+
+def _lti_margins(A, B, K, mask):
+    """The first g below and above 1 where rho(A - B diag(g on mask) K) = 1 (brentq on a
+    fine scan of the eigenvalues; 0 / inf where none)."""
+    rho = lambda g: np.abs(np.linalg.eigvals(A - (B * np.where(mask, g, 1.0)) @ K)).max() - 1  # noqa: E731
+    out = []
+    for grid in (np.linspace(1.0, 0.0, 401), np.linspace(1.0, mg.G_MAX, 401)):
+        r = np.array([rho(g) for g in grid])
+        i = int(np.argmax(r >= 0))
+        out.append(brentq(rho, grid[i - 1], grid[i], xtol=1e-14) if r[i] >= 0
+                   else (0.0 if grid[-1] == 0 else np.inf))
+    return out
+
+
+def test_a_level_circle_solved_periodically_has_its_lti_loops_margins(paper_config):
+    """The level circle is time-invariant: solved by the periodic solver over its N
+    steps (every step the same A, B and, to the recursion's convergence, K), its gain
+    margins are those of the one-step loop ``A - g B K``, all motors and each alone, to
+    1e-6; and the DARE path, which the build takes, stores the same."""
+    cfg = paper_config.with_values({"grid.azimuth_samples": 8})
+    periodic, (Ad, Bd, K) = solve_circle(cfg, 9.0, [0.0], keep_steps=True)
+    dare = solve_circle(cfg, 9.0, [0.0])
+    A, B, Kd = Ad[0, 0], Bd[0, 0], dare.K[0, 0]
+    np.testing.assert_allclose(K[0], np.broadcast_to(Kd, K[0].shape), atol=1e-9)
+    for j, mask in enumerate([np.ones(4, bool)] + [np.eye(4, dtype=bool)[i] for i in range(4)]):
+        ref = _lti_margins(A, B, Kd, mask)
+        got = periodic.gain_margin[0] if j == 0 else periodic.input_margin[0, j - 1]
+        stored = dare.gain_margin[0] if j == 0 else dare.input_margin[0, j - 1]
+        for g, r, s in zip(got, ref, stored, strict=True):
+            assert g == pytest.approx(r, rel=1e-6, abs=1e-9)
+            assert s == pytest.approx(r, rel=1e-6, abs=1e-9)
+    assert periodic.delay_margin[0] == pytest.approx(dare.delay_margin[0], rel=1e-6)
+
+
+def test_the_table_stores_the_builds_margins_and_serves_them():
+    """The build's margins are the table's (``Table.margins()``: every circle; with a
+    speed and a tilt: that circle), covered by the checksums; a table built with
+    ``[control] margins = false`` has none and says so."""
+
+
+    cfg = small_config()
+    grid = build_grid(cfg)
+    data = table_bytes(cfg, grid)
+    table = table_from_bytes(data)
+    lm = table.margins()
+    np.testing.assert_array_equal(lm.gain_down, grid.gain_margin[..., 0])
+    np.testing.assert_array_equal(lm.input_up, grid.input_margin[..., 1])
+    np.testing.assert_array_equal(lm.delay, grid.delay_margin)
+    assert np.all(lm.delay[np.isfinite(grid.spectral_radius)] > 0)
+    one = table.margins(9, 20)
+    assert one.delay == grid.delay_margin[1, 1] and one.input_down.shape == (4,)
+    with pytest.raises(ValueError, match=r"speed = 7 is not on the grid: \[6\.0, 9\.0\]"):
+        table.margins(7, 20)
+    with h5py.File(io.BytesIO(data), "r+") as f:  # an edited margin
+        f["closed_loop/delay_margin"][0, 0] *= 2
+        f.flush()
+        edited = f.id.get_file_image()
+    with pytest.raises(InputError, match="closed_loop/delay_margin"):
+        table_from_bytes(edited)
+    off = small_config(**{"control.margins": False})
+    bare = table_from_bytes(table_bytes(off, build_grid(off)))
+    assert bare.loop_margins is None
+    with pytest.raises(ValueError, match=r"margins = false"):
+        bare.margins()
+    assert "rebuild" in margin_lines(bare)[0]

@@ -61,7 +61,7 @@ def test_cli_plot_writes_the_pngs_and_a_summary_of_the_table(tmp_path):
     assert summary == json.loads((out / "plots.json").read_text())
     expected = {gain_file_name(a) for a in paper_table.tilt} | {
         "envelope.png", "nominal.png", "spectral_radius.png", "time_constant.png",
-        "plots.json"}
+        "gain_margin.png", "delay_margin.png", "plots.json"}
     assert set(summary["files"]) == expected == {p.name for p in out.iterdir()}
     for name in expected - {"plots.json"}:
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
@@ -115,6 +115,11 @@ def test_plotted_maps_are_the_tables_arrays(paper_table, figs):
     np.testing.assert_array_equal(
         _values(_mesh(figs["time_constant.png"], "time_constant"),
                 paper_table.spectral_radius.shape), paper_table.mode_tau[..., 0])
+    lm = paper_table.margins()
+    for name, values in (("gain_margin", 20 * np.log10(lm.gain_down)),
+                         ("delay_margin", 1e3 * lm.delay)):
+        np.testing.assert_array_equal(
+            _values(_mesh(figs[f"{name}.png"], name), lm.delay.shape), values)
 
 
 def test_midpoint_error_map_takes_the_max_over_azimuth():
@@ -194,8 +199,8 @@ def test_gain_maps_carry_units_colorbars_and_a_map_for_their_sign(paper_table, f
 
 def test_every_picture_is_legible_at_its_saved_size(paper_table, figs):
     """Issue 56: rendered at its saved size, no text of any picture of ``gainsched plot``
-    and ``inspect`` (the gain maps, the nominal, the spectral radius and time-constant
-    maps, the envelope) runs off the figure or over another text (a colorbar's labels
+    and ``inspect`` (the gain maps, the nominal, the spectral radius, time-constant and
+    margin maps, the envelope) runs off the figure or over another text (a colorbar's labels
     over the next map, a title over its colorbar's label); the values printed in the
     cells are black on light cells and white on dark ones, never a hue on a hue."""
     import matplotlib.pyplot as plt
@@ -210,5 +215,7 @@ def test_every_picture_is_legible_at_its_saved_size(paper_table, figs):
             assert text_problems(fig) == [], name
     finally:
         plt.close(env)
-    cells = [t for t in figs["spectral_radius.png"].axes[0].texts]
-    assert cells and {t.get_color() for t in cells} <= {"black", "white"}
+    assert {"gain_margin.png", "delay_margin.png"} <= set(figs)
+    for name in ("spectral_radius.png", "delay_margin.png"):
+        cells = [t for t in figs[name].axes[0].texts]
+        assert cells and {t.get_color() for t in cells} <= {"black", "white"}, name

@@ -239,7 +239,7 @@ def midpoint_check(table, *, speed_stride: int = 1, progress=None,
     circles, skipped = [], 0
     directions = (1.0,) if getattr(table, "reverse", None) is None else (1.0, -1.0)
     for v in (sign * float(v) for sign in directions for v in v_mid):
-        sol, steps = solve_circle(cfg2, v, a_mid, keep_steps=True)
+        sol, steps = solve_circle(cfg2, v, a_mid, keep_steps=True, margins=False)
         skipped += _midpoint_rows(rows, interp, sol, v, r, a_mid, np.copysign(xi_mid, v))
         if steps is not None:
             circles += _midpoint_circles(interp, sol, steps, v, r, a_mid)

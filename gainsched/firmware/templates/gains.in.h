@@ -5,6 +5,7 @@
  * config sha256: ${config_sha256}
  * grid: ${n_tilt} tilts x ${n_speed} speeds x ${n_xi} azimuths, n = ${n_state} states${directions_note}
  * table data: ${data_bytes} bytes, CRC-32 0x${crc32_hex} (docs/runtime.md)
+ * ${margins_note}
  *
  * Usage (C99; compile gainsched_runtime.c alongside):
  *     #include "${name}_gains.h"
