@@ -30,6 +30,8 @@ __all__ = [
     "MAX_SWEEP_VARIANTS",
     "MAX_JOBS",
     "MAX_LOG_BYTES",
+    "MARGIN_GAIN_MAX",
+    "MARGIN_DELAY_MAX_S",
 ]
 
 #: reduced state (delta, xi, delta', xi', phi, theta, chi, omega_x, omega_y, omega_z)
@@ -46,6 +48,11 @@ CONTROL_LAW = ("u = u_d - K (x - x_d); the azimuth error from continuous (unwrap
                "azimuths, never wrapped at +-pi; integral states integrate their errors")
 #: inputs: the four motor thrusts (T1, T2, T3, T4), N
 N_INPUT = 4
+#: the stability margins' search ranges (gainsched.schedule.margins): the largest factor
+#: on the commands (+20 dB) and the longest extra delay, s; beyond them a margin is
+#: reported infinite, and a build bound cannot ask for more
+MARGIN_GAIN_MAX = 10.0
+MARGIN_DELAY_MAX_S = 0.05
 #: the LQR's optional integral states, in their order after the reduced state (before
 #: the effect states): name -> index of the reduced state whose error each integrates.
 #: ``int_delta`` is the paper's (Sec. IV.B, ``[control] integrator``); ``int_xi``, the

@@ -500,6 +500,22 @@ def test_max_gain_is_optional_and_positive(paper_config):
         base.with_values({"control.max_gain": 0.0})
 
 
+def test_margin_bounds_are_optional_positive_within_the_search_and_need_margins(paper_config):
+    base = paper_config
+    assert base.control.margins and base.control.min_delay_margin_ms is None
+    c = base.with_values({"control.min_gain_margin_db": 6.0, "control.min_delay_margin_ms": 10})
+    assert (c.control.min_gain_margin_db, c.control.min_delay_margin_ms) == (6.0, 10.0)
+    for key, value, what in (("min_gain_margin_db", 0.0, "must be > 0"),
+                             ("min_gain_margin_db", 21.0, "beyond the margins' search range "
+                              "(20 dB"),
+                             ("min_delay_margin_ms", 60.0, "beyond the margins' search range "
+                              "(50 ms")):
+        with pytest.raises(InputError, match=rf"control\.{key}: .*{re.escape(what)}"):
+            base.with_values({f"control.{key}": value})
+    with pytest.raises(InputError, match=r"control\.min_delay_margin_ms: needs margins = true"):
+        base.with_values({"control.min_delay_margin_ms": 10.0, "control.margins": False})
+
+
 def test_config_is_a_flat_namespace_over_private_modules():
     """gainsched.config re-exports its private modules (issue 40): every name in its
     ``__all__`` resolves, the classes and functions come from a private module of the

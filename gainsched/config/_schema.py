@@ -106,6 +106,12 @@ class Control:
     #: compute the stability margins of every circle's loop at the build
     #: (:mod:`gainsched.schedule.margins`; docs/margins.md)
     margins: bool = True
+    #: dB; every loop's gain margins (down and up, all motors and each alone) at least
+    #: this far from 0 dB, or the build fails naming the circle (None: no bound;
+    #: :func:`gainsched.schedule.bounds.check_margin_bounds`)
+    min_gain_margin_db: float | None = None
+    #: ms; every loop's delay margin at least this, or the build fails (None: no bound)
+    min_delay_margin_ms: float | None = None
 
     @property
     def integrators(self) -> tuple[str, ...]:

@@ -8,10 +8,20 @@ ending in ``_deg``). Checks across sections are the reader's
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..actuators import MOTOR_ORDERS
-from ..constants import MAX_XI, N_INPUT, N_STATE, REDUCED_NAMES, XI_DOT_LIMIT
+from ..constants import (
+    MARGIN_DELAY_MAX_S,
+    MARGIN_GAIN_MAX,
+    MAX_XI,
+    N_INPUT,
+    N_STATE,
+    REDUCED_NAMES,
+    XI_DOT_LIMIT,
+)
 from ._checks import Section, check_axis, check_axis_range, check_float32_axis, check_square_weight
 from ._schema import (
     COMMANDS,
@@ -179,10 +189,32 @@ def read_control(sec: Section) -> Control:
         max_gain = sec.number("max_gain", positive=True)
     int_limit = _int_limit(sec, integrators) if "int_limit" in sec.data else None
     margins = sec.boolean("margins", True)
+    bounds = _margin_bounds(sec, margins)
     sec.done()
     Q.setflags(write=False)
     R.setflags(write=False)
-    return Control(rate, Q, R, integ, term, az_integ, tau_max, max_gain, int_limit, margins)
+    return Control(rate, Q, R, integ, term, az_integ, tau_max, max_gain, int_limit, margins,
+                   *bounds)
+
+
+def _margin_bounds(sec: Section, margins: bool) -> tuple[float | None, float | None]:
+    """``control.min_gain_margin_db`` (dB) and ``min_delay_margin_ms`` (ms): positive,
+    within the margins' search ranges, and only with ``margins = true``."""
+    out = []
+    for key, limit, unit in (("min_gain_margin_db", 20 * math.log10(MARGIN_GAIN_MAX), "dB"),
+                             ("min_delay_margin_ms", 1e3 * MARGIN_DELAY_MAX_S, "ms")):
+        if key not in sec.data:
+            out.append(None)
+            continue
+        value = sec.number(key, positive=True)
+        if value > limit:
+            raise sec.error(key, f"{value:g} {unit} is beyond the margins' search range "
+                            f"({limit:g} {unit}; docs/margins.md)")
+        if not margins:
+            raise sec.error(key, "needs margins = true (the bound is checked on the margins "
+                            "the build computes)")
+        out.append(value)
+    return out[0], out[1]
 
 
 def _int_limit(sec: Section, integrators: tuple[str, ...]) -> tuple[float, ...]:

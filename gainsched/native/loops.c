@@ -5,7 +5,8 @@
  * period. Its stability margins are the perturbations of the commands at which a Floquet
  * multiplier (an eigenvalue of the period's product) reaches the unit circle:
  *
- *   gs_gain_loops:  M = prod_k (A_k - B_k diag(g) K_k)        (factors g on the inputs)
+ *   gs_gain_loops:  M = prod_k (A_k - B_k diag(g) K_k)        (factors g on the inputs),
+ *                   or its surrogate of frozen blocks for the margins' scan
  *   gs_delay_loops: the same loop with the commands applied tau = d + f samples late,
  *                   u_applied,k = (1 - f) u_{k-d} + f u_{k-d-1},  u_k = -K_k x_k,
  *                   on the state [x_k, u_{k-1}, .., u_{k-D}] (D >= tau registers),
@@ -90,36 +91,72 @@ INLINE void renorm(size_t na, lane *X, size_t nb, lane *Y, double *e) {
     for (size_t i = 0; i < nb; i++) Y[i] *= sc;
 }
 
-INLINE void gain_group(int n, int m, int N, const steps *s, const lane *g, lane *M,
+/* C = X Y (n x n), two add chains per entry */
+INLINE void mul(int n, const lane *X, const lane *Y, lane *C) {
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            lane s0 = (lane){0}, s1 = (lane){0};
+            int q = 0;
+            for (; q + 2 <= n; q += 2) {
+                s0 += X[i * n + q] * Y[q * n + j];
+                s1 += X[i * n + q + 1] * Y[(q + 1) * n + j];
+            }
+            if (q < n) s0 += X[i * n + q] * Y[q * n + j];
+            C[i * n + j] = s0 + s1;
+        }
+}
+
+/* F = A_k - (B_k diag(g)) K_k of the lanes' step k */
+INLINE void closed(int n, int m, int k, const steps *s, const lane *g, lane *F) {
+    lane A[NMAX * NMAX], B[NMAX * MMAX], K[MMAX * NMAX];
+    gather(n, m, k, s, A, B, K);
+    for (int i = 0; i < n; i++)
+        for (int q = 0; q < m; q++) B[i * m + q] *= g[q];
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            lane acc = (lane){0};
+            for (int q = 0; q < m; q++) acc += B[i * m + q] * K[q * n + j];
+            F[i * n + j] = A[i * n + j] - acc;
+        }
+}
+
+/* M <- F^p M by binary powers (p >= 1); F is overwritten */
+INLINE void power_times(int n, int p, lane *F, lane *M, lane *T) {
+    for (;;) {
+        if (p & 1) {
+            mul(n, F, M, T);
+            memcpy(M, T, (size_t)n * n * sizeof(lane));
+        }
+        p >>= 1;
+        if (!p) break;
+        mul(n, F, F, T);
+        memcpy(F, T, (size_t)n * n * sizeof(lane));
+    }
+}
+
+/* the monodromy of W lanes: every step (block = 1), or the period in blocks of `block`
+ * steps, each the power of its middle step's loop (the scan's surrogate: the samples
+ * vary little over a block) */
+INLINE void gain_group(int n, int m, int N, int block, const steps *s, const lane *g, lane *M,
                        double *e) {
-    lane A[NMAX * NMAX], B[NMAX * MMAX], K[MMAX * NMAX], F[NMAX * NMAX], T[NMAX * NMAX];
+    lane F[NMAX * NMAX], T[NMAX * NMAX];
     for (int i = 0; i < n * n; i++) M[i] = (lane){0};
     for (int i = 0; i < n; i++) M[i * n + i] += 1.0;
-    for (int k = 0; k < N; k++) {
-        gather(n, m, k, s, A, B, K);
-        /* F = A - (B diag(g)) K */
-        for (int i = 0; i < n; i++)
-            for (int q = 0; q < m; q++) B[i * m + q] *= g[q];
-        for (int i = 0; i < n; i++)
-            for (int j = 0; j < n; j++) {
-                lane acc = (lane){0};
-                for (int q = 0; q < m; q++) acc += B[i * m + q] * K[q * n + j];
-                F[i * n + j] = A[i * n + j] - acc;
-            }
-        /* M <- F M: two add chains per entry */
-        for (int i = 0; i < n; i++)
-            for (int j = 0; j < n; j++) {
-                lane s0 = (lane){0}, s1 = (lane){0};
-                int q = 0;
-                for (; q + 2 <= n; q += 2) {
-                    s0 += F[i * n + q] * M[q * n + j];
-                    s1 += F[i * n + q + 1] * M[(q + 1) * n + j];
-                }
-                if (q < n) s0 += F[i * n + q] * M[q * n + j];
-                T[i * n + j] = s0 + s1;
-            }
-        memcpy(M, T, (size_t)n * n * sizeof(lane));
-        if ((k + 1) % RENORM == 0) renorm((size_t)n * n, M, 0, NULL, e);
+    int since = 0;
+    for (int k = 0; k < N; k += block) {
+        int len = N - k < block ? N - k : block;
+        closed(n, m, k + len / 2, s, g, F);
+        if (len == 1) {
+            mul(n, F, M, T);
+            memcpy(M, T, (size_t)n * n * sizeof(lane));
+        } else {
+            power_times(n, len, F, M, T);
+        }
+        since += len;
+        if (since >= RENORM) {
+            renorm((size_t)n * n, M, 0, NULL, e);
+            since = 0;
+        }
     }
 }
 
@@ -145,13 +182,15 @@ static void lane_steps(ptrdiff_t l0, ptrdiff_t L, const int *circle, const doubl
  * gs_gain_loops: lanes [l0, l1) of L. Ad (b, N, n, n), Bd (b, N, n, m), K (b, N, m, n):
  * doubles at the element strides sA[4], sB[4], sK[4]; circle (L): each lane's loop; G
  * (L, m): its factor on each input. M_out (L, n, n) row-major and e_out (L): the
- * monodromies, M_out 2^e_out. Returns 0, or -1 if the sizes exceed the compiled limits.
+ * monodromies, M_out 2^e_out; block 1: exact, block > 1: the surrogate of blocks of
+ * that many steps, each the power of its middle step's loop. Returns 0, or -1 if the
+ * sizes exceed the compiled limits.
  */
-int gs_gain_loops(int n, int m, int N, ptrdiff_t L, ptrdiff_t l0, ptrdiff_t l1,
+int gs_gain_loops(int n, int m, int N, int block, ptrdiff_t L, ptrdiff_t l0, ptrdiff_t l1,
                   const int *circle, const double *Ad, const ptrdiff_t *sA, const double *Bd,
                   const ptrdiff_t *sB, const double *K, const ptrdiff_t *sK, const double *G,
                   double *M_out, double *e_out) {
-    if (n < 1 || n > NMAX || m < 1 || m > MMAX || N < 1) return -1;
+    if (n < 1 || n > NMAX || m < 1 || m > MMAX || N < 1 || block < 1) return -1;
     for (ptrdiff_t g0 = l0; g0 < l1; g0 += W) {
         steps s;
         ptrdiff_t ll[W];
@@ -161,9 +200,9 @@ int gs_gain_loops(int n, int m, int N, ptrdiff_t L, ptrdiff_t l0, ptrdiff_t l1,
         for (int q = 0; q < m; q++)
             for (int l = 0; l < W; l++) g[q][l] = G[ll[l] * m + q];
         if (n == 11 && m == 4)
-            gain_group(11, 4, N, &s, g, M, e);
+            gain_group(11, 4, N, block, &s, g, M, e);
         else
-            gain_group(n, m, N, &s, g, M, e);
+            gain_group(n, m, N, block, &s, g, M, e);
         for (int l = 0; l < W && g0 + l < l1; l++) {
             for (int i = 0; i < n * n; i++) M_out[ll[l] * n * n + i] = M[i][l];
             e_out[ll[l]] = e[l];

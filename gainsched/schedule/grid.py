@@ -35,11 +35,11 @@ from ..model.symmetry import (
     table_refusal,
 )
 from ..native.reproducible import blas_single_thread, ensure_blas_single_thread
-from .bounds import check_gain_cap
+from .bounds import check_gain_cap, check_margin_bounds
 from .discrete import LIN_TOL, discrete_at, discrete_system, periodic_interp
 from .jobs import run_jobs
 from .lqr import dlqr, periodic_lqr, spectral_radius, stability_scale
-from .margins import MARGIN_XTOL, loop_margins
+from .margins import MARGIN_DELAY_XTOL, MARGIN_XTOL, SURROGATE_BLOCK, loop_margins
 from .modes import MODE_COUNT, floquet_modes
 from .nominal import circle_nominal, circle_offsets
 from .offsets import HARMONICS
@@ -430,7 +430,8 @@ def _fill_tilt0(out: CircleSolution, i: int, model, config, speed, Qx, margins) 
     _put_modes(out, i, modes)
     if margins:  # one step: the period's product is its N-th power
         _put_margins(out, [i], loop_margins(A[None, None], B[None, None], K[None, None],
-                                            out.dt, xtol=MARGIN_XTOL))
+                                            out.dt, xtol=MARGIN_XTOL,
+                                            delay_xtol=MARGIN_DELAY_XTOL))
     out.lin_samples[i], out.lin_error[i], out.sweeps[i] = 1, 0.0, -1  # infinite horizon
 
 
@@ -459,7 +460,9 @@ def _fill_periodic(out: CircleSolution, ok, model, config, speed, tilts, Qx, kee
         if keep_steps:
             kept.append((Ad, Bd, sol.K))
         if margins:  # the real loop's: the model's A_k, B_k (not the scaled ones)
-            _put_margins(out, idx, loop_margins(Ad, Bd, sol.K, dt, xtol=MARGIN_XTOL))
+            _put_margins(out, idx, loop_margins(Ad, Bd, sol.K, dt, xtol=MARGIN_XTOL,
+                                                delay_xtol=MARGIN_DELAY_XTOL,
+                                                block=SURROGATE_BLOCK))
         out.K[idx] = _sample(Ks, lo, hi, w)
         out.S[idx] = _sample(Ss, lo, hi, w)
         out.spectral_radius[idx] = spectral_radius(Phi)
@@ -639,7 +642,9 @@ def build_grid(config, *, n_jobs=1, progress=None, backend=None) -> GridResult:
             grid_from_solutions([s[0] for s in sols], invariant),
             reverse=grid_from_solutions([s[1] for s in sols], invariant))
         check_gain_cap(config, grid.reverse)
+        check_margin_bounds(config, grid.reverse)
     check_gain_cap(config, grid)
+    check_margin_bounds(config, grid)
     return grid
 
 

@@ -55,7 +55,7 @@ from ..errors import InputError
 from ..model.effects import registered_effects
 from ..model.reduced import Model
 from ..native.reproducible import blas_single_thread
-from .bounds import check_gain_cap
+from .bounds import check_gain_cap, check_margin_bounds
 from .certificate import (
     ERROR_QUANTUM,
     STABLE_RADIUS,
@@ -469,7 +469,9 @@ class _Refiner:
         if self.image is not None:
             grid = replace(grid, reverse=self.grid(self.image_points))
             check_gain_cap(chosen, grid.reverse)
+            check_margin_bounds(chosen, grid.reverse)
         check_gain_cap(chosen, grid)
+        check_margin_bounds(chosen, grid)
         live = [(c, self.centres[c]) for c in cells if self.centres[c].usable]
 
         def worst_of(attr):

@@ -276,3 +276,57 @@ def test_the_table_stores_the_builds_margins_and_serves_them():
     with pytest.raises(ValueError, match=r"margins = false"):
         bare.margins()
     assert "rebuild" in margin_lines(bare)[0]
+
+
+def test_a_delay_bound_the_weights_miss_fails_the_build_naming_the_circle(paper_config,
+                                                                          tmp_path):
+    """``[control] min_delay_margin_ms`` above what the paper's weights reach at 15 m/s,
+    40 deg fails the build with one line naming the config, the key, the circle and the
+    margin it reached (exit 2, nothing written); a bound below it builds."""
+    from click.testing import CliRunner
+
+    from gainsched.cli import cli
+
+    cut = {"grid.speeds": [9, 15], "grid.tilts_deg": [0, 40], "grid.azimuth_samples": 8,
+           "name": "bounded"}
+    grid = build_grid(paper_config.with_values(cut))
+    worst = 1e3 * np.nanmin(grid.delay_margin)
+    assert 12.5 < worst < 13.0 and np.nanargmin(grid.delay_margin) == 3  # 15 m/s, 40 deg
+    path = tmp_path / "bounded.toml"
+    path.write_text(paper_config.with_values({**cut, "control.min_delay_margin_ms": 13.0}).text)
+    r = CliRunner().invoke(cli, ["build", str(path), "-o", str(tmp_path / "out")])
+    assert r.exit_code == 2, r.output
+    assert r.output.strip() == (
+        f"gainsched: error: {path}: control.min_delay_margin_ms: 13 ms is not met: the "
+        f"delay margin is {worst:.2f} ms at 15 m/s, tilt 40 deg: raise R or lower Q (a "
+        "slower loop takes more delay)")
+    assert not (tmp_path / "out").exists()
+    ok = paper_config.with_values({**cut, "control.min_delay_margin_ms": 12.5,
+                                   "control.min_gain_margin_db": 20.0})
+    assert np.array_equal(build_grid(ok).delay_margin, grid.delay_margin)
+
+
+def test_a_gain_bound_names_the_margin_nearest_to_0_db_and_which_way_to_go(paper_config):
+    """The gain bound is met by every margin (all motors and each alone, down and up):
+    the nearest to 0 dB fails, named with its circle and the weights that move it."""
+    from types import SimpleNamespace
+
+    from gainsched.schedule.bounds import check_margin_bounds
+
+    cfg = paper_config.with_values({"grid.speeds": [9, 15], "grid.tilts_deg": [0, 40],
+                                    "control.min_gain_margin_db": 6.0})
+    gain = np.array([[[0.1, np.inf], [0.2, 8.0]], [[np.nan, np.nan], [0.3, 4.0]]])
+    motor = np.broadcast_to([0.0, np.inf], (2, 2, 4, 2)).copy()
+    motor[1, 1, 2] = [0.6, np.inf]  # T3 alone at 15 m/s, 40 deg: -4.4 dB down
+    grid = SimpleNamespace(gain_margin=gain, input_margin=motor, delay_margin=None)
+    with pytest.raises(InputError, match=r"control\.min_gain_margin_db: 6 dB is not met: the "
+                       r"gain margin down of T3 alone is 4\.44 dB at 15 m/s, tilt 40 deg: "
+                       r"raise Q or lower R \(more feedback\)"):
+        check_margin_bounds(cfg, grid)
+    motor[1, 1, 2] = [0.0, np.inf]
+    gain[0, 1, 1] = 1.9  # all motors at 15 m/s, level: up +5.58 dB
+    with pytest.raises(InputError, match=r"the gain margin up of all motors is 5\.58 dB at "
+                       r"15 m/s, tilt 0 deg: raise R or lower Q \(softer gains\)"):
+        check_margin_bounds(cfg, grid)
+    gain[0, 1, 1] = 2.0  # +6.02 dB: met
+    check_margin_bounds(cfg, grid)

@@ -1,0 +1,151 @@
+"""The first crossing of the unit circle by a family of periodic loops: the root search
+of the stability margins (:mod:`gainsched.schedule.margins`, docs/margins.md).
+
+A margin is the first parameter p (a factor on the commands, a delay) from the nominal
+outward at which a Floquet multiplier of the loop reaches the unit circle. The loop is
+known only through its multipliers at any p (one monodromy each), so the search is a
+scan that brackets the first crossing and a refinement inside the bracket, for every
+(loop, margin) pair of a batch at once. Why by hand: scipy's brentq solves one scalar
+root at a time and knows nothing of brackets shared by a batch, of a cheaper surrogate,
+or of the multiplier that crosses.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["first_crossings"]
+
+#: refinement steps at most
+_REFINE = 60
+
+#: the scan's points, as fractions of the search range, evaluated in rounds from the
+#: nominal outward (a margin whose crossing is bracketed stops scanning)
+_SCAN = np.array([1, 2, 4, 8]) / 8.0
+#: the real loop checks a bracket of this relative width around the surrogate's crossing
+_CHECK = 1e-3
+#: "no crossing" on the surrogate stands where its log rho stayed below minus this
+_SURROGATE_ERROR = 1e-3
+
+
+class _Brackets:
+    """The brackets ``[a, b]`` of flat (loop, margin) pairs: the loop is stable at a and
+    not at b (b inf: no crossing found), with log rho and the log multipliers at both."""
+
+    def __init__(self, f0, s0):
+        n = f0.size
+        self.a, self.fa, self.sa = np.zeros(n), f0.astype(float).copy(), s0.copy()
+        self.b, self.fb = np.full(n, np.inf), np.full(n, np.nan)
+        self.sb = np.full_like(s0, complex(np.nan, 0.0))
+        # Illinois: the end kept last (-1: b, +1: a) and the weights on the ends' values
+        self.side, self.wa, self.wb = np.zeros(n), np.ones(n), np.ones(n)
+        self.f0 = f0.astype(float).copy()  # log rho at p = 0
+        self.b2, self.fb2 = np.full(n, np.inf), np.full(n, np.nan)  # the previous b
+
+    def put(self, idx, P, S):
+        """Evaluations S (log multipliers) at P of the pairs idx: each the new lower or
+        upper end; returns which were stable."""
+        f = S[:, 0].real
+        left = f < 0.0
+        self.a[idx[left]], self.fa[idx[left]], self.sa[idx[left]] = P[left], f[left], S[left]
+        up = idx[~left]
+        self.b2[up], self.fb2[up] = self.b[up], self.fb[up]
+        self.b[up], self.fb[up], self.sb[up] = P[~left], f[~left], S[~left]
+        return left
+
+
+def _scan(spectra, h, br, pairs):
+    """The scan of :func:`_first_crossings` over ``pairs`` (flat indices into ``br``, ranges
+    ``h[pairs]``): each bracket's first crossing; returns the largest log rho met by each
+    pair that found none."""
+    peak = br.fa.copy()
+    scan = pairs[br.fa[pairs] < 0.0]
+    for s in _SCAN:
+        if scan.size == 0:
+            break
+        P = s * h[scan]
+        left = br.put(scan, P, spectra(scan, P))
+        peak[scan] = np.maximum(peak[scan], br.fa[scan])
+        scan = scan[left]
+    return peak
+
+
+def _refine(spectra, br, todo, xtol, size):
+    """Narrow the brackets of the pairs ``todo`` until ``b - a <= xtol * size(pair, b)``.
+
+    Illinois false position on log rho, where the stable end is on the mode that crosses.
+    Until it is (log rho at a within 10 % of its nominal value: a mode the margin leaves
+    alone, say the slow along-track one, is the largest there, so log rho is flat up to
+    the crossing and false position would crawl), the secant through the two latest
+    unstable ends (the crossing mode's), else bisection (also for a secant step within
+    5 % of either end)."""
+    for _ in range(_REFINE):
+        todo = todo[(br.b[todo] - br.a[todo]) > xtol * size(todo, br.b[todo])]
+        if todo.size == 0:
+            break
+        lo, up, w = br.a[todo], br.b[todo], br.b[todo] - br.a[todo]
+        flo, fup = br.wa[todo] * br.fa[todo], br.wb[todo] * br.fb[todo]
+        flat = br.fa[todo] <= br.f0[todo] + 0.1 * np.abs(br.f0[todo])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            falsi = up - fup * (up - lo) / (fup - flo)
+            b2, fb2 = br.b2[todo], br.fb2[todo]
+            secant = up - br.fb[todo] * (b2 - up) / (fb2 - br.fb[todo])
+        guard = np.where(flat, 0.05 * w, 0.0)  # the secant: not within 5 % of an end
+        c = np.where(flat, np.where(np.isfinite(b2) & (fb2 > br.fb[todo]), secant, np.nan),
+                     falsi)
+        c = np.where((c > lo + guard) & (c < up - guard), c, 0.5 * (lo + up))
+        left = br.put(todo, c, spectra(todo, c))  # left: c stable, the new a; b kept
+        sd = br.side[todo]
+        br.wb[todo] = np.where(left, np.where(sd == -1, 0.5, 1.0) * br.wb[todo], 1.0)
+        br.wa[todo] = np.where(left, 1.0, np.where(sd == 1, 0.5, 1.0) * br.wa[todo])
+        br.side[todo] = np.where(left, -1, 1)
+
+
+def first_crossings(spectra, hi, s0, xtol, size, surrogate=None):
+    """The first p in [0, hi] where the loop of ``spectra(pair, p)`` is unstable, searched
+    from 0, for every (loop, margin) pair of ``hi`` (b, J) at once: inf where none, NaN
+    where the loop is unstable at p = 0 (``s0`` (b, k), its log multipliers there).
+
+    ``spectra(pair, P)``: flat pair indices and parameters (L,) to the log multipliers
+    (L, k) (:func:`_log_spectrum`). The scan :data:`_SCAN` brackets the first crossing;
+    Illinois false position refines it until the bracket is ``xtol * size(pair, p)``
+    wide (the margin's value at p).
+
+    With a ``surrogate`` (a cheaper ``spectra``, :data:`_SURROGATE_ERROR` from the real
+    one) the scan and a first refinement run on it; the real loop then checks a bracket
+    of :data:`_CHECK` around each crossing found and refines it, and a margin the
+    surrogate finds no crossing of stands if the surrogate's loop stayed
+    :data:`_SURROGATE_ERROR` inside the unit circle at every scan point. Every other
+    pair is searched again on the real loop alone."""
+    hi = np.asarray(hi, float)
+    nb, J = hi.shape
+    h, S0 = hi.reshape(-1), np.repeat(s0, J, axis=0)
+    f0, everyone = S0[:, 0].real, np.arange(h.size)
+    br = _Brackets(f0, S0)
+    if surrogate is None:
+        _scan(spectra, h, br, everyone)
+        _refine(spectra, br, np.flatnonzero(np.isfinite(br.b)), xtol, size)
+    else:
+        sur = _Brackets(f0, S0)
+        peak = _scan(surrogate, h, sur, everyone)
+        found = np.flatnonzero(np.isfinite(sur.b))
+        _refine(surrogate, sur, found, _CHECK / 4, size)
+        p = 0.5 * (sur.a[found] + sur.b[found])
+        width = _CHECK * size(found, p)
+        lo, up = np.maximum(p - width, 0.0), np.minimum(p + width, h[found])
+        br.put(found, lo, spectra(found, lo))
+        br.put(found, up, spectra(found, up))
+        held = found[(br.a[found] == lo) & (br.b[found] == up)]
+        _refine(spectra, br, held, xtol, size)
+        none = np.setdiff1d(np.flatnonzero(f0 < 0.0), found)
+        again = np.setdiff1d(np.flatnonzero(f0 < 0.0),
+                             np.concatenate([held, none[peak[none] < -_SURROGATE_ERROR]]))
+        if again.size:  # the surrogate's answer not confirmed: the real loop alone
+            br.a[again], br.fa[again], br.sa[again] = 0.0, f0[again], S0[again]
+            br.b[again], br.side[again], br.wa[again], br.wb[again] = np.inf, 0, 1.0, 1.0
+            br.b2[again] = np.inf
+            _scan(spectra, h, br, again)
+            _refine(spectra, br, again[np.isfinite(br.b[again])], xtol, size)
+    out = np.where(np.isfinite(br.b), 0.5 * (br.a + br.b), np.inf)
+    out[f0 >= 0.0] = np.nan
+    return out.reshape(nb, J)
