@@ -23,7 +23,7 @@ from ..schedule.nominal import circle_offsets, nominal_from_path
 from ..schedule.path import AzimuthPath
 from ..schedule.trim import TrimError
 from ._estimator import _Estimator
-from ._plant import _Plant
+from ._plant import DelayedCommands, _Plant
 from ._result import SimResult, _Record
 from ._scenario import Scenario, profile_path
 from ._schedulers import Scheduler
@@ -43,7 +43,7 @@ _LOOKUP_BLOCK = 1000
 
 
 def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None = None,
-             progress=None, controller: str = "path") -> SimResult:
+             progress=None, controller: str = "path", command_delay: float = 0.0) -> SimResult:
     """Fly a scenario in closed loop: the scheduled LQR on the nonlinear tethered vehicle.
 
     The control law of paper Sec. IV, ``u = u_d - K(xi_d, xi_d', alpha) (x - x_d)``, at the
@@ -86,6 +86,9 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         capture the delayed noisy poses, the gyro and the accelerometer (the plant's
         specific force), its pose delay set to the latency unless
         ``sensing.latency_compensation`` is false.
+    command_delay : float, default 0
+        Extra delay from a command to the motors, s (>= 0): the plant applies ``(1 - f)
+        u_{k-d} + f u_{k-d-1}``, ``command_delay / dt = d + f`` (docs/margins.md).
 
     Returns
     -------
@@ -99,16 +102,9 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
         No usable gains where the flight starts or no nominal along it (no trim), or
         ``controller="firmware"`` on a C runtime without closed-form constants.
     ValueError
-        ``controller`` is neither ``"path"`` nor ``"firmware"``, or ``"firmware"`` with a
-        scheduler that is no :class:`Scheduler` (a plain callable).
-
-    Notes
-    -----
-    Sensing (``scenario.sensing``): the true state, or motion-capture poses (noise,
-    latency) fused with a design-model prediction between updates, and gyro body rates
-    (paper Sec. V.A). The rigid-link plant runs on the compiled kernel when a C compiler
-    is available (the numpy model's results to rounding, tests/sim/test_fastplant.py);
-    ``GAINSCHED_NATIVE=0`` forces the numpy model (about 0.3x real time instead of 80x).
+        ``controller`` is neither ``"path"`` nor ``"firmware"``, ``"firmware"`` with a
+        scheduler that is no :class:`Scheduler` (a plain callable), or a negative
+        ``command_delay``.
 
     Examples
     --------
@@ -133,8 +129,12 @@ def simulate(design: Config, scheduler, scenario: Scenario, plant: Config | None
     '37 mm'
     """
     plant = design if plant is None else plant
+    if not (np.isfinite(command_delay) and command_delay >= 0):
+        raise ValueError(f"command_delay must be >= 0 s, got {command_delay!r}")
     P, dmodel = _Plant(plant, scenario.gamma), Model(design)
     dt = design.control.dt
+    if command_delay > 0:
+        P = DelayedCommands(P, command_delay / dt)
     t = np.arange(int(round(scenario.duration / dt)) + 1) * dt
     path = profile_path(scenario, dmodel.r, t)
     if controller == "path":

@@ -156,3 +156,30 @@ def _rk4(f, x, u, alpha, dt):
     k3, _ = f(x + 0.5 * dt * k2, u, alpha)
     k4, _ = f(x + dt * k3, u, alpha)
     return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), ten
+
+
+class DelayedCommands:
+    """A plant whose thrusts act ``steps`` control steps after they are commanded: the
+    extra loop delay of the delay margin (docs/margins.md), flown.
+
+    Each step applies ``(1 - f) u_{k-d} + f u_{k-d-1}`` (``steps = d + f``), held over the
+    step, the commands before the first one being the first one: the discrete delay the
+    margins are computed for. Everything else is the wrapped plant's.
+    """
+
+    def __init__(self, plant, steps: float):
+        self.plant = plant
+        self.d = int(np.floor(steps))
+        self.f = float(steps) - self.d
+        self.past = None  # u_k, u_{k-1}, .., u_{k-d-1}
+
+    def __getattr__(self, name):
+        return getattr(self.plant, name)
+
+    def step(self, x, u, alpha, dt):
+        u = np.array(u, dtype=float)
+        if self.past is None:
+            self.past = [u] * (self.d + 2)
+        self.past = [u, *self.past[:-1]]
+        applied = (1.0 - self.f) * self.past[self.d] + self.f * self.past[self.d + 1]
+        return self.plant.step(x, applied, alpha, dt)
