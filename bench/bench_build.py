@@ -405,6 +405,13 @@ def bench_build(cfg):
           f"{np.nanmax(g.mode_tau):.1f} s)")
     out.update(bounded_s=t_b, bounded_ratio=t_b / t1)
 
+    # the stability margins of every circle (issue 56: within 1.5x of the build without)
+    bare = cfg.with_values({"control.margins": False})
+    t_bare, _ = best_of(lambda: build_grid(bare, n_jobs=2), 2)
+    print(f"  build without margins ([control] margins = false): {t_bare:.2f} s on 2 jobs "
+          f"(warm); with them x{t2 / t_bare:.2f} (goal 1.5x)")
+    out.update(no_margins_2_warm_s=t_bare, margins_ratio=t2 / t_bare)
+
     # growth in grid points, two ways. Speeds refined: one job per speed, each with the
     # same cost profile, so this is the growth of the work per grid point. Tilts
     # refined at fixed speeds: the tilts of a speed are solved as batches, which

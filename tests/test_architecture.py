@@ -216,8 +216,9 @@ def _studies_called(fn: ast.FunctionDef) -> list[str]:
 
 
 #: the studies a command calls in a mode of its own, besides its one study: ``convert
-#: --list`` lists the topics (studies.topics) instead of converting
-MODES = {"convert": ("topics",)}
+#: --list`` lists the topics (studies.topics) instead of converting, ``check
+#: --uncertain`` closes the loops over a diagnosis's box (studies.check_uncertain)
+MODES = {"convert": ("topics",), "check": ("check_uncertain",)}
 
 
 def test_every_command_is_a_call_of_one_study():

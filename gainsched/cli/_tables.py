@@ -130,14 +130,32 @@ def export_c(table, out_dir, no_code_size, fmt, motor_order, command, thr_mdl_fa
     default=None, help="Check the table's compact form (Fourier series in the azimuth, "
     "docs/runtime.md) made with this error bound at the azimuth samples, percent "
     "(1: the default form). Default: the format of the table's config.")
+@click.option(
+    "--uncertain", "report", type=click.Path(path_type=Path), default=None,
+    help="Instead: close the table's gains on plants drawn over the 95 % box of this "
+    "diagnose report's fit (diagnose.json or its folder; corners, estimate, samples) and "
+    "report the worst multiplier, where, at which parameter values, and the margins "
+    "(docs/margins.md).")
+@click.option(
+    "--samples", type=click.IntRange(0), default=None,
+    help="With --uncertain: random plants inside the box besides its corners "
+    "[default: 8].")
 @user_errors
-def check(table, speed_stride, max_error, azimuth_error):
+def check(table, speed_stride, max_error, azimuth_error, report, samples):
     """Interpolation accuracy of TABLE: solve the periodic LQR directly at cell midpoints
     (speed x tilt x azimuth) and compare with the interpolated gains (max and median
     relative Frobenius error), then close the loop along each midpoint circle with the
     interpolated gains (monodromy spectral radius). Exit code 1 if the max error is above
     --max-error or a midpoint closed loop is not stable. With --compact, the same for
-    the table's compact form."""
+    the table's compact form. With --uncertain REPORT, the table's loops on the plants of
+    a diagnosis's 95 % box instead: exit code 1 if one is unstable, naming the parameter."""
+    if report is not None:
+        from ..studies import check_uncertain
+
+        done = check_uncertain(table, report, samples=samples, reporter=TERMINAL)
+        if not done.ok:
+            sys.exit(1)
+        return
     from ..studies import check as run
 
     done = run(table, speed_stride=speed_stride, max_error=max_error,

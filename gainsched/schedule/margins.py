@@ -40,9 +40,9 @@ from ..constants import MARGIN_DELAY_MAX_S, MARGIN_GAIN_MAX
 from ..errors import GainschedError
 from .crossings import first_crossings
 
-__all__ = ["monodromy_with", "spectral_radius", "gain_margins", "delay_margin", "loop_margins",
-           "LoopMargins", "worst_margins", "G_MAX", "TAU_MAX_S", "XTOL", "MARGIN_XTOL",
-           "MARGIN_DELAY_XTOL",
+__all__ = ["loop_log_rho", "monodromy_with", "spectral_radius", "gain_margins", "delay_margin",
+           "loop_margins", "LoopMargins", "worst_margins", "worst_text", "worst_lines",
+           "G_MAX", "TAU_MAX_S", "XTOL", "MARGIN_XTOL", "MARGIN_DELAY_XTOL",
            "SURROGATE_BLOCK"]
 
 #: the largest gain factor searched (+20 dB); no crossing below it: margin reported inf
@@ -180,6 +180,24 @@ def _gain_spectra(Ad, Bd, K, circle, G, block=1):
                          pa, sa, pb, sb, pk, sk, pg, pm, pe) != 0:
         raise GainschedError(f"loop kernel: size n={n}, m={m} beyond its limits")
     return _log_spectrum(M, e)
+
+
+def loop_log_rho(Ad, Bd, K):
+    """``log rho`` of periodic closed loops ``prod_k (A_k - B_k K_k)``, overflow-safe (the
+    compiled kernel; numpy without it).
+
+    Parameters
+    ----------
+    Ad, Bd, K : ndarray
+        Shapes (b, N, n, n), (b, N, n, m), (b, N, m, n).
+
+    Returns
+    -------
+    ndarray, shape (b,)
+        The log of each loop's largest multiplier (< 0: stable).
+    """
+    b, m = Ad.shape[0], Bd.shape[-1]
+    return _gain_loops(Ad, Bd, K, np.arange(b), np.ones((b, m)))
 
 
 def _delayed_monodromy(Ad, Bd, K, tau_steps):
@@ -577,3 +595,44 @@ def worst_margins(lm: LoopMargins, speeds, tilts) -> dict:
             entry["input"] = int(idx[2])
         out[key] = entry
     return out
+
+
+def worst_text(entry: dict, what: str, none: str, unit: str = "dB") -> str:
+    """One worst margin of :func:`~gainsched.schedule.margins.worst_margins` as text."""
+    if not entry:
+        return f"{what} -"
+    if entry["value"] is None:
+        return f"{what} {none}"
+    where = [f"x{entry['value']:.3g}"] if unit == "dB" else []
+    if "input" in entry:
+        where.append(f"T{entry['input'] + 1}")
+    where.append(f"{entry['speed_mps']:g} m/s, tilt {entry['tilt_deg']:g} deg")
+    value = f"{entry['db']:+.1f} dB" if unit == "dB" else f"{1e3 * entry['value']:.2f} ms"
+    return f"{what} {value} ({'; '.join(where)})"
+
+
+def worst_lines(w: dict, title: str) -> list[str]:
+    """The worst margins of :func:`~gainsched.schedule.margins.worst_margins` as text: a
+    title line, then all motors, one motor alone and the delay.
+
+    Parameters
+    ----------
+    w : dict
+        ``worst_margins(...)``.
+    title : str
+        What they are the margins of.
+
+    Returns
+    -------
+    list of str
+    """
+    up = f"beyond +{20 * np.log10(G_MAX):.0f} dB"
+    return [f"{title}, worst over the {w['circles']} circles (docs/margins.md):",
+            "  all motors: " + worst_text(w["gain_down"], "down", "none (stable with the "
+                                           "feedback off)") + "; "
+            + worst_text(w["gain_up"], "up", up),
+            "  one motor alone: " + worst_text(w["input_down"], "down", "none (stable with "
+                                                "its feedback off)") + "; "
+            + worst_text(w["input_up"], "up", up),
+            "  " + worst_text(w["delay"], "extra delay", f"beyond {1e3 * TAU_MAX_S:g} ms",
+                               unit="ms")]

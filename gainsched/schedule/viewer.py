@@ -35,7 +35,7 @@ from collections import Counter
 import numpy as np
 
 from .envelope import envelope_from_table, envelope_png
-from .margins import G_MAX, TAU_MAX_S, worst_margins
+from .margins import G_MAX, TAU_MAX_S, worst_lines, worst_margins, worst_text
 from .modes import dominant_states
 
 __all__ = ["schedule_figures", "schedule_plots", "table_summary", "slowest_mode",
@@ -330,7 +330,7 @@ def _margin_makers(plt, table) -> dict:
     if lm is None:
         return {}
     w = worst_margins(lm, table.speed, table.tilt)
-    down, delay = (_worst_text(w[k], "worst", "none", unit=u).removeprefix("worst ")
+    down, delay = (worst_text(w[k], "worst", "none", unit=u).removeprefix("worst ")
                    for k, u in (("gain_down", "dB"), ("delay", "ms")))
     return {
         "gain_margin.png": functools.partial(
@@ -438,20 +438,6 @@ def _text_map(table, values, title: str) -> list[str]:
     return out
 
 
-def _worst_text(entry: dict, what: str, none: str, unit: str = "dB") -> str:
-    """One worst margin of :func:`~gainsched.schedule.margins.worst_margins` as text."""
-    if not entry:
-        return f"{what} -"
-    if entry["value"] is None:
-        return f"{what} {none}"
-    where = [f"x{entry['value']:.3g}"] if unit == "dB" else []
-    if "input" in entry:
-        where.append(f"T{entry['input'] + 1}")
-    where.append(f"{entry['speed_mps']:g} m/s, tilt {entry['tilt_deg']:g} deg")
-    value = f"{entry['db']:+.1f} dB" if unit == "dB" else f"{1e3 * entry['value']:.2f} ms"
-    return f"{what} {value} ({'; '.join(where)})"
-
-
 def margin_lines(table, maps: bool = True) -> list[str]:
     """The table's stability margins as text (docs/margins.md): the worst of each and
     where, and (``maps``) the all-motor down margin (dB) and the delay margin (ms) per
@@ -475,17 +461,7 @@ def margin_lines(table, maps: bool = True) -> list[str]:
     w = worst_margins(lm, table.speed, table.tilt)
     if not w["circles"]:
         return []
-    up = f"up beyond +{20 * np.log10(G_MAX):.0f} dB"
-    out = [f"stability margins at the thrust commands, worst over the {w['circles']} "
-           "circles (docs/margins.md):",
-           "  all motors: " + _worst_text(w["gain_down"], "down", "none (stable with the "
-                                          "feedback off)") + "; "
-           + _worst_text(w["gain_up"], "up", up[3:]),
-           "  one motor alone: " + _worst_text(w["input_down"], "down", "none (stable with "
-                                               "its feedback off)") + "; "
-           + _worst_text(w["input_up"], "up", up[3:]),
-           "  " + _worst_text(w["delay"], "extra delay", f"beyond {1e3 * TAU_MAX_S:g} ms",
-                              unit="ms")]
+    out = worst_lines(w, "stability margins at the thrust commands")
     if maps:
         out += _text_map(table, lm.db(lm.gain_down), "gain margin down, all motors, dB")
         out += _text_map(table, 1e3 * lm.delay, "delay margin, ms")

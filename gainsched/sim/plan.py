@@ -41,7 +41,7 @@ from ..errors import InputError
 from .campaign import default_flights
 from .loop import Maneuver, Scenario, Sine, log_from_result, profile_path, simulate
 
-__all__ = ["TONES_HZ", "PlannedFlight", "Plan", "truth_config", "menu", "named",
+__all__ = ["TONES_HZ", "PlannedFlight", "Plan", "report_focus", "truth_config", "menu", "named",
            "plan_flights"]
 
 #: the multisine's tones, Hz: within the closed loop's bandwidth, apart from the circle's
@@ -172,14 +172,14 @@ class Plan:
                 "not_planned": [{"name": n, "reason": w} for n, w in self.skipped]}
 
 
-def _focus(report: dict, source) -> tuple[str, dict, tuple]:
+def report_focus(report: dict, source) -> tuple[str, dict, tuple]:
     """The candidate to plan for, its parameters ``{name: (estimate, ci95, unit)}`` and
     its look-alikes, from a diagnose report's JSON."""
     cands = report.get("candidates")
     if not isinstance(cands, dict) or not cands:
-        raise InputError(source, "candidates", "no fitted candidate in the report: a plan "
-                         "needs a diagnosis with at least one fit (gainsched diagnose "
-                         "--report DIR writes diagnose.json)")
+        raise InputError(source, "candidates", "no fitted candidate in the report: give a "
+                         "diagnosis with at least one fit (gainsched diagnose --report DIR "
+                         "writes diagnose.json)")
     focus = report.get("accepted") or next(iter(report.get("ranking") or cands))
     if focus not in cands:
         raise InputError(source, "accepted", f"{focus!r} is not among the report's candidates")
@@ -314,7 +314,7 @@ def plan_flights(config, report: dict, table, *, duration: float = 10.0, source=
     from ..model.reduced import Model
     from .loop import table_scheduler
 
-    focus, params, alike = _focus(report, source)
+    focus, params, alike = report_focus(report, source)
     truth = truth_config(config, focus, [v for v, _, _ in params.values()])
     model = Model(truth)  # its nominals: one model for the whole menu
     sched = table_scheduler(table)

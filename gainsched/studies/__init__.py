@@ -29,6 +29,8 @@ study and prints (gainsched/cli), so a script gets the same results and files.
 - :func:`inspect`: a table's summary and its flight envelope (``gainsched inspect``);
 - :func:`check`: a table's interpolation checked at the cell midpoints (``gainsched
   check``);
+- :func:`check_uncertain`: a table's loops on the plants of a diagnosis's 95 % box
+  (``gainsched check --uncertain``);
 - :func:`table_for`: the table a config flies when none is given.
 
 The names are imported on first use (PEP 562, as the package root does): a command
@@ -54,6 +56,7 @@ _MODULE_OF = {
     "validate": "_circles", "Validation": "_circles", "nominal": "_circles",
     "NominalCircle": "_circles",
     "inspect": "_inspect", "Inspection": "_inspect", "check": "_inspect", "Check": "_inspect",
+    "check_uncertain": "_uncertain", "UncertainCheck": "_uncertain",
 }
 
 __all__ = list(_MODULE_OF)

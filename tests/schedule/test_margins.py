@@ -330,3 +330,57 @@ def test_a_gain_bound_names_the_margin_nearest_to_0_db_and_which_way_to_go(paper
         check_margin_bounds(cfg, grid)
     gain[0, 1, 1] = 2.0  # +6.02 dB: met
     check_margin_bounds(cfg, grid)
+
+
+@pytest.fixture(scope="module")
+def small_table(tmp_path_factory):
+    """A small paper table (9, 15 m/s; 0, 40 deg; 8 azimuths) on disk."""
+    from gainsched.firmware.outputs import write_outputs
+
+    cfg = small_config(**{"grid.speeds": [9, 15], "grid.tilts_deg": [0, 40]})
+    out = tmp_path_factory.mktemp("small")
+    return write_outputs(out, cfg, build_grid(cfg))[0]
+
+
+def _lag_report(ci):
+    """A diagnose report whose fit is a motor lag of 30 ms +- ``ci`` s."""
+    return {"accepted": "motor_lag", "ranking": ["motor_lag"], "candidates": {
+        "motor_lag": {"params": {"tau": {"estimate": 0.03, "ci95": ci, "unit": "s"}},
+                      "heldout_rms_reduction": 0.8}}}
+
+
+def test_check_uncertain_flies_the_tables_gains_over_the_fits_box(small_table, tmp_path):
+    """``gainsched check TABLE --uncertain REPORT``: a 30 +- 5 ms motor lag the table was
+    not built for keeps every loop stable (exit 0), with the worst multiplier, the plant
+    and its margins printed; the delay margin falls from the table's by about the lag's
+    phase. A wide interval (30 +- 100 ms) crosses 1 and the command says so: exit 1, the
+    last line naming the parameter and the value; the box's corner below 0 is no model
+    and is listed as skipped."""
+    import json
+
+    from click.testing import CliRunner
+
+    from gainsched.cli import cli
+    from gainsched.schedule.tables import load_table
+
+    narrow, wide = tmp_path / "narrow.json", tmp_path / "wide.json"
+    narrow.write_text(json.dumps(_lag_report(0.005)))
+    wide.write_text(json.dumps(_lag_report(0.1)))
+    r = CliRunner().invoke(cli, ["check", str(small_table), "--uncertain", str(narrow),
+                                 "--samples", "2"])
+    assert r.exit_code == 0, r.output
+    lines = r.output.strip().splitlines()
+    assert "5 plants of the diagnosis's 95 % box (motor_lag: tau 0.03 +- 0.005 s" in lines[0]
+    assert lines[1].startswith("  worst multiplier 0.9") and "with tau = " in lines[1]
+    assert lines[-1] == "  PASS: every loop stable over the box"
+    delay = [x for x in lines if "extra delay" in x][0]
+    ms = float(delay.split("extra delay ")[1].split(" ms")[0])
+    table_ms = 1e3 * np.nanmin(load_table(small_table).margins().delay)
+    assert 0.2 * table_ms < ms < 0.8 * table_ms  # a 25-35 ms lag eats most of it
+    r = CliRunner().invoke(cli, ["check", str(small_table), "--uncertain", str(wide),
+                                 "--samples", "1"])
+    assert r.exit_code == 1, r.output
+    last = r.output.strip().splitlines()[-1]
+    assert last.startswith("  FAIL: motor_lag.tau at 0.13 makes the loop unstable "
+                           "(multiplier "), last
+    assert "skipped: corner -0.07: must be in" in r.output

@@ -1,0 +1,282 @@
+"""A table's closed loops under the model's own uncertainty: ``gainsched check TABLE
+--uncertain REPORT`` (issue 56, docs/margins.md).
+
+A diagnosis fits the missing effect's parameters with 95 % intervals
+(:mod:`gainsched.analysis.diagnose`). The table's gains were built for one model; the
+vehicle is any model in that box. Each plant drawn over the box (its corners, the
+estimate and random samples, seeded) is linearised along every circle of the table's
+grid (its own nominal) and closed with the table's gains, interpolated in the azimuth
+at every control step as the firmware does (effect states the gains do not know get no
+feedback); its multipliers are those of the period's product (the margins' kernel,
+:mod:`gainsched.schedule.margins`). The worst plant's loops then get their margins.
+
+Where a loop is unstable, the parameter named is the one whose end of its interval,
+the others at their estimates, gives the largest multiplier.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..model.reduced import Model
+from ..schedule.discrete import discrete_system
+from ..schedule.margins import (
+    MARGIN_DELAY_XTOL,
+    MARGIN_XTOL,
+    SURROGATE_BLOCK,
+    LoopMargins,
+    loop_log_rho,
+    loop_margins,
+    worst_margins,
+)
+from ..schedule.trim import TrimError
+from .plan import report_focus, truth_config
+
+__all__ = ["Uncertainty", "uncertain_loops"]
+
+#: random plants drawn inside the box besides its corners and the estimate
+SAMPLES = 8
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """The table's loops on the plants of a diagnosis's 95 % box (:func:`uncertain_loops`).
+
+    Attributes
+    ----------
+    focus : str
+        The diagnosed effect (the report's accepted candidate).
+    params : dict
+        ``{name: (estimate, ci95 half-width, unit)}`` of its parameters.
+    plants : ndarray, shape (P, p)
+        The parameter values flown (the estimate, the corners, the samples).
+    kinds : tuple of str
+        ``"estimate"``, ``"corner"`` or ``"sample"`` per plant.
+    rho : ndarray, shape (P, n_a, n_v)
+        The largest multiplier of each plant's loop per circle (NaN: no gains there, or
+        the plant has no nominal on that circle).
+    speeds, tilts : ndarray
+        The table's axes, m/s and rad.
+    margins : LoopMargins or None
+        The worst plant's margins per circle (None when it is unstable somewhere).
+    culprit : tuple or None
+        Where a loop is unstable: ``(parameter, value, multiplier)`` of the parameter whose
+        interval's end, the others at their estimates, gives the largest multiplier.
+    skipped : tuple of str
+        Plants of the box that are no valid model (a parameter beyond its own limits).
+    """
+
+    focus: str
+    params: dict
+    plants: np.ndarray
+    kinds: tuple
+    rho: np.ndarray
+    speeds: np.ndarray
+    tilts: np.ndarray
+    margins: LoopMargins | None
+    culprit: tuple | None
+    skipped: tuple = ()
+
+    @property
+    def worst(self) -> tuple[int, int, int]:
+        """``(plant, tilt index, speed index)`` of the largest multiplier."""
+        return tuple(int(i) for i in np.unravel_index(np.nanargmax(self.rho), self.rho.shape))
+
+    @property
+    def stable(self) -> bool:
+        """Every plant's loop stable on every circle with gains."""
+        return bool(np.nanmax(self.rho) < 1.0)
+
+    def _values(self, k: int) -> str:
+        return ", ".join(f"{p} = {v:.4g}{' ' + u if u else ''}" for (p, (_, _, u)), v
+                         in zip(self.params.items(), self.plants[k], strict=True))
+
+    def lines(self, source: str = "") -> list[str]:
+        """What ``gainsched check TABLE --uncertain REPORT`` prints; the last line is PASS
+        or FAIL, FAIL naming the parameter."""
+        box = "; ".join(f"{p} {v:.4g} +- {c:.2g}{' ' + u if u else ''}"
+                        for p, (v, c, u) in self.params.items())
+        n = self.rho.shape[0]
+        k, i, j = self.worst
+        where = f"{self.speeds[j]:g} m/s, tilt {math.degrees(self.tilts[i]):g} deg"
+        out = [f"{source}: the table's loops on {n} plants of the diagnosis's 95 % box "
+               f"({self.focus}: {box}; the estimate, {self.kinds.count('corner')} corners, "
+               f"{self.kinds.count('sample')} samples)",
+               f"  worst multiplier {self.rho[k, i, j]:.5f} (1 is unstable) at {where}, "
+               f"with {self._values(k)}"]
+        out += [f"  skipped: {s}" for s in self.skipped]
+        if self.margins is not None:
+            from ..schedule.viewer import worst_lines
+
+            out += [f"  {line}" for line in worst_lines(
+                worst_margins(self.margins, self.speeds, self.tilts),
+                "the stability margins of that plant's loops")]
+        if self.stable:
+            out.append("  PASS: every loop stable over the box")
+        else:
+            p, v, r = self.culprit
+            out.append(f"  FAIL: {p} at {v:.4g} makes the loop unstable (multiplier {r:.4f} "
+                       f"at its worst circle); the box's worst: {self.rho[k, i, j]:.4f}")
+        return out
+
+    def to_json(self) -> dict:
+        """Every number as plain JSON data."""
+        k, i, j = self.worst
+        return {"focus": self.focus,
+                "params": {p: {"estimate": v, "ci95": c, "unit": u}
+                           for p, (v, c, u) in self.params.items()},
+                "plants": self.plants.tolist(), "kinds": list(self.kinds),
+                "worst": {"multiplier": float(self.rho[k, i, j]), "plant": k,
+                          "speed_mps": float(self.speeds[j]),
+                          "tilt_deg": math.degrees(self.tilts[i])},
+                "stable": self.stable,
+                "culprit": None if self.culprit is None else dict(zip(
+                    ("parameter", "value", "multiplier"), self.culprit, strict=True)),
+                "margins": None if self.margins is None else worst_margins(
+                    self.margins, self.speeds, self.tilts)}
+
+
+def _box(params, samples: int, seed: int):
+    """The plants' parameter values (P, p) and their kinds: the estimate, the corners,
+    the random samples."""
+    est = np.array([v for v, _, _ in params.values()])
+    half = np.array([c for _, c, _ in params.values()])
+    corners = [est + half * np.array(s) for s in itertools.product((-1, 1), repeat=est.size)]
+    rng = np.random.default_rng(seed)
+    draws = est + half * rng.uniform(-1, 1, (samples, est.size))
+    plants = np.vstack([est[None], *corners, draws]) if samples else np.vstack([est, *corners])
+    return plants, ("estimate",) + ("corner",) * len(corners) + ("sample",) * samples
+
+
+def _gains_at_steps(K, N):
+    """Gains (n_xi, 4, n) at the N steps of a period, linear in the azimuth (the
+    firmware's interpolation)."""
+    n_xi = K.shape[0]
+    pos = np.arange(N) * n_xi / N
+    j = np.floor(pos).astype(int)
+    w = (pos - j)[:, None, None]
+    return (1 - w) * K[j % n_xi] + w * K[(j + 1) % n_xi]
+
+
+def _plant_loops(table, model, *, with_margins=False):
+    """The largest multiplier per circle (n_a, n_v) of the table's gains on ``model``,
+    and, ``with_margins``, the loops' margins (else None); each speed's tilts at once."""
+    K_all = table.K_full()
+    n_a, n_v = table.spectral_radius.shape
+    rho = np.full((n_a, n_v), np.nan)
+    gd, gu, dl = (np.full((n_a, n_v), np.nan) for _ in range(3))
+    per_input = np.full((2, n_a, n_v, 4), np.nan)
+    for j, v in enumerate(table.speed):
+        dt = float(table.dt[j])
+        N = int(round(2 * math.pi * model.r / v / dt))
+        ok = np.flatnonzero(np.isfinite(table.spectral_radius[:, j]))
+        try:
+            Ad, Bd, _, _ = discrete_system(model, float(v), table.tilt[ok], N, dt)
+        except TrimError:  # the plant has no nominal on one of them: each alone
+            parts = [_one_circle(model, float(v), table.tilt[i], N, dt) for i in ok]
+            ok = np.array([i for i, p in zip(ok, parts, strict=True) if p is not None], int)
+            if not ok.size:
+                continue
+            Ad, Bd = (np.concatenate([p[k] for p in parts if p is not None]) for k in (0, 1))
+        K = np.stack([_gains_at_steps(K_all[i, j], N) for i in ok])
+        K = np.pad(K, [(0, 0)] * 3 + [(0, Ad.shape[-1] - K.shape[-1])])  # unknown states
+        rho[ok, j] = np.exp(loop_log_rho(Ad, Bd, K))
+        if with_margins:
+            lm = loop_margins(Ad, Bd, K, dt, xtol=MARGIN_XTOL, delay_xtol=MARGIN_DELAY_XTOL,
+                              block=SURROGATE_BLOCK)
+            gd[ok, j], gu[ok, j], dl[ok, j] = lm.gain_down, lm.gain_up, lm.delay
+            per_input[0, ok, j], per_input[1, ok, j] = lm.input_down, lm.input_up
+    margins = LoopMargins(gd, gu, *per_input, dl) if with_margins else None
+    return rho, margins
+
+
+def _one_circle(model, speed, tilt, N, dt):
+    """``(A_d, B_d)`` of one circle, or None where the plant has no nominal."""
+    try:
+        return discrete_system(model, speed, [tilt], N, dt)[:2]
+    except TrimError:
+        return None
+
+
+def uncertain_loops(table, report: dict, *, samples: int = SAMPLES, seed: int = 0,
+                    source: str = "report", progress=None) -> Uncertainty:
+    """The table's closed loops on plants drawn over a diagnosis's 95 % box (module
+    docstring).
+
+    Parameters
+    ----------
+    table : Table
+        The gain table.
+    report : dict
+        A diagnose report's JSON (``diagnose.json``): its accepted candidate's
+        parameters, estimates and 95 % half-widths.
+    samples : int
+        Random plants inside the box besides its corners and the estimate.
+    seed : int
+        Seed of the samples.
+    source : str
+        The report's file, for errors.
+    progress : callable, optional
+        ``progress(1)`` per plant done.
+
+    Returns
+    -------
+    Uncertainty
+
+    Raises
+    ------
+    InputError
+        The report holds no fit, or its focus is no library candidate.
+    """
+    from ..schedule.tables import config_from_table
+
+    cfg = config_from_table(table)
+    focus, params, _ = report_focus(report, source)
+    plants, kinds = _box(params, samples, seed)
+    step = progress or (lambda n: None)
+    rho, kept, kept_kinds, skipped, models = [], [], [], [], []
+    for theta, kind in zip(plants, kinds, strict=True):
+        try:
+            model = Model(truth_config(cfg, focus, theta))
+        except InputError as exc:
+            skipped.append(f"{kind} {', '.join(f'{v:.4g}' for v in theta)}: {exc.message}")
+            step(1)
+            continue
+        rho.append(_plant_loops(table, model)[0])
+        kept.append(theta)
+        kept_kinds.append(kind)
+        models.append(model)
+        step(1)
+    rho = np.array(rho)
+    k = int(np.unravel_index(np.nanargmax(rho), rho.shape)[0])
+    margins = culprit = None
+    if np.nanmax(rho) < 1.0:
+        margins = _plant_loops(table, models[k], with_margins=True)[1]
+    else:
+        culprit = _culprit(table, cfg, focus, params)
+    return Uncertainty(focus, params, np.array(kept), tuple(kept_kinds), rho, table.speed,
+                       table.tilt, margins, culprit, tuple(skipped))
+
+
+def _culprit(table, cfg, focus, params) -> tuple:
+    """``(parameter, value, multiplier)``: the end of one parameter's interval, the others
+    at their estimates, with the largest multiplier."""
+    est = np.array([v for v, _, _ in params.values()])
+    best = None
+    for q, (name, (v, c, _)) in enumerate(params.items()):
+        for end in (v - c, v + c):
+            theta = est.copy()
+            theta[q] = end
+            try:
+                model = Model(truth_config(cfg, focus, theta))
+            except InputError:
+                continue
+            r = float(np.nanmax(_plant_loops(table, model)[0]))
+            if best is None or r > best[2]:
+                best = (f"{focus}.{name}", float(end), r)
+    return best
