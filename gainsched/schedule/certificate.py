@@ -22,7 +22,7 @@ from .lqr import monodromy, spectral_radius
 
 __all__ = ["ERROR_QUANTUM", "STABLE_RADIUS", "midpoint_errors",
            # the checks of cell centres the refinement runs (schedule/refine.py)
-           "Centre", "check_centres", "quanta"]
+           "Centre", "check_centres", "quanta", "xi_linear"]
 
 #: decisions compare errors rounded to this (a fraction: 0.01 %) with the bound less one
 #: quantum, so that last-bit differences never change the grid
@@ -87,7 +87,7 @@ class Centre:
         return max(self.gain, self.thrust, self.roll)
 
 
-def _xi_linear(X, xs):
+def xi_linear(X, xs):
     """Linear interpolation of samples ``X`` (n_xi, ...) at the uniform periodic azimuths
     onto the azimuths ``xs`` (rad), as the runtime interpolates along xi."""
     n_xi = X.shape[0]
@@ -132,7 +132,7 @@ def check_centres(config2, speed, tilts, corners, effects=(), dare_tilt0=True):
         Ad, Bd, _ = steps
         N = Ad.shape[-3]
         xs = 2 * np.pi * np.arange(N) / N
-        K_steps = np.stack([_xi_linear(np.moveaxis(corners[i][0], 0, 1), xs).mean(axis=1)
+        K_steps = np.stack([xi_linear(np.moveaxis(corners[i][0], 0, 1), xs).mean(axis=1)
                             for i in ok])
         rho = spectral_radius(monodromy(Ad, Bd, K_steps))
         for b, i in enumerate(ok):

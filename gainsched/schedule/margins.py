@@ -41,7 +41,7 @@ from ..errors import GainschedError
 from .crossings import first_crossings
 
 __all__ = ["loop_log_rho", "monodromy_with", "spectral_radius", "gain_margins", "delay_margin",
-           "loop_margins", "LoopMargins", "worst_margins", "worst_text", "worst_lines",
+           "loop_margins", "LoopMargins", "factor_db", "worst_margins", "worst_text", "worst_lines",
            "G_MAX", "TAU_MAX_S", "XTOL", "MARGIN_XTOL", "MARGIN_DELAY_XTOL",
            "SURROGATE_BLOCK"]
 
@@ -198,40 +198,6 @@ def loop_log_rho(Ad, Bd, K):
     """
     b, m = Ad.shape[0], Bd.shape[-1]
     return _gain_loops(Ad, Bd, K, np.arange(b), np.ones((b, m)))
-
-
-def _delayed_monodromy(Ad, Bd, K, tau_steps):
-    """The monodromy of the loop with the commands delayed by ``tau_steps`` samples
-    (array (*b, S)), on the state ``[x, u_{k-1}, .., u_{k-D}]`` (module docstring), as
-    ``(M, e)``: ``M 2^e``."""
-    n, m = Ad.shape[-1], Bd.shape[-1]
-    tau = np.asarray(tau_steps, float)
-    D = int(np.floor(np.max(tau))) + 1
-    d = np.floor(tau).astype(int)
-    f = tau - d
-    na = n + D * m
-    batch = np.broadcast_shapes(Ad.shape[:-3], tau.shape)
-    M = np.broadcast_to(np.eye(na), batch + (na, na)).copy()
-    e = np.zeros(batch)
-    # weights of the held commands u_{k-j}, j = 0..D, on the applied input
-    j = np.arange(D + 1)
-    w = (np.where(j == d[..., None], 1.0 - f[..., None], 0.0)
-         + np.where(j == d[..., None] + 1, f[..., None], 0.0))  # (*batch, D + 1)
-    for k in range(Ad.shape[-3]):
-        A, B, Kk = Ad[..., k, :, :], Bd[..., k, :, :], K[..., k, :, :]
-        T = np.zeros(batch + (na, na))
-        # applied = w0 u_k + sum_{j>=1} w_j u_{k-j}, u_k = -K x
-        T[..., :n, :n] = A - w[..., 0, None, None] * (B @ Kk)
-        for jj in range(1, D + 1):
-            cols = slice(n + (jj - 1) * m, n + jj * m)
-            T[..., :n, cols] = w[..., jj, None, None] * B
-        T[..., n:n + m, :n] = -Kk  # the register: u_k enters, the rest shift down
-        for jj in range(1, D):
-            T[..., n + jj * m:n + (jj + 1) * m, n + (jj - 1) * m:n + jj * m] = np.eye(m)
-        M = T @ M
-        if (k + 1) % _RENORM == 0:
-            M, e = _rescaled(M, e)
-    return M, e
 
 
 #: columns the delayed loop's monodromy is applied to (above its numerical rank over a
@@ -476,10 +442,6 @@ class LoopMargins:
         """The margins of one loop (or a slice): every array indexed by ``index``."""
         return LoopMargins(*(getattr(self, f.name)[index] for f in fields(self)))
 
-    def db(self, factor):
-        """A factor in dB, ``20 log10``; -inf for 0 (no lower margin), inf for inf."""
-        with np.errstate(divide="ignore"):
-            return 20.0 * np.log10(np.asarray(factor, float))
 
 
 def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX_S,
@@ -536,6 +498,22 @@ def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX
                        delay.reshape(shape))
 
 
+def factor_db(factor):
+    """A gain factor in dB, ``20 log10``; -inf for 0 (no lower margin), inf for inf.
+
+    Parameters
+    ----------
+    factor : array_like
+        Factors on the commands (``LoopMargins.gain_down``...).
+
+    Returns
+    -------
+    ndarray
+    """
+    with np.errstate(divide="ignore"):
+        return 20.0 * np.log10(np.asarray(factor, float))
+
+
 def worst_margins(lm: LoopMargins, speeds, tilts) -> dict:
     """The worst margins of a grid of loops and where they are, as JSON data.
 
@@ -590,7 +568,7 @@ def worst_margins(lm: LoopMargins, speeds, tilts) -> dict:
         entry = {"value": x, "speed_mps": float(speeds[idx[1]]),
                  "tilt_deg": float(np.rad2deg(tilts[idx[0]]))}
         if key != "delay":
-            entry["db"] = float(20 * np.log10(x))
+            entry["db"] = float(factor_db(x))
         if a.ndim == 3:
             entry["input"] = int(idx[2])
         out[key] = entry

@@ -35,7 +35,7 @@ from collections import Counter
 import numpy as np
 
 from .envelope import envelope_from_table, envelope_png
-from .margins import G_MAX, TAU_MAX_S, worst_lines, worst_margins, worst_text
+from .margins import G_MAX, TAU_MAX_S, factor_db, worst_lines, worst_margins, worst_text
 from .modes import dominant_states
 
 __all__ = ["schedule_figures", "schedule_plots", "table_summary", "slowest_mode",
@@ -334,7 +334,7 @@ def _margin_makers(plt, table) -> dict:
                    for k, u in (("gain_down", "dB"), ("delay", "ms")))
     return {
         "gain_margin.png": functools.partial(
-            _speed_tilt_figure, plt, table, lm.db(lm.gain_down),
+            _speed_tilt_figure, plt, table, factor_db(lm.gain_down),
             f"{table.name}: gain margin down per circle, all motors' commands (worst "
             f"{down}; blank: infeasible)", "20 log10 g_down (dB)", "gain_margin"),
         "delay_margin.png": functools.partial(
@@ -463,7 +463,7 @@ def margin_lines(table, maps: bool = True) -> list[str]:
         return []
     out = worst_lines(w, "stability margins at the thrust commands")
     if maps:
-        out += _text_map(table, lm.db(lm.gain_down), "gain margin down, all motors, dB")
+        out += _text_map(table, factor_db(lm.gain_down), "gain margin down, all motors, dB")
         out += _text_map(table, 1e3 * lm.delay, "delay margin, ms")
     return out
 

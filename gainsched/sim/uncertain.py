@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.reduced import Model
+from ..schedule.certificate import xi_linear
 from ..schedule.discrete import discrete_system
 from ..schedule.margins import (
     MARGIN_DELAY_XTOL,
@@ -153,16 +154,6 @@ def _box(params, samples: int, seed: int):
     return plants, ("estimate",) + ("corner",) * len(corners) + ("sample",) * samples
 
 
-def _gains_at_steps(K, N):
-    """Gains (n_xi, 4, n) at the N steps of a period, linear in the azimuth (the
-    firmware's interpolation)."""
-    n_xi = K.shape[0]
-    pos = np.arange(N) * n_xi / N
-    j = np.floor(pos).astype(int)
-    w = (pos - j)[:, None, None]
-    return (1 - w) * K[j % n_xi] + w * K[(j + 1) % n_xi]
-
-
 def _plant_loops(table, model, *, with_margins=False):
     """The largest multiplier per circle (n_a, n_v) of the table's gains on ``model``,
     and, ``with_margins``, the loops' margins (else None); each speed's tilts at once."""
@@ -183,7 +174,8 @@ def _plant_loops(table, model, *, with_margins=False):
             if not ok.size:
                 continue
             Ad, Bd = (np.concatenate([p[k] for p in parts if p is not None]) for k in (0, 1))
-        K = np.stack([_gains_at_steps(K_all[i, j], N) for i in ok])
+        xs = 2 * np.pi * np.arange(N) / N  # the steps' azimuths
+        K = np.stack([xi_linear(K_all[i, j], xs) for i in ok])
         K = np.pad(K, [(0, 0)] * 3 + [(0, Ad.shape[-1] - K.shape[-1])])  # unknown states
         rho[ok, j] = np.exp(loop_log_rho(Ad, Bd, K))
         if with_margins:

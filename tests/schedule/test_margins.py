@@ -199,6 +199,40 @@ def paper_circle(paper_config):
     return sol, steps
 
 
+def _whole_delayed_monodromy(Ad, Bd, K, tau_steps):
+    """The reference: the delayed loop's whole monodromy, the product of its one-step
+    matrices on the state ``[x, u_{k-1}, .., u_{k-D}]`` (shift register, interpolated
+    hold), as ``(M, e)``: ``M 2^e``; a formulation of its own, not the kernel's ring."""
+    n, m = Ad.shape[-1], Bd.shape[-1]
+    tau = np.asarray(tau_steps, float)
+    D = int(np.floor(np.max(tau))) + 1
+    d = np.floor(tau).astype(int)
+    f = tau - d
+    na = n + D * m
+    batch = np.broadcast_shapes(Ad.shape[:-3], tau.shape)
+    M = np.broadcast_to(np.eye(na), batch + (na, na)).copy()
+    e = np.zeros(batch)
+    # weights of the held commands u_{k-j}, j = 0..D, on the applied input
+    j = np.arange(D + 1)
+    w = (np.where(j == d[..., None], 1.0 - f[..., None], 0.0)
+         + np.where(j == d[..., None] + 1, f[..., None], 0.0))  # (*batch, D + 1)
+    for k in range(Ad.shape[-3]):
+        A, B, Kk = Ad[..., k, :, :], Bd[..., k, :, :], K[..., k, :, :]
+        T = np.zeros(batch + (na, na))
+        # applied = w0 u_k + sum_{j>=1} w_j u_{k-j}, u_k = -K x
+        T[..., :n, :n] = A - w[..., 0, None, None] * (B @ Kk)
+        for jj in range(1, D + 1):
+            cols = slice(n + (jj - 1) * m, n + jj * m)
+            T[..., :n, cols] = w[..., jj, None, None] * B
+        T[..., n:n + m, :n] = -Kk  # the register: u_k enters, the rest shift down
+        for jj in range(1, D):
+            T[..., n + jj * m:n + (jj + 1) * m, n + (jj - 1) * m:n + jj * m] = np.eye(m)
+        M = T @ M
+        if (k + 1) % mg._RENORM == 0:
+            M, e = mg._rescaled(M, e)
+    return M, e
+
+
 def test_the_delayed_loops_low_rank_image_has_the_whole_monodromys_multipliers(paper_circle):
     """The delayed loop's multipliers from its image on 14 columns (the build's) are those
     of the whole (n + D m)-square monodromy, to 1e-9, below, near and beyond the margin."""
@@ -206,7 +240,7 @@ def test_the_delayed_loops_low_rank_image_has_the_whole_monodromys_multipliers(p
     tau = np.array([4.0, 12.5, 13.0, 20.25])
     circle = np.zeros(tau.size, int)
     low = mg._delay_loops(Ad, Bd, K, circle, tau)
-    whole = [mg._log_rho(*mg._delayed_monodromy(Ad[0], Bd[0], K[0], np.array(t)))
+    whole = [mg._log_rho(*_whole_delayed_monodromy(Ad[0], Bd[0], K[0], np.array(t)))
              for t in tau]
     np.testing.assert_allclose(low, whole, atol=1e-9)
     assert low[0] < 0 < low[-1]  # a stable and an unstable delay
