@@ -22,6 +22,8 @@ _REFINE = 60
 #: the scan's points, as fractions of the search range, evaluated in rounds from the
 #: nominal outward (a margin whose crossing is bracketed stops scanning)
 _SCAN = np.array([1, 2, 4, 8]) / 8.0
+#: the scan around a guess of the crossing, as multiples of it (then the range's end)
+_AROUND = np.array([0.5, 0.9, 1.1, 1.6])
 #: the real loop checks a bracket of this relative width around the surrogate's crossing
 _CHECK = 1e-3
 #: "no crossing" on the surrogate stands where its log rho stayed below minus this
@@ -54,16 +56,19 @@ class _Brackets:
         return left
 
 
-def _scan(spectra, h, br, pairs):
+def _scan(spectra, h, br, pairs, points=None):
     """The scan of :func:`_first_crossings` over ``pairs`` (flat indices into ``br``, ranges
     ``h[pairs]``): each bracket's first crossing; returns the largest log rho met by each
     pair that found none."""
     peak = br.fa.copy()
     scan = pairs[br.fa[pairs] < 0.0]
-    for s in _SCAN:
+    if points is None:
+        points = _SCAN[None, :] * h[:, None]
+    for r in range(points.shape[1]):
+        scan = scan[np.isfinite(points[scan, r])] if r == points.shape[1] - 1 else scan
         if scan.size == 0:
             break
-        P = s * h[scan]
+        P = points[scan, r]
         left = br.put(scan, P, spectra(scan, P))
         peak[scan] = np.maximum(peak[scan], br.fa[scan])
         scan = scan[left]
@@ -78,7 +83,8 @@ def _refine(spectra, br, todo, xtol, size):
     alone, say the slow along-track one, is the largest there, so log rho is flat up to
     the crossing and false position would crawl), the secant through the two latest
     unstable ends (the crossing mode's), else bisection (also for a secant step within
-    5 % of either end)."""
+    5 % of the lower end: the secant from above lands near the root, which lies near the
+    upper end once it is close)."""
     for _ in range(_REFINE):
         todo = todo[(br.b[todo] - br.a[todo]) > xtol * size(todo, br.b[todo])]
         if todo.size == 0:
@@ -90,10 +96,10 @@ def _refine(spectra, br, todo, xtol, size):
             falsi = up - fup * (up - lo) / (fup - flo)
             b2, fb2 = br.b2[todo], br.fb2[todo]
             secant = up - br.fb[todo] * (b2 - up) / (fb2 - br.fb[todo])
-        guard = np.where(flat, 0.05 * w, 0.0)  # the secant: not within 5 % of an end
+        guard = np.where(flat, 0.05 * w, 0.0)  # the secant: not within 5 % of the lower end
         c = np.where(flat, np.where(np.isfinite(b2) & (fb2 > br.fb[todo]), secant, np.nan),
                      falsi)
-        c = np.where((c > lo + guard) & (c < up - guard), c, 0.5 * (lo + up))
+        c = np.where((c > lo + guard) & (c < up), c, 0.5 * (lo + up))
         left = br.put(todo, c, spectra(todo, c))  # left: c stable, the new a; b kept
         sd = br.side[todo]
         br.wb[todo] = np.where(left, np.where(sd == -1, 0.5, 1.0) * br.wb[todo], 1.0)
@@ -101,7 +107,7 @@ def _refine(spectra, br, todo, xtol, size):
         br.side[todo] = np.where(left, -1, 1)
 
 
-def first_crossings(spectra, hi, s0, xtol, size, surrogate=None):
+def first_crossings(spectra, hi, s0, xtol, size, surrogate=None, guess=None):
     """The first p in [0, hi] where the loop of ``spectra(pair, p)`` is unstable, searched
     from 0, for every (loop, margin) pair of ``hi`` (b, J) at once: inf where none, NaN
     where the loop is unstable at p = 0 (``s0`` (b, k), its log multipliers there).
@@ -116,14 +122,25 @@ def first_crossings(spectra, hi, s0, xtol, size, surrogate=None):
     of :data:`_CHECK` around each crossing found and refines it, and a margin the
     surrogate finds no crossing of stands if the surrogate's loop stayed
     :data:`_SURROGATE_ERROR` inside the unit circle at every scan point. Every other
-    pair is searched again on the real loop alone."""
+    pair is searched again on the real loop alone.
+
+    A ``guess`` (b, J) of each crossing (NaN: none) scans at :data:`_AROUND` times it
+    first, then at the range's end: the bracket starts tight around a good guess (the
+    level circle's delay margin for the tilted circles of its speed)."""
     hi = np.asarray(hi, float)
     nb, J = hi.shape
     h, S0 = hi.reshape(-1), np.repeat(s0, J, axis=0)
     f0, everyone = S0[:, 0].real, np.arange(h.size)
     br = _Brackets(f0, S0)
+    points = None
+    if guess is not None:
+        g = np.asarray(guess, float).reshape(-1)
+        points = np.where(np.isfinite(g)[:, None] & (g[:, None] > 0),
+                          np.minimum(np.append(_AROUND, np.inf)[None, :] * g[:, None],
+                                     h[:, None]),
+                          np.append(_SCAN, np.nan)[None, :] * h[:, None])
     if surrogate is None:
-        _scan(spectra, h, br, everyone)
+        _scan(spectra, h, br, everyone, points)
         _refine(spectra, br, np.flatnonzero(np.isfinite(br.b)), xtol, size)
     else:
         sur = _Brackets(f0, S0)

@@ -444,6 +444,10 @@ def _fill_periodic(out: CircleSolution, ok, model, config, speed, tilts, Qx, kee
     scale = stability_scale(dt, ctrl.max_time_constant_s)
     keep, lo, hi, w = _sample_steps(N, out.K.shape[1])
     kept = []
+    # the level circle's delay margin (solved first, by the DARE) starts the tilted
+    # circles' search: they lie within a few percent of it on the paper grid
+    level = np.flatnonzero((tilts == 0.0) & np.isfinite(out.delay_margin))
+    guess = float(out.delay_margin[level[0]]) if level.size else None
     for c in range(0, ok.size, TILT_BATCH):
         idx = ok[c : c + TILT_BATCH]
         Ad, Bd, M, err = discrete_system(model, speed, tilts[idx], N, dt)
@@ -462,7 +466,7 @@ def _fill_periodic(out: CircleSolution, ok, model, config, speed, tilts, Qx, kee
         if margins:  # the real loop's: the model's A_k, B_k (not the scaled ones)
             _put_margins(out, idx, loop_margins(Ad, Bd, sol.K, dt, xtol=MARGIN_XTOL,
                                                 delay_xtol=MARGIN_DELAY_XTOL,
-                                                block=SURROGATE_BLOCK))
+                                                block=SURROGATE_BLOCK, delay_guess=guess))
         out.K[idx] = _sample(Ks, lo, hi, w)
         out.S[idx] = _sample(Ss, lo, hi, w)
         out.spectral_radius[idx] = spectral_radius(Phi)

@@ -313,15 +313,17 @@ def _gain_crossings(Ad, Bd, K, masks, sign, g_max, s0, xtol, block):
     return first_crossings(loops(1), hi, s0, xtol, size, surrogate)
 
 
-def _delay_crossings(Ad, Bd, K, hi_steps, s0, xtol):
-    """The first crossing of the delay margin, samples: (b,)."""
+def _delay_crossings(Ad, Bd, K, hi_steps, s0, xtol, guess_steps=None):
+    """The first crossing of the delay margin, samples: (b,); ``guess_steps`` (b,) of it
+    (NaN: none) start the scan around it."""
     def spectra(pair, P):
         return _delay_spectra(Ad, Bd, K, pair, P)
 
     def size(pair, P):  # the delay, samples (at least one)
         return np.maximum(P, 1.0)
 
-    return first_crossings(spectra, hi_steps[:, None], s0, xtol, size)[:, 0]
+    guess = None if guess_steps is None else np.asarray(guess_steps, float)[:, None]
+    return first_crossings(spectra, hi_steps[:, None], s0, xtol, size, guess=guess)[:, 0]
 
 
 def _flat(Ad, Bd, K):
@@ -445,8 +447,8 @@ class LoopMargins:
 
 
 def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX_S,
-                 xtol: float = XTOL, delay_xtol: float | None = None,
-                 block: int = 1) -> LoopMargins:
+                 xtol: float = XTOL, delay_xtol: float | None = None, block: int = 1,
+                 delay_guess: float | None = None) -> LoopMargins:
     """Every margin of periodic closed loops at once: the gain margins of all inputs
     together and of each alone, and the delay margin (module docstring).
 
@@ -468,6 +470,10 @@ def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX
     block : int
         The gain margins' scan on the surrogate of blocks of that many steps first (1:
         none; :func:`gain_margins`).
+    delay_guess : float, optional
+        A guess of the delay margins, s (the level circle's for the tilted circles of
+        its speed): the scan starts around it; the first crossing is still searched
+        from 0.
 
     Returns
     -------
@@ -490,8 +496,9 @@ def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX
     p = _gain_crossings(Ad, Bd, K, masks, sign, g_max, s0, xtol, block)
     g = np.where(sign < 0, np.where(np.isinf(p), 0.0, 1.0 - p), 1.0 + p)
     h = np.broadcast_to(np.asarray(h, float), shape).reshape(-1)
+    guess = None if delay_guess is None else np.full(h.shape, delay_guess) / h
     delay = _delay_crossings(Ad, Bd, K, tau_max / h, s0,
-                             xtol if delay_xtol is None else delay_xtol) * h
+                             xtol if delay_xtol is None else delay_xtol, guess) * h
     per = g[:, 2:].reshape(-1, m, 2)
     return LoopMargins(g[:, 0].reshape(shape), g[:, 1].reshape(shape),
                        per[..., 0].reshape(shape + (m,)), per[..., 1].reshape(shape + (m,)),
