@@ -8,7 +8,10 @@ estimate and random samples, seeded) is linearised along every circle of the tab
 grid (its own nominal) and closed with the table's gains, interpolated in the azimuth
 at every control step as the firmware does (effect states the gains do not know get no
 feedback); its multipliers are those of the period's product (the margins' kernel,
-:mod:`gainsched.schedule.margins`). The worst plant's loops then get their margins.
+:mod:`gainsched.schedule.margins`). The margins are then the worst of those of the
+estimate, the corners and the plant with the worst multiplier, circle by circle (where
+a margin moves monotonically with the parameters, its extreme over the box is at a
+corner; the random samples are not searched for margins).
 
 Where a loop is unstable, the parameter named is the one whose end of its interval,
 the others at their estimates, gives the largest multiplier.
@@ -64,7 +67,8 @@ class Uncertainty:
     speeds, tilts : ndarray
         The table's axes, m/s and rad.
     margins : LoopMargins or None
-        The worst plant's margins per circle (None when it is unstable somewhere).
+        Per circle, the worst margins of the estimate, the box's corners and the plant
+        with the worst multiplier (None when a loop is unstable somewhere).
     culprit : tuple or None
         Where a loop is unstable: ``(parameter, value, multiplier)`` of the parameter whose
         interval's end, the others at their estimates, gives the largest multiplier.
@@ -116,7 +120,7 @@ class Uncertainty:
 
             out += [f"  {line}" for line in worst_lines(
                 worst_margins(self.margins, self.speeds, self.tilts),
-                "the stability margins of that plant's loops")]
+                "the stability margins of the estimate, the corners and that plant")]
         if self.stable:
             out.append("  PASS: every loop stable over the box")
         else:
@@ -247,12 +251,27 @@ def uncertain_loops(table, report: dict, *, samples: int = SAMPLES, seed: int = 
     rho = np.array(rho)
     k = int(np.unravel_index(np.nanargmax(rho), rho.shape)[0])
     margins = culprit = None
-    if np.nanmax(rho) < 1.0:
-        margins = _plant_loops(table, models[k], with_margins=True)[1]
+    if np.nanmax(rho) < 1.0:  # the margins of the estimate, the corners and the worst
+        kinds_ = np.array(kept_kinds)
+        which = sorted({k, *np.flatnonzero(kinds_ != "sample").tolist()})
+        margins = _worst_of([_plant_loops(table, models[q], with_margins=True)[1]
+                             for q in which])
     else:
         culprit = _culprit(table, cfg, focus, params)
     return Uncertainty(focus, params, np.array(kept), tuple(kept_kinds), rho, table.speed,
                        table.tilt, margins, culprit, tuple(skipped))
+
+
+def _worst_of(margins: list) -> LoopMargins:
+    """Per circle, the worst of several plants' margins: the largest down factor, the
+    smallest up factor and delay (NaN where a plant has no loop there)."""
+    def pick(attr, worst):
+        a = np.stack([getattr(m, attr) for m in margins])
+        return np.where(np.all(np.isnan(a), 0), np.nan, worst(np.where(
+            np.isnan(a), -np.inf if worst is np.max else np.inf, a), axis=0))
+    return LoopMargins(pick("gain_down", np.max), pick("gain_up", np.min),
+                       pick("input_down", np.max), pick("input_up", np.min),
+                       pick("delay", np.min))
 
 
 def _culprit(table, cfg, focus, params) -> tuple:
