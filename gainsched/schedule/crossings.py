@@ -32,13 +32,12 @@ _SURROGATE_ERROR = 1e-3
 
 class _Brackets:
     """The brackets ``[a, b]`` of flat (loop, margin) pairs: the loop is stable at a and
-    not at b (b inf: no crossing found), with log rho and the log multipliers at both."""
+    not at b (b inf: no crossing found), with log rho at both."""
 
-    def __init__(self, f0, s0):
+    def __init__(self, f0):
         n = f0.size
-        self.a, self.fa, self.sa = np.zeros(n), f0.astype(float).copy(), s0.copy()
+        self.a, self.fa = np.zeros(n), f0.astype(float).copy()
         self.b, self.fb = np.full(n, np.inf), np.full(n, np.nan)
-        self.sb = np.full_like(s0, complex(np.nan, 0.0))
         # Illinois: the end kept last (-1: b, +1: a) and the weights on the ends' values
         self.side, self.wa, self.wb = np.zeros(n), np.ones(n), np.ones(n)
         self.f0 = f0.astype(float).copy()  # log rho at p = 0
@@ -49,10 +48,10 @@ class _Brackets:
         upper end; returns which were stable."""
         f = S[:, 0].real
         left = f < 0.0
-        self.a[idx[left]], self.fa[idx[left]], self.sa[idx[left]] = P[left], f[left], S[left]
+        self.a[idx[left]], self.fa[idx[left]] = P[left], f[left]
         up = idx[~left]
         self.b2[up], self.fb2[up] = self.b[up], self.fb[up]
-        self.b[up], self.fb[up], self.sb[up] = P[~left], f[~left], S[~left]
+        self.b[up], self.fb[up] = P[~left], f[~left]
         return left
 
 
@@ -131,7 +130,7 @@ def first_crossings(spectra, hi, s0, xtol, size, surrogate=None, guess=None):
     nb, J = hi.shape
     h, S0 = hi.reshape(-1), np.repeat(s0, J, axis=0)
     f0, everyone = S0[:, 0].real, np.arange(h.size)
-    br = _Brackets(f0, S0)
+    br = _Brackets(f0)
     points = None
     if guess is not None:
         g = np.asarray(guess, float).reshape(-1)
@@ -143,7 +142,7 @@ def first_crossings(spectra, hi, s0, xtol, size, surrogate=None, guess=None):
         _scan(spectra, h, br, everyone, points)
         _refine(spectra, br, np.flatnonzero(np.isfinite(br.b)), xtol, size)
     else:
-        sur = _Brackets(f0, S0)
+        sur = _Brackets(f0)
         peak = _scan(surrogate, h, sur, everyone)
         found = np.flatnonzero(np.isfinite(sur.b))
         _refine(surrogate, sur, found, _CHECK / 4, size)
@@ -158,7 +157,7 @@ def first_crossings(spectra, hi, s0, xtol, size, surrogate=None, guess=None):
         again = np.setdiff1d(np.flatnonzero(f0 < 0.0),
                              np.concatenate([held, none[peak[none] < -_SURROGATE_ERROR]]))
         if again.size:  # the surrogate's answer not confirmed: the real loop alone
-            br.a[again], br.fa[again], br.sa[again] = 0.0, f0[again], S0[again]
+            br.a[again], br.fa[again] = 0.0, f0[again]
             br.b[again], br.side[again], br.wa[again], br.wb[again] = np.inf, 0, 1.0, 1.0
             br.b2[again] = np.inf
             _scan(spectra, h, br, again)

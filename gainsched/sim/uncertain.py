@@ -36,6 +36,7 @@ from ..schedule.margins import (
     LoopMargins,
     loop_log_rho,
     loop_margins,
+    worst_lines,
     worst_margins,
 )
 from ..schedule.trim import TrimError
@@ -116,8 +117,6 @@ class Uncertainty:
                f"with {self._values(k)}"]
         out += [f"  skipped: {s}" for s in self.skipped]
         if self.margins is not None:
-            from ..schedule.viewer import worst_lines
-
             out += [f"  {line}" for line in worst_lines(
                 worst_margins(self.margins, self.speeds, self.tilts),
                 "the stability margins of the estimate, the corners and that plant")]
