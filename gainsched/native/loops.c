@@ -13,10 +13,15 @@
  *                   applied to p columns (the monodromy itself when they are I).
  *
  * Each call evaluates a list of lanes, a lane being a loop (its circle c[l] of the batch)
- * and its perturbation. Lanes are computed W at a time, every matrix entry a vector of W
- * lanes (GCC/Clang vector extensions, as riccati.c): the step's A_k, B_k, K_k of each lane
- * are gathered into the vectors, so lanes of different circles share the instructions.
- * The operation order of each lane is fixed by this source, so the result does not depend
+ * and its perturbation, with vectors of W doubles (GCC/Clang vector extensions, as
+ * riccati.c):
+ *   - gs_gain_loops computes W lanes at a time, every matrix entry a vector of W lanes: the
+ *     step's A_k, B_k, K_k of each lane are gathered into the vectors, so lanes of
+ *     different circles share the instructions;
+ *   - gs_delay_loops computes one lane at a time, W of its p columns to a vector: the
+ *     step's entries are shared by the columns, nothing is gathered, and a call of few
+ *     lanes wastes no vector width.
+ * The operation order of each entry is fixed by this source, so the result does not depend
  * on the vector width (-ffp-contract=off: bit-reproducible on x86-64).
  *
  * An unstable loop's product grows without bound: every RENORM steps it is rescaled by the
@@ -61,15 +66,27 @@ INLINE void gather(int n, int m, int k, const steps *s, lane *A, lane *B, lane *
             for (int j = 0; j < n; j++) K[q * n + j] = (lane){0} + kk[q * s->k2 + j * s->k3];
         return;
     }
-    for (int l = 0; l < W; l++) {
-        const double *a = s->A[l] + k * s->a1, *b = s->B[l] + k * s->b1, *kk = s->K[l] + k * s->k1;
-        for (int i = 0; i < n; i++)
-            for (int j = 0; j < n; j++) A[i * n + j][l] = a[i * s->a2 + j * s->a3];
-        for (int i = 0; i < n; i++)
-            for (int q = 0; q < m; q++) B[i * m + q][l] = b[i * s->b2 + q * s->b3];
-        for (int q = 0; q < m; q++)
-            for (int j = 0; j < n; j++) K[q * n + j][l] = kk[q * s->k2 + j * s->k3];
-    }
+    /* each vector built in a register from the W lanes' entries (no store to a lane of a
+     * vector in memory: its load would stall) */
+    const ptrdiff_t ka = k * s->a1, kb = k * s->b1, kk = k * s->k1;
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            lane v;
+            for (int l = 0; l < W; l++) v[l] = s->A[l][ka + i * s->a2 + j * s->a3];
+            A[i * n + j] = v;
+        }
+    for (int i = 0; i < n; i++)
+        for (int q = 0; q < m; q++) {
+            lane v;
+            for (int l = 0; l < W; l++) v[l] = s->B[l][kb + i * s->b2 + q * s->b3];
+            B[i * m + q] = v;
+        }
+    for (int q = 0; q < m; q++)
+        for (int j = 0; j < n; j++) {
+            lane v;
+            for (int l = 0; l < W; l++) v[l] = s->K[l][kk + q * s->k2 + j * s->k3];
+            K[q * n + j] = v;
+        }
 }
 
 /* X <- X 2^-p per lane, 2^p the power of two above the lane's max |X| (and those of the
@@ -91,33 +108,41 @@ INLINE void renorm(size_t na, lane *X, size_t nb, lane *Y, double *e) {
     for (size_t i = 0; i < nb; i++) Y[i] *= sc;
 }
 
-/* C = X Y (n x n), two add chains per entry */
+/* C = X Y (n x n), two add chains per entry (even and odd q), a row at a time: its
+ * entries' chains are independent and interleave */
 INLINE void mul(int n, const lane *X, const lane *Y, lane *C) {
-    for (int i = 0; i < n; i++)
-        for (int j = 0; j < n; j++) {
-            lane s0 = (lane){0}, s1 = (lane){0};
-            int q = 0;
-            for (; q + 2 <= n; q += 2) {
-                s0 += X[i * n + q] * Y[q * n + j];
-                s1 += X[i * n + q + 1] * Y[(q + 1) * n + j];
+    for (int i = 0; i < n; i++) {
+        lane s0[NMAX], s1[NMAX];
+        for (int j = 0; j < n; j++) s0[j] = s1[j] = (lane){0};
+        int q = 0;
+        for (; q + 2 <= n; q += 2) {
+            const lane x0 = X[i * n + q], x1 = X[i * n + q + 1];
+            for (int j = 0; j < n; j++) {
+                s0[j] += x0 * Y[q * n + j];
+                s1[j] += x1 * Y[(q + 1) * n + j];
             }
-            if (q < n) s0 += X[i * n + q] * Y[q * n + j];
-            C[i * n + j] = s0 + s1;
         }
+        if (q < n) {
+            const lane x0 = X[i * n + q];
+            for (int j = 0; j < n; j++) s0[j] += x0 * Y[q * n + j];
+        }
+        for (int j = 0; j < n; j++) C[i * n + j] = s0[j] + s1[j];
+    }
 }
 
 /* F = A_k - (B_k diag(g)) K_k of the lanes' step k */
 INLINE void closed(int n, int m, int k, const steps *s, const lane *g, lane *F) {
     lane A[NMAX * NMAX], B[NMAX * MMAX], K[MMAX * NMAX];
     gather(n, m, k, s, A, B, K);
-    for (int i = 0; i < n; i++)
-        for (int q = 0; q < m; q++) B[i * m + q] *= g[q];
-    for (int i = 0; i < n; i++)
-        for (int j = 0; j < n; j++) {
-            lane acc = (lane){0};
-            for (int q = 0; q < m; q++) acc += B[i * m + q] * K[q * n + j];
-            F[i * n + j] = A[i * n + j] - acc;
+    for (int i = 0; i < n; i++) {
+        lane acc[NMAX];
+        for (int j = 0; j < n; j++) acc[j] = (lane){0};
+        for (int q = 0; q < m; q++) {
+            const lane bq = B[i * m + q] * g[q];
+            for (int j = 0; j < n; j++) acc[j] += bq * K[q * n + j];
         }
+        for (int j = 0; j < n; j++) F[i * n + j] = A[i * n + j] - acc[j];
+    }
 }
 
 /* M <- F^p M by binary powers (p >= 1); F is overwritten */
@@ -212,60 +237,87 @@ int gs_gain_loops(int n, int m, int N, int block, ptrdiff_t L, ptrdiff_t l0, ptr
     return 0;
 }
 
-/* W delayed loops applied to p columns each. X (n x p), the ring of the last D + 1
- * commands (D + 1 slots of m x p) and app (m x p) are work space, columns innermost. */
-static void delay_group(int n, int m, int N, int D, int p, const steps *s, const double *tau,
-                        lane *X, lane *Xn, lane *ring, lane *app, double *e) {
-    lane A[NMAX * NMAX], B[NMAX * MMAX], K[MMAX * NMAX];
-    const size_t slot = (size_t)m * p, R = (size_t)D + 1, np_ = (size_t)n * p;
-    int d[W], same_d = 1;
-    lane fv;
-    for (int l = 0; l < W; l++) {
-        d[l] = (int)tau[l];
-        fv[l] = tau[l] - d[l];
-        same_d &= d[l] == d[0];
-    }
-    for (int k = 0; k < N; k++) {
-        gather(n, m, k, s, A, B, K);
-        lane *u = ring + (size_t)k % R * slot;
-        /* u_k = -K_k x_k */
+/* the steps and delay of one delayed loop, its columns W to a vector */
+typedef struct {
+    const double *A, *B, *K;
+    ptrdiff_t a1, a2, a3, b1, b2, b3, k1, k2, k3;
+    int n, m, P, d;   /* sizes, P vectors of columns; the delay's whole samples */
+    double f;         /* and its fraction */
+    size_t R;         /* ring slots, D + 1 */
+} delayed;
+
+/* Step k of a delayed loop applied to P vectors of W columns: X (n x P) and the ring of
+ * the last D + 1 commands (slots of m x P) in place, acc (n x P) and ua (m x P) work
+ * space, columns innermost (padding columns are zero and stay zero). Each entry's sum
+ * runs in the order of the source whatever W is: j (the state) then q (the input). */
+INLINE void delay_step(const delayed *s, int k, lane *X, lane *ring, lane *acc, lane *ua) {
+    const int n = s->n, m = s->m, P = s->P;
+    const size_t slot = (size_t)m * P, R = s->R;
+    const double *a = s->A + k * s->a1, *b = s->B + k * s->b1, *kk = s->K + k * s->k1;
+    /* u_k = -K_k x_k */
+    for (size_t i = 0; i < slot; i++) ua[i] = (lane){0};
+    for (int j = 0; j < n; j++)
         for (int q = 0; q < m; q++) {
-            lane *uq = u + (size_t)q * p;
-            for (int c = 0; c < p; c++) uq[c] = (lane){0};
-            for (int j = 0; j < n; j++) {
-                const lane kq = K[q * n + j];
-                const lane *xj = X + (size_t)j * p;
-                for (int c = 0; c < p; c++) uq[c] -= kq * xj[c];
-            }
+            const double kq = kk[q * s->k2 + j * s->k3];
+            for (int c = 0; c < P; c++) ua[q * P + c] -= kq * X[j * P + c];
         }
-        /* applied = (1 - f) u_{k-d} + f u_{k-d-1}: per lane, unless all have one d */
-        if (same_d) {
-            const lane *ud = ring + ((size_t)k + 2 * R - (size_t)d[0]) % R * slot;
-            const lane *ue = ring + ((size_t)k + 2 * R - (size_t)d[0] - 1) % R * slot;
-            for (size_t i = 0; i < slot; i++) app[i] = (1.0 - fv) * ud[i] + fv * ue[i];
-        } else
-        for (int l = 0; l < W; l++) {
-            const lane *ud = ring + ((size_t)k + 2 * R - (size_t)d[l]) % R * slot;
-            const lane *ue = ring + ((size_t)k + 2 * R - (size_t)d[l] - 1) % R * slot;
-            for (size_t i = 0; i < slot; i++) app[i][l] = (1.0 - fv[l]) * ud[i][l] + fv[l] * ue[i][l];
-        }
-        /* x_{k+1} = A_k x_k + B_k applied */
+    lane *u = ring + (size_t)k % R * slot;
+    for (size_t i = 0; i < slot; i++) u[i] = ua[i];
+    /* applied = (1 - f) u_{k-d} + f u_{k-d-1} */
+    const lane *ud = ring + ((size_t)k + 2 * R - (size_t)s->d) % R * slot;
+    const lane *ue = ring + ((size_t)k + 2 * R - (size_t)s->d - 1) % R * slot;
+    for (size_t i = 0; i < slot; i++) ua[i] = (1.0 - s->f) * ud[i] + s->f * ue[i];
+    /* x_{k+1} = A_k x_k + B_k applied */
+    for (int i = 0; i < n * P; i++) acc[i] = (lane){0};
+    for (int j = 0; j < n; j++)
         for (int i = 0; i < n; i++) {
-            lane *xi = Xn + (size_t)i * p;
-            for (int c = 0; c < p; c++) xi[c] = (lane){0};
-            for (int j = 0; j < n; j++) {
-                const lane aij = A[i * n + j];
-                const lane *xj = X + (size_t)j * p;
-                for (int c = 0; c < p; c++) xi[c] += aij * xj[c];
-            }
-            for (int q = 0; q < m; q++) {
-                const lane biq = B[i * m + q];
-                const lane *pq = app + (size_t)q * p;
-                for (int c = 0; c < p; c++) xi[c] += biq * pq[c];
-            }
+            const double aij = a[i * s->a2 + j * s->a3];
+            for (int c = 0; c < P; c++) acc[i * P + c] += aij * X[j * P + c];
         }
-        memcpy(X, Xn, np_ * sizeof(lane));
-        if ((k + 1) % RENORM == 0) renorm(np_, X, R * slot, ring, e);
+    for (int q = 0; q < m; q++)
+        for (int i = 0; i < n; i++) {
+            const double biq = b[i * s->b2 + q * s->b3];
+            for (int c = 0; c < P; c++) acc[i * P + c] += biq * ua[q * P + c];
+        }
+    for (int i = 0; i < n * P; i++) X[i] = acc[i];
+}
+
+/* X <- X 2^-p, 2^p the power of two above max |X| and max |Y| (one loop, exact) */
+static void renorm_one(size_t na, lane *X, size_t nb, lane *Y, double *e) {
+    double mx = 0.0;
+    for (size_t i = 0; i < na; i++)
+        for (int l = 0; l < W; l++) mx = fmax(mx, fabs(X[i][l]));
+    for (size_t i = 0; i < nb; i++)
+        for (int l = 0; l < W; l++) mx = fmax(mx, fabs(Y[i][l]));
+    int p = 0;
+    if (mx > 0.0 && isfinite(mx)) frexp(mx, &p);
+    const double sc = ldexp(1.0, -p);
+    *e += p;
+    for (size_t i = 0; i < na; i++) X[i] *= sc;
+    for (size_t i = 0; i < nb; i++) Y[i] *= sc;
+}
+
+/* the period of a delayed loop, any size: the work space acc, ua from the heap */
+static void delay_period(const delayed *s, int N, lane *X, lane *ring, lane *acc, lane *ua,
+                         double *e) {
+    for (int k = 0; k < N; k++) {
+        delay_step(s, k, X, ring, acc, ua);
+        if ((k + 1) % RENORM == 0)
+            renorm_one((size_t)s->n * s->P, X, s->R * s->m * s->P, ring, e);
+    }
+}
+
+/* the common size: 11 states, 4 inputs, 14 columns (PAPER_P vectors) */
+#define PAPER_P ((14 + W - 1) / W)
+
+/* the period of a delayed loop of the common size: the sizes known to the compiler and
+ * the work space on the stack, a step's, which it keeps in registers (2x faster) */
+static void delay_period_paper(delayed s, int N, lane *X, lane *ring, double *e) {
+    s.n = 11, s.m = 4, s.P = PAPER_P;
+    for (int k = 0; k < N; k++) {
+        lane acc[11 * PAPER_P], ua[4 * PAPER_P];
+        delay_step(&s, k, X, ring, acc, ua);
+        if ((k + 1) % RENORM == 0) renorm_one(11 * PAPER_P, X, s.R * 4 * PAPER_P, ring, e);
     }
 }
 
@@ -275,12 +327,15 @@ static lane *vectors(size_t count) {
     return posix_memalign(&ptr, sizeof(lane), count * sizeof(lane)) == 0 ? ptr : NULL;
 }
 
+
 /*
  * gs_delay_loops: lanes [l0, l1) of L, each a loop (circle, as gs_gain_loops) and a delay
  * tau (L) in samples, 0 <= tau <= D. The delayed loop's monodromy on the state
  * [x, u_{k-1}, .., u_{k-D}] (na = n + D m rows) applied to p columns: X0 (L, na, p) in,
  * Y_out (L, na, p) and e_out (L) out, M X0 = Y_out 2^e_out (p = na and X0 = I give M).
- * Returns 0, -1 if the sizes or a delay are out of range, -2 if memory runs out.
+ * One lane at a time, its columns W to a vector (the step's entries are shared by the
+ * columns: nothing is gathered). Returns 0, -1 if the sizes or a delay are out of range,
+ * -2 if memory runs out.
  */
 int gs_delay_loops(int n, int m, int N, int D, int p, ptrdiff_t L, ptrdiff_t l0, ptrdiff_t l1,
                    const int *circle, const double *Ad, const ptrdiff_t *sA, const double *Bd,
@@ -289,39 +344,43 @@ int gs_delay_loops(int n, int m, int N, int D, int p, ptrdiff_t L, ptrdiff_t l0,
     if (n < 1 || n > NMAX || m < 1 || m > MMAX || N < 1 || D < 1 || p < 1) return -1;
     for (ptrdiff_t l = l0; l < l1; l++)
         if (!(tau[l] >= 0.0) || tau[l] > D) return -1;
-    const size_t na = (size_t)n + (size_t)D * m, slot = (size_t)m * p, R = (size_t)D + 1;
-    lane *X = vectors((size_t)n * p), *Xn = vectors((size_t)n * p);
+    const int P = (p + W - 1) / W;
+    const size_t na = (size_t)n + (size_t)D * m, slot = (size_t)m * P, R = (size_t)D + 1;
+    lane *X = vectors((size_t)n * P), *Xn = vectors((size_t)n * P);
     lane *ring = vectors(R * slot), *app = vectors(slot);
     int rc = (X && Xn && ring && app) ? 0 : -2;
-    for (ptrdiff_t g0 = l0; g0 < l1 && rc == 0; g0 += W) {
-        steps s;
-        ptrdiff_t ll[W];
-        double t[W], e[W] = {0};
-        lane_steps(g0, l1, circle, Ad, sA, Bd, sB, K, sK, &s, ll);
-        for (int l = 0; l < W; l++) t[l] = tau[ll[l]];
-        /* x_0 and u_{-j} (ring slot D + 1 - j) from X0 */
+    for (ptrdiff_t l = l0; l < l1 && rc == 0; l++) {
+        const ptrdiff_t c = circle[l];
+        const double *x0 = X0 + l * na * p;
+        double e = 0.0;
+        /* x_0 and u_{-j} (ring slot D + 1 - j) from X0, the padding columns zero */
+        memset(X, 0, (size_t)n * P * sizeof(lane));
         memset(ring, 0, R * slot * sizeof(lane));
-        for (int l = 0; l < W; l++) {
-            const double *x0 = X0 + ll[l] * na * p;
-            for (size_t i = 0; i < (size_t)n * p; i++) X[i][l] = x0[i];
-            for (int j = 1; j <= D; j++)
-                for (size_t i = 0; i < slot; i++)
-                    ring[(R - j) * slot + i][l] = x0[(size_t)(n + (j - 1) * m) * p + i];
-        }
-        if (n == 11 && m == 4)
-            delay_group(11, 4, N, D, p, &s, t, X, Xn, ring, app, e);
+        for (size_t i = 0; i < (size_t)n; i++)
+            for (int col = 0; col < p; col++) X[i * P + col / W][col % W] = x0[i * p + col];
+        for (int j = 1; j <= D; j++)
+            for (size_t i = 0; i < (size_t)m; i++)
+                for (int col = 0; col < p; col++)
+                    ring[(R - j) * slot + i * P + col / W][col % W] =
+                        x0[((size_t)n + (j - 1) * m + i) * p + col];
+        delayed ds = {Ad + c * sA[0], Bd + c * sB[0], K + c * sK[0], sA[1], sA[2], sA[3],
+                      sB[1], sB[2], sB[3], sK[1], sK[2], sK[3], n, m, P, (int)tau[l],
+                      tau[l] - (int)tau[l], R};
+        if (n == 11 && m == 4 && P == PAPER_P)
+            delay_period_paper(ds, N, X, ring, &e);
         else
-            delay_group(n, m, N, D, p, &s, t, X, Xn, ring, app, e);
+            delay_period(&ds, N, X, ring, Xn, app, &e);
         /* the state after the period: x_N, then u_{N-1}, .., u_{N-D} */
-        for (int l = 0; l < W && g0 + l < l1; l++) {
-            double *y = Y_out + ll[l] * na * p;
-            for (size_t i = 0; i < (size_t)n * p; i++) y[i] = X[i][l];
-            for (int j = 1; j <= D; j++) {
-                const lane *uj = ring + ((size_t)N % R + R - (size_t)j) % R * slot;
-                for (size_t i = 0; i < slot; i++) y[(size_t)(n + (j - 1) * m) * p + i] = uj[i][l];
-            }
-            e_out[ll[l]] = e[l];
+        double *y = Y_out + l * na * p;
+        for (size_t i = 0; i < (size_t)n; i++)
+            for (int col = 0; col < p; col++) y[i * p + col] = X[i * P + col / W][col % W];
+        for (int j = 1; j <= D; j++) {
+            const lane *uj = ring + ((size_t)N % R + R - (size_t)j) % R * slot;
+            for (size_t i = 0; i < (size_t)m; i++)
+                for (int col = 0; col < p; col++)
+                    y[((size_t)n + (j - 1) * m + i) * p + col] = uj[i * P + col / W][col % W];
         }
+        e_out[l] = e;
     }
     free(X);
     free(Xn);

@@ -22,8 +22,10 @@ _REFINE = 60
 #: the scan's points, as fractions of the search range, evaluated in rounds from the
 #: nominal outward (a margin whose crossing is bracketed stops scanning)
 _SCAN = np.array([1, 2, 4, 8]) / 8.0
-#: the scan around a guess of the crossing, as multiples of it (then the range's end)
-_AROUND = np.array([0.5, 0.9, 1.1, 1.6])
+#: the scan around a guess of the crossing, as multiples of it, in rounds (then the
+#: range's end): below it, then two points at once just above it, whose log rho (both
+#: on the crossing mode when unstable) gives the secant its first step
+_AROUND = (np.array([0.5]), np.array([0.97]), np.array([1.0, 1.005]), np.array([1.6]))
 #: the real loop checks a bracket of this relative width around the surrogate's crossing
 _CHECK = 1e-3
 #: "no crossing" on the surrogate stands where its log rho stayed below minus this
@@ -44,33 +46,45 @@ class _Brackets:
         self.b2, self.fb2 = np.full(n, np.inf), np.full(n, np.nan)  # the previous b
 
     def put(self, idx, P, S):
-        """Evaluations S (log multipliers) at P of the pairs idx: each the new lower or
-        upper end; returns which were stable."""
+        """Evaluations S (log multipliers) at P of the pairs idx (a pair at most once):
+        each the new lower end where stable above it, the new upper end (or the one
+        before it) where unstable below it; returns which were stable."""
         f = S[:, 0].real
         left = f < 0.0
-        self.a[idx[left]], self.fa[idx[left]] = P[left], f[left]
-        up = idx[~left]
+        lo = left & (P > self.a[idx])
+        self.a[idx[lo]], self.fa[idx[lo]] = P[lo], f[lo]
+        new = ~left & (P < self.b[idx])
+        up = idx[new]
         self.b2[up], self.fb2[up] = self.b[up], self.fb[up]
-        self.b[up], self.fb[up] = P[~left], f[~left]
+        self.b[up], self.fb[up] = P[new], f[new]
+        second = ~left & ~new & (P < self.b2[idx])
+        self.b2[idx[second]], self.fb2[idx[second]] = P[second], f[second]
         return left
 
 
 def _scan(spectra, h, br, pairs, points=None):
     """The scan of :func:`_first_crossings` over ``pairs`` (flat indices into ``br``, ranges
     ``h[pairs]``): each bracket's first crossing; returns the largest log rho met by each
-    pair that found none."""
+    pair that found none. ``points``: a list of rounds, each (pairs, k) parameters
+    evaluated at once (NaN: none; default :data:`_SCAN`, one a round)."""
     peak = br.fa.copy()
     scan = pairs[br.fa[pairs] < 0.0]
     if points is None:
-        points = _SCAN[None, :] * h[:, None]
-    for r in range(points.shape[1]):
-        scan = scan[np.isfinite(points[scan, r])] if r == points.shape[1] - 1 else scan
+        points = [x * h[:, None] for x in _SCAN[:, None, None]]
+    for r, P in enumerate(points):
+        if r == len(points) - 1:  # the last round: the range's end, where not NaN
+            scan = scan[np.isfinite(P[scan, 0])]
         if scan.size == 0:
             break
-        P = points[scan, r]
-        left = br.put(scan, P, spectra(scan, P))
+        idx, col = np.nonzero(np.isfinite(P[scan]))
+        x = P[scan[idx], col]
+        S = spectra(scan[idx], x)  # one call a round
+        stable = np.ones(scan.size, bool)
+        for c in np.unique(col):  # a column at a time: a pair at most once per put
+            at = col == c
+            stable[idx[at]] &= br.put(scan[idx[at]], x[at], S[at])
         peak[scan] = np.maximum(peak[scan], br.fa[scan])
-        scan = scan[left]
+        scan = scan[stable]
     return peak
 
 
@@ -83,7 +97,7 @@ def _refine(spectra, br, todo, xtol, size):
     the crossing and false position would crawl), the secant through the two latest
     unstable ends (the crossing mode's), else bisection (also for a secant step within
     5 % of the lower end: the secant from above lands near the root, which lies near the
-    upper end once it is close)."""
+    upper end once it is close). A step is kept half the tolerance inside the bracket."""
     for _ in range(_REFINE):
         todo = todo[(br.b[todo] - br.a[todo]) > xtol * size(todo, br.b[todo])]
         if todo.size == 0:
@@ -99,6 +113,10 @@ def _refine(spectra, br, todo, xtol, size):
         c = np.where(flat, np.where(np.isfinite(b2) & (fb2 > br.fb[todo]), secant, np.nan),
                      falsi)
         c = np.where((c > lo + guard) & (c < up), c, 0.5 * (lo + up))
+        # at least half the tolerance inside the bracket: a step that lands on the root
+        # then closes it from one side or the other (as Brent's method steps)
+        half = 0.5 * xtol * size(todo, up)
+        c = np.clip(c, lo + half, up - half)
         left = br.put(todo, c, spectra(todo, c))  # left: c stable, the new a; b kept
         sd = br.side[todo]
         br.wb[todo] = np.where(left, np.where(sd == -1, 0.5, 1.0) * br.wb[todo], 1.0)
@@ -134,10 +152,11 @@ def first_crossings(spectra, hi, s0, xtol, size, surrogate=None, guess=None):
     points = None
     if guess is not None:
         g = np.asarray(guess, float).reshape(-1)
-        points = np.where(np.isfinite(g)[:, None] & (g[:, None] > 0),
-                          np.minimum(np.append(_AROUND, np.inf)[None, :] * g[:, None],
-                                     h[:, None]),
-                          np.append(_SCAN, np.nan)[None, :] * h[:, None])
+        ok = (np.isfinite(g) & (g > 0))[:, None]
+        points = [np.where(ok, np.minimum(x[None, :] * g[:, None], h[:, None]),
+                           np.where(np.arange(x.size) == 0, s * h[:, None], np.nan))
+                  for x, s in zip(_AROUND, _SCAN, strict=True)]
+        points.append(np.where(ok, h[:, None], np.nan))  # then the range's end
     if surrogate is None:
         _scan(spectra, h, br, everyone, points)
         _refine(spectra, br, np.flatnonzero(np.isfinite(br.b)), xtol, size)

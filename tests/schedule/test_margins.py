@@ -36,6 +36,7 @@ from gainsched.schedule.grid import build_grid, solve_circle
 from gainsched.schedule.margins import (
     delay_margin,
     gain_margins,
+    loop_margins,
     monodromy_with,
     spectral_radius,
 )
@@ -133,6 +134,44 @@ def test_the_delay_margin_of_a_scalar_loop_is_where_its_polynomial_crosses(a, bk
     assert tau[0] / h == pytest.approx(ref, abs=1e-6)
 
 
+def _scalar_delay_search(monkeypatch, guess):
+    """The delay margin of a scalar loop (1.43 samples of 4 ms, in a range of 12.5) and
+    the loops evaluated to find it, with ``guess`` times it as the search's guess."""
+    h, xtol = 0.004, 1e-6
+    Ad, Bd, K = np.full((1, 9, 1, 1), 1.0), np.full((1, 9, 1, 1), 0.5), np.ones((1, 9, 1, 1))
+    free = loop_margins(Ad, Bd, K, h, xtol=xtol).delay[0]
+    lanes, spectra = [], mg._delay_spectra
+    monkeypatch.setattr(mg, "_delay_spectra",
+                        lambda *a: lanes.append(a[3].size) or spectra(*a))
+    tau = loop_margins(Ad, Bd, K, h, xtol=xtol,
+                       delay_guess=None if guess is None else guess * free).delay[0]
+    return free, tau, sum(lanes)
+
+
+@pytest.mark.parametrize("guess", [0.3, 0.9, 0.985, 1.0, 1.003, 1.2, 20.0])
+def test_a_guess_of_the_delay_margin_moves_the_search_not_the_margin(monkeypatch, guess):
+    """The delay search started around a guess (the build's level circle's margin for its
+    tilted circles), however far off (x20: beyond the search range), finds the margin of
+    the search without one, within its tolerance."""
+    free, tau, _ = _scalar_delay_search(monkeypatch, guess)
+    assert tau == pytest.approx(free, rel=2e-6)
+
+
+def test_a_good_guess_of_the_delay_margin_saves_evaluations(monkeypatch, paper_circle):
+    """The build's point of the guess: on the paper's 15 m/s, 20 deg circle (whose level
+    circle's margin is 1.3 % above its own), the search from a guess 1.3 % off evaluates
+    fewer delayed loops than the scan of the whole range, and finds the same margin."""
+    sol, (Ad, Bd, K) = paper_circle
+    lanes, spectra = [], mg._delay_spectra
+    monkeypatch.setattr(mg, "_delay_spectra",
+                        lambda *a: lanes.append(a[3].size) or spectra(*a))
+    free = loop_margins(Ad, Bd, K, sol.dt, delay_xtol=1e-4).delay[0]
+    none, lanes[:] = sum(lanes), []
+    near = loop_margins(Ad, Bd, K, sol.dt, delay_xtol=1e-4, delay_guess=1.013 * free).delay[0]
+    assert near == pytest.approx(free, rel=2e-4)
+    assert sum(lanes) < none
+
+
 def _periodic_loop(seed=1, b=3, N=40, n=11, m=4):
     """Random stable-ish periodic loops (b, N): A_k near I, small B_k, K_k."""
     rng = np.random.default_rng(seed)
@@ -151,7 +190,8 @@ def _lanes(Ad, Bd, K):
     G = np.tile([[0.5] * m, [1.0] * m, [3.0, 1.0, 1.0, 0.2][:m]], (b, 1))
     tau = np.tile([0.0, 2.5, 6.0], b)
     D = 7
-    X0 = np.random.default_rng(2).standard_normal((circle.size, Ad.shape[-1] + D * m, 5))
+    # 14 columns, the build's: the kernel's specialised path for 11 x 4, generic otherwise
+    X0 = np.random.default_rng(2).standard_normal((circle.size, Ad.shape[-1] + D * m, 14))
     return mg._gain_loops(Ad, Bd, K, circle, G), mg._delay_pass(
         mg._lib(), Ad, Bd, K, circle, tau, D, X0)
 
