@@ -144,7 +144,7 @@ def improve(config: Config, logs, *, rounds: int = 3, exclude=(), channel_map=No
 
 
 def write_improve(imp: Improvement, out_dir, flights=None, *,
-                  not_flown: str | None = None) -> list[Path]:
+                  not_flown: str | None = None, uncertain=None) -> list[Path]:
     """The report of an improvement: the error round by round, the flights old and new.
 
     The flights, when the rebuilt tables were flown: the tracking of the standard flights
@@ -162,13 +162,17 @@ def write_improve(imp: Improvement, out_dir, flights=None, *,
     not_flown : str, optional
         Why the flights were not flown (``--no-build``, a table that cannot be built),
         said in the report when ``flights`` is None.
+    uncertain : Uncertainty, optional
+        The rebuilt table's loops over the last applied fit's 95 % box
+        (:func:`gainsched.sim.uncertain.uncertain_loops`); None: not checked.
 
     Returns
     -------
     list of Path
         ``improve.json`` (the rounds: normalised RMS, accepted candidate, verdict; and
         ``flights``: the flights' metrics old, new and their ratio, per flight and over
-        all flights, or None with ``flights_not_flown``), ``improve.md`` (the same as
+        all flights, or None with ``flights_not_flown``; ``uncertain``: the check's
+        numbers, or None), ``improve.md`` (the same as
         tables) and ``improve.png`` (the normalised RMS per round, each round's added
         effect written beside it; beside it, when flown, the RMS tracking errors of the
         flights, old table against new).
@@ -192,6 +196,7 @@ def write_improve(imp: Improvement, out_dir, flights=None, *,
     data["flights"] = None if flights is None else flights.to_json()
     if flights is None:
         data["flights_not_flown"] = not_flown or "not asked for"
+    data["uncertain"] = None if uncertain is None else uncertain.to_json()
     paths = [out_dir / "improve.json", out_dir / "improve.md", out_dir / "improve.png"]
     paths[0].write_text(json.dumps(data, indent=2) + "\n")
     lines = [f"# Model improvement of `{imp.config.name}`", "",
@@ -203,6 +208,10 @@ def write_improve(imp: Improvement, out_dir, flights=None, *,
     lines += ["", f"Applied: {', '.join(imp.applied) or 'nothing'}. The normalised RMS is 1 at "
               "the measurement noise (docs/model-vs-measurement.md).", ""]
     lines += _flight_lines(flights, data.get("flights_not_flown"))
+    if uncertain is not None:
+        lines += ["## The new table under the fit's uncertainty", "",
+                  "As `gainsched check TABLE --uncertain REPORT` (docs/margins.md):", "",
+                  "```", *uncertain.lines("the rebuilt table"), "```", ""]
     paths[1].write_text("\n".join(lines))
     if flights is not None and flights.flights:
         fig, (ax, ax_f) = plt.subplots(1, 2, figsize=(12, 4),

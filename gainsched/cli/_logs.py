@@ -170,18 +170,25 @@ def diagnose(config, logs, candidates, exclude, joint, no_sensors, do_apply, new
               help=f"Parallel workers of the build, 1..{MAX_JOBS} (-1 = all cores).")
 @click.option("--no-sensors", "no_sensors", is_flag=True,
               help="Take the config's [sensors] as they are (diagnose --no-sensors).")
+@click.option("--no-uncertain", "no_uncertain", is_flag=True,
+              help="Skip the check of the rebuilt table over the last fit's 95 % box (check "
+              "--uncertain: minutes on a large grid).")
+@click.option("--samples", type=click.IntRange(0), default=None, metavar="N",
+              help="Random plants of that check besides the estimate and the box's corners "
+              "[default: 8].")
 @_MAP
 @_TRUST
 @_day_options
 @user_errors
 def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, duration, jobs,
-            no_sensors, map_path, trust, pose, pose_map, day):
+            no_sensors, no_uncertain, samples, map_path, trust, pose, pose_map, day):
     """The model loop in one command: compare CONFIG with LOGS, diagnose and apply in
     rounds until no effect is missing, rebuild the tables from the improved config (its
     name kept: the same C symbols), fly the standard flights on the improved model with
-    the old and the new table, and write the report: the error round by round and the
-    tracking old against new. Each step is what compare, diagnose --apply, build and
-    simulate do."""
+    the old and the new table, check the new table's loops over the last fit's 95 % box,
+    and write the report: the error round by round, the tracking old against new and the
+    worst multiplier and margins under the fit's uncertainty. Each step is what compare,
+    diagnose --apply, build, simulate and check --uncertain do."""
 
     from ..publish import check_out_dir
     from ..studies import improve as run
@@ -199,7 +206,7 @@ def improve(config, logs, out_dir, rounds, exclude, no_build, table_path, durati
     done = run(cfg, logs, out_dir, rounds=rounds, exclude=exclude, build=not no_build,
                old_table=table_path, duration=duration, jobs=jobs, channel_map=cmap,
                trust=trust, sensors=not no_sensors, pose=pose, pose_map=pose_map, day=day,
-               reporter=TERMINAL)
+               uncertain=not no_uncertain, samples=samples, reporter=TERMINAL)
     if done.failed is not None:  # the study kept what was done before it
         kept = "" if done.out_dir is None else f" (what was done before it is in {out_dir})"
         click.echo(f"gainsched: error: improve: the step '{done.failed.name}' failed: "

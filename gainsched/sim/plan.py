@@ -201,10 +201,11 @@ def report_focus(report: dict, source) -> tuple[str, dict, tuple]:
     return focus, params, tuple(alike[:3])
 
 
-def truth_config(config, focus: str, estimates):
+def truth_config(config, focus: str, estimates, keep=frozenset()):
     """The config with the candidate ``focus`` (a library name, or parts joined by
     ``" + "``) at ``estimates`` (its parameters in order): the plant the report believes
-    in."""
+    in. ``keep``: parameters the fit did not identify, whose ``estimates`` are the
+    config's own values (:func:`focus_values`), left as the config has them."""
     from ..analysis.diagnose import candidate_library
     from ..config import config_from_text
 
@@ -219,10 +220,21 @@ def truth_config(config, focus: str, estimates):
     for part in parts:
         cand = lib[part]
         n = len(cand.params)
-        text = cand.apply_text(cfg.text, cfg, theta[k:k + n], [""] * n, "gainsched plan")
+        text = cand.apply_text(cfg.text, cfg, theta[k:k + n], [""] * n, "gainsched plan",
+                               keep=frozenset(keep))
         cfg = config_from_text(text, f"<{config.name} with {part}>")
         k += n
     return cfg
+
+
+def focus_values(config, focus: str) -> np.ndarray:
+    """The values the config has of the candidate ``focus``'s parameters (in the fit's
+    parametrisation, as :func:`truth_config` takes them)."""
+    from ..analysis.diagnose import candidate_library
+
+    lib = candidate_library()
+    return np.concatenate([np.asarray(lib[part].start(config), float)
+                           for part in focus.split(" + ")])
 
 
 def menu(table, duration: float, seed: int = 1) -> list[Scenario]:

@@ -13,6 +13,10 @@ estimate, the corners and the plant with the worst multiplier, circle by circle 
 a margin moves monotonically with the parameters, its extreme over the box is at a
 corner; the random samples are not searched for margins).
 
+A parameter the fit did not identify (no finite interval: the diagnosis wrote the
+config's own value instead of its estimate) is held at the table config's value in every
+plant, and said so.
+
 Where a loop is unstable, the parameter named is the one whose end of its interval,
 the others at their estimates, gives the largest multiplier.
 """
@@ -40,7 +44,7 @@ from ..schedule.margins import (
     worst_margins,
 )
 from ..schedule.trim import TrimError
-from .plan import report_focus, truth_config
+from .plan import focus_values, report_focus, truth_config
 
 __all__ = ["Uncertainty", "uncertain_loops"]
 
@@ -75,6 +79,9 @@ class Uncertainty:
         interval's end, the others at their estimates, gives the largest multiplier.
     skipped : tuple of str
         Plants of the box that are no valid model (a parameter beyond its own limits).
+    held : tuple of str
+        Parameters the fit did not identify (no finite interval), held at the table
+        config's value in every plant (their ``params`` entry: that value, half-width 0).
     """
 
     focus: str
@@ -87,6 +94,7 @@ class Uncertainty:
     margins: LoopMargins | None
     culprit: tuple | None
     skipped: tuple = ()
+    held: tuple = ()
 
     @property
     def worst(self) -> tuple[int, int, int]:
@@ -105,7 +113,8 @@ class Uncertainty:
     def lines(self, source: str = "") -> list[str]:
         """What ``gainsched check TABLE --uncertain REPORT`` prints; the last line is PASS
         or FAIL, FAIL naming the parameter."""
-        box = "; ".join(f"{p} {v:.4g} +- {c:.2g}{' ' + u if u else ''}"
+        box = "; ".join(f"{p} {v:.4g}{' ' + u if u else ''} held" if p in self.held else
+                        f"{p} {v:.4g} +- {c:.2g}{' ' + u if u else ''}"
                         for p, (v, c, u) in self.params.items())
         n = self.rho.shape[0]
         k, i, j = self.worst
@@ -115,6 +124,8 @@ class Uncertainty:
                f"{self.kinds.count('sample')} samples)",
                f"  worst multiplier {self.rho[k, i, j]:.5f} (1 is unstable) at {where}, "
                f"with {self._values(k)}"]
+        out += [f"  held at the table config's value, not identified by the fit (no finite "
+                f"95 % interval): {', '.join(self.held)}"] if self.held else []
         out += [f"  skipped: {s}" for s in self.skipped]
         if self.margins is not None:
             out += [f"  {line}" for line in worst_lines(
@@ -134,6 +145,7 @@ class Uncertainty:
         return {"focus": self.focus,
                 "params": {p: {"estimate": v, "ci95": c, "unit": u}
                            for p, (v, c, u) in self.params.items()},
+                "held": list(self.held),
                 "plants": self.plants.tolist(), "kinds": list(self.kinds),
                 "worst": {"multiplier": float(self.rho[k, i, j]), "plant": k,
                           "speed_mps": float(self.speeds[j]),
@@ -150,7 +162,12 @@ def _box(params, samples: int, seed: int):
     the random samples."""
     est = np.array([v for v, _, _ in params.values()])
     half = np.array([c for _, c, _ in params.values()])
-    corners = [est + half * np.array(s) for s in itertools.product((-1, 1), repeat=est.size)]
+    vary = half > 0  # a held parameter (half-width 0) has no corners of its own
+    corners = []
+    for s in itertools.product((-1, 1), repeat=int(vary.sum())):
+        theta = est.copy()
+        theta[vary] += half[vary] * np.array(s)
+        corners.append(theta)
     rng = np.random.default_rng(seed)
     draws = est + half * rng.uniform(-1, 1, (samples, est.size))
     plants = np.vstack([est[None], *corners, draws]) if samples else np.vstack([est, *corners])
@@ -232,12 +249,17 @@ def uncertain_loops(table, report: dict, *, samples: int = SAMPLES, seed: int = 
 
     cfg = config_from_table(table)
     focus, params, _ = report_focus(report, source)
+    held = tuple(p for p, (_, c, _) in params.items() if not np.isfinite(c))
+    if held:  # at the config's own value, as the diagnosis wrote them
+        own = focus_values(cfg, focus)
+        params = {p: (float(own[q]), 0.0, u) if p in held else (v, c, u)
+                  for q, (p, (v, c, u)) in enumerate(params.items())}
     plants, kinds = _box(params, samples, seed)
     step = progress or (lambda n: None)
     rho, kept, kept_kinds, skipped, models = [], [], [], [], []
     for theta, kind in zip(plants, kinds, strict=True):
         try:
-            model = Model(truth_config(cfg, focus, theta))
+            model = Model(truth_config(cfg, focus, theta, held))
         except InputError as exc:
             skipped.append(f"{kind} {', '.join(f'{v:.4g}' for v in theta)}: {exc.message}")
             step(1)
@@ -256,9 +278,9 @@ def uncertain_loops(table, report: dict, *, samples: int = SAMPLES, seed: int = 
         margins = _worst_of([_plant_loops(table, models[q], with_margins=True)[1]
                              for q in which])
     else:
-        culprit = _culprit(table, cfg, focus, params)
+        culprit = _culprit(table, cfg, focus, params, held)
     return Uncertainty(focus, params, np.array(kept), tuple(kept_kinds), rho, table.speed,
-                       table.tilt, margins, culprit, tuple(skipped))
+                       table.tilt, margins, culprit, tuple(skipped), held)
 
 
 def _worst_of(margins: list) -> LoopMargins:
@@ -273,17 +295,17 @@ def _worst_of(margins: list) -> LoopMargins:
                        pick("delay", np.min))
 
 
-def _culprit(table, cfg, focus, params) -> tuple:
+def _culprit(table, cfg, focus, params, held=()) -> tuple:
     """``(parameter, value, multiplier)``: the end of one parameter's interval, the others
-    at their estimates, with the largest multiplier."""
+    at their estimates, with the largest multiplier (``held`` parameters not varied)."""
     est = np.array([v for v, _, _ in params.values()])
     best = None
     for q, (name, (v, c, _)) in enumerate(params.items()):
-        for end in (v - c, v + c):
+        for end in (v - c, v + c) if name not in held else ():
             theta = est.copy()
             theta[q] = end
             try:
-                model = Model(truth_config(cfg, focus, theta))
+                model = Model(truth_config(cfg, focus, theta, held))
             except InputError:
                 continue
             r = float(np.nanmax(_plant_loops(table, model)[0]))

@@ -28,8 +28,8 @@ class StepFailure:
     Attributes
     ----------
     name : str
-        The step: ``"compare and diagnose"``, ``"rebuild the tables"`` or ``"fly the old
-        and the new tables"``.
+        The step: ``"compare and diagnose"``, ``"rebuild the tables"``, ``"fly the old
+        and the new tables"`` or ``"check the new tables under the fit's uncertainty"``.
     why : str
         Why, in one line (with the exception's type when it is not a user error).
     undone : bool
@@ -63,6 +63,10 @@ class Improved:
     refusal : str or None
         Why no table can hold the improved config (an effect the tables' symmetry
         cannot carry), when that is why.
+    uncertain : Uncertainty or None
+        The rebuilt table's loops on plants over the last applied fit's 95 % box
+        (:func:`gainsched.sim.uncertain.uncertain_loops`, as ``gainsched check
+        --uncertain``); None when not checked.
     failed : StepFailure or None
         The step that failed; what was done before it is in ``out_dir``.
     said : tuple of str
@@ -76,6 +80,7 @@ class Improved:
     not_flown: str | None = None
     refusal: str | None = None
     failed: StepFailure | None = None
+    uncertain: object = None
 
     @property
     def config(self) -> Config:
@@ -102,6 +107,7 @@ class Improved:
 
 
 _REBUILD, _FLY = "rebuild the tables", "fly the old and the new tables"
+_UNCERTAIN = "check the new tables under the fit's uncertainty"
 _UNCHANGED = "nothing was applied: the tables are CONFIG's own"
 _NO_BUILD = "--no-build"  # the report says it as the command line does (build=False)
 
@@ -109,15 +115,17 @@ _NO_BUILD = "--no-build"  # the report says it as the command line does (build=F
 def improve(config, logs, out_dir=None, *, rounds: int = 3, exclude=(), build: bool = True,
             old_table=None, duration: float = 3.0, jobs: int = -1, channel_map=None,
             trust=(), sensors: bool = True, pose=None, pose_map=None, day: bool = False,
+            uncertain: bool = True, samples: int | None = None,
             reporter: Reporter = SILENT) -> Improved:
     """The model loop in one call: what ``gainsched improve CONFIG LOGS -o OUT_DIR`` does.
 
     Compare and diagnose in rounds, applying each accepted fit, until no effect is
     missing (:func:`gainsched.analysis.improve.improve`); with ``out_dir``, write the
     improved config (its name kept: the same C symbols), rebuild the tables from it, fly
-    the standard flights on the improved model with the old table and the new one, and
-    write the report, the whole set published at once. A step that fails after the first
-    keeps what was done before it (:attr:`Improved.failed`).
+    the standard flights on the improved model with the old table and the new one, check
+    the new table's loops over the last applied fit's 95 % box (as ``gainsched check
+    --uncertain``), and write the report, the whole set published at once. A step that
+    fails after the first keeps what was done before it (:attr:`Improved.failed`).
 
     Parameters
     ----------
@@ -147,6 +155,13 @@ def improve(config, logs, out_dir=None, *, rounds: int = 3, exclude=(), build: b
     pose, pose_map, day
         A flight day, or a pose recorded apart, as :func:`~gainsched.studies.compare`
         takes them.
+    uncertain : bool, default True
+        Check the rebuilt table under the last applied fit's uncertainty: its loops on
+        the estimate, the corners of the fit's 95 % box and ``samples`` random plants,
+        their worst multiplier and margins (docs/margins.md).
+    samples : int, optional
+        The random plants of that check (default
+        :data:`~gainsched.sim.uncertain.SAMPLES`).
     reporter : Reporter, optional
         Shows the fits', the build's and the flights' progress; default: nothing.
 
@@ -197,18 +212,21 @@ def improve(config, logs, out_dir=None, *, rounds: int = 3, exclude=(), build: b
     if out_dir is None:
         return Improved(imp, None, said=tuple(said))
     out_dir = Path(out_dir)
+    check = (samples,) if uncertain else None
     done = _publish(cfg, imp, out_dir, build, old_table, old_path, duration, jobs, reporter,
-                    say)
+                    say, check)
     return Improved(imp, out_dir, done.get("build"), done.get("flights"), done["not_flown"],
-                    done.get("refusal"), done.get("failed"), tuple(said))
+                    done.get("refusal"), done.get("failed"), done.get("uncertain"),
+                    tuple(said))
 
 
 def _publish(cfg, imp, out_dir: Path, build, old_table, old_path, duration, jobs, reporter,
-             say) -> dict:
+             say, check=None) -> dict:
     """The output set of :func:`improve` published at once: the improved config, the
-    rebuilt tables and the flights old against new (:func:`_rebuild_and_fly`, unless
-    nothing was applied or ``build`` is false), the report; what was done (``build``,
-    ``flights``, ``refusal``, ``failed``, ``not_flown``) returned, its lines said."""
+    rebuilt tables, the flights old against new and (``check``: ``(samples,)``) the new
+    table under the fit's uncertainty (:func:`_rebuild_and_fly`, unless nothing was
+    applied or ``build`` is false), the report; what was done (``build``, ``flights``,
+    ``uncertain``, ``refusal``, ``failed``, ``not_flown``) returned, its lines said."""
     from ..publish import staged
 
     new, done = imp.config, {}
@@ -221,15 +239,19 @@ def _publish(cfg, imp, out_dir: Path, build, old_table, old_path, duration, jobs
             _rebuild_and_fly(cfg, old_table, old_path, config_from_text(
                 new.text, str(out_dir / path.name)), stage, out_dir, duration, jobs,
                 reporter, done, say)
+            if check is not None and "build" in done and "failed" not in done:
+                _check_uncertain(imp, stage, new.name, check[0], reporter, done)
         refusal, failed = done.get("refusal"), done.get("failed")
         done["not_flown"] = (
             _NO_BUILD if not build else _UNCHANGED if unchanged else
             refusal and f"the tables were not rebuilt: {refusal}" or
             failed and f"the step '{failed.name}' failed: {failed.why}" or None)
         write_improve(imp, stage / "report", done.get("flights"),
-                      not_flown=done["not_flown"])
+                      not_flown=done["not_flown"], uncertain=done.get("uncertain"))
     if done.get("flights") is not None:
         say(done["flights"].lines())
+    if done.get("uncertain") is not None:
+        say(done["uncertain"].lines(str(out_dir / "tables" / f"{new.name}.h5")))
     say([f"{out_dir}: {new.name}.toml ({', '.join(imp.applied) or 'nothing'} applied), "
          "report/" + (", tables/" if "build" in done else "")
          + (f"; tables not rebuilt: {refusal}" if refusal else
@@ -270,6 +292,37 @@ def _rebuild_and_fly(cfg, old_table, old_path, new, stage, out_dir, duration, jo
         with reporter.bar("fly old and new tables", 2 * N_FLIGHTS, "flight") as bar:
             done["flights"] = fly_old_new(cfg, old_table, new, new_table, duration=duration,
                                           progress=bar.update, meta=meta)
+    if step.failure is not None:
+        done["failed"] = step.failure
+
+
+def last_fit(imp: Improvement) -> tuple[int, dict] | None:
+    """The round and the diagnosis report (``diagnose.json``'s data) of the last fit an
+    improvement applied, or None: the box the rebuilt table is checked over."""
+    fits = [(k, r.diagnosis) for k, r in enumerate(imp.rounds)
+            if r.diagnosis is not None and r.diagnosis.applied]
+    return (fits[-1][0], fits[-1][1].to_json()) if fits else None
+
+
+def _check_uncertain(imp, stage, name, samples, reporter, done) -> None:
+    """The step :data:`_UNCERTAIN`: the rebuilt table's loops over the last applied fit's
+    95 % box into ``done["uncertain"]`` (its failure into ``done["failed"]``, the tables
+    and flights kept). Its other applied fits stay at their estimates, as the table has
+    them."""
+    from ..schedule.tables import load_table
+    from ..sim.plan import report_focus
+    from ..sim.uncertain import SAMPLES, uncertain_loops
+
+    samples = SAMPLES if samples is None else samples
+    with _step(_UNCERTAIN) as step:
+        k, report = last_fit(imp)
+        source = f"round {k}'s diagnosis"
+        table = load_table(stage / "tables" / f"{name}.h5")
+        _, params, _ = report_focus(report, source)
+        with reporter.bar(f"check {name} --uncertain", 1 + 2 ** len(params) + samples,
+                          "plant") as bar:
+            done["uncertain"] = uncertain_loops(table, report, samples=samples,
+                                                source=source, progress=bar.update)
     if step.failure is not None:
         done["failed"] = step.failure
 

@@ -74,6 +74,13 @@ def test_the_command_writes_config_tables_with_the_same_symbols_and_the_report(t
         res.output
     md = (tmp_path / "imp" / "report" / "improve.md").read_text()
     assert "## The standard flights, old table against new" in md and "| **all** |" in md
+    # the rebuilt table over the fit's 95 % box, printed and in the report (issue 56)
+    u = data["uncertain"]
+    assert u["focus"] == "thrust_momentum + motor_lag" and u["stable"]
+    assert u["kinds"].count("corner") == 2 ** len(u["params"]) and 0 < u["worst"][
+        "multiplier"] < 1
+    assert "imp/tables/small.h5: the table's loops on " in res.output
+    assert "## The new table under the fit's uncertainty" in md and "PASS" in md
 
 
 @pytest.mark.slow
@@ -85,6 +92,7 @@ def test_no_build_says_the_flights_were_not_flown(tmp_path, monkeypatch):
     assert not (tmp_path / "imp" / "tables").exists() and "flights on" not in res.output
     data = json.loads((tmp_path / "imp" / "report" / "improve.json").read_text())
     assert data["flights"] is None and data["flights_not_flown"] == "--no-build"
+    assert data["uncertain"] is None and "plants of the diagnosis" not in res.output
     assert "Not flown: --no-build." in (tmp_path / "imp" / "report" / "improve.md").read_text()
 
 

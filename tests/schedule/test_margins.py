@@ -458,3 +458,26 @@ def test_check_uncertain_flies_the_tables_gains_over_the_fits_box(small_table, t
     assert last.startswith("  FAIL: motor_lag.tau at 0.13 makes the loop unstable "
                            "(multiplier "), last
     assert "skipped: corner -0.07: must be in" in r.output
+
+
+def test_check_uncertain_holds_a_parameter_the_fit_did_not_identify(small_table):
+    """A fit's parameter without a finite 95 % interval (the diagnosis does not write its
+    estimate: the config keeps its own value) is held at the table config's value in
+    every plant, not at its estimate nor at infinite corners, and the check says so;
+    the identified one spans its box (2 corners, not 4)."""
+    from gainsched.schedule.tables import load_table
+    from gainsched.sim.uncertain import uncertain_loops
+
+    report = {"accepted": "drag", "ranking": ["drag"], "candidates": {"drag": {
+        "params": {"mu1": {"estimate": 0.18, "ci95": 0.01, "unit": ""},
+                   "mu2": {"estimate": 0.5, "ci95": float("inf"), "unit": ""}},
+        "heldout_rms_reduction": 0.8}}}
+    u = uncertain_loops(load_table(small_table), report, samples=1)
+    assert u.held == ("mu2",) and u.kinds == ("estimate", "corner", "corner", "sample")
+    np.testing.assert_array_equal(u.plants[:, 1], 0.0025)  # the config's mu2, not 0.5
+    np.testing.assert_allclose(u.plants[:3, 0], [0.18, 0.17, 0.19])
+    assert u.stable and np.isfinite(u.rho[np.isfinite(u.rho)]).all()
+    text = "\n".join(u.lines("t.h5"))
+    assert "(drag: mu1 0.18 +- 0.01; mu2 0.0025 held;" in text
+    assert "not identified by the fit (no finite 95 % interval): mu2" in text
+    assert u.to_json()["held"] == ["mu2"]
