@@ -40,6 +40,7 @@ class _Brackets:
         n = f0.size
         self.a, self.fa = np.zeros(n), f0.astype(float).copy()
         self.b, self.fb = np.full(n, np.inf), np.full(n, np.nan)
+        self.pb = np.full(n, np.nan)  # the arg of the largest multiplier at b
         # Illinois: the end kept last (-1: b, +1: a) and the weights on the ends' values
         self.side, self.wa, self.wb = np.zeros(n), np.ones(n), np.ones(n)
         self.f0 = f0.astype(float).copy()  # log rho at p = 0
@@ -56,7 +57,7 @@ class _Brackets:
         new = ~left & (P < self.b[idx])
         up = idx[new]
         self.b2[up], self.fb2[up] = self.b[up], self.fb[up]
-        self.b[up], self.fb[up] = P[new], f[new]
+        self.b[up], self.fb[up], self.pb[up] = P[new], f[new], S[new, 0].imag
         second = ~left & ~new & (P < self.b2[idx])
         self.b2[idx[second]], self.fb2[idx[second]] = P[second], f[second]
         return left
@@ -124,7 +125,7 @@ def _refine(spectra, br, todo, xtol, size):
         br.side[todo] = np.where(left, -1, 1)
 
 
-def first_crossings(spectra, hi, s0, xtol, size, surrogate=None, guess=None):
+def first_crossings(spectra, hi, s0, xtol, size, surrogate=None, guess=None, phases=False):
     """The first p in [0, hi] where the loop of ``spectra(pair, p)`` is unstable, searched
     from 0, for every (loop, margin) pair of ``hi`` (b, J) at once: inf where none, NaN
     where the loop is unstable at p = 0 (``s0`` (b, k), its log multipliers there).
@@ -143,7 +144,10 @@ def first_crossings(spectra, hi, s0, xtol, size, surrogate=None, guess=None):
 
     A ``guess`` (b, J) of each crossing (NaN: none) scans at :data:`_AROUND` times it
     first, then at the range's end: the bracket starts tight around a good guess (the
-    level circle's delay margin for the tilted circles of its speed)."""
+    level circle's delay margin for the tilted circles of its speed).
+
+    ``phases``: also the arg of the crossing multiplier (b, J), rad in (-pi, pi] (the
+    largest multiplier at the bracket's unstable end; NaN where no crossing)."""
     hi = np.asarray(hi, float)
     nb, J = hi.shape
     h, S0 = hi.reshape(-1), np.repeat(s0, J, axis=0)
@@ -183,4 +187,6 @@ def first_crossings(spectra, hi, s0, xtol, size, surrogate=None, guess=None):
             _refine(spectra, br, again[np.isfinite(br.b[again])], xtol, size)
     out = np.where(np.isfinite(br.b), 0.5 * (br.a + br.b), np.inf)
     out[f0 >= 0.0] = np.nan
+    if phases:
+        return out.reshape(nb, J), np.where(np.isfinite(out), br.pb, np.nan).reshape(nb, J)
     return out.reshape(nb, J)

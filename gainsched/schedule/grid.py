@@ -144,6 +144,7 @@ class _Circles:
     gain_margin: np.ndarray
     input_margin: np.ndarray
     delay_margin: np.ndarray
+    crossover: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -222,6 +223,10 @@ class CircleSolution(_Circles):
     delay_margin : ndarray, shape (n_a,)
         The extra delay on the commands that puts a multiplier on the unit circle, s
         (inf: beyond :data:`~gainsched.schedule.margins.TAU_MAX_S`); NaN as above.
+    crossover : ndarray, shape (n_a,)
+        The frequency of that multiplier, the loop's crossover, rad/s
+        (:func:`~gainsched.schedule.margins.crossover_frequency`; a tilted circle's the
+        alias nearest its level circle's); NaN where none or as above.
     """
 
     @classmethod
@@ -243,7 +248,7 @@ class CircleSolution(_Circles):
                    np.zeros(n_a, dtype=np.int32), np.zeros(n_a, dtype=np.int32), nan(n_a),
                    steps, dt, np.zeros((n_a, 2, 2 * HARMONICS + 1)), nan(n_a, MODE_COUNT),
                    nan(n_a, MODE_COUNT), nan(n_a, MODE_COUNT), nan(n_a, MODE_COUNT, n),
-                   nan(n_a), nan(n_a, 2), nan(n_a, N_INPUT, 2), nan(n_a))
+                   nan(n_a), nan(n_a, 2), nan(n_a, N_INPUT, 2), nan(n_a), nan(n_a))
 
 
 def _sample_steps(N, n_xi):
@@ -414,7 +419,7 @@ def _fill_nominals(out: CircleSolution, model, speed, tilts) -> np.ndarray:
 def _put_margins(out: CircleSolution, idx, lm) -> None:
     out.gain_margin[idx] = np.stack([lm.gain_down, lm.gain_up], axis=-1)
     out.input_margin[idx] = np.stack([lm.input_down, lm.input_up], axis=-1)
-    out.delay_margin[idx] = lm.delay
+    out.delay_margin[idx], out.crossover[idx] = lm.delay, lm.crossover
 
 
 def _put_modes(out: CircleSolution, idx, m) -> None:
@@ -448,6 +453,7 @@ def _fill_periodic(out: CircleSolution, ok, model, config, speed, tilts, Qx, kee
     # circles' search: they lie within a few percent of it on the paper grid
     level = np.flatnonzero((tilts == 0.0) & np.isfinite(out.delay_margin))
     guess = float(out.delay_margin[level[0]]) if level.size else None
+    w0 = float(out.crossover[level[0]]) if level.size else None  # picks the alias
     for c in range(0, ok.size, TILT_BATCH):
         idx = ok[c : c + TILT_BATCH]
         Ad, Bd, M, err = discrete_system(model, speed, tilts[idx], N, dt)
@@ -466,7 +472,8 @@ def _fill_periodic(out: CircleSolution, ok, model, config, speed, tilts, Qx, kee
         if margins:  # the real loop's: the model's A_k, B_k (not the scaled ones)
             _put_margins(out, idx, loop_margins(Ad, Bd, sol.K, dt, xtol=MARGIN_XTOL,
                                                 delay_xtol=MARGIN_DELAY_XTOL,
-                                                block=SURROGATE_BLOCK, delay_guess=guess))
+                                                block=SURROGATE_BLOCK, delay_guess=guess,
+                                                crossover_guess=w0))
         out.K[idx] = _sample(Ks, lo, hi, w)
         out.S[idx] = _sample(Ss, lo, hi, w)
         out.spectral_radius[idx] = spectral_radius(Phi)
@@ -530,6 +537,8 @@ class GridResult(_Circles):
         Those of each motor alone.
     delay_margin : ndarray, shape (n_a, n_v)
         The delay margin per circle, s.
+    crossover : ndarray, shape (n_a, n_v)
+        The crossover per circle, rad/s.
     level_invariant : bool
         Tilt 0 was solved by the DARE, one gain per speed independent of the azimuth
         (:func:`level_circle_invariant`); False when an effect changes with the azimuth

@@ -41,7 +41,7 @@ from ..errors import GainschedError
 from .crossings import first_crossings
 
 __all__ = ["loop_log_rho", "monodromy_with", "spectral_radius", "gain_margins", "delay_margin",
-           "loop_margins", "LoopMargins", "factor_db", "worst_margins", "worst_text", "worst_lines",
+           "loop_margins", "LoopMargins", "crossover_frequency",
            "G_MAX", "TAU_MAX_S", "XTOL", "MARGIN_XTOL", "MARGIN_DELAY_XTOL",
            "SURROGATE_BLOCK"]
 
@@ -314,8 +314,9 @@ def _gain_crossings(Ad, Bd, K, masks, sign, g_max, s0, xtol, block):
 
 
 def _delay_crossings(Ad, Bd, K, hi_steps, s0, xtol, guess_steps=None):
-    """The first crossing of the delay margin, samples: (b,); ``guess_steps`` (b,) of it
-    (NaN: none) start the scan around it."""
+    """The first crossing of the delay margin, samples, and the arg of the multiplier that
+    crosses, rad: (b,) each; ``guess_steps`` (b,) of it (NaN: none) start the scan
+    around it."""
     def spectra(pair, P):
         return _delay_spectra(Ad, Bd, K, pair, P)
 
@@ -323,7 +324,61 @@ def _delay_crossings(Ad, Bd, K, hi_steps, s0, xtol, guess_steps=None):
         return np.maximum(P, 1.0)
 
     guess = None if guess_steps is None else np.asarray(guess_steps, float)[:, None]
-    return first_crossings(spectra, hi_steps[:, None], s0, xtol, size, guess=guess)[:, 0]
+    steps, phase = first_crossings(spectra, hi_steps[:, None], s0, xtol, size, guess=guess,
+                                   phases=True)
+    return steps[:, 0], phase[:, 0]
+
+
+def crossover_frequency(phase, N: int, h, guess=None):
+    """The frequency of the multiplier ``exp(i phase)`` that crosses the unit circle at the
+    delay margin: the loop's crossover, rad/s.
+
+    A time-invariant loop (``N = 1``) has it exactly, ``|phase| / h``. A periodic loop's
+    Floquet exponent is defined up to ``2 pi / T`` (T = N h, the period) and, its
+    multipliers coming in conjugate pairs, up to its sign: the aliases are ``|+-phase + 2
+    pi k| / T``, neighbours ``min(2 |phase|, 2 pi - 2 |phase|) / T`` or more apart. Its
+    crossover is the alias nearest ``guess`` (the build's: its level circle's,
+    time-invariant, of the same speed: the mode continued from the level circle), NaN
+    without one.
+
+    Parameters
+    ----------
+    phase : ndarray, shape (b,)
+        The crossing multiplier's arg, rad (NaN: no crossing).
+    N : int
+        Steps per period.
+    h : float or ndarray, shape (b,)
+        The step, s.
+    guess : float or ndarray, shape (b,), optional
+        A guess of each crossover, rad/s.
+
+    Returns
+    -------
+    ndarray, shape (b,)
+        rad/s; NaN where no crossing, none could be chosen, or the multiplier is real at
+        zero frequency (no crossover: the phase margin is undefined).
+
+    Examples
+    --------
+    A loop of 100 steps of 2 ms whose multiplier crosses at arg 1 rad, near 60 rad/s: the
+    alias 1 + 2 pi 3 rad over the period of 0.2 s, 99.2 rad/s, is not the one; 1 + 2 pi 2:
+
+    >>> w = gs.crossover_frequency(np.array([1.0]), 100, 0.002, guess=70.0)
+    >>> np.round(w, 2).tolist(), round((1 + 4 * np.pi) / 0.2, 2)
+    ([67.83], 67.83)
+    """
+    phase = np.asarray(phase, float)
+    if N == 1:
+        w = np.abs(phase) / h
+    else:
+        T = N * np.asarray(h, float)
+        g = np.full(phase.shape, np.nan) if guess is None else np.asarray(guess, float) * T
+        cands = [np.abs(sgn * phase + 2 * np.pi * np.round((g - sgn * phase) / (2 * np.pi)))
+                 for sgn in (1.0, -1.0)]  # either of the conjugate pair
+        with np.errstate(invalid="ignore"):
+            w = np.where(np.abs(cands[0] - g) <= np.abs(cands[1] - g), *cands) / T
+    with np.errstate(invalid="ignore"):
+        return np.where(w > 1e-9, w, np.nan)
 
 
 def _flat(Ad, Bd, K):
@@ -420,7 +475,7 @@ def delay_margin(Ad, Bd, K, h, *, tau_max: float = TAU_MAX_S, xtol: float = XTOL
     """
     shape, (Ad, Bd, K) = _flat(Ad, Bd, K)
     h = np.broadcast_to(np.asarray(h, float), shape).reshape(-1)
-    steps = _delay_crossings(Ad, Bd, K, tau_max / h, _nominal(Ad, Bd, K), xtol)
+    steps, _ = _delay_crossings(Ad, Bd, K, tau_max / h, _nominal(Ad, Bd, K), xtol)
     return (steps * h).reshape(shape)
 
 
@@ -439,6 +494,9 @@ class LoopMargins:
         The same for each input alone (the others at 1).
     delay : ndarray, shape (*b,)
         Extra delay on the commands, s (inf: stable up to :data:`TAU_MAX_S`).
+    crossover : ndarray, shape (*b,), or None
+        The frequency of the multiplier that crosses at the delay margin, rad/s
+        (:func:`crossover_frequency`; NaN where none); None: not computed.
     """
 
     gain_down: np.ndarray
@@ -446,16 +504,24 @@ class LoopMargins:
     input_down: np.ndarray
     input_up: np.ndarray
     delay: np.ndarray
+    crossover: np.ndarray | None = None
+
+    @property
+    def phase(self) -> np.ndarray | None:
+        """The phase margin the delay margin implies at the crossover, ``crossover *
+        delay``, rad (NaN where no crossover; None without crossovers)."""
+        return None if self.crossover is None else self.crossover * self.delay
 
     def at(self, *index) -> LoopMargins:
         """The margins of one loop (or a slice): every array indexed by ``index``."""
-        return LoopMargins(*(getattr(self, f.name)[index] for f in fields(self)))
+        return LoopMargins(*(None if getattr(self, f.name) is None else
+                             getattr(self, f.name)[index] for f in fields(self)))
 
 
 
 def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX_S,
                  xtol: float = XTOL, delay_xtol: float | None = None, block: int = 1,
-                 delay_guess: float | None = None) -> LoopMargins:
+                 delay_guess: float | None = None, crossover_guess=None) -> LoopMargins:
     """Every margin of periodic closed loops at once: the gain margins of all inputs
     together and of each alone, and the delay margin (module docstring).
 
@@ -481,6 +547,9 @@ def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX
         A guess of the delay margins, s (the level circle's for the tilted circles of
         its speed): the scan starts around it; the first crossing is still searched
         from 0.
+    crossover_guess : float or ndarray, shape (*b,), optional
+        A guess of the crossover, rad/s, which picks a periodic loop's
+        (:func:`crossover_frequency`; the level circle's for the tilted ones).
 
     Returns
     -------
@@ -504,127 +573,11 @@ def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX
     g = np.where(sign < 0, np.where(np.isinf(p), 0.0, 1.0 - p), 1.0 + p)
     h = np.broadcast_to(np.asarray(h, float), shape).reshape(-1)
     guess = None if delay_guess is None else np.full(h.shape, delay_guess) / h
-    delay = _delay_crossings(Ad, Bd, K, tau_max / h, s0,
-                             xtol if delay_xtol is None else delay_xtol, guess) * h
+    steps, phase = _delay_crossings(Ad, Bd, K, tau_max / h, s0,
+                                    xtol if delay_xtol is None else delay_xtol, guess)
+    w = crossover_frequency(phase, Ad.shape[-3], h, None if crossover_guess is None else
+                            np.broadcast_to(crossover_guess, shape).reshape(-1))
     per = g[:, 2:].reshape(-1, m, 2)
     return LoopMargins(g[:, 0].reshape(shape), g[:, 1].reshape(shape),
                        per[..., 0].reshape(shape + (m,)), per[..., 1].reshape(shape + (m,)),
-                       delay.reshape(shape))
-
-
-def factor_db(factor):
-    """A gain factor in dB, ``20 log10``; -inf for 0 (no lower margin), inf for inf.
-
-    Parameters
-    ----------
-    factor : array_like
-        Factors on the commands (``LoopMargins.gain_down``...).
-
-    Returns
-    -------
-    ndarray
-    """
-    with np.errstate(divide="ignore"):
-        return 20.0 * np.log10(np.asarray(factor, float))
-
-
-def worst_margins(lm: LoopMargins, speeds, tilts) -> dict:
-    """The worst margins of a grid of loops and where they are, as JSON data.
-
-    Parameters
-    ----------
-    lm : LoopMargins
-        Margins over (tilt, speed): arrays (n_a, n_v), per input (n_a, n_v, m).
-    speeds : ndarray, shape (n_v,)
-        The speed axis, m/s.
-    tilts : ndarray, shape (n_a,)
-        The tilt axis, rad.
-
-    Returns
-    -------
-    dict
-        ``circles`` (loops with margins) and, for ``gain_down``, ``gain_up``,
-        ``input_down``, ``input_up`` (factors) and ``delay`` (s), the worst loop's
-        ``value``, ``db`` (factors), ``speed_mps``, ``tilt_deg`` and, per input,
-        ``input`` (its index). The worst is the value nearest to 1 (factors) or the
-        smallest delay. ``value`` None: no crossing anywhere in the range searched (down:
-        stable with the feedback off everywhere; up: beyond :data:`G_MAX`; delay: beyond
-        :data:`TAU_MAX_S`); ``db`` None with it. An empty dict entry where no loop has
-        margins.
-
-    Examples
-    --------
-    >>> lm = gs.LoopMargins(np.array([[0.2, 0.5]]), np.array([[np.inf, 4.0]]),
-    ...                     np.zeros((1, 2, 1)), np.full((1, 2, 1), np.inf),
-    ...                     np.array([[0.02, 0.01]]))
-    >>> w = gs.worst_margins(lm, np.array([5.0, 10.0]), np.array([0.0]))
-    >>> w["gain_down"]["value"], round(w["gain_down"]["db"], 2), w["gain_down"]["speed_mps"]
-    (0.5, -6.02, 10.0)
-    >>> w["gain_up"]["value"], w["input_down"]["value"], w["delay"]["value"]
-    (4.0, None, 0.01)
-    """
-    ok = np.isfinite(lm.gain_down)
-    out = {"circles": int(ok.sum())}
-    for key, worse_is_larger, absent in (("gain_down", True, 0.0), ("gain_up", False, np.inf),
-                                         ("input_down", True, 0.0), ("input_up", False, np.inf),
-                                         ("delay", False, np.inf)):
-        a = np.asarray(getattr(lm, key), float)
-        mask = ok if a.ndim == 2 else ok[..., None] & np.ones(a.shape, bool)
-        if not mask.any():
-            out[key] = {}
-            continue
-        v = np.where(mask, a, -np.inf if worse_is_larger else np.inf)
-        idx = np.unravel_index(np.argmax(v) if worse_is_larger else np.argmin(v), a.shape)
-        x = float(a[idx])
-        if x == absent:
-            out[key] = {"value": None} | ({} if key == "delay" else {"db": None})
-            continue
-        entry = {"value": x, "speed_mps": float(speeds[idx[1]]),
-                 "tilt_deg": float(np.rad2deg(tilts[idx[0]]))}
-        if key != "delay":
-            entry["db"] = float(factor_db(x))
-        if a.ndim == 3:
-            entry["input"] = int(idx[2])
-        out[key] = entry
-    return out
-
-
-def worst_text(entry: dict, what: str, none: str, unit: str = "dB") -> str:
-    """One worst margin of :func:`~gainsched.schedule.margins.worst_margins` as text."""
-    if not entry:
-        return f"{what} -"
-    if entry["value"] is None:
-        return f"{what} {none}"
-    where = [f"x{entry['value']:.3g}"] if unit == "dB" else []
-    if "input" in entry:
-        where.append(f"T{entry['input'] + 1}")
-    where.append(f"{entry['speed_mps']:g} m/s, tilt {entry['tilt_deg']:g} deg")
-    value = f"{entry['db']:+.1f} dB" if unit == "dB" else f"{1e3 * entry['value']:.2f} ms"
-    return f"{what} {value} ({'; '.join(where)})"
-
-
-def worst_lines(w: dict, title: str) -> list[str]:
-    """The worst margins of :func:`~gainsched.schedule.margins.worst_margins` as text: a
-    title line, then all motors, one motor alone and the delay.
-
-    Parameters
-    ----------
-    w : dict
-        ``worst_margins(...)``.
-    title : str
-        What they are the margins of.
-
-    Returns
-    -------
-    list of str
-    """
-    up = f"beyond +{20 * np.log10(G_MAX):.0f} dB"
-    return [f"{title}, worst over the {w['circles']} circles (docs/margins.md):",
-            "  all motors: " + worst_text(w["gain_down"], "down", "none (stable with the "
-                                           "feedback off)") + "; "
-            + worst_text(w["gain_up"], "up", up),
-            "  one motor alone: " + worst_text(w["input_down"], "down", "none (stable with "
-                                                "its feedback off)") + "; "
-            + worst_text(w["input_up"], "up", up),
-            "  " + worst_text(w["delay"], "extra delay", f"beyond {1e3 * TAU_MAX_S:g} ms",
-                               unit="ms")]
+                       (steps * h).reshape(shape), w.reshape(shape))

@@ -363,6 +363,8 @@ def _write_solution(parent, grid) -> None:
                 "the same for each motor alone, (tilt, speed, motor, [down, up])")
         create_dataset(cl, "delay_margin", grid.delay_margin, "s", "extra delay on the commands "
                 "where a multiplier reaches the unit circle (tilt, speed)")
+        create_dataset(cl, "crossover", grid.crossover, "rad/s", "the frequency of that "
+                "multiplier, the loop's crossover (NaN: none known), (tilt, speed)")
 
 
 def _write_reverse(r, config, model, grid) -> None:
@@ -667,8 +669,12 @@ def _margins(f, path, prefix, n_a, n_v) -> LoopMargins | None:
             raise InputError(path, f"{prefix}closed_loop/{key}", "missing, or its shape does "
                              f"not match the axes {want}")
         d[key] = np.asarray(v[()], dtype=float)
-    g, i = d["gain_margin"], d["input_gain_margin"]
-    return LoopMargins(g[..., 0], g[..., 1], i[..., 0], i[..., 1], d["delay_margin"])
+    g, i, w = d["gain_margin"], d["input_gain_margin"], f.get(f"{prefix}closed_loop/crossover")
+    if w is not None and w.shape != (n_a, n_v):
+        raise InputError(path, f"{prefix}closed_loop/crossover", f"its shape {w.shape} does "
+                         f"not match the axes {(n_a, n_v)}")
+    return LoopMargins(g[..., 0], g[..., 1], i[..., 0], i[..., 1], d["delay_margin"],
+                       None if w is None else np.asarray(w[()], dtype=float))
 
 
 def _table(axes, s, weights, d, attrs, source, grid_auto, reverse) -> Table:

@@ -35,7 +35,8 @@ from collections import Counter
 import numpy as np
 
 from .envelope import envelope_from_table, envelope_png
-from .margins import G_MAX, TAU_MAX_S, factor_db, worst_lines, worst_margins, worst_text
+from .margin_report import factor_db, worst_lines, worst_margins, worst_text
+from .margins import G_MAX, TAU_MAX_S
 from .modes import dominant_states
 
 __all__ = ["schedule_figures", "schedule_plots", "table_summary", "slowest_mode",
@@ -477,11 +478,13 @@ def _margins_summary(table) -> dict | None:
         return np.where(np.isnan(a), None, np.where(np.isinf(a), "inf", a.astype(object))
                         ).tolist()
 
-    return {"gain_down": grid(lm.gain_down), "gain_up": grid(lm.gain_up),
-            "input_down": grid(lm.input_down), "input_up": grid(lm.input_up),
-            "delay_s": grid(lm.delay), "search": {"gain_max": G_MAX,
-                                                        "delay_max_s": TAU_MAX_S},
-            "worst": worst_margins(lm, table.speed, table.tilt)}
+    out = {"gain_down": grid(lm.gain_down), "gain_up": grid(lm.gain_up),
+           "input_down": grid(lm.input_down), "input_up": grid(lm.input_up),
+           "delay_s": grid(lm.delay), "search": {"gain_max": G_MAX, "delay_max_s": TAU_MAX_S},
+           "worst": worst_margins(lm, table.speed, table.tilt)}
+    if lm.crossover is not None:
+        out |= {"crossover_rad_s": grid(lm.crossover), "phase_deg": grid(np.degrees(lm.phase))}
+    return out
 
 
 def _modes_summary(table) -> dict | None:
@@ -525,8 +528,10 @@ def table_summary(table, *, source: str = "") -> dict:
         ``worst_spectral_radius``; ``modes``; ``margins`` (None: not stored): the gain
         margins ``gain_down``, ``gain_up`` (n_a, n_v) and per motor ``input_down``,
         ``input_up`` (n_a, n_v, 4) as factors, ``delay_s`` (n_a, n_v), s (None where
-        infeasible, ``"inf"`` beyond the range searched), the ``search`` ranges and the
-        ``worst`` of each (:func:`~gainsched.schedule.margins.worst_margins`).
+        infeasible, ``"inf"`` beyond the range searched), ``crossover_rad_s`` and
+        ``phase_deg`` (n_a, n_v), the phase margin at the crossover (None where none, or
+        in a table that stores no crossovers: no keys), the ``search`` ranges and the
+        ``worst`` of each (:func:`~gainsched.schedule.margin_report.worst_margins`).
 
     See Also
     --------

@@ -33,6 +33,7 @@ from ..errors import InputError
 from ..model.reduced import Model
 from ..schedule.certificate import xi_linear
 from ..schedule.discrete import discrete_system
+from ..schedule.margin_report import worst_lines, worst_margins
 from ..schedule.margins import (
     MARGIN_DELAY_XTOL,
     MARGIN_XTOL,
@@ -40,8 +41,6 @@ from ..schedule.margins import (
     LoopMargins,
     loop_log_rho,
     loop_margins,
-    worst_lines,
-    worst_margins,
 )
 from ..schedule.trim import TrimError
 from .plan import focus_values, report_focus, truth_config

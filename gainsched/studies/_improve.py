@@ -146,22 +146,16 @@ def improve(config, logs, out_dir=None, *, rounds: int = 3, exclude=(), build: b
     old_table : Table or path-like, optional
         The table built from ``config`` that the old controller flies; default: as
         :func:`~gainsched.studies.table_for` finds it.
-    duration : float, default 3.0
-        Seconds per standard flight.
-    jobs : int, default -1
-        Parallel workers of the rebuild (-1: every core).
+    duration, jobs : float (default 3.0), int (default -1)
+        Seconds per standard flight; parallel workers of the rebuild (-1: every core).
     channel_map, trust, sensors
         As :func:`gainsched.diagnose` takes them.
     pose, pose_map, day
         A flight day, or a pose recorded apart, as :func:`~gainsched.studies.compare`
         takes them.
-    uncertain : bool, default True
-        Check the rebuilt table under the last applied fit's uncertainty: its loops on
-        the estimate, the corners of the fit's 95 % box and ``samples`` random plants,
-        their worst multiplier and margins (docs/margins.md).
-    samples : int, optional
-        The random plants of that check (default
-        :data:`~gainsched.sim.uncertain.SAMPLES`).
+    uncertain, samples : bool (default True), int (default 8)
+        Check the rebuilt table over the last applied fit's 95 % box with ``samples``
+        random plants besides the estimate and the corners (docs/margins.md).
     reporter : Reporter, optional
         Shows the fits', the build's and the flights' progress; default: nothing.
 
@@ -212,9 +206,8 @@ def improve(config, logs, out_dir=None, *, rounds: int = 3, exclude=(), build: b
     if out_dir is None:
         return Improved(imp, None, said=tuple(said))
     out_dir = Path(out_dir)
-    check = (samples,) if uncertain else None
     done = _publish(cfg, imp, out_dir, build, old_table, old_path, duration, jobs, reporter,
-                    say, check)
+                    say, (samples,) if uncertain else None)
     return Improved(imp, out_dir, done.get("build"), done.get("flights"), done["not_flown"],
                     done.get("refusal"), done.get("failed"), done.get("uncertain"),
                     tuple(said))

@@ -172,6 +172,49 @@ def test_a_good_guess_of_the_delay_margin_saves_evaluations(monkeypatch, paper_c
     assert sum(lanes) < none
 
 
+@pytest.mark.parametrize(("theta", "d"), [(0.2, 3), (0.05, 7), (0.4, 2)])
+@pytest.mark.parametrize("N", [1, 40])
+def test_the_phase_margin_of_an_lti_loop_is_its_frequency_responses(theta, d, N):
+    """A scalar loop ``x+ = a x - b k u_{k-d}`` built to cross at ``exp(i theta)`` with a
+    delay of exactly d samples: its crossover is where ``|L(exp(i w h))| = 1``, ``L(z) =
+    b k / (z - a)`` (brentq), its phase margin ``pi + arg L`` there, and the delay margin
+    times the crossover is that phase margin, to 1e-6; the same loop flown as a period of
+    N = 40 constant steps (its multiplier's arg N theta wrapped 1 to 3 turns) has the
+    same, its alias picked by a guess 1 % below or above (the paper's tilted circles lie
+    within 0.8 % of their level circle's)."""
+    h = 0.002
+    psi = np.pi - d * theta  # arg(exp(i theta) - a): the loop's phase at the crossover
+    bk = np.sin(theta) / np.sin(psi)
+    a = np.cos(theta) - bk * np.cos(psi)
+    w_ref = brentq(lambda w: abs(np.exp(1j * w * h) - a) - bk, 1e-9, 0.999 * np.pi / h)
+    pm_ref = np.pi - np.angle(np.exp(1j * w_ref * h) - a)
+    Ad, Bd, K = np.full((2, N, 1, 1), a), np.full((2, N, 1, 1), bk), np.ones((2, N, 1, 1))
+    guess = None if N == 1 else np.array([0.99, 1.01]) * theta / h  # below and above
+    lm = loop_margins(Ad, Bd, K, h, crossover_guess=guess)
+    np.testing.assert_allclose(lm.delay / h, d, rtol=1e-6)
+    np.testing.assert_allclose(lm.crossover, w_ref, rtol=1e-6)
+    np.testing.assert_allclose(lm.phase, pm_ref, rtol=1e-6)
+
+
+def test_a_periodic_loops_crossover_needs_a_guess_of_its_alias():
+    """A loop of N > 1 steps knows its crossing multiplier's frequency only up to 2 pi /
+    T: without a guess its crossover is unknown (NaN), not a wrong alias."""
+    Ad, Bd, K = np.full((1, 7, 1, 1), 1.27), np.full((1, 7, 1, 1), 0.35), np.ones((1, 7, 1, 1))
+    lm = loop_margins(Ad, Bd, K, 0.002)
+    assert np.isfinite(lm.delay[0]) and np.isnan(lm.crossover[0]) and np.isnan(lm.phase[0])
+
+
+def test_the_builds_tilted_circles_crossovers_are_near_their_level_circles(paper_config):
+    """The build picks a tilted circle's alias nearest its level circle's crossover: on
+    the paper's circles they lie well inside half an alias step of it (so the pick is
+    unambiguous), and the phase margins are those of an LQR loop (above 60 deg)."""
+    for v, tilts in ((3.0, [0.0, 20.0]), (15.0, [0.0, 20.0, 37.0])):
+        sol = solve_circle(paper_config, v, np.radians(tilts))
+        step = 2 * np.pi / (sol.steps * sol.dt)
+        assert np.all(np.abs(sol.crossover[1:] - sol.crossover[0]) < 0.25 * step)
+        assert np.all(np.degrees(sol.crossover * sol.delay_margin) > 60)
+
+
 def _periodic_loop(seed=1, b=3, N=40, n=11, m=4):
     """Random stable-ish periodic loops (b, N): A_k near I, small B_k, K_k."""
     rng = np.random.default_rng(seed)
@@ -333,9 +376,11 @@ def test_the_table_stores_the_builds_margins_and_serves_them():
     np.testing.assert_array_equal(lm.gain_down, grid.gain_margin[..., 0])
     np.testing.assert_array_equal(lm.input_up, grid.input_margin[..., 1])
     np.testing.assert_array_equal(lm.delay, grid.delay_margin)
+    np.testing.assert_array_equal(lm.crossover, grid.crossover)
     assert np.all(lm.delay[np.isfinite(grid.spectral_radius)] > 0)
     one = table.margins(9, 20)
     assert one.delay == grid.delay_margin[1, 1] and one.input_down.shape == (4,)
+    assert one.phase == grid.crossover[1, 1] * grid.delay_margin[1, 1]
     with pytest.raises(ValueError, match=r"speed = 7 is not on the grid: \[6\.0, 9\.0\]"):
         table.margins(7, 20)
     with h5py.File(io.BytesIO(data), "r+") as f:  # an edited margin

@@ -120,6 +120,7 @@ LAYOUT = {
     "closed_loop/gain_margin": ((2, 2, 2), "-"),
     "closed_loop/input_gain_margin": ((2, 2, 4, 2), "-"),
     "closed_loop/delay_margin": ((2, 2), "s"),
+    "closed_loop/crossover": ((2, 2), "rad/s"),
     "weights/Q": ((11, 11), None),
     "weights/R": ((4, 4), None),
     "firmware/vehicle": ((31,), "SI"),
