@@ -448,7 +448,8 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
         Extra facts for the report header (table path, hashes).
     table : Table, optional
         The table flown: its flight envelope (:mod:`gainsched.schedule.envelope`) goes
-        into the report as envelope.png and the circle counts.
+        into the report as envelope.png and the circle counts, and its worst stability
+        margins (``margins`` in report.json, :func:`gainsched.worst_margins`).
     """
     out_dir = Path(out_dir)
     exps = experiments(scenario_dir, quick=quick)
@@ -490,6 +491,10 @@ def run_paper(design, scheduler, out_dir, *, quick: bool = False, plant=None,
         env = envelope_from_table(table)
         write_atomic(out_dir / "envelope.png", envelope_png(env))
         info["envelope"] = env.counts()
+        if table.loop_margins is not None:  # the table's worst (docs/margins.md)
+            from ..schedule.margin_report import worst_margins
+
+            info["margins"] = worst_margins(table.loop_margins, table.speed, table.tilt)
     report = PaperReport(tuple(_rows(exps, results)), results, info)
     write_report(report, out_dir, exps)
     return report
@@ -656,6 +661,11 @@ def _md_envelope(m: dict) -> list[str]:
                   "runs a motor out of range the table's nominal has pitch and yaw offsets "
                   "(docs/conventions.md, \"Attitude offsets\").", "",
                   "![flight envelope](envelope.png)"]
+    if m.get("margins"):
+        from ..schedule.margin_report import worst_lines
+
+        lines += ["", "```", *worst_lines(m["margins"], "The table's stability margins"),
+                  "```"]
     return lines
 
 

@@ -281,6 +281,11 @@ def test_paper_quick_report(tmp_path, monkeypatch):
     assert set(rep["envelope"]) == {"feasible", "feasible with attitude offsets",
                                     "tether slack"}
     assert "## Flight envelope of the table" in md
+    # and its worst stability margins (issue 56), the table's own
+    lm = load_table(seeded).margins()
+    assert rep["margins"]["delay"]["value"] == float(np.nanmin(lm.delay))
+    assert rep["margins"]["phase"]["deg"] == pytest.approx(np.degrees(np.nanmin(lm.phase)))
+    assert "The table's stability margins, worst over the" in md
 
 
 def test_paper_bad_table_is_one_line(tmp_path):
