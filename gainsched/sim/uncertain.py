@@ -45,7 +45,7 @@ from ..schedule.margins import (
 from ..schedule.trim import TrimError
 from .plan import focus_values, report_focus, truth_config
 
-__all__ = ["Uncertainty", "uncertain_loops"]
+__all__ = ["Uncertainty", "uncertain_loops", "plant_count"]
 
 #: random plants drawn inside the box besides its corners and the estimate
 SAMPLES = 8
@@ -154,6 +154,13 @@ class Uncertainty:
                     ("parameter", "value", "multiplier"), self.culprit, strict=True)),
                 "margins": None if self.margins is None else worst_margins(
                     self.margins, self.speeds, self.tilts)}
+
+
+def plant_count(report: dict, samples: int, source: str = "report") -> int:
+    """The plants :func:`uncertain_loops` flies for ``report``: the estimate, a corner per
+    sign of each identified parameter, ``samples`` (a progress bar's total)."""
+    _, params, _ = report_focus(report, source)
+    return 1 + 2 ** sum(bool(np.isfinite(c)) for _, c, _ in params.values()) + samples
 
 
 def _box(params, samples: int, seed: int):

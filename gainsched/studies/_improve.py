@@ -303,16 +303,14 @@ def _check_uncertain(imp, stage, name, samples, reporter, done) -> None:
     and flights kept). Its other applied fits stay at their estimates, as the table has
     them."""
     from ..schedule.tables import load_table
-    from ..sim.plan import report_focus
-    from ..sim.uncertain import SAMPLES, uncertain_loops
+    from ..sim.uncertain import SAMPLES, plant_count, uncertain_loops
 
     samples = SAMPLES if samples is None else samples
     with _step(_UNCERTAIN) as step:
         k, report = last_fit(imp)
         source = f"round {k}'s diagnosis"
         table = load_table(stage / "tables" / f"{name}.h5")
-        _, params, _ = report_focus(report, source)
-        with reporter.bar(f"check {name} --uncertain", 1 + 2 ** len(params) + samples,
+        with reporter.bar(f"check {name} --uncertain", plant_count(report, samples, source),
                           "plant") as bar:
             done["uncertain"] = uncertain_loops(table, report, samples=samples,
                                                 source=source, progress=bar.update)

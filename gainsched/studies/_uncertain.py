@@ -80,18 +80,16 @@ def check_uncertain(table, report, *, samples: int | None = None, seed: int = 0,
     report: candidates: no fitted candidate in the report
     """
     from ..schedule.tables import load_table
-    from ..sim.plan import report_focus
-    from ..sim.uncertain import SAMPLES, uncertain_loops
+    from ..sim.uncertain import SAMPLES, plant_count, uncertain_loops
 
     samples = SAMPLES if samples is None else samples
     if samples < 0:
         raise InputError("command line", "--samples", f"{samples}: must be >= 0")
     t = load_table(table)
     data, source = (report, "report") if isinstance(report, dict) else read_report(report)
-    _, params, _ = report_focus(data, str(source))
+    total = plant_count(data, samples, str(source))  # its checks first, before any work
     said, say = teller(reporter)
-    with reporter.bar(f"check {t.name} --uncertain", 1 + 2 ** len(params) + samples,
-                      "plant") as bar:
+    with reporter.bar(f"check {t.name} --uncertain", total, "plant") as bar:
         u = uncertain_loops(t, data, samples=samples, seed=seed, source=str(source),
                             progress=bar.update)
     say(u.lines(str(table)))

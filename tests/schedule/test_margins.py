@@ -511,7 +511,7 @@ def test_check_uncertain_holds_a_parameter_the_fit_did_not_identify(small_table)
     every plant, not at its estimate nor at infinite corners, and the check says so;
     the identified one spans its box (2 corners, not 4)."""
     from gainsched.schedule.tables import load_table
-    from gainsched.sim.uncertain import uncertain_loops
+    from gainsched.sim.uncertain import plant_count, uncertain_loops
 
     report = {"accepted": "drag", "ranking": ["drag"], "candidates": {"drag": {
         "params": {"mu1": {"estimate": 0.18, "ci95": 0.01, "unit": ""},
@@ -519,6 +519,7 @@ def test_check_uncertain_holds_a_parameter_the_fit_did_not_identify(small_table)
         "heldout_rms_reduction": 0.8}}}
     u = uncertain_loops(load_table(small_table), report, samples=1)
     assert u.held == ("mu2",) and u.kinds == ("estimate", "corner", "corner", "sample")
+    assert plant_count(report, 1) == len(u.kinds)  # the progress bar's total
     np.testing.assert_array_equal(u.plants[:, 1], 0.0025)  # the config's mu2, not 0.5
     np.testing.assert_allclose(u.plants[:3, 0], [0.18, 0.17, 0.19])
     assert u.stable and np.isfinite(u.rho[np.isfinite(u.rho)]).all()
