@@ -131,9 +131,9 @@ def first_crossings(spectra, hi, s0, xtol, size, surrogate=None, guess=None, pha
     where the loop is unstable at p = 0 (``s0`` (b, k), its log multipliers there).
 
     ``spectra(pair, P)``: flat pair indices and parameters (L,) to the log multipliers
-    (L, k) (:func:`_log_spectrum`). The scan :data:`_SCAN` brackets the first crossing;
-    Illinois false position refines it until the bracket is ``xtol * size(pair, p)``
-    wide (the margin's value at p).
+    (L, k), largest first (``_log_spectrum`` of :mod:`~gainsched.schedule.margins`: k =
+    1). The scan :data:`_SCAN` brackets the first crossing; Illinois false position
+    refines it until the bracket is ``xtol * size(pair, p)`` wide (the margin's value at p).
 
     With a ``surrogate`` (a cheaper ``spectra``, :data:`_SURROGATE_ERROR` from the real
     one) the scan and a first refinement run on it; the real loop then checks a bracket

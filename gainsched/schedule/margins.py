@@ -97,22 +97,16 @@ def _rescaled(M, e):
     return np.ldexp(M, -p[..., None, None]), e + p
 
 
-#: the multipliers kept per evaluation to follow the crossing one (largest first)
-_TRACKED = 8
-
-
 def _log_spectrum(M, e):
-    """The ``_TRACKED`` largest multipliers of ``M 2^e`` as complex logs, ``log|lambda| + i
-    arg lambda``, largest first (L, _TRACKED); -inf for zeros and padding."""
+    """The largest multiplier of ``M 2^e`` as a complex log, ``log|lambda| + i arg
+    lambda`` (L, 1) (the first of equals; -inf for a nilpotent product): its real part
+    is what the searches bracket, its arg the crossing's frequency."""
     lam = np.linalg.eigvals(M)
     with np.errstate(divide="ignore"):
         out = np.log(lam.astype(complex)) + (e * np.log(2.0))[..., None]
     out = np.where(lam == 0, complex(-np.inf, 0.0), out)
-    order = np.argsort(-out.real, axis=-1, kind="stable")[..., :_TRACKED]
-    out = np.take_along_axis(out, order, -1)
-    pad = _TRACKED - out.shape[-1]
-    return np.pad(out, [(0, 0)] * (out.ndim - 1) + [(0, pad)],
-                  constant_values=complex(-np.inf, 0.0)) if pad > 0 else out
+    key = np.where(np.isnan(out.real), -np.inf, out.real)  # a NaN last, as a sort puts it
+    return np.take_along_axis(out, np.argmax(key, axis=-1)[..., None], -1)
 
 
 def _log_rho(M, e):
@@ -154,9 +148,9 @@ def _gain_loops(Ad, Bd, K, circle, G, block=1):
 
 
 def _gain_spectra(Ad, Bd, K, circle, G, block=1):
-    """The log multipliers (:func:`_log_spectrum`) of the lanes: loop ``circle`` (L,) with
-    the factors G (L, m); ``block`` > 1: the scan's surrogate, the period in blocks of
-    that many steps, each the power of its middle step's loop."""
+    """The largest log multiplier (:func:`_log_spectrum`) of the lanes: loop ``circle``
+    (L,) with the factors G (L, m); ``block`` > 1: the scan's surrogate, the period in
+    blocks of that many steps, each the power of its middle step's loop."""
     _, N, n, m = Bd.shape
     L = circle.size
     lib = _lib()
@@ -254,8 +248,8 @@ def _delay_loops(Ad, Bd, K, circle, tau):
 
 
 def _delay_spectra(Ad, Bd, K, circle, tau):
-    """The log multipliers (:func:`_log_spectrum`) of the lanes: loop ``circle`` (L,) with
-    the delays tau (L,) in samples.
+    """The largest log multiplier (:func:`_log_spectrum`) of the lanes: loop ``circle``
+    (L,) with the delays tau (L,) in samples.
 
     The delayed loop's monodromy has n + D m rows, but over a period its fast modes have
     decayed: it is numerically of low rank. It is applied to :data:`_RANK` columns (a
@@ -288,7 +282,7 @@ def _gain_kinds(m):
 
 
 def _nominal(Ad, Bd, K):
-    """The log multipliers of each loop as it is (b, :data:`_TRACKED`)."""
+    """The largest log multiplier of each loop as it is (b, 1)."""
     b, m = Ad.shape[0], Bd.shape[-1]
     return _gain_spectra(Ad, Bd, K, np.arange(b), np.ones((b, m)))
 
