@@ -16,6 +16,7 @@ import numpy as np
 from .. import __version__
 from ..constants import MAX_JOBS, MAX_SEED
 from ..errors import GainschedWarning, InputError
+from ..native import shm
 from ..studies._report import Reporter
 
 
@@ -283,6 +284,10 @@ def cli(quiet):
 
     Units: SI everywhere (m, s, N, rad/s) except tilts, which are given in degrees.
     """
+    # every command, before its work: what builds killed with their whole process group
+    # left in /dev/shm goes, also when this run makes no worker pool (one job, a cached
+    # table, another command); gainsched.native.shm
+    shm.sweep()
 
 
 def _speed_option(fn):

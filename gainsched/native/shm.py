@@ -10,8 +10,9 @@ kills the tracker with it, and nothing removes them again until a reboot.
 
 So a process marks itself before it makes a pool: ``/dev/shm/gainsched-run-PID.json``
 holds its pid, the start time of that pid (``/proc/PID/stat``: a later process that
-reuses the pid is not it), its pid namespace and the boot. Every later run, before
-its own pool starts, looks at the marks: a mark whose process is gone (no process
+reuses the pid is not it), its pid namespace and the boot. Every later run (every
+``gainsched`` command as it starts, whether it makes a pool or not, and a library call
+before its own pool starts) looks at the marks: a mark whose process is gone (no process
 with that pid and start time in this namespace and boot) has its entries removed,
 then the mark. A mark of a live process (a concurrent build) is left alone, and so
 is a mark of another pid namespace sharing this ``/dev/shm`` (its processes cannot
