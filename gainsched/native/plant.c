@@ -103,6 +103,9 @@ int gs_maximal_eval(const double *p, const double *x, const double *u, double al
                     double gamma, double *x_dot, double *tension);
 int gs_maximal_rk4(const double *p, const double *x, const double *u, double alpha,
                    double gamma, double dt, int substeps, double *x_next, double *tension);
+/* exported (ctypes, gainsched/model/momentum.py): the model's induced velocities */
+int gs_induced_velocity(ptrdiff_t n, const double *vh, const double *vz, const double *vxy2,
+                        double *v);
 
 int gs_plant_layout(void) { return GS_PLANT_LAYOUT; }
 
@@ -240,6 +243,27 @@ static double induced_velocity(double vh, double vz, double vxy2)
         v = vn;
     }
     return v;
+}
+
+/*
+ * gs_induced_velocity: the induced velocity of n rotors (induced_velocity above), the one
+ * implementation of the model (gainsched.model.momentum.induced_velocity, real inputs)
+ * and of this plant. NaN in any input gives NaN.
+ * @param n     rotors (samples), >= 0
+ * @param vh    (n) hover induced velocity, m/s, > 0
+ * @param vz    (n) airspeed along the rotor axis, m/s (positive: the air from above)
+ * @param vxy2  (n) squared in-plane airspeed, m^2/s^2, >= 0
+ * @param v     (n) out: the induced velocity, m/s
+ * @return 0
+ */
+int gs_induced_velocity(ptrdiff_t n, const double *vh, const double *vz, const double *vxy2,
+                        double *v)
+{
+    ptrdiff_t i;
+    for (i = 0; i < n; ++i) {
+        v[i] = induced_velocity(vh[i], vz[i], vxy2[i]);
+    }
+    return 0;
 }
 
 /* T / T_h of ThrustMomentum for a rotor at thrust T (N) meeting the air at v_B (m/s, in

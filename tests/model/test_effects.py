@@ -88,11 +88,15 @@ def test_momentum_induced_velocity_is_the_largest_root_everywhere():
 
 
 
-def test_momentum_plain_newton_equals_the_safeguarded_iteration():
-    """Issue 39: the plain Newton steps from Glauert's estimate that most samples take give
-    the root of the safeguarded Newton-bisection (the induced velocity's only iteration
-    before) to 1e-13 relative, over a build's range of thrust and airspeed (hover induced
-    velocity 1-8 m/s, axial airspeed -1.5..3 vh, in-plane 0-16 m/s)."""
+@pytest.mark.parametrize("native", ["1", "0"], ids=["compiled", "numpy"])
+def test_momentum_plain_newton_equals_the_safeguarded_iteration(native, monkeypatch):
+    """Issue 39: the plain Newton steps from Glauert's estimate that most samples take (the
+    numpy fallback), and the compiled plant's safeguarded Newton per sample (issue 57: the
+    model's default, the simulator's plant's own), give the root of the numpy safeguarded
+    Newton-bisection (the induced velocity's only iteration before) to 1e-13 relative,
+    over a build's range of thrust and airspeed (hover induced velocity 1-8 m/s, axial
+    airspeed -1.5..3 vh, in-plane 0-16 m/s)."""
+    monkeypatch.setenv("GAINSCHED_NATIVE", native)
     rng = np.random.default_rng(39)
     n = 20000
     vh = rng.uniform(1.0, 8.0, n)
