@@ -72,7 +72,9 @@ class Uncertainty:
         The table's axes, m/s and rad.
     margins : LoopMargins or None
         Per circle, the worst margins of the estimate, the box's corners and the plant
-        with the worst multiplier (None when a loop is unstable somewhere).
+        with the worst multiplier (None when a loop is unstable somewhere); the crossover
+        is that of the plant with the smallest delay margin (None in a table without
+        crossovers).
     culprit : tuple or None
         Where a loop is unstable: ``(parameter, value, multiplier)`` of the parameter whose
         interval's end, the others at their estimates, gives the largest multiplier.
@@ -182,11 +184,16 @@ def _box(params, samples: int, seed: int):
 
 def _plant_loops(table, model, *, with_margins=False):
     """The largest multiplier per circle (n_a, n_v) of the table's gains on ``model``,
-    and, ``with_margins``, the loops' margins (else None); each speed's tilts at once."""
+    and, ``with_margins``, the loops' margins (else None); each speed's tilts at once.
+    Each loop's crossover is the alias nearest the table's own crossover of that circle
+    (:func:`~gainsched.schedule.margins.crossover_frequency`; the plants of a fit's box
+    move it by far less than the aliases' spacing), none in a table without them."""
     K_all = table.K_full()
     n_a, n_v = table.spectral_radius.shape
     rho = np.full((n_a, n_v), np.nan)
-    gd, gu, dl = (np.full((n_a, n_v), np.nan) for _ in range(3))
+    stored = table.loop_margins
+    guess = None if stored is None else stored.crossover
+    gd, gu, dl, w = (np.full((n_a, n_v), np.nan) for _ in range(4))
     per_input = np.full((2, n_a, n_v, 4), np.nan)
     for j, v in enumerate(table.speed):
         dt = float(table.dt[j])
@@ -206,10 +213,13 @@ def _plant_loops(table, model, *, with_margins=False):
         rho[ok, j] = np.exp(loop_log_rho(Ad, Bd, K))
         if with_margins:
             lm = loop_margins(Ad, Bd, K, dt, xtol=MARGIN_XTOL, delay_xtol=MARGIN_DELAY_XTOL,
-                              block=SURROGATE_BLOCK)
+                              block=SURROGATE_BLOCK,
+                              crossover_guess=None if guess is None else guess[ok, j])
             gd[ok, j], gu[ok, j], dl[ok, j] = lm.gain_down, lm.gain_up, lm.delay
             per_input[0, ok, j], per_input[1, ok, j] = lm.input_down, lm.input_up
-    margins = LoopMargins(gd, gu, *per_input, dl) if with_margins else None
+            w[ok, j] = lm.crossover
+    margins = LoopMargins(gd, gu, *per_input, dl, None if guess is None else w) \
+        if with_margins else None
     return rho, margins
 
 
@@ -291,14 +301,20 @@ def uncertain_loops(table, report: dict, *, samples: int = SAMPLES, seed: int = 
 
 def _worst_of(margins: list) -> LoopMargins:
     """Per circle, the worst of several plants' margins: the largest down factor, the
-    smallest up factor and delay (NaN where a plant has no loop there)."""
+    smallest up factor and delay (NaN where a plant has no loop there), and the crossover
+    of the plant with that smallest delay (its phase margin, ``crossover * delay``)."""
     def pick(attr, worst):
         a = np.stack([getattr(m, attr) for m in margins])
         return np.where(np.all(np.isnan(a), 0), np.nan, worst(np.where(
             np.isnan(a), -np.inf if worst is np.max else np.inf, a), axis=0))
+    crossover = None
+    if all(m.crossover is not None for m in margins):
+        d = np.stack([m.delay for m in margins])
+        first = np.argmin(np.where(np.isnan(d), np.inf, d), axis=0)[None]
+        crossover = np.take_along_axis(np.stack([m.crossover for m in margins]), first, 0)[0]
     return LoopMargins(pick("gain_down", np.max), pick("gain_up", np.min),
                        pick("input_down", np.max), pick("input_up", np.min),
-                       pick("delay", np.min))
+                       pick("delay", np.min), crossover)
 
 
 def _culprit(table, cfg, focus, params, held=()) -> tuple:

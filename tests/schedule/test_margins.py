@@ -505,6 +505,39 @@ def test_check_uncertain_flies_the_tables_gains_over_the_fits_box(small_table, t
     assert "skipped: corner -0.07: must be in" in r.output
 
 
+def test_check_uncertain_gives_the_phase_margin_of_the_tables_own_plant(small_table):
+    """A box around the table's own drag (1e-9 wide): every plant is the table's model.
+    On the level circles (constant gains) the check's loops are the build's, so the
+    crossovers are the stored ones to 1e-6; on the tilted ones the check flies the
+    table's 8 azimuth samples interpolated where the build had every step's gains, and
+    the crossovers agree to 1e-3 (the right alias: they lie 9 rad/s or more apart), the
+    delay margins to 1e-2. The phase margin line is printed, within 1 deg of the table's
+    own. A 30 +- 5 ms motor lag the table was not built for lowers the worst phase
+    margin."""
+    from gainsched.schedule.tables import config_from_table, load_table
+    from gainsched.sim.plan import focus_values
+    from gainsched.sim.uncertain import uncertain_loops
+
+    table = load_table(small_table)
+    own = focus_values(config_from_table(table), "drag")
+    report = {"accepted": "drag", "ranking": ["drag"], "candidates": {"drag": {
+        "params": {"mu1": {"estimate": own[0], "ci95": 1e-9, "unit": ""},
+                   "mu2": {"estimate": own[1], "ci95": 1e-9, "unit": ""}},
+        "heldout_rms_reduction": 0.8}}}
+    u = uncertain_loops(table, report, samples=0)
+    stored = table.margins()
+    assert np.isfinite(stored.crossover).all() and np.isfinite(u.margins.crossover).all()
+    np.testing.assert_allclose(u.margins.crossover[0], stored.crossover[0], rtol=1e-6)
+    np.testing.assert_allclose(u.margins.crossover, stored.crossover, rtol=1e-3)
+    np.testing.assert_allclose(u.margins.delay, stored.delay, rtol=1e-2)
+    line = [x for x in u.lines("t.h5") if "phase margin at the crossover" in x]
+    deg = np.degrees(np.nanmin(u.margins.phase))
+    assert len(line) == 1 and f"{deg:.1f} deg" in line[0], (line, deg)
+    assert abs(deg - np.degrees(np.nanmin(stored.phase))) < 1.0
+    lag = uncertain_loops(table, _lag_report(0.005), samples=0)
+    assert np.nanmin(lag.margins.phase) < np.nanmin(stored.phase) - np.radians(5)
+
+
 def test_check_uncertain_holds_a_parameter_the_fit_did_not_identify(small_table):
     """A fit's parameter without a finite 95 % interval (the diagnosis does not write its
     estimate: the config keeps its own value) is held at the table config's value in
