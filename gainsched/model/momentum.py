@@ -158,13 +158,3 @@ def induced_velocity(vh, vz, vxy2, tol=TOL, max_iter=MAX_ITER):
         v[rest] = _bracketed(start, np.zeros(rest.size), hi[rest], a[rest], b[rest], c[rest],
                              h[rest], tol, max_iter)
     return v.reshape(shape)
-    hi = hi.reshape(-1)
-    glauert = a / np.sqrt(c + (h + b) ** 2 + 1e-12)
-    one_root = (b >= 0) | (8 * c >= b * b)
-    v, ok = _newton_plain(glauert, a, b, c, tol * h, one_root)
-    rest = np.flatnonzero(~(ok & one_root & (v >= 0) & (v <= hi)))
-    if rest.size:  # the vortex ring, and any plain Newton that failed: from the old start
-        start = np.where(one_root[rest], glauert[rest], hi[rest])
-        v[rest] = _bracketed(start, np.zeros(rest.size), hi[rest], a[rest], b[rest], c[rest],
-                             h[rest], tol, max_iter)
-    return v.reshape(shape)
