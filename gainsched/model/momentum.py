@@ -4,9 +4,10 @@ whole arrays of samples, complex-step safe.
 
 The roots are those of the compiled plant's ``gs_induced_velocity``
 (``gainsched/native/plant.c``: safeguarded Newton per sample, the one implementation the
-model and the simulator's plant share; a build's thousands of calls of tens to thousands
-of samples each cost the numpy version's ~100 array operations per call, 2.6x the
-drag-only build's time with momentum theory). Its numpy fallback: most samples (every one
+model and the simulator's plant share). A build calls this thousands of times on tens to
+thousands of samples: the numpy iteration's ~100 array operations a call made the paper
+grid's build with momentum theory 3.3x the drag-only one, the compiled roots 2.9x
+(docs/performance.md). The numpy fallback: most samples (every one
 where the root is unique) take plain Newton steps from Glauert's estimate on whole
 arrays; the rest (the vortex ring, where three roots may exist, and any sample whose
 plain Newton did not converge inside the bracket) a safeguarded Newton with bisection
