@@ -792,3 +792,35 @@ def test_diagnose_shows_its_progress_on_a_terminal(tmp_path):
     piped = subprocess.run(args, capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert piped.returncode == 0 and "fit/s" not in piped.stderr and "diagnose:" not in \
         piped.stderr, piped.stderr
+
+
+def test_fits_in_threads_give_what_one_thread_gives(paper_config, monkeypatch):
+    """Diagnose's fits run side by side in threads on long logs (_Problem.map): the
+    singles, the joint fits and forward selection's tries each in a thread of its own
+    (checked by the threads' names) give the report of one thread, every number and the
+    count of model evaluations. The size threshold set to 0 here so the seven example
+    flights take the threads."""
+    import json
+    import threading
+
+    from gainsched.analysis.diagnose import _problem, _select
+
+    logs = sorted(str(p) for p in (REPO / "examples" / "flights").glob("*.csv"))
+    cmp = compare(paper_config, logs)
+    seen = set()
+    fit = _select._fit_candidate
+
+    def named(*args, **kwargs):
+        seen.add(threading.current_thread().name.split("_")[0])
+        return fit(*args, **kwargs)
+
+    monkeypatch.setattr(_select, "_fit_candidate", named)
+    monkeypatch.setattr(_problem, "THREADS_MIN_SAMPLES", 0)
+    runs = [diagnose(paper_config, logs, comparison=cmp, n_jobs=n,
+                     candidates=["drag_quadratic", "thrust_momentum", "motor_lag"])
+            for n in (1, 2)]
+    assert seen == {"MainThread", "gainsched-fit"}, seen
+    one, two = (json.dumps(d.to_json(), sort_keys=True, default=str) for d in runs)
+    assert one == two
+    assert runs[0].evaluations == runs[1].evaluations > 0
+    assert any(" + " in r.name for r in runs[1].results)  # a joint fit ran in threads

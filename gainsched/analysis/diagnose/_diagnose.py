@@ -22,13 +22,14 @@ from ._fit import _fit_candidate
 from ._lsq import _sq
 from ._problem import _Problem
 from ._results import THRESHOLDS, Diagnosis, unidentified
-from ._select import _joint_fit, _select, _twins
+from ._select import _joint_fits, _select, _twins
 from ._verdict import _verdict
 
 
 def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | None = None,
              progress=None, joint: bool = False, forward: bool = True,
-             channel_map=None, exclude=(), trust=(), sensors: bool = True) -> Diagnosis:
+             channel_map=None, exclude=(), trust=(), sensors: bool = True,
+             n_jobs: int = -1) -> Diagnosis:
     """Find which physical effect the model misses: fit candidates, score them held out.
 
     The whole of ``gainsched diagnose`` (docs/model-vs-measurement.md, the module
@@ -57,28 +58,28 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     comparison : Comparison, optional
         ``compare(config, logs)`` if already computed: it is reused, not recomputed.
     progress : callable, optional
-        ``progress(name)`` before each candidate is fitted.
+        ``progress(name)`` as each candidate's fit is done.
     joint : bool, default False
-        Fit pairs of the best single candidates even when one passes (without
-        ``joint`` they run only when none passes and the residual is above the noise
-        floor): a passing joint fit then replaces the accepted single when its delta-BIC
-        is lower by ``THRESHOLDS["nested_bic_gain"]``.
+        Fit pairs of the best singles even when one passes (else only when none passes
+        above the noise floor): a passing joint fit replaces the accepted single when its
+        delta-BIC is lower by ``THRESHOLDS["nested_bic_gain"]``.
     forward : bool, default True
-        Forward selection (:func:`_forward`): when the accepted fit, or the best single if
-        none passes, leaves more than ``THRESHOLDS["forward_excess_gain"]`` of the
-        residual above noise, add the next best effects while each explains clearly
-        more; False: the single and joint fits only.
+        Forward selection (:func:`_forward`): while the accepted fit (or the best single)
+        leaves more than ``THRESHOLDS["forward_excess_gain"]`` of the residual above
+        noise, add the next best effect that explains clearly more.
     channel_map : ChannelMap, str or path-like, optional
         For PX4 ULogs and ROS 2 bags among ``logs`` (:func:`compare`).
     exclude : sequence of str
         Candidates or effect kinds to leave out (:func:`select_candidates`): the library
-        told that an effect is not there. When no other effect explains what it would
-        have, the verdict says that no library effect explains it and fits an empirical
-        term.
+        told that an effect is not there (when no other explains what it would have, the
+        verdict says so and fits an empirical term).
     trust : iterable of str, optional
         Consistency checks of the log files to skip (:func:`compare`).
     sensors : bool, default True
         Calibrate the sensors first (:func:`_calibrated`); False: ``[sensors]`` as it is.
+    n_jobs : int, default -1
+        Threads the fits run in side by side (-1: one per core); nothing else depends
+        on it.
 
     Returns
     -------
@@ -88,8 +89,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     Raises
     ------
     InputError
-        Fewer than two flights, an unknown candidate name, or a log :func:`compare`
-        refuses.
+        Fewer than two flights, an unknown candidate, or a log :func:`compare` refuses.
 
     Examples
     --------
@@ -113,7 +113,7 @@ def diagnose(config: Config, logs, *, candidates=None, comparison: Comparison | 
     """
     base = comparison or compare(config, logs, channel_map=channel_map, trust=trust)
     config, base, calibration = _calibrated(config, base) if sensors else (config, base, None)
-    prob = _problem(config, base)
+    prob = _problem(config, base, n_jobs)
     library = candidate_library()
     names = select_candidates(candidates, exclude, library)
     names = _logged(names, library, base.measured, asked=candidates is not None)
@@ -219,7 +219,7 @@ def _select_beside(prob, library, names, base, nuisance, base_sq, base_vecs, *, 
     fits beside the nuisance noting it."""
     cfg2 = nuisance.candidate.variant(prob.config, nuisance.theta).config
     base2 = compare(cfg2, base.segs, measured=base.measured, segs=base.segs)
-    prob2 = _problem(cfg2, base2)
+    prob2 = _problem(cfg2, base2, prob.n_jobs)
     at2, vecs2, sq2 = _base_residual(prob2, base2)
     results, found = _select(prob2, library, [n for n in names if n != nuisance.name],
                              base2, at2, sq2, vecs2, asked=False, joint=joint,
@@ -243,19 +243,19 @@ def _with_nuisance(prob, nuisance, found, base_sq, base_vecs, progress):
     pass."""
     if found is None:
         return nuisance if nuisance.passes else None
-    both = _joint_fit(prob, [found, nuisance], base_sq, base_vecs, progress)
-    alone = _joint_fit(prob, [found], base_sq, base_vecs, progress)
+    both, alone = _joint_fits(prob, [[found, nuisance], [found]], base_sq, base_vecs,
+                              progress)
     pick = (both if both.delta_bic < alone.delta_bic - THRESHOLDS["nested_bic_gain"]
             else alone)
     return pick if pick.passes else None
 
 
-def _problem(config: Config, base: Comparison) -> _Problem:
-    """The fit problem of ``config`` on the flights of its comparison ``base``; InputError
-    with fewer than two flights (no held-out scores)."""
+def _problem(config: Config, base: Comparison, n_jobs: int) -> _Problem:
+    """The fit problem of ``config`` on the flights of its comparison ``base``, its fits
+    ``n_jobs`` at a time; InputError with fewer than two flights (no held-out scores)."""
     from ...errors import InputError
 
-    prob = _Problem(config, base.measured, base.segs, base.noise, base.residuals)
+    prob = _Problem(config, base.measured, base.segs, base.noise, base.residuals, n_jobs)
     if len(prob.flights) < 2:
         raise InputError("command line", "LOG", "diagnose needs at least two flights (log "
                          "files) for held-out scores")

@@ -13,6 +13,7 @@ explain nearly as much: not to be told apart on these flights.
 
 from __future__ import annotations
 
+import functools
 import itertools
 
 import numpy as np
@@ -48,15 +49,15 @@ def _fit_joint(prob, library, results, base_sq, base_vecs, progress):
     if len(top) < 2:
         return None
 
-    def joint(parts):
-        return _joint_fit(prob, parts, base_sq, base_vecs, progress)
+    def joint(fits):  # each a list of parts, fitted side by side
+        return _joint_fits(prob, fits, base_sq, base_vecs, progress)
 
-    pairs = [joint(pr) for pr in itertools.combinations(top, 2)]
+    pairs = joint(itertools.combinations(top, 2))
     pairs.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
     best = pairs[0]
     names = set(best.name.split(" + "))
-    triples = [joint([*(t for t in top if t.name in names), r]) for r in top
-               if r.name not in names]
+    triples = joint([[*(t for t in top if t.name in names), r] for r in top
+                     if r.name not in names])
     results.extend(pairs + triples)
     results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
     ok_pairs = [r for r in pairs if r.passes]
@@ -68,9 +69,27 @@ def _fit_joint(prob, library, results, base_sq, base_vecs, progress):
     return pick
 
 
-def _joint_fit(prob, parts, base_sq, base_vecs, progress) -> CandidateResult:
-    """The candidates of the fits ``parts`` (CandidateResult, single or joint) fitted
-    together (:class:`JointCandidate`), started at their fits."""
+def _joint_fits(prob, fits, base_sq, base_vecs, progress) -> list[CandidateResult]:
+    """For each list of fits ``parts`` of ``fits`` (CandidateResult, single or joint),
+    their candidates fitted together (:class:`JointCandidate`), started at their fits;
+    the joint fits side by side (:meth:`~._problem._Problem.map`)."""
+    cands = [_joint_candidate(prob, parts) for parts in fits]
+    return prob.map([(c.name, functools.partial(_fit_candidate, cand=c, base_sq=base_sq,
+                                                base_vecs=base_vecs)) for c in cands],
+                    progress)
+
+
+def _fit_single(prob, cand, base_sq, base_vecs) -> CandidateResult:
+    """The fit of a library candidate (a series' order chosen first,
+    :func:`~._fit._choose_order`)."""
+    pre = None
+    if getattr(cand, "orders", ()):
+        cand, pre = _choose_order(prob, cand)
+    return _fit_candidate(prob, cand, base_sq, base_vecs, pre)
+
+
+def _joint_candidate(prob, parts) -> JointCandidate:
+    """The candidates of the fits ``parts`` as one, started at their fits."""
     cfg = prob.config
     cands, starts, bounds = [], [], []
     for r in parts:
@@ -82,10 +101,7 @@ def _joint_fit(prob, parts, base_sq, base_vecs, progress) -> CandidateResult:
             cands.append(c)
             bounds.append(b)
             starts.append(np.clip(th, b[0], b[1]))
-    cand = JointCandidate(cands, starts, bounds)
-    if progress is not None:
-        progress(cand.name)
-    return _fit_candidate(prob, cand, base_sq, base_vecs)
+    return JointCandidate(cands, starts, bounds)
 
 
 def _forward(prob, library, results, start, base_sq, base_vecs, progress):
@@ -148,8 +164,10 @@ def _forward(prob, library, results, start, base_sq, base_vecs, progress):
         pool += [r for r in eligible if r.name in NUISANCE and r not in pool
                  and _leaves_structure_on(current, _axes_of(prob, r))]
         fitted = {frozenset(r.name.split(" + ")): r for r in results}
-        tries = [fitted.get(frozenset([*names, r.name]))
-                 or _joint_fit(prob, [current, r], base_sq, base_vecs, progress) for r in pool]
+        new = [r for r in pool if frozenset([*names, r.name]) not in fitted]
+        made = iter(_joint_fits(prob, [[current, r] for r in new], base_sq, base_vecs,
+                                progress))
+        tries = [fitted.get(frozenset([*names, r.name])) or next(made) for r in pool]
         known = {id(r) for r in results}
         results.extend(t for t in tries if id(t) not in known)
         ok = [t for t in tries if better(t)
@@ -235,21 +253,15 @@ def _select(prob, library, names, base, at_floor, base_sq, base_vecs, *, asked, 
     structure of ``base``), or when the candidates were ``asked`` for by name; forward
     selection (:func:`_forward`, with ``forward``) while the fit leaves more than
     ``THRESHOLDS["forward_excess_gain"]`` of the residual above noise. ``progress(name)``
-    before each fit, when given. ``fitted``: fits already made on ``prob``, by name (not
+    as each fit is done, when given. ``fitted``: fits already made on ``prob``, by name (not
     made again)."""
     fitted = dict(fitted or {})
 
     def fit(names_):
-        for n in names_:
-            if n in fitted:
-                results.append(fitted.pop(n))
-                continue
-            if progress is not None:
-                progress(n)
-            cand, pre = library[n], None
-            if getattr(cand, "orders", ()):
-                cand, pre = _choose_order(prob, cand)
-            results.append(_fit_candidate(prob, cand, base_sq, base_vecs, pre))
+        made = iter(prob.map([(n, functools.partial(_fit_single, cand=library[n],
+                                                    base_sq=base_sq, base_vecs=base_vecs))
+                              for n in names_ if n not in fitted], progress))
+        results.extend(fitted.pop(n) if n in fitted else next(made) for n in names_)
         results.sort(key=lambda r: (-r.rms_reduction, r.delta_bic))
         return _parsimonious([r for r in results if r.passes], library)
 
