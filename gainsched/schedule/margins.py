@@ -197,6 +197,12 @@ def loop_log_rho(Ad, Bd, K):
 #: columns the delayed loop's monodromy is applied to (above its numerical rank over a
 #: period, 12-13 on the paper's circles)
 _RANK = 14
+#: the span, s, of the power a time-invariant loop's delay margin is searched on
+#: (:func:`_ti_power`): over it the delayed loop's fast and delay modes decay far below the
+#: 1e-9 of :func:`_delay_spectra`'s check (the paper's level circles at 1 and 4 kHz, 3 and
+#: 15 m/s, at their delay margin: the 15th multiplier 4e-15 to 7e-12 at 0.25 s, 1e-29 to
+#: 5e-23 at 0.5 s, 2e-6 to 4e-5 at 0.1 s)
+_TI_SPAN_S = 0.3
 
 
 def _delay_pass_numpy(Ad, Bd, K, circle, tau, D, X0):
@@ -247,7 +253,14 @@ def _delay_loops(Ad, Bd, K, circle, tau):
     return _delay_spectra(Ad, Bd, K, circle, tau)[:, 0].real
 
 
-def _delay_spectra(Ad, Bd, K, circle, tau):
+def _ti_power(N: int, h) -> int:
+    """The power of a time-invariant loop's step (N = 1) its delay margin is searched on:
+    the steps of :data:`_TI_SPAN_S` at the shortest step ``h`` (s); 1 for a periodic loop
+    (N > 1), searched on its period."""
+    return 1 if N > 1 else max(1, int(np.ceil(_TI_SPAN_S / float(np.min(h)))))
+
+
+def _delay_spectra(Ad, Bd, K, circle, tau, power=1):
     """The largest log multiplier (:func:`_log_spectrum`) of the lanes: loop ``circle``
     (L,) with the delays tau (L,) in samples.
 
@@ -255,23 +268,54 @@ def _delay_spectra(Ad, Bd, K, circle, tau):
     decayed: it is numerically of low rank. It is applied to :data:`_RANK` columns (a
     fixed random start, then the orthonormal basis of its image: one step of subspace
     iteration) and its multipliers are those of ``Q' M Q``; where ``M Q`` leaves the span
-    of Q by more than 1e-9 of its norm, the whole monodromy is formed instead."""
+    of Q by more than 1e-9 of its norm, the whole monodromy is formed instead.
+
+    ``power`` > 1, a time-invariant loop (N = 1, :func:`_ti_power`): the same on its
+    step's ``power``-th power, whose multipliers are the step's to that power: the log of
+    the largest over ``power``, with the arg of the step's own multiplier (the Rayleigh
+    quotient of one step on the power's eigenvector; the power's arg is that times
+    ``power``, modulo 2 pi). The one-step matrix of n + D m rows has as many multipliers
+    as rows (815 at 4 kHz and the 50 ms searched: its eigenvalues were 4x the rest of the
+    build); its power needs the 14 columns."""
     n, m = Ad.shape[-1], Bd.shape[-1]
     D = int(np.floor(tau.max())) + 1
     na, L = n + D * m, tau.size
     lib = _lib()
     if na > _RANK:
+        steps = tuple(X if power == 1 else np.broadcast_to(X[:, :1], X.shape[:1] + (power,)
+                                                             + X.shape[2:])
+                      for X in (Ad, Bd, K))
         omega = np.linalg.qr(np.random.default_rng(0).standard_normal((na, _RANK)))[0]
         start = np.broadcast_to(omega, (L,) + omega.shape)
-        Y, _ = _delay_pass(lib, Ad, Bd, K, circle, tau, D, start)
+        Y, _ = _delay_pass(lib, *steps, circle, tau, D, start)
         Q = np.linalg.qr(Y)[0]
-        Z, e = _delay_pass(lib, Ad, Bd, K, circle, tau, D, Q)
+        Z, e = _delay_pass(lib, *steps, circle, tau, D, Q)
         QB = np.swapaxes(Q, -1, -2) @ Z
         off = np.linalg.norm(Z - Q @ QB, axis=(-2, -1))
         if np.all(off <= 1e-9 * np.linalg.norm(Z, axis=(-2, -1))):
-            return _log_spectrum(QB, e)
+            if power == 1:
+                return _log_spectrum(QB, e)
+            return _one_step(lib, Ad, Bd, K, circle, tau, D, Q, QB, e, power)
     M, e = _delay_pass(lib, Ad, Bd, K, circle, tau, D, np.broadcast_to(np.eye(na), (L, na, na)))
     return _log_spectrum(M, e)
+
+
+def _one_step(lib, Ad, Bd, K, circle, tau, D, Q, QB, e, power):
+    """The largest log multiplier of time-invariant delayed loops (one step each) from
+    the Rayleigh-Ritz pair ``Q, QB`` (``QB 2^e``) of their step's ``power``-th power
+    (:func:`_delay_spectra`): ``log|mu| / power + i arg lambda``, mu the power's largest
+    multiplier and lambda the step's Rayleigh quotient on mu's eigenvector."""
+    w, Yv = np.linalg.eig(QB)
+    with np.errstate(divide="ignore"):
+        logw = np.log(np.abs(w)) + (e * np.log(2.0))[:, None]
+    j = np.argmax(np.where(np.isnan(logw), -np.inf, logw), axis=-1)
+    v = Q @ np.take_along_axis(Yv, j[:, None, None], -1)  # (L, na, 1), complex
+    Fv, _ = _delay_pass(lib, Ad, Bd, K, circle, tau, D,
+                        np.concatenate([v.real, v.imag], axis=-1))
+    lam = np.sum(v.conj()[..., 0] * (Fv[..., 0] + 1j * Fv[..., 1]), -1) / np.sum(
+        np.abs(v[..., 0]) ** 2, -1)
+    mag = np.take_along_axis(logw, j[:, None], -1)[:, 0] / power
+    return (mag + 1j * np.angle(lam))[:, None]
 
 
 def _gain_kinds(m):
@@ -307,12 +351,12 @@ def _gain_crossings(Ad, Bd, K, masks, sign, g_max, s0, xtol, block):
     return first_crossings(loops(1), hi, s0, xtol, size, surrogate)
 
 
-def _delay_crossings(Ad, Bd, K, hi_steps, s0, xtol, guess_steps=None):
+def _delay_crossings(Ad, Bd, K, hi_steps, s0, xtol, guess_steps=None, power=1):
     """The first crossing of the delay margin, samples, and the arg of the multiplier that
     crosses, rad: (b,) each; ``guess_steps`` (b,) of it (NaN: none) start the scan
-    around it."""
+    around it; ``power``: of a time-invariant loop's step (:func:`_delay_spectra`)."""
     def spectra(pair, P):
-        return _delay_spectra(Ad, Bd, K, pair, P)
+        return _delay_spectra(Ad, Bd, K, pair, P, power)
 
     def size(pair, P):  # the delay, samples (at least one)
         return np.maximum(P, 1.0)
@@ -469,7 +513,8 @@ def delay_margin(Ad, Bd, K, h, *, tau_max: float = TAU_MAX_S, xtol: float = XTOL
     """
     shape, (Ad, Bd, K) = _flat(Ad, Bd, K)
     h = np.broadcast_to(np.asarray(h, float), shape).reshape(-1)
-    steps, _ = _delay_crossings(Ad, Bd, K, tau_max / h, _nominal(Ad, Bd, K), xtol)
+    steps, _ = _delay_crossings(Ad, Bd, K, tau_max / h, _nominal(Ad, Bd, K), xtol,
+                                power=_ti_power(Ad.shape[-3], h))
     return (steps * h).reshape(shape)
 
 
@@ -568,7 +613,8 @@ def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX
     h = np.broadcast_to(np.asarray(h, float), shape).reshape(-1)
     guess = None if delay_guess is None else np.full(h.shape, delay_guess) / h
     steps, phase = _delay_crossings(Ad, Bd, K, tau_max / h, s0,
-                                    xtol if delay_xtol is None else delay_xtol, guess)
+                                    xtol if delay_xtol is None else delay_xtol, guess,
+                                    _ti_power(Ad.shape[-3], h))
     w = crossover_frequency(phase, Ad.shape[-3], h, None if crossover_guess is None else
                             np.broadcast_to(crossover_guess, shape).reshape(-1))
     per = g[:, 2:].reshape(-1, m, 2)

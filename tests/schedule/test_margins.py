@@ -362,6 +362,50 @@ def test_a_level_circle_solved_periodically_has_its_lti_loops_margins(paper_conf
     assert periodic.delay_margin[0] == pytest.approx(dare.delay_margin[0], rel=1e-6)
 
 
+def _delayed_step(A, B, K, tau):
+    """The one-step matrix of the loop ``x+ = A x + B ((1 - f) u_{k-d} + f u_{k-d-1})``,
+    ``u = -K x``, tau = d + f samples, on ``[x, u_{k-1}, .., u_{k-D}]``: formed whole, the
+    reference the margins' search no longer forms for a time-invariant loop."""
+    n, m = B.shape
+    d, f = int(np.floor(tau)), tau - np.floor(tau)
+    D = d + 2
+    F = np.zeros((n + D * m, n + D * m))
+    F[:n, :n] = A
+    for j, w in ((d, 1.0 - f), (d + 1, f)):  # the applied command u_{k-j}, weight w
+        if j == 0:
+            F[:n, :n] -= w * B @ K
+        else:
+            F[:n, n + (j - 1) * m:n + j * m] += w * B
+    F[n:n + m, :n] = -K
+    for j in range(1, D):
+        F[n + j * m:n + (j + 1) * m, n + (j - 1) * m:n + j * m] = np.eye(m)
+    return F
+
+
+def test_a_level_circles_delay_margin_at_4_khz_is_its_whole_step_matrixs(paper_config):
+    """At 4 kHz the level circle's one-step delayed loop has 11 + 4 D rows (815 over the
+    50 ms searched: its eigenvalues were 4x the rest of the build); its delay margin is
+    searched on 0.3 s of its steps instead (14 columns). Against the whole one-step matrix
+    formed here: stable 1e-4 below the margin, unstable 1e-4 above, and its multiplier
+    nearest the unit circle at the margin has the crossover's frequency to the build's
+    1e-4 (the arg a power of the step leaves only modulo 2 pi / 1201: its aliases are 19 %
+    apart at this crossover)."""
+    cfg = paper_config.with_values({"control.rate_hz": 4000.0, "grid.azimuth_samples": 8})
+    _, (Ad, Bd, _) = solve_circle(cfg, 12.0, [0.0], keep_steps=True)  # its A, B
+    sol = solve_circle(cfg, 12.0, [0.0])  # the build's: the DARE and one step
+    A, B, K, h = Ad[0, 0], Bd[0, 0], sol.K[0, 0], sol.dt
+    tau, w = sol.delay_margin[0] / h, sol.crossover[0]
+    assert mg._ti_power(1, h) > 1000 and 40 < tau < 80, (mg._ti_power(1, h), tau)
+
+    def rho(t):
+        return np.abs(np.linalg.eigvals(_delayed_step(A, B, K, t))).max()
+
+    assert rho(tau * (1 - 1e-4)) < 1.0 < rho(tau * (1 + 1e-4))
+    lam = np.linalg.eigvals(_delayed_step(A, B, K, tau))
+    on = lam[np.argmin(np.abs(np.abs(lam) - 1.0))]
+    assert abs(np.angle(on)) / h == pytest.approx(w, rel=1e-4)
+
+
 def test_the_table_stores_the_builds_margins_and_serves_them():
     """The build's margins are the table's (``Table.margins()``: every circle; with a
     speed and a tilt: that circle), covered by the checksums; a table built with
