@@ -39,7 +39,7 @@ from .bounds import check_gain_cap, check_margin_bounds
 from .discrete import LIN_TOL, discrete_at, discrete_system, periodic_interp
 from .jobs import run_jobs
 from .lqr import dlqr, periodic_lqr, spectral_radius, stability_scale
-from .margins import MARGIN_DELAY_XTOL, MARGIN_XTOL, SURROGATE_BLOCK, loop_margins
+from .margins import MARGIN_DELAY_XTOL, MARGIN_XTOL, loop_margins, surrogate_block
 from .modes import MODE_COUNT, floquet_modes
 from .nominal import circle_nominal, circle_offsets
 from .offsets import HARMONICS
@@ -472,7 +472,7 @@ def _fill_periodic(out: CircleSolution, ok, model, config, speed, tilts, Qx, kee
         if margins:  # the real loop's: the model's A_k, B_k (not the scaled ones)
             _put_margins(out, idx, loop_margins(Ad, Bd, sol.K, dt, xtol=MARGIN_XTOL,
                                                 delay_xtol=MARGIN_DELAY_XTOL,
-                                                block=SURROGATE_BLOCK, delay_guess=guess,
+                                                block=surrogate_block(dt), delay_guess=guess,
                                                 crossover_guess=w0))
         out.K[idx] = _sample(Ks, lo, hi, w)
         out.S[idx] = _sample(Ss, lo, hi, w)

@@ -43,7 +43,7 @@ from .crossings import first_crossings
 __all__ = ["loop_log_rho", "monodromy_with", "spectral_radius", "gain_margins", "delay_margin",
            "loop_margins", "LoopMargins", "crossover_frequency",
            "G_MAX", "TAU_MAX_S", "XTOL", "MARGIN_XTOL", "MARGIN_DELAY_XTOL",
-           "SURROGATE_BLOCK"]
+           "SURROGATE_SPAN_S", "surrogate_block"]
 
 #: the largest gain factor searched (+20 dB); no crossing below it: margin reported inf
 G_MAX = MARGIN_GAIN_MAX
@@ -55,12 +55,27 @@ XTOL = 1e-10
 #: (1.5 us on the paper's 15 ms)
 MARGIN_XTOL = 1e-6
 MARGIN_DELAY_XTOL = 1e-4
-#: the gain scan's surrogate: blocks of this many control steps, each the power of its
-#: middle step's loop (about 7x cheaper than every step; its log rho is within 1e-4 of
-#: the loop's on the paper's circles; :func:`~gainsched.schedule.crossings.first_crossings`)
-SURROGATE_BLOCK = 32
+#: the gain scan's surrogate: blocks of this span of control steps, s, each the power of
+#: its middle step's loop (32 steps at 1 kHz: about 7x cheaper than every step; its log
+#: rho is within 1e-4 of the loop's on the paper's circles;
+#: :func:`~gainsched.schedule.crossings.first_crossings`). A span, not a count: how far
+#: the loop moves inside a block is a matter of time, and at 8 kHz 32 steps would leave
+#: the surrogate 8x the work for the same accuracy
+SURROGATE_SPAN_S = 0.032
 #: steps between the numpy fallback's rescalings (the kernel's RENORM)
 _RENORM = 16
+
+
+def surrogate_block(h) -> int:
+    """Steps per block of the gain scan's surrogate at the step ``h`` (s): those of
+    :data:`SURROGATE_SPAN_S`, at least 1.
+
+    Examples
+    --------
+    >>> surrogate_block(0.001), surrogate_block(1 / 8000)
+    (32, 256)
+    """
+    return max(1, int(round(SURROGATE_SPAN_S / float(np.min(h)))))
 
 
 def spectral_radius(M):
@@ -203,6 +218,12 @@ _RANK = 14
 #: 15 m/s, at their delay margin: the 15th multiplier 4e-15 to 7e-12 at 0.25 s, 1e-29 to
 #: 5e-23 at 0.5 s, 2e-6 to 4e-5 at 0.1 s)
 _TI_SPAN_S = 0.3
+#: and at least this many times the delay evaluated: a delay mode's multiplier over a span
+#: falls like j^(-span / tau) (the j-th root of a retarded loop), so the span grows with
+#: the delay (0.3 s is 20 of the paper's 15 ms margins; at 8 kHz and the scan's 25-50 ms,
+#: 0.3 s left the 15th multiplier above the check, and the one-step matrix of 1615 rows
+#: was formed)
+_TI_DELAYS = 20
 
 
 def _delay_pass_numpy(Ad, Bd, K, circle, tau, D, X0):
@@ -271,7 +292,8 @@ def _delay_spectra(Ad, Bd, K, circle, tau, power=1):
     of Q by more than 1e-9 of its norm, the whole monodromy is formed instead.
 
     ``power`` > 1, a time-invariant loop (N = 1, :func:`_ti_power`): the same on its
-    step's ``power``-th power, whose multipliers are the step's to that power: the log of
+    step's power (``power``, or :data:`_TI_DELAYS` times the longest delay in samples if
+    that is more), whose multipliers are the step's to that power: the log of
     the largest over ``power``, with the arg of the step's own multiplier (the Rayleigh
     quotient of one step on the power's eigenvector; the power's arg is that times
     ``power``, modulo 2 pi). The one-step matrix of n + D m rows has as many multipliers
@@ -281,6 +303,8 @@ def _delay_spectra(Ad, Bd, K, circle, tau, power=1):
     D = int(np.floor(tau.max())) + 1
     na, L = n + D * m, tau.size
     lib = _lib()
+    if power > 1:
+        power = max(power, int(np.ceil(_TI_DELAYS * tau.max())))
     if na > _RANK:
         steps = tuple(X if power == 1 else np.broadcast_to(X[:, :1], X.shape[:1] + (power,)
                                                              + X.shape[2:])
@@ -448,7 +472,7 @@ def gain_margins(Ad, Bd, K, *, inputs=None, g_max: float = G_MAX, xtol: float = 
         Tolerance on each margin, relative to its factor.
     block : int
         1: every evaluation on the loop itself; > 1: the scan on the surrogate of blocks
-        of that many steps first (:data:`SURROGATE_BLOCK`), its crossings checked and
+        of that many steps first (:func:`surrogate_block`), its crossings checked and
         refined on the loop.
 
     Returns

@@ -37,10 +37,10 @@ from ..schedule.margin_report import worst_lines, worst_margins
 from ..schedule.margins import (
     MARGIN_DELAY_XTOL,
     MARGIN_XTOL,
-    SURROGATE_BLOCK,
     LoopMargins,
     loop_log_rho,
     loop_margins,
+    surrogate_block,
 )
 from ..schedule.trim import TrimError
 from .plan import focus_values, report_focus, truth_config
@@ -213,7 +213,7 @@ def _plant_loops(table, model, *, with_margins=False):
         rho[ok, j] = np.exp(loop_log_rho(Ad, Bd, K))
         if with_margins:
             lm = loop_margins(Ad, Bd, K, dt, xtol=MARGIN_XTOL, delay_xtol=MARGIN_DELAY_XTOL,
-                              block=SURROGATE_BLOCK,
+                              block=surrogate_block(dt),
                               crossover_guess=None if guess is None else guess[ok, j])
             gd[ok, j], gu[ok, j], dl[ok, j] = lm.gain_down, lm.gain_up, lm.delay
             per_input[0, ok, j], per_input[1, ok, j] = lm.input_down, lm.input_up

@@ -406,6 +406,20 @@ def test_a_level_circles_delay_margin_at_4_khz_is_its_whole_step_matrixs(paper_c
     assert abs(np.angle(on)) / h == pytest.approx(w, rel=1e-4)
 
 
+def test_the_gain_scans_surrogate_spans_32_ms_at_any_rate(paper_config):
+    """The gain scan's surrogate blocks span 32 ms: 32 steps at 1 kHz, 128 at 4 kHz
+    (surrogate_block), and the margins it leads to are the real loop's: on a 4 kHz circle
+    tilted 20 deg, every gain margin (all motors, each alone) equals the search without
+    a surrogate to the build's 1e-6."""
+    cfg = paper_config.with_values({"control.rate_hz": 4000.0, "grid.azimuth_samples": 8})
+    sol, (Ad, Bd, K) = solve_circle(cfg, 12.0, [np.deg2rad(20.0)], keep_steps=True)
+    assert mg.surrogate_block(1e-3) == 32 and mg.surrogate_block(sol.dt) == 128
+    got, ref = (loop_margins(Ad, Bd, K, sol.dt, xtol=1e-6, block=b)
+                for b in (mg.surrogate_block(sol.dt), 1))
+    for name in ("gain_down", "gain_up", "input_down", "input_up"):
+        np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=2e-6)
+
+
 def test_the_table_stores_the_builds_margins_and_serves_them():
     """The build's margins are the table's (``Table.margins()``: every circle; with a
     speed and a tilt: that circle), covered by the checksums; a table built with
