@@ -23,9 +23,12 @@ _REFINE = 60
 #: nominal outward (a margin whose crossing is bracketed stops scanning)
 _SCAN = np.array([1, 2, 4, 8]) / 8.0
 #: the scan around a guess of the crossing, as multiples of it, in rounds (then the
-#: range's end): below it, then two points at once just above it, whose log rho (both
-#: on the crossing mode when unstable) gives the secant its first step
-_AROUND = (np.array([0.5]), np.array([0.97]), np.array([1.0, 1.005]), np.array([1.6]))
+#: range's end): half of it, the first crossing's check, with two points at once at and
+#: just above it, whose log rho (both on the crossing mode when unstable) gives the
+#: secant its first step; then further above. On the paper grid's tilted circles 505
+#: delayed loops against 599 with a round at 0.97 before the pair, the same margins to
+#: the last bit
+_AROUND = (np.array([0.5, 1.0, 1.005]), np.array([1.3]), np.array([1.6]), np.array([2.5]))
 #: the real loop checks a bracket of this relative width around the surrogate's crossing
 _CHECK = 1e-3
 #: "no crossing" on the surrogate stands where its log rho stayed below minus this
