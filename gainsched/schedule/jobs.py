@@ -28,7 +28,7 @@ from ..native.reproducible import (
     process_pinned,
 )
 
-__all__ = ["run_jobs", "start_workers"]
+__all__ = ["local_processes", "run_jobs", "start_workers"]
 
 
 def _dask_active() -> bool:
@@ -43,8 +43,9 @@ def _same_numerics() -> bool:
     return process_pinned() or not pin_available()
 
 
-def _local_processes(n_jobs: int, n_args: int | None = None) -> int:
-    """Processes at work at once for ``n_jobs`` (-1: every core), at most ``n_args``."""
+def local_processes(n_jobs: int, n_args: int | None = None) -> int:
+    """Processes (or threads) at work at once for ``n_jobs`` (-1: every core), at most
+    ``n_args``."""
     n = n_jobs if n_jobs > 0 else max(1, cpu_count() + 1 + n_jobs)
     return n if n_args is None else min(n, n_args)
 
@@ -60,7 +61,7 @@ def start_workers(n_jobs: int, module: str) -> None:
     both take about a second, and this way they overlap (the ``gainsched`` command calls
     it first thing in a build). Nothing when this process would not work beside workers
     (not pinned, or one job at a time)."""
-    n = _local_processes(n_jobs)
+    n = local_processes(n_jobs)
     if n < 2 or not _same_numerics():
         return
     with children_ignore_sigint():
@@ -99,7 +100,7 @@ def run_jobs(args, n_jobs, backend, job):
         yield from Parallel(n_jobs=n_jobs, backend=backend, return_as="generator")(
             delayed(job)(*a) for a in args)
         return
-    n = 1 if backend == "sequential" else _local_processes(n_jobs, len(args))
+    n = 1 if backend == "sequential" else local_processes(n_jobs, len(args))
     if _same_numerics():
         if backend == "threading" and n > 1:
             yield from Parallel(n_jobs=n, backend="threading", return_as="generator")(

@@ -19,10 +19,10 @@ from concurrent.futures import ThreadPoolExecutor
 from types import SimpleNamespace
 
 import numpy as np
-from joblib import cpu_count
 
 from ...config import Config
 from ...model.reduced import Model
+from ...schedule.jobs import local_processes
 from ..compare import (
     UNITS,
     Comparison,
@@ -80,8 +80,7 @@ class _Problem:
         work: one thread. Every fit computes what it computes alone: the results, and
         the count of evaluations, do not depend on ``n_jobs``."""
         jobs = list(jobs)
-        n = min(len(jobs), self.n_jobs if self.n_jobs > 0
-                else max(1, cpu_count() + 1 + self.n_jobs))
+        n = local_processes(self.n_jobs, len(jobs))
         if sum(m.t.size for m in self._meas[_geometry(self.config)]) < THREADS_MIN_SAMPLES:
             n = 1
         if n <= 1:
