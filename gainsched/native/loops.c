@@ -26,6 +26,8 @@
  *
  * An unstable loop's product grows without bound: every RENORM steps it is rescaled by the
  * power of two above its largest entry (exact, no rounding) and the exponent is returned.
+ * A delayed loop's ring of past commands is not rescaled: each slot keeps the exponent it
+ * was written at and its largest entry, and is read at the state's exponent.
  *
  * Why hand-written C: numpy dispatches an 11 x 11 product slower than it computes it, and
  * a margin needs tens of monodromies of hundreds to thousands of steps per circle.
@@ -237,6 +239,19 @@ int gs_gain_loops(int n, int m, int N, int block, ptrdiff_t L, ptrdiff_t l0, ptr
     return 0;
 }
 
+/* lane-wise max(a, |x|) (NaN entries of x ignored, as fmax does) */
+INLINE lane fmaxv(lane a, lane x) {
+    for (int l = 0; l < W; l++) a[l] = fmax(a[l], fabs(x[l]));
+    return a;
+}
+
+/* the largest of a vector's lanes */
+INLINE double hmax(lane v) {
+    double mx = v[0];
+    for (int l = 1; l < W; l++) mx = fmax(mx, v[l]);
+    return mx;
+}
+
 /* the steps and delay of one delayed loop, its columns W to a vector */
 typedef struct {
     const double *A, *B, *K;
@@ -244,13 +259,18 @@ typedef struct {
     int n, m, P, d;   /* sizes, P vectors of columns; the delay's whole samples */
     double f;         /* and its fraction */
     size_t R;         /* ring slots, D + 1 */
+    double *se, *sm;  /* each slot's exponent (its entries times 2^se) and largest |entry| */
 } delayed;
 
-/* Step k of a delayed loop applied to P vectors of W columns: X (n x P) and the ring of
- * the last D + 1 commands (slots of m x P) in place, acc (n x P) and ua (m x P) work
- * space, columns innermost (padding columns are zero and stay zero). Each entry's sum
- * runs in the order of the source whatever W is: j (the state) then q (the input). */
-INLINE void delay_step(const delayed *s, int k, lane *X, lane *ring, lane *acc, lane *ua) {
+/* Step k of a delayed loop applied to P vectors of W columns: X (n x P, its entries times
+ * 2^e) and the ring of the last D + 1 commands (slots of m x P, each at its own exponent
+ * s->se, written at the e of its step) in place, acc (n x P) and ua (m x P) work space,
+ * columns innermost (padding columns are zero and stay zero). Each entry's sum runs in
+ * the order of the source whatever W is: j (the state) then q (the input). A slot is read
+ * at X's exponent, times 2^(se - e): exact, so the ring is never rescaled (at 16 kHz it
+ * holds 800 commands; rescaling it every RENORM steps doubled the loop's work). */
+INLINE void delay_step(const delayed *s, int k, double e, lane *X, lane *ring, lane *acc,
+                       lane *ua) {
     const int n = s->n, m = s->m, P = s->P;
     const size_t slot = (size_t)m * P, R = s->R;
     const double *a = s->A + k * s->a1, *b = s->B + k * s->b1, *kk = s->K + k * s->k1;
@@ -261,12 +281,20 @@ INLINE void delay_step(const delayed *s, int k, lane *X, lane *ring, lane *acc, 
             const double kq = kk[q * s->k2 + j * s->k3];
             for (int c = 0; c < P; c++) ua[q * P + c] -= kq * X[j * P + c];
         }
-    lane *u = ring + (size_t)k % R * slot;
-    for (size_t i = 0; i < slot; i++) u[i] = ua[i];
-    /* applied = (1 - f) u_{k-d} + f u_{k-d-1} */
-    const lane *ud = ring + ((size_t)k + 2 * R - (size_t)s->d) % R * slot;
-    const lane *ue = ring + ((size_t)k + 2 * R - (size_t)s->d - 1) % R * slot;
-    for (size_t i = 0; i < slot; i++) ua[i] = (1.0 - s->f) * ud[i] + s->f * ue[i];
+    const size_t ku = (size_t)k % R, kd = ((size_t)k + 2 * R - (size_t)s->d) % R,
+                 ke = ((size_t)k + 2 * R - (size_t)s->d - 1) % R;
+    lane *u = ring + ku * slot;
+    lane mx = {0};
+    for (size_t i = 0; i < slot; i++) {
+        u[i] = ua[i];
+        mx = fmaxv(mx, ua[i]);
+    }
+    s->se[ku] = e;
+    s->sm[ku] = hmax(mx);
+    /* applied = (1 - f) u_{k-d} + f u_{k-d-1}, at X's exponent */
+    const lane *ud = ring + kd * slot, *ue = ring + ke * slot;
+    const double sd = ldexp(1.0, (int)(s->se[kd] - e)), sf = ldexp(1.0, (int)(s->se[ke] - e));
+    for (size_t i = 0; i < slot; i++) ua[i] = (1.0 - s->f) * (ud[i] * sd) + s->f * (ue[i] * sf);
     /* x_{k+1} = A_k x_k + B_k applied */
     for (int i = 0; i < n * P; i++) acc[i] = (lane){0};
     for (int j = 0; j < n; j++)
@@ -282,28 +310,26 @@ INLINE void delay_step(const delayed *s, int k, lane *X, lane *ring, lane *acc, 
     for (int i = 0; i < n * P; i++) X[i] = acc[i];
 }
 
-/* X <- X 2^-p, 2^p the power of two above max |X| and max |Y| (one loop, exact) */
-static void renorm_one(size_t na, lane *X, size_t nb, lane *Y, double *e) {
-    double mx = 0.0;
-    for (size_t i = 0; i < na; i++)
-        for (int l = 0; l < W; l++) mx = fmax(mx, fabs(X[i][l]));
-    for (size_t i = 0; i < nb; i++)
-        for (int l = 0; l < W; l++) mx = fmax(mx, fabs(Y[i][l]));
+/* X <- X 2^-p, 2^p the power of two above max |X| and the ring's largest |entry| at X's
+ * exponent (one loop, exact); the ring keeps its slots' exponents */
+static void renorm_one(const delayed *s, size_t na, lane *X, double *e) {
+    lane v = {0};
+    for (size_t i = 0; i < na; i++) v = fmaxv(v, X[i]);
+    double mx = hmax(v);
+    for (size_t r = 0; r < s->R; r++) mx = fmax(mx, ldexp(s->sm[r], (int)(s->se[r] - *e)));
     int p = 0;
     if (mx > 0.0 && isfinite(mx)) frexp(mx, &p);
     const double sc = ldexp(1.0, -p);
     *e += p;
     for (size_t i = 0; i < na; i++) X[i] *= sc;
-    for (size_t i = 0; i < nb; i++) Y[i] *= sc;
 }
 
 /* the period of a delayed loop, any size: the work space acc, ua from the heap */
 static void delay_period(const delayed *s, int N, lane *X, lane *ring, lane *acc, lane *ua,
                          double *e) {
     for (int k = 0; k < N; k++) {
-        delay_step(s, k, X, ring, acc, ua);
-        if ((k + 1) % RENORM == 0)
-            renorm_one((size_t)s->n * s->P, X, s->R * s->m * s->P, ring, e);
+        delay_step(s, k, *e, X, ring, acc, ua);
+        if ((k + 1) % RENORM == 0) renorm_one(s, (size_t)s->n * s->P, X, e);
     }
 }
 
@@ -316,8 +342,8 @@ static void delay_period_paper(delayed s, int N, lane *X, lane *ring, double *e)
     s.n = 11, s.m = 4, s.P = PAPER_P;
     for (int k = 0; k < N; k++) {
         lane acc[11 * PAPER_P], ua[4 * PAPER_P];
-        delay_step(&s, k, X, ring, acc, ua);
-        if ((k + 1) % RENORM == 0) renorm_one(11 * PAPER_P, X, s.R * 4 * PAPER_P, ring, e);
+        delay_step(&s, k, *e, X, ring, acc, ua);
+        if ((k + 1) % RENORM == 0) renorm_one(&s, 11 * PAPER_P, X, e);
     }
 }
 
@@ -348,7 +374,8 @@ int gs_delay_loops(int n, int m, int N, int D, int p, ptrdiff_t L, ptrdiff_t l0,
     const size_t na = (size_t)n + (size_t)D * m, slot = (size_t)m * P, R = (size_t)D + 1;
     lane *X = vectors((size_t)n * P), *Xn = vectors((size_t)n * P);
     lane *ring = vectors(R * slot), *app = vectors(slot);
-    int rc = (X && Xn && ring && app) ? 0 : -2;
+    double *se = malloc(2 * R * sizeof(double)), *sm = se ? se + R : NULL;
+    int rc = (X && Xn && ring && app && se) ? 0 : -2;
     for (ptrdiff_t l = l0; l < l1 && rc == 0; l++) {
         const ptrdiff_t c = circle[l];
         const double *x0 = X0 + l * na * p;
@@ -363,9 +390,15 @@ int gs_delay_loops(int n, int m, int N, int D, int p, ptrdiff_t L, ptrdiff_t l0,
                 for (int col = 0; col < p; col++)
                     ring[(R - j) * slot + i * P + col / W][col % W] =
                         x0[((size_t)n + (j - 1) * m + i) * p + col];
+        for (size_t r = 0; r < R; r++) {
+            lane mx = {0};
+            for (size_t i = 0; i < slot; i++) mx = fmaxv(mx, ring[r * slot + i]);
+            se[r] = 0.0;
+            sm[r] = hmax(mx);
+        }
         delayed ds = {Ad + c * sA[0], Bd + c * sB[0], K + c * sK[0], sA[1], sA[2], sA[3],
                       sB[1], sB[2], sB[3], sK[1], sK[2], sK[3], n, m, P, (int)tau[l],
-                      tau[l] - (int)tau[l], R};
+                      tau[l] - (int)tau[l], R, se, sm};
         if (n == 11 && m == 4 && P == PAPER_P)
             delay_period_paper(ds, N, X, ring, &e);
         else
@@ -375,10 +408,13 @@ int gs_delay_loops(int n, int m, int N, int D, int p, ptrdiff_t L, ptrdiff_t l0,
         for (size_t i = 0; i < (size_t)n; i++)
             for (int col = 0; col < p; col++) y[i * p + col] = X[i * P + col / W][col % W];
         for (int j = 1; j <= D; j++) {
-            const lane *uj = ring + ((size_t)N % R + R - (size_t)j) % R * slot;
+            const size_t r = ((size_t)N % R + R - (size_t)j) % R;
+            const lane *uj = ring + r * slot;
+            const double sc = ldexp(1.0, (int)(se[r] - e)); /* at x_N's exponent */
             for (size_t i = 0; i < (size_t)m; i++)
                 for (int col = 0; col < p; col++)
-                    y[((size_t)n + (j - 1) * m + i) * p + col] = uj[i * P + col / W][col % W];
+                    y[((size_t)n + (j - 1) * m + i) * p + col] =
+                        uj[i * P + col / W][col % W] * sc;
         }
         e_out[l] = e;
     }
@@ -386,6 +422,7 @@ int gs_delay_loops(int n, int m, int N, int D, int p, ptrdiff_t L, ptrdiff_t l0,
     free(Xn);
     free(ring);
     free(app);
+    free(se);
     (void)L;
     return rc;
 }
