@@ -14,7 +14,7 @@ PYTEST_ARGS ?=
 PYTEST_WORKERS ?= auto
 PYTEST_XDIST = -n $(PYTEST_WORKERS) --dist loadfile
 
-.PHONY: venv lint test test-fast test-count tables bench paper clean distclean firmware-example firmware-size fuzz \
+.PHONY: venv lint test test-fast test-count tables bench bench-quick paper clean distclean firmware-example firmware-size fuzz \
 	interrupt-trials fresh-machine test-wheel
 
 # (Re)create the virtualenv whenever the dependencies or their tested lock change: the
@@ -66,6 +66,10 @@ tables: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m bench
+
+# The benchmarks' quick mode, for slices of work (bench/__init__.py).
+bench-quick: $(STAMP)
+	$(BIN)/python -m bench --quick
 
 paper: $(STAMP)
 	$(BIN)/gainsched paper -o reports/paper

@@ -1,7 +1,9 @@
-"""Benchmark entry point: ``python -m bench`` (``make bench``).
+"""Benchmark entry point: ``python -m bench [--quick] [NAME ...]`` (``make bench``, ``make
+bench-quick``).
 
-Runs every ``bench/bench_*.py`` module present (sorted by name), calling its
-``main()``. A module's ``main()`` prints its own figures and may return a
+Runs every ``bench/bench_*.py`` module present (sorted by name), or those whose names
+contain one of the NAMEs, calling its ``main()``; ``--quick``: the quick mode
+(:func:`bench.quick`). A module's ``main()`` prints its own figures and may return a
 JSON-serialisable dict, which is collected under its name into
 ``bench/results.json`` (or the path in the environment variable ``BENCH_OUT``).
 A failing module is recorded with its error and the run continues; the exit
@@ -23,6 +25,8 @@ import traceback
 from pathlib import Path
 
 import numpy as np
+
+from bench import QUICK_ENV, quick
 
 HERE = Path(__file__).resolve().parent
 
@@ -62,11 +66,17 @@ def environment() -> dict:
 
 
 def main(argv=None) -> int:
+    argv = list(argv or [])
+    if "--quick" in argv:  # in the environment: the modules' subprocesses see it too
+        argv.remove("--quick")
+        os.environ[QUICK_ENV] = "1"
     names = discover()
     if argv:  # optional filter: python -m bench build runtime
         names = [n for n in names if any(a in n for a in argv)]
-    out = Path(os.environ.get("BENCH_OUT", HERE / "results.json"))
-    results = {"environment": environment(), "modules": {}}
+    out = Path(os.environ.get("BENCH_OUT", HERE / ("results-quick.json" if quick()
+                                                   else "results.json")))
+    results = {"environment": environment(), "quick": quick(), "modules": {}}
+    t_run = time.perf_counter()
     failed = False
     for name in names:
         print(f"== {name}")
@@ -86,6 +96,8 @@ def main(argv=None) -> int:
         print(f"== {name}: {entry['status']} ({entry['wall_s']:.1f} s)\n")
     if not names:
         print("no bench/bench_*.py modules found")
+    results["wall_s"] = round(time.perf_counter() - t_run, 1)
+    print(f"{'quick' if quick() else 'full'} run: {results['wall_s']:.0f} s")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=2) + "\n")
     print(f"wrote {out}")

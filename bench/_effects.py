@@ -12,6 +12,8 @@ bench._effects`` prints one line per figure and the figures as JSON on its last 
   rebuild every user of the paper's loop waits for;
 - a user's vehicle whose grid the build chooses (bench/configs/user_quad.toml; the chosen
   grid may differ with the effect, as the user's rebuild's would).
+
+The quick mode (:func:`bench.quick`): the cut grid only, best of 2 rounds.
 """
 
 from __future__ import annotations
@@ -53,17 +55,26 @@ def _each(effects):
     return {kind: {kind: values} for kind, values in effects.items()}
 
 
+#: s: a round of the interleaved cases this long is the last (a slow spell is a smaller
+#: part of it; the whole paper grid's round takes 40 s)
+LONG_ROUND_S = 20.0
+
+
 def interleaved(cases, repeat):
     """``{name: (best wall time s, last result)}`` of the calls ``cases`` (name ->
-    function), ``repeat`` rounds of one call each in turn: a slow spell of a shared
-    machine lands on every case alike, not on one case's repeats."""
+    function), ``repeat`` rounds of one call each in turn (or fewer: a round of
+    :data:`LONG_ROUND_S` or more is the last): a slow spell of a shared machine lands on
+    every case alike, not on one case's repeats."""
     best = dict.fromkeys(cases, float("inf"))
     last = {}
     for _ in range(repeat):
+        t_round = time.perf_counter()
         for name, fn in cases.items():
             t0 = time.perf_counter()
             last[name] = fn()
             best[name] = min(best[name], time.perf_counter() - t0)
+        if time.perf_counter() - t_round >= LONG_ROUND_S:
+            break
     return {name: (best[name], last[name]) for name in cases}
 
 
@@ -92,6 +103,7 @@ def _against_drag_only(out, prefix, make, text, name, effects, repeat, title, de
 
 
 def main() -> dict:
+    from bench import quick
     from bench.bench_build import _variant
     from gainsched.config import config_from_text
     from gainsched.schedule.grid import build_grid
@@ -111,9 +123,14 @@ def main() -> dict:
     def gains(g):
         return f" ({int(np.isfinite(g.spectral_radius).sum())} circles with gains)"
 
-    _against_drag_only(out, "", build, text, "cut.toml", _each(TRIM_EFFECTS), 3, lambda g: (
+    _against_drag_only(out, "", build, text, "cut.toml", _each(TRIM_EFFECTS), 2 if quick()
+                       else 3, lambda g: (
         f"build of the paper grid cut to 5 speeds x 3 tilts ({g.spectral_radius.size} "
         "circles), drag only (closed form)"), lambda g: "")
+    if quick():
+        print("  the whole paper grid's and the automatic grid's effect builds: not in the "
+              "quick mode (make bench)")
+        return out
     _against_drag_only(out, "paper_", build, PAPER.read_text(), "paper.toml",
                        _each(PAPER_EFFECTS) | {"improved": IMPROVED}, 2, lambda g: (
                            f"the paper grid ({g.spectral_radius.size} circles), drag only"

@@ -30,11 +30,11 @@ import json
 import re
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
+from bench import best_of, quick
 from gainsched.config import config_from_text, load_config
 from gainsched.model.reduced import Model
 from gainsched.schedule.grid import build_grid, discrete_system, solve_circle, steps_per_period
@@ -46,16 +46,6 @@ from gainsched.schedule.path import period
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "configs" / "paper.toml"
 SPEED = 9.0  # m/s: all tilts feasible
-
-
-def best_of(fn, repeat):
-    """Minimum wall time of ``repeat`` calls and the last result."""
-    best, out = np.inf, None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
 
 
 def loop_sweep(Ad, Bd, Q, R):
@@ -365,12 +355,14 @@ def _fixed_plus_power(x, y):
     return float(a), float(b / x[0] ** p), float(p)
 
 
-def _growth(what, variants, size, unit):
-    """Build each (name, config text) of ``variants`` (best of 2); their sizes and times."""
+def _growth(what, variants, size, unit, first):
+    """Build each (name, config text) of ``variants`` (best of 2, :func:`best_of`) but the
+    first, the paper build already timed: ``first`` its (time s, grid); their sizes and
+    times."""
     xs, ts = [], []
-    for name, vt in variants:
+    for i, (name, vt) in enumerate(variants):
         c = config_from_text(vt, "bench.toml")
-        t, g = best_of(lambda c=c: build_grid(c, n_jobs=1), 2)
+        t, g = first if i == 0 else best_of(lambda c=c: build_grid(c, n_jobs=1), 2)
         xs.append(size(g))
         ts.append(t)
         print(f"    {what} {name}: {xs[-1]} {unit}, {t:.2f} s")
@@ -405,13 +397,29 @@ def bench_build(cfg):
           f"{np.nanmax(g.mode_tau):.1f} s)")
     out.update(bounded_s=t_b, bounded_ratio=t_b / t1)
 
-    # the stability margins of every circle (issue 56: within 1.5x of the build without)
-    bare = cfg.with_values({"control.margins": False})
-    t_bare, _ = best_of(lambda: build_grid(bare, n_jobs=2), 2)
-    print(f"  build without margins ([control] margins = false): {t_bare:.2f} s on 2 jobs "
-          f"(warm); with them x{t2 / t_bare:.2f} (goal 1.5x)")
-    out.update(no_margins_2_warm_s=t_bare, margins_ratio=t2 / t_bare)
+    # the stability margins of every circle (issue 56: within 1.5x of the build without),
+    # on 2 warm workers, the builds with and without in interleaved rounds
+    from bench._effects import interleaved
 
+    bare = cfg.with_values({"control.margins": False})
+    got = interleaved({"on": lambda: build_grid(cfg, n_jobs=2),
+                       "off": lambda: build_grid(bare, n_jobs=2)}, 2 if quick() else 3)
+    t_on, t_bare = got["on"][0], got["off"][0]
+    print(f"  build without margins ([control] margins = false): {t_bare:.2f} s on 2 jobs "
+          f"(warm), with them {t_on:.2f} s: x{t_on / t_bare:.2f} (goal 1.5x; interleaved, "
+          "best of each)")
+    out.update(no_margins_2_warm_s=t_bare, margins_2_warm_s=t_on, margins_ratio=t_on / t_bare)
+    if quick():
+        print("  growth sweeps and the 4x finer grid: not in the quick mode (make bench)")
+        return out
+    out.update(_growth_sweeps(cfg, text, (t1, g), peak))
+    return out
+
+
+def _growth_sweeps(cfg, text, paper, peak):
+    """The build's growth in grid points and in steps per period, and the 4x finer grid;
+    ``paper``: the paper build's (time s, grid) on one job, the sweeps' first point,
+    ``peak`` its peak memory, MiB."""
     # growth in grid points, two ways. Speeds refined: one job per speed, each with the
     # same cost profile, so this is the growth of the work per grid point. Tilts
     # refined at fixed speeds: the tilts of a speed are solved as batches, which
@@ -422,42 +430,45 @@ def bench_build(cfg):
     # interpolation check; the set-up), so the time is fitted as t = a + b steps^p: p is
     # the growth exponent of the work that grows with the steps; the plain log-log
     # slope, pulled below 1 by a, is printed too.
+    def circles(g):
+        return g.spectral_radius.size
+
     speeds = _refinements(cfg.grid.speeds, 2)
     pts, times = _growth(
         "grid", [(f"{2**i}x speeds", _variant(text, speeds=v)) for i, v in enumerate(speeds)],
-        lambda g: g.spectral_radius.size, "circles")
+        circles, "circles", paper)
     e_pts = _exponent(pts, times)
     tilts = _refinements(np.rad2deg(cfg.grid.tilts), 3)
     pts_t, times_t = _growth(
         "grid", [(f"{2**i}x tilts", _variant(text, tilts=a)) for i, a in enumerate(tilts)],
-        lambda g: g.spectral_radius.size, "circles")
+        circles, "circles", paper)
     e_tilts = _exponent(pts_t, times_t)
     print(f"  growth exponent in grid points {e_pts:.2f} (speeds refined: one job each); "
           f"{e_tilts:.2f} with tilts refined (batched in a job, sublinear)")
-    # 4x finer grid: the spacing of speeds and of tilts halved (midpoints added)
+    # 4x finer grid: the spacing of speeds and of tilts halved (midpoints added), built
+    # once in a fresh process (its time and peak memory)
     fine = _variant(text, speeds=speeds[1], tilts=tilts[1])
-    t_fine, g_fine = best_of(lambda: build_grid(config_from_text(fine, "fine.toml")), 1)
-    _, _, peak4 = _peak_rss_mib(fine)
+    t_fine, _, peak4 = _peak_rss_mib(fine)
+    n_fine = len(speeds[1]) * len(tilts[1])
     print(
-        f"  4x finer grid (speeds and tilts refined, {g_fine.spectral_radius.size} circles): "
+        f"  4x finer grid (speeds and tilts refined, {n_fine} circles): "
         f"{t_fine:.2f} s, peak memory {peak4:.0f} MiB (paper: {peak:.0f} MiB)"
     )
     rates = (1000.0, 2000.0, 4000.0, 8000.0, 16000.0)
     steps, t_steps = _growth(
         "control rate", [(f"{r:g} Hz", _variant(text, rate=r)) for r in rates],
-        lambda g: int(g.steps.sum()), "steps per sweep of all speeds")
+        lambda g: int(g.steps.sum()), "steps per sweep of all speeds", paper)
     a, b, e_steps = _fixed_plus_power(steps, t_steps)
     e_steps_loglog = _exponent(steps, t_steps)
     print(f"  growth exponent in steps per period {e_steps:.2f} (t = a + b steps^p over 1-16 "
           f"kHz, a = {a:.2f} s); plain log-log slope {e_steps_loglog:.2f}")
-    out.update(fine_grid_s=t_fine, fine_grid_circles=int(g_fine.spectral_radius.size),
-               fine_peak_rss_mib=peak4, growth_exponent_points=e_pts,
-               growth_exponent_points_tilts=e_tilts, growth_exponent_steps=e_steps,
-               growth_exponent_steps_loglog=e_steps_loglog, step_fit=[a, b, e_steps],
-               scaling={"circles": pts, "circle_times_s": times, "circles_tilts": pts_t,
-                        "circle_times_tilts_s": times_t, "steps": steps,
-                        "step_times_s": t_steps})
-    return out
+    return dict(fine_grid_s=t_fine, fine_grid_circles=n_fine,
+                fine_peak_rss_mib=peak4, growth_exponent_points=e_pts,
+                growth_exponent_points_tilts=e_tilts, growth_exponent_steps=e_steps,
+                growth_exponent_steps_loglog=e_steps_loglog, step_fit=[a, b, e_steps],
+                scaling={"circles": pts, "circle_times_s": times, "circles_tilts": pts_t,
+                         "circle_times_tilts_s": times_t, "steps": steps,
+                         "step_times_s": t_steps})
 
 
 def bench_effect_builds(cfg):
@@ -543,7 +554,8 @@ def main():
         print(f"  Riccati kernel vs per-point loop: {r['compiled_1t_ratio_vs_loop']:.1f}x on 1 "
               f"thread, {r['compiled_2t_ratio_vs_loop']:.1f}x on 2 "
               f"({r['compiled_2t_us_per_point_step']:.2f} us per point-step)")
-    results["plot"] = str(plot(results, Path(__file__).parent))
+    if "scaling" in results["build"]:  # not in the quick mode
+        results["plot"] = str(plot(results, Path(__file__).parent))
     return results
 
 

@@ -1,6 +1,6 @@
 """Reading a PX4 ULog against reading the same flight as the project's CSV (issue 36).
 
-    python -m bench.bench_logs [--minutes 10]
+    python -m bench.bench_logs [--minutes 10]   (the quick mode: 2 minutes)
 
 A steady level circle of the paper's vehicle (9 m/s, the attitude of a tethered circle,
 the body rates of the turn, constant commands) is written for
@@ -25,6 +25,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from bench import best_of, quick
 
 REPO = Path(__file__).parents[1]
 G = 9.80665
@@ -90,18 +92,9 @@ def write_logs(folder: Path, minutes: float) -> tuple[Path, Path]:
     return ulg, csv
 
 
-def best_of(fn, n=3) -> float:
-    best = float("inf")
-    for _ in range(n):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--minutes", type=float, default=10.0)
+    ap.add_argument("--minutes", type=float, default=2.0 if quick() else 10.0)
     args = ap.parse_args(argv)
     from gainsched.analysis.logs import read_log
 
@@ -109,15 +102,15 @@ def main(argv=None) -> dict:
         t0 = time.perf_counter()
         ulg, csv = write_logs(Path(tmp), args.minutes)
         made = time.perf_counter() - t0
-        t_csv = best_of(lambda: read_log(csv))
+        t_csv = best_of(lambda: read_log(csv), 3)[0]
         old = {k: os.environ.get(k) for k in ("GAINSCHED_CACHE", "GAINSCHED_LOG_CACHE")}
         try:
             os.environ["GAINSCHED_LOG_CACHE"] = "0"
-            t_cold = best_of(lambda: read_log(ulg, channel_map="px4", thrust_max=TMAX))
+            t_cold = best_of(lambda: read_log(ulg, channel_map="px4", thrust_max=TMAX), 3)[0]
             os.environ["GAINSCHED_LOG_CACHE"] = "1"
             os.environ["GAINSCHED_CACHE"] = str(Path(tmp) / "cache")
             (log,) = read_log(ulg, channel_map="px4", thrust_max=TMAX)  # fills the cache
-            t_warm = best_of(lambda: read_log(ulg, channel_map="px4", thrust_max=TMAX))
+            t_warm = best_of(lambda: read_log(ulg, channel_map="px4", thrust_max=TMAX), 3)[0]
         finally:
             for k, v in old.items():
                 if v is None:
@@ -125,7 +118,7 @@ def main(argv=None) -> dict:
                 else:
                     os.environ[k] = v
         sizes = ulg.stat().st_size, csv.stat().st_size
-        t_checks = best_of(lambda: _checks_at_1khz(log, args.minutes))
+        t_checks = best_of(lambda: _checks_at_1khz(log, args.minutes), 3)[0]
     cold, warm = t_cold / t_csv, t_warm / t_csv
     print(f"{args.minutes:g} min: ULog {sizes[0] / 2**20:.1f} MiB (1 kHz IMU), CSV "
           f"{sizes[1] / 2**20:.1f} MiB (100 Hz) [written in {made:.1f} s]")

@@ -2,6 +2,8 @@
 
     python -m bench.bench_mvm [--minutes 10] [--logs DIR] [--hidden rotor_drag]
 
+(the quick mode, :func:`bench.quick`: 2 minutes)
+
 Flies the default campaign (7 flights: 3, 9, 15 m/s level, 8 m/s at 20 deg,
 7 m/s at 40 deg, a speed-up, a braking) with flights long enough for
 ``--minutes`` of 200 Hz logs in total (~120k samples for 10 minutes), on a plant
@@ -29,19 +31,35 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench import quick
+
 REPO = Path(__file__).parents[1]
 
 
-def make_logs(out: Path, minutes: float, hidden: str) -> list[Path]:
+def _flight(name: str, duration: float, hidden: str):
+    """The default flight ``name`` of ``duration`` s on the plant with ``hidden``."""
     from gainsched.config import load_config
     from gainsched.schedule.tables import load_table
-    from gainsched.sim.campaign import campaign, write_campaign
+    from gainsched.sim.campaign import campaign, default_flights
     from gainsched.sim.loop import table_scheduler
 
     cfg = load_config(REPO / "configs/paper.toml")
     sched = table_scheduler(load_table(REPO / "tables/paper.h5"))
+    (scenario,) = [s for s in default_flights(duration) if s.name == name]
+    return campaign(cfg, sched, hidden, duration=duration, scenarios=[scenario])[0]
+
+
+def make_logs(out: Path, minutes: float, hidden: str) -> list[Path]:
+    """The default campaign's 7 flights, ``minutes`` of logs in all, written as HDF5 in
+    ``out``; flown two at a time (each flight is its own: the same logs as one
+    :func:`~gainsched.sim.campaign.campaign`)."""
+    from joblib import Parallel, delayed
+
+    from gainsched.sim.campaign import default_flights, write_campaign
+
     duration = 60.0 * minutes / 7 + 0.25  # 7 flights, 0.25 s trimmed from each
-    logs = campaign(cfg, sched, hidden, duration=duration)
+    names = [s.name for s in default_flights(duration)]
+    logs = Parallel(n_jobs=2)(delayed(_flight)(n, duration, hidden) for n in names)
     return write_campaign(out, logs, "h5")
 
 
@@ -122,7 +140,7 @@ def run(paths, candidates=None) -> dict:
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--minutes", type=float, default=10.0)
+    ap.add_argument("--minutes", type=float, default=2.0 if quick() else 10.0)
     ap.add_argument("--logs", type=Path, help="Reuse the logs in this folder (*.h5, *.csv).")
     ap.add_argument("--hidden", default="rotor_drag")
     ap.add_argument("--json", type=Path)

@@ -4,10 +4,12 @@ tilt axes are ranges, against the build of the grid it chose given as lists.
     python -m bench.bench_refine [--config CONFIG] [-j 2] [--json out.json]
 
 Default: configs/heavy_auto.toml, and configs/paper.toml with its speed and tilt lists
-as ranges over the same spans (the hand-refined lists have 19 x 7 = 133 circles).
+as ranges over the same spans (the hand-refined lists have 19 x 7 = 133 circles); the
+quick mode (:func:`bench.quick`): the paper's ranges only, one run each.
 
 Both builds run as the command a user types, in a fresh process each (worker start-up,
-output checks and writing included), the better of two runs each; the ratio of their
+output checks and writing included), the better of two runs each (one if it takes
+:data:`bench.LONG_S` or more); the ratio of their
 wall times is the figure (target: at most 3). The refinement's counters come from the
 table's ``grid_auto`` record: circles solved at breakpoints (each once), how often a
 later round reused one, and the cell centres the certificate solved.
@@ -20,9 +22,9 @@ import json
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
+from bench import best_of, quick
 from gainsched.config import load_config
 from gainsched.schedule.tables import load_table
 
@@ -32,24 +34,22 @@ PAPER = ROOT / "configs" / "paper.toml"
 TARGET = 3.0  # auto build / direct build of the chosen grid (issue 23)
 
 
-def _build(config: Path, out: Path, jobs: int) -> float:
+def _build(config: Path, out: Path, jobs: int) -> None:
     cmd = [sys.executable, "-m", "gainsched", "build", str(config), "-o", str(out),
            "-j", str(jobs)]
-    t0 = time.perf_counter()
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=3600)
     if res.returncode:
         raise RuntimeError(res.stderr.strip().splitlines()[-1])
-    return time.perf_counter() - t0
 
 
 def measure(config: Path = CONFIG, jobs: int = 2, repeats: int = 2) -> dict:
     with tempfile.TemporaryDirectory() as d:
         d = Path(d)
-        t_auto = min(_build(config, d / "auto", jobs) for _ in range(repeats))
+        t_auto = best_of(lambda: _build(config, d / "auto", jobs), repeats)[0]
         table = load_table(next((d / "auto").glob("*.h5")))
         listed = d / "listed.toml"
         listed.write_text(table.config_text)  # the chosen axes as lists
-        t_list = min(_build(listed, d / "list", jobs) for _ in range(repeats))
+        t_list = best_of(lambda: _build(listed, d / "list", jobs), repeats)[0]
     rec = table.grid_auto
     return {
         "config": str(config.relative_to(ROOT)) if config.is_relative_to(ROOT)
@@ -103,9 +103,10 @@ def main(argv=None) -> dict:
     out = {}
     with tempfile.TemporaryDirectory() as d:
         configs = ([args.config.resolve()] if args.config else
+                   [paper_with_ranges(Path(d) / "paper_auto.toml")] if quick() else
                    [CONFIG, paper_with_ranges(Path(d) / "paper_auto.toml")])
         for path in configs:
-            r = measure(path, args.jobs)
+            r = measure(path, args.jobs, repeats=1 if quick() else 2)
             report(r)
             out[path.stem] = r
     if args.json:
