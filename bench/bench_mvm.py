@@ -51,15 +51,17 @@ def _flight(name: str, duration: float, hidden: str):
 
 def make_logs(out: Path, minutes: float, hidden: str) -> list[Path]:
     """The default campaign's 7 flights, ``minutes`` of logs in all, written as HDF5 in
-    ``out``; flown two at a time (each flight is its own: the same logs as one
-    :func:`~gainsched.sim.campaign.campaign`)."""
-    from joblib import Parallel, delayed
-
+    ``out``; flown two at a time in the build's pinned workers
+    (:func:`~gainsched.schedule.jobs.run_jobs`; joblib's own pool cannot start in a
+    process that has used them). Each flight is its own: the logs of one
+    :func:`~gainsched.sim.campaign.campaign` in this process to 2e-14 m (the workers'
+    pinned numerics)."""
+    from gainsched.schedule.jobs import run_jobs
     from gainsched.sim.campaign import default_flights, write_campaign
 
     duration = 60.0 * minutes / 7 + 0.25  # 7 flights, 0.25 s trimmed from each
     names = [s.name for s in default_flights(duration)]
-    logs = Parallel(n_jobs=2)(delayed(_flight)(n, duration, hidden) for n in names)
+    logs = list(run_jobs([(n, duration, hidden) for n in names], 2, None, _flight))
     return write_campaign(out, logs, "h5")
 
 
