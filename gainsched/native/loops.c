@@ -226,8 +226,10 @@ int gs_gain_loops(int n, int m, int N, int block, ptrdiff_t L, ptrdiff_t l0, ptr
         lane_steps(g0, l1, circle, Ad, sA, Bd, sB, K, sK, &s, ll);
         for (int q = 0; q < m; q++)
             for (int l = 0; l < W; l++) g[q][l] = G[ll[l] * m + q];
-        if (n == 11 && m == 4)
+        if (n == 11 && m == 4) /* the paper's loop */
             gain_group(11, 4, N, block, &s, g, M, e);
+        else if (n == 15 && m == 4) /* with a motor lag's four states */
+            gain_group(15, 4, N, block, &s, g, M, e);
         else
             gain_group(n, m, N, block, &s, g, M, e);
         for (int l = 0; l < W && g0 + l < l1; l++) {
@@ -333,17 +335,20 @@ static void delay_period(const delayed *s, int N, lane *X, lane *ring, lane *acc
     }
 }
 
-/* the common size: 11 states, 4 inputs, 14 columns (PAPER_P vectors) */
+/* the common sizes: 11 states (15 with a motor lag), 4 inputs, 14 columns (PAPER_P
+ * vectors) */
 #define PAPER_P ((14 + W - 1) / W)
 
-/* the period of a delayed loop of the common size: the sizes known to the compiler and
- * the work space on the stack, a step's, which it keeps in registers (2x faster) */
-static void delay_period_paper(delayed s, int N, lane *X, lane *ring, double *e) {
-    s.n = 11, s.m = 4, s.P = PAPER_P;
+/* the period of a delayed loop of a common size, n x m given as constants: the sizes known
+ * to the compiler and the work space on the stack, a step's, which it keeps in registers
+ * (2x faster) */
+INLINE void delay_period_fixed(delayed s, int n, int m, int N, lane *X, lane *ring,
+                               double *e) {
+    s.n = n, s.m = m, s.P = PAPER_P;
     for (int k = 0; k < N; k++) {
-        lane acc[11 * PAPER_P], ua[4 * PAPER_P];
+        lane acc[NMAX * PAPER_P], ua[MMAX * PAPER_P];
         delay_step(&s, k, *e, X, ring, acc, ua);
-        if ((k + 1) % RENORM == 0) renorm_one(&s, 11 * PAPER_P, X, e);
+        if ((k + 1) % RENORM == 0) renorm_one(&s, (size_t)n * PAPER_P, X, e);
     }
 }
 
@@ -400,7 +405,9 @@ int gs_delay_loops(int n, int m, int N, int D, int p, ptrdiff_t L, ptrdiff_t l0,
                       sB[1], sB[2], sB[3], sK[1], sK[2], sK[3], n, m, P, (int)tau[l],
                       tau[l] - (int)tau[l], R, se, sm};
         if (n == 11 && m == 4 && P == PAPER_P)
-            delay_period_paper(ds, N, X, ring, &e);
+            delay_period_fixed(ds, 11, 4, N, X, ring, &e);
+        else if (n == 15 && m == 4 && P == PAPER_P)
+            delay_period_fixed(ds, 15, 4, N, X, ring, &e);
         else
             delay_period(&ds, N, X, ring, Xn, app, &e);
         /* the state after the period: x_N, then u_{N-1}, .., u_{N-D} */

@@ -239,9 +239,17 @@ def _lanes(Ad, Bd, K):
         mg._lib(), Ad, Bd, K, circle, tau, D, X0)
 
 
+#: the kernel's sizes: specialised (the paper's loop, with a motor lag) and generic
+KERNEL_SIZES = ((11, 4), (15, 4), (5, 2))
+
+
 @pytest.mark.skipif(not native.available("loops"), reason="no C compiler")
-def test_the_loop_kernel_and_its_numpy_fallback_agree(monkeypatch):
-    Ad, Bd, K = _periodic_loop()
+@pytest.mark.parametrize("sizes", KERNEL_SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
+def test_the_loop_kernel_and_its_numpy_fallback_agree(monkeypatch, sizes):
+    """Both kernels against the numpy recursion, through renormalisations of the state
+    while the ring holds commands written before them (40 steps, a renormalisation every
+    16, delays to 6 samples)."""
+    Ad, Bd, K = _periodic_loop(n=sizes[0], m=sizes[1])
     g_c, (Y_c, e_c) = _lanes(Ad, Bd, K)
     monkeypatch.setattr(mg, "_lib", lambda: None)
     g_n, (Y_n, e_n) = _lanes(Ad, Bd, K)
@@ -252,8 +260,8 @@ def test_the_loop_kernel_and_its_numpy_fallback_agree(monkeypatch):
 
 def test_the_loop_kernel_bits_do_not_depend_on_vector_width(monkeypatch):
     """Every vector variant this CPU runs gives the same bits (the margins are stored in
-    the table, which is byte-identical on every machine); sizes 11 x 4 (specialised) and
-    5 x 2 (generic)."""
+    the table, which is byte-identical on every machine); sizes 11 x 4 and 15 x 4
+    (specialised) and 5 x 2 (generic)."""
     variants = native.vector_variants()
     with ThreadPoolExecutor(2) as ex:
         paths = list(ex.map(lambda f: native.build("loops", f), variants))
@@ -266,7 +274,7 @@ def test_the_loop_kernel_bits_do_not_depend_on_vector_width(monkeypatch):
         lib = ctypes.CDLL(str(path))
         monkeypatch.setattr(native, "load", lambda name, lib=lib: lib)
         out = []
-        for sizes in ((11, 4), (5, 2)):
+        for sizes in KERNEL_SIZES:
             g, (Y, e) = _lanes(*_periodic_loop(n=sizes[0], m=sizes[1]))
             out += [g, Y, e]
         results.append(out)
