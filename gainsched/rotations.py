@@ -133,7 +133,7 @@ def matrix_from_quaternion(q):
     operations in the same order, so the same bits.
     """
     if np.ndim(q) == 1 and np.asarray(q).dtype == np.float64:
-        return np.array(_quaternion_entries(*(float(v) for v in q))).reshape(3, 3)
+        return np.array(_quaternion_entries(*np.asarray(q).tolist())).reshape(3, 3)
     return _stack3x3(*_quaternion_entries(*(q[..., i] for i in range(4))))
 
 

@@ -358,6 +358,8 @@ def reduced_from_maximal(model, x, xi_ref=None):
     to the branch nearest ``xi_ref`` (rad, broadcastable) when given.
     """
     x = np.asarray(x, dtype=float)
+    if x.ndim == 1 and xi_ref is not None:
+        return _reduced_one(model, x, float(xi_ref))
     p, v, q, w = x[..., 0:3], x[..., 3:6], x[..., 6:10], x[..., 10:13]
     R = matrix_from_quaternion(q / np.sqrt(dot(q, q))[..., None])
     dist, pose = pose_angles_from_pose(p, R, model.p_e, xi_ref)
@@ -368,3 +370,23 @@ def reduced_from_maximal(model, x, xi_ref=None):
     xi_dot = dot(d.e_xi, v_t) / (dist * np.sin(delta) ** 2)  # |e_xi| = sin(delta)
     z = np.concatenate([pose[..., :2], np.stack([delta_dot, xi_dot], -1), pose[..., 2:]], -1)
     return np.concatenate([z, w], -1)[..., :N_STATE]
+
+
+def _reduced_one(model, x, xi_ref: float):
+    """:func:`reduced_from_maximal` of one real state (the per-step plants, every control
+    step of a flight on an elastic tether): scalar math for the 3-vectors, where numpy's
+    per-call overhead was 80 % of the conversion (60 % of such a flight); the same
+    operations in the same order, so the same bits."""
+    q = x[6:10]
+    R = matrix_from_quaternion(q / np.sqrt(dot(q, q)))
+    dist, pose = pose_angles_from_pose(x[0:3], R, model.p_e, xi_ref)
+    w0, w1, w2 = x[10:13].tolist()
+    e0, e1, e2 = model.p_e.tolist()
+    v_t = x[3:6] + mv(R, np.array([w1 * e2 - w2 * e1, w2 * e0 - w0 * e2, w0 * e1 - w1 * e0]))
+    v0, v1, v2 = v_t.tolist()
+    sd, cd = float(np.sin(pose[0])), float(np.cos(pose[0]))
+    sx, cx = float(np.sin(pose[1])), float(np.cos(pose[1]))
+    delta_dot = (cd * cx * v0 + cd * sx * v1 + -sd * v2) / dist
+    xi_dot = (-sd * sx * v0 + sd * cx * v1 + 0.0 * v2) / (dist * sd**2)  # |e_xi| = sin(delta)
+    return np.array([pose[0], pose[1], delta_dot, xi_dot, pose[2], pose[3], pose[4],
+                     w0, w1, w2])[:N_STATE]

@@ -100,6 +100,24 @@ def test_round_trip_reduced_maximal_reduced(model):
     np.testing.assert_allclose(far[:, 1] - z[:5, 1], 20 * np.pi, rtol=0, atol=1e-12)
 
 
+def test_one_state_with_its_branch_takes_the_scalar_path_to_the_batched_values(model):
+    """One state and its xi branch (what the per-step plants convert at every control
+    step) take scalar math: the batched conversion's values to a few ulp (the scalar
+    atan2 of the pose angles against numpy's, through the rates' division by sin(delta)^2),
+    on elastic links' stretched states and off the rigid constraint, and on the branch
+    asked for."""
+    rng = np.random.default_rng(12)
+    z = random_states(rng, 300)
+    x = maximal_from_reduced(model, z, stretch=rng.uniform(-0.01, 0.05, 300))
+    x = x + 1e-3 * rng.standard_normal(x.shape)
+    ref = z[:, 1] + 2 * np.pi * rng.integers(-3, 4, 300)
+    batched = reduced_from_maximal(model, x, xi_ref=ref)
+    one = np.array([reduced_from_maximal(model, xk, xi_ref=rk)
+                    for xk, rk in zip(x, ref, strict=True)])
+    np.testing.assert_allclose(one, batched, rtol=4e-15, atol=2e-14)
+    assert np.all(np.abs(one[:, 1] - ref) <= np.pi)
+
+
 def test_maximal_state_geometry(model):
     """The attachment point of the converted state is at rho e(delta, xi); v is the COG velocity."""
     rng = np.random.default_rng(12)
