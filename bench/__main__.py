@@ -73,6 +73,9 @@ def main(argv=None) -> int:
     names = discover()
     if argv:  # optional filter: python -m bench build runtime
         names = [n for n in names if any(a in n for a in argv)]
+    # the modules' main() read their own options from sys.argv when run alone (python -m
+    # bench.bench_controller --table T): run from here, they get none of these
+    sys.argv[1:] = []
     out = Path(os.environ.get("BENCH_OUT", HERE / ("results-quick.json" if quick()
                                                    else "results.json")))
     results = {"environment": environment(), "quick": quick(), "modules": {}}
