@@ -386,6 +386,7 @@ def _reduced_one(model, x, xi_ref: float):
     v0, v1, v2 = v_t.tolist()
     sd, cd = float(np.sin(pose[0])), float(np.cos(pose[0]))
     sx, cx = float(np.sin(pose[1])), float(np.cos(pose[1]))
+    # the batched dot products' terms, e_delta's and e_xi's third entries included
     delta_dot = (cd * cx * v0 + cd * sx * v1 + -sd * v2) / dist
     xi_dot = (-sd * sx * v0 + sd * cx * v1 + 0.0 * v2) / (dist * sd**2)  # |e_xi| = sin(delta)
     return np.array([pose[0], pose[1], delta_dot, xi_dot, pose[2], pose[3], pose[4],
