@@ -7,6 +7,9 @@ shorter logs), each from fewer repeats. The full mode adds the growth sweeps, th
 paper grid's and the automatic grid's effect builds, and takes the ratios from more
 rounds. The mode travels in the environment (:data:`QUICK_ENV`), so the benchmarks'
 own subprocesses see it.
+
+Every module times with :func:`best_of` (repeated calls) and :func:`interleaved` (cases
+in turn), here once.
 """
 
 from __future__ import annotations
@@ -55,3 +58,26 @@ def best_of(fn, repeat, long_s=LONG_S):
         if best >= long_s:
             break
     return best, out
+
+
+#: s: a round of the interleaved cases this long is the last (a slow spell is a smaller
+#: part of it; the whole paper grid's round takes 40 s)
+LONG_ROUND_S = 20.0
+
+
+def interleaved(cases, repeat):
+    """``{name: (best wall time s, last result)}`` of the calls ``cases`` (name ->
+    function), ``repeat`` rounds of one call each in turn (or fewer: a round of
+    :data:`LONG_ROUND_S` or more is the last): a slow spell of a shared machine lands on
+    every case alike, not on one case's repeats."""
+    best = dict.fromkeys(cases, float("inf"))
+    last = {}
+    for _ in range(repeat):
+        t_round = time.perf_counter()
+        for name, fn in cases.items():
+            t0 = time.perf_counter()
+            last[name] = fn()
+            best[name] = min(best[name], time.perf_counter() - t0)
+        if time.perf_counter() - t_round >= LONG_ROUND_S:
+            break
+    return {name: (best[name], last[name]) for name in cases}

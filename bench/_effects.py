@@ -1,7 +1,7 @@
 """Builds whose effects leave the closed form (issue 39) against the drag-only build of
 the same grid, in a process pinned like the ``gainsched`` command
 (:mod:`gainsched.native.reproducible`), one worker, each case's best of rounds that take
-every case in turn (:func:`interleaved`): ``python -m
+every case in turn (:func:`bench.interleaved`): ``python -m
 bench._effects`` prints one line per figure and the figures as JSON on its last line
 (run by :func:`bench.bench_build.bench_effect_builds`).
 
@@ -23,10 +23,11 @@ from gainsched.native.reproducible import pin_environ
 pin_environ()  # before numpy, as the command does
 
 import json  # noqa: E402
-import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+
+from bench import interleaved  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "configs" / "paper.toml"
@@ -53,29 +54,6 @@ AUTO_EFFECTS = {"rotor_drag": {"k_rd": 0.01}, "motor_lag": {"tau": 0.03}}
 def _each(effects):
     """One case per effect: ``{kind: {kind: values}}``."""
     return {kind: {kind: values} for kind, values in effects.items()}
-
-
-#: s: a round of the interleaved cases this long is the last (a slow spell is a smaller
-#: part of it; the whole paper grid's round takes 40 s)
-LONG_ROUND_S = 20.0
-
-
-def interleaved(cases, repeat):
-    """``{name: (best wall time s, last result)}`` of the calls ``cases`` (name ->
-    function), ``repeat`` rounds of one call each in turn (or fewer: a round of
-    :data:`LONG_ROUND_S` or more is the last): a slow spell of a shared machine lands on
-    every case alike, not on one case's repeats."""
-    best = dict.fromkeys(cases, float("inf"))
-    last = {}
-    for _ in range(repeat):
-        t_round = time.perf_counter()
-        for name, fn in cases.items():
-            t0 = time.perf_counter()
-            last[name] = fn()
-            best[name] = min(best[name], time.perf_counter() - t0)
-        if time.perf_counter() - t_round >= LONG_ROUND_S:
-            break
-    return {name: (best[name], last[name]) for name in cases}
 
 
 def _with(text, effects):

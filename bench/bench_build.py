@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import best_of, quick
+from bench import best_of, interleaved, quick
 from gainsched.config import config_from_text, load_config
 from gainsched.model.reduced import Model
 from gainsched.schedule.grid import build_grid, discrete_system, solve_circle, steps_per_period
@@ -402,8 +402,6 @@ def bench_build(cfg):
 
     # the stability margins of every circle (issue 56: within 1.5x of the build without),
     # on 2 warm workers, the builds with and without in interleaved rounds
-    from bench._effects import interleaved
-
     bare = cfg.with_values({"control.margins": False})
     got = interleaved({"on": lambda: build_grid(cfg, n_jobs=2),
                        "off": lambda: build_grid(bare, n_jobs=2)}, 2 if quick() else 3)
