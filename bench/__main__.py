@@ -5,7 +5,8 @@ Runs every ``bench/bench_*.py`` module present (sorted by name), or those whose 
 contain one of the NAMEs, calling its ``main()``; ``--quick``: the quick mode
 (:func:`bench.quick`). A module's ``main()`` prints its own figures and may return a
 JSON-serialisable dict, which is collected under its name into
-``bench/results.json`` (or the path in the environment variable ``BENCH_OUT``).
+``bench/results.json`` (the quick mode: ``bench/results-quick.json``; or the path in
+the environment variable ``BENCH_OUT``), with the run's wall time.
 A failing module is recorded with its error and the run continues; the exit
 code is 1 if any module failed.
 
