@@ -17,7 +17,9 @@
  * riccati.c):
  *   - gs_gain_loops computes W lanes at a time, every matrix entry a vector of W lanes: the
  *     step's A_k, B_k, K_k of each lane are gathered into the vectors, so lanes of
- *     different circles share the instructions;
+ *     different circles share the instructions; a call's last few lanes (the searches'
+ *     refinements evaluate one or two margins at a time) each on its own, its matrices'
+ *     rows W columns to a vector, in the same operations (the same bits);
  *   - gs_delay_loops computes one lane at a time, W of its p columns to a vector: the
  *     step's entries are shared by the columns, nothing is gathered, and a call of few
  *     lanes wastes no vector width.
@@ -28,6 +30,10 @@
  * power of two above its largest entry (exact, no rounding) and the exponent is returned.
  * A delayed loop's ring of past commands is not rescaled: each slot keeps the exponent it
  * was written at and its largest entry, and is read at the state's exponent.
+ *
+ * Maxima and powers of two stay in the vector unit and in bit operations: fmax and ldexp
+ * are library calls (a delayed loop's step made 66 of them and 3 divisions for its ring;
+ * without them it is 3x faster, with the same bits).
  *
  * Why hand-written C: numpy dispatches an 11 x 11 product slower than it computes it, and
  * a margin needs tens of monodromies of hundreds to thousands of steps per circle.
@@ -91,19 +97,50 @@ INLINE void gather(int n, int m, int k, const steps *s, lane *A, lane *B, lane *
         }
 }
 
+/* the lanes as 64-bit integers, for the bitwise helpers below */
+typedef long long ilane __attribute__((vector_size(W * sizeof(double))));
+
+/* lane-wise max(a, |x|), NaN entries of x ignored (as fmax does; a is never NaN): compares
+ * and masks in the vector unit (fmax and fabs per lane are a library call each) */
+INLINE lane fmaxv(lane a, lane x) {
+    const lane ax = (lane)((ilane)x & ((ilane){0} + 0x7fffffffffffffffLL));
+    const ilane gt = ax > a; /* false for a NaN */
+    return (lane)(((ilane)ax & gt) | ((ilane)a & ~gt));
+}
+
+/* 2^k, exact: the bits of a normal double for -1022 <= k <= 1023, ldexp beyond */
+INLINE double pow2(int k) {
+    if (k < -1022 || k > 1023) return ldexp(1.0, k);
+    union {
+        unsigned long long u;
+        double d;
+    } v = {(unsigned long long)(k + 1023) << 52};
+    return v.d;
+}
+
+/* the largest of a vector's lanes (none NaN: fmaxv's) */
+INLINE double hmax(lane v) {
+    double mx = v[0];
+    for (int l = 1; l < W; l++) mx = v[l] > mx ? v[l] : mx;
+    return mx;
+}
+
+/* x 2^k, exactly as ldexp (a product by a power of two rounds as ldexp does) */
+INLINE double times_pow2(double x, int k) {
+    return k < -1022 || k > 1023 ? ldexp(x, k) : x * pow2(k);
+}
+
 /* X <- X 2^-p per lane, 2^p the power of two above the lane's max |X| (and those of the
  * nb entries of Y, scaled alike), e += p; a lane all zero or not finite is left alone */
 INLINE void renorm(size_t na, lane *X, size_t nb, lane *Y, double *e) {
-    double mx[W] = {0};
-    for (size_t i = 0; i < na; i++)
-        for (int l = 0; l < W; l++) mx[l] = fmax(mx[l], fabs(X[i][l]));
-    for (size_t i = 0; i < nb; i++)
-        for (int l = 0; l < W; l++) mx[l] = fmax(mx[l], fabs(Y[i][l]));
+    lane mv = {0};
+    for (size_t i = 0; i < na; i++) mv = fmaxv(mv, X[i]);
+    for (size_t i = 0; i < nb; i++) mv = fmaxv(mv, Y[i]);
     lane sc;
     for (int l = 0; l < W; l++) {
         int p = 0;
-        if (mx[l] > 0.0 && isfinite(mx[l])) frexp(mx[l], &p);
-        sc[l] = ldexp(1.0, -p);
+        if (mv[l] > 0.0 && isfinite(mv[l])) frexp(mv[l], &p);
+        sc[l] = pow2(-p);
         e[l] += p;
     }
     for (size_t i = 0; i < na; i++) X[i] *= sc;
@@ -205,6 +242,122 @@ static void lane_steps(ptrdiff_t l0, ptrdiff_t L, const int *circle, const doubl
     s->k1 = sK[1], s->k2 = sK[2], s->k3 = sK[3];
 }
 
+/* one loop's steps, its matrices' rows W columns to a vector (the columns path of a
+ * call's last few lanes, which would leave most of a vector of lanes empty) */
+typedef struct {
+    const double *A, *B, *K;
+    ptrdiff_t a1, a2, a3, b1, b2, b3, k1, k2, k3;
+} rows;
+
+/* C = X Y of n x n matrices held as rows of P vectors (padding columns zero): each entry
+ * summed as mul sums it, in two chains (even and odd q) */
+INLINE void mul_rows(int n, int P, const lane *X, const lane *Y, lane *C) {
+    for (int i = 0; i < n; i++) {
+        lane s0[NMAX], s1[NMAX];
+        for (int c = 0; c < P; c++) s0[c] = s1[c] = (lane){0};
+        int q = 0;
+        for (; q + 2 <= n; q += 2) {
+            const double x0 = X[i * P + q / W][q % W], x1 = X[i * P + (q + 1) / W][(q + 1) % W];
+            for (int c = 0; c < P; c++) {
+                s0[c] += x0 * Y[q * P + c];
+                s1[c] += x1 * Y[(q + 1) * P + c];
+            }
+        }
+        if (q < n) {
+            const double x0 = X[i * P + q / W][q % W];
+            for (int c = 0; c < P; c++) s0[c] += x0 * Y[q * P + c];
+        }
+        for (int c = 0; c < P; c++) C[i * P + c] = s0[c] + s1[c];
+    }
+}
+
+/* entries x[0], x[st], .. of a row of n as P vectors, zero beyond n */
+INLINE void row_vectors(int n, int P, const double *x, ptrdiff_t st, lane *v) {
+    for (int c = 0; c < P; c++) {
+        const int w = n - c * W < W ? n - c * W : W;
+        lane r = {0};
+        for (int l = 0; l < w; l++) r[l] = x[(c * W + l) * st];
+        v[c] = r;
+    }
+}
+
+/* F = A_k - (B_k diag(g)) K_k of one loop's step k, as rows of P vectors (as closed) */
+INLINE void closed_rows(int n, int m, int P, int k, const rows *s, const double *g, lane *F) {
+    const double *a = s->A + k * s->a1, *b = s->B + k * s->b1, *kk = s->K + k * s->k1;
+    lane Kr[MMAX * NMAX];
+    for (int q = 0; q < m; q++) row_vectors(n, P, kk + q * s->k2, s->k3, Kr + q * P);
+    for (int i = 0; i < n; i++) {
+        lane acc[NMAX];
+        for (int c = 0; c < P; c++) acc[c] = (lane){0};
+        for (int q = 0; q < m; q++) {
+            const double bq = b[i * s->b2 + q * s->b3] * g[q];
+            for (int c = 0; c < P; c++) acc[c] += bq * Kr[q * P + c];
+        }
+        lane Ar[NMAX];
+        row_vectors(n, P, a + i * s->a2, s->a3, Ar);
+        for (int c = 0; c < P; c++) F[i * P + c] = Ar[c] - acc[c];
+    }
+}
+
+/* gain_group for one loop, its rows W columns to a vector: the same operations on every
+ * entry, so the same bits */
+INLINE void gain_rows(int n, int m, int N, int block, const rows *s, const double *g, lane *M,
+                      double *e) {
+    const int P = (n + W - 1) / W;
+    lane F[NMAX * NMAX], T[NMAX * NMAX];
+    for (int i = 0; i < n * P; i++) M[i] = (lane){0};
+    for (int i = 0; i < n; i++) M[i * P + i / W][i % W] = 1.0;
+    int since = 0;
+    for (int k = 0; k < N; k += block) {
+        int len = N - k < block ? N - k : block;
+        closed_rows(n, m, P, k + len / 2, s, g, F);
+        for (int p = len;;) { /* M <- F^len M by binary powers, as power_times */
+            if (p & 1) {
+                mul_rows(n, P, F, M, T);
+                memcpy(M, T, (size_t)n * P * sizeof(lane));
+            }
+            p >>= 1;
+            if (!p) break;
+            mul_rows(n, P, F, F, T);
+            memcpy(F, T, (size_t)n * P * sizeof(lane));
+        }
+        since += len;
+        if (since >= RENORM) {
+            lane mv = {0};
+            for (int i = 0; i < n * P; i++) mv = fmaxv(mv, M[i]);
+            const double mx = hmax(mv);
+            int p = 0;
+            if (mx > 0.0 && isfinite(mx)) frexp(mx, &p);
+            const double sc = pow2(-p);
+            *e += p;
+            for (int i = 0; i < n * P; i++) M[i] *= sc;
+            since = 0;
+        }
+    }
+}
+
+/* lane l's monodromy by gain_rows into M_out, e_out */
+static void gain_lane(int n, int m, int N, int block, ptrdiff_t l, const int *circle,
+                      const double *Ad, const ptrdiff_t *sA, const double *Bd,
+                      const ptrdiff_t *sB, const double *K, const ptrdiff_t *sK,
+                      const double *G, double *M_out, double *e_out) {
+    const ptrdiff_t c = circle[l];
+    const rows s = {Ad + c * sA[0], Bd + c * sB[0], K + c * sK[0], sA[1], sA[2], sA[3],
+                    sB[1], sB[2], sB[3], sK[1], sK[2], sK[3]};
+    const int P = (n + W - 1) / W;
+    lane M[NMAX * NMAX];
+    double e = 0.0;
+    if (n == 11 && m == 4)
+        gain_rows(11, 4, N, block, &s, G + l * m, M, &e);
+    else if (n == 15 && m == 4)
+        gain_rows(15, 4, N, block, &s, G + l * m, M, &e);
+    else
+        gain_rows(n, m, N, block, &s, G + l * m, M, &e);
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) M_out[l * n * n + i * n + j] = M[i * P + j / W][j % W];
+    e_out[l] = e;
+}
+
 /*
  * gs_gain_loops: lanes [l0, l1) of L. Ad (b, N, n, n), Bd (b, N, n, m), K (b, N, m, n):
  * doubles at the element strides sA[4], sB[4], sK[4]; circle (L): each lane's loop; G
@@ -219,6 +372,12 @@ int gs_gain_loops(int n, int m, int N, int block, ptrdiff_t L, ptrdiff_t l0, ptr
                   double *M_out, double *e_out) {
     if (n < 1 || n > NMAX || m < 1 || m > MMAX || N < 1 || block < 1) return -1;
     for (ptrdiff_t g0 = l0; g0 < l1; g0 += W) {
+        /* a last group of r lanes, r P < n: each lane's rows to vectors is less work */
+        if ((l1 - g0) * ((n + W - 1) / W) < n) {
+            for (ptrdiff_t l = g0; l < l1; l++)
+                gain_lane(n, m, N, block, l, circle, Ad, sA, Bd, sB, K, sK, G, M_out, e_out);
+            break;
+        }
         steps s;
         ptrdiff_t ll[W];
         lane g[MMAX], M[NMAX * NMAX];
@@ -241,19 +400,6 @@ int gs_gain_loops(int n, int m, int N, int block, ptrdiff_t L, ptrdiff_t l0, ptr
     return 0;
 }
 
-/* lane-wise max(a, |x|) (NaN entries of x ignored, as fmax does) */
-INLINE lane fmaxv(lane a, lane x) {
-    for (int l = 0; l < W; l++) a[l] = fmax(a[l], fabs(x[l]));
-    return a;
-}
-
-/* the largest of a vector's lanes */
-INLINE double hmax(lane v) {
-    double mx = v[0];
-    for (int l = 1; l < W; l++) mx = fmax(mx, v[l]);
-    return mx;
-}
-
 /* the steps and delay of one delayed loop, its columns W to a vector */
 typedef struct {
     const double *A, *B, *K;
@@ -271,8 +417,8 @@ typedef struct {
  * the order of the source whatever W is: j (the state) then q (the input). A slot is read
  * at X's exponent, times 2^(se - e): exact, so the ring is never rescaled (at 16 kHz it
  * holds 800 commands; rescaling it every RENORM steps doubled the loop's work). */
-INLINE void delay_step(const delayed *s, int k, double e, lane *X, lane *ring, lane *acc,
-                       lane *ua) {
+INLINE void delay_step(const delayed *s, int k, size_t ku, double e, lane *X, lane *ring,
+                       lane *acc, lane *ua) {
     const int n = s->n, m = s->m, P = s->P;
     const size_t slot = (size_t)m * P, R = s->R;
     const double *a = s->A + k * s->a1, *b = s->B + k * s->b1, *kk = s->K + k * s->k1;
@@ -283,8 +429,9 @@ INLINE void delay_step(const delayed *s, int k, double e, lane *X, lane *ring, l
             const double kq = kk[q * s->k2 + j * s->k3];
             for (int c = 0; c < P; c++) ua[q * P + c] -= kq * X[j * P + c];
         }
-    const size_t ku = (size_t)k % R, kd = ((size_t)k + 2 * R - (size_t)s->d) % R,
-                 ke = ((size_t)k + 2 * R - (size_t)s->d - 1) % R;
+    /* the slots of u_k (ku = k mod R, the caller's), u_{k-d} and u_{k-d-1} (d <= D < R) */
+    const size_t d = (size_t)s->d, kd = ku >= d ? ku - d : ku + R - d,
+                 ke = kd == 0 ? R - 1 : kd - 1;
     lane *u = ring + ku * slot;
     lane mx = {0};
     for (size_t i = 0; i < slot; i++) {
@@ -295,7 +442,7 @@ INLINE void delay_step(const delayed *s, int k, double e, lane *X, lane *ring, l
     s->sm[ku] = hmax(mx);
     /* applied = (1 - f) u_{k-d} + f u_{k-d-1}, at X's exponent */
     const lane *ud = ring + kd * slot, *ue = ring + ke * slot;
-    const double sd = ldexp(1.0, (int)(s->se[kd] - e)), sf = ldexp(1.0, (int)(s->se[ke] - e));
+    const double sd = pow2((int)(s->se[kd] - e)), sf = pow2((int)(s->se[ke] - e));
     for (size_t i = 0; i < slot; i++) ua[i] = (1.0 - s->f) * (ud[i] * sd) + s->f * (ue[i] * sf);
     /* x_{k+1} = A_k x_k + B_k applied */
     for (int i = 0; i < n * P; i++) acc[i] = (lane){0};
@@ -318,10 +465,13 @@ static void renorm_one(const delayed *s, size_t na, lane *X, double *e) {
     lane v = {0};
     for (size_t i = 0; i < na; i++) v = fmaxv(v, X[i]);
     double mx = hmax(v);
-    for (size_t r = 0; r < s->R; r++) mx = fmax(mx, ldexp(s->sm[r], (int)(s->se[r] - *e)));
+    for (size_t r = 0; r < s->R; r++) {
+        const double v = times_pow2(s->sm[r], (int)(s->se[r] - *e));
+        mx = v > mx ? v : mx; /* a slot's maximum is never NaN (fmaxv's) */
+    }
     int p = 0;
     if (mx > 0.0 && isfinite(mx)) frexp(mx, &p);
-    const double sc = ldexp(1.0, -p);
+    const double sc = pow2(-p);
     *e += p;
     for (size_t i = 0; i < na; i++) X[i] *= sc;
 }
@@ -329,8 +479,8 @@ static void renorm_one(const delayed *s, size_t na, lane *X, double *e) {
 /* the period of a delayed loop, any size: the work space acc, ua from the heap */
 static void delay_period(const delayed *s, int N, lane *X, lane *ring, lane *acc, lane *ua,
                          double *e) {
-    for (int k = 0; k < N; k++) {
-        delay_step(s, k, *e, X, ring, acc, ua);
+    for (int k = 0, ku = 0; k < N; k++, ku = (size_t)ku + 1 == s->R ? 0 : ku + 1) {
+        delay_step(s, k, (size_t)ku, *e, X, ring, acc, ua);
         if ((k + 1) % RENORM == 0) renorm_one(s, (size_t)s->n * s->P, X, e);
     }
 }
@@ -345,10 +495,22 @@ static void delay_period(const delayed *s, int N, lane *X, lane *ring, lane *acc
 INLINE void delay_period_fixed(delayed s, int n, int m, int N, lane *X, lane *ring,
                                double *e) {
     s.n = n, s.m = m, s.P = PAPER_P;
-    for (int k = 0; k < N; k++) {
+    for (int k = 0, ku = 0; k < N; k++, ku = (size_t)ku + 1 == s.R ? 0 : ku + 1) {
         lane acc[NMAX * PAPER_P], ua[MMAX * PAPER_P];
-        delay_step(&s, k, *e, X, ring, acc, ua);
+        delay_step(&s, k, (size_t)ku, *e, X, ring, acc, ua);
         if ((k + 1) % RENORM == 0) renorm_one(&s, (size_t)n * PAPER_P, X, e);
+    }
+}
+
+/* delay_period_fixed with the steps' rows contiguous (a C-ordered array's): the
+ * strides known to the compiler too */
+INLINE void delay_period_rows(delayed s, int n, int m, int N, lane *X, lane *ring,
+                              double *e) {
+    if (s.a2 == n && s.a3 == 1 && s.b2 == m && s.b3 == 1 && s.k2 == n && s.k3 == 1) {
+        s.a2 = n, s.a3 = 1, s.b2 = m, s.b3 = 1, s.k2 = n, s.k3 = 1;
+        delay_period_fixed(s, n, m, N, X, ring, e);
+    } else {
+        delay_period_fixed(s, n, m, N, X, ring, e);
     }
 }
 
@@ -405,9 +567,9 @@ int gs_delay_loops(int n, int m, int N, int D, int p, ptrdiff_t L, ptrdiff_t l0,
                       sB[1], sB[2], sB[3], sK[1], sK[2], sK[3], n, m, P, (int)tau[l],
                       tau[l] - (int)tau[l], R, se, sm};
         if (n == 11 && m == 4 && P == PAPER_P)
-            delay_period_fixed(ds, 11, 4, N, X, ring, &e);
+            delay_period_rows(ds, 11, 4, N, X, ring, &e);
         else if (n == 15 && m == 4 && P == PAPER_P)
-            delay_period_fixed(ds, 15, 4, N, X, ring, &e);
+            delay_period_rows(ds, 15, 4, N, X, ring, &e);
         else
             delay_period(&ds, N, X, ring, Xn, app, &e);
         /* the state after the period: x_N, then u_{N-1}, .., u_{N-D} */
@@ -417,7 +579,7 @@ int gs_delay_loops(int n, int m, int N, int D, int p, ptrdiff_t L, ptrdiff_t l0,
         for (int j = 1; j <= D; j++) {
             const size_t r = ((size_t)N % R + R - (size_t)j) % R;
             const lane *uj = ring + r * slot;
-            const double sc = ldexp(1.0, (int)(se[r] - e)); /* at x_N's exponent */
+            const double sc = pow2((int)(se[r] - e)); /* at x_N's exponent */
             for (size_t i = 0; i < (size_t)m; i++)
                 for (int col = 0; col < p; col++)
                     y[((size_t)n + (j - 1) * m + i) * p + col] =

@@ -444,15 +444,9 @@ def crossover_frequency(phase, N: int, h, guess=None):
 
 
 def _flat(Ad, Bd, K):
-    """The loops' batch shape, and their steps flat over it and packed: each step's
-    ``A_k, B_k, K_k`` side by side in memory, read at every pass of the searches."""
-    b, (N, n, m) = Ad.shape[:-3], Bd.shape[-3:]
-    packed = np.empty((int(np.prod(b)), N, n * n + 2 * n * m))
-    parts = np.split(packed, [n * n, n * n + n * m], axis=-1)
-    for X, part in zip((Ad, Bd, K), parts, strict=True):
-        part.reshape((-1,) + X.shape[-3:])[...] = X.reshape((-1,) + X.shape[-3:])
-    return b, tuple(part.reshape((-1,) + X.shape[-3:])
-                    for X, part in zip((Ad, Bd, K), parts, strict=True))
+    """The loops' batch shape, and their steps flat over it (views where the arrays allow:
+    the kernels read any whole-element strides, rows of contiguous entries fastest)."""
+    return Ad.shape[:-3], tuple(X.reshape((-1,) + X.shape[-3:]) for X in (Ad, Bd, K))
 
 
 def gain_margins(Ad, Bd, K, *, inputs=None, g_max: float = G_MAX, xtol: float = XTOL,

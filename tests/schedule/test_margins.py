@@ -283,6 +283,22 @@ def test_the_loop_kernel_bits_do_not_depend_on_vector_width(monkeypatch):
             assert np.array_equal(a, b)
 
 
+@pytest.mark.skipif(not native.available("loops"), reason="no C compiler")
+@pytest.mark.parametrize("sizes", KERNEL_SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
+@pytest.mark.parametrize("block", [1, 4])
+def test_a_calls_last_few_lanes_take_the_row_path_to_the_same_bits(sizes, block):
+    """A call's last group of few lanes runs each lane on its own, its matrices' rows to
+    vectors (a lane vector would be mostly empty): the same bits as the lanes computed
+    together, every step and the scan's surrogate of blocks."""
+    Ad, Bd, K = _periodic_loop(n=sizes[0], m=sizes[1])
+    circle = np.repeat(np.arange(3), 6)  # 18 lanes: full lane vectors at every width
+    G = np.random.default_rng(3).uniform(0.2, 3.0, (circle.size, sizes[1]))
+    together = mg._gain_spectra(Ad, Bd, K, circle, G, block)
+    alone = np.concatenate([mg._gain_spectra(Ad, Bd, K, circle[i:i + 1], G[i:i + 1], block)
+                            for i in range(circle.size)])
+    assert np.array_equal(together, alone)
+
+
 @pytest.fixture(scope="module")
 def paper_circle(paper_config):
     """The paper vehicle's 15 m/s circle at 20 deg: its steps and solution."""
