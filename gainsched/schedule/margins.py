@@ -212,18 +212,20 @@ def loop_log_rho(Ad, Bd, K):
 #: columns the delayed loop's monodromy is applied to (above its numerical rank over a
 #: period, 12-13 on the paper's circles)
 _RANK = 14
-#: the span, s, of the power a time-invariant loop's delay margin is searched on
-#: (:func:`_ti_power`): over it the delayed loop's fast and delay modes decay far below the
-#: 1e-9 of :func:`_delay_spectra`'s check (the paper's level circles at 1 and 4 kHz, 3 and
-#: 15 m/s, at their delay margin: the 15th multiplier 4e-15 to 7e-12 at 0.25 s, 1e-29 to
-#: 5e-23 at 0.5 s, 2e-6 to 4e-5 at 0.1 s)
-_TI_SPAN_S = 0.3
+#: the span, s, over which the delayed loop's fast and delay modes decay far below the
+#: 1e-9 of :func:`_delay_spectra`'s check (:func:`_decay_steps`): a time-invariant loop's
+#: delay margin is searched on its step's power over it (the paper's level circles at 1
+#: and 4 kHz, 3 and 15 m/s, at their delay margin: the 15th multiplier 4e-15 to 7e-12 at
+#: 0.25 s, 1e-29 to 5e-23 at 0.5 s, 2e-6 to 4e-5 at 0.1 s), and a periodic loop's image
+#: is found over the last span of its period (tilted 10 and 20 deg at 5-15 m/s, 15 ms of
+#: delay: off the span 4e-10 to 7e-15 at 0.2-0.4 s, 3e-2 at 0.03 s)
+_DECAY_SPAN_S = 0.3
 #: and at least this many times the delay evaluated: a delay mode's multiplier over a span
 #: falls like j^(-span / tau) (the j-th root of a retarded loop), so the span grows with
 #: the delay (0.3 s is 20 of the paper's 15 ms margins; at 8 kHz and the scan's 25-50 ms,
 #: 0.3 s left the 15th multiplier above the check, and the one-step matrix of 1615 rows
 #: was formed)
-_TI_DELAYS = 20
+_DECAY_DELAYS = 20
 
 
 def _delay_pass_numpy(Ad, Bd, K, circle, tau, D, X0):
@@ -274,52 +276,56 @@ def _delay_loops(Ad, Bd, K, circle, tau):
     return _delay_spectra(Ad, Bd, K, circle, tau)[:, 0].real
 
 
-def _ti_power(N: int, h) -> int:
-    """The power of a time-invariant loop's step (N = 1) its delay margin is searched on:
-    the steps of :data:`_TI_SPAN_S` at the shortest step ``h`` (s); 1 for a periodic loop
-    (N > 1), searched on its period."""
-    return 1 if N > 1 else max(1, int(np.ceil(_TI_SPAN_S / float(np.min(h)))))
+def _decay_steps(h) -> int:
+    """The steps of :data:`_DECAY_SPAN_S` at the shortest step ``h`` (s): a time-invariant
+    loop's power, a periodic loop's span to find its image on (:func:`_delay_spectra`)."""
+    return max(1, int(np.ceil(_DECAY_SPAN_S / float(np.min(h)))))
 
 
-def _delay_spectra(Ad, Bd, K, circle, tau, power=1):
+def _delay_spectra(Ad, Bd, K, circle, tau, decay=1):
     """The largest log multiplier (:func:`_log_spectrum`) of the lanes: loop ``circle``
     (L,) with the delays tau (L,) in samples.
 
     The delayed loop's monodromy has n + D m rows, but over a period its fast modes have
-    decayed: it is numerically of low rank. It is applied to :data:`_RANK` columns (a
-    fixed random start, then the orthonormal basis of its image: one step of subspace
-    iteration) and its multipliers are those of ``Q' M Q``; where ``M Q`` leaves the span
-    of Q by more than 1e-9 of its norm, the whole monodromy is formed instead.
+    decayed: it is numerically of low rank. It is applied to :data:`_RANK` columns (the
+    orthonormal basis Q of its image: one step of subspace iteration from a fixed random
+    start) and its multipliers are those of ``Q' M Q``; where ``M Q`` leaves the span of Q
+    by more than 1e-9 of its norm, the whole monodromy is formed instead. The span of the
+    fast modes' decay (``decay`` steps, :func:`_decay_steps`, or :data:`_DECAY_DELAYS`
+    times the longest delay in samples if that is more) is all that shapes the image: the
+    start is propagated over the period's last span alone (the whole period if the check
+    fails on it), then Q over the period.
 
-    ``power`` > 1, a time-invariant loop (N = 1, :func:`_ti_power`): the same on its
-    step's power (``power``, or :data:`_TI_DELAYS` times the longest delay in samples if
-    that is more), whose multipliers are the step's to that power: the log of
-    the largest over ``power``, with the arg of the step's own multiplier (the Rayleigh
-    quotient of one step on the power's eigenvector; the power's arg is that times
-    ``power``, modulo 2 pi). The one-step matrix of n + D m rows has as many multipliers
-    as rows (815 at 4 kHz and the 50 ms searched: its eigenvalues were 4x the rest of the
-    build); its power needs the 14 columns."""
-    n, m = Ad.shape[-1], Bd.shape[-1]
+    A time-invariant loop (N = 1): the same on its step's power over the span, whose
+    multipliers are the step's to that power: the log of the largest over the power, with
+    the arg of the step's own multiplier (the Rayleigh quotient of one step on the power's
+    eigenvector; the power's arg is that times the power, modulo 2 pi). The one-step
+    matrix of n + D m rows has as many multipliers as rows (815 at 4 kHz and the 50 ms
+    searched: its eigenvalues were 4x the rest of the build); its power needs the 14
+    columns."""
+    n, m, N = Ad.shape[-1], Bd.shape[-1], Ad.shape[-3]
     D = int(np.floor(tau.max())) + 1
     na, L = n + D * m, tau.size
     lib = _lib()
-    if power > 1:
-        power = max(power, int(np.ceil(_TI_DELAYS * tau.max())))
+    span = max(decay, int(np.ceil(_DECAY_DELAYS * tau.max())))
+    power = span if N == 1 else 1
     if na > _RANK:
         steps = tuple(X if power == 1 else np.broadcast_to(X[:, :1], X.shape[:1] + (power,)
                                                              + X.shape[2:])
                       for X in (Ad, Bd, K))
         omega = np.linalg.qr(np.random.default_rng(0).standard_normal((na, _RANK)))[0]
         start = np.broadcast_to(omega, (L,) + omega.shape)
-        Y, _ = _delay_pass(lib, *steps, circle, tau, D, start)
-        Q = np.linalg.qr(Y)[0]
-        Z, e = _delay_pass(lib, *steps, circle, tau, D, Q)
-        QB = np.swapaxes(Q, -1, -2) @ Z
-        off = np.linalg.norm(Z - Q @ QB, axis=(-2, -1))
-        if np.all(off <= 1e-9 * np.linalg.norm(Z, axis=(-2, -1))):
-            if power == 1:
-                return _log_spectrum(QB, e)
-            return _one_step(lib, Ad, Bd, K, circle, tau, D, Q, QB, e, power)
+        for w in dict.fromkeys((min(span, N * power), N * power)):
+            Y, _ = _delay_pass(lib, *(X[:, X.shape[1] - w:] for X in steps), circle, tau, D,
+                               start)
+            Q = np.linalg.qr(Y)[0]
+            Z, e = _delay_pass(lib, *steps, circle, tau, D, Q)
+            QB = np.swapaxes(Q, -1, -2) @ Z
+            off = np.linalg.norm(Z - Q @ QB, axis=(-2, -1))
+            if np.all(off <= 1e-9 * np.linalg.norm(Z, axis=(-2, -1))):
+                if power == 1:
+                    return _log_spectrum(QB, e)
+                return _one_step(lib, Ad, Bd, K, circle, tau, D, Q, QB, e, power)
     M, e = _delay_pass(lib, Ad, Bd, K, circle, tau, D, np.broadcast_to(np.eye(na), (L, na, na)))
     return _log_spectrum(M, e)
 
@@ -375,12 +381,12 @@ def _gain_crossings(Ad, Bd, K, masks, sign, g_max, s0, xtol, block):
     return first_crossings(loops(1), hi, s0, xtol, size, surrogate)
 
 
-def _delay_crossings(Ad, Bd, K, hi_steps, s0, xtol, guess_steps=None, power=1):
+def _delay_crossings(Ad, Bd, K, hi_steps, s0, xtol, guess_steps=None, decay=1):
     """The first crossing of the delay margin, samples, and the arg of the multiplier that
     crosses, rad: (b,) each; ``guess_steps`` (b,) of it (NaN: none) start the scan
-    around it; ``power``: of a time-invariant loop's step (:func:`_delay_spectra`)."""
+    around it; ``decay``: the steps of the fast modes' decay (:func:`_delay_spectra`)."""
     def spectra(pair, P):
-        return _delay_spectra(Ad, Bd, K, pair, P, power)
+        return _delay_spectra(Ad, Bd, K, pair, P, decay)
 
     def size(pair, P):  # the delay, samples (at least one)
         return np.maximum(P, 1.0)
@@ -532,7 +538,7 @@ def delay_margin(Ad, Bd, K, h, *, tau_max: float = TAU_MAX_S, xtol: float = XTOL
     shape, (Ad, Bd, K) = _flat(Ad, Bd, K)
     h = np.broadcast_to(np.asarray(h, float), shape).reshape(-1)
     steps, _ = _delay_crossings(Ad, Bd, K, tau_max / h, _nominal(Ad, Bd, K), xtol,
-                                power=_ti_power(Ad.shape[-3], h))
+                                decay=_decay_steps(h))
     return (steps * h).reshape(shape)
 
 
@@ -632,7 +638,7 @@ def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX
     guess = None if delay_guess is None else np.full(h.shape, delay_guess) / h
     steps, phase = _delay_crossings(Ad, Bd, K, tau_max / h, s0,
                                     xtol if delay_xtol is None else delay_xtol, guess,
-                                    _ti_power(Ad.shape[-3], h))
+                                    _decay_steps(h))
     w = crossover_frequency(phase, Ad.shape[-3], h, None if crossover_guess is None else
                             np.broadcast_to(crossover_guess, shape).reshape(-1))
     per = g[:, 2:].reshape(-1, m, 2)

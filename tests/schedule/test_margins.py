@@ -12,7 +12,8 @@ Checked against answers found another way:
   the interpolated-hold loop, ``z^(d+2) - a z^(d+1) + b k ((1 - f) z + f)``, has a root
   on the unit circle (numpy's roots and brentq on f), to 1e-6 of a sample;
 - the compiled kernel against its numpy fallback, its vector variants bit for bit, and
-  the delayed loop's low-rank image against its whole monodromy on a paper circle;
+  the delayed loop's low-rank image against its whole monodromy on a paper circle (its
+  image found over the period's last span, or over the whole period when that fails);
 - the build: the level circle of the paper vehicle solved by the periodic solver over its
   N constant steps has the margins of its one-step LTI loop found by brentq on the
   eigenvalues of ``A - g B K`` (to 1e-6), and the DARE path stores the same.
@@ -353,6 +354,50 @@ def test_the_delayed_loops_low_rank_image_has_the_whole_monodromys_multipliers(p
     assert low[0] < 0 < low[-1]  # a stable and an unstable delay
 
 
+def test_a_span_too_short_for_the_image_falls_back_to_the_whole_period(monkeypatch,
+                                                                       paper_circle):
+    """The delayed loop's image is found over the period's last span (0.3 s, or 20
+    delays): the start propagated over that span, then Q over the period. A span too short
+    for the fast modes to decay (8 steps) fails the check, and the start goes over the
+    whole period: the multipliers of the whole monodromy either way, to 1e-9."""
+    sol, (Ad, Bd, K) = paper_circle
+    N, passes, run = Ad.shape[1], [], mg._delay_pass
+    monkeypatch.setattr(mg, "_delay_pass",
+                        lambda lib, A, *a: passes.append(A.shape[1]) or run(lib, A, *a))
+    for tau, decay, expect in ((12.5, mg._decay_steps(sol.dt), [300, N]),
+                               (12.5, 8, [8, N, N, N])):
+        monkeypatch.setattr(mg, "_DECAY_DELAYS", 20 if decay > 8 else 0)  # 8 steps alone
+        passes.clear()
+        got = mg._delay_spectra(Ad, Bd, K, np.zeros(1, int), np.array([tau]), decay)
+        assert passes == expect
+        whole = mg._log_rho(*_whole_delayed_monodromy(Ad[0], Bd[0], K[0], np.array(tau)))
+        assert got[0, 0].real == pytest.approx(whole, abs=1e-9)
+
+
+def test_a_crossing_just_outside_the_surrogates_check_is_bracketed_by_widening():
+    """The real loop checks a bracket 1e-3 of the margin wide around the surrogate's
+    crossing; a down margin of 3 % makes that 3e-5 in p, less than the surrogate's error
+    there. The check widens (4x, up to 3 times) on the side the crossing lies beyond and
+    finds it, instead of searching the real loop again from 0: here a surrogate 5e-5 off
+    a crossing at p = 0.97 (a factor of 0.03)."""
+    from gainsched.schedule.crossings import first_crossings
+
+    def line(offset, seen=None):
+        def spectra(pair, P):
+            if seen is not None:
+                seen.extend(P.tolist())
+            x = P - 0.97 - offset
+            return (10.0 * x - 3.0 * x ** 2 + 0j)[:, None]
+        return spectra
+
+    seen = []
+    s0 = line(0.0)(None, np.zeros(1))
+    p = first_crossings(line(0.0, seen), np.ones((1, 1)), s0, 1e-6,
+                        lambda pair, P: np.maximum(1.0 - P, 1e-12), surrogate=line(5e-5))
+    assert p[0, 0] == pytest.approx(0.97, abs=1e-6 * 0.03)
+    assert min(seen) > 0.969, seen  # no search again from p = 0
+
+
 def _lti_margins(A, B, K, mask):
     """The first g below and above 1 where rho(A - B diag(g on mask) K) = 1 (brentq on a
     fine scan of the eigenvalues; 0 / inf where none)."""
@@ -419,7 +464,7 @@ def test_a_level_circles_delay_margin_at_4_khz_is_its_whole_step_matrixs(paper_c
     sol = solve_circle(cfg, 12.0, [0.0])  # the build's: the DARE and one step
     A, B, K, h = Ad[0, 0], Bd[0, 0], sol.K[0, 0], sol.dt
     tau, w = sol.delay_margin[0] / h, sol.crossover[0]
-    assert mg._ti_power(1, h) > 1000 and 40 < tau < 80, (mg._ti_power(1, h), tau)
+    assert mg._decay_steps(h) > 1000 and 40 < tau < 80, (mg._decay_steps(h), tau)
 
     def rho(t):
         return np.abs(np.linalg.eigvals(_delayed_step(A, B, K, t))).max()
