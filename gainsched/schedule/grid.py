@@ -473,7 +473,7 @@ def _fill_periodic(out: CircleSolution, ok, model, config, speed, tilts, Qx, kee
             _put_margins(out, idx, loop_margins(Ad, Bd, sol.K, dt, xtol=MARGIN_XTOL,
                                                 delay_xtol=MARGIN_DELAY_XTOL,
                                                 block=surrogate_block(dt), delay_guess=guess,
-                                                crossover_guess=w0))
+                                                crossover_guess=w0, monodromy=Phi))
         out.K[idx] = _sample(Ks, lo, hi, w)
         out.S[idx] = _sample(Ss, lo, hi, w)
         out.spectral_radius[idx] = spectral_radius(Phi)

@@ -584,7 +584,8 @@ class LoopMargins:
 
 def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX_S,
                  xtol: float = XTOL, delay_xtol: float | None = None, block: int = 1,
-                 delay_guess: float | None = None, crossover_guess=None) -> LoopMargins:
+                 delay_guess: float | None = None, crossover_guess=None,
+                 monodromy=None) -> LoopMargins:
     """Every margin of periodic closed loops at once: the gain margins of all inputs
     together and of each alone, and the delay margin (module docstring).
 
@@ -613,6 +614,9 @@ def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX
     crossover_guess : float or ndarray, shape (*b,), optional
         A guess of the crossover, rad/s, which picks a periodic loop's
         (:func:`crossover_frequency`; the level circle's for the tilted ones).
+    monodromy : ndarray, shape (*b, n, n), optional
+        The loops' monodromies ``prod_k (A_k - B_k K_k)`` if at hand (the solver's), for
+        their multipliers as they are (formed here without).
 
     Returns
     -------
@@ -629,9 +633,10 @@ def loop_margins(Ad, Bd, K, h, *, g_max: float = G_MAX, tau_max: float = TAU_MAX
     [0.1667, 3.5, 3.5]
     """
     shape, (Ad, Bd, K) = _flat(Ad, Bd, K)
-    m = Bd.shape[-1]
+    m, n = Bd.shape[-1], Bd.shape[-2]
     masks, sign = _gain_kinds(m)
-    s0 = _nominal(Ad, Bd, K)
+    s0 = (_nominal(Ad, Bd, K) if monodromy is None else
+          _log_spectrum(np.reshape(monodromy, (-1, n, n)), np.zeros(Ad.shape[0])))
     p = _gain_crossings(Ad, Bd, K, masks, sign, g_max, s0, xtol, block)
     g = np.where(sign < 0, np.where(np.isinf(p), 0.0, 1.0 - p), 1.0 + p)
     h = np.broadcast_to(np.asarray(h, float), shape).reshape(-1)

@@ -354,6 +354,26 @@ def test_the_delayed_loops_low_rank_image_has_the_whole_monodromys_multipliers(p
     assert low[0] < 0 < low[-1]  # a stable and an unstable delay
 
 
+def test_a_monodromy_at_hand_gives_the_loops_margins_without_forming_it(monkeypatch,
+                                                                        paper_circle):
+    """The build hands the solver's monodromy to the margins (its multipliers as the loop
+    is): the same margins as with the monodromy formed by the kernel, to the build's
+    tolerances, and one loop fewer evaluated."""
+    sol, (Ad, Bd, K) = paper_circle
+    lanes, spectra = [], mg._gain_spectra
+    monkeypatch.setattr(mg, "_gain_spectra",
+                        lambda *a: lanes.append(a[3].size) or spectra(*a))
+    kw = dict(xtol=mg.MARGIN_XTOL, delay_xtol=mg.MARGIN_DELAY_XTOL, block=32)
+    formed = loop_margins(Ad, Bd, K, sol.dt, **kw)
+    count, lanes[:] = sum(lanes), []
+    Phi = monodromy_with(Ad, Bd, K, np.ones(4))
+    given = loop_margins(Ad, Bd, K, sol.dt, monodromy=Phi, **kw)
+    assert sum(lanes) == count - 1
+    for a, b, tol in ((given.gain_down, formed.gain_down, kw["xtol"]),
+                      (given.delay, formed.delay, kw["delay_xtol"])):
+        np.testing.assert_allclose(a, b, rtol=tol)
+
+
 def test_a_span_too_short_for_the_image_falls_back_to_the_whole_period(monkeypatch,
                                                                        paper_circle):
     """The delayed loop's image is found over the period's last span (0.3 s, or 20
