@@ -21,6 +21,7 @@ __all__ = [
     "Rz",
     "matrix_from_euler_zyx",
     "matrix_from_euler_zyx_scalar",
+    "matrix_entries_from_quaternion",
     "euler_zyx_from_matrix",
     "matrix_from_quaternion",
     "quaternion_from_matrix",
@@ -115,9 +116,17 @@ def euler_zyx_from_matrix(R):
     return phi, theta, psi
 
 
-def _quaternion_entries(w, x, y, z):
-    """The nine entries of the rotation matrix of ``(w, x, y, z)``, row by row (scalars or
-    arrays alike)."""
+def matrix_entries_from_quaternion(w, x, y, z):
+    """The nine entries of the rotation matrix of a unit quaternion ``(w, x, y, z)``, row
+    by row: ``R_00, R_01, .., R_22`` (scalars or arrays alike; the per-step simulators'
+    scalar math takes them as Python floats).
+
+    Examples
+    --------
+    >>> R = gs.rotations.matrix_entries_from_quaternion(np.cos(0.5), 0.0, 0.0, np.sin(0.5))
+    >>> bool(np.allclose(np.reshape(R, (3, 3)), gs.rotations.Rz(1.0)))
+    True
+    """
     return (
         1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
         2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
@@ -133,8 +142,8 @@ def matrix_from_quaternion(q):
     operations in the same order, so the same bits.
     """
     if np.ndim(q) == 1 and np.asarray(q).dtype == np.float64:
-        return np.array(_quaternion_entries(*np.asarray(q).tolist())).reshape(3, 3)
-    return _stack3x3(*_quaternion_entries(*(q[..., i] for i in range(4))))
+        return np.array(matrix_entries_from_quaternion(*np.asarray(q).tolist())).reshape(3, 3)
+    return _stack3x3(*matrix_entries_from_quaternion(*(q[..., i] for i in range(4))))
 
 
 def quaternion_from_matrix(R):

@@ -35,18 +35,25 @@ s_effects, s_link)``, shape (..., 13 + n_extra + n_link).
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
 from .._vec import broadcast, cross, dot, mtv, mv
 from ..constants import N_STATE
-from ..rotations import matrix_from_quaternion, quaternion_from_matrix, skew
+from ..rotations import (
+    matrix_entries_from_quaternion,
+    matrix_from_quaternion,
+    quaternion_from_matrix,
+    skew,
+)
 from .effects import Kinematics
 from .geometry import (
     attachment_from_cog,
     cog_from_attachment,
     pose_angles_from_pose,
     tether_direction,
+    wrap_angle,
 )
 from .links import ELASTIC_LINKS, LinkOutput, SpringDamper, link_from_tether
 
@@ -374,20 +381,28 @@ def reduced_from_maximal(model, x, xi_ref=None):
 
 def _reduced_one(model, x, xi_ref: float):
     """:func:`reduced_from_maximal` of one real state (the per-step plants, every control
-    step of a flight on an elastic tether): scalar math for the 3-vectors, where numpy's
-    per-call overhead was 80 % of the conversion (60 % of such a flight); the same
-    operations in the same order, so the same bits."""
-    q = x[6:10]
-    R = matrix_from_quaternion(q / np.sqrt(dot(q, q)))
-    dist, pose = pose_angles_from_pose(x[0:3], R, model.p_e, xi_ref)
-    w0, w1, w2 = x[10:13].tolist()
+    step of a flight on an elastic tether) in Python floats and :mod:`math`: numpy's
+    per-call overhead on 3-vectors was most of the conversion (a flight's largest share).
+    The batched formulas, each sum in index order; tests/model/test_maximal.py checks
+    them against the batched conversion to a few ulp."""
+    p0, p1, p2, v0, v1, v2, qw, qx, qy, qz, w0, w1, w2 = x[:13].tolist()
+    qn = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = matrix_entries_from_quaternion(
+        qw / qn, qx / qn, qy / qn, qz / qn)
     e0, e1, e2 = model.p_e.tolist()
-    v_t = x[3:6] + mv(R, np.array([w1 * e2 - w2 * e1, w2 * e0 - w0 * e2, w0 * e1 - w1 * e0]))
-    v0, v1, v2 = v_t.tolist()
-    sd, cd = float(np.sin(pose[0])), float(np.cos(pose[0]))
-    sx, cx = float(np.sin(pose[1])), float(np.cos(pose[1]))
-    # the batched dot products' terms, e_delta's and e_xi's third entries included
-    delta_dot = (cd * cx * v0 + cd * sx * v1 + -sd * v2) / dist
-    xi_dot = (-sd * sx * v0 + sd * cx * v1 + 0.0 * v2) / (dist * sd**2)  # |e_xi| = sin(delta)
-    return np.array([pose[0], pose[1], delta_dot, xi_dot, pose[2], pose[3], pose[4],
+    # the attachment point p_t = p_q + R p_e, and its velocity v_t = v + R (w x p_e)
+    t0, t1, t2 = (p0 + (r00 * e0 + r01 * e1 + r02 * e2), p1 + (r10 * e0 + r11 * e1 + r12 * e2),
+                  p2 + (r20 * e0 + r21 * e1 + r22 * e2))
+    c0, c1, c2 = w1 * e2 - w2 * e1, w2 * e0 - w0 * e2, w0 * e1 - w1 * e0
+    u0, u1, u2 = (v0 + (r00 * c0 + r01 * c1 + r02 * c2), v1 + (r10 * c0 + r11 * c1 + r12 * c2),
+                  v2 + (r20 * c0 + r21 * c1 + r22 * c2))
+    dist = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    delta, xi = math.atan2(math.hypot(t0, t1), t2), math.atan2(t1, t0)
+    xi += 2 * math.pi * round((xi_ref - xi) / (2 * math.pi))
+    phi, psi = math.atan2(r21, r22), math.atan2(r10, r00)
+    theta = math.asin(min(max(-r20, -1.0), 1.0))
+    sd, cd, sx, cx = math.sin(delta), math.cos(delta), math.sin(xi), math.cos(xi)
+    delta_dot = (cd * cx * u0 + cd * sx * u1 - sd * u2) / dist
+    xi_dot = (-sd * sx * u0 + sd * cx * u1) / (dist * sd**2)  # |e_xi| = sin(delta)
+    return np.array([delta, xi, delta_dot, xi_dot, phi, theta, wrap_angle(psi - xi),
                      w0, w1, w2])[:N_STATE]
