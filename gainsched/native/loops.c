@@ -485,32 +485,33 @@ static void delay_period(const delayed *s, int N, lane *X, lane *ring, lane *acc
     }
 }
 
-/* the common sizes: 11 states (15 with a motor lag), 4 inputs, 14 columns (PAPER_P
- * vectors) */
-#define PAPER_P ((14 + W - 1) / W)
+/* the vectors of the columns a delayed loop of n states is applied to, n + 3
+ * (margins._columns): the common sizes are 11 states (15 with a motor lag) and 4 inputs */
+#define COLUMN_P(n) ((n + 3 + W - 1) / W)
 
-/* the period of a delayed loop of a common size, n x m given as constants: the sizes known
- * to the compiler and the work space on the stack, a step's, which it keeps in registers
- * at 11 x 4 (2x faster; at 15 x 4 it no longer fits the 32 vector registers of AVX-512) */
-INLINE void delay_period_fixed(delayed s, int n, int m, int N, lane *X, lane *ring,
+/* the period of a delayed loop of a common size, n x m and P given as constants: the sizes
+ * known to the compiler and the work space on the stack, a step's, which it keeps in
+ * registers at 11 x 4 (2x faster; at 15 x 4 it no longer fits the 32 vector registers of
+ * AVX-512) */
+INLINE void delay_period_fixed(delayed s, int n, int m, int P, int N, lane *X, lane *ring,
                                double *e) {
-    s.n = n, s.m = m, s.P = PAPER_P;
+    s.n = n, s.m = m, s.P = P;
     for (int k = 0, ku = 0; k < N; k++, ku = (size_t)ku + 1 == s.R ? 0 : ku + 1) {
-        lane acc[NMAX * PAPER_P], ua[MMAX * PAPER_P];
+        lane acc[NMAX * COLUMN_P(NMAX)], ua[MMAX * COLUMN_P(NMAX)];
         delay_step(&s, k, (size_t)ku, *e, X, ring, acc, ua);
-        if ((k + 1) % RENORM == 0) renorm_one(&s, (size_t)n * PAPER_P, X, e);
+        if ((k + 1) % RENORM == 0) renorm_one(&s, (size_t)n * P, X, e);
     }
 }
 
 /* delay_period_fixed with the steps' rows contiguous (a C-ordered array's): the
  * strides known to the compiler too */
-INLINE void delay_period_rows(delayed s, int n, int m, int N, lane *X, lane *ring,
+INLINE void delay_period_rows(delayed s, int n, int m, int P, int N, lane *X, lane *ring,
                               double *e) {
     if (s.a2 == n && s.a3 == 1 && s.b2 == m && s.b3 == 1 && s.k2 == n && s.k3 == 1) {
         s.a2 = n, s.a3 = 1, s.b2 = m, s.b3 = 1, s.k2 = n, s.k3 = 1;
-        delay_period_fixed(s, n, m, N, X, ring, e);
+        delay_period_fixed(s, n, m, P, N, X, ring, e);
     } else {
-        delay_period_fixed(s, n, m, N, X, ring, e);
+        delay_period_fixed(s, n, m, P, N, X, ring, e);
     }
 }
 
@@ -566,10 +567,10 @@ int gs_delay_loops(int n, int m, int N, int D, int p, ptrdiff_t L, ptrdiff_t l0,
         delayed ds = {Ad + c * sA[0], Bd + c * sB[0], K + c * sK[0], sA[1], sA[2], sA[3],
                       sB[1], sB[2], sB[3], sK[1], sK[2], sK[3], n, m, P, (int)tau[l],
                       tau[l] - (int)tau[l], R, se, sm};
-        if (n == 11 && m == 4 && P == PAPER_P)
-            delay_period_rows(ds, 11, 4, N, X, ring, &e);
-        else if (n == 15 && m == 4 && P == PAPER_P)
-            delay_period_rows(ds, 15, 4, N, X, ring, &e);
+        if (n == 11 && m == 4 && P == COLUMN_P(11))
+            delay_period_rows(ds, 11, 4, COLUMN_P(11), N, X, ring, &e);
+        else if (n == 15 && m == 4 && P == COLUMN_P(15))
+            delay_period_rows(ds, 15, 4, COLUMN_P(15), N, X, ring, &e);
         else
             delay_period(&ds, N, X, ring, Xn, app, &e);
         /* the state after the period: x_N, then u_{N-1}, .., u_{N-D} */

@@ -209,9 +209,18 @@ def loop_log_rho(Ad, Bd, K):
     return _gain_loops(Ad, Bd, K, np.arange(b), np.ones((b, m)))
 
 
-#: columns the delayed loop's monodromy is applied to (above its numerical rank over a
-#: period, 12-13 on the paper's circles)
-_RANK = 14
+#: columns the delayed loop's monodromy is applied to, above the loop's states
+#: (:func:`_columns`): its numerical rank over a period is about theirs and one or two
+#: delay modes (12-13 on the paper's circles of 11 states; a motor lag's 15 states left 14
+#: columns short, and the whole monodromy was formed)
+_RANK_ABOVE = 3
+
+
+def _columns(n: int) -> int:
+    """The columns the delayed loop of ``n`` states is applied to (14 for the paper's
+    11, 18 with a motor lag's four more)."""
+    return n + _RANK_ABOVE
+
 #: the span, s, over which the delayed loop's fast and delay modes decay far below the
 #: 1e-9 of :func:`_delay_spectra`'s check (:func:`_decay_steps`): a time-invariant loop's
 #: delay margin is searched on its step's power over it (the paper's level circles at 1
@@ -287,7 +296,7 @@ def _delay_spectra(Ad, Bd, K, circle, tau, decay=1):
     (L,) with the delays tau (L,) in samples.
 
     The delayed loop's monodromy has n + D m rows, but over a period its fast modes have
-    decayed: it is numerically of low rank. It is applied to :data:`_RANK` columns (the
+    decayed: it is numerically of low rank. It is applied to :func:`_columns` (the
     orthonormal basis Q of its image: one step of subspace iteration from a fixed random
     start) and its multipliers are those of ``Q' M Q``; where ``M Q`` leaves the span of Q
     by more than 1e-9 of its norm, the whole monodromy is formed instead. The span of the
@@ -309,11 +318,12 @@ def _delay_spectra(Ad, Bd, K, circle, tau, decay=1):
     lib = _lib()
     span = max(decay, int(np.ceil(_DECAY_DELAYS * tau.max())))
     power = span if N == 1 else 1
-    if na > _RANK:
+    cols = _columns(n)
+    if na > cols:
         steps = tuple(X if power == 1 else np.broadcast_to(X[:, :1], X.shape[:1] + (power,)
                                                              + X.shape[2:])
                       for X in (Ad, Bd, K))
-        omega = np.linalg.qr(np.random.default_rng(0).standard_normal((na, _RANK)))[0]
+        omega = np.linalg.qr(np.random.default_rng(0).standard_normal((na, cols)))[0]
         start = np.broadcast_to(omega, (L,) + omega.shape)
         for w in dict.fromkeys((min(span, N * power), N * power)):
             Y, _ = _delay_pass(lib, *(X[:, X.shape[1] - w:] for X in steps), circle, tau, D,

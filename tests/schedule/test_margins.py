@@ -31,6 +31,7 @@ import pytest
 from scipy.optimize import brentq
 
 from gainsched import native
+from gainsched.config import config_from_text
 from gainsched.errors import InputError
 from gainsched.schedule import margins as mg
 from gainsched.schedule.grid import build_grid, solve_circle
@@ -44,7 +45,7 @@ from gainsched.schedule.margins import (
 from gainsched.schedule.tables import table_bytes, table_from_bytes
 from gainsched.schedule.viewer import margin_lines
 
-from support import small_config
+from support import paper_config_text, small_config
 
 
 @pytest.mark.parametrize("N", [1, 5, 36])
@@ -234,8 +235,10 @@ def _lanes(Ad, Bd, K):
     G = np.tile([[0.5] * m, [1.0] * m, [3.0, 1.0, 1.0, 0.2][:m]], (b, 1))
     tau = np.tile([0.0, 2.5, 6.0], b)
     D = 7
-    # 14 columns, the build's: the kernel's specialised path for 11 x 4, generic otherwise
-    X0 = np.random.default_rng(2).standard_normal((circle.size, Ad.shape[-1] + D * m, 14))
+    # the build's columns (n + 3): the kernel's specialised paths for 11 x 4 and 15 x 4,
+    # generic otherwise
+    X0 = np.random.default_rng(2).standard_normal((circle.size, Ad.shape[-1] + D * m,
+                                                   mg._columns(Ad.shape[-1])))
     return mg._gain_loops(Ad, Bd, K, circle, G), mg._delay_pass(
         mg._lib(), Ad, Bd, K, circle, tau, D, X0)
 
@@ -392,6 +395,28 @@ def test_a_span_too_short_for_the_image_falls_back_to_the_whole_period(monkeypat
         assert passes == expect
         whole = mg._log_rho(*_whole_delayed_monodromy(Ad[0], Bd[0], K[0], np.array(tau)))
         assert got[0, 0].real == pytest.approx(whole, abs=1e-9)
+
+
+def test_a_motor_lags_delayed_loop_has_its_image_on_its_columns(monkeypatch):
+    """A motor lag's loop has 15 states: its delayed loop's numerical rank over a period
+    is above the paper's 14 columns, and the whole monodromy was formed at nearly every
+    evaluation. On n + 3 columns (18) its image passes the check over the period's last
+    span (two passes, the whole monodromy never formed), with the whole monodromy's
+    multipliers to 1e-9, below and beyond the margin."""
+    cfg = config_from_text(paper_config_text(**{"effects.motor_lag.tau": 0.035}), "lag.toml")
+    sol, (Ad, Bd, K) = solve_circle(cfg, 9.0, np.radians([20.0]), keep_steps=True)
+    assert Ad.shape[-1] == 15 and mg._columns(15) == 18
+    columns, run = [], mg._delay_pass
+    monkeypatch.setattr(mg, "_delay_pass",
+                        lambda lib, A, *a: columns.append(a[-1].shape[-1]) or run(lib, A, *a))
+    for tau in (8.0, 1.5 * sol.delay_margin[0] / sol.dt):
+        columns.clear()
+        got = mg._delay_spectra(Ad, Bd, K, np.zeros(1, int), np.array([tau]),
+                                mg._decay_steps(sol.dt))
+        assert columns == [18, 18]
+        whole = mg._log_rho(*_whole_delayed_monodromy(Ad[0], Bd[0], K[0], np.array(tau)))
+        assert got[0, 0].real == pytest.approx(whole, abs=1e-9)
+    assert got[0, 0].real > 0  # beyond the margin: unstable
 
 
 def test_a_crossing_just_outside_the_surrogates_check_is_bracketed_by_widening():
