@@ -130,6 +130,16 @@ INLINE double times_pow2(double x, int k) {
     return k < -1022 || k > 1023 ? ldexp(x, k) : x * pow2(k);
 }
 
+/* X <- X 2^-p and e += p, 2^p the power of two above mx (one loop's largest |entry|;
+ * left alone if mx is zero or not finite): exact */
+INLINE void rescale(size_t na, lane *X, double mx, double *e) {
+    int p = 0;
+    if (mx > 0.0 && isfinite(mx)) frexp(mx, &p);
+    const double sc = pow2(-p);
+    *e += p;
+    for (size_t i = 0; i < na; i++) X[i] *= sc;
+}
+
 /* X <- X 2^-p per lane, 2^p the power of two above the lane's max |X| (and those of the
  * nb entries of Y, scaled alike), e += p; a lane all zero or not finite is left alone */
 INLINE void renorm(size_t na, lane *X, size_t nb, lane *Y, double *e) {
@@ -325,12 +335,7 @@ INLINE void gain_rows(int n, int m, int N, int block, const rows *s, const doubl
         if (since >= RENORM) {
             lane mv = {0};
             for (int i = 0; i < n * P; i++) mv = fmaxv(mv, M[i]);
-            const double mx = hmax(mv);
-            int p = 0;
-            if (mx > 0.0 && isfinite(mx)) frexp(mx, &p);
-            const double sc = pow2(-p);
-            *e += p;
-            for (int i = 0; i < n * P; i++) M[i] *= sc;
+            rescale((size_t)n * P, M, hmax(mv), e);
             since = 0;
         }
     }
@@ -466,14 +471,10 @@ static void renorm_one(const delayed *s, size_t na, lane *X, double *e) {
     for (size_t i = 0; i < na; i++) v = fmaxv(v, X[i]);
     double mx = hmax(v);
     for (size_t r = 0; r < s->R; r++) {
-        const double v = times_pow2(s->sm[r], (int)(s->se[r] - *e));
-        mx = v > mx ? v : mx; /* a slot's maximum is never NaN (fmaxv's) */
+        const double slot = times_pow2(s->sm[r], (int)(s->se[r] - *e));
+        mx = slot > mx ? slot : mx; /* a slot's maximum is never NaN (fmaxv's) */
     }
-    int p = 0;
-    if (mx > 0.0 && isfinite(mx)) frexp(mx, &p);
-    const double sc = pow2(-p);
-    *e += p;
-    for (size_t i = 0; i < na; i++) X[i] *= sc;
+    rescale(na, X, mx, e);
 }
 
 /* the period of a delayed loop, any size: the work space acc, ua from the heap */
