@@ -10,7 +10,7 @@ from ..model.geometry import pose_angles_from_pose, wrap_angle
 from ..rotations import (
     matrix_from_euler_zyx_scalar,
 )
-from .fastplant import fast_plant
+from .fastplant import reduced_fast_plant
 
 
 class _Estimator:
@@ -41,11 +41,10 @@ class _Estimator:
         self.hist: list[np.ndarray] = []
         self.pending: list[tuple[int, np.ndarray]] = []
         self.R_IC = matrix_from_euler_zyx_scalar(alpha, 0.0, gamma)
-        # prediction model: the compiled reduced design model when it applies (same
-        # numbers); an elastic design link predicts with the reduced (rigid) model too
-        fast = None
-        if not sens.ideal and model.n_z == N_STATE and model.config.tether.link == "rigid":
-            fast = fast_plant(model.config)
+        # prediction model: the compiled reduced design model when it applies (its
+        # numbers to 1e-12), effect states included; an elastic design link predicts
+        # with the reduced (rigid) model too
+        fast = None if sens.ideal and model.n_z == N_STATE else reduced_fast_plant(model)
         self._f = ((lambda z, u, a: fast.f(z, u, a, gamma)[0]) if fast is not None
                    else (lambda z, u, a: model.f(z, u, a, gamma)))
 

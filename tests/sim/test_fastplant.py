@@ -17,6 +17,8 @@
   closed-loop flight at a heading in a wind equals the numpy-plant flight.
 - The numpy model is used with ``GAINSCHED_NATIVE=0`` and for configs the kernel
   does not implement.
+- The state estimator predicts a design with effect states (a motor lag), on a rigid or
+  an elastic tether, with its compiled reduced model.
 - The simulator's single-query interpolator path gives the vectorised reference's
   numbers bit for bit, and a flight with block-wise (batched) gain lookups is bit
   for bit the flight with per-step lookups.
@@ -37,6 +39,7 @@ from gainsched.model.effects import EFFECTS
 from gainsched.model.maximal import MaximalModel
 from gainsched.model.reduced import Model
 from gainsched.schedule.tables import load_table
+from gainsched.sim._estimator import _Estimator
 from gainsched.sim._plant import _Plant, _rk4
 from gainsched.sim.fastplant import (
     SUPPORTED_EFFECTS,
@@ -44,6 +47,7 @@ from gainsched.sim.fastplant import (
     FastPlant,
     fast_plant,
     fast_plant_supported,
+    reduced_fast_plant,
 )
 from gainsched.sim.loop import Scenario, Sensing, simulate, table_scheduler
 
@@ -314,6 +318,37 @@ def test_fallback_for_unsupported_configs(paper_config):
         FastPlant(link("spring-damper"), native.load("plant"))
     with pytest.raises(ValueError, match="not supported"):
         FastMaximal(paper_config, native.load("plant"))
+
+
+@pytest.mark.parametrize("link", ["rigid", "spring-damper"])
+def test_the_estimator_predicts_a_design_with_effect_states_compiled(paper_text, link):
+    """A design with a motor lag's states (and momentum theory), on a rigid or an elastic
+    tether: the state estimator predicts with its compiled reduced model
+    (``reduced_fast_plant``), never the numpy one, whose numbers it has to 1e-12 of the
+    largest entry; an effect the kernel lacks gives the numpy model."""
+    names = ("drag", "thrust_momentum", "motor_lag")
+    cfg = (with_effects(paper_text, names) if link == "rigid" else
+           spring_damper(paper_text, names, 2e5, 40.0))
+    model = Model(cfg)
+    fp = reduced_fast_plant(model)
+    assert isinstance(fp, FastPlant) and fp.n_z == model.n_z == N_STATE + 4
+    z, u, alpha = random_states(model, 16, seed=3)
+    for i in range(z.shape[0]):
+        ref = model.f(z[i], u[i], alpha[i])
+        assert np.abs(fp.f(z[i], u[i], alpha[i])[0] - ref).max() <= 1e-12 * np.abs(ref).max()
+    sens = Sensing(False, 200.0, 0.0005, np.deg2rad(0.2), 0.01, 0.005, 7)
+    est = _Estimator(model, None, sens, 0.001, alpha[0], 0.0, z[0], np.random.default_rng(0))
+
+    def numpy_model(*args):
+        raise AssertionError("the estimator predicted with the numpy model")
+
+    model.f = numpy_model
+    est.predict(u[0])
+    expect = z[0] + 0.001 * fp.f(z[0], u[0], alpha[0])[0]
+    np.testing.assert_array_equal(est.z, expect)
+    kind = sorted(set(EFFECTS) - SUPPORTED_EFFECTS)[0]
+    other = dataclasses.replace(cfg, effects=(*cfg.effects, EffectSpec(kind, ())))
+    assert reduced_fast_plant(Model(other)) is None
 
 
 # ----------------------------------------------------------- maximal model, spring-damper
