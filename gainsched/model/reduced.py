@@ -405,10 +405,16 @@ class Model:
         p_q, v_q, a_q : ndarray, shape (3,), m, m/s, m/s^2
         R_CB : ndarray, shape (3, 3)
         """
+        p_q, v_q, a_q, r = self.cog_motion_floats(z, z_dot)
+        return np.array(p_q), np.array(v_q), np.array(a_q), np.array(r)
+
+    def cog_motion_floats(self, z, z_dot):
+        """:meth:`cog_motion_one` as Python floats, for per-step code that goes on in
+        scalar math (the simulator's sensors): ``p_q, v_q, a_q`` lists of 3 (m, m/s,
+        m/s^2) and ``R_CB`` a list of its 3 rows, the same numbers."""
         delta, xi, dd, dx, phi, theta, chi, w0, w1, w2 = np.asarray(z[:10], dtype=float).tolist()
         _, _, ddd, dxx, _, _, _, wd0, wd1, wd2 = np.asarray(z_dot[:10], dtype=float).tolist()
-        R = matrix_from_euler_zyx_scalar(phi, theta, chi + xi)
-        r = R.tolist()
+        r = matrix_from_euler_zyx_scalar(phi, theta, chi + xi).tolist()
         sd, cd, sx, cx = math.sin(delta), math.cos(delta), math.sin(xi), math.cos(xi)
         e = (sd * cx, sd * sx, cd)
         e_d = (cd * cx, cd * sx, -sd)
@@ -434,7 +440,7 @@ class Model:
             a_q.append(rho * (e_d[i] * ddd + e_x[i] * dxx - e[i] * dd * dd
                               + 2 * e_dx[i] * dd * dx + e_xx[i] * dx * dx)
                        - (ri[0] * arm[0] + ri[1] * arm[1] + ri[2] * arm[2]))
-        return np.array(p_q), np.array(v_q), np.array(a_q), R
+        return p_q, v_q, a_q, r
 
     def specific_force(self, z, z_dot, alpha):
         """What an accelerometer at the COG senses, in B, shape (..., 3), m/s^2:

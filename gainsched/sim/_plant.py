@@ -14,12 +14,32 @@ from ..model.maximal import N_MAXIMAL, MaximalModel, reduced_from_maximal
 from ..model.reduced import Model
 from ..rotations import (
     R_IC_from_tilt,
+    matrix_entries_from_quaternion,
     matrix_from_euler_zyx_scalar,
     matrix_from_quaternion,
     quaternion_from_matrix,
     quaternion_from_matrix_scalar,
 )
 from .fastplant import SUPPORTED_EFFECTS, fast_plant
+
+
+def _mv(r, v):
+    """The rows ``r`` (3 lists of 3 floats) times ``v`` (3 floats): a list of 3."""
+    return [r[0][0] * v[0] + r[0][1] * v[1] + r[0][2] * v[2],
+            r[1][0] * v[0] + r[1][1] * v[1] + r[1][2] * v[2],
+            r[2][0] * v[0] + r[2][1] * v[1] + r[2][2] * v[2]]
+
+
+def _cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def _minus(a, b):
+    return [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+
+
+def _plus(a, b):
+    return [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 
 
 def _warn_numpy_plant(cfg: Config) -> None:
@@ -54,6 +74,11 @@ class _Plant:
         self.fast = fast_plant(cfg)
         if self.maximal is None and self.fast is None:
             _warn_numpy_plant(cfg)
+        # the frame centre from the COG, floats (None: the same point), and the circle
+        # frame of the last sensors' call (:meth:`_frame`)
+        d = self.model.cog_offset
+        self.cog_offset = d.tolist() if d.any() else None
+        self._frame_of = None
 
     def initial(self, z0, u0):
         """Plant state from the reduced state ``z0`` (10,) and the thrusts ``u0`` (4,), N:
@@ -112,28 +137,45 @@ class _Plant:
         centre's position ``p_I`` (m) and velocity ``v_I`` (m/s) in I (the COG's unless
         ``[effects.cog_offset]`` moves it), the attitude ``q_IB``, the body
         rates (rad/s) and the specific force at the frame centre in B (m/s^2, what the IMU
-        there senses; None with ``accel=False``, which skips the plant's derivative)."""
-        R_IC = matrix_from_euler_zyx_scalar(alpha, 0.0, gamma)
-        f_B = None
+        there senses; None with ``accel=False``, which skips the plant's derivative).
+        Scalar math (Python floats): it runs at every step of a flight, where numpy's
+        small operations cost three times as much."""
         if self.maximal is None:
             z_dot = self.f(x, u, alpha)[0] if accel else np.zeros_like(x)
-            p_C, v_C, a_C, R_CB = self.model.cog_motion_one(x, z_dot)
-            w, w_dot = x[7:10], z_dot[7:10]
+            p, v, a, r = self.model.cog_motion_floats(x, z_dot)
+            w, w_dot = x[7:10].tolist(), z_dot[7:10].tolist()
         else:
-            p_C, v_C, w = x[0:3], x[3:6], x[10:13]
-            R_CB = matrix_from_quaternion(x[6:10] / np.linalg.norm(x[6:10]))
+            p, v, w = x[0:3].tolist(), x[3:6].tolist(), x[10:13].tolist()
+            q = x[6:10] / np.linalg.norm(x[6:10])
+            e = matrix_entries_from_quaternion(*q.tolist())
+            r = [list(e[0:3]), list(e[3:6]), list(e[6:9])]
             x_dot = self.f(x, u, alpha)[0] if accel else None
-            a_C, w_dot = (None, None) if x_dot is None else (x_dot[3:6], x_dot[10:13])
-        if self.model.cog_offset.any():  # the markers and the IMU sit at the frame centre
-            d = self.model.cog_offset
-            p_C = p_C - R_CB @ d
-            v_C = v_C - R_CB @ np.cross(w, d)
+            a, w_dot = (None, None) if x_dot is None else (x_dot[3:6].tolist(),
+                                                           x_dot[10:13].tolist())
+        if self.cog_offset is not None:  # the markers and the IMU sit at the frame centre
+            d = self.cog_offset
+            w_d = _cross(w, d)
+            p, v = _minus(p, _mv(r, d)), _minus(v, _mv(r, w_d))
             if accel:
-                a_C = a_C - R_CB @ (np.cross(w_dot, d) + np.cross(w, np.cross(w, d)))
-        if accel:
-            f_B = R_CB.T @ (a_C - self.model.g_C(alpha))
-        return (R_IC @ p_C, R_IC @ v_C, quaternion_from_matrix_scalar(R_IC @ R_CB),
-                np.array(w), f_B)
+                a = _minus(a, _mv(r, _plus(_cross(w_dot, d), _cross(w, w_d))))
+        R_IC, g_C = self._frame(alpha, gamma)
+        f_B = None
+        if accel:  # R_CB^T (a - g_C)
+            f = _minus(a, g_C)
+            f_B = np.array([r[0][j] * f[0] + r[1][j] * f[1] + r[2][j] * f[2] for j in range(3)])
+        R_IB = [[R_IC[i][0] * r[0][j] + R_IC[i][1] * r[1][j] + R_IC[i][2] * r[2][j]
+                 for j in range(3)] for i in range(3)]
+        return (np.array(_mv(R_IC, p)), np.array(_mv(R_IC, v)),
+                quaternion_from_matrix_scalar(R_IB), np.array(w), f_B)
+
+    def _frame(self, alpha, gamma):
+        """``R_IC`` as its rows (floats) and gravity in C (floats) of the circle ``(alpha,
+        gamma)``, rad: made once per circle, not at every step."""
+        key = (float(alpha), float(gamma))
+        if self._frame_of is None or self._frame_of[0] != key:
+            self._frame_of = (key, matrix_from_euler_zyx_scalar(key[0], 0.0, key[1]).tolist(),
+                              self.model.g_C(key[0]).tolist())
+        return self._frame_of[1:]
 
     def battery_voltage(self, X):
         """The battery's terminal voltage (N,), V, along plant states X (N, n_x), or None
