@@ -284,8 +284,8 @@ def auto_text(speeds=AUTO_SPEEDS, tilts=AUTO_TILTS, n_xi=16, bound=3, name="auto
 #: s, the flight time of the campaigns the analysis tests fly (conftest ``fly``)
 CAMPAIGN_DURATION = 2.5
 
-#: the default flights a campaign with an effect outside the library flies in the suite: it
-#: flies on the numpy plant (about 15x slower than the compiled one), so on three circles
+#: the default flights a campaign with an effect outside the library (the azimuth thrust
+#: loss) flies in the suite: three circles, which its diagnosis needs
 OUTSIDE_FLIGHTS = ("v9", "tilt20-v8", "v15")
 
 

@@ -89,7 +89,10 @@ enum {
      * e = tau (s); 2 states: the open-circuit voltage and the drop under load (V) */
     FX_THRUST_VOLTAGE = 10,
     /* CogOffset: geometry only (p_e and the allocation rows carry it), nothing here */
-    FX_COG_OFFSET = 11
+    FX_COG_OFFSET = 11,
+    /* AzimuthThrustLoss (gainsched.sim.campaign: a truth outside the library): a = depth,
+     * b = xi0 (rad), c = width (rad) of a Gaussian loss in the azimuth of travel */
+    FX_AZIMUTH_THRUST_LOSS = 12
 };
 
 /* exported (ctypes, gainsched/sim/fastplant.py) */
@@ -280,12 +283,26 @@ static double momentum_ratio(double T, const double v_B[3], double disk_area, do
     return vh / lam;
 }
 
+/* The thrust factor of AzimuthThrustLoss at the COG velocity vg (m/s, in C, over the
+ * ground): 1 - depth exp(-d^2 / (2 width^2)), d the azimuth of travel atan2(-vg_x, vg_y)
+ * from xi0 wrapped to [-pi, pi) as numpy's remainder wraps it. */
+static double azimuth_loss(const double *ef, const double vg[3])
+{
+    const double pi = 3.141592653589793, two_pi = 6.283185307179586;
+    double d = fmod(atan2(-vg[0], vg[1]) - ef[2] + pi, two_pi);
+    d = (d < 0.0 ? d + two_pi : d) - pi;
+    d = d / ef[3];
+    return 1.0 - ef[1] * exp(-0.5 * (d * d));
+}
+
 /* Actual motor thrusts T (4, N) from the command u (4, N) after the effects, in model
  * order (motor lag: its states in z, which may be NULL without one; thrust scale;
- * thrust polynomial in |v|; momentum theory in v_B = R^T v); v is the COG velocity
- * relative to the air in C (m/s, air_velocity), R = R_CB. Returns T_C = sum T (N). Model.thrust. */
+ * thrust polynomial in |v|; momentum theory in v_B = R^T v; a loss in the azimuth of
+ * travel); v is the COG velocity relative to the air in C (m/s, air_velocity), vg over the
+ * ground, R = R_CB. Returns T_C = sum T (N). Model.thrust. */
 static double effect_thrust(const double *p, const double *z, const double *u,
-                            double R[3][3], const double v[3], double *speed, double T[4])
+                            double R[3][3], const double v[3], const double vg[3],
+                            double *speed, double T[4])
 {
     const int n_eff = (int)p[P_NEFF];
     int j, k;
@@ -333,6 +350,11 @@ static double effect_thrust(const double *p, const double *z, const double *u,
             }
             for (j = 0; j < 4; ++j) {
                 T[j] = T[j] * momentum_ratio(T[j], v_B, ef[1], ef[2]);
+            }
+        } else if (kind == FX_AZIMUTH_THRUST_LOSS) {
+            const double f = azimuth_loss(ef, vg);
+            for (j = 0; j < 4; ++j) {
+                T[j] = T[j] * f;
             }
         }
     }
@@ -451,7 +473,7 @@ int gs_plant_eval(const double *p, const double *z, const double *u, double alph
     (void)air_velocity(p, alpha, gamma, v, v_air);
 
     /* thrust: command -> effects in model order; then the effects' force (see T) */
-    const double T_C = effect_thrust(p, z, u, R, v_air, &speed, T);
+    const double T_C = effect_thrust(p, z, u, R, v_air, v, &speed, T);
     effect_force(p, T_C, R, v_air, &speed, F);
 
     /* p_t'' = rho (e_d delta'' + e_x xi'' + c2) */
@@ -607,7 +629,7 @@ int gs_maximal_eval(const double *p, const double *x, const double *u, double al
     }
     /* everything but the tether (Model.body_wrench), the effects in the air's frame */
     (void)air_velocity(p, alpha, gamma, v, v_air);
-    const double T_C = effect_thrust(p, x, u, R, v_air, &speed, T);
+    const double T_C = effect_thrust(p, x, u, R, v_air, v, &speed, T);
     effect_force(p, T_C, R, v_air, &speed, F);
     for (i = 0; i < 3; ++i) {
         Jw[i] = J[3 * i] * w[0] + J[3 * i + 1] * w[1] + J[3 * i + 2] * w[2];

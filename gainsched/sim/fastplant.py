@@ -12,7 +12,8 @@ Supported: the rigid link with the state-only effects ``drag`` (eq. 10),
 ``rotor_drag``, ``thrust_scale``, ``motor_efficiency``, ``thrust_airspeed``,
 ``thrust_momentum`` (eq. 29), ``wind`` (the circle's heading gamma is then an argument of
 every call), ``thrust_time`` (1 extra state), ``thrust_voltage`` (2 extra states: the
-battery model) and ``motor_lag`` (4 extra states) (:class:`FastPlant`); the
+battery model), ``motor_lag`` (4 extra states) and the campaigns' truth outside the
+library ``azimuth_thrust_loss`` (:mod:`gainsched.sim._outside`) (:class:`FastPlant`); the
 spring-damper link with the same effects, their states after the rigid body's
 (:class:`FastMaximal`, the maximal-coordinate model of :mod:`gainsched.model.maximal`).
 Anything else (other effects, the SLS and lumped-mass links) uses the
@@ -23,6 +24,7 @@ no C compiler is available or ``GAINSCHED_NATIVE=0`` (:func:`gainsched.native.lo
 from __future__ import annotations
 
 import ctypes
+import math
 
 import numpy as np
 
@@ -43,6 +45,7 @@ from ..model.effects import (
 from ..model.maximal import N_MAXIMAL, MaximalModel
 from ..model.reduced import Model
 from ..native import load
+from ._outside import AzimuthThrustLoss
 
 __all__ = ["FastPlant", "FastMaximal", "fast_plant", "fast_plant_supported",
            "reduced_fast_plant", "SUPPORTED_EFFECTS"]
@@ -64,6 +67,9 @@ _CODES = {
     # v_ref, exponent, the battery's drain V/(N s) and load drop V/N, tau
     ThrustVoltage: (10, lambda e: [e.v_ref, e.exponent, *e.coefficients(), e.tau]),
     CogOffset: (11, ()),  # geometry: in the head's p_e and the allocation rows
+    # a truth outside the library (the campaigns'): depth, xi0 and width in rad
+    AzimuthThrustLoss: (12, lambda e: [e.depth, math.radians(e.xi0_deg),
+                                       math.radians(e.width_deg)]),
 }
 #: config effect names the compiled plant implements
 SUPPORTED_EFFECTS = frozenset(cls.kind for cls in _CODES)

@@ -349,8 +349,8 @@ def test_effect_outside_library_gets_an_empirical_law(diagnosed, paper_config):
 
 @pytest.mark.slow
 def test_momentum_theory_thrust_loss(diagnosed):
-    """Thrust change with airspeed by momentum theory (eq. 29): the disk area is recovered
-    (the compiled plant does not support this effect: numpy plant, slow)."""
+    """Thrust change with airspeed by momentum theory (eq. 29): the disk area is
+    recovered."""
     scn = [s for s in default_flights(DURATION) if s.name in ("v3", "v9", "v15", "tilt20-v8")]
     d = diagnosed("thrust_momentum", scn)
     assert d.accepted is not None and story(d.accepted) == "thrust_momentum", d.verdict

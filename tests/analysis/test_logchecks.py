@@ -241,10 +241,7 @@ def test_example_flights_pass(paper_config):
                                  log.meta, config=paper_config))
 
 
-@pytest.mark.parametrize("hidden", [
-    # an effect outside the registry flies on the numpy plant (minutes): the slow tier
-    pytest.param(h.name, marks=pytest.mark.slow) if h.custom is not None else h.name
-    for h in HIDDEN.values()])
+@pytest.mark.parametrize("hidden", list(HIDDEN))
 def test_campaigns_of_every_hidden_effect_pass(tmp_path, fly, paper_config, hidden):
     """Every flight of the campaign, written and read back: CSV with the load cell, HDF5
     without it (the tension column dropped). The campaigns are the ones the diagnosis

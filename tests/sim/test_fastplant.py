@@ -17,6 +17,8 @@
   closed-loop flight at a heading in a wind equals the numpy-plant flight.
 - The numpy model is used with ``GAINSCHED_NATIVE=0`` and for configs the kernel
   does not implement.
+- The campaigns' truth outside the library (an azimuth thrust loss) is compiled too, on
+  the rigid and the elastic tether.
 - The state estimator predicts a design with effect states (a motor lag), on a rigid or
   an elastic tether, with its compiled reduced model.
 - The simulator's single-query interpolator path gives the vectorised reference's
@@ -35,12 +37,13 @@ import pytest
 from gainsched import native
 from gainsched.config import N_STATE, EffectSpec, config_from_text, remove_key, set_values
 from gainsched.firmware.runtime import Interpolator
-from gainsched.model.effects import EFFECTS
+from gainsched.model.effects import EFFECTS, registered_effect
 from gainsched.model.maximal import MaximalModel
 from gainsched.model.reduced import Model
 from gainsched.schedule.tables import load_table
 from gainsched.sim._estimator import _Estimator
 from gainsched.sim._plant import _Plant, _rk4
+from gainsched.sim.campaign import AzimuthThrustLoss, plant_config
 from gainsched.sim.fastplant import (
     SUPPORTED_EFFECTS,
     FastMaximal,
@@ -378,6 +381,37 @@ def maximal_states(mm: MaximalModel, n: int, seed: int):
     x[:, :3] *= 1 + 1e-4 * rng.standard_normal((n, 1))
     x[::3, :3] *= 1 - 1e-3 / model.rho
     return x, u, alpha
+
+
+@pytest.mark.parametrize("hidden", ["azimuth_thrust_dip", "elastic_and_dip"])
+def test_the_campaigns_truth_outside_the_library_is_compiled_as_numpy(paper_config, hidden):
+    """The azimuth thrust loss (gainsched.sim._outside, a campaign's hidden truth) on the
+    rigid and the elastic tether: the compiled plant's derivative and tension equal the
+    numpy models' to 1e-12 of the largest entry at random states (every direction of
+    travel), where the loss moves them by more than 1e-3."""
+    with registered_effect(AzimuthThrustLoss):
+        cfg = plant_config(paper_config, hidden)
+        model = Model(cfg)
+        without = Model(cfg, effects=tuple(e for e in model.effects
+                                           if not isinstance(e, AzimuthThrustLoss)))
+        fp = fast_plant(cfg)
+        if cfg.tether.link == "rigid":
+            assert isinstance(fp, FastPlant)
+            x, u, alpha = random_states(model, 48, seed=9)
+            ev = model.evaluate(x, u, alpha)
+            ref, ten_ref = ev.z_dot, ev.tension
+            moved = np.abs(ref - without.evaluate(x, u, alpha).z_dot).max()
+        else:
+            assert isinstance(fp, FastMaximal)
+            mm = MaximalModel(model)
+            x, u, alpha = maximal_states(mm, 48, seed=9)
+            ref, ten_ref = mm.f(x, u, alpha), mm.tension(x, u, alpha)
+            moved = np.abs(ref - MaximalModel(without).f(x, u, alpha)).max()
+        assert moved > 1e-3
+        for i in range(x.shape[0]):
+            x_dot, ten = fp.f(x[i], u[i], alpha[i])
+            assert np.abs(x_dot - ref[i]).max() <= 1e-12 * np.abs(ref[i]).max()
+            assert abs(ten - ten_ref[i]) <= 1e-12 * max(abs(ten_ref[i]), 1.0)
 
 
 @pytest.mark.parametrize("names", COMBOS, ids=lambda c: "+".join(c) or "none")
