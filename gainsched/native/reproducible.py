@@ -53,6 +53,7 @@ __all__ = [
     "BLAS_CORETYPE",
     "NUMPY_DISABLED",
     "PINNED_ENV",
+    "WORKER_IDLE_S",
     "pin_available",
     "pin_environ",
     "fingerprint",
@@ -72,6 +73,12 @@ PINNED_ENV = {
     "OPENBLAS_CORETYPE": BLAS_CORETYPE,
     "NPY_DISABLE_CPU_FEATURES": " ".join(NUMPY_DISABLED),
 }
+#: s, how long an idle worker of :func:`pinned_executor` waits for the next job: joblib's
+#: own for its loky backend (``idle_worker_timeout``). loky's default of 10 s ended the
+#: workers between two builds of one session (a notebook, the test suite), and each
+#: build then started its workers again, 1.2 s of imports each (129 worker processes in
+#: one run of the suite)
+WORKER_IDLE_S = 300
 _OFF = "GAINSCHED_PIN"
 #: CPU flags (``/proc/cpuinfo``) the pinned code needs
 _NEEDS = ("avx2", "fma")
@@ -203,9 +210,10 @@ def pinned_executor(n_workers: int):
     """A loky process pool whose workers start with :data:`PINNED_ENV` (where the CPU can run
     it) and one BLAS thread.
 
-    Workers are reused across calls (loky's reusable executor); they end with
-    this process (see :func:`_worker_init`). What the pool leaves in ``/dev/shm`` when
-    the whole process group is killed goes with the next run (:mod:`.shm`).
+    Workers are reused across calls (loky's reusable executor), idle ones for
+    :data:`WORKER_IDLE_S`; they end with this process (see :func:`_worker_init`). What
+    the pool leaves in ``/dev/shm`` when the whole process group is killed goes with the
+    next run (:mod:`.shm`).
     """
     from joblib.externals.loky import get_reusable_executor
 
@@ -214,7 +222,8 @@ def pinned_executor(n_workers: int):
     shm.claim()  # before the pool makes its semaphores: a later run removes them if killed
     env = dict(PINNED_ENV if pin_available() else {}, OPENBLAS_NUM_THREADS="1",
                OMP_NUM_THREADS="1")
-    return get_reusable_executor(max_workers=n_workers, env=env, initializer=_worker_init)
+    return get_reusable_executor(max_workers=n_workers, env=env, initializer=_worker_init,
+                                 timeout=WORKER_IDLE_S)
 
 
 @contextmanager

@@ -136,3 +136,14 @@ def test_a_feeder_that_meets_the_shut_down_pool_stops_quietly():
     assert res.returncode == 0 and json.loads(res.stdout) == "job 1 failed", res.stderr
     assert "Traceback" not in res.stderr and "Exception in thread" not in res.stderr, \
         res.stderr
+
+
+def test_idle_workers_wait_for_the_next_build_as_joblibs_do():
+    """The pool keeps an idle worker WORKER_IDLE_S, 300 s as joblib's loky backend keeps
+    it (``idle_worker_timeout``): with loky's own default of 10 s, every build of a
+    session after a pause started and imported its workers again (1.2 s each)."""
+    from gainsched.native.reproducible import WORKER_IDLE_S, pinned_executor
+
+    assert WORKER_IDLE_S == 300
+    assert pinned_executor(1)._timeout == WORKER_IDLE_S
+
