@@ -273,6 +273,7 @@ def uncertain_loops(table, report: dict, *, samples: int = SAMPLES, seed: int = 
     plants, kinds = _box(params, samples, seed)
     step = progress or (lambda n: None)
     rho, kept, kept_kinds, skipped, models = [], [], [], [], []
+    found = {}  # the margins of the estimate and the corners, from their one linearisation
     for theta, kind in zip(plants, kinds, strict=True):
         try:
             model = Model(truth_config(cfg, focus, theta, held))
@@ -280,7 +281,10 @@ def uncertain_loops(table, report: dict, *, samples: int = SAMPLES, seed: int = 
             skipped.append(f"{kind} {', '.join(f'{v:.4g}' for v in theta)}: {exc.message}")
             step(1)
             continue
-        rho.append(_plant_loops(table, model)[0])
+        r, m = _plant_loops(table, model, with_margins=kind != "sample")
+        if m is not None:
+            found[len(rho)] = m
+        rho.append(r)
         kept.append(theta)
         kept_kinds.append(kind)
         models.append(model)
@@ -289,10 +293,9 @@ def uncertain_loops(table, report: dict, *, samples: int = SAMPLES, seed: int = 
     k = int(np.unravel_index(np.nanargmax(rho), rho.shape)[0])
     margins = culprit = None
     if np.nanmax(rho) < 1.0:  # the margins of the estimate, the corners and the worst
-        kinds_ = np.array(kept_kinds)
-        which = sorted({k, *np.flatnonzero(kinds_ != "sample").tolist()})
-        margins = _worst_of([_plant_loops(table, models[q], with_margins=True)[1]
-                             for q in which])
+        if k not in found:
+            found[k] = _plant_loops(table, models[k], with_margins=True)[1]
+        margins = _worst_of([found[q] for q in sorted(found)])
     else:
         culprit = _culprit(table, cfg, focus, params, held)
     return Uncertainty(focus, params, np.array(kept), tuple(kept_kinds), rho, table.speed,
