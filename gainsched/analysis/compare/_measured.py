@@ -10,10 +10,12 @@ derivatives and the exact kinematics (paper eq. 9 corrected) per gap-free segmen
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import convolve1d
 from scipy.signal import savgol_coeffs, savgol_filter
 
 from ...config import Config, Sensors
@@ -33,6 +35,13 @@ from ...rotations import (
     up_C_from_tilt,
 )
 from ..logs import FlightLog
+
+
+@functools.lru_cache(maxsize=64)
+def _savgol_kernel(window: int, order: int, deriv: int, delta: float) -> np.ndarray:
+    """Convolution coefficients of :func:`scipy.signal.savgol_filter` (computed once)."""
+    return savgol_coeffs(window, order, deriv=deriv, delta=delta)
+
 
 _CHANNELS = ("d", "delta", "xi", "phi", "theta", "psi")
 #: samples of the cubic fit whose residual estimates an IMU channel's noise (gyro, accelerometer)
@@ -164,15 +173,20 @@ class Measured:
         pose's attitude, plus gravity and :meth:`cog_lever`, projected, then smoothed like
         the prediction: on
         the path axes a circle's acceleration is constant, in C it turns), else the
-        twice-differentiated pose (``a``) projected."""
+        twice-differentiated pose (``a``) projected. The accelerometer's is exact on
+        :attr:`core` only, the samples its callers take (the smoothing's convolution
+        without the end fits, which are ``savgol_filter``'s interior bit for bit: a fit
+        that moves the latency refilters it at every step, and the end fits were most of
+        that work)."""
         if self.accel is None:
             return self.derived("acc_pose", lambda: np.einsum("nij,nj->ni", self.axes, self.a))
         hit = self.cache.get("acc_imu")
         if hit is None or hit[0] != latency:  # one latency kept: a fit moves it step by step
             f_C = np.einsum("nij,nj->ni", self.R, _delayed(self.t, self.accel, latency))
             a_path = np.einsum("nij,nj->ni", self.axes, f_C + self.gravity_C + self.cog_lever())
-            self.cache["acc_imu"] = (latency, savgol_filter(
-                a_path, self.window, self.order, axis=0, mode="interp"))
+            self.cache["acc_imu"] = (latency, convolve1d(
+                a_path, _savgol_kernel(self.window, self.order, 0, 1.0), axis=0,
+                mode="constant"))
         return self.cache["acc_imu"][1]
 
     def with_attachment(self, p_e) -> Measured:

@@ -8,19 +8,18 @@ or the radial equation; stateful effects run along the log).
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import convolve1d
-from scipy.signal import lfilter, savgol_coeffs, savgol_filter
+from scipy.signal import lfilter, savgol_filter
 
 from ...config import Config
 from ...model.effects import Kinematics, tether_stretch_of
 from ...model.reduced import Model
 from ._inputs import _load_cell, centred_commands, effect_states, logged_channel
-from ._measured import Measured, _delayed
+from ._measured import Measured, _delayed, _savgol_kernel
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,12 +92,6 @@ def _kinematics(meas: Measured) -> Kinematics:
         return _Kin(meas.R, meas.v, meas.z[:, 7:10], meas.p, meas.alpha, meas.gamma, vB=vB)
 
     return meas.derived("kin", make)
-
-
-@functools.lru_cache(maxsize=64)
-def _savgol_kernel(window: int, order: int, deriv: int, delta: float) -> np.ndarray:
-    """Convolution coefficients of :func:`scipy.signal.savgol_filter` (computed once)."""
-    return savgol_coeffs(window, order, deriv=deriv, delta=delta)
 
 
 def _savgol(x, meas: Measured, deriv: int, edges: bool) -> np.ndarray:
