@@ -81,8 +81,12 @@ def fast_plant_supported(config: Config) -> bool:
 
     Says nothing about whether a compiler is available (see :func:`fast_plant`).
     """
-    names = {s.name for s in config.effects}
-    return config.tether.link in ("rigid", "spring-damper") and names <= SUPPORTED_EFFECTS
+    return config.tether.link in ("rigid", "spring-damper") and _effects_supported(config)
+
+
+def _effects_supported(config: Config) -> bool:
+    """Whether ``plant.c`` implements every effect of ``config``."""
+    return {s.name for s in config.effects} <= SUPPORTED_EFFECTS
 
 
 def _params(model: Model, maximal: MaximalModel | None = None) -> np.ndarray:
@@ -135,8 +139,7 @@ class FastPlant:
     """
 
     def __init__(self, config: Config, lib: ctypes.CDLL, model: Model | None = None):
-        if ((model is None and config.tether.link != "rigid")
-                or not fast_plant_supported(config)):
+        if not _effects_supported(config) or (model is None and config.tether.link != "rigid"):
             raise ValueError(f"{config.source}: not supported by the compiled plant")
         model = Model(config) if model is None else model
         if int(lib.gs_plant_layout()) != _LAYOUT:
@@ -278,8 +281,7 @@ def reduced_fast_plant(model: Model) -> FastPlant | None:
     ``GAINSCHED_NATIVE=0``. Its derivatives equal ``model.f``'s to 1e-12 of their
     largest entry (tests/sim/test_fastplant.py) at about 1 % of the cost (2.3 against
     225 us a state with a motor lag and momentum theory)."""
-    names = {s.name for s in model.config.effects}
-    lib = load("plant") if names <= SUPPORTED_EFFECTS else None
+    lib = load("plant") if _effects_supported(model.config) else None
     if lib is None or model.n_z > int(lib.gs_plant_max_states()):
         return None
     return FastPlant(model.config, lib, model=model)

@@ -323,15 +323,18 @@ def test_fallback_for_unsupported_configs(paper_config):
         FastMaximal(paper_config, native.load("plant"))
 
 
-@pytest.mark.parametrize("link", ["rigid", "spring-damper"])
+@pytest.mark.parametrize("link", ["rigid", "spring-damper", "sls"])
 def test_the_estimator_predicts_a_design_with_effect_states_compiled(paper_text, link):
     """A design with a motor lag's states (and momentum theory), on a rigid or an elastic
-    tether: the state estimator predicts with its compiled reduced model
+    tether (one the compiled plant cannot fly too: the estimator's model is the reduced
+    one): the state estimator predicts with its compiled reduced model
     (``reduced_fast_plant``), never the numpy one, whose numbers it has to 1e-12 of the
     largest entry; an effect the kernel lacks gives the numpy model."""
     names = ("drag", "thrust_momentum", "motor_lag")
     cfg = (with_effects(paper_text, names) if link == "rigid" else
            spring_damper(paper_text, names, 2e5, 40.0))
+    if link == "sls":
+        cfg = dataclasses.replace(cfg, tether=dataclasses.replace(cfg.tether, link="sls"))
     model = Model(cfg)
     fp = reduced_fast_plant(model)
     assert isinstance(fp, FastPlant) and fp.n_z == model.n_z == N_STATE + 4
