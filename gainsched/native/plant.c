@@ -90,8 +90,9 @@ enum {
     FX_THRUST_VOLTAGE = 10,
     /* CogOffset: geometry only (p_e and the allocation rows carry it), nothing here */
     FX_COG_OFFSET = 11,
-    /* AzimuthThrustLoss (gainsched.sim.campaign: a truth outside the library): a = depth,
-     * b = xi0 (rad), c = width (rad) of a Gaussian loss in the azimuth of travel */
+    /* AzimuthThrustLoss (gainsched/sim/_outside.py, a truth outside the library):
+     * a = depth, b = xi0 (rad), c = width (rad) of a Gaussian loss in the azimuth of
+     * travel */
     FX_AZIMUTH_THRUST_LOSS = 12
 };
 

@@ -273,7 +273,9 @@ def uncertain_loops(table, report: dict, *, samples: int = SAMPLES, seed: int = 
     plants, kinds = _box(params, samples, seed)
     step = progress or (lambda n: None)
     rho, kept, kept_kinds, skipped, models = [], [], [], [], []
-    found = {}  # the margins of the estimate and the corners, from their one linearisation
+    # the margins of the estimate and the corners, from their one linearisation (unused,
+    # and their cost lost, where another plant turns out unstable)
+    found = {}
     for theta, kind in zip(plants, kinds, strict=True):
         try:
             model = Model(truth_config(cfg, focus, theta, held))
