@@ -19,9 +19,9 @@ metrics.json, speed_roll.png, path3d.png), ``horizontal_out_of_plane.png``,
 ``report.md`` (the paper-versus-simulation table and the plots) and
 ``report.json`` (the same table and every experiment's metrics).
 
-Run time: ~6 s for everything on the compiled rigid plant plus ~80 s for the
-thrust-loss staircase, whose ``thrust_momentum`` effect only the numpy plant has
-(22 s of flight); ``--quick`` ~6 s.
+Run time (2026-12-04, a shared 2-core machine, wall): about 19 s for everything, the
+thrust-loss staircase's ``thrust_momentum`` plant on the compiled plant too (22 s of
+flight); ``--quick`` about 10 s.
 """
 
 from __future__ import annotations
