@@ -10,6 +10,7 @@ folder ``tests/`` is on ``sys.path`` (pytest puts the root conftest's folder the
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 from pathlib import Path
 
@@ -231,6 +232,14 @@ SAN_ENV = {
     "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=0:halt_on_error=1",
     "UBSAN_OPTIONS": "halt_on_error=1:print_stacktrace=1",
 }
+
+
+def sigint_default():
+    """``preexec_fn`` of a child that must see a Ctrl-C as a terminal delivers it: a runner
+    that started the suite in the background (a shell without job control, CI) hands its
+    children SIGINT ignored, which Python then keeps, and an injected Ctrl-C would never
+    arrive."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def compile_c(args, cwd=None):

@@ -32,7 +32,7 @@ from gainsched.schedule.tables import load_table
 import support
 from support import PAPER_H5 as TABLE
 from support import PAPER_TOML as PAPER
-from support import REPO, paper_config_text, small_config_text
+from support import REPO, paper_config_text, sigint_default, small_config_text
 
 FLIGHT = REPO / "examples" / "flights" / "v9.csv"
 FLIGHTS = sorted((REPO / "examples" / "flights").glob("*.csv"))
@@ -819,11 +819,8 @@ def test_ctrl_c_during_the_heavy_imports(tmp_path):
             "threading.Timer(0.02, os.kill, (os.getpid(), signal.SIGINT)).start()\n"
             f"sys.argv = ['gainsched', 'validate', {str(PAPER)!r}]\n"
             "main()\n")
-    # Ctrl-C as a terminal delivers it: a runner that started the suite in the
-    # background (CI) hands its children SIGINT ignored, which Python then keeps
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                       timeout=120, cwd=tmp_path,
-                       preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                       timeout=120, cwd=tmp_path, preexec_fn=sigint_default)
     assert p.returncode == 130, p.stderr
     assert p.stderr == "gainsched: interrupted\n" and p.stdout == ""
 

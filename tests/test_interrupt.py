@@ -33,7 +33,7 @@ import pytest
 
 from gainsched.publish import recover
 
-from support import PAPER_H5, small_config_text
+from support import PAPER_H5, sigint_default, small_config_text
 
 TRIALS = int(os.environ.get("GAINSCHED_INTERRUPT_TRIALS", "6"))
 SET = ("gainsched_control.c", "gainsched_control.h", "gainsched_runtime.c", "gainsched_runtime.h",
@@ -190,13 +190,6 @@ def test_kill_9_of_the_whole_group_leaves_nothing_after_the_next_run(tmp_path):
     assert not _theirs(pids), f"shared memory left in /dev/shm: {sorted(_theirs(pids))}"
 
 
-def _sigint_default():
-    """A child's SIGINT as a terminal's Ctrl-C finds it: a runner that started the suite
-    in the background (a shell without job control) hands its children SIGINT ignored,
-    which Python then keeps, and the injected Ctrl-C would never arrive."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 #: a Ctrl-C inside threadpoolctl's ctypes callback (fault injection: its per-library step
 #: raises SIGINT at every library), then the call of ``reproducible`` under test
 _CTRL_C_IN_SCAN = """
@@ -222,7 +215,7 @@ def test_a_ctrl_c_during_the_library_scan_is_raised_after_it(call):
     loaded libraries (inside a ctypes callback, which cannot raise) printed a traceback
     and was lost, the build went on. Deferred to the scan's end, it is raised there."""
     res = subprocess.run([sys.executable, "-c", _CTRL_C_IN_SCAN.format(call=call)],
-                         capture_output=True, text=True, timeout=120, preexec_fn=_sigint_default)
+                         capture_output=True, text=True, timeout=120, preexec_fn=sigint_default)
     assert res.stdout == "interrupted after the scan\n" and res.stderr == "", \
         res.stdout + res.stderr
 
@@ -258,7 +251,7 @@ def test_a_ctrl_c_in_a_weakref_callback_is_raised_after_it(hooked):
     hook (Python's) it is lost, as the test shows."""
     hook = "sys.unraisablehook = _ctrl_c_in_a_callback" if hooked else ""
     res = subprocess.run([sys.executable, "-c", _CTRL_C_IN_WEAKREF.format(hook=hook)],
-                         capture_output=True, text=True, timeout=120, preexec_fn=_sigint_default)
+                         capture_output=True, text=True, timeout=120, preexec_fn=sigint_default)
     if hooked:
         assert res.stdout == "interrupted after the callback\n" and res.stderr == "", \
             res.stdout + res.stderr

@@ -146,4 +146,3 @@ def test_idle_workers_wait_for_the_next_build_as_joblibs_do():
 
     assert WORKER_IDLE_S == 300
     assert pinned_executor(1)._timeout == WORKER_IDLE_S
-
